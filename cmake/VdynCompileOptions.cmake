@@ -1,0 +1,16 @@
+# Compile options shared by every vdyn target, through the interface library vdyn_options.
+#  - warnings are errors;
+#  - -ffp-contract=off: no fused multiply-add contraction, so a trajectory does not depend on
+#    which expressions the compiler happened to fuse (determinism, see docs/architecture.md);
+#  - VDYN_SANITIZE=ON adds AddressSanitizer + UndefinedBehaviorSanitizer, which CI runs the tests under.
+add_library(vdyn_options INTERFACE)
+target_compile_options(vdyn_options INTERFACE
+  -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wold-style-cast -Wcast-align
+  -Wunused -Woverloaded-virtual -Wnull-dereference -Wdouble-promotion -Wformat=2
+  -Wimplicit-fallthrough -Werror
+  -ffp-contract=off -fno-fast-math)
+if(VDYN_SANITIZE)
+  target_compile_options(vdyn_options INTERFACE
+    -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
+  target_link_options(vdyn_options INTERFACE -fsanitize=address,undefined)
+endif()

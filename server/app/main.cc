@@ -1,0 +1,190 @@
+// vdyn-server: the vehicle-dynamics simulation server.
+//
+// Modes so far: batch drives (--batch, --demo) and the parameter/maneuver dumps. Exit codes:
+// 0 success, 1 the simulation failed (non-finite state), 2 bad command line or input file.
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <numbers>
+#include <optional>
+
+#include <CLI/CLI.hpp>
+#include <spdlog/spdlog.h>
+
+#include "batch.h"
+#include "maneuver.h"
+#include "params_io.h"
+#include "progress.h"
+#include "simulator.h"
+#include "world.h"
+
+namespace {
+
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+struct Options {
+  bool batch = false;
+  bool demo = false;
+  bool dump_vehicle = false;
+  std::string dump_maneuver;
+  std::string world = "facility";
+  vdyn::WorldFileOptions world_file;
+  std::string world_up = "z";
+  std::string vehicle;
+  std::string maneuver;
+  std::optional<double> duration;
+  std::string csv;
+  int csv_every = 1;
+  double step_ms = 1.0;
+  std::vector<double> spawn;
+  double speed_kmh = 0.0;
+  bool quiet = false;
+};
+
+int RunBatchMode(const Options& o) {
+  const vdyn::pb::VehicleParams msg = o.vehicle.empty()
+                                          ? vdyn::DefaultVehicleParams()
+                                          : vdyn::LoadVehicleParamsFile(o.vehicle);
+  const vdyn::Params params = vdyn::ParamsFromProto(msg);
+  const vdyn::Maneuver maneuver = o.maneuver == "demo"
+                                      ? vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo")
+                                      : vdyn::Maneuver::Load(o.maneuver);
+  vdyn::WorldFileOptions wfo = o.world_file;
+  wfo.up_axis = o.world_up.empty() ? 'z' : o.world_up[0];
+  std::shared_ptr<const vdyn::World> world = vdyn::LoadWorld(o.world, wfo);
+
+  vdyn::SimConfig config;
+  config.step_ns = std::llround(o.step_ms * 1e6);
+  vdyn::Simulator sim(world, params, config);
+  vdyn::Pose2 spawn = world->spawn;
+  if (!o.spawn.empty()) spawn = {o.spawn[0], o.spawn[1], o.spawn[2] * kDeg};
+  sim.Spawn(spawn, o.speed_kmh / 3.6);
+
+  const double duration = o.duration.value_or(maneuver.end_time());
+  std::unique_ptr<vdyn::CsvWriter> csv;
+  if (!o.csv.empty()) csv = std::make_unique<vdyn::CsvWriter>(o.csv);
+
+  vdyn::ProgressBar bar(o.demo ? "demo drive" : "batch");
+  vdyn::BatchOptions bo;
+  bo.duration = duration;
+  bo.csv_every = o.csv_every;
+  const vdyn::BatchSummary s =
+      vdyn::RunBatch(sim, maneuver, bo, csv.get(), [&bar](double f) { bar.Update(f); });
+  bar.Finish();
+  if (csv) csv->Close();
+
+  if (!o.quiet) {
+    std::printf("vdyn %s on %s: %.3f s simulated in %.3f s (%.0fx real time), %lld steps of %g ms\n",
+                o.demo ? "demo drive" : "batch drive", world->name.c_str(), s.sim_time, s.wall_time,
+                s.wall_time > 0 ? s.sim_time / s.wall_time : 0.0,
+                static_cast<long long>(s.steps), o.step_ms);
+    const Eigen::Vector3d p = vdyn::Position(sim.state().x);
+    std::printf("  distance %.1f m, top speed %.1f km/h, airborne %.2f s, largest spring force %.1f kN\n",
+                s.distance, 3.6 * s.max_speed, s.airborne_time, s.max_Fp / 1000.0);
+    std::printf("  final position (%.2f, %.2f, %.3f) m, speed %.2f km/h, state hash %016llx\n",
+                p.x(), p.y(), p.z(), 3.6 * vdyn::Velocity(sim.state().x).norm(),
+                static_cast<unsigned long long>(s.final_hash));
+    if (csv) {
+      std::printf("  CSV: %s (%zu rows, %zu columns)\n", o.csv.c_str(), s.csv_rows,
+                  vdyn::CsvColumns().size());
+    }
+  }
+  if (!s.ok) {
+    spdlog::error("{}", s.error);
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"vdyn-server: deterministic vehicle-dynamics simulation (RK4 at a fixed step)"};
+  Options o;
+  auto* batch = app.add_flag("--batch", o.batch, "Run a maneuver as fast as possible, no network");
+  app.add_flag("--demo", o.demo,
+               "The built-in demo drive on facility (batch); CSV to out/demo.csv unless --csv");
+  app.add_flag("--dump-vehicle", o.dump_vehicle,
+               "Print the effective vehicle parameters (defaults, or --vehicle merged over them)");
+  app.add_option("--dump-maneuver", o.dump_maneuver, "Print a built-in maneuver: demo")
+      ->check(CLI::IsMember({"demo"}));
+  app.add_option("--world", o.world, "facility, flat, or a terrain file (OBJ, STL, glTF, FBX, "
+                                     "height-map image)")
+      ->capture_default_str();
+  app.add_option("--world-scale", o.world_file.scale, "Terrain file units to metres")
+      ->capture_default_str();
+  app.add_option("--world-up", o.world_up, "Up axis of a terrain mesh file: y or z")
+      ->check(CLI::IsMember({"y", "z"}))
+      ->capture_default_str();
+  app.add_option("--heightmap-cell", o.world_file.heightmap_cell, "Height map: metres per pixel")
+      ->capture_default_str();
+  app.add_option("--heightmap-height", o.world_file.heightmap_height,
+                 "Height map: metres for full white")
+      ->capture_default_str();
+  app.add_option("--vehicle", o.vehicle,
+                 "Vehicle parameter file (protobuf text, or JSON if *.json); lists only changes");
+  app.add_option("--maneuver", o.maneuver,
+                 "Maneuver CSV (t_s,steer_deg,throttle,brake,cruise_kmh) or 'demo'");
+  app.add_option("--duration", o.duration, "Simulated seconds (default: the maneuver's last row)")
+      ->check(CLI::PositiveNumber);
+  app.add_option("--csv", o.csv, "Write every computed quantity to this CSV file");
+  app.add_option("--csv-every", o.csv_every, "Write every Nth step to the CSV")
+      ->check(CLI::Range(1, 1000000))
+      ->capture_default_str();
+  app.add_option("--step-ms", o.step_ms, "Integration step h in milliseconds")
+      ->check(CLI::Range(0.01, 100.0))
+      ->capture_default_str();
+  app.add_option("--spawn", o.spawn, "Start pose x_m,y_m,yaw_deg (default: the world's spawn)")
+      ->expected(3)
+      ->delimiter(',');
+  app.add_option("--speed-kmh", o.speed_kmh, "Initial speed along the heading, km/h")
+      ->check(CLI::Range(0.0, 400.0))
+      ->capture_default_str();
+  app.add_flag("--quiet", o.quiet, "Print no summary");
+  (void)batch;
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  try {
+    if (o.dump_vehicle) {
+      const auto msg = o.vehicle.empty() ? vdyn::DefaultVehicleParams()
+                                         : vdyn::LoadVehicleParamsFile(o.vehicle);
+      std::cout << vdyn::DumpVehicleParamsText(msg);
+      return 0;
+    }
+    if (!o.dump_maneuver.empty()) {
+      std::cout << vdyn::DemoManeuverCsv();
+      return 0;
+    }
+    if (o.demo) {
+      o.batch = true;
+      if (o.maneuver.empty()) o.maneuver = "demo";
+      if (o.csv.empty()) o.csv = "out/demo.csv";
+    }
+    if (!o.batch) {
+      std::cerr << "vdyn-server: choose a mode: --batch (with --maneuver), --demo, --dump-vehicle"
+                   " or --dump-maneuver demo\n"
+                << app.help();
+      return 2;
+    }
+    if (o.maneuver.empty()) {
+      std::cerr << "vdyn-server: --batch needs --maneuver FILE (or 'demo')\n";
+      return 2;
+    }
+    return RunBatchMode(o);
+  } catch (const vdyn::ParamsError& e) {
+    std::cerr << "vdyn-server: " << e.what() << "\n";
+  } catch (const vdyn::ManeuverError& e) {
+    std::cerr << "vdyn-server: " << e.what() << "\n";
+  } catch (const vdyn::WorldError& e) {
+    std::cerr << "vdyn-server: " << e.what() << "\n";
+  } catch (const std::exception& e) {
+    std::cerr << "vdyn-server: " << e.what() << "\n";
+  }
+  return 2;
+}

@@ -1,0 +1,69 @@
+// Terrain: triangle meshes in an Embree 3 scene (robust mode) and the line traces the model uses.
+//
+// Embree finds the hit triangle in single precision; the hit distance and normal are then
+// recomputed in double against that triangle's plane, so a trace is smooth in the ray origin
+// (no float staircase) and exact on planar ground far from the origin.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "mesh.h"
+
+namespace vdyn {
+
+struct TraceHit {
+  bool hit = false;
+  double distance = 0;                                    // along the unit direction, m
+  Eigen::Vector3d normal_W = Eigen::Vector3d::UnitZ();    // unit, facing the ray's origin
+  std::uint32_t mesh = 0;                                  // index into Terrain::meshes()
+  std::uint32_t triangle = 0;
+};
+
+class Terrain {
+ public:
+  Terrain();
+  ~Terrain();
+  Terrain(const Terrain&) = delete;
+  Terrain& operator=(const Terrain&) = delete;
+
+  // Adds a mesh; triangles with a non-finite vertex or zero area are dropped and counted.
+  // Throws std::invalid_argument for an index out of range. Only before Commit().
+  void AddMesh(TriangleMesh mesh);
+  // Builds the acceleration structure. After this the terrain is immutable and traces may run
+  // concurrently from several threads.
+  void Commit();
+
+  // Closest hit along origin + t * dir_W (dir_W unit) for t in [0, t_max]. No allocation.
+  TraceHit Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W, double t_max) const;
+
+  const std::vector<TriangleMesh>& meshes() const { return meshes_; }
+  std::size_t triangle_count() const { return triangle_count_; }
+  std::size_t dropped_triangles() const { return dropped_triangles_; }
+  Eigen::Vector3d bounds_min() const { return bounds_min_; }
+  Eigen::Vector3d bounds_max() const { return bounds_max_; }
+  bool committed() const { return committed_; }
+
+ private:
+  struct Plane {
+    Eigen::Vector3d n;  // unit normal
+    double offset;      // n . x for x on the plane
+  };
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  std::vector<TriangleMesh> meshes_;
+  std::vector<std::vector<Plane>> planes_;  // per mesh, per kept triangle
+  std::vector<std::vector<std::uint32_t>> kept_to_source_;  // per mesh: Embree prim -> triangle
+  std::vector<std::uint32_t> geom_to_mesh_;                 // Embree geometry id -> mesh index
+  std::size_t triangle_count_ = 0;
+  std::size_t dropped_triangles_ = 0;
+  Eigen::Vector3d bounds_min_ = Eigen::Vector3d::Constant(1e300);
+  Eigen::Vector3d bounds_max_ = Eigen::Vector3d::Constant(-1e300);
+  bool committed_ = false;
+};
+
+}  // namespace vdyn

@@ -1,0 +1,77 @@
+// The equations of motion: forces on the body and the state derivative xdot = f(x, u).
+//
+// One evaluation reads as its stages (docs/model.md gives every equation):
+//   1. sense terrain   - a vertical line trace per wheel from A along -Z_B (the paper's A-B)
+//   2. suspension      - spring length lS, deformation lT, spring force Fp (never pulling)
+//   3. tire forces     - drive Fh, brake Fb, side Fy, all bounded by mu * Fp
+//   4. body forces     - gravity, aerodynamic drag Da, wall contacts from the horizontal traces
+//   5. derivatives     - Newton for T, Euler for the body rates, quaternion kinematics
+#pragma once
+
+#include <array>
+
+#include "controls.h"
+#include "params.h"
+#include "state.h"
+#include "terrain.h"
+
+namespace vdyn {
+
+// Per-wheel quantities at one state (what the CSV, the state topic and the viewer show).
+struct WheelOutputs {
+  bool contact = false;
+  double Fp = 0;          // spring force = normal force, N (>= 0)
+  double Fh = 0;          // drive force applied, N (signed along the wheel heading)
+  double Fb = 0;          // brake force applied, N (>= 0, opposing the wheel's motion)
+  double Fy = 0;          // side force, N (along the wheel's lateral axis, positive to the left)
+  double Frr = 0;         // rolling resistance, N (>= 0)
+  double lS = 0;          // instant spring length, m
+  double lT = 0;          // spring deformation lT = free length - lS, m
+  double lS_rate = 0;     // d(lS)/dt, m/s
+  double gamma = 0;       // wheel steering angle, rad
+  double slip_angle = 0;  // rad
+  double v_long = 0;      // contact point velocity along the wheel heading, m/s
+  double v_lat = 0;       // ... along the wheel's lateral axis, m/s
+  Eigen::Vector3d p_A_W = Eigen::Vector3d::Zero();  // mount point A
+  Eigen::Vector3d p_B_W = Eigen::Vector3d::Zero();  // contact point B (or wheel bottom in the air)
+  Eigen::Vector3d n_W = Eigen::Vector3d::UnitZ();   // terrain normal at B
+  Eigen::Vector3d F_W = Eigen::Vector3d::Zero();    // total wheel force on the body at B
+};
+
+// A wall found by a horizontal trace at the start of a step; contact at each stage is evaluated
+// against this plane (the trace runs once per step, the terrain under the wheels every stage).
+struct WallPlane {
+  bool active = false;
+  Eigen::Vector3d p_W = Eigen::Vector3d::Zero();  // hit point D
+  Eigen::Vector3d n_W = Eigen::Vector3d::UnitX(); // unit normal, facing the body
+};
+using WallPlanes = std::array<WallPlane, Params::kNumProbes>;
+
+struct Derived {
+  std::array<WheelOutputs, kNumWheels> wheel{};
+  bool any_contact = false;
+  double Da = 0;                                        // drag, N (positive opposes forward motion)
+  Eigen::Vector3d F_W = Eigen::Vector3d::Zero();        // total force on the body incl. gravity
+  Eigen::Vector3d M_B = Eigen::Vector3d::Zero();        // total moment about T, body axes
+  Eigen::Vector3d a_WT_W = Eigen::Vector3d::Zero();     // acceleration of T, world axes
+  Eigen::Vector3d dw_B = Eigen::Vector3d::Zero();       // angular acceleration, body axes
+  Eigen::Vector3d w_eff_B = Eigen::Vector3d::Zero();    // body rates used (paper yaw mode)
+  Eigen::Vector3d F_wall_W = Eigen::Vector3d::Zero();   // sum of wall contact forces
+  double wall_penetration_max = 0;                      // m
+  int wall_contacts = 0;
+};
+
+// Casts the horizontal traces at state x; a hit on a steep surface (|n_z| < 0.7) becomes a wall.
+void FindWalls(const Params& p, const Terrain& terrain, const StateVector& x, WallPlanes& walls);
+
+// xdot = f(x) with the controls held, filling `out` with every intermediate quantity.
+void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedControl& u,
+                        const WallPlanes& walls, const StateVector& x, StateVector& xdot,
+                        Derived& out);
+
+// The tire's lateral force (N) at slip angle alpha for normal load Fz: linear in the small-slip
+// range with slope -C_alpha, never above mu * Fz in magnitude.
+double TireLateralForce(TireLaw law, double alpha, double cornering_stiffness, double mu,
+                        double Fz);
+
+}  // namespace vdyn

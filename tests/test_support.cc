@@ -1,0 +1,94 @@
+#include "test_support.h"
+
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <random>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+namespace vdyn::testing {
+
+TempDir::TempDir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  std::string name = info != nullptr ? std::string(info->test_suite_name()) + "." + info->name()
+                                     : std::string("vdyn");
+  for (char& c : name) {
+    if (c == '/') c = '_';
+  }
+  path_ = std::filesystem::temp_directory_path() /
+          ("vdyn-test-" + std::to_string(::getpid()) + "-" + name);
+  std::filesystem::remove_all(path_);
+  std::filesystem::create_directories(path_);
+}
+
+TempDir::~TempDir() {
+  std::error_code ec;
+  std::filesystem::remove_all(path_, ec);
+}
+
+void WriteFile(const std::filesystem::path& path, const std::string& text) {
+  std::ofstream out(path, std::ios::binary);
+  out << text;
+  ASSERT_TRUE(out.good()) << "cannot write " << path;
+}
+
+std::string ReadFile(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+std::shared_ptr<const World> SharedWorld(const std::string& name) {
+  static std::mutex mu;
+  static std::map<std::string, std::shared_ptr<const World>> cache;
+  std::lock_guard<std::mutex> lock(mu);
+  auto& w = cache[name];
+  if (!w) w = BuildBuiltinWorld(name);
+  return w;
+}
+
+std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn) {
+  auto world = std::make_shared<World>();
+  world->name = mesh.name;
+  world->terrain.AddMesh(std::move(mesh));
+  world->terrain.Commit();
+  world->spawn = spawn;
+  return world;
+}
+
+TriangleMesh InclinedPlane(double slope, double half_size) {
+  TriangleMesh m;
+  m.name = "incline";
+  const double s = half_size;
+  m.AddQuad(Eigen::Vector3d(-s, -s, -slope * s), Eigen::Vector3d(s, -s, slope * s),
+            Eigen::Vector3d(s, s, slope * s), Eigen::Vector3d(-s, s, -slope * s));
+  return m;
+}
+
+Params DefaultParams() { return ParamsFromProto(DefaultVehicleParams()); }
+
+Params ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
+  pb::VehicleParams msg = DefaultVehicleParams();
+  edit(msg);
+  return ParamsFromProto(msg);
+}
+
+std::int64_t Drive(Simulator& sim, std::int64_t max_steps,
+                   const std::function<void(Simulator&)>& before_step,
+                   const std::function<bool(const StepRecord&)>& after_step) {
+  for (std::int64_t i = 0; i < max_steps; ++i) {
+    if (before_step) before_step(sim);
+    if (sim.Step() != StepStatus::kOk) {
+      ADD_FAILURE() << "non-finite state at t = " << sim.time();
+      return i;
+    }
+    if (after_step && after_step(sim.last_step())) return i + 1;
+  }
+  return max_steps;
+}
+
+}  // namespace vdyn::testing

@@ -1,0 +1,60 @@
+// Shared helpers for the tests: worlds, vehicles, drives and scratch folders.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "params_io.h"
+#include "simulator.h"
+#include "world.h"
+
+namespace vdyn::testing {
+
+// While alive, warnings and errors logged are expected (and counted), not failures.
+class ExpectLogs {
+ public:
+  ExpectLogs();
+  ~ExpectLogs();
+  int count() const;
+
+ private:
+  int before_;
+};
+
+// A fresh scratch folder per test, removed at the end.
+class TempDir {
+ public:
+  TempDir();
+  ~TempDir();
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+void WriteFile(const std::filesystem::path& path, const std::string& text);
+std::string ReadFile(const std::filesystem::path& path);
+
+// Built-in worlds are built once per test binary and shared (they are immutable after Commit).
+std::shared_ptr<const World> SharedWorld(const std::string& name);
+
+// A world made of one mesh (e.g. an inclined plane) for a test.
+std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn);
+
+// A plane z = slope * x over a large square, as one mesh.
+TriangleMesh InclinedPlane(double slope, double half_size);
+
+Params DefaultParams();
+// The defaults with `edit` applied to the message first.
+Params ParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
+
+// Steps until `stop` returns true or `max_steps` is reached; returns the steps taken. Fails the
+// test if a step is non-finite.
+std::int64_t Drive(Simulator& sim, std::int64_t max_steps,
+                   const std::function<void(Simulator&)>& before_step,
+                   const std::function<bool(const StepRecord&)>& after_step = {});
+
+}  // namespace vdyn::testing

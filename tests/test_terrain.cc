@@ -1,0 +1,121 @@
+// Terrain traces and the built-in worlds.
+#include <cmath>
+#include <limits>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "test_support.h"
+#include "world.h"
+
+namespace vdyn {
+namespace {
+
+using Eigen::Vector3d;
+
+TEST(Terrain, VerticalTraceOnFlatGroundIsExactInDouble) {
+  const auto world = testing::SharedWorld("flat");
+  // Far from the origin and off any float grid: the plane refinement keeps full precision.
+  for (const double x : {0.0, 123.456789, 4321.123456789}) {
+    const double z0 = 0.5 + 1e-9;
+    const TraceHit hit = world->terrain.Trace(Vector3d(x, -77.7, z0), -Vector3d::UnitZ(), 2.0);
+    ASSERT_TRUE(hit.hit);
+    EXPECT_NEAR(hit.distance, z0, 1e-14) << "x = " << x;
+    EXPECT_EQ(hit.normal_W, Vector3d::UnitZ());
+  }
+}
+
+TEST(Terrain, SlantedTraceAndRangeLimit) {
+  const auto world = testing::SharedWorld("flat");
+  const Vector3d dir = Vector3d(1.0, 0.0, -1.0).normalized();
+  const TraceHit hit = world->terrain.Trace(Vector3d(0, 0, 1.0), dir, 10.0);
+  ASSERT_TRUE(hit.hit);
+  EXPECT_NEAR(hit.distance, std::sqrt(2.0), 1e-12);
+  EXPECT_FALSE(world->terrain.Trace(Vector3d(0, 0, 1.0), dir, 1.4).hit);
+  EXPECT_FALSE(world->terrain.Trace(Vector3d(0, 0, 1.0), Vector3d::UnitZ(), 100.0).hit);
+}
+
+TEST(Terrain, NormalFacesTheRayOriginFromEitherSide) {
+  const auto world = testing::SharedWorld("flat");
+  const TraceHit below = world->terrain.Trace(Vector3d(0, 0, -1.0), Vector3d::UnitZ(), 5.0);
+  ASSERT_TRUE(below.hit);
+  EXPECT_NEAR(below.distance, 1.0, 1e-12);
+  EXPECT_EQ(below.normal_W, -Vector3d::UnitZ());
+}
+
+TEST(Terrain, DegenerateAndNonFiniteTrianglesAreDroppedAndCounted) {
+  Terrain t;
+  TriangleMesh m;
+  m.name = "mixed";
+  m.vertices_W = {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0), Vector3d(2, 0, 0),
+                  Vector3d(std::numeric_limits<double>::quiet_NaN(), 0, 0)};
+  m.triangles = {{0, 1, 2}, {0, 1, 3}, {0, 1, 4}};  // good, collinear, NaN
+  t.AddMesh(m);
+  t.Commit();
+  EXPECT_EQ(t.triangle_count(), 1u);
+  EXPECT_EQ(t.dropped_triangles(), 2u);
+  EXPECT_TRUE(t.Trace(Vector3d(0.2, 0.2, 1), -Vector3d::UnitZ(), 2).hit);
+}
+
+TEST(Terrain, IndexOutOfRangeIsRefused) {
+  Terrain t;
+  TriangleMesh m;
+  m.name = "broken";
+  m.vertices_W = {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0)};
+  m.triangles = {{0, 1, 7}};
+  EXPECT_THROW(t.AddMesh(m), std::invalid_argument);
+}
+
+TEST(Facility, HasThePapersPartsAndTheyAreWhereTheLandmarksSay) {
+  const auto world = testing::SharedWorld("facility");
+  std::set<std::string> names;
+  for (const auto& m : world->terrain.meshes()) names.insert(m.name);
+  for (const char* part : {"ground", "test_road", "washboard", "jump_ramp_a", "jump_ramp_b",
+                           "rough_terrain", "glass_barrier", "billboard"}) {
+    EXPECT_TRUE(names.count(part)) << part;
+  }
+  const Terrain& t = world->terrain;
+  auto ground_z = [&t](double x, double y) {
+    const TraceHit h = t.Trace(Vector3d(x, y, 50.0), -Vector3d::UnitZ(), 100.0);
+    EXPECT_TRUE(h.hit);
+    return 50.0 - h.distance;
+  };
+  // The ramp's top edge is 0.8 m above the road, the road 2 cm above the ground.
+  const Vector3d ramp = world->LandmarkAt("jump_ramp_a");
+  EXPECT_NEAR(ground_z(ramp.x() + 0.8 / std::tan(10.0 * M_PI / 180.0) - 0.01, ramp.y()), 0.82,
+              0.01);
+  EXPECT_NEAR(ground_z(0.0, ramp.y()), 0.02, 1e-9);
+  EXPECT_NEAR(ground_z(200.0, 100.0), 0.0, 1e-12);
+  // The rough terrain is rough: its heights spread over more than 10 cm.
+  const Vector3d c = world->LandmarkAt("rough_terrain_center");
+  double lo = 1e9, hi = -1e9;
+  for (int i = -20; i <= 20; ++i) {
+    const double z = ground_z(c.x() + i * 1.3, c.y() + i * 0.7);
+    lo = std::min(lo, z);
+    hi = std::max(hi, z);
+  }
+  EXPECT_GT(hi - lo, 0.1);
+  // A horizontal trace from inside finds the glass barrier at the landmark's distance.
+  const Vector3d inner = world->LandmarkAt("barrier_inner_max");
+  const TraceHit wall = t.Trace(Vector3d(100.0, inner.y() - 5.0, 0.5), Vector3d::UnitY(), 10.0);
+  ASSERT_TRUE(wall.hit);
+  EXPECT_NEAR(wall.distance, 5.0, 1e-9);
+  EXPECT_EQ(t.meshes()[wall.mesh].name, "glass_barrier");
+  EXPECT_EQ(wall.normal_W, -Vector3d::UnitY());
+}
+
+TEST(Facility, IsLargeEnoughToDriveForMinutes) {
+  const auto world = testing::SharedWorld("facility");
+  const Vector3d lo = world->LandmarkAt("barrier_inner_min");
+  const Vector3d hi = world->LandmarkAt("barrier_inner_max");
+  // Once around inside the barrier at 50 km/h takes more than two minutes.
+  const double perimeter = 2.0 * ((hi.x() - lo.x()) + (hi.y() - lo.y()));
+  EXPECT_GT(perimeter / (50.0 / 3.6), 120.0);
+}
+
+TEST(Worlds, UnknownBuiltinIsAClearError) {
+  EXPECT_THROW(BuildBuiltinWorld("moon"), WorldError);
+}
+
+}  // namespace
+}  // namespace vdyn

@@ -1,0 +1,509 @@
+// Physics validation against closed forms and properties (issue: foundation and physics core).
+// Every expected value here comes from a formula and the parameters, never from earlier output.
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <cstdio>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "batch.h"
+#include "maneuver.h"
+#include "test_support.h"
+
+namespace vdyn {
+namespace {
+
+using Eigen::Vector3d;
+using testing::Drive;
+using testing::ParamsWith;
+using testing::SharedWorld;
+constexpr double kDeg = std::numbers::pi / 180.0;
+
+Vector3d BodyVelocity(const State& s) {
+  return Orientation(s.x).toRotationMatrix().transpose() * Velocity(s.x);
+}
+
+// --- heave -----------------------------------------------------------------------------------
+// Four equal springs k and dampers c under a body of mass m with T midway between the axles
+// (b = c, bL = bP), so heave does not couple into pitch or roll. Released 3 cm above equilibrium
+// it is the damped oscillator  m z'' + 4c z' + 4k z = 0:
+//   z(t) = z0 e^(-zeta wn t) (cos wd t + zeta wn / wd sin wd t),  wn = sqrt(4k/m),
+//   zeta = 4c / (2 sqrt(4k m)),  wd = wn sqrt(1 - zeta^2).
+TEST(Validation, HeaveFollowsTheDampedOscillator) {
+  const double k = 30000.0, c = 1500.0, z0 = 0.03;
+  const Params p = ParamsWith([&](pb::VehicleParams& m) {
+    m.set_b(1.35);
+    m.set_c(1.35);
+    for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()}) {
+      w->set_spring_stiffness(k);
+      w->set_damper_coefficient(c);
+    }
+  });
+  Simulator sim(SharedWorld("flat"), p);
+  State s = sim.state();
+  // Equilibrium height from the parameters: each spring carries m g / 4.
+  const WheelParams& w = p.wheel[kLF];
+  const double z_eq = w.radius + (w.free_length - p.mass * p.gravity / (4.0 * k)) + w.z_offset;
+  ASSERT_NEAR(Position(s.x).z(), z_eq, 1e-12);
+  s.x[sx::kP + 2] = z_eq + z0;
+  sim.SetState(s);
+
+  const double wn = std::sqrt(4.0 * k / p.mass);
+  const double zeta = 4.0 * c / (2.0 * std::sqrt(4.0 * k * p.mass));
+  const double wd = wn * std::sqrt(1.0 - zeta * zeta);
+  double max_err = 0.0, min_z = 1e9;
+  Drive(sim, 4000, {}, [&](const StepRecord& r) {
+    const double t = r.t + sim.h();  // the state after the step
+    const double z = Position(sim.state().x).z() - z_eq;
+    const double expect =
+        z0 * std::exp(-zeta * wn * t) * (std::cos(wd * t) + zeta * wn / wd * std::sin(wd * t));
+    max_err = std::max(max_err, std::abs(z - expect));
+    min_z = std::min(min_z, z);
+    for (const auto& wo : r.derived.wheel) EXPECT_TRUE(wo.contact);
+    return false;
+  });
+  // It really oscillated: the first undershoot is z0 exp(-zeta pi / sqrt(1 - zeta^2)) = 0.49 z0.
+  EXPECT_LT(min_z, -0.45 * z0);
+  EXPECT_LT(max_err, 0.005 * z0);      // within 0.5 % of the amplitude
+  std::printf("heave: wn %.4f rad/s, zeta %.4f, max |z - closed form| %.3g m (%.4f %% of z0)\n", wn,
+              zeta, max_err, 100.0 * max_err / z0);
+  const Vector3d rpy = RollPitchYaw(Orientation(sim.state().x));
+  EXPECT_LT(rpy.head<2>().norm(), 1e-9);  // no pitch or roll
+}
+
+// --- coasting with drag only -------------------------------------------------------------------
+// m v' = -(1/2 rho cx Sx) v^2  =>  v(t) = v0 / (1 + (1/2 rho cx Sx) v0 t / m).
+TEST(Validation, CoastingWithDragMatchesClosedForm) {
+  const Params p = ParamsWith([](pb::VehicleParams& m) { m.set_rolling_resistance(0.0); });
+  Simulator sim(SharedWorld("flat"), p);
+  const double v0 = 30.0;
+  sim.Spawn({0.0, 0.0, 0.3}, v0);
+  const double kd = 0.5 * p.rho * p.cx * p.sx;
+  double max_rel = 0.0;
+  Drive(sim, 30000, {}, [&](const StepRecord& r) {
+    const double t = r.t + sim.h();
+    const double v = Velocity(sim.state().x).norm();
+    const double expect = v0 / (1.0 + kd * v0 * t / p.mass);
+    max_rel = std::max(max_rel, std::abs(v - expect) / expect);
+    return false;
+  });
+  const double v_end = Velocity(sim.state().x).norm();
+  EXPECT_LT(v_end, 0.85 * v0);      // drag really acted (closed form: 0.805 v0 at 30 s)
+  EXPECT_LT(max_rel, 0.005);        // within 0.5 %
+  std::printf("coasting: v(30 s) %.4f m/s, max relative error %.3g %%\n", v_end, 100.0 * max_rel);
+}
+
+// --- RK4's observed order -----------------------------------------------------------------------
+// Halving h must divide the global error by 2^4; the observed order log2(e(h)/e(h/2)) is 4 +- 0.2.
+StateVector RunWithStep(std::int64_t step_ns, double t_end, const Params& p, const State& start,
+                        const DriverInput& input) {
+  SimConfig cfg;
+  cfg.step_ns = step_ns;
+  Simulator sim(SharedWorld("flat"), p, cfg);
+  sim.SetState(start);
+  sim.SetInput(input);
+  const auto n = static_cast<std::int64_t>(std::llround(t_end / sim.h()));
+  for (std::int64_t i = 0; i < n; ++i) EXPECT_EQ(sim.Step(), StepStatus::kOk);
+  return sim.state().x;
+}
+
+void ExpectFourthOrder(const Params& p, const State& start, const DriverInput& input,
+                       double t_end) {
+  const StateVector ref = RunWithStep(250'000, t_end, p, start, input);  // h = 0.25 ms
+  double err[3];
+  const std::int64_t steps_ns[3] = {16'000'000, 8'000'000, 4'000'000};
+  for (int i = 0; i < 3; ++i) {
+    err[i] = (RunWithStep(steps_ns[i], t_end, p, start, input) - ref).norm();
+  }
+  for (int i = 0; i < 2; ++i) {
+    const double order = std::log2(err[i] / err[i + 1]);
+    std::printf("rk4: h %g -> %g ms, errors %.3g -> %.3g, observed order %.3f\n",
+                steps_ns[i] * 1e-6, steps_ns[i + 1] * 1e-6, err[i], err[i + 1], order);
+    EXPECT_NEAR(order, 4.0, 0.2) << "h = " << steps_ns[i] * 1e-6 << " ms: errors " << err[i]
+                                 << " -> " << err[i + 1];
+  }
+}
+
+TEST(Validation, Rk4ObservedOrderIsFourInHeave) {
+  const Params p = testing::DefaultParams();
+  Simulator sim(SharedWorld("flat"), p);
+  State s = sim.state();
+  s.x[sx::kP + 2] += 0.04;                  // heave, with pitch coupling (b != c)
+  ExpectFourthOrder(p, s, DriverInput{}, 0.96);
+}
+
+TEST(Validation, Rk4ObservedOrderIsFourWhileCornering) {
+  // Full 3-D motion with tire forces: 20 m/s, a 2 degree steer held. Start from the turn already
+  // established, so no slip angle crosses zero (the Fiala law's |z| z is only C1 there, which
+  // would show up as a local O(h^3) error at the crossing).
+  const Params p = testing::DefaultParams();
+  Simulator sim(SharedWorld("flat"), p);
+  sim.Spawn({0, 0, 0}, 20.0);
+  DriverInput in;
+  in.steer = 2.0 * kDeg;
+  sim.SetInput(in);
+  Drive(sim, 3000, {});
+  for (const WheelOutputs& w : sim.last_step().derived.wheel) EXPECT_GT(std::abs(w.slip_angle), 1e-3);
+  ExpectFourthOrder(p, sim.state(), in, 0.96);
+}
+
+// --- steady-state cornering vs the linear bicycle model ----------------------------------------
+// r / delta = V / (L + K V^2),  K = (m / L) (lr / Cf - lf / Cr),  Cf, Cr per axle (2 C_alpha).
+void ExpectBicycleGain(double c_front, double c_rear, TireLaw law, double speed) {
+  const Params p = ParamsWith([&](pb::VehicleParams& m) {
+    m.mutable_lf()->set_cornering_stiffness(c_front);
+    m.mutable_rf()->set_cornering_stiffness(c_front);
+    m.mutable_lr()->set_cornering_stiffness(c_rear);
+    m.mutable_rr()->set_cornering_stiffness(c_rear);
+    m.set_tire_law(law == TireLaw::kFiala ? pb::TIRE_LAW_FIALA : pb::TIRE_LAW_LINEAR_SATURATED);
+    m.set_drive_front_fraction(0.0);  // rear drive: no drive force on the steered wheels
+    m.set_rolling_resistance(0.0);
+  });
+  const double L = p.wheelbase, Cf = 2.0 * c_front, Cr = 2.0 * c_rear;
+  const double K = (p.mass / L) * (p.c / Cf - p.b / Cr);
+  // Steer for a lateral acceleration of 0.08 g from the model itself.
+  const double ay_target = 0.08 * p.gravity;
+  const double delta = ay_target / speed * (L + K * speed * speed) / speed;
+  Simulator sim(SharedWorld("flat"), p);
+  sim.Spawn({0, 0, 0}, speed);
+  DriverInput in;
+  in.steer = delta;
+  in.cruise_on = true;
+  in.cruise_speed = speed;
+  sim.SetInput(in);
+  double r_sum = 0.0, v_sum = 0.0, ay_max = 0.0;
+  int n = 0;
+  Drive(sim, 20000, {}, [&](const StepRecord& rec) {
+    if (rec.t >= 18.0) {
+      r_sum += rec.derived.w_eff_B.z();
+      v_sum += Velocity(rec.state.x).norm();
+      ay_max = std::max(ay_max, std::abs(
+          (Orientation(rec.state.x).toRotationMatrix().transpose() * rec.derived.a_WT_W).y()));
+      ++n;
+    }
+    return false;
+  });
+  const double r = r_sum / n, V = v_sum / n;
+  const double expect = V / (L + K * V * V);
+  EXPECT_LE(ay_max, 0.1 * p.gravity);
+  std::printf("bicycle: K %.3g rad/(m/s^2), V %.3f m/s, ay_max %.3f g, r/delta %.5f vs %.5f (%+.3f %%)\n",
+              K, V, ay_max / p.gravity, r / delta, expect, 100.0 * ((r / delta) / expect - 1.0));
+  EXPECT_NEAR((r / delta) / expect, 1.0, 0.02)
+      << "K = " << K << ", V = " << V << ", r/delta = " << r / delta << " vs " << expect;
+}
+
+TEST(Validation, BicycleModelGainUndersteer) {
+  ExpectBicycleGain(55000.0, 80000.0, TireLaw::kFiala, 20.0);
+  ExpectBicycleGain(55000.0, 80000.0, TireLaw::kLinearSaturated, 25.0);
+}
+
+TEST(Validation, BicycleModelGainOversteer) {
+  // K < 0; the critical speed sqrt(L / -K) is ~43 m/s, well above the test speed.
+  ExpectBicycleGain(80000.0, 50000.0, TireLaw::kFiala, 20.0);
+  ExpectBicycleGain(80000.0, 50000.0, TireLaw::kLinearSaturated, 25.0);
+}
+
+// --- static equilibrium -------------------------------------------------------------------------
+TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
+  const Params p = testing::DefaultParams();
+  Simulator sim(SharedWorld("flat"), p);
+  Drive(sim, 5000, {});
+  Derived d;
+  sim.Forward(d);
+  const double front = d.wheel[kLF].Fp + d.wheel[kRF].Fp;
+  const double rear = d.wheel[kLR].Fp + d.wheel[kRR].Fp;
+  const double W = p.mass * p.gravity;
+  EXPECT_NEAR((front + rear) / W, 1.0, 1e-6);
+  EXPECT_NEAR(front / W, p.c / p.wheelbase, 2e-3);  // moments about T: Fp_f b = Fp_r c
+  EXPECT_NEAR(rear / W, p.b / p.wheelbase, 2e-3);
+  EXPECT_NEAR(d.wheel[kLF].Fp, d.wheel[kRF].Fp, 1e-6 * W);  // bL = bP
+  EXPECT_LT(Velocity(sim.state().x).norm(), 1e-5);
+}
+
+// --- jump ---------------------------------------------------------------------------------------
+TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
+  const auto world = SharedWorld("facility");
+  const Params p = testing::DefaultParams();
+  Simulator sim(world, p);
+  const Vector3d ramp = world->LandmarkAt("jump_ramp_a");
+  sim.Spawn({ramp.x() - 60.0, ramp.y(), 0.0}, 50.0 / 3.6);
+  DriverInput in;
+  in.cruise_on = true;
+  in.cruise_speed = 50.0 / 3.6;
+  sim.SetInput(in);
+  int airborne_steps = 0;
+  double max_Fp = 0.0;
+  Drive(sim, 12000, {}, [&](const StepRecord& r) {
+    bool all_air = true;
+    for (const WheelOutputs& w : r.derived.wheel) {
+      max_Fp = std::max(max_Fp, w.Fp);
+      if (!w.contact) {
+        // A wheel in the air carries no force at all.
+        EXPECT_EQ(w.Fp, 0.0);
+        EXPECT_EQ(w.Fh, 0.0);
+        EXPECT_EQ(w.Fb, 0.0);
+        EXPECT_EQ(w.Fy, 0.0);
+      }
+      all_air = all_air && !w.contact;
+    }
+    if (all_air) {
+      ++airborne_steps;
+      // Ballistic: gravity plus the drag along X_B only.
+      const Vector3d drag_W = -r.derived.Da / p.mass *
+                              Orientation(r.state.x).toRotationMatrix().col(0);
+      EXPECT_NEAR((r.derived.a_WT_W - drag_W).z(), -p.gravity, 1e-9);
+      EXPECT_NEAR((r.derived.a_WT_W - drag_W).head<2>().norm(), 0.0, 1e-9);
+    }
+    return false;
+  });
+  EXPECT_GT(airborne_steps * sim.h(), 0.3);
+  std::printf("jump: %.3f s with all wheels in the air, largest spring force %.1f kN\n",
+              airborne_steps * sim.h(), max_Fp / 1000.0);
+  // The landing: finite (Drive fails on NaN) and bounded, and the car drives on settled.
+  EXPECT_LT(max_Fp, 20.0 * StaticWheelLoad(p, kLF));
+  Derived d;
+  sim.Forward(d);
+  for (const WheelOutputs& w : d.wheel) EXPECT_TRUE(w.contact);
+  EXPECT_LT(std::abs(Velocity(sim.state().x).z()), 0.05);
+  EXPECT_GT(Position(sim.state().x).x(), ramp.x() + 50.0);
+}
+
+// --- glass barrier ------------------------------------------------------------------------------
+void DriveIntoBarrier(double heading_deg) {
+  const auto world = SharedWorld("facility");
+  const Params p = testing::DefaultParams();
+  Simulator sim(world, p);
+  const Vector3d inner = world->LandmarkAt("barrier_inner_max");  // north wall at y = inner.y()
+  const double yaw = heading_deg * kDeg;
+  sim.Spawn({100.0, inner.y() - 30.0, yaw}, 50.0 / 3.6);
+  DriverInput in;
+  in.cruise_on = true;  // keeps pushing at the wall
+  in.cruise_speed = 50.0 / 3.6;
+  sim.SetInput(in);
+  double max_y = -1e9, max_pen = 0.0;
+  bool touched = false;
+  Drive(sim, 6000, {}, [&](const StepRecord& r) {
+    const Eigen::Matrix3d R = Orientation(r.state.x).toRotationMatrix();
+    for (int k = 0; k < Params::kNumProbes; ++k) {
+      const Vector3d corner =
+          Position(r.state.x) + R * (p.p_TO_B + p.probe_length[k] * p.probe_dir_B[k]);
+      max_y = std::max(max_y, corner.y());
+    }
+    max_pen = std::max(max_pen, r.derived.wall_penetration_max);
+    touched = touched || r.derived.wall_contacts > 0;
+    return false;
+  });
+  EXPECT_TRUE(touched);
+  std::printf("barrier at %.0f deg: deepest probe %.3f m into the wall, body reached y = %.3f m\n",
+              heading_deg, max_pen, max_y);
+  // No point of the body box ever reaches the barrier's far face; the body stays inside.
+  EXPECT_LT(max_y, inner.y() + world->LandmarkAt("barrier_thickness").y());
+  EXPECT_LT(max_pen, 0.35);
+  EXPECT_LT(Position(sim.state().x).y(), inner.y());
+}
+
+TEST(Validation, BarrierStopsTheCarHeadOnAt50kmh) { DriveIntoBarrier(90.0); }
+TEST(Validation, BarrierStopsTheCarAtAnAngleAt50kmh) { DriveIntoBarrier(60.0); }
+
+// --- cruise control -----------------------------------------------------------------------------
+void ExpectCruiseHolds(double slope) {
+  const Params p = testing::DefaultParams();
+  const auto world = testing::WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
+  Simulator sim(world, p);
+  const double set = 72.0 / 3.6;
+  DriverInput in;
+  in.cruise_on = true;
+  in.cruise_speed = set;
+  sim.SetInput(in);
+  bool reached = false;
+  double worst_after = 0.0;
+  Drive(sim, 60000, {}, [&](const StepRecord&) {
+    const double vx = BodyVelocity(sim.state()).x();
+    if (!reached && std::abs(vx - set) <= 0.02 * set) reached = true;
+    if (reached) worst_after = std::max(worst_after, std::abs(vx - set) / set);
+    return false;
+  });
+  EXPECT_TRUE(reached);
+  EXPECT_LT(worst_after, 0.02);
+  EXPECT_NEAR(BodyVelocity(sim.state()).x(), set, 0.002 * set);
+}
+
+TEST(Validation, CruiseControlReachesAndHoldsOnFlat) { ExpectCruiseHolds(0.0); }
+TEST(Validation, CruiseControlHoldsUphill) { ExpectCruiseHolds(0.06); }
+TEST(Validation, CruiseControlHoldsDownhill) { ExpectCruiseHolds(-0.06); }
+
+// --- stability on the rough terrain ---------------------------------------------------------------
+// Ten simulated minutes on the rough patch: a driver steering around the patch centre, step
+// steers every 7 s and full braking every 40 s. No NaN, bounded forces and rates.
+struct RoughDriveStats {
+  std::int64_t nonfinite = 0;
+  double on_patch_fraction = 0;
+  double max_Fp = 0;
+  double max_rate = 0;
+};
+
+RoughDriveStats RoughDrive(std::int64_t step_ns, double seconds) {
+  const auto world = SharedWorld("facility");
+  const Params p = testing::DefaultParams();
+  SimConfig cfg;
+  cfg.step_ns = step_ns;
+  Simulator sim(world, p, cfg);
+  const Vector3d c = world->LandmarkAt("rough_terrain_center");
+  const Vector3d lo = world->LandmarkAt("rough_terrain_min");
+  const Vector3d hi = world->LandmarkAt("rough_terrain_max");
+  sim.Spawn({c.x() + 30.0, c.y(), std::numbers::pi / 2});
+  RoughDriveStats st;
+  const auto n = static_cast<std::int64_t>(seconds / sim.h());
+  std::int64_t on_patch = 0;
+  for (std::int64_t i = 0; i < n; ++i) {
+    const double t = sim.time();
+    const Vector3d pos = Position(sim.state().x);
+    // Aim 30 degrees ahead on a 30 m circle around the centre (counter-clockwise).
+    const double ang = std::atan2(pos.y() - c.y(), pos.x() - c.x()) + 30.0 * kDeg;
+    const Vector3d target = c + 30.0 * Vector3d(std::cos(ang), std::sin(ang), 0.0);
+    const double yaw = RollPitchYaw(Orientation(sim.state().x)).z();
+    double err = std::atan2(target.y() - pos.y(), target.x() - pos.x()) - yaw;
+    err = std::remainder(err, 2.0 * std::numbers::pi);
+    DriverInput in;
+    in.steer = std::clamp(1.5 * err, -0.5, 0.5);
+    if (std::fmod(t, 7.0) < 1.0) in.steer += (std::fmod(t, 14.0) < 7.0 ? 10.0 : -10.0) * kDeg;
+    if (std::fmod(t, 40.0) > 36.0) {
+      in.brake = 1.0;  // full braking for 4 s
+    } else {
+      in.cruise_on = true;
+      in.cruise_speed = 30.0 / 3.6;
+    }
+    sim.SetInput(in);
+    if (sim.Step() != StepStatus::kOk) {
+      ++st.nonfinite;
+      break;
+    }
+    const StepRecord& r = sim.last_step();
+    for (const WheelOutputs& w : r.derived.wheel) st.max_Fp = std::max(st.max_Fp, w.Fp);
+    st.max_rate = std::max(st.max_rate, AngularVelocityB(sim.state().x).norm());
+    const bool inside = pos.x() > lo.x() + 6 && pos.x() < hi.x() - 6 && pos.y() > lo.y() + 6 &&
+                        pos.y() < hi.y() - 6;
+    on_patch += inside ? 1 : 0;
+  }
+  st.on_patch_fraction = static_cast<double>(on_patch) / static_cast<double>(n);
+  return st;
+}
+
+TEST(Validation, TenMinutesOnRoughTerrainStayFiniteAndBounded) {
+  const RoughDriveStats st = RoughDrive(1'000'000, 600.0);
+  EXPECT_EQ(st.nonfinite, 0);
+  std::printf("rough: %.1f %% of 600 s on the patch, largest Fp %.1f kN, largest |w| %.2f rad/s\n",
+              100.0 * st.on_patch_fraction, st.max_Fp / 1000.0, st.max_rate);
+  EXPECT_GT(st.on_patch_fraction, 0.95);  // the drive really was on the rough terrain
+  EXPECT_LT(st.max_Fp, 40000.0);
+  EXPECT_LT(st.max_rate, 3.0);
+}
+
+// --- determinism --------------------------------------------------------------------------------
+// The demo drive twice, once on another thread with its own world: byte-identical CSV files.
+TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
+  testing::TempDir dir;
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  auto run = [&m](const std::filesystem::path& out, std::uint64_t* hash) {
+    std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
+    Simulator sim(world, testing::DefaultParams());
+    CsvWriter csv(out);
+    BatchOptions o;
+    o.duration = m.end_time();
+    const BatchSummary s = RunBatch(sim, m, o, &csv);
+    csv.Close();
+    *hash = s.final_hash;
+  };
+  std::uint64_t h1 = 0, h2 = 0;
+  run(dir / "a.csv", &h1);
+  std::thread other([&] { run(dir / "b.csv", &h2); });
+  other.join();
+  const std::string a = testing::ReadFile(dir / "a.csv"), b = testing::ReadFile(dir / "b.csv");
+  EXPECT_GT(a.size(), 1000000u);
+  EXPECT_TRUE(a == b) << "the two CSV files differ";
+  EXPECT_EQ(h1, h2);
+}
+
+// --- friction circle, paper yaw mode, containment -----------------------------------------------
+TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
+  const auto world = SharedWorld("facility");
+  const Params p = testing::DefaultParams();
+  Simulator sim(world, p);
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  int checked = 0;
+  Drive(sim, static_cast<std::int64_t>(m.end_time() / sim.h()),
+        [&m](Simulator& s) { s.SetInput(m.At(s.time())); },
+        [&](const StepRecord& r) {
+          for (const WheelOutputs& w : r.derived.wheel) {
+            const Vector3d tangential = w.F_W - w.F_W.dot(w.n_W) * w.n_W;
+            EXPECT_LE(tangential.norm(), p.mu * w.Fp * (1.0 + 1e-12) + 1e-9);
+            EXPECT_NEAR(w.F_W.dot(w.n_W), w.Fp, 1e-9 * (1.0 + w.Fp));  // Fp is the normal force
+            ++checked;
+          }
+          return false;
+        });
+  EXPECT_GT(checked, 100000);
+}
+
+TEST(Properties, PaperYawModeFollowsEquation6AsAYawRate) {
+  const Params p = ParamsWith([](pb::VehicleParams& m) { m.set_yaw_mode(pb::YAW_MODE_PAPER); });
+  Simulator sim(SharedWorld("flat"), p);
+  sim.Spawn({0, 0, 0}, 10.0);
+  DriverInput in;
+  in.steer = 2.0 * kDeg;
+  in.cruise_on = true;
+  in.cruise_speed = 10.0;
+  sim.SetInput(in);
+  double yaw_integral = 0.0;
+  Drive(sim, 3000, {}, [&](const StepRecord& r) {
+    const double vx = BodyVelocity(r.state).x();
+    EXPECT_NEAR(r.derived.w_eff_B.z(), vx * std::sin(in.steer) / p.wheelbase, 1e-12);
+    yaw_integral += r.derived.w_eff_B.z() * sim.h();
+    return false;
+  });
+  // Heading change = integral of the imposed yaw rate (body nearly level on flat ground).
+  EXPECT_GT(yaw_integral, 0.3);
+  EXPECT_NEAR(RollPitchYaw(Orientation(sim.state().x)).z(), yaw_integral, 1e-3);
+}
+
+TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  DriverInput in;
+  in.steer = std::numeric_limits<double>::quiet_NaN();
+  in.throttle = 7.0;
+  sim.SetInput(in);
+  EXPECT_EQ(sim.sanitized_inputs(), 1u);
+  EXPECT_EQ(sim.input().steer, 0.0);
+  EXPECT_EQ(sim.input().throttle, 1.0);
+  EXPECT_EQ(sim.Step(), StepStatus::kOk);
+  EXPECT_TRUE(sim.state().x.allFinite());
+}
+
+TEST(Properties, NonFiniteStateIsContained) {
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  State s = sim.state();
+  s.x[sx::kV] = std::numeric_limits<double>::infinity();
+  sim.SetState(s);
+  EXPECT_EQ(sim.Step(), StepStatus::kNonFinite);
+  EXPECT_EQ(sim.nonfinite_steps(), 1u);
+  EXPECT_EQ(sim.state().step, s.step);  // stayed at x_n
+}
+
+TEST(Properties, ParametersChangeBetweenSteps) {
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 1000, {});
+  // A heavier car sinks: the new static deflection follows k and the new weight.
+  const Params heavy = ParamsWith([](pb::VehicleParams& m) { m.set_mass(2000.0); });
+  sim.SetParams(heavy);
+  Drive(sim, 8000, {});
+  Derived d;
+  sim.Forward(d);
+  double sum = 0.0;
+  for (const auto& w : d.wheel) sum += w.Fp;
+  EXPECT_NEAR(sum, heavy.mass * heavy.gravity, 1e-3 * heavy.mass * heavy.gravity);
+}
+
+}  // namespace
+}  // namespace vdyn

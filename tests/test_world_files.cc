@@ -1,0 +1,148 @@
+// Terrain files: meshes through Assimp (written here by Assimp's own exporters, and by hand) and
+// height-map images; broken input ends in an error naming the file and the reason.
+#include <cmath>
+
+#include <assimp/Exporter.hpp>
+#include <assimp/scene.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "test_support.h"
+#include "world.h"
+
+namespace vdyn {
+namespace {
+
+using ::testing::HasSubstr;
+using testing::TempDir;
+using testing::WriteFile;
+using Eigen::Vector3d;
+
+// A 20 m x 10 m quad at height 3 in a Y-up file: x in [0, 20], "up" y = 3, z in [-10, 0].
+std::unique_ptr<aiScene> YUpQuadScene() {
+  auto scene = std::make_unique<aiScene>();
+  scene->mRootNode = new aiNode();
+  scene->mRootNode->mNumMeshes = 1;
+  scene->mRootNode->mMeshes = new unsigned[1]{0};
+  scene->mMaterials = new aiMaterial*[1]{new aiMaterial()};
+  scene->mNumMaterials = 1;
+  auto* mesh = new aiMesh();
+  mesh->mMaterialIndex = 0;
+  mesh->mPrimitiveTypes = aiPrimitiveType_TRIANGLE;
+  mesh->mNumVertices = 4;
+  mesh->mVertices = new aiVector3D[4]{{0, 3, 0}, {20, 3, 0}, {20, 3, -10}, {0, 3, -10}};
+  mesh->mNumFaces = 2;
+  mesh->mFaces = new aiFace[2];
+  const unsigned idx[2][3] = {{0, 1, 2}, {0, 2, 3}};
+  for (int f = 0; f < 2; ++f) {
+    mesh->mFaces[f].mNumIndices = 3;
+    mesh->mFaces[f].mIndices = new unsigned[3]{idx[f][0], idx[f][1], idx[f][2]};
+  }
+  scene->mMeshes = new aiMesh*[1]{mesh};
+  scene->mNumMeshes = 1;
+  return scene;
+}
+
+double GroundZ(const World& w, double x, double y) {
+  const TraceHit h = w.terrain.Trace(Vector3d(x, y, 100.0), -Vector3d::UnitZ(), 200.0);
+  EXPECT_TRUE(h.hit) << "no ground at " << x << ", " << y;
+  return 100.0 - h.distance;
+}
+
+class AssimpFormats : public ::testing::TestWithParam<std::pair<const char*, const char*>> {};
+
+TEST_P(AssimpFormats, YUpFileWithScaleLandsWhereExpected) {
+  TempDir dir;
+  const auto [format, ext] = GetParam();
+  const auto path = dir / (std::string("quad.") + ext);
+  Assimp::Exporter exporter;
+  const auto scene = YUpQuadScene();
+  ASSERT_EQ(exporter.Export(scene.get(), format, path.string()), AI_SUCCESS)
+      << exporter.GetErrorString();
+  WorldFileOptions o;
+  o.up_axis = 'y';
+  o.scale = 2.0;
+  const auto world = LoadWorld(path.string(), o);
+  EXPECT_EQ(world->terrain.triangle_count(), 2u);
+  // File (x, y-up, z) -> world (x, -z, y), times 2: x in [0, 40], y in [0, 20], height 6.
+  EXPECT_NEAR(GroundZ(*world, 30.0, 15.0), 6.0, 1e-5);
+  EXPECT_FALSE(world->terrain.Trace(Vector3d(30, -5, 100), -Vector3d::UnitZ(), 200).hit);
+  EXPECT_NEAR(world->spawn.x, 20.0, 1e-5);
+  EXPECT_NEAR(world->spawn.y, 10.0, 1e-5);
+}
+
+INSTANTIATE_TEST_SUITE_P(Files, AssimpFormats,
+                         ::testing::Values(std::make_pair("obj", "obj"),
+                                           std::make_pair("stlb", "stl"),
+                                           std::make_pair("gltf2", "gltf"),
+                                           std::make_pair("glb2", "glb"),
+                                           std::make_pair("fbxa", "fbx")));
+
+TEST(WorldFiles, HandWrittenObjZUp) {
+  TempDir dir;
+  WriteFile(dir / "ground.obj",
+            "# two triangles, Z up\nv -5 -5 1\nv 5 -5 1\nv 5 5 2\nv -5 5 2\nf 1 2 3\nf 1 3 4\n");
+  const auto world = LoadWorld((dir / "ground.obj").string(), WorldFileOptions{});
+  EXPECT_NEAR(GroundZ(*world, 0.0, 0.0), 1.5, 1e-9);
+  EXPECT_NEAR(GroundZ(*world, 0.0, 2.5), 1.75, 1e-9);
+}
+
+TEST(WorldFiles, HeightMapImage) {
+  TempDir dir;
+  // 3 x 2 binary PGM: top row (north) 0 128 255, bottom row 0 0 0.
+  std::string pgm = "P5\n3 2\n255\n";
+  pgm += std::string{'\x00', '\x80', '\xff', '\x00', '\x00', '\x00'};
+  WriteFile(dir / "hm.pgm", pgm);
+  WorldFileOptions o;
+  o.heightmap_cell = 10.0;
+  o.heightmap_height = 5.1;
+  const auto world = LoadWorld((dir / "hm.pgm").string(), o);
+  // Pixels span x in [-10, 10], y in [-5, 5]; pixel (2, 0) is at (10, 5) with 5.1 m.
+  EXPECT_NEAR(GroundZ(*world, 9.999, 4.999), 5.1, 0.01);
+  EXPECT_NEAR(GroundZ(*world, -9.9, -4.9), 0.0, 1e-9);
+  EXPECT_NEAR(GroundZ(*world, 0.0, 4.999), 5.1 * 128.0 / 255.0, 0.01);
+}
+
+struct BrokenCase {
+  const char* name;
+  const char* content;  // nullptr: do not create the file
+  const char* reason;
+};
+
+class BrokenWorldFiles : public ::testing::TestWithParam<BrokenCase> {};
+
+TEST_P(BrokenWorldFiles, EndWithAMessageNamingFileAndReason) {
+  TempDir dir;
+  const auto path = dir / GetParam().name;
+  if (GetParam().content != nullptr) WriteFile(path, GetParam().content);
+  try {
+    LoadWorld(path.string(), WorldFileOptions{});
+    FAIL() << "expected WorldError";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), HasSubstr(path.string()));
+    EXPECT_THAT(e.what(), HasSubstr(GetParam().reason));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Files, BrokenWorldFiles,
+    ::testing::Values(BrokenCase{"missing.obj", nullptr, "no such file"},
+                      BrokenCase{"empty.stl", "", "the file is empty"},
+                      BrokenCase{"garbage.fbx", "this is not an FBX file at all\n",
+                                 "cannot read the mesh"},
+                      BrokenCase{"garbage.gltf", "{ not json", "cannot read the mesh"},
+                      BrokenCase{"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
+                                 "no usable triangles"},
+                      BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
+                      BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"}));
+
+TEST(WorldFiles, BadOptionsAreRefused) {
+  TempDir dir;
+  WriteFile(dir / "g.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  WorldFileOptions o;
+  o.scale = -1.0;
+  EXPECT_THROW(LoadWorld((dir / "g.obj").string(), o), WorldError);
+}
+
+}  // namespace
+}  // namespace vdyn
