@@ -113,6 +113,52 @@ TEST(Facility, IsLargeEnoughToDriveForMinutes) {
   EXPECT_GT(perimeter / (50.0 / 3.6), 120.0);
 }
 
+TEST(Terrain, PacketTraceAnswersLikeSingleTraces) {
+  const auto world = testing::SharedWorld("facility");
+  const Terrain& t = world->terrain;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::array<Vector3d, 4> origins = {Vector3d(10.3, 40.7, 2.0), Vector3d(42.0, -150.2, 3.0),
+                                           Vector3d(0, 0, nan), Vector3d(100.0, 100.0, 0.5)};
+  const std::array<Vector3d, 4> dirs = {-Vector3d::UnitZ(), -Vector3d::UnitZ(), -Vector3d::UnitZ(),
+                                        Vector3d::UnitZ()};
+  const std::array<double, 4> ranges = {5.0, 5.0, 5.0, 5.0};
+  std::array<TraceHit, 4> hits;
+  t.Trace4(origins, dirs, ranges, hits);
+  for (int i = 0; i < 4; ++i) {
+    const TraceHit one = t.Trace(origins[i], dirs[i], ranges[i]);
+    EXPECT_EQ(hits[i].hit, one.hit) << i;
+    EXPECT_EQ(hits[i].distance, one.distance) << i;
+    EXPECT_EQ(hits[i].normal_W, one.normal_W) << i;
+  }
+  EXPECT_TRUE(hits[0].hit);   // rough terrain
+  EXPECT_TRUE(hits[1].hit);   // jump ramp A
+  EXPECT_FALSE(hits[2].hit);  // non-finite origin: no hit, no crash
+  EXPECT_FALSE(hits[3].hit);  // upwards into the sky
+}
+
+TEST(Terrain, SteepSurfaceGridFindsWallsNearAndNothingInTheOpen) {
+  const auto world = testing::SharedWorld("facility");
+  const Terrain& t = world->terrain;
+  const Vector3d inner = world->LandmarkAt("barrier_inner_max");
+  EXPECT_TRUE(t.SteepSurfaceNear(100.0, inner.y() - 3.0, 4.0));
+  EXPECT_TRUE(t.SteepSurfaceNear(inner.x() - 1.0, 0.0, 2.0));
+  EXPECT_TRUE(t.SteepSurfaceNear(0.0, 170.0, 1.0));  // billboard posts
+  // Conservative: every vertical face of the facility is flagged within its own cell.
+  for (const auto& mesh : t.meshes()) {
+    for (const auto& tri : mesh.triangles) {
+      const Vector3d a = mesh.vertices_W[tri[0]], b = mesh.vertices_W[tri[1]],
+                     c = mesh.vertices_W[tri[2]];
+      const Vector3d n = (b - a).cross(c - a).normalized();
+      if (std::abs(n.z()) < Terrain::kSteepNormalZ) {
+        const Vector3d m = (a + b + c) / 3.0;
+        ASSERT_TRUE(t.SteepSurfaceNear(m.x(), m.y(), 0.0)) << mesh.name;
+      }
+    }
+  }
+  EXPECT_FALSE(t.SteepSurfaceNear(200.0, 100.0, 6.0));  // open ground
+  EXPECT_FALSE(testing::SharedWorld("flat")->terrain.SteepSurfaceNear(0.0, 0.0, 100.0));
+}
+
 TEST(Worlds, UnknownBuiltinIsAClearError) {
   EXPECT_THROW(BuildBuiltinWorld("moon"), WorldError);
 }

@@ -1,5 +1,6 @@
 #include "terrain.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -107,40 +108,66 @@ void Terrain::AddMesh(TriangleMesh mesh) {
 void Terrain::Commit() {
   if (committed_) return;
   rtcCommitScene(impl_->scene);
+  BuildSteepGrid();
   committed_ = true;
 }
 
-TraceHit Terrain::Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
-                       double t_max) const {
-  TraceHit out;
-  // A non-finite ray (from a diverging state) finds nothing; Embree must never see one.
-  if (!origin_W.allFinite() || !dir_W.allFinite() || !(t_max >= 0.0)) return out;
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  RTCRayHit rh;
-  rh.ray.org_x = static_cast<float>(origin_W.x());
-  rh.ray.org_y = static_cast<float>(origin_W.y());
-  rh.ray.org_z = static_cast<float>(origin_W.z());
-  rh.ray.dir_x = static_cast<float>(dir_W.x());
-  rh.ray.dir_y = static_cast<float>(dir_W.y());
-  rh.ray.dir_z = static_cast<float>(dir_W.z());
-  rh.ray.tnear = 0.0f;
-  // A little beyond t_max in float; the exact bound is applied in double below.
-  rh.ray.tfar = static_cast<float>(t_max) * 1.0001f + 1e-3f;
-  rh.ray.time = 0.0f;
-  rh.ray.mask = 0xFFFFFFFFu;
-  rh.ray.id = 0;
-  rh.ray.flags = 0;
-  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
-  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-  rtcIntersect1(impl_->scene, &context, &rh);
-  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return out;
+void Terrain::BuildSteepGrid() {
+  if (triangle_count_ == 0) return;
+  const Eigen::Vector3d ext = bounds_max_ - bounds_min_;
+  // 4 m cells, coarser for huge worlds so the grid stays within ~1M cells.
+  grid_cell_ = std::max({4.0, ext.x() / 1024.0, ext.y() / 1024.0});
+  grid_x0_ = bounds_min_.x();
+  grid_y0_ = bounds_min_.y();
+  grid_nx_ = static_cast<int>(std::floor(ext.x() / grid_cell_)) + 1;
+  grid_ny_ = static_cast<int>(std::floor(ext.y() / grid_cell_)) + 1;
+  steep_cells_.assign(static_cast<std::size_t>(grid_nx_) * static_cast<std::size_t>(grid_ny_), 0);
+  for (std::size_t m = 0; m < meshes_.size(); ++m) {
+    const TriangleMesh& mesh = meshes_[m];
+    for (std::size_t k = 0; k < planes_[m].size(); ++k) {
+      if (std::abs(planes_[m][k].n.z()) >= kSteepNormalZ) continue;
+      const auto& tri = mesh.triangles[kept_to_source_[m][k]];
+      Eigen::Vector3d lo = mesh.vertices_W[tri[0]], hi = lo;
+      for (int i = 1; i < 3; ++i) {
+        lo = lo.cwiseMin(mesh.vertices_W[tri[i]]);
+        hi = hi.cwiseMax(mesh.vertices_W[tri[i]]);
+      }
+      const int i0 = std::clamp(static_cast<int>((lo.x() - grid_x0_) / grid_cell_), 0, grid_nx_ - 1);
+      const int i1 = std::clamp(static_cast<int>((hi.x() - grid_x0_) / grid_cell_), 0, grid_nx_ - 1);
+      const int j0 = std::clamp(static_cast<int>((lo.y() - grid_y0_) / grid_cell_), 0, grid_ny_ - 1);
+      const int j1 = std::clamp(static_cast<int>((hi.y() - grid_y0_) / grid_cell_), 0, grid_ny_ - 1);
+      for (int j = j0; j <= j1; ++j) {
+        for (int i = i0; i <= i1; ++i) {
+          steep_cells_[static_cast<std::size_t>(j) * grid_nx_ + i] = 1;
+        }
+      }
+    }
+  }
+}
 
-  const std::uint32_t mesh = geom_to_mesh_[rh.hit.geomID];
-  const Plane& plane = planes_[mesh][rh.hit.primID];
+bool Terrain::SteepSurfaceNear(double x, double y, double radius) const {
+  if (steep_cells_.empty()) return false;
+  if (!std::isfinite(x) || !std::isfinite(y)) return false;
+  const int i0 = std::max(0, static_cast<int>(std::floor((x - radius - grid_x0_) / grid_cell_)));
+  const int i1 = std::min(grid_nx_ - 1, static_cast<int>(std::floor((x + radius - grid_x0_) / grid_cell_)));
+  const int j0 = std::max(0, static_cast<int>(std::floor((y - radius - grid_y0_) / grid_cell_)));
+  const int j1 = std::min(grid_ny_ - 1, static_cast<int>(std::floor((y + radius - grid_y0_) / grid_cell_)));
+  for (int j = j0; j <= j1; ++j) {
+    for (int i = i0; i <= i1; ++i) {
+      if (steep_cells_[static_cast<std::size_t>(j) * grid_nx_ + i] != 0) return true;
+    }
+  }
+  return false;
+}
+
+TraceHit Terrain::Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                         double t_max, unsigned geom_id, unsigned prim_id, float t_float) const {
+  TraceHit out;
+  if (geom_id == RTC_INVALID_GEOMETRY_ID) return out;
+  const std::uint32_t mesh = geom_to_mesh_[geom_id];
+  const Plane& plane = planes_[mesh][prim_id];
   const double denom = plane.n.dot(dir_W);
-  double t = static_cast<double>(rh.ray.tfar);
+  double t = static_cast<double>(t_float);
   // Refine in double against the triangle's plane unless the ray grazes it.
   if (std::abs(denom) > 1e-6) {
     const double t_plane = (plane.offset - plane.n.dot(origin_W)) / denom;
@@ -153,8 +180,81 @@ TraceHit Terrain::Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& 
   out.distance = t;
   out.normal_W = denom > 0.0 ? Eigen::Vector3d(-plane.n) : plane.n;
   out.mesh = mesh;
-  out.triangle = kept_to_source_[mesh][rh.hit.primID];
+  out.triangle = kept_to_source_[mesh][prim_id];
   return out;
+}
+
+namespace {
+bool FiniteRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max) {
+  return o.allFinite() && d.allFinite() && t_max >= 0.0;
+}
+// A little beyond t_max in float; the exact bound is applied in double by Refine.
+float FloatFar(double t_max) { return static_cast<float>(t_max) * 1.0001f + 1e-3f; }
+}  // namespace
+
+TraceHit Terrain::Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
+                       double t_max) const {
+  // A non-finite ray (from a diverging state) finds nothing; Embree must never see one.
+  if (!FiniteRay(origin_W, dir_W, t_max)) return TraceHit{};
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  RTCRayHit rh;
+  rh.ray.org_x = static_cast<float>(origin_W.x());
+  rh.ray.org_y = static_cast<float>(origin_W.y());
+  rh.ray.org_z = static_cast<float>(origin_W.z());
+  rh.ray.dir_x = static_cast<float>(dir_W.x());
+  rh.ray.dir_y = static_cast<float>(dir_W.y());
+  rh.ray.dir_z = static_cast<float>(dir_W.z());
+  rh.ray.tnear = 0.0f;
+  rh.ray.tfar = FloatFar(t_max);
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &context, &rh);
+  return Refine(origin_W, dir_W, t_max, rh.hit.geomID, rh.hit.primID, rh.ray.tfar);
+}
+
+void Terrain::Trace4(const std::array<Eigen::Vector3d, 4>& origin_W,
+                     const std::array<Eigen::Vector3d, 4>& dir_W,
+                     const std::array<double, 4>& t_max, std::array<TraceHit, 4>& hits) const {
+  alignas(16) int valid[4];
+  alignas(16) RTCRayHit4 rh;
+  for (int i = 0; i < 4; ++i) {
+    valid[i] = FiniteRay(origin_W[i], dir_W[i], t_max[i]) ? -1 : 0;
+    rh.ray.org_x[i] = static_cast<float>(origin_W[i].x());
+    rh.ray.org_y[i] = static_cast<float>(origin_W[i].y());
+    rh.ray.org_z[i] = static_cast<float>(origin_W[i].z());
+    rh.ray.dir_x[i] = static_cast<float>(dir_W[i].x());
+    rh.ray.dir_y[i] = static_cast<float>(dir_W[i].y());
+    rh.ray.dir_z[i] = static_cast<float>(dir_W[i].z());
+    if (valid[i] == 0) {  // Embree must not see non-finite values even in an inactive lane
+      rh.ray.org_x[i] = rh.ray.org_y[i] = rh.ray.org_z[i] = 0.0f;
+      rh.ray.dir_x[i] = rh.ray.dir_y[i] = 0.0f;
+      rh.ray.dir_z[i] = -1.0f;
+    }
+    rh.ray.tnear[i] = 0.0f;
+    rh.ray.tfar[i] = valid[i] != 0 ? FloatFar(t_max[i]) : 0.0f;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xFFFFFFFFu;
+    rh.ray.id[i] = static_cast<unsigned>(i);
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcIntersect4(valid, impl_->scene, &context, &rh);
+  for (int i = 0; i < 4; ++i) {
+    hits[i] = valid[i] != 0 ? Refine(origin_W[i], dir_W[i], t_max[i], rh.hit.geomID[i],
+                                     rh.hit.primID[i], rh.ray.tfar[i])
+                            : TraceHit{};
+  }
 }
 
 }  // namespace vdyn

@@ -5,6 +5,7 @@
 // (no float staircase) and exact on planar ground far from the origin.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -41,6 +42,17 @@ class Terrain {
   // Closest hit along origin + t * dir_W (dir_W unit) for t in [0, t_max]. No allocation.
   TraceHit Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W, double t_max) const;
 
+  // Four traces at once (one Embree ray packet), each as Trace would answer it.
+  void Trace4(const std::array<Eigen::Vector3d, 4>& origin_W,
+              const std::array<Eigen::Vector3d, 4>& dir_W, const std::array<double, 4>& t_max,
+              std::array<TraceHit, 4>& hits) const;
+
+  // Whether any steep surface (|n_z| < kSteepNormalZ: walls, barrier, ramp faces) lies within
+  // `radius` of (x, y) in the horizontal plane, from a grid built at Commit. Conservative: it may
+  // say yes when the surface is a little farther, never no when it is near.
+  bool SteepSurfaceNear(double x, double y, double radius) const;
+  static constexpr double kSteepNormalZ = 0.7;
+
   const std::vector<TriangleMesh>& meshes() const { return meshes_; }
   std::size_t triangle_count() const { return triangle_count_; }
   std::size_t dropped_triangles() const { return dropped_triangles_; }
@@ -53,6 +65,10 @@ class Terrain {
     Eigen::Vector3d n;  // unit normal
     double offset;      // n . x for x on the plane
   };
+  TraceHit Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W, double t_max,
+                  unsigned geom_id, unsigned prim_id, float t_float) const;
+  void BuildSteepGrid();
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
   std::vector<TriangleMesh> meshes_;
@@ -64,6 +80,11 @@ class Terrain {
   Eigen::Vector3d bounds_min_ = Eigen::Vector3d::Constant(1e300);
   Eigen::Vector3d bounds_max_ = Eigen::Vector3d::Constant(-1e300);
   bool committed_ = false;
+  // Steep-surface grid over the terrain's XY bounds: one flag per cell.
+  double grid_cell_ = 1.0;
+  double grid_x0_ = 0, grid_y0_ = 0;
+  int grid_nx_ = 0, grid_ny_ = 0;
+  std::vector<std::uint8_t> steep_cells_;
 };
 
 }  // namespace vdyn

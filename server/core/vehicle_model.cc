@@ -38,11 +38,16 @@ void FindWalls(const Params& p, const Terrain& terrain, const StateVector& x, Wa
   const Eigen::Vector3d p_WO = Position(x) + R_WB * p.p_TO_B;
   // Look 1 m beyond the body: far more than one step's travel at any speed the model allows.
   constexpr double kLookAhead = 1.0;
+  const double reach = std::max(p.body_front, p.body_rear) + p.body_half_width + kLookAhead;
+  if (!terrain.SteepSurfaceNear(p_WO.x(), p_WO.y(), reach)) {
+    for (WallPlane& wall : walls) wall.active = false;  // open ground: no trace needed
+    return;
+  }
   for (int k = 0; k < Params::kNumProbes; ++k) {
     const Eigen::Vector3d dir_W = R_WB * p.probe_dir_B[k];
     const TraceHit hit = terrain.Trace(p_WO, dir_W, p.probe_length[k] + kLookAhead);
     WallPlane& wall = walls[k];
-    wall.active = hit.hit && std::abs(hit.normal_W.z()) < 0.7;
+    wall.active = hit.hit && std::abs(hit.normal_W.z()) < Terrain::kSteepNormalZ;
     if (wall.active) {
       wall.p_W = p_WO + hit.distance * dir_W;
       wall.n_W = hit.normal_W;
@@ -60,17 +65,24 @@ void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedCo
   const Eigen::Vector3d down_W = -R_WB.col(2);  // -Z_B, the direction of the vertical traces
 
   // --- 1. sense terrain: A-B trace per wheel -------------------------------------------------
-  std::array<TraceHit, kNumWheels> hits;
-  out.any_contact = false;
+  std::array<Eigen::Vector3d, kNumWheels> origins, dirs;
+  std::array<double, kNumWheels> ranges;
   for (int w = 0; w < kNumWheels; ++w) {
     const WheelParams& wp = p.wheel[w];
     WheelOutputs& o = out.wheel[w];
     o.p_A_W = p_WT + R_WB * p.p_TA_B[w];
     const double lift = TraceLift(wp);
-    hits[w] = terrain.Trace(o.p_A_W - lift * down_W, down_W, lift + wp.free_length + wp.radius);
-    if (hits[w].hit) hits[w].distance -= lift;  // now AB, measured from A (negative: above A)
-    o.contact = hits[w].hit;
-    out.any_contact = out.any_contact || o.contact;
+    origins[w] = o.p_A_W - lift * down_W;
+    dirs[w] = down_W;
+    ranges[w] = lift + wp.free_length + wp.radius;
+  }
+  std::array<TraceHit, kNumWheels> hits;
+  terrain.Trace4(origins, dirs, ranges, hits);  // the four wheels as one ray packet
+  out.any_contact = false;
+  for (int w = 0; w < kNumWheels; ++w) {
+    if (hits[w].hit) hits[w].distance -= TraceLift(p.wheel[w]);  // now AB from A (< 0: above A)
+    out.wheel[w].contact = hits[w].hit;
+    out.any_contact = out.any_contact || hits[w].hit;
   }
 
   // Body rates: the state's, or in the paper's yaw mode eq. 6 as a yaw rate while a wheel touches.
