@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include "batch.h"
+#include "drivers.h"
 #include "maneuver.h"
 #include "test_support.h"
 
@@ -335,8 +336,8 @@ TEST(Validation, CruiseControlHoldsUphill) { ExpectCruiseHolds(0.06); }
 TEST(Validation, CruiseControlHoldsDownhill) { ExpectCruiseHolds(-0.06); }
 
 // --- stability on the rough terrain ---------------------------------------------------------------
-// Ten simulated minutes on the rough patch: a driver steering around the patch centre, step
-// steers every 7 s and full braking every 40 s. No NaN, bounded forces and rates.
+// Ten simulated minutes on the rough patch: a driver circling the patch centre, step steers every
+// 7 s and full braking every 40 s (CircuitDriver). No NaN, bounded forces and rates.
 struct RoughDriveStats {
   std::int64_t nonfinite = 0;
   double on_patch_fraction = 0;
@@ -346,43 +347,27 @@ struct RoughDriveStats {
 
 RoughDriveStats RoughDrive(std::int64_t step_ns, double seconds) {
   const auto world = SharedWorld("facility");
-  const Params p = testing::DefaultParams();
   SimConfig cfg;
   cfg.step_ns = step_ns;
-  Simulator sim(world, p, cfg);
+  Simulator sim(world, testing::DefaultParams(), cfg);
   const Vector3d c = world->LandmarkAt("rough_terrain_center");
   const Vector3d lo = world->LandmarkAt("rough_terrain_min");
   const Vector3d hi = world->LandmarkAt("rough_terrain_max");
-  sim.Spawn({c.x() + 30.0, c.y(), std::numbers::pi / 2});
+  CircuitDriver driver;
+  driver.center = c.head<2>();
+  sim.Spawn({c.x() + driver.radius, c.y(), std::numbers::pi / 2});
   RoughDriveStats st;
   const auto n = static_cast<std::int64_t>(seconds / sim.h());
   std::int64_t on_patch = 0;
   for (std::int64_t i = 0; i < n; ++i) {
-    const double t = sim.time();
-    const Vector3d pos = Position(sim.state().x);
-    // Aim 30 degrees ahead on a 30 m circle around the centre (counter-clockwise).
-    const double ang = std::atan2(pos.y() - c.y(), pos.x() - c.x()) + 30.0 * kDeg;
-    const Vector3d target = c + 30.0 * Vector3d(std::cos(ang), std::sin(ang), 0.0);
-    const double yaw = RollPitchYaw(Orientation(sim.state().x)).z();
-    double err = std::atan2(target.y() - pos.y(), target.x() - pos.x()) - yaw;
-    err = std::remainder(err, 2.0 * std::numbers::pi);
-    DriverInput in;
-    in.steer = std::clamp(1.5 * err, -0.5, 0.5);
-    if (std::fmod(t, 7.0) < 1.0) in.steer += (std::fmod(t, 14.0) < 7.0 ? 10.0 : -10.0) * kDeg;
-    if (std::fmod(t, 40.0) > 36.0) {
-      in.brake = 1.0;  // full braking for 4 s
-    } else {
-      in.cruise_on = true;
-      in.cruise_speed = 30.0 / 3.6;
-    }
-    sim.SetInput(in);
+    sim.SetInput(driver.Input(sim.state(), sim.time()));
     if (sim.Step() != StepStatus::kOk) {
       ++st.nonfinite;
       break;
     }
-    const StepRecord& r = sim.last_step();
-    for (const WheelOutputs& w : r.derived.wheel) st.max_Fp = std::max(st.max_Fp, w.Fp);
+    for (const WheelOutputs& w : sim.last_step().derived.wheel) st.max_Fp = std::max(st.max_Fp, w.Fp);
     st.max_rate = std::max(st.max_rate, AngularVelocityB(sim.state().x).norm());
+    const Vector3d pos = Position(sim.state().x);
     const bool inside = pos.x() > lo.x() + 6 && pos.x() < hi.x() - 6 && pos.y() > lo.y() + 6 &&
                         pos.y() < hi.y() - 6;
     on_patch += inside ? 1 : 0;
@@ -399,6 +384,32 @@ TEST(Validation, TenMinutesOnRoughTerrainStayFiniteAndBounded) {
   EXPECT_GT(st.on_patch_fraction, 0.95);  // the drive really was on the rough terrain
   EXPECT_LT(st.max_Fp, 40000.0);
   EXPECT_LT(st.max_rate, 3.0);
+}
+
+// The documented largest stable step for driving (docs/model.md, bench/step_sweep): the demo
+// drive at h = 10 ms stays finite, keeps its peak spring force and body rate within 1.5x of the
+// 1 ms run's, and the braked car ends at rest.
+TEST(Validation, DemoDriveStableAtTheDocumentedLargestStep) {
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  auto run = [&m](std::int64_t step_ns, double* max_Fp, double* max_rate) {
+    SimConfig cfg;
+    cfg.step_ns = step_ns;
+    Simulator sim(SharedWorld("facility"), testing::DefaultParams(), cfg);
+    Drive(sim, std::llround(m.end_time() / sim.h()),
+          [&m](Simulator& s) { s.SetInput(m.At(s.time())); },
+          [&](const StepRecord& r) {
+            for (const WheelOutputs& w : r.derived.wheel) *max_Fp = std::max(*max_Fp, w.Fp);
+            *max_rate = std::max(*max_rate, r.derived.w_eff_B.norm());
+            return false;
+          });
+    return Velocity(sim.state().x).norm();
+  };
+  double fp1 = 0, rate1 = 0, fp10 = 0, rate10 = 0;
+  run(1'000'000, &fp1, &rate1);
+  const double end_speed = run(10'000'000, &fp10, &rate10);
+  EXPECT_LT(end_speed, 0.01);
+  EXPECT_LT(fp10, 1.5 * fp1);
+  EXPECT_LT(rate10, 1.5 * rate1);
 }
 
 // --- determinism --------------------------------------------------------------------------------

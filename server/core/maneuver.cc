@@ -172,14 +172,15 @@ const std::string& DemoManeuverCsv() {
       "t_s,steer_deg,throttle,brake,cruise_kmh\n"
       "# accelerate on the automatic speed control along the test road\n"
       "0,0,0,0,50\n"
-      "24,0,0,0,50\n"
-      "# over jump ramp A at ~50 km/h; then a 2 degree step steer to the left\n"
-      "24.05,2,0,0,50\n"
-      "30,2,0,0,50\n"
-      "30.05,0,0,0,50\n"
-      "# full stop\n"
-      "32,0,0,0,\n"
-      "32.05,0,0,1,\n"
+      "# over the speed bumps, the washboard, the one-sided bump and jump ramp A (t ~ 23 s)\n"
+      "26,0,0,0,50\n"
+      "# step steer: 3 degrees to the left within 0.1 s, held 4 s, then straight\n"
+      "26.1,3,0,0,50\n"
+      "30,3,0,0,50\n"
+      "30.1,0,0,0,50\n"
+      "# full stop: speed control off, full brake\n"
+      "33,0,0,0,\n"
+      "33.1,0,0,1,\n"
       "40,0,0,1,\n";
   return csv;
 }
