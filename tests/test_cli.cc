@@ -24,7 +24,9 @@ struct Result {
 };
 
 Result RunServer(const std::string& args) {
-  const std::string cmd = std::string(VDYN_SERVER_BINARY) + " " + args + " 2>&1";
+  // Bounded: a server that does not stop on its own is killed after 120 s.
+  const std::string cmd =
+      "timeout -s KILL 120 " + std::string(VDYN_SERVER_BINARY) + " " + args + " 2>&1";
   Result r{-1, {}};
   FILE* pipe = popen(cmd.c_str(), "r");
   if (pipe == nullptr) return r;
@@ -89,10 +91,16 @@ TEST(Cli, MissingWorldFileIsRefused) {
   EXPECT_THAT(r.output, HasSubstr("/nonexistent/hills.obj: no such file"));
 }
 
-TEST(Cli, NoModeIsAUsageError) {
-  const Result r = RunServer("");
+TEST(Cli, UnknownOptionIsAUsageError) {
+  const Result r = RunServer("--warp-speed 9");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.output, HasSubstr("choose a mode"));
+  EXPECT_THAT(r.output, HasSubstr("--warp-speed"));
+}
+
+TEST(Cli, BadOptionValueIsRefused) {
+  const Result r = RunServer("--batch --maneuver demo --step-ms 0");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("--step-ms"));
 }
 
 TEST(Cli, DemoRunsAndSaysWhereTheCsvIs) {

@@ -1,13 +1,19 @@
 // vdyn-server: the vehicle-dynamics simulation server.
 //
-// Modes so far: batch drives (--batch, --demo) and the parameter/maneuver dumps. Exit codes:
-// 0 success, 1 the simulation failed (non-finite state), 2 bad command line or input file.
+// Modes: real time over DDS (the default), lockstep over DDS (--lockstep), batch drives
+// (--batch, --demo), and the parameter/maneuver dumps. Exit codes: 0 success, 1 the simulation
+// failed (non-finite state), 2 bad command line or input file, 3 lockstep client gone.
+#include <unistd.h>
+
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
 #include <numbers>
 #include <optional>
+
+#include <csignal>
 
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
@@ -18,8 +24,14 @@
 #include "progress.h"
 #include "simulator.h"
 #include "world.h"
+#if VDYN_WITH_DDS
+#include "server_node.h"
+#endif
 
 namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void OnSignal(int) { g_stop.store(true); }
 
 constexpr double kDeg = std::numbers::pi / 180.0;
 
@@ -40,26 +52,69 @@ struct Options {
   std::vector<double> spawn;
   double speed_kmh = 0.0;
   bool quiet = false;
+  // Networked modes.
+  bool lockstep = false;
+  std::uint32_t domain = 0;
+  std::string server_id = "vdyn";
+  std::vector<std::uint32_t> vehicle_ids = {1};
+  double watchdog_ms = 100.0;
+  double lockstep_timeout_s = 10.0;
+  int rt_priority = 50;
+  bool status = false;
+  bool no_status = false;
 };
 
-int RunBatchMode(const Options& o) {
-  const vdyn::pb::VehicleParams msg = o.vehicle.empty()
-                                          ? vdyn::DefaultVehicleParams()
-                                          : vdyn::LoadVehicleParamsFile(o.vehicle);
-  const vdyn::Params params = vdyn::ParamsFromProto(msg);
-  const vdyn::Maneuver maneuver = o.maneuver == "demo"
-                                      ? vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo")
-                                      : vdyn::Maneuver::Load(o.maneuver);
+vdyn::pb::VehicleParams LoadParams(const Options& o) {
+  return o.vehicle.empty() ? vdyn::DefaultVehicleParams() : vdyn::LoadVehicleParamsFile(o.vehicle);
+}
+
+std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
   vdyn::WorldFileOptions wfo = o.world_file;
   wfo.up_axis = o.world_up.empty() ? 'z' : o.world_up[0];
   std::shared_ptr<const vdyn::World> world = vdyn::LoadWorld(o.world, wfo);
+  if (!o.spawn.empty()) {
+    auto w = std::const_pointer_cast<vdyn::World>(world);
+    w->spawn = {o.spawn[0], o.spawn[1], o.spawn[2] * kDeg};
+  }
+  return world;
+}
 
+int RunNetworked(const Options& o) {
+#if VDYN_WITH_DDS
+  vdyn::ServerOptions so;
+  so.mode = o.lockstep ? vdyn::ServerOptions::Mode::kLockstep
+                       : vdyn::ServerOptions::Mode::kRealtime;
+  so.domain_id = o.domain;
+  so.vehicle_ids = o.vehicle_ids;
+  so.session.server_id = o.server_id;
+  so.session.step_ns = std::llround(o.step_ms * 1e6);
+  so.session.watchdog_s = o.watchdog_ms / 1000.0;
+  so.session.default_params = LoadParams(o);
+  so.duration_s = o.duration.value_or(0.0);
+  so.lockstep_timeout_s = o.lockstep_timeout_s;
+  so.rt_priority = o.rt_priority;
+  so.status_line = o.status || (!o.no_status && isatty(STDERR_FILENO) == 1 && !o.lockstep);
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  vdyn::ServerNode node(LoadWorldFrom(o), so);
+  return node.Run(g_stop);
+#else
+  (void)o;
+  std::cerr << "vdyn-server: built without DDS (VDYN_WITH_DDS=OFF): only --batch and --demo\n";
+  return 2;
+#endif
+}
+
+int RunBatchMode(const Options& o) {
+  const vdyn::Params params = vdyn::ParamsFromProto(LoadParams(o));
+  const vdyn::Maneuver maneuver = o.maneuver == "demo"
+                                      ? vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo")
+                                      : vdyn::Maneuver::Load(o.maneuver);
+  std::shared_ptr<const vdyn::World> world = LoadWorldFrom(o);
   vdyn::SimConfig config;
   config.step_ns = std::llround(o.step_ms * 1e6);
   vdyn::Simulator sim(world, params, config);
-  vdyn::Pose2 spawn = world->spawn;
-  if (!o.spawn.empty()) spawn = {o.spawn[0], o.spawn[1], o.spawn[2] * kDeg};
-  sim.Spawn(spawn, o.speed_kmh / 3.6);
+  sim.Spawn(world->spawn, o.speed_kmh / 3.6);
 
   const double duration = o.duration.value_or(maneuver.end_time());
   std::unique_ptr<vdyn::CsvWriter> csv;
@@ -143,11 +198,33 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--quiet", o.quiet, "Print no summary");
   (void)batch;
+  app.add_flag("--lockstep", o.lockstep,
+               "Networked, advancing only when a client asks for steps (ControlRequest.step)");
+  app.add_option("--domain", o.domain, "DDS domain id")->check(CLI::Range(0, 232))
+      ->capture_default_str();
+  app.add_option("--server-id", o.server_id, "This server's id (several may share a domain)")
+      ->capture_default_str();
+  app.add_option("--vehicle-ids", o.vehicle_ids, "Vehicles to spawn at start, e.g. 1,2")
+      ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--watchdog-ms", o.watchdog_ms,
+                 "Without live input for this long a vehicle brakes to a safe state")
+      ->check(CLI::Range(1.0, 60000.0))
+      ->capture_default_str();
+  app.add_option("--lockstep-timeout", o.lockstep_timeout_s,
+                 "Lockstep: stop when no request arrives for this many seconds")
+      ->check(CLI::Range(0.1, 86400.0))
+      ->capture_default_str();
+  app.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority of the 1 kHz loop")
+      ->check(CLI::Range(1, 99))
+      ->capture_default_str();
+  app.add_flag("--status", o.status, "Print the status line (default: on a terminal)");
+  app.add_flag("--no-status", o.no_status, "No status line");
 
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return app.exit(e) == 0 ? 0 : 2;  // --help is a success; every parse error is a usage error
   }
 
   try {
@@ -166,12 +243,7 @@ int main(int argc, char** argv) {
       if (o.maneuver.empty()) o.maneuver = "demo";
       if (o.csv.empty()) o.csv = "out/demo.csv";
     }
-    if (!o.batch) {
-      std::cerr << "vdyn-server: choose a mode: --batch (with --maneuver), --demo, --dump-vehicle"
-                   " or --dump-maneuver demo\n"
-                << app.help();
-      return 2;
-    }
+    if (!o.batch) return RunNetworked(o);
     if (o.maneuver.empty()) {
       std::cerr << "vdyn-server: --batch needs --maneuver FILE (or 'demo')\n";
       return 2;
@@ -183,6 +255,11 @@ int main(int argc, char** argv) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
   } catch (const vdyn::WorldError& e) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
+#if VDYN_WITH_DDS
+  } catch (const vdyn::transport::TransportError& e) {
+    std::cerr << "vdyn-server: " << e.what() << "\n";
+    return 1;
+#endif
   } catch (const std::exception& e) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
   }

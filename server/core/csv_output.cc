@@ -58,6 +58,7 @@ const Column kColumns[] = {
   {"azW_mps2",     [](const StepRecord& r) { return r.derived.a_WT_W.z(); }},
   {"speed_kmh",    [](const StepRecord& r) { return 3.6 * Velocity(r.state.x).norm(); }},
   {"Da_N",         [](const StepRecord& r) { return r.derived.Da; }},
+  {"Tsteer_Nm",    [](const StepRecord& r) { return r.derived.steering_torque; }},
   {"Fwall_N",      [](const StepRecord& r) { return r.derived.F_wall_W.norm(); }},
   {"wall_pen_m",   [](const StepRecord& r) { return r.derived.wall_penetration_max; }},
   {"steer_in_rad", [](const StepRecord& r) { return r.input.steer; }},

@@ -50,6 +50,8 @@ struct Params {
   double body_front = 0, body_rear = 0, body_half_width = 0, body_probe_height = 0;
   double wall_stiffness = 0, wall_damping = 0 /* s/m */, wall_friction = 0;
   double gravity = 0;
+  double steering_trail = 0;  // m
+  double steering_ratio = 1;  // hand wheel / road wheel
 
   // Derived once when the parameters are made (MakeParams), never inside a step.
   std::array<Eigen::Vector3d, kNumWheels> p_TA_B{};  // mount points A from T, body frame

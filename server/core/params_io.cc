@@ -70,6 +70,8 @@ constexpr Rule kRules[] = {
   {"wall_damping", 0, 10, false, "wall contact damping factor, s/m"},
   {"wall_friction", 0, 3, false, "wall friction coefficient"},
   {"gravity", 0, 100, false, "gravitational acceleration, m/s^2"},
+  {"steering_trail", -0.5, 0.5, false, "steering trail, m"},
+  {"steering_ratio", 1, 100, false, "steering ratio (hand wheel / road wheel)"},
 };
 constexpr Rule kWheelRules[] = {
   {"z_offset", -3, 3, false, "T to mount point A, m"},
@@ -180,6 +182,8 @@ pb::VehicleParams DefaultVehicleParams() {
   p.set_wall_damping(0.5);
   p.set_wall_friction(0.3);
   p.set_gravity(9.81);
+  p.set_steering_trail(0.04);
+  p.set_steering_ratio(15.0);
   return p;
 }
 
@@ -288,6 +292,8 @@ Params ParamsFromProto(const pb::VehicleParams& m) {
   p.wall_damping = m.wall_damping();
   p.wall_friction = m.wall_friction();
   p.gravity = m.gravity();
+  p.steering_trail = m.steering_trail();
+  p.steering_ratio = m.steering_ratio();
   DeriveParams(p);
   return p;
 }

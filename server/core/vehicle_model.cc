@@ -167,6 +167,11 @@ void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedCo
     M_W += (o.p_B_W - p_WT).cross(o.F_W);
   }
 
+  // Aligning torque at the hand wheel: the front side forces act `trail` behind the steering
+  // axis and turn the wheels back towards straight ahead.
+  out.steering_torque =
+      -p.steering_trail * (out.wheel[kLF].Fy + out.wheel[kRF].Fy) / p.steering_ratio;
+
   // --- 4. body forces: drag at height ha above T, walls ----------------------------------------
   const double vx_B = R_WB.col(0).dot(v_WT);
   out.Da = 0.5 * p.rho * p.cx * p.sx * vx_B * std::abs(vx_B);  // eq. 15, signed to oppose vx

@@ -51,6 +51,7 @@ struct Derived {
   std::array<WheelOutputs, kNumWheels> wheel{};
   bool any_contact = false;
   double Da = 0;                                        // drag, N (positive opposes forward motion)
+  double steering_torque = 0;  // at the hand wheel, N*m, positive turns it left (force feedback)
   Eigen::Vector3d F_W = Eigen::Vector3d::Zero();        // total force on the body incl. gravity
   Eigen::Vector3d M_B = Eigen::Vector3d::Zero();        // total moment about T, body axes
   Eigen::Vector3d a_WT_W = Eigen::Vector3d::Zero();     // acceleration of T, world axes

@@ -1,0 +1,205 @@
+// Google Benchmark suite for the physics core, with Bullet's btRaycastVehicle as the peer measured
+// in the same run. Names: <what>/<engine>/<world>[/<pattern>].
+//
+//   step/vdyn/W     one Simulator::Step (RK4: 4 stages x 4 wheel rays = 16 rays, plus the wall
+//                   probes near steep surfaces) while driving course W (cars.h)
+//   step/bullet/W   one btDiscreteDynamicsWorld::stepSimulation(1 ms) of the same car (4 wheel
+//                   rays, chassis box vs mesh collision, solver, integration)
+//   step/bullet_nobox/W  the same without the chassis box's collision: only the wheel rays touch
+//                   the terrain (the least a btRaycastVehicle costs)
+//   trace/vdyn/W/P  one vertical Terrain::Trace; P = moving (1.4 cm further each call, a car at
+//                   50 km/h at 1 kHz) or random (uniform over the world)
+//   trace4/vdyn/W/P one Terrain::Trace4 (the four wheels of a car as one packet);
+//                   per_ray = time / 4
+//   ray/bullet/W/P  one ray through btDefaultVehicleRaycaster (what btRaycastVehicle casts)
+//
+// After the run, the medians are printed as vdyn / Bullet ratios (below 1: vdyn is faster).
+// Respawning a car (cars.h) is excluded from the timed region with PauseTiming.
+#include <cstdio>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <benchmark/benchmark.h>
+#include <unistd.h>
+
+#include "cars.h"
+#include "rays.h"
+
+namespace vdyn::bench {
+namespace {
+
+const Course& CourseNamed(const std::string& name) {
+  static const Course facility = FacilityCourse();
+  static const Course terrain = TerrainCourse();
+  return name == "facility" ? facility : terrain;
+}
+
+// The cars live across benchmark invocations (Google Benchmark calls a function several times while
+// it sizes the run): each continues its drive instead of restarting from rest at the spawn.
+VdynCar& OurCar(const std::string& world) {
+  static std::map<std::string, std::unique_ptr<VdynCar>> cars;
+  auto& car = cars[world];
+  if (!car) car = std::make_unique<VdynCar>(CourseNamed(world), BenchParams());
+  return *car;
+}
+
+BulletCar& PeerCar(const std::string& world, bool chassis_box = true) {
+  static std::map<std::string, std::unique_ptr<BulletCar>> cars;
+  auto& car = cars[world + (chassis_box ? "" : "/nobox")];
+  if (!car) car = std::make_unique<BulletCar>(CourseNamed(world), BenchParams(), chassis_box);
+  return *car;
+}
+
+template <class Car>
+void StepLoop(benchmark::State& st, Car& car) {
+  for (auto _ : st) {
+    if (!car.Step()) {
+      st.SkipWithError("the step was not finite");
+      break;
+    }
+    if (car.NeedsRespawn()) {
+      st.PauseTiming();
+      car.Respawn();
+      st.ResumeTiming();
+    }
+  }
+}
+
+void BM_StepVdyn(benchmark::State& st, const std::string& world) {
+  StepLoop(st, OurCar(world));
+}
+void BM_StepBullet(benchmark::State& st, const std::string& world, bool chassis_box) {
+  StepLoop(st, PeerCar(world, chassis_box));
+}
+
+const RaySet& Rays(const std::string& world, const std::string& pattern) {
+  static std::map<std::string, RaySet> sets;
+  RaySet& set = sets[world + "/" + pattern];
+  if (set.origins.empty()) {
+    set = pattern == "moving" ? MovingRays(CourseNamed(world)) : RandomRays(CourseNamed(world));
+  }
+  return set;
+}
+
+void BM_Trace(benchmark::State& st, const std::string& world, const std::string& pattern) {
+  const Terrain& terrain = CourseNamed(world).world->terrain;
+  const RaySet& rays = Rays(world, pattern);
+  const Eigen::Vector3d down = -Eigen::Vector3d::UnitZ();
+  std::size_t i = 0;
+  for (auto _ : st) {
+    TraceHit hit = terrain.Trace(rays.origins[i][0], down, rays.t_max);
+    benchmark::DoNotOptimize(hit);
+    if (++i == rays.origins.size()) i = 0;
+  }
+}
+
+void BM_Trace4(benchmark::State& st, const std::string& world, const std::string& pattern) {
+  const Terrain& terrain = CourseNamed(world).world->terrain;
+  const RaySet& rays = Rays(world, pattern);
+  std::array<Eigen::Vector3d, 4> down;
+  down.fill(-Eigen::Vector3d::UnitZ());
+  std::array<double, 4> t_max;
+  t_max.fill(rays.t_max);
+  std::array<TraceHit, 4> hits;
+  std::size_t i = 0;
+  for (auto _ : st) {
+    terrain.Trace4(rays.origins[i], down, t_max, hits);
+    benchmark::DoNotOptimize(hits);
+    if (++i == rays.origins.size()) i = 0;
+  }
+  st.counters["per_ray"] = benchmark::Counter(
+      4, benchmark::Counter::kIsIterationInvariantRate | benchmark::Counter::kInvert);
+}
+
+void BM_BulletRay(benchmark::State& st, const std::string& world, const std::string& pattern) {
+  BulletCar& car = PeerCar(world);
+  const RaySet& rays = Rays(world, pattern);
+  const Eigen::Vector3d reach(0.0, 0.0, -rays.t_max);
+  std::size_t i = 0;
+  for (auto _ : st) {
+    double fraction = 0;
+    const Eigen::Vector3d& o = rays.origins[i][0];
+    benchmark::DoNotOptimize(car.CastRay(o, o + reach, &fraction));
+    benchmark::DoNotOptimize(fraction);
+    if (++i == rays.origins.size()) i = 0;
+  }
+}
+
+// Console output as usual; also keeps each benchmark's median (or single run) for the ratios.
+// (A reporter given to RunSpecifiedBenchmarks does not follow --benchmark_color: colour only when
+// stdout is a terminal, so result files stay plain text.)
+class RatioReporter : public benchmark::ConsoleReporter {
+ public:
+  RatioReporter() : ConsoleReporter(isatty(STDOUT_FILENO) ? OO_ColorTabular : OO_Tabular) {}
+
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& r : runs) {
+      if (r.error_occurred) continue;
+      if (r.run_type == Run::RT_Aggregate && r.aggregate_name != "median") continue;
+      const double ns =
+          r.GetAdjustedRealTime() / benchmark::GetTimeUnitMultiplier(r.time_unit) * 1e9;
+      ns_[r.run_name.function_name] = ns;
+    }
+    ConsoleReporter::ReportRuns(runs);
+  }
+
+  void PrintRatios() const {
+    std::printf("\nvdyn / Bullet, medians of this run (real time; below 1: vdyn is faster)\n");
+    std::printf("%-36s %12s %12s %8s\n", "", "vdyn ns", "Bullet ns", "ratio");
+    for (const char* world : {"facility", "terrain_1m"}) {
+      const std::string w = world;
+      Ratio("step/" + w, "step/vdyn/" + w, "step/bullet/" + w);
+      Ratio("step/" + w + " (Bullet without box)", "step/vdyn/" + w, "step/bullet_nobox/" + w);
+      for (const char* pattern : {"moving", "random"}) {
+        const std::string wp = std::string(world) + "/" + pattern;
+        Ratio("ray/" + wp + " (Trace)", "trace/vdyn/" + wp, "ray/bullet/" + wp);
+        Ratio("ray/" + wp + " (Trace4 / 4)", "trace4/vdyn/" + wp, "ray/bullet/" + wp, 0.25);
+      }
+    }
+    std::fflush(stdout);
+  }
+
+ private:
+  void Ratio(const std::string& label, const std::string& ours, const std::string& peer,
+             double ours_scale = 1.0) const {
+    const auto a = ns_.find(ours), b = ns_.find(peer);
+    if (a == ns_.end() || b == ns_.end()) return;  // filtered out of this run
+    const double x = a->second * ours_scale;
+    std::printf("%-36s %12.1f %12.1f %8.2f\n", label.c_str(), x, b->second, x / b->second);
+  }
+
+  std::map<std::string, double> ns_;
+};
+
+void Register() {
+  for (const std::string world : {"facility", "terrain_1m"}) {
+    benchmark::RegisterBenchmark(("step/vdyn/" + world).c_str(), BM_StepVdyn, world);
+    benchmark::RegisterBenchmark(("step/bullet/" + world).c_str(), BM_StepBullet, world, true);
+    benchmark::RegisterBenchmark(("step/bullet_nobox/" + world).c_str(), BM_StepBullet, world,
+                                 false);
+  }
+  for (const std::string world : {"facility", "terrain_1m"}) {
+    for (const std::string pattern : {"moving", "random"}) {
+      const std::string wp = world + "/" + pattern;
+      benchmark::RegisterBenchmark(("trace/vdyn/" + wp).c_str(), BM_Trace, world, pattern);
+      benchmark::RegisterBenchmark(("trace4/vdyn/" + wp).c_str(), BM_Trace4, world, pattern);
+      benchmark::RegisterBenchmark(("ray/bullet/" + wp).c_str(), BM_BulletRay, world, pattern);
+    }
+  }
+}
+
+}  // namespace
+}  // namespace vdyn::bench
+
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  vdyn::bench::Register();
+  vdyn::bench::RatioReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  reporter.PrintRatios();
+  benchmark::Shutdown();
+  return 0;
+}

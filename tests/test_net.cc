@@ -1,0 +1,388 @@
+// The server and its clients as real processes over loopback DDS (issue: the simulation server
+// over DDS). Each test has its own domain id; Cyclone DDS is restricted to `lo`. Every wait is
+// on an event (DDS data, a child's exit) with a generous bound.
+#include <signal.h>
+
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <map>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "control_client.h"
+#include "convert.h"
+#include "dds.h"
+#include "process.h"
+#include "resim.h"
+#include "test_support.h"
+#include "vdyn/diagnostics.pb.h"
+#include "vdyn/world.pb.h"
+#include "vdyn_envelope.h"
+
+namespace vdyn {
+namespace {
+
+using ::testing::HasSubstr;
+using namespace std::chrono_literals;
+using testing::Process;
+using transport::TopicId;
+
+class Net : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    testing::UseLoopbackDds();
+    domain_ = testing::FreshDomain();
+  }
+
+  std::unique_ptr<Process> StartServer(const std::vector<std::string>& extra,
+                                       const std::string& log = "server.log") {
+    std::vector<std::string> argv = {testing::ServerBinary(), "--domain", std::to_string(domain_),
+                                     "--no-status"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    if (std::find(extra.begin(), extra.end(), "--world") == extra.end()) {
+      argv.insert(argv.end(), {"--world", "flat"});
+    }
+    return std::make_unique<Process>(argv, dir_ / log);
+  }
+
+  std::unique_ptr<Process> StartInput(const std::vector<std::string>& extra,
+                                      const std::string& log) {
+    std::vector<std::string> argv = {testing::InputBinary(), "--domain", std::to_string(domain_)};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return std::make_unique<Process>(argv, dir_ / log);
+  }
+
+  std::uint32_t domain_ = 0;
+  testing::TempDir dir_;
+};
+
+// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
+template <class M>
+bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout,
+               const std::function<void(const M&)>& on, const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    reader.Wait(50ms);
+    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
+  }
+  return true;
+}
+
+pb::DriverInput Input(std::uint32_t vehicle, double throttle, const std::string& source) {
+  pb::DriverInput in;
+  in.set_vehicle_id(vehicle);
+  in.set_source_id(source);
+  in.set_throttle(throttle);
+  return in;
+}
+
+TEST_F(Net, LateJoiningSubscriberGetsWorldAndParamsAtOnce) {
+  auto server = StartServer({"--vehicle-ids", "1,2"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  {
+    // Wait until the server runs (its state arrives), then join late.
+    transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+    bool running = false;
+    ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) { running = s.step() > 500; },
+                                            [&] { return running; }))
+        << server->Log();
+  }
+  transport::Participant late(domain_);
+  transport::Reader<pb::WorldDescription> world(late, TopicId::kWorld, &drops);
+  transport::Reader<pb::VehicleParams> params(late, TopicId::kParams, &drops);
+  std::optional<pb::WorldDescription> w;
+  ASSERT_TRUE(ReadUntil<pb::WorldDescription>(world, 10s, [&](const auto& m) { w = m; },
+                                              [&] { return w.has_value(); }));
+  EXPECT_EQ(w->name(), "flat");
+  EXPECT_EQ(w->server_id(), "vdyn");
+  EXPECT_GT(w->meshes_size(), 0);
+  EXPECT_EQ(w->vehicles_size(), 2);
+  EXPECT_EQ(w->terrain_hash(), TerrainHash(testing::SharedWorld("flat")->terrain));
+  int n_params = 0;
+  ASSERT_TRUE(ReadUntil<pb::VehicleParams>(params, 10s, [&](const auto& m) {
+    EXPECT_TRUE(ValidateVehicleParams(m).empty());
+    ++n_params;
+  }, [&] { return n_params >= 2; }));
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Writer<pb::DriverInput> input(p, TopicId::kInput, 10);
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  pb::VehicleState last;
+  // Drive: throttle 1 written at ~100 Hz until the car goes faster than 10 m/s.
+  bool fast = false;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+    last = s;
+    fast = s.v_wt_b().x() > 10.0;
+  }, [&] {
+    input.Write(1, Input(1, 1.0, "test-rig"));
+    return fast;
+  })) << server->Log();
+  EXPECT_EQ(last.input().source_id(), "test-rig");
+  EXPECT_DOUBLE_EQ(last.control().throttle(), 1.0);
+  EXPECT_FALSE(last.control().watchdog_safe_state());
+  // Stop writing: within the 100 ms watchdog the server brakes; the speed falls.
+  const std::uint64_t stop_step = last.step();
+  const double v_stop = last.v_wt_b().x();
+  std::optional<std::uint64_t> safe_step;
+  double v_later = v_stop;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
+    if (!safe_step && s.control().watchdog_safe_state()) safe_step = s.step();
+    if (safe_step && s.step() > *safe_step + 1000) v_later = s.v_wt_b().x();
+  }, [&] { return safe_step && v_later < v_stop - 2.0; }));
+  // Watchdog time is 100 ms; allow for the last write in flight and the read loop.
+  EXPECT_LE(*safe_step - stop_step, 160u);
+  EXPECT_GE(*safe_step - stop_step, 100u);
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  bool said = false;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 5s, [&](const auto& d) {
+    for (const auto& v : d.vehicles()) said = said || (v.vehicle_id() == 1 && v.watchdog_safe_state());
+  }, [&] { return said; }));
+}
+
+TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
+  auto server = StartServer({"--watchdog-ms", "1000"});
+  const auto primary_csv = dir_ / "primary.csv", backup_csv = dir_ / "backup.csv";
+  testing::WriteFile(primary_csv, "t_s,steer_deg,throttle,brake\n0,0,0.5,0\n600,0,0.5,0\n");
+  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
+  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
+                            "backup", "--strength", "5"}, "backup.log");
+  auto primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
+                             "primary", "--strength", "20"}, "primary.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::string source;
+  auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
+    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
+      source = s.input().source_id();
+      if (source == want) {
+        EXPECT_DOUBLE_EQ(s.input().throttle(), want == "primary" ? 0.5 : 0.2);
+      }
+    }, [&] { return source == want; });
+  };
+  ASSERT_TRUE(until_source("primary", 20s)) << source << "\n" << server->Log();
+  // The primary rig dies without a goodbye: its liveliness lapses and the backup drives.
+  primary->Signal(SIGKILL);
+  primary->Wait(5s);
+  ASSERT_TRUE(until_source("backup", 10s)) << source;
+  // It comes back and takes over again.
+  primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
+                        "primary", "--strength", "20"}, "primary2.log");
+  ASSERT_TRUE(until_source("primary", 20s)) << source;
+}
+
+TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::ControlClient control(p, "tester");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+
+  // One raw writer (the input topic has exclusive ownership: a second writer of equal strength
+  // could be ignored), one instance (key) per bad sample (the reader keeps the last per key).
+  dds_qos_t* q = transport::WriterQos(TopicId::kInput, 1);
+  const dds_entity_t raw = dds_create_writer(p.handle(), p.Topic(TopicId::kInput), q, nullptr);
+  dds_delete_qos(q);
+  ASSERT_GT(raw, 0);
+  auto write_raw = [&](std::uint32_t key, const char* type, const std::string& payload) {
+    vdyn_dds_Envelope env{};
+    env.key = key;
+    std::strcpy(env.type_name, type);
+    std::string bytes = payload;
+    env.payload._buffer = reinterpret_cast<std::uint8_t*>(bytes.data());
+    env.payload._length = env.payload._maximum = static_cast<std::uint32_t>(bytes.size());
+    ASSERT_EQ(dds_write(raw, &env), DDS_RETCODE_OK);
+  };
+  // A payload that is not a protobuf message, and a type nobody knows.
+  write_raw(11, "vdyn.pb.DriverInput", std::string("\xff\xff\xff\xff\x0f", 5));
+  write_raw(12, "acme.Joystick", "joystick");
+  // A NaN and an out-of-range value in well-formed messages.
+  pb::DriverInput nan_input = Input(13, 0.5, "bad");
+  nan_input.set_steer(std::numeric_limits<double>::quiet_NaN());
+  write_raw(13, "vdyn.pb.DriverInput", nan_input.SerializeAsString());
+  write_raw(1, "vdyn.pb.DriverInput", Input(1, 7.0, "bad").SerializeAsString());
+  // Invalid parameters: rejected with field and reason.
+  pb::ControlRequest req;
+  req.set_vehicle_id(1);
+  req.mutable_set_params()->mutable_params()->set_mass(-1.0);
+  const auto reply = control.Call(req, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  EXPECT_FALSE(reply->accepted());
+  EXPECT_THAT(reply->reason(), HasSubstr("mass"));
+  req.mutable_set_params()->mutable_params()->set_mass(1700.0);
+  const auto good = control.Call(req, 10s);
+  ASSERT_TRUE(good.has_value() && good->accepted());
+
+  // The diagnostics count each kind; the server lives on.
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  std::map<std::string, std::uint64_t> counts;
+  auto has = [&](const std::string& kind) { return counts.count(kind) != 0; };
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
+    counts.clear();
+    for (const auto& dc : d.drops()) counts[dc.kind()] = dc.count();
+  }, [&] {
+    return has("malformed payload on vdyn/input") && has("unknown type on vdyn/input") &&
+           has("non-finite value on vdyn/input") && has("out-of-range input on vdyn/input") &&
+           has("rejected control request");
+  })) << server->Log();
+  EXPECT_THAT(server->Log(), HasSubstr("non-finite value on vdyn/input: steer"));
+  EXPECT_TRUE(server->running());
+  dds_delete(raw);
+}
+
+TEST_F(Net, LockstepAnswersWhenTheStepsAreDoneAndTimesOutWithoutAClient) {
+  auto server = StartServer({"--lockstep", "--lockstep-timeout", "3"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::ControlClient control(p, "lockstep-client");
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  pb::ControlRequest step;
+  step.set_vehicle_id(1);
+  step.mutable_step()->set_steps(250);
+  *step.mutable_step()->mutable_input() = Input(1, 1.0, "lockstep-client");
+  for (int round = 1; round <= 2; ++round) {
+    const auto reply = control.Call(step, 20s);
+    ASSERT_TRUE(reply.has_value()) << control.last_error();
+    EXPECT_TRUE(reply->accepted()) << reply->reason();
+    EXPECT_EQ(reply->applied_step(), 250u * round);  // answered when all steps are done
+  }
+  std::uint64_t last_step = 0;
+  ReadUntil<pb::VehicleState>(states, 5s, [&](const auto& s) { last_step = s.step(); },
+                              [&] { return last_step == 499; });
+  EXPECT_EQ(last_step, 499u);  // state of step 499 (the 500th): nothing more ran
+  pb::ControlRequest resume;
+  resume.set_vehicle_id(1);
+  resume.mutable_resume();
+  const auto refused = control.Call(resume, 10s);
+  ASSERT_TRUE(refused.has_value());
+  EXPECT_FALSE(refused->accepted());
+  // No more requests: the server gives up with a clear message, exit code 3.
+  const auto code = server->Wait(20s);
+  ASSERT_TRUE(code.has_value()) << "the lockstep server hung";
+  EXPECT_EQ(*code, 3);
+  EXPECT_THAT(server->Log(), HasSubstr("no control request for 3.0 s"));
+  // And a client without a server times out cleanly too.
+  const auto none = control.Call(step, 500ms);
+  EXPECT_FALSE(none.has_value());
+  EXPECT_THAT(control.last_error(), HasSubstr("no reply"));
+}
+
+TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
+  auto server = StartServer({"--world", "facility", "--vehicle-ids", "1,2"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::SessionEvent> events(p, TopicId::kEvents, &drops);
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::ControlClient control(p, "recorder-test");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  // Start from a clean slate we have seen all events of: reset both vehicles.
+  std::vector<pb::SessionEvent> captured;
+  std::map<std::uint32_t, std::map<std::uint64_t, std::uint64_t>> hashes;
+  for (std::uint32_t v : {1u, 2u}) {
+    pb::ControlRequest reset;
+    reset.set_vehicle_id(v);
+    reset.mutable_reset();
+    ASSERT_TRUE(control.Call(reset, 10s).has_value());
+  }
+  auto player = StartInput({"--maneuver", "demo"}, "player.log");
+  pb::ControlRequest params;
+  params.set_vehicle_id(2);
+  params.mutable_set_params()->mutable_params()->set_mu(0.6);
+  bool params_sent = false;
+  std::size_t n_states = 0;
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (n_states < 3000 && std::chrono::steady_clock::now() < deadline) {
+    states.Wait(20ms);
+    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
+    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+      hashes[s.vehicle_id()][s.step()] = s.state_hash();
+      ++n_states;
+    });
+    if (!params_sent && n_states > 1000) {
+      ASSERT_TRUE(control.Call(params, 10s).has_value());
+      params_sent = true;
+    }
+  }
+  ASSERT_GE(n_states, 3000u) << server->Log();
+  server->Signal(SIGTERM);
+  ASSERT_TRUE(server->Wait(20s).has_value());
+  events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
+  // Keep the events from the resets on (the first Spawned of each vehicle after them).
+  std::sort(captured.begin(), captured.end(),
+            [](const auto& x, const auto& y) { return x.sequence() < y.sequence(); });
+  std::vector<pb::SessionEvent> session;
+  bool started = false;
+  for (const auto& e : captured) {
+    if (!started && e.has_spawned() && e.vehicle_id() == 1) started = true;
+    if (started) session.push_back(e);
+  }
+  ASSERT_FALSE(session.empty());
+  std::map<std::uint32_t, std::uint64_t> end;
+  for (const auto& [v, h] : hashes) end[v] = h.rbegin()->first + 1;
+  const ResimResult res = Resimulate(testing::SharedWorld("facility"), session, end);
+  ASSERT_TRUE(res.ok) << res.error;
+  std::size_t compared = 0;
+  for (const auto& [v, h] : hashes) {
+    for (const auto& [step, hash] : h) {
+      const auto& rh = res.hashes.at(v);
+      const auto it = rh.find(step);
+      if (it == rh.end()) continue;  // a state from before the reset
+      ASSERT_EQ(it->second, hash) << "vehicle " << v << " step " << step;
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 2500u);
+  int input_changes = 0;
+  for (const auto& e : session) input_changes += e.has_input_changed() && e.vehicle_id() == 1;
+  EXPECT_GT(input_changes, 1);  // the player's input really varied
+}
+
+TEST_F(Net, SubscriberKeepsReceivingAfterTheServerRestarts) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  for (int run = 0; run < 2; ++run) {
+    auto server = StartServer({}, "server" + std::to_string(run) + ".log");
+    std::uint64_t n = 0;
+    ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto&) { ++n; },
+                                            [&] { return n >= 200; }))
+        << "run " << run << "\n" << server->Log();
+    server->Signal(SIGTERM);
+    const auto code = server->Wait(20s);
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 0);
+  }
+}
+
+TEST_F(Net, TwoServersShareADomainWithDistinctVehicles) {
+  auto a = StartServer({"--server-id", "lab-a", "--vehicle-ids", "1,2"}, "a.log");
+  auto b = StartServer({"--server-id", "lab-b", "--vehicle-ids", "3"}, "b.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::Writer<pb::DriverInput> input(p, TopicId::kInput, 10);
+  std::map<std::uint32_t, pb::VehicleState> latest;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+    latest[s.vehicle_id()] = s;
+  }, [&] {
+    input.Write(3, Input(3, 1.0, "rig-3"));
+    return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) && latest.count(2);
+  })) << a->Log() << b->Log();
+  EXPECT_EQ(latest[1].server_id(), "lab-a");
+  EXPECT_EQ(latest[3].server_id(), "lab-b");
+  EXPECT_LT(latest[1].v_wt_w().x(), 0.1);  // only vehicle 3 was driven
+  EXPECT_LT(latest[2].v_wt_w().x(), 0.1);
+}
+
+}  // namespace
+}  // namespace vdyn
