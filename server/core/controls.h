@@ -26,6 +26,8 @@ struct AppliedControl {
   bool cruise_active = false;
   // Per wheel: steering angle gamma_W, commanded drive force Fh and brake force Fb (N).
   std::array<double, kNumWheels> gamma_W{};
+  std::array<double, kNumWheels> cos_gamma_W{};  // held over the step: computed once
+  std::array<double, kNumWheels> sin_gamma_W{};
   std::array<double, kNumWheels> drive_W{};
   std::array<double, kNumWheels> brake_W{};
 };

@@ -84,7 +84,7 @@ StepStatus Simulator::Step() {
   const AppliedControl& u = record_.control;
   auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
     Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-    EvaluateDerivative(params_, terrain, u, ws_.walls, x, xdot, d);
+    EvaluateDerivative(params_, terrain, u, ws_.walls, x, xdot, d, stage == 0);
   };
   Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
 

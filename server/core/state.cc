@@ -21,20 +21,29 @@ Eigen::Quaterniond QuaternionFromRollPitchYaw(double roll, double pitch, double 
 }
 
 namespace {
-void Fnv(std::uint64_t& h, const void* data, std::size_t n) {
-  const auto* p = static_cast<const unsigned char*>(data);
-  for (std::size_t i = 0; i < n; ++i) {
-    h ^= p[i];
-    h *= 1099511628211ull;
-  }
+// FNV-1a over 64-bit words (not bytes): a word at a time, then a final avalanche (the mixer of
+// MurmurHash3's fmix64) so every input bit reaches every output bit.
+void Mix(std::uint64_t& h, std::uint64_t word) {
+  h ^= word;
+  h *= 1099511628211ull;
+}
+std::uint64_t Bits(double v) {
+  std::uint64_t u;
+  std::memcpy(&u, &v, sizeof u);
+  return u;
 }
 }  // namespace
 
 std::uint64_t StateHash(const State& s) {
   std::uint64_t h = 14695981039346656037ull;
-  Fnv(h, s.x.data(), sizeof(double) * static_cast<std::size_t>(s.x.size()));
-  Fnv(h, &s.cruise_integral, sizeof s.cruise_integral);
-  Fnv(h, &s.step, sizeof s.step);
+  for (int i = 0; i < s.x.size(); ++i) Mix(h, Bits(s.x[i]));
+  Mix(h, Bits(s.cruise_integral));
+  Mix(h, static_cast<std::uint64_t>(s.step));
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdull;
+  h ^= h >> 33;
+  h *= 0xc4ceb9fe1a85ec53ull;
+  h ^= h >> 33;
   return h;
 }
 

@@ -54,8 +54,8 @@ inline void SetAngularVelocityB(StateVector& x, const Eigen::Vector3d& w) {
 Eigen::Vector3d RollPitchYaw(const Eigen::Quaterniond& q_WB);
 Eigen::Quaterniond QuaternionFromRollPitchYaw(double roll, double pitch, double yaw);
 
-// 64-bit FNV-1a over the bytes of the integrated state (x, cruise integral, step): two runs agree
-// on this hash exactly when they agree bit for bit.
+// 64-bit hash of the integrated state's bits (x, cruise integral, step): FNV-1a over 64-bit
+// words with a final avalanche. Two runs agree on it exactly when they agree bit for bit.
 std::uint64_t StateHash(const State& s);
 
 }  // namespace vdyn

@@ -39,10 +39,9 @@ Terrain::~Terrain() {
 void Terrain::AddMesh(TriangleMesh mesh) {
   if (committed_) throw std::logic_error("Terrain::AddMesh after Commit");
   const std::size_t nv = mesh.vertices_W.size();
-  std::vector<Plane> planes;
-  std::vector<std::uint32_t> kept;
+  const auto mesh_index = static_cast<std::uint32_t>(meshes_.size());
+  const auto base = static_cast<std::uint32_t>(planes_.size());
   std::vector<std::array<std::uint32_t, 3>> kept_tris;
-  planes.reserve(mesh.triangles.size());
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     const auto& tri = mesh.triangles[t];
     for (std::uint32_t i : tri) {
@@ -62,8 +61,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
       continue;
     }
     const Eigen::Vector3d un = n / len;
-    planes.push_back({un, un.dot(a)});
-    kept.push_back(static_cast<std::uint32_t>(t));
+    planes_.push_back({un, un.dot(a), mesh_index, static_cast<std::uint32_t>(t)});
     kept_tris.push_back(tri);
   }
   if (!kept_tris.empty()) {
@@ -96,12 +94,10 @@ void Terrain::AddMesh(TriangleMesh mesh) {
     rtcCommitGeometry(geom);
     const unsigned id = rtcAttachGeometry(impl_->scene, geom);
     rtcReleaseGeometry(geom);
-    if (geom_to_mesh_.size() <= id) geom_to_mesh_.resize(id + 1, 0);
-    geom_to_mesh_[id] = static_cast<std::uint32_t>(meshes_.size());
+    if (geom_base_.size() <= id) geom_base_.resize(id + 1, 0);
+    geom_base_[id] = base;
   }
   triangle_count_ += kept_tris.size();
-  planes_.push_back(std::move(planes));
-  kept_to_source_.push_back(std::move(kept));
   meshes_.push_back(std::move(mesh));
 }
 
@@ -122,11 +118,11 @@ void Terrain::BuildSteepGrid() {
   grid_nx_ = static_cast<int>(std::floor(ext.x() / grid_cell_)) + 1;
   grid_ny_ = static_cast<int>(std::floor(ext.y() / grid_cell_)) + 1;
   steep_cells_.assign(static_cast<std::size_t>(grid_nx_) * static_cast<std::size_t>(grid_ny_), 0);
-  for (std::size_t m = 0; m < meshes_.size(); ++m) {
-    const TriangleMesh& mesh = meshes_[m];
-    for (std::size_t k = 0; k < planes_[m].size(); ++k) {
-      if (std::abs(planes_[m][k].n.z()) >= kSteepNormalZ) continue;
-      const auto& tri = mesh.triangles[kept_to_source_[m][k]];
+  for (const Plane& plane : planes_) {
+    {
+      if (std::abs(plane.n.z()) >= kSteepNormalZ) continue;
+      const TriangleMesh& mesh = meshes_[plane.mesh];
+      const auto& tri = mesh.triangles[plane.triangle];
       Eigen::Vector3d lo = mesh.vertices_W[tri[0]], hi = lo;
       for (int i = 1; i < 3; ++i) {
         lo = lo.cwiseMin(mesh.vertices_W[tri[i]]);
@@ -164,8 +160,7 @@ TraceHit Terrain::Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d&
                          double t_max, unsigned geom_id, unsigned prim_id, float t_float) const {
   TraceHit out;
   if (geom_id == RTC_INVALID_GEOMETRY_ID) return out;
-  const std::uint32_t mesh = geom_to_mesh_[geom_id];
-  const Plane& plane = planes_[mesh][prim_id];
+  const Plane& plane = planes_[geom_base_[geom_id] + prim_id];
   const double denom = plane.n.dot(dir_W);
   double t = static_cast<double>(t_float);
   // Refine in double against the triangle's plane unless the ray grazes it.
@@ -179,8 +174,8 @@ TraceHit Terrain::Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d&
   out.hit = true;
   out.distance = t;
   out.normal_W = denom > 0.0 ? Eigen::Vector3d(-plane.n) : plane.n;
-  out.mesh = mesh;
-  out.triangle = kept_to_source_[mesh][prim_id];
+  out.mesh = plane.mesh;
+  out.triangle = plane.triangle;
   return out;
 }
 

@@ -61,9 +61,12 @@ class Terrain {
   bool committed() const { return committed_; }
 
  private:
+  // One record per Embree primitive, in one flat array (one cache line per hit).
   struct Plane {
-    Eigen::Vector3d n;  // unit normal
-    double offset;      // n . x for x on the plane
+    Eigen::Vector3d n;        // unit normal
+    double offset;            // n . x for x on the plane
+    std::uint32_t mesh;       // index into meshes_
+    std::uint32_t triangle;   // index into that mesh's triangles
   };
   TraceHit Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W, double t_max,
                   unsigned geom_id, unsigned prim_id, float t_float) const;
@@ -72,9 +75,8 @@ class Terrain {
   struct Impl;
   std::unique_ptr<Impl> impl_;
   std::vector<TriangleMesh> meshes_;
-  std::vector<std::vector<Plane>> planes_;  // per mesh, per kept triangle
-  std::vector<std::vector<std::uint32_t>> kept_to_source_;  // per mesh: Embree prim -> triangle
-  std::vector<std::uint32_t> geom_to_mesh_;                 // Embree geometry id -> mesh index
+  std::vector<Plane> planes_;               // all meshes' kept triangles
+  std::vector<std::uint32_t> geom_base_;     // Embree geometry id -> its first record in planes_
   std::size_t triangle_count_ = 0;
   std::size_t dropped_triangles_ = 0;
   Eigen::Vector3d bounds_min_ = Eigen::Vector3d::Constant(1e300);

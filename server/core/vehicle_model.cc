@@ -15,20 +15,20 @@ double SoftSign(double v, double v_eps) { return std::clamp(v / v_eps, -1.0, 1.0
 
 }  // namespace
 
-double TireLateralForce(TireLaw law, double alpha, double cornering_stiffness, double mu,
+double TireLateralForce(TireLaw law, double tan_alpha, double cornering_stiffness, double mu,
                         double Fz) {
   const double f_max = mu * Fz;
   if (f_max <= 0.0) return 0.0;
   if (law == TireLaw::kLinearSaturated) {
-    return std::clamp(-cornering_stiffness * alpha, -f_max, f_max);
+    return std::clamp(-cornering_stiffness * std::atan(tan_alpha), -f_max, f_max);
   }
   // Fiala brush model: with z = tan(alpha) and C = C_alpha,
   //   Fy = -C z + C^2 |z| z / (3 f_max) - C^3 z^3 / (27 f_max^2)   for |z| < 3 f_max / C,
   //   Fy = -f_max sign(alpha)                                     beyond (full sliding).
-  const double z = std::tan(std::clamp(alpha, -1.5, 1.5));
+  const double z = tan_alpha;
   const double C = cornering_stiffness;
   const double z_slide = 3.0 * f_max / C;
-  if (std::abs(z) >= z_slide) return alpha > 0.0 ? -f_max : f_max;
+  if (std::abs(z) >= z_slide) return z > 0.0 ? -f_max : f_max;
   return -C * z + C * C * std::abs(z) * z / (3.0 * f_max) -
          C * C * C * z * z * z / (27.0 * f_max * f_max);
 }
@@ -57,7 +57,7 @@ void FindWalls(const Params& p, const Terrain& terrain, const StateVector& x, Wa
 
 void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedControl& u,
                         const WallPlanes& walls, const StateVector& x, StateVector& xdot,
-                        Derived& out) {
+                        Derived& out, bool report_all) {
   const Eigen::Quaterniond q_WB = Orientation(x);
   const Eigen::Matrix3d R_WB = q_WB.normalized().toRotationMatrix();
   const Eigen::Vector3d p_WT = Position(x);
@@ -130,8 +130,7 @@ void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedCo
     o.Fp = std::max(0.0, spring - wp.damper_coefficient * o.lS_rate);
 
     // --- 3. tire forces in the terrain's tangent plane ----------------------------------------
-    const double cg = std::cos(o.gamma), sg = std::sin(o.gamma);
-    const Eigen::Vector3d heading_W = cg * R_WB.col(0) + sg * R_WB.col(1);
+    const Eigen::Vector3d heading_W = u.cos_gamma_W[w] * R_WB.col(0) + u.sin_gamma_W[w] * R_WB.col(1);
     Eigen::Vector3d t_long = heading_W - heading_W.dot(n_W) * n_W;
     const double t_norm = t_long.norm();
     t_long = t_norm > 1e-9 ? Eigen::Vector3d(t_long / t_norm) : R_WB.col(0);
@@ -139,8 +138,11 @@ void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedCo
     const Eigen::Vector3d v_B = v_WT + w_W.cross(o.p_B_W - p_WT);
     o.v_long = v_B.dot(t_long);
     o.v_lat = v_B.dot(t_lat);
-    o.slip_angle = std::atan2(o.v_lat, std::max(std::abs(o.v_long), p.tire_slip_speed));
-    double Fy = TireLateralForce(p.tire_law, o.slip_angle, wp.cornering_stiffness, p.mu, o.Fp);
+    // tan(slip angle), the slip angle regularised below tire_slip_speed; the angle itself only
+    // where it is reported (it costs an atan).
+    const double tan_alpha = o.v_lat / std::max(std::abs(o.v_long), p.tire_slip_speed);
+    o.slip_angle = report_all ? std::atan(tan_alpha) : 0.0;
+    double Fy = TireLateralForce(p.tire_law, tan_alpha, wp.cornering_stiffness, p.mu, o.Fp);
     const double roll_sign = SoftSign(o.v_long, 0.1 * p.tire_slip_speed);
     double Fh = u.drive_W[w];
     double Fb = u.brake_W[w] * roll_sign;  // opposes rolling; fades out at standstill

@@ -65,14 +65,15 @@ struct Derived {
 // Casts the horizontal traces at state x; a hit on a steep surface (|n_z| < 0.7) becomes a wall.
 void FindWalls(const Params& p, const Terrain& terrain, const StateVector& x, WallPlanes& walls);
 
-// xdot = f(x) with the controls held, filling `out` with every intermediate quantity.
+// xdot = f(x) with the controls held, filling `out` with every intermediate quantity. With
+// report_all false, quantities that only outputs use (the slip angle) are skipped.
 void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedControl& u,
                         const WallPlanes& walls, const StateVector& x, StateVector& xdot,
-                        Derived& out);
+                        Derived& out, bool report_all = true);
 
-// The tire's lateral force (N) at slip angle alpha for normal load Fz: linear in the small-slip
+// The tire's lateral force (N) at tan(slip angle) for normal load Fz: linear in the small-slip
 // range with slope -C_alpha, never above mu * Fz in magnitude.
-double TireLateralForce(TireLaw law, double alpha, double cornering_stiffness, double mu,
+double TireLateralForce(TireLaw law, double tan_alpha, double cornering_stiffness, double mu,
                         double Fz);
 
 }  // namespace vdyn
