@@ -6,8 +6,8 @@ cd "$(dirname "$0")/.."
 config="${1:-release}"
 shift || true
 case "$config" in
-  release) flags=(-DCMAKE_BUILD_TYPE=Release -DVDYN_SANITIZE=OFF) ;;
-  asan) flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DVDYN_SANITIZE=ON -DVDYN_BUILD_BENCH=OFF) ;;
+  release) flags=(-DCMAKE_BUILD_TYPE=Release -DVDYN_SANITIZE=OFF -DVDYN_WITH_DDS=ON) ;;
+  asan) flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DVDYN_SANITIZE=ON -DVDYN_BUILD_BENCH=OFF -DVDYN_WITH_DDS=ON) ;;
   *) echo "build.sh: unknown configuration '$config' (release, asan)" >&2; exit 2 ;;
 esac
 dir="build/$config"

@@ -1,8 +1,27 @@
 #!/usr/bin/env bash
-# vdyn's main job on its built-in default world: installs what it needs, builds, and runs the
-# demo drive on `facility` (batch, as fast as possible), writing every quantity to out/demo.csv.
+# vdyn's main job on its built-in default world: installs what it needs, builds, and runs a live
+# session - the server on `facility` in real time (1 kHz), with the demo drive fed to it as live
+# driver input over DDS by vdyn-input, and a terminal line of speed, step rate and lateness.
+#   scripts/demo.sh            the live session (about 45 s)
+#   scripts/demo.sh --batch    the same drive as a batch run, as fast as possible, to out/demo.csv
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
-./scripts/build.sh release vdyn-server
-exec ./build/release/server/vdyn-server --demo "$@"
+./scripts/build.sh release vdyn-server vdyn-input
+bin=build/release
+if [ "${1:-}" = "--batch" ]; then
+  shift
+  exec "$bin/server/vdyn-server" --demo "$@"
+fi
+# Loopback only unless the caller configured Cyclone DDS; a domain of its own.
+export CYCLONEDDS_URI="${CYCLONEDDS_URI:-<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General><Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery><Tracing><Verbosity>severe</Verbosity></Tracing>}"
+domain="${VDYN_DOMAIN:-42}"
+"$bin/server/vdyn-server" --domain "$domain" --world facility --duration 44 --status \
+  --stats-out out/live-stats.txt &
+server=$!
+trap 'kill "$server" 2>/dev/null || true' EXIT
+mkdir -p out
+"$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30
+wait "$server"
+trap - EXIT
+echo "live session done; run summary in out/live-stats.txt"

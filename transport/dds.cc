@@ -104,6 +104,7 @@ RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops)
 }
 
 RawReader::~RawReader() {
+  if (on_data_ && reader_ > 0) dds_set_listener(reader_, nullptr);  // no callback after this
   if (waitset_ > 0) dds_delete(waitset_);
   if (condition_ > 0) dds_delete(condition_);
   if (reader_ > 0) dds_delete(reader_);
@@ -113,6 +114,17 @@ bool RawReader::Wait(std::chrono::nanoseconds timeout) {
   dds_attach_t triggered;
   const dds_return_t n = dds_waitset_wait(waitset_, &triggered, 1, timeout.count());
   return n > 0;
+}
+
+void RawReader::OnDataAvailable(std::function<void()> fn) {
+  on_data_ = std::make_unique<std::function<void()>>(std::move(fn));
+  dds_listener_t* l = dds_create_listener(on_data_.get());
+  dds_lset_data_available(l, [](dds_entity_t, void* arg) {
+    (*static_cast<std::function<void()>*>(arg))();
+  });
+  const dds_return_t rc = dds_set_listener(reader_, l);
+  dds_delete_listener(l);
+  if (rc != DDS_RETCODE_OK) throw TransportError(DdsError("dds_set_listener", rc));
 }
 
 std::uint32_t RawReader::MatchedWriters() const {

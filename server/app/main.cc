@@ -62,6 +62,7 @@ struct Options {
   int rt_priority = 50;
   bool status = false;
   bool no_status = false;
+  std::string stats_out;
 };
 
 vdyn::pb::VehicleParams LoadParams(const Options& o) {
@@ -94,6 +95,7 @@ int RunNetworked(const Options& o) {
   so.lockstep_timeout_s = o.lockstep_timeout_s;
   so.rt_priority = o.rt_priority;
   so.status_line = o.status || (!o.no_status && isatty(STDERR_FILENO) == 1 && !o.lockstep);
+  so.stats_out = o.stats_out;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
   vdyn::ServerNode node(LoadWorldFrom(o), so);
@@ -220,6 +222,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_flag("--status", o.status, "Print the status line (default: on a terminal)");
   app.add_flag("--no-status", o.no_status, "No status line");
+  app.add_option("--stats-out", o.stats_out,
+                 "Real time: write a run summary (lateness distribution, drift, CPU) at the end");
 
   try {
     app.parse(argc, argv);

@@ -36,6 +36,25 @@ class LatenessWindow {
   bool sorted_ = false;
 };
 
+// A histogram of durations in 1 us bins up to 100 ms (and one overflow bin): fixed memory for
+// runs of any length, exact percentiles to 1 us.
+class Histogram {
+ public:
+  void Add(double us);
+  std::uint64_t count() const { return count_; }
+  double Percentile(double p) const;  // us; the overflow bin reads as max
+  double Max() const { return max_us_; }
+  double Mean() const { return count_ ? sum_us_ / static_cast<double>(count_) : 0.0; }
+  // Fraction of samples below `us`.
+  double FractionBelow(double us) const;
+
+ private:
+  static constexpr int kBins = 100'000;
+  std::vector<std::uint64_t> bins_ = std::vector<std::uint64_t>(kBins + 1, 0);
+  std::uint64_t count_ = 0;
+  double sum_us_ = 0, max_us_ = 0;
+};
+
 // CPU time of this process (user + system), ns.
 std::int64_t ProcessCpuNs();
 

@@ -211,7 +211,11 @@ void ServerNode::ReportWindow(std::int64_t now_ns) {
 }
 
 void ServerNode::PrintStatus(std::int64_t now_ns) {
-  if (!options_.status_line || now_ns - last_status_ns_ < 250'000'000) return;
+  // On a terminal the line rewrites itself 4 times a second; into a file, a line every 5 s.
+  static const bool tty = isatty(STDERR_FILENO) == 1;
+  if (!options_.status_line || now_ns - last_status_ns_ < (tty ? 250'000'000 : 5'000'000'000)) {
+    return;
+  }
   last_status_ns_ = now_ns;
   std::string vehicles;
   for (std::uint32_t id : session_->vehicle_ids()) {
@@ -221,10 +225,12 @@ void ServerNode::PrintStatus(std::int64_t now_ns) {
                   session_->in_safe_state(id) ? " (no input: braking)" : "");
     vehicles += buf;
   }
-  std::fprintf(stderr, "\rt %7.2f s%s | %6.0f steps/s | late p50 %4.0f p99 %5.0f max %6.0f us  ",
+  std::fprintf(stderr, "%st %7.2f s%s | %6.0f steps/s | late p50 %4.0f p99 %5.0f max %6.0f us  %s",
+               tty ? "\r" : "",
                static_cast<double>(session_->steps()) * 1e-9 *
                    static_cast<double>(session_->step_ns()),
-               vehicles.c_str(), last_rate_hz_, last_p50_us_, last_p99_us_, last_max_us_);
+               vehicles.c_str(), last_rate_hz_, last_p50_us_, last_p99_us_, last_max_us_,
+               tty ? "" : "\n");
   std::fflush(stderr);
 }
 
@@ -236,9 +242,11 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
   const std::int64_t h = options_.session.step_ns;
   const auto end_steps = static_cast<std::int64_t>(
       std::llround(options_.duration_s * 1e9 / static_cast<double>(h)));
-  std::int64_t next = MonotonicNowNs() + h;
-  window_start_ns_ = MonotonicNowNs();
-  window_start_cpu_ns_ = ProcessCpuNs();
+  const std::int64_t start_ns = MonotonicNowNs();
+  const std::int64_t start_cpu_ns = ProcessCpuNs();
+  std::int64_t next = start_ns + h;  // the deadline of step k is start + (k + 1) h
+  window_start_ns_ = start_ns;
+  window_start_cpu_ns_ = start_cpu_ns;
   while (!stop.load(std::memory_order_relaxed)) {
     SleepUntilNs(next);
     std::int64_t now = MonotonicNowNs();
@@ -246,7 +254,9 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
     // catches up after a late wake-up; no step is skipped.
     int run_this_wake = 0;
     while (now >= next && !stop.load(std::memory_order_relaxed)) {
-      lateness_.Add(static_cast<double>(now - next) * 1e-3);
+      const double late_us = static_cast<double>(now - next) * 1e-3;
+      lateness_.Add(late_us);
+      lateness_all_.Add(late_us);
       Boundary();
       if (!session_->paused() || session_->pending_steps() > 0) StepOnce();
       next += h;
@@ -267,9 +277,50 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
     PrintStatus(now);
     if (end_steps > 0 && session_->steps() >= end_steps) break;
   }
-  if (options_.status_line) std::fprintf(stderr, "\n");
-  ReportWindow(MonotonicNowNs());
+  if (options_.status_line && isatty(STDERR_FILENO) == 1) std::fprintf(stderr, "\n");
+  const std::int64_t end_ns = MonotonicNowNs();
+  ReportWindow(end_ns);
+  spdlog::info("server '{}': {} steps in {:.3f} s of wall time; tick lateness p50 {:.0f} us, p99 "
+               "{:.0f} us, max {:.0f} us; {} steps caught up; drift {:.3f} ms",
+               options_.session.server_id, session_->steps(),
+               static_cast<double>(end_ns - start_ns) * 1e-9, lateness_all_.Percentile(50),
+               lateness_all_.Percentile(99), lateness_all_.Max(), steps_caught_up_,
+               (static_cast<double>(session_->steps() * session_->step_ns()) -
+                static_cast<double>(end_ns - start_ns)) * 1e-6);
+  if (!options_.stats_out.empty()) WriteStats(start_ns, end_ns, start_cpu_ns);
   return 0;
+}
+
+void ServerNode::WriteStats(std::int64_t start_ns, std::int64_t end_ns,
+                            std::int64_t start_cpu_ns) const {
+  std::FILE* f = std::fopen(options_.stats_out.c_str(), "w");
+  if (f == nullptr) {
+    spdlog::error("cannot write the run summary to {}", options_.stats_out);
+    return;
+  }
+  const double wall_s = static_cast<double>(end_ns - start_ns) * 1e-9;
+  const double sim_s = static_cast<double>(session_->steps()) *
+                       static_cast<double>(session_->step_ns()) * 1e-9;
+  // Steps whose deadline passed by the end but that never ran (a rebase drops wall time).
+  const auto due = static_cast<std::int64_t>((end_ns - start_ns) / session_->step_ns());
+  std::fprintf(f, "ticks %llu\n", static_cast<unsigned long long>(lateness_all_.count()));
+  std::fprintf(f, "steps %lld\n", static_cast<long long>(session_->steps()));
+  std::fprintf(f, "steps_due %lld\n", static_cast<long long>(due));
+  std::fprintf(f, "lateness_p50_us %.1f\n", lateness_all_.Percentile(50));
+  std::fprintf(f, "lateness_p99_us %.1f\n", lateness_all_.Percentile(99));
+  std::fprintf(f, "lateness_p999_us %.1f\n", lateness_all_.Percentile(99.9));
+  std::fprintf(f, "lateness_max_us %.1f\n", lateness_all_.Max());
+  std::fprintf(f, "fraction_under_1ms %.6f\n", lateness_all_.FractionBelow(1000.0));
+  std::fprintf(f, "steps_caught_up %llu\n", static_cast<unsigned long long>(steps_caught_up_));
+  std::fprintf(f, "max_lag_steps %llu\n", static_cast<unsigned long long>(max_lag_steps_seen_));
+  std::fprintf(f, "schedule_rebases %llu\n", static_cast<unsigned long long>(schedule_rebases_));
+  std::fprintf(f, "wall_s %.6f\n", wall_s);
+  std::fprintf(f, "sim_s %.6f\n", sim_s);
+  std::fprintf(f, "drift_ms %.3f\n", (sim_s - wall_s) * 1e3);
+  std::fprintf(f, "cpu_percent %.2f\n",
+               100.0 * static_cast<double>(ProcessCpuNs() - start_cpu_ns) * 1e-9 / wall_s);
+  std::fprintf(f, "scheduling %s\n", scheduling_.c_str());
+  std::fclose(f);
 }
 
 int ServerNode::RunLockstep(const std::atomic<bool>& stop) {

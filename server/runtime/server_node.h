@@ -35,6 +35,7 @@ struct ServerOptions {
   int rt_priority = 50;
   std::int64_t max_lag_steps = 1000;  // beyond this backlog the schedule is rebased
   bool status_line = false;       // a terminal line of speed, step rate and lateness
+  std::string stats_out;          // real time: write a run summary here at the end
 };
 
 class ServerNode {
@@ -69,6 +70,7 @@ class ServerNode {
   void PrintStatus(std::int64_t now_ns);
   int RunRealtime(const std::atomic<bool>& stop);
   int RunLockstep(const std::atomic<bool>& stop);
+  void WriteStats(std::int64_t start_ns, std::int64_t end_ns, std::int64_t start_cpu_ns) const;
 
   std::shared_ptr<const World> world_;
   ServerOptions options_;
@@ -94,6 +96,7 @@ class ServerNode {
   // Statistics of the current 1 s window and since start.
   std::string scheduling_;
   LatenessWindow lateness_;
+  Histogram lateness_all_;  // the whole run
   std::uint64_t steps_caught_up_ = 0;
   std::uint64_t max_lag_steps_seen_ = 0;
   std::uint64_t schedule_rebases_ = 0;

@@ -1,0 +1,261 @@
+// net_bench: the networked server measured as a lab uses it (issue: the simulation server over
+// DDS). One run, on one machine, over loopback:
+//  - the server in real time on `facility` for N s: tick lateness distribution (p50, p99, p99.9,
+//    max), steps that never ran, drift of simulation time against the wall clock, its CPU;
+//  - three subscriber processes on the state topic (this one and two children);
+//  - one-way state latency (DDS source timestamp to the subscriber's hand, same clock);
+//  - latency from a driver input to the first state that applied it (the input's monotonic stamp
+//    travels back in the state);
+//  - Cyclone's own ddsperf ping/pong at 1 kHz with a payload of the state's size, in the same run:
+//    its round trip / 2 is the one-way peer figure.
+//
+// Usage: net_bench [seconds=60] [ddsperf_seconds=20]
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "dds.h"
+#include "pacing.h"
+#include "vdyn/input.pb.h"
+#include "vdyn/state.pb.h"
+
+extern char** environ;
+
+namespace {
+
+using vdyn::transport::TopicId;
+
+pid_t Spawn(std::vector<std::string> argv, const std::string& log) {
+  std::vector<char*> args;
+  for (auto& a : argv) args.push_back(a.data());
+  args.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  pid_t pid = -1;
+  if (posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ) != 0) {
+    std::fprintf(stderr, "cannot start %s\n", args[0]);
+    std::exit(1);
+  }
+  posix_spawn_file_actions_destroy(&fa);
+  return pid;
+}
+
+int WaitPid(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+// utime + stime of a process, seconds.
+double ProcessCpuSeconds(pid_t pid) {
+  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
+  std::string s;
+  std::getline(in, s);
+  const auto close = s.rfind(')');
+  if (close == std::string::npos) return 0.0;
+  std::istringstream rest(s.substr(close + 2));
+  std::string field;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && rest >> field; ++i) {
+    if (i == 14) utime = std::stod(field);
+    if (i == 15) stime = std::stod(field);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+std::map<std::string, std::string> ReadStats(const std::string& path) {
+  std::map<std::string, std::string> out;
+  std::ifstream in(path);
+  std::string k, v;
+  while (in >> k && std::getline(in, v)) out[k] = v.substr(v.find_first_not_of(' '));
+  return out;
+}
+
+// Subscriber child: takes every state for `seconds`, prints how many it got.
+int Subscriber(std::uint32_t domain, double seconds) {
+  vdyn::transport::Participant p(domain);
+  vdyn::transport::DropCounters drops;
+  vdyn::transport::Reader<vdyn::pb::VehicleState> states(p, TopicId::kState, &drops);
+  const std::int64_t end = vdyn::MonotonicNowNs() + static_cast<std::int64_t>(seconds * 1e9);
+  std::uint64_t n = 0;
+  while (vdyn::MonotonicNowNs() < end) {
+    states.Wait(std::chrono::milliseconds(10));
+    n += static_cast<std::uint64_t>(
+        states.Take([](const vdyn::pb::VehicleState&, const vdyn::transport::SampleInfo&) {}));
+  }
+  std::printf("subscriber received %llu states\n", static_cast<unsigned long long>(n));
+  return 0;
+}
+
+// Median of the per-second "50%" and "99%" round trips that ddsperf ping prints.
+std::pair<double, double> ParseDdsperf(const std::string& log) {
+  std::ifstream in(log);
+  std::string line;
+  std::vector<double> p50, p99;
+  while (std::getline(in, line)) {
+    const auto a = line.find(" 50% "), b = line.find(" 99% ");
+    if (a == std::string::npos || b == std::string::npos) continue;
+    p50.push_back(std::atof(line.c_str() + a + 5));
+    p99.push_back(std::atof(line.c_str() + b + 5));
+  }
+  auto median = [](std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  return {median(p50), median(p99)};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc >= 4 && std::string(argv[1]) == "--subscriber") {
+    return Subscriber(static_cast<std::uint32_t>(std::atoi(argv[2])), std::atof(argv[3]));
+  }
+  const double seconds = argc > 1 ? std::atof(argv[1]) : 60.0;
+  const double ddsperf_seconds = argc > 2 ? std::atof(argv[2]) : 20.0;
+  if (std::getenv("CYCLONEDDS_URI") == nullptr) {
+    setenv("CYCLONEDDS_URI",
+           "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
+           "<Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery>",
+           1);
+  }
+  const std::uint32_t domain = 150 + static_cast<std::uint32_t>(getpid()) % 60;
+  const std::string tmp = "/tmp/vdyn-net-bench-" + std::to_string(getpid());
+  const double warmup = 3.0;
+
+  const pid_t server = Spawn({VDYN_SERVER_BINARY, "--domain", std::to_string(domain), "--world",
+                              "facility", "--no-status", "--duration",
+                              std::to_string(seconds + warmup + 1.0), "--stats-out",
+                              tmp + "-stats.txt", "--watchdog-ms", "100"},
+                             tmp + "-server.log");
+  std::vector<pid_t> subs;
+  for (int i = 0; i < 2; ++i) {
+    subs.push_back(Spawn({argv[0], "--subscriber", std::to_string(domain),
+                          std::to_string(seconds + warmup)},
+                         tmp + "-sub" + std::to_string(i) + ".log"));
+  }
+
+  vdyn::transport::Participant participant(domain);
+  vdyn::transport::DropCounters drops;
+  vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant, TopicId::kState, &drops);
+  vdyn::transport::Writer<vdyn::pb::DriverInput> input(participant, TopicId::kInput, 10);
+
+  // Input at 1 kHz from a thread of its own: the stamp is the monotonic time of the write.
+  std::atomic<bool> stop{false};
+  std::thread writer([&] {
+    vdyn::pb::DriverInput msg;
+    msg.set_vehicle_id(1);
+    msg.set_source_id("net_bench");
+    msg.set_cruise_on(true);
+    msg.set_cruise_set_kmh(30.0);
+    std::uint64_t seq = 0;
+    std::int64_t next = vdyn::MonotonicNowNs();
+    while (!stop) {
+      vdyn::SleepUntilNs(next += 1'000'000);
+      msg.set_sequence(++seq);
+      msg.set_steer(0.05 * std::sin(static_cast<double>(seq) * 1e-3));  // the input really varies
+      msg.set_stamp_ns(vdyn::MonotonicNowNs());
+      input.Write(1, msg);
+    }
+  });
+
+  vdyn::Histogram one_way, input_to_state;
+  std::uint64_t received = 0, last_seq = 0;
+  const std::int64_t t0 = vdyn::MonotonicNowNs();
+  const std::int64_t measure_from = t0 + static_cast<std::int64_t>(warmup * 1e9);
+  const std::int64_t measure_to = measure_from + static_cast<std::int64_t>(seconds * 1e9);
+  std::atomic<bool> measuring{false};
+  std::atomic<std::size_t> state_bytes{0};
+  std::mutex mu;  // the histograms are read by the main thread at the end
+  // Take on DDS's receive thread (a listener): the lowest-latency way to read, as ddsperf does.
+  states.OnDataAvailable([&] {
+    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
+      const std::int64_t now_wall = dds_time();
+      const std::int64_t now_mono = vdyn::MonotonicNowNs();
+      if (!measuring) return;
+      std::lock_guard<std::mutex> lock(mu);
+      state_bytes = s.ByteSizeLong();
+      ++received;
+      one_way.Add(static_cast<double>(now_wall - info.source_timestamp_ns) * 1e-3);
+      if (s.input().sequence() > last_seq && s.input().stamp_ns() > 0) {
+        last_seq = s.input().sequence();
+        input_to_state.Add(static_cast<double>(now_mono - s.input().stamp_ns()) * 1e-3);
+      }
+    });
+  });
+  vdyn::SleepUntilNs(measure_from);
+  const double cpu0 = ProcessCpuSeconds(server);
+  measuring = true;
+  vdyn::SleepUntilNs(measure_to);
+  measuring = false;
+  const double cpu1 = ProcessCpuSeconds(server);
+  stop = true;
+  writer.join();
+  const int server_code = WaitPid(server);
+  for (pid_t p : subs) WaitPid(p);
+  auto stats = ReadStats(tmp + "-stats.txt");
+
+  // The peer: ddsperf ping/pong at 1 kHz with a payload of the state's size.
+  const std::size_t size = std::max<std::size_t>(1024, state_bytes.load());
+  const std::string dur = std::to_string(static_cast<int>(ddsperf_seconds));
+  const pid_t pong = Spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain + 1), "-D",
+                            std::to_string(static_cast<int>(ddsperf_seconds) + 3), "pong"},
+                           tmp + "-pong.log");
+  const pid_t ping = Spawn({"/usr/bin/ddsperf", "-i", std::to_string(domain + 1), "-D", dur, "ping",
+                            "1kHz", "size", std::to_string(size)},
+                           tmp + "-ping.log");
+  WaitPid(ping);
+  kill(pong, SIGTERM);
+  WaitPid(pong);
+  const auto [rtt50, rtt99] = ParseDdsperf(tmp + "-ping.log");
+
+  const double cpu = 100.0 * (cpu1 - cpu0) / seconds;
+  std::printf("net_bench: %.0f s of the real-time server on facility, 3 state subscribers, input at 1 kHz\n",
+              seconds);
+  std::printf("server exit code %d, scheduling: %s\n", server_code, stats["scheduling"].c_str());
+  std::printf("tick lateness: p50 %s us, p99 %s us, p99.9 %s us, max %s us; under 1 ms: %.3f %%\n",
+              stats["lateness_p50_us"].c_str(), stats["lateness_p99_us"].c_str(),
+              stats["lateness_p999_us"].c_str(), stats["lateness_max_us"].c_str(),
+              100.0 * std::atof(stats["fraction_under_1ms"].c_str()));
+  std::printf("steps %s of %s due (never run: %lld), caught up %s, largest lag %s steps, rebases %s\n",
+              stats["steps"].c_str(), stats["steps_due"].c_str(),
+              std::atoll(stats["steps_due"].c_str()) - std::atoll(stats["steps"].c_str()),
+              stats["steps_caught_up"].c_str(), stats["max_lag_steps"].c_str(),
+              stats["schedule_rebases"].c_str());
+  std::printf("drift of simulation time against the wall clock at the end: %s ms over %s s\n",
+              stats["drift_ms"].c_str(), stats["wall_s"].c_str());
+  std::printf("server CPU with 3 subscribers: %.1f %% of one core (whole run: %s %%)\n", cpu,
+              stats["cpu_percent"].c_str());
+  std::printf("state one-way latency (%llu states, %zu B): p50 %.1f us, p99 %.1f us, max %.1f us\n",
+              static_cast<unsigned long long>(received), state_bytes.load(),
+              one_way.Percentile(50), one_way.Percentile(99), one_way.Max());
+  std::printf("input to first state applying it (%llu inputs): p50 %.1f us, p99 %.1f us, max %.1f us\n",
+              static_cast<unsigned long long>(input_to_state.count()), input_to_state.Percentile(50),
+              input_to_state.Percentile(99), input_to_state.Max());
+  std::printf("ddsperf ping/pong 1 kHz, %zu B, same run: round trip p50 %.1f us, p99 %.1f us -> "
+              "one way ~ p50 %.1f us, p99 %.1f us\n",
+              size, rtt50, rtt99, rtt50 / 2.0, rtt99 / 2.0);
+  if (rtt50 > 0) {
+    std::printf("ratio vdyn state one-way / ddsperf one-way: p50 %.2f, p99 %.2f\n",
+                one_way.Percentile(50) / (rtt50 / 2.0), one_way.Percentile(99) / (rtt99 / 2.0));
+  }
+  return server_code;
+}
