@@ -8,7 +8,7 @@ packages=(
   libeigen3-dev libembree-dev libprotobuf-dev protobuf-compiler
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
-  cyclonedds-dev cyclonedds-tools iproute2 procps
+  cyclonedds-dev cyclonedds-tools
 )
 
 missing=()

@@ -214,6 +214,37 @@ TEST(Session, ResimulationFromEventsReproducesEveryHash) {
   EXPECT_GT(differing, 100);  // from the parameter change until the teleport re-sets the state
 }
 
+// Valid but absurd parameters (a 1 kg car on 1e8 N/m springs: h * omega = 20) make the state
+// blow up; the step is contained, the vehicle is put back at rest where it was, the session goes
+// on, and the re-simulation follows it through.
+TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
+  Recorder rec;
+  const auto world = testing::SharedWorld("flat");
+  Session s(world, Config(), [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  pb::VehicleParams stiff;
+  stiff.set_mass(1.0);
+  stiff.set_ixx(0.1);
+  stiff.set_iyy(0.1);
+  stiff.set_izz(0.1);
+  for (auto* w : {stiff.mutable_lf(), stiff.mutable_rf(), stiff.mutable_lr(), stiff.mutable_rr()}) {
+    w->set_spring_stiffness(1e8);
+  }
+  s.Spawn(1, {0, 0, 0}, 0.0, stiff);
+  pb::ControlRequest drop = Request(1);  // 1 cm above equilibrium: enough to set it off
+  drop.mutable_teleport()->mutable_pose()->set_x(0.0);
+  ASSERT_TRUE(s.Apply(drop).accepted());
+  StepAndRecord(s, rec, 400);
+  EXPECT_GE(s.simulator(1).nonfinite_steps(), 1u);
+  EXPECT_TRUE(s.simulator(1).state().x.allFinite());
+  EXPECT_EQ(s.simulator(1).state().step, 400);
+  int respawns = 0;
+  for (const auto& e : rec.events) respawns += e.has_spawned() && e.step() > 0;
+  EXPECT_GE(respawns, 1);
+  const ResimResult res = Resimulate(world, rec.events, {{1, 400}});
+  ASSERT_TRUE(res.ok) << res.error;
+  for (const auto& [step, hash] : rec.hashes.at(1)) EXPECT_EQ(res.hashes.at(1).at(step), hash);
+}
+
 TEST(Session, ResimulationRefusesAnotherTerrainAndGaps) {
   Recorder rec;
   Session s(testing::SharedWorld("flat"), Config(),

@@ -133,6 +133,15 @@ TEST(Terrain, PacketTraceAnswersLikeSingleTraces) {
   EXPECT_TRUE(hits[0].hit);   // rough terrain
   EXPECT_TRUE(hits[1].hit);   // jump ramp A
   EXPECT_FALSE(hits[2].hit);  // non-finite origin: no hit, no crash
+  // Finite in double but not as a float, and absurd ranges: no hit, no crash either.
+  const std::array<Vector3d, 4> huge = {Vector3d(1e300, 0, 1), Vector3d(0, 0, 1),
+                                        Vector3d(0, 0, 1), Vector3d(0, 0, 1)};
+  const std::array<Vector3d, 4> bad_dirs = {-Vector3d::UnitZ(), Vector3d(0, 0, -1e200),
+                                            Vector3d::Zero(), -Vector3d::UnitZ()};
+  const std::array<double, 4> bad_ranges = {5.0, 5.0, 5.0, 1e300};
+  t.Trace4(huge, bad_dirs, bad_ranges, hits);
+  for (const TraceHit& h : hits) EXPECT_FALSE(h.hit);
+  EXPECT_FALSE(t.Trace(huge[0], -Vector3d::UnitZ(), 5.0).hit);
   EXPECT_FALSE(hits[3].hit);  // upwards into the sky
 }
 

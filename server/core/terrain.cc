@@ -143,7 +143,10 @@ void Terrain::BuildSteepGrid() {
 
 bool Terrain::SteepSurfaceNear(double x, double y, double radius) const {
   if (steep_cells_.empty()) return false;
-  if (!std::isfinite(x) || !std::isfinite(y)) return false;
+  // Out of any world (or not finite): no cell to look at, and no float-to-int overflow.
+  if (!(std::abs(x) < 1e9) || !(std::abs(y) < 1e9) || !(radius >= 0.0 && radius < 1e9)) {
+    return false;
+  }
   const int i0 = std::max(0, static_cast<int>(std::floor((x - radius - grid_x0_) / grid_cell_)));
   const int i1 = std::min(grid_nx_ - 1, static_cast<int>(std::floor((x + radius - grid_x0_) / grid_cell_)));
   const int j0 = std::max(0, static_cast<int>(std::floor((y - radius - grid_y0_) / grid_cell_)));
@@ -180,8 +183,14 @@ TraceHit Terrain::Refine(const Eigen::Vector3d& origin_W, const Eigen::Vector3d&
 }
 
 namespace {
+// A ray Embree may see: finite also in single precision (a diverging state can hold 1e300,
+// which is finite in double and infinite as a float) and within a range where floats still mean
+// something. Embree asserts on anything else.
 bool FiniteRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max) {
-  return o.allFinite() && d.allFinite() && t_max >= 0.0;
+  constexpr double kLimit = 1e9;  // m
+  return o.allFinite() && d.allFinite() && o.cwiseAbs().maxCoeff() < kLimit &&
+         d.cwiseAbs().maxCoeff() <= 1.0 + 1e-6 && d.squaredNorm() > 0.5 && t_max >= 0.0 &&
+         t_max < kLimit;
 }
 // A little beyond t_max in float; the exact bound is applied in double by Refine.
 float FloatFar(double t_max) { return static_cast<float>(t_max) * 1.0001f + 1e-3f; }

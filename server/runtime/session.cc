@@ -268,7 +268,11 @@ void Session::Step(const std::function<void(std::uint32_t, const pb::VehicleStat
       try {
         v.sim->Spawn({p.x(), p.y(), yaw}, 0.0);
       } catch (const std::exception&) {
-        v.sim->Spawn(v.spawn_pose, 0.0);
+        try {
+          v.sim->Spawn(v.spawn_pose, 0.0);  // nothing below it: back to where it started
+        } catch (const std::exception&) {
+          continue;  // not even there (cannot happen on a world it spawned on): keep x_n
+        }
       }
       State s = v.sim->state();
       s.step = step + 1;
