@@ -2,7 +2,8 @@
 #  - warnings are errors;
 #  - -ffp-contract=off: no fused multiply-add contraction, so a trajectory does not depend on
 #    which expressions the compiler happened to fuse (determinism, see docs/architecture.md);
-#  - VDYN_SANITIZE=ON adds AddressSanitizer + UndefinedBehaviorSanitizer, which CI runs the tests under.
+#  - VDYN_SANITIZE=ON adds AddressSanitizer + UndefinedBehaviorSanitizer (with float-cast-overflow,
+#    which -fsanitize=undefined leaves out), which CI runs the tests under.
 add_library(vdyn_options INTERFACE)
 target_compile_options(vdyn_options INTERFACE
   -Wall -Wextra -Wpedantic -Wshadow -Wnon-virtual-dtor -Wold-style-cast -Wcast-align
@@ -11,6 +12,7 @@ target_compile_options(vdyn_options INTERFACE
   -ffp-contract=off -fno-fast-math)
 if(VDYN_SANITIZE)
   target_compile_options(vdyn_options INTERFACE
-    -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer)
-  target_link_options(vdyn_options INTERFACE -fsanitize=address,undefined)
+    -fsanitize=address,undefined,float-cast-overflow -fno-sanitize-recover=undefined,float-cast-overflow
+    -fno-omit-frame-pointer)
+  target_link_options(vdyn_options INTERFACE -fsanitize=address,undefined,float-cast-overflow)
 endif()

@@ -14,7 +14,7 @@ if [ "${1:-}" = "--batch" ]; then
   exec "$bin/server/vdyn-server" --demo "$@"
 fi
 # Loopback only unless the caller configured Cyclone DDS; a domain of its own.
-export CYCLONEDDS_URI="${CYCLONEDDS_URI:-<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General><Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery><Tracing><Verbosity>severe</Verbosity></Tracing>}"
+export CYCLONEDDS_URI="${CYCLONEDDS_URI:-<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General><Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery>}"
 domain="${VDYN_DOMAIN:-42}"
 "$bin/server/vdyn-server" --domain "$domain" --world facility --duration 44 --status \
   --stats-out out/live-stats.txt &

@@ -86,8 +86,7 @@ std::string InputBinary() { return VDYN_INPUT_BINARY; }
 void UseLoopbackDds() {
   setenv("CYCLONEDDS_URI",
          "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
-         "<Discovery><MaxAutoParticipantIndex>120</MaxAutoParticipantIndex></Discovery>"
-         "<Tracing><Verbosity>warning</Verbosity></Tracing>",
+         "<Discovery><MaxAutoParticipantIndex>120</MaxAutoParticipantIndex></Discovery>",
          1);
 }
 

@@ -103,6 +103,15 @@ TEST(Cli, BadOptionValueIsRefused) {
   EXPECT_THAT(r.output, HasSubstr("--step-ms"));
 }
 
+TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
+  const Result twice = RunServer("--vehicle-ids 1,1 --domain 231 --duration 1");
+  EXPECT_EQ(twice.exit_code, 2) << twice.output;
+  EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));
+  const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --domain 231 --duration 1");
+  EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
+  EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
+}
+
 TEST(Cli, DemoRunsAndSaysWhereTheCsvIs) {
   TempDir dir;
   const Result r = RunServer("--demo --csv " + (dir / "demo.csv").string());

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <functional>
 #include <map>
+#include <thread>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -258,10 +259,13 @@ TEST_F(Net, LockstepAnswersWhenTheStepsAreDoneAndTimesOutWithoutAClient) {
     EXPECT_TRUE(reply->accepted()) << reply->reason();
     EXPECT_EQ(reply->applied_step(), 250u * round);  // answered when all steps are done
   }
-  std::uint64_t last_step = 0;
-  ReadUntil<pb::VehicleState>(states, 5s, [&](const auto& s) { last_step = s.step(); },
-                              [&] { return last_step == 499; });
-  EXPECT_EQ(last_step, 499u);  // state of step 499 (the 500th): nothing more ran
+  // Nothing more ran: the server's own count (reliable diagnostics, once a second) stays at 500.
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  int reports = 0;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
+    EXPECT_EQ(d.steps(), 500u);
+    ++reports;
+  }, [&] { return reports >= 2; }));
   pb::ControlRequest resume;
   resume.set_vehicle_id(1);
   resume.mutable_resume();
@@ -277,6 +281,90 @@ TEST_F(Net, LockstepAnswersWhenTheStepsAreDoneAndTimesOutWithoutAClient) {
   const auto none = control.Call(step, 500ms);
   EXPECT_FALSE(none.has_value());
   EXPECT_THAT(control.last_error(), HasSubstr("no reply"));
+}
+
+TEST_F(Net, LockstepKeepsAClientWhoseStepsTakeLongerThanTheTimeout) {
+  // 600,000 steps take well over the 1 s timeout; the client's next request is still answered.
+  auto server = StartServer({"--lockstep", "--lockstep-timeout", "1"});
+  transport::Participant p(domain_);
+  transport::ControlClient control(p, "slow-steps");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  pb::ControlRequest step;
+  step.set_vehicle_id(1);
+  step.mutable_step()->set_steps(600'000);
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto first = control.Call(step, 300s);
+  ASSERT_TRUE(first.has_value()) << control.last_error();
+  EXPECT_EQ(first->applied_step(), 600'000u);
+  EXPECT_GT(std::chrono::steady_clock::now() - t0, 1s);  // the case this test is about
+  step.mutable_step()->set_steps(10);
+  const auto second = control.Call(step, 20s);
+  ASSERT_TRUE(second.has_value()) << control.last_error() << server->Log();
+  EXPECT_EQ(second->applied_step(), 600'010u);
+}
+
+TEST_F(Net, StepRepliesAreAnsweredEachAtItsOwnStepsOrCancelled) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::ControlClient a(p, "client-a"), b(p, "client-b");
+  ASSERT_TRUE(a.WaitForServer(20s)) << a.last_error() << server->Log();
+  ASSERT_TRUE(b.WaitForServer(20s));
+  pb::ControlRequest pause;
+  pause.set_vehicle_id(1);
+  pause.mutable_pause();
+  ASSERT_TRUE(a.Call(pause, 10s).value_or(pb::ControlReply()).accepted());
+  // In real time, paused: a's 50 steps run first (50 ms), b's 100 after them.
+  pb::ControlRequest step;
+  step.set_vehicle_id(1);
+  step.mutable_step()->set_steps(50);
+  const auto ra = a.Call(step, 10s);
+  step.mutable_step()->set_steps(100);
+  const auto rb = b.Call(step, 10s);
+  ASSERT_TRUE(ra.has_value() && rb.has_value());
+  EXPECT_EQ(rb->applied_step() - ra->applied_step(), 100u);
+  // A step request still running when a pause comes is answered: cancelled, with the reason.
+  step.mutable_step()->set_steps(1'000'000);  // 1000 s at real time
+  std::optional<pb::ControlReply> long_reply;
+  std::thread waiter([&] { long_reply = a.Call(step, 20s); });
+  // b's pause must come after a's step request: wait until the server runs a's steps.
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::uint64_t seen = 0;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) { seen = s.step(); },
+                                          [&] { return seen > rb->applied_step() + 20; }));
+  ASSERT_TRUE(b.Call(pause, 10s).value_or(pb::ControlReply()).accepted());
+  waiter.join();
+  ASSERT_TRUE(long_reply.has_value()) << a.last_error();
+  EXPECT_FALSE(long_reply->accepted());
+  EXPECT_THAT(long_reply->reason(), HasSubstr("cancelled by a pause"));
+}
+
+TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
+  auto server = StartServer({"--watchdog-ms", "2000"});
+  const auto backup_csv = dir_ / "backup.csv";
+  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
+  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
+                            "backup", "--strength", "5"}, "backup.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Writer<pb::DriverInput> primary(p, TopicId::kInput, 20);
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::string source;
+  // The primary drives while it writes...
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+    source = s.input().source_id();
+  }, [&] {
+    primary.Write(1, Input(1, 0.5, "primary"));
+    return source == "primary";
+  })) << source << server->Log();
+  // ...then its loop hangs: the writer is alive but silent. After the 200 ms lease the backup
+  // drives; the vehicle never falls back to the watchdog's safe state (2 s here).
+  bool safe = false;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
+    source = s.input().source_id();
+    safe = safe || s.control().watchdog_safe_state();
+  }, [&] { return source == "backup"; })) << source;
+  EXPECT_FALSE(safe);
 }
 
 TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {

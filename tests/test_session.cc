@@ -139,6 +139,8 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   spawn.mutable_spawn();
   EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("exists already"));
   spawn.set_vehicle_id(2);
+  EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("spawn needs server_id"));
+  spawn.set_server_id("test");
   spawn.mutable_spawn()->mutable_params()->mutable_lf()->set_radius(0.0);
   EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("lf.radius"));
   spawn.mutable_spawn()->clear_params();
@@ -179,6 +181,7 @@ TEST(Session, ResimulationFromEventsReproducesEveryHash) {
   p.mutable_set_params()->mutable_params()->set_mu(0.7);
   ASSERT_TRUE(s.Apply(p).accepted());
   pb::ControlRequest spawn = Request(2);
+  spawn.set_server_id("test");
   spawn.mutable_spawn()->mutable_pose()->set_x(0.0);
   spawn.mutable_spawn()->mutable_pose()->set_y(50.0);
   spawn.mutable_spawn()->set_speed(5.0);
@@ -243,6 +246,55 @@ TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
   const ResimResult res = Resimulate(world, rec.events, {{1, 400}});
   ASSERT_TRUE(res.ok) << res.error;
   for (const auto& [step, hash] : rec.hashes.at(1)) EXPECT_EQ(res.hashes.at(1).at(step), hash);
+}
+
+// A recorder that joins late starts from a checkpoint, also at a step other than 1 ms; a
+// vehicle removed and spawned again under its id goes on counting its steps, and its second
+// life is re-simulated too.
+TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
+  Recorder rec;
+  const auto world = testing::SharedWorld("flat");
+  SessionConfig cfg = Config();
+  cfg.step_ns = 2'000'000;
+  cfg.checkpoint_every_steps = 100;
+  Session s(world, cfg, [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  s.Spawn(1, {0, 0, 0}, 8.0, pb::VehicleParams());
+  std::string why;
+  for (int k = 0; k < 6; ++k) {
+    ASSERT_TRUE(s.OfferInput(Input(1, 0.4, 0.01 * k), &why)) << why;
+    StepAndRecord(s, rec, 40);
+  }
+  pb::ControlRequest remove = Request(1);
+  remove.mutable_remove();
+  ASSERT_TRUE(s.Apply(remove).accepted());
+  pb::ControlRequest spawn = Request(1);
+  spawn.set_server_id("test");
+  spawn.mutable_spawn()->mutable_pose()->set_x(30.0);
+  spawn.mutable_spawn()->set_speed(4.0);
+  ASSERT_TRUE(s.Apply(spawn).accepted());
+  EXPECT_EQ(s.simulator(1).state().step, 240);  // the id's steps go on
+  ASSERT_TRUE(s.OfferInput(Input(1, 0.7, -0.02), &why));
+  StepAndRecord(s, rec, 150);
+
+  // Late joiner: every event from the first checkpoint on.
+  std::vector<pb::SessionEvent> late;
+  bool from_checkpoint = false;
+  for (const auto& e : rec.events) {
+    from_checkpoint = from_checkpoint || e.has_checkpoint();
+    if (from_checkpoint) late.push_back(e);
+  }
+  ASSERT_TRUE(late.front().has_checkpoint());
+  const ResimResult res = Resimulate(world, late, {{1, 390}});
+  ASSERT_TRUE(res.ok) << res.error;
+  const auto& got = res.hashes.at(1);
+  int compared = 0;
+  for (const auto& [step, hash] : rec.hashes.at(1)) {
+    if (step < late.front().step()) continue;  // before the checkpoint
+    ASSERT_TRUE(got.count(step)) << "step " << step;
+    EXPECT_EQ(got.at(step), hash) << "step " << step;
+    ++compared;
+  }
+  EXPECT_EQ(compared, 390 - 100);  // both lives, from the checkpoint at step 100
 }
 
 TEST(Session, ResimulationRefusesAnotherTerrainAndGaps) {

@@ -105,12 +105,27 @@ TEST(Facility, HasThePapersPartsAndTheyAreWhereTheLandmarksSay) {
 }
 
 TEST(Facility, IsLargeEnoughToDriveForMinutes) {
+  // Measure the enclosure with horizontal traces from its middle (above the rough terrain's and
+  // the ramps' height, below the billboard) and check it against the landmarks.
   const auto world = testing::SharedWorld("facility");
+  const Terrain& t = world->terrain;
+  const Vector3d o(150.0, 0.0, 1.0);
+  double reach[4];
+  const Vector3d dirs[4] = {Vector3d::UnitX(), -Vector3d::UnitX(), Vector3d::UnitY(),
+                            -Vector3d::UnitY()};
+  for (int i = 0; i < 4; ++i) {
+    const TraceHit h = t.Trace(o, dirs[i], 2000.0);
+    ASSERT_TRUE(h.hit) << i;
+    EXPECT_EQ(t.meshes()[h.mesh].name, "glass_barrier") << i;
+    reach[i] = h.distance;
+  }
+  const double width = reach[0] + reach[1], depth = reach[2] + reach[3];
   const Vector3d lo = world->LandmarkAt("barrier_inner_min");
   const Vector3d hi = world->LandmarkAt("barrier_inner_max");
+  EXPECT_NEAR(width, hi.x() - lo.x(), 1e-9);
+  EXPECT_NEAR(depth, hi.y() - lo.y(), 1e-9);
   // Once around inside the barrier at 50 km/h takes more than two minutes.
-  const double perimeter = 2.0 * ((hi.x() - lo.x()) + (hi.y() - lo.y()));
-  EXPECT_GT(perimeter / (50.0 / 3.6), 120.0);
+  EXPECT_GT(2.0 * (width + depth) / (50.0 / 3.6), 120.0);
 }
 
 TEST(Terrain, PacketTraceAnswersLikeSingleTraces) {

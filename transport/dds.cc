@@ -1,5 +1,6 @@
 #include "dds.h"
 
+#include <algorithm>
 #include <cstring>
 
 #include "vdyn_envelope.h"
@@ -153,9 +154,10 @@ bool RawReader::Decode(const void* sample, google::protobuf::Message& scratch, S
   return true;
 }
 
-int TakeSamples(dds_entity_t reader, TakeBuffers& b) {
+int TakeSamples(dds_entity_t reader, TakeBuffers& b, int max_samples) {
   for (void*& p : b.samples) p = nullptr;  // loans from DDS
-  const dds_return_t n = dds_take(reader, b.samples, b.infos, 64, 64);
+  const auto n_max = static_cast<std::uint32_t>(std::clamp(max_samples, 1, 64));
+  const dds_return_t n = dds_take(reader, b.samples, b.infos, n_max, n_max);
   return n < 0 ? 0 : static_cast<int>(n);
 }
 

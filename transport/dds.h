@@ -4,7 +4,9 @@
 
 #include <chrono>
 #include <cstdint>
+#include <algorithm>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -90,7 +92,7 @@ class RawReader {
  protected:
   // Takes every available sample; for each valid one parses into `scratch` and calls fn.
   template <class F>
-  int TakeInto(google::protobuf::Message& scratch, F&& fn);
+  int TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples);
 
  private:
   bool Decode(const void* sample, google::protobuf::Message& scratch, SampleInfo& info);
@@ -115,12 +117,16 @@ template <class M>
 class Reader : public RawReader {
  public:
   using RawReader::RawReader;
-  // Calls fn(const M&, const SampleInfo&) for every valid sample available now; returns how many.
+  // Calls fn(const M&, const SampleInfo&) for every valid sample available now (at most
+  // max_samples taken); returns how many valid ones.
   template <class F>
-  int Take(F&& fn) {
-    return TakeInto(scratch_, [&](const google::protobuf::Message&, const SampleInfo& info) {
-      fn(static_cast<const M&>(scratch_), info);
-    });
+  int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
+    return TakeInto(
+        scratch_,
+        [&](const google::protobuf::Message&, const SampleInfo& info) {
+          fn(static_cast<const M&>(scratch_), info);
+        },
+        max_samples);
   }
 
  private:
@@ -134,16 +140,18 @@ struct TakeBuffers {
   dds_sample_info_t infos[64];
 };
 
-int TakeSamples(dds_entity_t reader, TakeBuffers& b);
+int TakeSamples(dds_entity_t reader, TakeBuffers& b, int max_samples);
 void ReturnSamples(dds_entity_t reader, TakeBuffers& b, int n);
 
 template <class F>
-int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn) {
+int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples) {
   int delivered = 0;
+  int taken = 0;
   TakeBuffers b;
-  while (true) {
-    const int n = TakeSamples(reader_, b);
+  while (taken < max_samples) {
+    const int n = TakeSamples(reader_, b, std::min(kBatch, max_samples - taken));
     if (n <= 0) break;
+    taken += n;
     for (int i = 0; i < n; ++i) {
       if (!b.infos[i].valid_data) continue;
       SampleInfo info;

@@ -14,7 +14,8 @@ constexpr std::array<TopicSpec, 8> kTopics = {{
   // State every step: the newest sample is all that matters; never block the 1 kHz loop.
   {TopicId::kState, "vdyn/state", "vdyn.pb.VehicleState", false, 1, false, false, 0, 0},
   // Driver input: the strongest live writer per vehicle drives (primary rig, backup device).
-  // A writer that misses the deadline or loses liveliness hands ownership to the next one.
+  // Liveliness is asserted by each write (manual by topic), so a writer that stops writing -
+  // a crashed process or a hung input loop - loses ownership to the next one after the lease.
   {TopicId::kInput, "vdyn/input", "vdyn.pb.DriverInput", true, 1, false, true, 50 * kMs, 200 * kMs},
   // Requests and replies: every one delivered, in order.
   {TopicId::kControl, "vdyn/control", "vdyn.pb.ControlRequest", true, 0, false, false, 0, 0},
@@ -48,8 +49,11 @@ dds_qos_t* BaseQos(const TopicSpec& s) {
   }
   dds_qset_ownership(q, s.exclusive_ownership ? DDS_OWNERSHIP_EXCLUSIVE : DDS_OWNERSHIP_SHARED);
   dds_qset_deadline(q, s.deadline_ns > 0 ? s.deadline_ns : DDS_INFINITY);
-  dds_qset_liveliness(q, DDS_LIVELINESS_AUTOMATIC,
-                      s.liveliness_lease_ns > 0 ? s.liveliness_lease_ns : DDS_INFINITY);
+  if (s.liveliness_lease_ns > 0) {
+    dds_qset_liveliness(q, DDS_LIVELINESS_MANUAL_BY_TOPIC, s.liveliness_lease_ns);
+  } else {
+    dds_qset_liveliness(q, DDS_LIVELINESS_AUTOMATIC, DDS_INFINITY);
+  }
   dds_qset_destination_order(q, DDS_DESTINATIONORDER_BY_RECEPTION_TIMESTAMP);
   dds_qset_resource_limits(q, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED);
   return q;

@@ -29,7 +29,8 @@ struct TopicSpec {
   bool transient_local;   // late joiners get the last samples at once
   bool exclusive_ownership;
   std::int64_t deadline_ns;        // 0: none
-  std::int64_t liveliness_lease_ns;  // 0: none (automatic, infinite)
+  std::int64_t liveliness_lease_ns;  // 0: none (automatic, infinite); else manual by topic:
+                                     // every write asserts the writer's liveliness
 };
 
 const TopicSpec& Spec(TopicId id);

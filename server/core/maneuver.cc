@@ -103,7 +103,7 @@ Maneuver Maneuver::Parse(const std::string& text, const std::string& source) {
       }
     };
     range(0, 0.0, 1e7);
-    range(1, -90.0, 90.0);
+    range(1, -85.0, 85.0);  // below the 1.5 rad every input path accepts
     range(2, -1.0, 1.0);
     range(3, 0.0, 1.0);
     if (present[4]) range(4, 0.0, 400.0);

@@ -62,6 +62,14 @@ Simulator::Simulator(std::shared_ptr<const World> world, const Params& params, S
   Spawn(world_->spawn);
 }
 
+Simulator::Simulator(std::shared_ptr<const World> world, const Params& params, SimConfig config,
+                     const State& initial)
+    : world_(std::move(world)),
+      params_(params),
+      config_(config),
+      h_(static_cast<double>(config.step_ns) * 1e-9),
+      state_(initial) {}
+
 void Simulator::SetInput(const DriverInput& input) {
   input_ = input;
   if (!SanitizeInput(input_)) ++sanitized_inputs_;

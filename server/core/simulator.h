@@ -40,7 +40,11 @@ enum class StepStatus { kOk, kNonFinite };
 
 class Simulator {
  public:
+  // Starts at rest at the world's spawn pose (throws WorldError when no terrain is below it).
   Simulator(std::shared_ptr<const World> world, const Params& params, SimConfig config = {});
+  // Starts from `initial` as it is (a recorded state, or one Spawn() replaces at once).
+  Simulator(std::shared_ptr<const World> world, const Params& params, SimConfig config,
+            const State& initial);
 
   // Takes effect at the next step boundary.
   void SetParams(const Params& params) { params_ = params; }

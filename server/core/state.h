@@ -23,7 +23,8 @@ inline constexpr int kW = 10;
 }  // namespace sx
 
 struct State {
-  StateVector x = StateVector::Zero();
+  // At the world origin, level, at rest (identity orientation).
+  StateVector x = (StateVector() << 0, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0).finished();
   // Discrete state of the automatic speed control (integral of the speed error, scaled by ki).
   double cruise_integral = 0;
   // Steps taken since the start; simulation time t = step * h exactly.

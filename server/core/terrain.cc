@@ -56,7 +56,9 @@ void Terrain::AddMesh(TriangleMesh mesh) {
     const Eigen::Vector3d& c = mesh.vertices_W[tri[2]];
     const Eigen::Vector3d n = (b - a).cross(c - a);
     const double len = n.norm();
-    if (!a.allFinite() || !b.allFinite() || !c.allFinite() || !(len > 1e-12)) {
+    // Embree stores single precision: a vertex out of float range (or not finite) is unusable.
+    const auto usable = [](const Eigen::Vector3d& v) { return v.cwiseAbs().maxCoeff() < 1e9; };
+    if (!usable(a) || !usable(b) || !usable(c) || !(len > 1e-12)) {
       ++dropped_triangles_;
       continue;
     }
@@ -78,7 +80,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
     }
     for (std::size_t i = 0; i < nv; ++i) {
       const Eigen::Vector3d& v = mesh.vertices_W[i];
-      const bool ok = v.allFinite();
+      const bool ok = v.cwiseAbs().maxCoeff() < 1e9;  // false for NaN too
       vb[4 * i + 0] = ok ? static_cast<float>(v.x()) : 0.0f;
       vb[4 * i + 1] = ok ? static_cast<float>(v.y()) : 0.0f;
       vb[4 * i + 2] = ok ? static_cast<float>(v.z()) : 0.0f;

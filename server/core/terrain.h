@@ -32,7 +32,8 @@ class Terrain {
   Terrain(const Terrain&) = delete;
   Terrain& operator=(const Terrain&) = delete;
 
-  // Adds a mesh; triangles with a non-finite vertex or zero area are dropped and counted.
+  // Adds a mesh; triangles with a vertex that is not finite or beyond 1e9 m (Embree works in
+  // single precision), or with zero area, are dropped and counted.
   // Throws std::invalid_argument for an index out of range. Only before Commit().
   void AddMesh(TriangleMesh mesh);
   // Builds the acceleration structure. After this the terrain is immutable and traces may run

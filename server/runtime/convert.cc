@@ -65,13 +65,14 @@ State FromExactState(const pb::ExactState& m) {
 }
 
 void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
-                      std::int64_t step_ns, const StepRecord& r, const pb::DriverInput& input,
-                      bool watchdog_safe_state, double steering_torque, pb::VehicleState& out) {
+                      std::int64_t step_ns, std::int64_t sim_time_ns, const StepRecord& r,
+                      const pb::DriverInput& input, bool watchdog_safe_state,
+                      double steering_torque, pb::VehicleState& out) {
   const Eigen::Matrix3d R = Orientation(r.state.x).toRotationMatrix();
   out.set_vehicle_id(vehicle_id);
   out.set_server_id(server_id);
   out.set_step(static_cast<std::uint64_t>(r.step));
-  out.set_sim_time_ns(r.step * step_ns);
+  out.set_sim_time_ns(sim_time_ns);
   out.set_step_ns(step_ns);
   SetVec(out.mutable_p_wt_w(), Position(r.state.x));
   auto* q = out.mutable_q_wb();

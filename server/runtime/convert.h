@@ -22,9 +22,12 @@ State FromExactState(const pb::ExactState& m);
 
 // The state message of one step: the record of the step (state at its start, derived
 // quantities, controls), the input message that was latched for it and the hash after it.
+// `sim_time_ns` is the server's simulation time at the step's start (the same clock for every
+// vehicle); the record's step is the vehicle's own.
 void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
-                      std::int64_t step_ns, const StepRecord& r, const pb::DriverInput& input,
-                      bool watchdog_safe_state, double steering_torque, pb::VehicleState& out);
+                      std::int64_t step_ns, std::int64_t sim_time_ns, const StepRecord& r,
+                      const pb::DriverInput& input, bool watchdog_safe_state,
+                      double steering_torque, pb::VehicleState& out);
 
 // FNV-1a-64 over every mesh's vertices and indices (a re-simulation checks it).
 std::uint64_t TerrainHash(const Terrain& terrain);

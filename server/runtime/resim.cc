@@ -58,19 +58,26 @@ ResimResult Resimulate(std::shared_ptr<const World> world,
             }
             step_ns = e.spawned().step_ns();
             const Params p = ParamsFromProto(e.spawned().params());
+            const State st = FromExactState(e.spawned().state());
             if (!sim) {
               SimConfig c;
               c.step_ns = step_ns;
-              sim = std::make_unique<Simulator>(world, p, c);
+              sim = std::make_unique<Simulator>(world, p, c, st);
             }
             sim->SetParams(p);
-            sim->SetState(FromExactState(e.spawned().state()));
+            sim->SetState(st);
           } else if (e.has_checkpoint()) {
             if (!sim) {
+              if (e.checkpoint().terrain_hash() != terrain_hash) {
+                out.ok = false;
+                out.error = "vehicle " + std::to_string(vehicle) + " ran on another terrain";
+                return out;
+              }
+              step_ns = e.checkpoint().step_ns();
               SimConfig c;
-              c.step_ns = step_ns > 0 ? step_ns : 1'000'000;
-              sim = std::make_unique<Simulator>(world, ParamsFromProto(e.checkpoint().params()), c);
-              sim->SetState(FromExactState(e.checkpoint().state()));
+              c.step_ns = step_ns;
+              sim = std::make_unique<Simulator>(world, ParamsFromProto(e.checkpoint().params()), c,
+                                                FromExactState(e.checkpoint().state()));
               sim->SetInput(FromProto(e.checkpoint().input()));
             }
           } else if (e.has_input_changed() && sim) {
@@ -87,7 +94,13 @@ ResimResult Resimulate(std::shared_ptr<const World> world,
           return out;
         }
       }
-      if (!sim || static_cast<std::uint64_t>(sim->state().step) >= end) break;
+      if (!sim) {
+        // Removed (or not there yet): go on at its next life, if it has one.
+        while (next < mine.size() && !mine[next]->has_spawned()) ++next;
+        if (next == mine.size()) break;
+        continue;
+      }
+      if (static_cast<std::uint64_t>(sim->state().step) >= end) break;
       if (sim->Step() != StepStatus::kOk) {
         // The recorded session re-spawned the vehicle after this step (its next Spawned event).
         if (next < mine.size() && mine[next]->has_spawned()) {

@@ -24,7 +24,6 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
                     TopicId::kDiagnostics}) {
     writers_[t] = std::make_unique<transport::RawWriter>(participant_, t);
   }
-  publisher_ = std::thread([this] { PublisherLoop(); });
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](const pb::SessionEvent& e) { OnEvent(e); });
   // The world first (transient-local: viewers joining later get it), then the vehicles.
@@ -41,6 +40,8 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
         session_->simulator(options_.vehicle_ids[i]).params());
   }
   Enqueue(TopicId::kWorld, transport::ServerKey(options_.session.server_id), std::move(world_msg));
+  // Last: if anything above throws, no thread is left running.
+  publisher_ = std::thread([this] { PublisherLoop(); });
 }
 
 ServerNode::~ServerNode() {
@@ -56,11 +57,12 @@ void ServerNode::Enqueue(TopicId topic, std::uint32_t key,
                          std::unique_ptr<google::protobuf::Message> msg) {
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (queue_.size() >= kMaxQueue) {
+    auto& q = topic == TopicId::kEvents ? events_ : urgent_;
+    if (urgent_.size() + events_.size() >= kMaxQueue) {
       drops_.Count("publisher queue full, not sent", transport::Spec(topic).name);
       return;
     }
-    queue_.push_back({topic, key, std::move(msg)});
+    q.push_back({topic, key, std::move(msg)});
   }
   cv_.notify_one();
 }
@@ -70,13 +72,18 @@ void ServerNode::PublisherLoop() {
     Outgoing item;
     {
       std::unique_lock<std::mutex> lock(mu_);
-      cv_.wait(lock, [this] { return publisher_stop_ || !queue_.empty(); });
-      if (queue_.empty()) return;  // stopping, all sent
-      item = std::move(queue_.front());
-      queue_.pop_front();
+      cv_.wait(lock, [this] { return publisher_stop_ || !urgent_.empty() || !events_.empty(); });
+      if (urgent_.empty() && events_.empty()) return;  // stopping, all sent
+      auto& q = !urgent_.empty() ? urgent_ : events_;
+      item = std::move(q.front());
+      q.pop_front();
     }
     transport::RawWriter& w = *writers_.at(item.topic);
-    if (!w.Write(item.key, *item.msg)) {
+    // A reliable write times out (10 ms) only while a reader's history is full: try again for
+    // up to a second before giving the message up (a re-simulation needs every event).
+    bool sent = false;
+    for (int attempt = 0; attempt < 100 && !sent; ++attempt) sent = w.Write(item.key, *item.msg);
+    if (!sent) {
       drops_.Count(std::string("write failed on ") + transport::Spec(item.topic).name,
                    w.last_error());
     }
@@ -114,8 +121,14 @@ void ServerNode::HandleRequest(const pb::ControlRequest& r) {
     reply = session_->Apply(r);
   }
   if (r.has_step() && reply.accepted()) {
-    deferred_step_replies_.push_back(reply);  // answered when the steps are done
+    // Answered when its steps are done: the ones pending before it, then its own.
+    deferred_step_replies_.push_back(
+        {session_->steps() + static_cast<std::int64_t>(session_->pending_steps()), reply});
     return;
+  }
+  if ((r.has_pause() || r.has_resume()) && reply.accepted()) {
+    CancelStepReplies(std::string("cancelled by a ") + (r.has_pause() ? "pause" : "resume") +
+                      " request before its steps were done");
   }
   if (!reply.accepted()) {
     drops_.Count("rejected control request", reply.reason());
@@ -125,10 +138,14 @@ void ServerNode::HandleRequest(const pb::ControlRequest& r) {
 
 bool ServerNode::Boundary() {
   bool got_request = false;
-  control_reader_.Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
-    got_request = true;
-    HandleRequest(r);
-  });
+  // At most 16 requests per step boundary: a flood waits in the reader (keep-all) instead of
+  // stretching one step of the 1 kHz loop.
+  control_reader_.Take(
+      [&](const pb::ControlRequest& r, const transport::SampleInfo&) {
+        got_request = true;
+        HandleRequest(r);
+      },
+      16);
   input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
     if (info.key != in.vehicle_id()) {
       drops_.Count("key mismatch on vdyn/input", "envelope key " + std::to_string(info.key) +
@@ -151,18 +168,36 @@ void ServerNode::StepOnce() {
     }
   });
   if (session_->paused()) session_->ConsumePendingStep();
-  if (session_->pending_steps() == 0 && !deferred_step_replies_.empty()) {
-    for (pb::ControlReply& reply : deferred_step_replies_) {
-      if (session_->HasVehicle(reply.vehicle_id())) {
-        reply.set_applied_step(
-            static_cast<std::uint64_t>(session_->simulator(reply.vehicle_id()).state().step));
-      }
-      reply.set_sim_time_ns(session_->steps() * session_->step_ns());
-      Enqueue(TopicId::kControlReply, reply.vehicle_id(),
-              std::make_unique<pb::ControlReply>(reply));
+  SendDueStepReplies();
+}
+
+void ServerNode::SendDueStepReplies() {
+  std::vector<DeferredReply> waiting;
+  for (DeferredReply& d : deferred_step_replies_) {
+    if (d.target_steps > session_->steps()) {
+      waiting.push_back(std::move(d));
+      continue;
     }
-    deferred_step_replies_.clear();
+    pb::ControlReply& reply = d.reply;
+    if (session_->HasVehicle(reply.vehicle_id())) {
+      reply.set_applied_step(
+          static_cast<std::uint64_t>(session_->simulator(reply.vehicle_id()).state().step));
+    }
+    reply.set_sim_time_ns(session_->steps() * session_->step_ns());
+    Enqueue(TopicId::kControlReply, reply.vehicle_id(), std::make_unique<pb::ControlReply>(reply));
   }
+  deferred_step_replies_ = std::move(waiting);
+}
+
+void ServerNode::CancelStepReplies(const std::string& why) {
+  for (DeferredReply& d : deferred_step_replies_) {
+    d.reply.set_accepted(false);
+    d.reply.set_reason(why);
+    d.reply.set_sim_time_ns(session_->steps() * session_->step_ns());
+    Enqueue(TopicId::kControlReply, d.reply.vehicle_id(),
+            std::make_unique<pb::ControlReply>(d.reply));
+  }
+  deferred_step_replies_.clear();
 }
 
 void ServerNode::ReportWindow(std::int64_t now_ns) {
@@ -337,10 +372,12 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
   std::int64_t last_request = MonotonicNowNs();
   const auto timeout_ns = static_cast<std::int64_t>(options_.lockstep_timeout_s * 1e9);
   while (!stop.load(std::memory_order_relaxed)) {
+    // The client is silent only while no request comes and no steps it asked for are running.
     if (Boundary()) last_request = MonotonicNowNs();
     while (session_->pending_steps() > 0 && !stop.load(std::memory_order_relaxed)) {
       StepOnce();
       Boundary();
+      last_request = MonotonicNowNs();
     }
     const std::int64_t now = MonotonicNowNs();
     if (now - window_start_ns_ >= 1'000'000'000) ReportWindow(now);
@@ -361,7 +398,7 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
   for (int i = 0; i < 200; ++i) {
     {
       std::lock_guard<std::mutex> lock(mu_);
-      if (queue_.empty()) break;
+      if (urgent_.empty() && events_.empty()) break;
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }

@@ -82,13 +82,22 @@ class ServerNode {
   transport::Reader<pb::ControlRequest> control_reader_;
   std::unique_ptr<Session> session_;
 
-  // Step replies wait until their steps are done.
-  std::vector<pb::ControlReply> deferred_step_replies_;
+  // Step replies wait until their steps are done: each is due when the session's step count
+  // reaches its target.
+  struct DeferredReply {
+    std::int64_t target_steps;
+    pb::ControlReply reply;
+  };
+  std::vector<DeferredReply> deferred_step_replies_;
+  void SendDueStepReplies();
+  void CancelStepReplies(const std::string& why);
 
-  // Publisher thread.
+  // Publisher thread: replies, params, world and diagnostics go before events, so a slow
+  // recorder never delays an answer.
   std::mutex mu_;
   std::condition_variable cv_;
-  std::deque<Outgoing> queue_;
+  std::deque<Outgoing> urgent_;
+  std::deque<Outgoing> events_;
   bool publisher_stop_ = false;
   std::thread publisher_;
   static constexpr std::size_t kMaxQueue = 200'000;

@@ -38,7 +38,10 @@ std::string CheckInputRanges(const pb::DriverInput& in) {
 }
 
 Session::Session(std::shared_ptr<const World> world, SessionConfig config, EventSink on_event)
-    : world_(std::move(world)), config_(std::move(config)), on_event_(std::move(on_event)) {
+    : world_(std::move(world)),
+      config_(std::move(config)),
+      on_event_(std::move(on_event)),
+      terrain_hash_(TerrainHash(world_->terrain)) {
   const auto issues = ValidateVehicleParams(config_.default_params);
   if (!issues.empty()) {
     throw std::invalid_argument("default vehicle parameters: " + FormatIssues(issues));
@@ -59,7 +62,7 @@ void Session::EmitSpawned(Vehicle& v) {
   *s->mutable_state() = ToExactState(v.sim->state());
   *s->mutable_params() = v.params;
   s->set_world_name(world_->name);
-  s->set_terrain_hash(TerrainHash(world_->terrain));
+  s->set_terrain_hash(terrain_hash_);
   s->set_step_ns(config_.step_ns);
   Emit(v.id, v.sim->state().step, e);
   v.applied_valid = false;  // the next latched input is announced again
@@ -73,12 +76,23 @@ void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
   const pb::VehicleParams params = MergeVehicleParams(config_.default_params, params_update);
   const auto issues = ValidateVehicleParams(params);
   if (!issues.empty()) throw std::invalid_argument(FormatIssues(issues));
+  if (vehicles_.size() >= config_.max_vehicles) {
+    throw std::invalid_argument("this server runs its maximum of " +
+                                std::to_string(config_.max_vehicles) + " vehicles");
+  }
   SimConfig sc;
   sc.step_ns = config_.step_ns;
   Vehicle v;
   v.id = vehicle_id;
-  v.sim = std::make_unique<Simulator>(world_, ParamsFromProto(params), sc);
+  v.sim = std::make_unique<Simulator>(world_, ParamsFromProto(params), sc, State{});
   v.sim->Spawn(pose, speed);  // throws WorldError when no terrain is below
+  // A vehicle id used before in this session goes on counting where its last life ended, so
+  // (vehicle, step) names one moment of the session.
+  if (const auto r = retired_steps_.find(vehicle_id); r != retired_steps_.end()) {
+    State s = v.sim->state();
+    s.step = r->second;
+    v.sim->SetState(s);
+  }
   v.params = params;
   v.spawn_pose = pose;
   v.spawn_speed = speed;
@@ -160,6 +174,10 @@ pb::ControlReply Session::Apply(const pb::ControlRequest& r) {
       if (exists) {
         return Reply(r, false, "vehicle " + std::to_string(r.vehicle_id()) + " exists already");
       }
+      if (r.server_id().empty()) {
+        // Every server in the domain would take it and two vehicles would share one key.
+        return Reply(r, false, "spawn needs server_id: several servers may share the domain");
+      }
       const std::string bad = CheckPose(r.spawn().pose(), r.spawn().speed());
       if (!bad.empty()) return Reply(r, false, bad);
       try {
@@ -175,6 +193,7 @@ pb::ControlReply Session::Apply(const pb::ControlRequest& r) {
       pb::SessionEvent e;
       e.mutable_removed();
       Emit(r.vehicle_id(), it->second.sim->state().step, e);
+      retired_steps_[r.vehicle_id()] = it->second.sim->state().step;
       vehicles_.erase(it);
       return reply;
     }
@@ -282,8 +301,8 @@ void Session::Step(const std::function<void(std::uint32_t, const pb::VehicleStat
     }
     const StepRecord& r = v.sim->last_step();
     if (on_state) {
-      FillVehicleState(id, config_.server_id, config_.step_ns, r, v.applied_msg, v.safe_state,
-                       r.derived.steering_torque, v.state_msg);
+      FillVehicleState(id, config_.server_id, config_.step_ns, steps_ * config_.step_ns, r,
+                       v.applied_msg, v.safe_state, r.derived.steering_torque, v.state_msg);
       on_state(id, v.state_msg);
     }
     if (config_.checkpoint_every_steps > 0 &&
@@ -293,6 +312,8 @@ void Session::Step(const std::function<void(std::uint32_t, const pb::VehicleStat
       *c->mutable_state() = ToExactState(v.sim->state());
       *c->mutable_params() = v.params;
       *c->mutable_input() = v.applied_msg;
+      c->set_terrain_hash(terrain_hash_);
+      c->set_step_ns(config_.step_ns);
       Emit(id, v.sim->state().step, e);
     }
   }

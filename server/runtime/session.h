@@ -30,6 +30,7 @@ struct SessionConfig {
   double watchdog_s = 0.1;
   double safe_brake = 0.3;  // controlled braking in the safe state, [0, 1]
   std::int64_t checkpoint_every_steps = 1000;
+  std::size_t max_vehicles = 64;  // spawn requests beyond are refused
   pb::VehicleParams default_params;  // complete; spawn requests merge over it
 };
 
@@ -103,10 +104,12 @@ class Session {
   SessionConfig config_;
   EventSink on_event_;
   std::map<std::uint32_t, Vehicle> vehicles_;
+  std::map<std::uint32_t, std::int64_t> retired_steps_;  // removed ids: the step they ended at
   bool paused_ = false;
   std::uint32_t pending_steps_ = 0;
   std::int64_t steps_ = 0;
   std::uint64_t event_sequence_ = 0;
+  std::uint64_t terrain_hash_ = 0;
 };
 
 // Checks a driver input's ranges; empty when valid, else the reason.
