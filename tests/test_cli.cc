@@ -9,6 +9,7 @@
 
 #include "csv_output.h"
 #include "params_io.h"
+#include "process.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -23,10 +24,9 @@ struct Result {
   std::string output;  // stdout and stderr
 };
 
-Result RunServer(const std::string& args) {
-  // Bounded: a server that does not stop on its own is killed after 120 s.
-  const std::string cmd =
-      "timeout -s KILL 120 " + std::string(VDYN_SERVER_BINARY) + " " + args + " 2>&1";
+Result Run(const std::string& binary, const std::string& args) {
+  // Bounded: a process that does not stop on its own is killed after 120 s.
+  const std::string cmd = "timeout -s KILL 120 " + binary + " " + args + " 2>&1";
   Result r{-1, {}};
   FILE* pipe = popen(cmd.c_str(), "r");
   if (pipe == nullptr) return r;
@@ -36,6 +36,9 @@ Result RunServer(const std::string& args) {
   r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   return r;
 }
+
+Result RunServer(const std::string& args) { return Run(VDYN_SERVER_BINARY, args); }
+Result RunInput(const std::string& args) { return Run(VDYN_INPUT_BINARY, args); }
 
 TEST(Cli, DumpVehicleReadsBackThroughVehicle) {
   TempDir dir;
@@ -119,6 +122,25 @@ TEST(Cli, DemoRunsAndSaysWhereTheCsvIs) {
   EXPECT_THAT(r.output, HasSubstr("demo drive on facility"));
   EXPECT_THAT(r.output, HasSubstr("CSV: " + (dir / "demo.csv").string()));
   EXPECT_TRUE(std::filesystem::file_size(dir / "demo.csv") > 0);
+}
+
+}  // namespace
+}  // namespace vdyn
+
+namespace vdyn {
+namespace {
+
+TEST(CliInput, BadManeuverIsRefusedWithTheReason) {
+  const Result r = RunInput("--maneuver /nonexistent/m.csv");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("/nonexistent/m.csv: cannot open"));
+}
+
+TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
+  testing::UseLoopbackDds();
+  const Result r = RunInput("--maneuver demo --domain 230 --wait 1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.output, HasSubstr("no state of vehicle 1 on domain 230 within 1 s"));
 }
 
 }  // namespace
