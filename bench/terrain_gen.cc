@@ -66,15 +66,6 @@ TriangleMesh GenerateTerrainMesh(const TerrainSpec& spec) {
   return m;
 }
 
-std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn) {
-  auto world = std::make_shared<World>();
-  world->name = mesh.name;
-  world->terrain.AddMesh(std::move(mesh));
-  world->terrain.Commit();
-  world->spawn = spawn;
-  return world;
-}
-
 std::shared_ptr<const World> GeneratedTerrainWorld() {
   static const std::shared_ptr<const World> world =
       WorldFromMesh(GenerateTerrainMesh(), Pose2{0.0, 0.0, 0.0});

@@ -23,9 +23,6 @@ double TerrainHeight(double x, double y);
 
 TriangleMesh GenerateTerrainMesh(const TerrainSpec& spec = {});
 
-// A world holding one mesh (committed), spawning at `spawn`.
-std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn);
-
 // The 1M-triangle terrain as a world, built once per process (Embree's build takes seconds).
 std::shared_ptr<const World> GeneratedTerrainWorld();
 

@@ -51,15 +51,6 @@ std::shared_ptr<const World> SharedWorld(const std::string& name) {
   return w;
 }
 
-std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn) {
-  auto world = std::make_shared<World>();
-  world->name = mesh.name;
-  world->terrain.AddMesh(std::move(mesh));
-  world->terrain.Commit();
-  world->spawn = spawn;
-  return world;
-}
-
 TriangleMesh InclinedPlane(double slope, double half_size) {
   TriangleMesh m;
   m.name = "incline";

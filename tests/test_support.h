@@ -41,9 +41,6 @@ std::string ReadFile(const std::filesystem::path& path);
 // Built-in worlds are built once per test binary and shared (they are immutable after Commit).
 std::shared_ptr<const World> SharedWorld(const std::string& name);
 
-// A world made of one mesh (e.g. an inclined plane) for a test.
-std::shared_ptr<const World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn);
-
 // A plane z = slope * x over a large square, as one mesh.
 TriangleMesh InclinedPlane(double slope, double half_size);
 

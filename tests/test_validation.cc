@@ -311,7 +311,8 @@ TEST(Validation, BarrierStopsTheCarAtAnAngleAt50kmh) { DriveIntoBarrier(60.0); }
 // --- cruise control -----------------------------------------------------------------------------
 void ExpectCruiseHolds(double slope) {
   const Params p = testing::DefaultParams();
-  const auto world = testing::WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
+  const std::shared_ptr<const World> world =
+      WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
   Simulator sim(world, p);
   const double set = 72.0 / 3.6;
   DriverInput in;

@@ -50,6 +50,9 @@ struct WorldFileOptions {
   double heightmap_height = 10.0;  // height-map images: metres for full white
 };
 
+// A world of one mesh (named after it), committed, with the given spawn pose.
+std::unique_ptr<World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn);
+
 // Built-in worlds generated in code: "facility" (the paper's test facility) and "flat".
 std::unique_ptr<World> BuildBuiltinWorld(const std::string& name);
 std::vector<std::string> BuiltinWorldNames();

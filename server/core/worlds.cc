@@ -227,6 +227,15 @@ std::unique_ptr<World> BuildFlat() {
 
 }  // namespace
 
+std::unique_ptr<World> WorldFromMesh(TriangleMesh mesh, const Pose2& spawn) {
+  auto world = std::make_unique<World>();
+  world->name = mesh.name;
+  world->terrain.AddMesh(std::move(mesh));
+  world->terrain.Commit();
+  world->spawn = spawn;
+  return world;
+}
+
 std::vector<std::string> BuiltinWorldNames() { return {"facility", "flat"}; }
 
 std::unique_ptr<World> BuildBuiltinWorld(const std::string& name) {
