@@ -30,24 +30,23 @@ bool AllFinite(const gp::Message& msg, std::string* where) {
       if (where != nullptr) *where = FieldPath(f->name(), index, {});
       return false;
     };
+    // The first non-finite element of a double or float field (-2: none); -1 for a single value.
+    const auto first_bad = [&](auto get_one, auto get_repeated) {
+      if (!f->is_repeated()) return std::isfinite((r->*get_one)(msg, f)) ? -2 : -1;
+      for (int i = 0; i < r->FieldSize(msg, f); ++i) {
+        if (!std::isfinite((r->*get_repeated)(msg, f, i))) return i;
+      }
+      return -2;
+    };
+    int index = -2;
     switch (f->cpp_type()) {
       case gp::FieldDescriptor::CPPTYPE_DOUBLE:
-        if (f->is_repeated()) {
-          for (int i = 0; i < r->FieldSize(msg, f); ++i) {
-            if (!std::isfinite(r->GetRepeatedDouble(msg, f, i))) return bad(i);
-          }
-        } else if (!std::isfinite(r->GetDouble(msg, f))) {
-          return bad(-1);
-        }
+        index = first_bad(&gp::Reflection::GetDouble, &gp::Reflection::GetRepeatedDouble);
+        if (index != -2) return bad(index);
         break;
       case gp::FieldDescriptor::CPPTYPE_FLOAT:
-        if (f->is_repeated()) {
-          for (int i = 0; i < r->FieldSize(msg, f); ++i) {
-            if (!std::isfinite(r->GetRepeatedFloat(msg, f, i))) return bad(i);
-          }
-        } else if (!std::isfinite(r->GetFloat(msg, f))) {
-          return bad(-1);
-        }
+        index = first_bad(&gp::Reflection::GetFloat, &gp::Reflection::GetRepeatedFloat);
+        if (index != -2) return bad(index);
         break;
       case gp::FieldDescriptor::CPPTYPE_MESSAGE:
         if (f->is_repeated()) {
