@@ -82,6 +82,7 @@ std::string Process::Log() const {
 
 std::string ServerBinary() { return VDYN_SERVER_BINARY; }
 std::string InputBinary() { return VDYN_INPUT_BINARY; }
+std::string StateSubscriberBinary() { return VDYN_STATE_SUBSCRIBER_BINARY; }
 
 void UseLoopbackDds() {
   setenv("CYCLONEDDS_URI",

@@ -36,6 +36,7 @@ class Process {
 // Path of a built executable (set by CMake).
 std::string ServerBinary();
 std::string InputBinary();
+std::string StateSubscriberBinary();
 
 // Cyclone DDS restricted to loopback, with room for many processes per domain.
 void UseLoopbackDds();

@@ -7,8 +7,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "csv_output.h"
-#include "params_io.h"
+#include "vdyn/io/csv.h"
+#include "vdyn/bridge/params.h"
 #include "process.h"
 #include "test_support.h"
 
@@ -133,7 +133,7 @@ namespace {
 TEST(CliInput, BadManeuverIsRefusedWithTheReason) {
   const Result r = RunInput("--maneuver /nonexistent/m.csv");
   EXPECT_EQ(r.exit_code, 2);
-  EXPECT_THAT(r.output, HasSubstr("/nonexistent/m.csv: cannot open"));
+  EXPECT_THAT(r.output, HasSubstr("/nonexistent/m.csv: no such maneuver file"));
 }
 
 TEST(CliInput, NoServerEndsWithAMessageNotAHang) {

@@ -5,7 +5,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "maneuver.h"
+#include "vdyn/io/maneuver.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -23,11 +23,11 @@ TEST(Maneuver, InterpolatesLinearlyBetweenRows) {
       "m.csv");
   ASSERT_EQ(m.rows().size(), 3u);
   EXPECT_DOUBLE_EQ(m.end_time(), 4.0);
-  const DriverInput a = m.At(1.0);
+  const ManeuverInput a = m.At(1.0);
   EXPECT_NEAR(a.steer, 5.0 * kDeg, 1e-15);
   EXPECT_DOUBLE_EQ(a.throttle, 0.5);
   EXPECT_FALSE(a.cruise_on);  // the row before t has cruise off
-  const DriverInput b = m.At(3.0);
+  const ManeuverInput b = m.At(3.0);
   EXPECT_NEAR(b.steer, 0.0, 1e-15);
   EXPECT_DOUBLE_EQ(b.brake, 0.25);
   EXPECT_TRUE(b.cruise_on);
@@ -91,7 +91,7 @@ TEST(Maneuver, MissingFileIsAClearError) {
     Maneuver::Load("/nonexistent/m.csv");
     FAIL() << "expected ManeuverError";
   } catch (const ManeuverError& e) {
-    EXPECT_THAT(e.what(), HasSubstr("/nonexistent/m.csv: cannot open"));
+    EXPECT_THAT(e.what(), HasSubstr("/nonexistent/m.csv: no such maneuver file"));
   }
 }
 

@@ -6,7 +6,7 @@
 #include <google/protobuf/util/message_differencer.h>
 #include <gtest/gtest.h>
 
-#include "params_io.h"
+#include "vdyn/bridge/params.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -115,7 +115,7 @@ TEST(Params, MissingFileIsAClearError) {
     LoadVehicleParamsFile("/nonexistent/car.txt");
     FAIL() << "expected ParamsError";
   } catch (const ParamsError& e) {
-    EXPECT_THAT(e.what(), HasSubstr("/nonexistent/car.txt: cannot open"));
+    EXPECT_THAT(e.what(), HasSubstr("/nonexistent/car.txt: no such vehicle parameter file"));
   }
 }
 

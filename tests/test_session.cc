@@ -6,9 +6,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "convert.h"
-#include "resim.h"
-#include "session.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/replay/resim.h"
+#include "vdyn/runtime/session.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -20,6 +20,15 @@ struct Recorder {
   std::vector<pb::SessionEvent> events;
   std::map<std::uint32_t, std::map<std::uint64_t, std::uint64_t>> hashes;  // vehicle -> step -> hash
 };
+
+// The session's event records as the server publishes them (messages).
+Session::EventSink Into(Recorder& rec, const std::shared_ptr<const World>& world,
+                        std::int64_t step_ns = 1'000'000) {
+  const std::uint64_t terrain = TerrainHash(world->terrain);
+  return [&rec, terrain, step_ns](SessionEventRecord&& r) {
+    rec.events.push_back(ToMessage(r, "test", terrain, step_ns));
+  };
+}
 
 SessionConfig Config() {
   SessionConfig c;
@@ -56,8 +65,7 @@ void StepAndRecord(Session& s, Recorder& rec, int n) {
 
 TEST(Session, SpawnEmitsTheExactStateAndCompleteParams) {
   Recorder rec;
-  Session s(testing::SharedWorld("flat"), Config(),
-            [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(testing::SharedWorld("flat"), Config(), Into(rec, testing::SharedWorld("flat")));
   s.Spawn(7, {1.0, 2.0, 0.5}, 3.0, pb::VehicleParams());
   ASSERT_EQ(rec.events.size(), 1u);
   const pb::SessionEvent& e = rec.events[0];
@@ -107,8 +115,7 @@ TEST(Session, InputsOutOfRangeOrForUnknownVehiclesAreRefused) {
 
 TEST(Session, RequestsAreValidatedAndAnswered) {
   Recorder rec;
-  Session s(testing::SharedWorld("flat"), Config(),
-            [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(testing::SharedWorld("flat"), Config(), Into(rec, testing::SharedWorld("flat")));
   s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
 
   pb::ControlRequest bad_params = Request(1);
@@ -170,7 +177,7 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
 TEST(Session, ResimulationFromEventsReproducesEveryHash) {
   Recorder rec;
   const auto world = testing::SharedWorld("facility");
-  Session s(world, Config(), [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(world, Config(), Into(rec, world));
   s.Spawn(1, world->spawn, 0.0, pb::VehicleParams());
   std::string why;
   for (int k = 0; k < 30; ++k) {
@@ -223,7 +230,7 @@ TEST(Session, ResimulationFromEventsReproducesEveryHash) {
 TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
   Recorder rec;
   const auto world = testing::SharedWorld("flat");
-  Session s(world, Config(), [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(world, Config(), Into(rec, world));
   pb::VehicleParams stiff;
   stiff.set_mass(1.0);
   stiff.set_ixx(0.1);
@@ -257,7 +264,7 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
   SessionConfig cfg = Config();
   cfg.step_ns = 2'000'000;
   cfg.checkpoint_every_steps = 100;
-  Session s(world, cfg, [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(world, cfg, Into(rec, world, cfg.step_ns));
   s.Spawn(1, {0, 0, 0}, 8.0, pb::VehicleParams());
   std::string why;
   for (int k = 0; k < 6; ++k) {
@@ -299,8 +306,7 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
 
 TEST(Session, ResimulationRefusesAnotherTerrainAndGaps) {
   Recorder rec;
-  Session s(testing::SharedWorld("flat"), Config(),
-            [&rec](const pb::SessionEvent& e) { rec.events.push_back(e); });
+  Session s(testing::SharedWorld("flat"), Config(), Into(rec, testing::SharedWorld("flat")));
   s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
   StepAndRecord(s, rec, 10);
   const ResimResult wrong = Resimulate(testing::SharedWorld("facility"), rec.events, {{1, 10}});

@@ -60,9 +60,9 @@ TriangleMesh InclinedPlane(double slope, double half_size) {
   return m;
 }
 
-Params DefaultParams() { return ParamsFromProto(DefaultVehicleParams()); }
+ValidParams DefaultParams() { return ParamsFromProto(DefaultVehicleParams()); }
 
-Params ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
+ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
   pb::VehicleParams msg = DefaultVehicleParams();
   edit(msg);
   return ParamsFromProto(msg);

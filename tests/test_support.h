@@ -6,9 +6,9 @@
 #include <memory>
 #include <string>
 
-#include "params_io.h"
-#include "simulator.h"
-#include "world.h"
+#include "vdyn/bridge/params.h"
+#include "vdyn/physics/simulator.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn::testing {
 
@@ -44,9 +44,9 @@ std::shared_ptr<const World> SharedWorld(const std::string& name);
 // A plane z = slope * x over a large square, as one mesh.
 TriangleMesh InclinedPlane(double slope, double half_size);
 
-Params DefaultParams();
+ValidParams DefaultParams();
 // The defaults with `edit` applied to the message first.
-Params ParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
+ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
 
 // Steps until `stop` returns true or `max_steps` is reached; returns the steps taken. Fails the
 // test if a step is non-finite.

@@ -6,7 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "test_support.h"
-#include "world.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn {
 namespace {

@@ -8,9 +8,10 @@
 
 #include <gtest/gtest.h>
 
-#include "batch.h"
-#include "drivers.h"
-#include "maneuver.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/runtime/batch.h"
+#include "vdyn/physics/drivers.h"
+#include "vdyn/io/maneuver.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -34,7 +35,7 @@ Vector3d BodyVelocity(const State& s) {
 //   zeta = 4c / (2 sqrt(4k m)),  wd = wn sqrt(1 - zeta^2).
 TEST(Validation, HeaveFollowsTheDampedOscillator) {
   const double k = 30000.0, c = 1500.0, z0 = 0.03;
-  const Params p = ParamsWith([&](pb::VehicleParams& m) {
+  const ValidParams p = ParamsWith([&](pb::VehicleParams& m) {
     m.set_b(1.35);
     m.set_c(1.35);
     for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()}) {
@@ -45,14 +46,14 @@ TEST(Validation, HeaveFollowsTheDampedOscillator) {
   Simulator sim(SharedWorld("flat"), p);
   State s = sim.state();
   // Equilibrium height from the parameters: each spring carries m g / 4.
-  const WheelParams& w = p.wheel[kLF];
-  const double z_eq = w.radius + (w.free_length - p.mass * p.gravity / (4.0 * k)) + w.z_offset;
+  const WheelParams& w = p->wheel[kLF];
+  const double z_eq = w.radius + (w.free_length - p->mass * p->gravity / (4.0 * k)) + w.z_offset;
   ASSERT_NEAR(Position(s.x).z(), z_eq, 1e-12);
   s.x[sx::kP + 2] = z_eq + z0;
   sim.SetState(s);
 
-  const double wn = std::sqrt(4.0 * k / p.mass);
-  const double zeta = 4.0 * c / (2.0 * std::sqrt(4.0 * k * p.mass));
+  const double wn = std::sqrt(4.0 * k / p->mass);
+  const double zeta = 4.0 * c / (2.0 * std::sqrt(4.0 * k * p->mass));
   const double wd = wn * std::sqrt(1.0 - zeta * zeta);
   double max_err = 0.0, min_z = 1e9;
   Drive(sim, 4000, {}, [&](const StepRecord& r) {
@@ -77,16 +78,16 @@ TEST(Validation, HeaveFollowsTheDampedOscillator) {
 // --- coasting with drag only -------------------------------------------------------------------
 // m v' = -(1/2 rho cx Sx) v^2  =>  v(t) = v0 / (1 + (1/2 rho cx Sx) v0 t / m).
 TEST(Validation, CoastingWithDragMatchesClosedForm) {
-  const Params p = ParamsWith([](pb::VehicleParams& m) { m.set_rolling_resistance(0.0); });
+  const ValidParams p = ParamsWith([](pb::VehicleParams& m) { m.set_rolling_resistance(0.0); });
   Simulator sim(SharedWorld("flat"), p);
   const double v0 = 30.0;
   sim.Spawn({0.0, 0.0, 0.3}, v0);
-  const double kd = 0.5 * p.rho * p.cx * p.sx;
+  const double kd = 0.5 * p->rho * p->cx * p->sx;
   double max_rel = 0.0;
   Drive(sim, 30000, {}, [&](const StepRecord& r) {
     const double t = r.t + sim.h();
     const double v = Velocity(sim.state().x).norm();
-    const double expect = v0 / (1.0 + kd * v0 * t / p.mass);
+    const double expect = v0 / (1.0 + kd * v0 * t / p->mass);
     max_rel = std::max(max_rel, std::abs(v - expect) / expect);
     return false;
   });
@@ -98,7 +99,7 @@ TEST(Validation, CoastingWithDragMatchesClosedForm) {
 
 // --- RK4's observed order -----------------------------------------------------------------------
 // Halving h must divide the global error by 2^4; the observed order log2(e(h)/e(h/2)) is 4 +- 0.2.
-StateVector RunWithStep(std::int64_t step_ns, double t_end, const Params& p, const State& start,
+StateVector RunWithStep(std::int64_t step_ns, double t_end, const ValidParams& p, const State& start,
                         const DriverInput& input) {
   SimConfig cfg;
   cfg.step_ns = step_ns;
@@ -110,7 +111,7 @@ StateVector RunWithStep(std::int64_t step_ns, double t_end, const Params& p, con
   return sim.state().x;
 }
 
-void ExpectFourthOrder(const Params& p, const State& start, const DriverInput& input,
+void ExpectFourthOrder(const ValidParams& p, const State& start, const DriverInput& input,
                        double t_end) {
   const StateVector ref = RunWithStep(250'000, t_end, p, start, input);  // h = 0.25 ms
   double err[3];
@@ -128,7 +129,7 @@ void ExpectFourthOrder(const Params& p, const State& start, const DriverInput& i
 }
 
 TEST(Validation, Rk4ObservedOrderIsFourInHeave) {
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(SharedWorld("flat"), p);
   State s = sim.state();
   s.x[sx::kP + 2] += 0.04;                  // heave, with pitch coupling (b != c)
@@ -139,7 +140,7 @@ TEST(Validation, Rk4ObservedOrderIsFourWhileCornering) {
   // Full 3-D motion with tire forces: 20 m/s, a 2 degree steer held. Start from the turn already
   // established, so no slip angle crosses zero (the Fiala law's |z| z is only C1 there, which
   // would show up as a local O(h^3) error at the crossing).
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(SharedWorld("flat"), p);
   sim.Spawn({0, 0, 0}, 20.0);
   DriverInput in;
@@ -153,7 +154,7 @@ TEST(Validation, Rk4ObservedOrderIsFourWhileCornering) {
 // --- steady-state cornering vs the linear bicycle model ----------------------------------------
 // r / delta = V / (L + K V^2),  K = (m / L) (lr / Cf - lf / Cr),  Cf, Cr per axle (2 C_alpha).
 void ExpectBicycleGain(double c_front, double c_rear, TireLaw law, double speed) {
-  const Params p = ParamsWith([&](pb::VehicleParams& m) {
+  const ValidParams p = ParamsWith([&](pb::VehicleParams& m) {
     m.mutable_lf()->set_cornering_stiffness(c_front);
     m.mutable_rf()->set_cornering_stiffness(c_front);
     m.mutable_lr()->set_cornering_stiffness(c_rear);
@@ -162,10 +163,10 @@ void ExpectBicycleGain(double c_front, double c_rear, TireLaw law, double speed)
     m.set_drive_front_fraction(0.0);  // rear drive: no drive force on the steered wheels
     m.set_rolling_resistance(0.0);
   });
-  const double L = p.wheelbase, Cf = 2.0 * c_front, Cr = 2.0 * c_rear;
-  const double K = (p.mass / L) * (p.c / Cf - p.b / Cr);
+  const double L = p->wheelbase, Cf = 2.0 * c_front, Cr = 2.0 * c_rear;
+  const double K = (p->mass / L) * (p->c / Cf - p->b / Cr);
   // Steer for a lateral acceleration of 0.08 g from the model itself.
-  const double ay_target = 0.08 * p.gravity;
+  const double ay_target = 0.08 * p->gravity;
   const double delta = ay_target / speed * (L + K * speed * speed) / speed;
   Simulator sim(SharedWorld("flat"), p);
   sim.Spawn({0, 0, 0}, speed);
@@ -188,9 +189,9 @@ void ExpectBicycleGain(double c_front, double c_rear, TireLaw law, double speed)
   });
   const double r = r_sum / n, V = v_sum / n;
   const double expect = V / (L + K * V * V);
-  EXPECT_LE(ay_max, 0.1 * p.gravity);
+  EXPECT_LE(ay_max, 0.1 * p->gravity);
   std::printf("bicycle: K %.3g rad/(m/s^2), V %.3f m/s, ay_max %.3f g, r/delta %.5f vs %.5f (%+.3f %%)\n",
-              K, V, ay_max / p.gravity, r / delta, expect, 100.0 * ((r / delta) / expect - 1.0));
+              K, V, ay_max / p->gravity, r / delta, expect, 100.0 * ((r / delta) / expect - 1.0));
   EXPECT_NEAR((r / delta) / expect, 1.0, 0.02)
       << "K = " << K << ", V = " << V << ", r/delta = " << r / delta << " vs " << expect;
 }
@@ -208,17 +209,17 @@ TEST(Validation, BicycleModelGainOversteer) {
 
 // --- static equilibrium -------------------------------------------------------------------------
 TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(SharedWorld("flat"), p);
   Drive(sim, 5000, {});
   Derived d;
   sim.Forward(d);
   const double front = d.wheel[kLF].Fp + d.wheel[kRF].Fp;
   const double rear = d.wheel[kLR].Fp + d.wheel[kRR].Fp;
-  const double W = p.mass * p.gravity;
+  const double W = p->mass * p->gravity;
   EXPECT_NEAR((front + rear) / W, 1.0, 1e-6);
-  EXPECT_NEAR(front / W, p.c / p.wheelbase, 2e-3);  // moments about T: Fp_f b = Fp_r c
-  EXPECT_NEAR(rear / W, p.b / p.wheelbase, 2e-3);
+  EXPECT_NEAR(front / W, p->c / p->wheelbase, 2e-3);  // moments about T: Fp_f b = Fp_r c
+  EXPECT_NEAR(rear / W, p->b / p->wheelbase, 2e-3);
   EXPECT_NEAR(d.wheel[kLF].Fp, d.wheel[kRF].Fp, 1e-6 * W);  // bL = bP
   EXPECT_LT(Velocity(sim.state().x).norm(), 1e-5);
 }
@@ -226,7 +227,7 @@ TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
 // --- jump ---------------------------------------------------------------------------------------
 TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
   const auto world = SharedWorld("facility");
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(world, p);
   const Vector3d ramp = world->LandmarkAt("jump_ramp_a");
   sim.Spawn({ramp.x() - 60.0, ramp.y(), 0.0}, 50.0 / 3.6);
@@ -252,9 +253,9 @@ TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
     if (all_air) {
       ++airborne_steps;
       // Ballistic: gravity plus the drag along X_B only.
-      const Vector3d drag_W = -r.derived.Da / p.mass *
+      const Vector3d drag_W = -r.derived.Da / p->mass *
                               Orientation(r.state.x).toRotationMatrix().col(0);
-      EXPECT_NEAR((r.derived.a_WT_W - drag_W).z(), -p.gravity, 1e-9);
+      EXPECT_NEAR((r.derived.a_WT_W - drag_W).z(), -p->gravity, 1e-9);
       EXPECT_NEAR((r.derived.a_WT_W - drag_W).head<2>().norm(), 0.0, 1e-9);
     }
     return false;
@@ -274,7 +275,7 @@ TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
 // --- glass barrier ------------------------------------------------------------------------------
 void DriveIntoBarrier(double heading_deg) {
   const auto world = SharedWorld("facility");
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(world, p);
   const Vector3d inner = world->LandmarkAt("barrier_inner_max");  // north wall at y = inner.y()
   const double yaw = heading_deg * kDeg;
@@ -289,7 +290,7 @@ void DriveIntoBarrier(double heading_deg) {
     const Eigen::Matrix3d R = Orientation(r.state.x).toRotationMatrix();
     for (int k = 0; k < Params::kNumProbes; ++k) {
       const Vector3d corner =
-          Position(r.state.x) + R * (p.p_TO_B + p.probe_length[k] * p.probe_dir_B[k]);
+          Position(r.state.x) + R * (p->p_TO_B + p->probe_length[k] * p->probe_dir_B[k]);
       max_y = std::max(max_y, corner.y());
     }
     max_pen = std::max(max_pen, r.derived.wall_penetration_max);
@@ -310,7 +311,7 @@ TEST(Validation, BarrierStopsTheCarAtAnAngleAt50kmh) { DriveIntoBarrier(60.0); }
 
 // --- cruise control -----------------------------------------------------------------------------
 void ExpectCruiseHolds(double slope) {
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   const std::shared_ptr<const World> world =
       WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
   Simulator sim(world, p);
@@ -397,7 +398,7 @@ TEST(Validation, DemoDriveStableAtTheDocumentedLargestStep) {
     cfg.step_ns = step_ns;
     Simulator sim(SharedWorld("facility"), testing::DefaultParams(), cfg);
     Drive(sim, std::llround(m.end_time() / sim.h()),
-          [&m](Simulator& s) { s.SetInput(m.At(s.time())); },
+          [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
           [&](const StepRecord& r) {
             for (const WheelOutputs& w : r.derived.wheel) *max_Fp = std::max(*max_Fp, w.Fp);
             *max_rate = std::max(*max_rate, r.derived.w_eff_B.norm());
@@ -441,16 +442,16 @@ TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
 // --- friction circle, paper yaw mode, containment -----------------------------------------------
 TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
   const auto world = SharedWorld("facility");
-  const Params p = testing::DefaultParams();
+  const ValidParams p = testing::DefaultParams();
   Simulator sim(world, p);
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   int checked = 0;
   Drive(sim, static_cast<std::int64_t>(m.end_time() / sim.h()),
-        [&m](Simulator& s) { s.SetInput(m.At(s.time())); },
+        [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
         [&](const StepRecord& r) {
           for (const WheelOutputs& w : r.derived.wheel) {
             const Vector3d tangential = w.F_W - w.F_W.dot(w.n_W) * w.n_W;
-            EXPECT_LE(tangential.norm(), p.mu * w.Fp * (1.0 + 1e-12) + 1e-9);
+            EXPECT_LE(tangential.norm(), p->mu * w.Fp * (1.0 + 1e-12) + 1e-9);
             EXPECT_NEAR(w.F_W.dot(w.n_W), w.Fp, 1e-9 * (1.0 + w.Fp));  // Fp is the normal force
             ++checked;
           }
@@ -460,7 +461,7 @@ TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
 }
 
 TEST(Properties, PaperYawModeFollowsEquation6AsAYawRate) {
-  const Params p = ParamsWith([](pb::VehicleParams& m) { m.set_yaw_mode(pb::YAW_MODE_PAPER); });
+  const ValidParams p = ParamsWith([](pb::VehicleParams& m) { m.set_yaw_mode(pb::YAW_MODE_PAPER); });
   Simulator sim(SharedWorld("flat"), p);
   sim.Spawn({0, 0, 0}, 10.0);
   DriverInput in;
@@ -470,12 +471,12 @@ TEST(Properties, PaperYawModeFollowsEquation6AsAYawRate) {
   sim.SetInput(in);
   Drive(sim, 3000, {}, [&](const StepRecord& r) {
     const double vx = BodyVelocity(r.state).x();
-    EXPECT_NEAR(r.derived.w_eff_B.z(), vx * std::sin(in.steer) / p.wheelbase, 1e-12);
+    EXPECT_NEAR(r.derived.w_eff_B.z(), vx * std::sin(in.steer) / p->wheelbase, 1e-12);
     return false;
   });
   // Closed form at constant speed: the heading turns at v sin(gamma) / L, so after 3 s
   // psi = 10 m/s * sin(2 deg) * 3 s / 2.7 m = 0.3877 rad (the speed control holds 10 m/s).
-  const double expect = 10.0 * std::sin(in.steer) * 3.0 / p.wheelbase;
+  const double expect = 10.0 * std::sin(in.steer) * 3.0 / p->wheelbase;
   EXPECT_NEAR(RollPitchYaw(Orientation(sim.state().x)).z(), expect, 0.005 * expect);
 }
 
@@ -506,14 +507,14 @@ TEST(Properties, ParametersChangeBetweenSteps) {
   Simulator sim(SharedWorld("flat"), testing::DefaultParams());
   Drive(sim, 1000, {});
   // A heavier car sinks: the new static deflection follows k and the new weight.
-  const Params heavy = ParamsWith([](pb::VehicleParams& m) { m.set_mass(2000.0); });
+  const ValidParams heavy = ParamsWith([](pb::VehicleParams& m) { m.set_mass(2000.0); });
   sim.SetParams(heavy);
   Drive(sim, 8000, {});
   Derived d;
   sim.Forward(d);
   double sum = 0.0;
   for (const auto& w : d.wheel) sum += w.Fp;
-  EXPECT_NEAR(sum, heavy.mass * heavy.gravity, 1e-3 * heavy.mass * heavy.gravity);
+  EXPECT_NEAR(sum, heavy->mass * heavy->gravity, 1e-3 * heavy->mass * heavy->gravity);
 }
 
 }  // namespace

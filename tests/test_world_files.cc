@@ -8,7 +8,8 @@
 #include <gtest/gtest.h>
 
 #include "test_support.h"
-#include "world.h"
+#include "vdyn/bridge/world_files.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn {
 namespace {

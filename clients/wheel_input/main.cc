@@ -14,10 +14,11 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include "convert.h"
-#include "dds.h"
-#include "maneuver.h"
-#include "pacing.h"
+#include "vdyn/base/time.h"
+#include "vdyn/cli/options.h"
+#include "vdyn/client/driver_input.h"
+#include "vdyn/client/loop.h"
+#include "vdyn/io/maneuver.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/state.pb.h"
 
@@ -39,7 +40,8 @@ int main(int argc, char** argv) {
   double wait_s = 10.0;
   bool loop = false;
   app.add_option("--maneuver", maneuver_name, "Maneuver CSV to play, or 'demo'")->required();
-  app.add_option("--domain", domain, "DDS domain id")->check(CLI::Range(0, 232))
+  app.add_option("--domain", domain, "DDS domain id")
+      ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
       ->capture_default_str();
   app.add_option("--vehicle-id", vehicle_id, "Vehicle to drive")->capture_default_str();
   app.add_option("--source-id", source_id, "This source's name (shown in the state)")
@@ -48,27 +50,25 @@ int main(int argc, char** argv) {
                  "Ownership strength: the strongest live source drives (primary rig > backup)")
       ->capture_default_str();
   app.add_option("--rate-hz", rate_hz, "Input messages per second")
-      ->check(CLI::Range(20.0, 2000.0))
+      ->check(vdyn::cli::InRange(vdyn::limits::kRateHz))
       ->capture_default_str();
   app.add_option("--clock", clock,
                  "Maneuver time: 'server' (the vehicle's simulation time) or 'wall'")
       ->check(CLI::IsMember({"server", "wall"}))
       ->capture_default_str();
   app.add_option("--wait", wait_s, "Seconds to wait for the server's first state (clock=server)")
+      ->check(vdyn::cli::InRange(vdyn::limits::kWaitS))
       ->capture_default_str();
   app.add_flag("--loop", loop, "Start the maneuver again at its end");
-  CLI11_PARSE(app, argc, argv);
+  if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
 
   try {
-    const vdyn::Maneuver maneuver =
-        maneuver_name == "demo" ? vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo")
-                                : vdyn::Maneuver::Load(maneuver_name);
+    const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(maneuver_name);
     std::signal(SIGINT, OnSignal);
     std::signal(SIGTERM, OnSignal);
     vdyn::transport::DropCounters drops;
     vdyn::transport::Participant participant(domain);
-    vdyn::transport::Writer<vdyn::pb::DriverInput> writer(
-        participant, vdyn::transport::TopicId::kInput, strength);
+    vdyn::client::InputPublisher writer(participant, vehicle_id, source_id, strength);
     vdyn::transport::Reader<vdyn::pb::VehicleState> states(
         participant, vdyn::transport::TopicId::kState, &drops);
 
@@ -94,32 +94,26 @@ int main(int argc, char** argv) {
     spdlog::info("vdyn-input: playing '{}' ({:.1f} s) for vehicle {} as '{}' (strength {})",
                  maneuver_name, maneuver.end_time(), vehicle_id, source_id, strength);
 
-    const std::int64_t period = static_cast<std::int64_t>(1e9 / rate_hz);
-    const std::int64_t wall_start = vdyn::MonotonicNowNs();
+    const vdyn::base::MonoTime wall_start = vdyn::base::MonotonicNow();
     const std::int64_t sim_start = sim_ns;
-    std::int64_t next = wall_start;
+    vdyn::client::FixedRateLoop loop_clock(
+        vdyn::base::Nanos{static_cast<std::int64_t>(1e9 / rate_hz)}, wall_start);
     vdyn::pb::DriverInput msg;
-    msg.set_vehicle_id(vehicle_id);
-    msg.set_source_id(source_id);
-    std::uint64_t sequence = 0;
     while (!g_stop) {
-      vdyn::SleepUntilNs(next);
-      next += period;
+      const auto tick = loop_clock.Wait();
       double t = 0.0;
       if (clock == "server") {
         poll_states();
         t = static_cast<double>(sim_ns - sim_start) * 1e-9;
       } else {
-        t = static_cast<double>(vdyn::MonotonicNowNs() - wall_start) * 1e-9;
+        t = (tick.now - wall_start).seconds();
       }
       if (t > maneuver.end_time()) {
         if (!loop) break;
         t = std::fmod(t, maneuver.end_time());
       }
-      vdyn::ToProto(maneuver.At(t), msg);
-      msg.set_sequence(sequence++);
-      msg.set_stamp_ns(vdyn::MonotonicNowNs());
-      if (!writer.Write(vehicle_id, msg)) {
+      vdyn::client::FillFromManeuver(maneuver.At(t), msg);
+      if (!writer.Publish(msg)) {
         std::cerr << "vdyn-input: " << writer.last_error() << "\n";
         return 1;
       }

@@ -18,15 +18,15 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
-#include "batch.h"
-#include "maneuver.h"
-#include "params_io.h"
+#include "vdyn/cli/options.h"
+
 #include "progress.h"
-#include "simulator.h"
-#include "world.h"
-#if VDYN_WITH_DDS
-#include "server_node.h"
-#endif
+#include "vdyn/bridge/convert.h"
+#include "vdyn/bridge/params.h"
+#include "vdyn/bridge/world_files.h"
+#include "vdyn/io/maneuver.h"
+#include "vdyn/runtime/batch.h"
+#include "vdyn/runtime/server_node.h"
 
 namespace {
 
@@ -81,7 +81,6 @@ std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
 }
 
 int RunNetworked(const Options& o) {
-#if VDYN_WITH_DDS
   vdyn::ServerOptions so;
   so.mode = o.lockstep ? vdyn::ServerOptions::Mode::kLockstep
                        : vdyn::ServerOptions::Mode::kRealtime;
@@ -100,18 +99,11 @@ int RunNetworked(const Options& o) {
   std::signal(SIGTERM, OnSignal);
   vdyn::ServerNode node(LoadWorldFrom(o), so);
   return node.Run(g_stop);
-#else
-  (void)o;
-  std::cerr << "vdyn-server: built without DDS (VDYN_WITH_DDS=OFF): only --batch and --demo\n";
-  return 2;
-#endif
 }
 
 int RunBatchMode(const Options& o) {
-  const vdyn::Params params = vdyn::ParamsFromProto(LoadParams(o));
-  const vdyn::Maneuver maneuver = o.maneuver == "demo"
-                                      ? vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo")
-                                      : vdyn::Maneuver::Load(o.maneuver);
+  const vdyn::ValidParams params = vdyn::ParamsFromProto(LoadParams(o));
+  const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(o.maneuver);
   std::shared_ptr<const vdyn::World> world = LoadWorldFrom(o);
   vdyn::SimConfig config;
   config.step_ns = std::llround(o.step_ms * 1e6);
@@ -170,39 +162,43 @@ int main(int argc, char** argv) {
                                      "height-map image)")
       ->capture_default_str();
   app.add_option("--world-scale", o.world_file.scale, "Terrain file units to metres")
+      ->check(vdyn::cli::InRange(vdyn::limits::kWorldScale))
       ->capture_default_str();
   app.add_option("--world-up", o.world_up, "Up axis of a terrain mesh file: y or z")
       ->check(CLI::IsMember({"y", "z"}))
       ->capture_default_str();
   app.add_option("--heightmap-cell", o.world_file.heightmap_cell, "Height map: metres per pixel")
+      ->check(vdyn::cli::InRange(vdyn::limits::kHeightmapCell))
       ->capture_default_str();
   app.add_option("--heightmap-height", o.world_file.heightmap_height,
                  "Height map: metres for full white")
+      ->check(vdyn::cli::InRange(vdyn::limits::kHeightmapHeight))
       ->capture_default_str();
   app.add_option("--vehicle", o.vehicle,
                  "Vehicle parameter file (protobuf text, or JSON if *.json); lists only changes");
   app.add_option("--maneuver", o.maneuver,
                  "Maneuver CSV (t_s,steer_deg,throttle,brake,cruise_kmh) or 'demo'");
   app.add_option("--duration", o.duration, "Simulated seconds (default: the maneuver's last row)")
-      ->check(CLI::PositiveNumber);
+      ->check(vdyn::cli::InRange(vdyn::limits::kDurationS));
   app.add_option("--csv", o.csv, "Write every computed quantity to this CSV file");
   app.add_option("--csv-every", o.csv_every, "Write every Nth step to the CSV")
-      ->check(CLI::Range(1, 1000000))
+      ->check(vdyn::cli::WholeInRange({1, 1e6, false, false, "--csv-every"}))
       ->capture_default_str();
   app.add_option("--step-ms", o.step_ms, "Integration step h in milliseconds")
-      ->check(CLI::Range(0.01, 100.0))
+      ->check(vdyn::cli::InRange(vdyn::limits::kStepMs))
       ->capture_default_str();
   app.add_option("--spawn", o.spawn, "Start pose x_m,y_m,yaw_deg (default: the world's spawn)")
       ->expected(3)
       ->delimiter(',');
   app.add_option("--speed-kmh", o.speed_kmh, "Initial speed along the heading, km/h")
-      ->check(CLI::Range(0.0, 400.0))
+      ->check(vdyn::cli::InRange(vdyn::limits::kSpeedKmh))
       ->capture_default_str();
   app.add_flag("--quiet", o.quiet, "Print no summary");
   (void)batch;
   app.add_flag("--lockstep", o.lockstep,
                "Networked, advancing only when a client asks for steps (ControlRequest.step)");
-  app.add_option("--domain", o.domain, "DDS domain id")->check(CLI::Range(0, 232))
+  app.add_option("--domain", o.domain, "DDS domain id")
+      ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
       ->capture_default_str();
   app.add_option("--server-id", o.server_id, "This server's id (several may share a domain)")
       ->capture_default_str();
@@ -211,25 +207,22 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--watchdog-ms", o.watchdog_ms,
                  "Without live input for this long a vehicle brakes to a safe state")
-      ->check(CLI::Range(1.0, 60000.0))
+      ->check(vdyn::cli::InRange(vdyn::limits::kWatchdogMs))
       ->capture_default_str();
   app.add_option("--lockstep-timeout", o.lockstep_timeout_s,
                  "Lockstep: stop when no request arrives for this many seconds")
-      ->check(CLI::Range(0.1, 86400.0))
+      ->check(vdyn::cli::InRange(vdyn::limits::kLockstepTimeoutS))
       ->capture_default_str();
   app.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority of the 1 kHz loop")
-      ->check(CLI::Range(1, 99))
+      ->check(vdyn::cli::WholeInRange({1, 99, false, false, "SCHED_FIFO priority"}))
       ->capture_default_str();
   app.add_flag("--status", o.status, "Print the status line (default: on a terminal)");
   app.add_flag("--no-status", o.no_status, "No status line");
   app.add_option("--stats-out", o.stats_out,
                  "Real time: write a run summary (lateness distribution, drift, CPU) at the end");
 
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;  // --help is a success; every parse error is a usage error
-  }
+  // --help is a success; every parse error is a usage error (exit code 2).
+  if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
 
   try {
     if (o.dump_vehicle) {
@@ -259,11 +252,9 @@ int main(int argc, char** argv) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
   } catch (const vdyn::WorldError& e) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
-#if VDYN_WITH_DDS
   } catch (const vdyn::transport::TransportError& e) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
     return 1;
-#endif
   } catch (const std::exception& e) {
     std::cerr << "vdyn-server: " << e.what() << "\n";
   }

@@ -1,0 +1,87 @@
+// The one table of limits: every driver input, request, message, parameter and command-line
+// limit of vdyn, in one place. The physics validates parameters against it, the server checks
+// inputs and requests against it, the clients clamp to it, and every program checks its numeric
+// options with it (docs/topics.md and docs/formats.md quote it).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <string_view>
+
+namespace vdyn::limits {
+
+// A closed, open or half-open interval of finite numbers, with what the number is (and its unit)
+// for messages: "vehicle mass, kg must be in (0, 100000], got -5".
+struct Range {
+  double lo;
+  double hi;
+  bool lo_open = false;
+  bool hi_open = false;
+  std::string_view what = "";
+};
+
+// Empty when v is finite and inside r; else the reason, e.g. "throttle must be in [-1, 1], got 5"
+// or "throttle must be a finite number, got nan". Numbers are printed as a person writes them.
+std::string Check(const Range& r, double v);
+// Clamps into [lo, hi]; a non-finite value becomes `fallback`.
+double Clamp(const Range& r, double v, double fallback = 0.0);
+// "[lo, hi]" or "(lo, hi]" etc.
+std::string Describe(const Range& r);
+
+// --- Driver input (vdyn.pb.DriverInput) ------------------------------------------------------
+inline constexpr Range kSteer{-1.5, 1.5, false, false, "steer (front road-wheel angle, rad)"};
+inline constexpr Range kThrottle{-1.0, 1.0, false, false, "throttle"};
+inline constexpr Range kBrake{0.0, 1.0, false, false, "brake"};
+inline constexpr Range kCruiseSetKmh{0.0, 400.0, false, false, "cruise_set_kmh"};
+
+// --- Control requests (vdyn.pb.ControlRequest) -----------------------------------------------
+inline constexpr Range kPoseXY{-1e7, 1e7, false, false, "pose position, m"};
+inline constexpr Range kPoseYaw{-1e3, 1e3, false, false, "pose yaw, rad"};
+inline constexpr Range kSpawnSpeed{0.0, 110.0, false, false, "speed, m/s"};
+// Steps one request may ask for: 10 simulated minutes at 1 kHz.
+inline constexpr std::uint32_t kMaxStepsPerRequest = 600'000;
+// Requests the server applies at one step boundary; more wait in the queue.
+inline constexpr int kMaxRequestsPerBoundary = 16;
+
+// --- Messages -------------------------------------------------------------------------------
+// Every string field of every message (ids, names, reasons).
+inline constexpr std::size_t kMaxIdBytes = 64;        // client_id, source_id, server_id
+inline constexpr std::size_t kMaxReasonBytes = 1024;  // a reply's reason
+inline constexpr std::size_t kMaxNameBytes = 256;     // mesh, landmark and world names
+// Serialised payload sizes per topic, bytes (a larger sample is refused and counted).
+inline constexpr std::size_t kMaxStateBytes = 64 * 1024;
+inline constexpr std::size_t kMaxInputBytes = 4 * 1024;
+inline constexpr std::size_t kMaxControlBytes = 64 * 1024;
+inline constexpr std::size_t kMaxReplyBytes = 16 * 1024;
+inline constexpr std::size_t kMaxParamsBytes = 64 * 1024;
+inline constexpr std::size_t kMaxWorldBytes = 512ull * 1024 * 1024;
+inline constexpr std::size_t kMaxEventBytes = 1024 * 1024;
+inline constexpr std::size_t kMaxDiagnosticsBytes = 1024 * 1024;
+
+// --- Vehicle parameters (vdyn.pb.VehicleParams), by field path -------------------------------
+struct ParamLimit {
+  std::string_view path;  // "mass", "lf.free_length" (wheel fields are given as "wheel.<name>")
+  Range range;
+};
+std::span<const ParamLimit> VehicleParamLimits();
+std::span<const ParamLimit> WheelParamLimits();  // per wheel, path without the wheel prefix
+// The limit of a field path ("mass", "lf.radius"); nullptr for a path with no limit.
+const Range* ParamRange(std::string_view path);
+
+// --- Command-line options -------------------------------------------------------------------
+inline constexpr Range kDomainId{0, 232, false, false, "DDS domain id"};
+inline constexpr Range kStepMs{0.01, 100.0, false, false, "integration step, ms"};
+inline constexpr Range kWatchdogMs{1.0, 60000.0, false, false, "watchdog, ms"};
+inline constexpr Range kLockstepTimeoutS{0.1, 86400.0, false, false, "lockstep timeout, s"};
+inline constexpr Range kDurationS{0.0, 1e7, true, false, "duration, s"};
+inline constexpr Range kSpeedKmh{0.0, 400.0, false, false, "speed, km/h"};
+inline constexpr Range kRateHz{1.0, 2000.0, false, false, "rate, Hz"};
+inline constexpr Range kWaitS{0.0, 3600.0, false, false, "wait, s"};
+inline constexpr Range kWorldScale{0.0, 1e6, true, false, "terrain scale, m per file unit"};
+inline constexpr Range kHeightmapCell{0.0, 1e4, true, false, "height-map cell, m"};
+inline constexpr Range kHeightmapHeight{0.0, 1e5, true, false, "height-map height, m"};
+inline constexpr Range kStrength{0, 1e6, false, false, "ownership strength"};
+
+}  // namespace vdyn::limits

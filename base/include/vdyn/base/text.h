@@ -1,0 +1,28 @@
+// Numbers and strings as a person reads and writes them: parsing that refuses what is not a
+// finite number, formatting without 17-digit noise, and log-safe quoting of untrusted text.
+#pragma once
+
+#include <cstddef>
+#include <optional>
+#include <string>
+#include <string_view>
+
+namespace vdyn::base {
+
+// Parses the whole of `text` (surrounding blanks allowed, a leading '+' allowed) as a decimal or
+// hexadecimal floating-point number. A value too small for a double underflows to (signed) zero,
+// as it would on paper; too large, "nan", "inf" or trailing characters give nullopt.
+std::optional<double> ParseNumber(std::string_view text);
+
+// The shortest form that reads back to the same double, with the exponent as a person writes it:
+// 100000, 0.25, 1e9, 1.5e-7, -3. Never 17 significant digits of noise.
+std::string FormatNumber(double v);
+
+// Untrusted text made safe for one log line or reply: at most `max_bytes` bytes of it, printable
+// ASCII kept, everything else escaped (\n, \x1b, ...), and "... (N bytes)" when cut.
+std::string Quote(std::string_view text, std::size_t max_bytes = 80);
+
+// Strips a leading UTF-8 byte-order mark.
+std::string_view StripBom(std::string_view text);
+
+}  // namespace vdyn::base

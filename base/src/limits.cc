@@ -1,0 +1,99 @@
+#include "vdyn/base/limits.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "vdyn/base/text.h"
+
+namespace vdyn::limits {
+namespace {
+
+// clang-format off
+constexpr ParamLimit kParams[] = {
+  {"mass",                 {0, 1e5, true, false, "vehicle mass, kg"}},
+  {"ixx",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
+  {"iyy",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
+  {"izz",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
+  {"b",                    {0, 20, true, false, "distance T to front axle, m"}},
+  {"c",                    {0, 20, true, false, "distance T to rear axle, m"}},
+  {"b_l",                  {0, 5, true, false, "distance T to left wheels, m"}},
+  {"b_p",                  {0, 5, true, false, "distance T to right wheels, m"}},
+  {"mu",                   {0, 3, true, false, "friction coefficient"}},
+  {"cx",                   {0, 5, false, false, "drag coefficient"}},
+  {"rho",                  {0, 10, false, false, "air density, kg/m^3"}},
+  {"sx",                   {0, 50, false, false, "frontal area, m^2"}},
+  {"ha",                   {-5, 5, false, false, "drag height above T, m"}},
+  {"rolling_resistance",   {0, 0.5, false, false, "rolling resistance coefficient"}},
+  {"drive_force_max",      {0, 1e6, false, false, "drive force, N"}},
+  {"drive_front_fraction", {0, 1, false, false, "share of drive force on the front axle"}},
+  {"brake_force_max",      {0, 1e6, false, false, "brake force, N"}},
+  {"brake_front_fraction", {0, 1, false, false, "share of brake force on the front axle"}},
+  {"steering_lock",        {0, 1.5, true, false, "steering lock, rad (below pi/2)"}},
+  {"tire_slip_speed",      {0, 10, true, false, "slip regularisation speed, m/s"}},
+  {"cruise_kp",            {0, 100, false, false, "cruise proportional gain, 1/(m/s)"}},
+  {"cruise_ki",            {0, 100, false, false, "cruise integral gain, 1/m"}},
+  {"body_front",           {0, 20, true, false, "body extent ahead of T, m"}},
+  {"body_rear",            {0, 20, true, false, "body extent behind T, m"}},
+  {"body_half_width",      {0, 5, true, false, "body half width, m"}},
+  {"body_probe_height",    {-5, 5, false, false, "height of the horizontal traces above T, m"}},
+  {"wall_stiffness",       {0, 1e9, true, false, "wall contact stiffness, N/m"}},
+  {"wall_damping",         {0, 10, false, false, "wall contact damping factor, s/m"}},
+  {"wall_friction",        {0, 3, false, false, "wall friction coefficient"}},
+  {"gravity",              {0, 100, false, false, "gravitational acceleration, m/s^2"}},
+  {"steering_trail",       {-0.5, 0.5, false, false, "steering trail, m"}},
+  {"steering_ratio",       {1, 100, false, false, "steering ratio (hand wheel / road wheel)"}},
+};
+constexpr ParamLimit kWheel[] = {
+  {"z_offset",             {-3, 3, false, false, "T to mount point A, m"}},
+  {"spring_stiffness",     {0, 1e8, true, false, "spring stiffness, N/m"}},
+  {"damper_coefficient",   {0, 1e7, false, false, "damping coefficient, N*s/m"}},
+  {"free_length",          {0, 5, true, false, "spring free length, m"}},
+  {"radius",               {0, 3, true, false, "wheel radius, m"}},
+  {"cornering_stiffness",  {0, 1e7, true, false, "cornering stiffness, N/rad"}},
+  {"bump_stop_length",     {0, 5, false, false, "bump stop engagement length, m"}},
+  {"bump_stop_stiffness",  {0, 1e9, false, false, "bump stop stiffness, N/m"}},
+};
+// clang-format on
+
+}  // namespace
+
+std::string Describe(const Range& r) {
+  return std::string(r.lo_open ? "(" : "[") + base::FormatNumber(r.lo) + ", " +
+         base::FormatNumber(r.hi) + (r.hi_open ? ")" : "]");
+}
+
+std::string Check(const Range& r, double v) {
+  if (!std::isfinite(v)) {
+    return std::string(r.what) + " must be a finite number, got " + base::FormatNumber(v);
+  }
+  const bool low = r.lo_open ? v <= r.lo : v < r.lo;
+  const bool high = r.hi_open ? v >= r.hi : v > r.hi;
+  if (low || high) {
+    return std::string(r.what) + " must be in " + Describe(r) + ", got " + base::FormatNumber(v);
+  }
+  return {};
+}
+
+double Clamp(const Range& r, double v, double fallback) {
+  if (!std::isfinite(v)) return fallback;
+  return std::clamp(v, r.lo, r.hi);
+}
+
+std::span<const ParamLimit> VehicleParamLimits() { return kParams; }
+std::span<const ParamLimit> WheelParamLimits() { return kWheel; }
+
+const Range* ParamRange(std::string_view path) {
+  for (const ParamLimit& l : kParams) {
+    if (l.path == path) return &l.range;
+  }
+  const std::size_t dot = path.find('.');
+  if (dot != std::string_view::npos) {
+    const std::string_view field = path.substr(dot + 1);
+    for (const ParamLimit& l : kWheel) {
+      if (l.path == field) return &l.range;
+    }
+  }
+  return nullptr;
+}
+
+}  // namespace vdyn::limits

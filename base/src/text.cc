@@ -1,0 +1,104 @@
+#include "vdyn/base/text.h"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <limits>
+
+namespace vdyn::base {
+
+std::optional<double> ParseNumber(std::string_view text) {
+  while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
+  while (!text.empty() && (text.back() == ' ' || text.back() == '\t' || text.back() == '\r' ||
+                           text.back() == '\n')) {
+    text.remove_suffix(1);
+  }
+  if (text.empty()) return std::nullopt;
+  bool negative = false;
+  std::string_view body = text;
+  if (body.front() == '+' || body.front() == '-') {
+    negative = body.front() == '-';
+    body.remove_prefix(1);
+  }
+  if (body.empty() || body.front() == '+' || body.front() == '-') return std::nullopt;
+  std::chars_format fmt = std::chars_format::general;
+  if (body.size() > 2 && body[0] == '0' && (body[1] == 'x' || body[1] == 'X')) {
+    body.remove_prefix(2);
+    fmt = std::chars_format::hex;
+  }
+  double v = 0.0;
+  const auto [ptr, ec] = std::from_chars(body.data(), body.data() + body.size(), v, fmt);
+  if (ptr != body.data() + body.size()) return std::nullopt;
+  if (ec == std::errc::result_out_of_range) {
+    // Underflow or overflow: strtod tells which (0 for underflow, HUGE_VAL for overflow).
+    const std::string copy(fmt == std::chars_format::hex ? "0x" + std::string(body)
+                                                         : std::string(body));
+    const double r = std::strtod(copy.c_str(), nullptr);
+    if (std::isinf(r)) return std::nullopt;
+    v = 0.0;
+  } else if (ec != std::errc()) {
+    return std::nullopt;
+  }
+  if (!std::isfinite(v)) return std::nullopt;
+  return negative ? -v : v;
+}
+
+std::string FormatNumber(double v) {
+  if (std::isnan(v)) return "nan";
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  if (v == 0.0) return "0";
+  char buf[64];
+  // Plain decimals for ordinary magnitudes, scientific beyond; both shortest round trip.
+  const double a = std::abs(v);
+  const auto fmt = (a >= 1e-4 && a < 1e7) ? std::chars_format::fixed : std::chars_format::scientific;
+  auto [ptr, ec] = std::to_chars(buf, buf + sizeof buf, v, fmt);
+  if (ec != std::errc()) return "?";
+  std::string s(buf, ptr);
+  // "1e+09" -> "1e9", "1.5e-07" -> "1.5e-7".
+  const std::size_t e = s.find('e');
+  if (e != std::string::npos) {
+    std::string mant = s.substr(0, e);
+    std::string exp = s.substr(e + 1);
+    bool neg = false;
+    if (!exp.empty() && (exp[0] == '+' || exp[0] == '-')) {
+      neg = exp[0] == '-';
+      exp.erase(0, 1);
+    }
+    while (exp.size() > 1 && exp[0] == '0') exp.erase(0, 1);
+    s = mant + "e" + (neg ? "-" : "") + exp;
+  }
+  return s;
+}
+
+std::string Quote(std::string_view text, std::size_t max_bytes) {
+  std::string out;
+  const std::size_t n = std::min(text.size(), max_bytes);
+  out.reserve(n + 16);
+  for (std::size_t i = 0; i < n; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    switch (c) {
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      case '\\': out += "\\\\"; break;
+      default:
+        if (c >= 0x20 && c < 0x7f) {
+          out += static_cast<char>(c);
+        } else {
+          char buf[8];
+          std::snprintf(buf, sizeof buf, "\\x%02x", c);
+          out += buf;
+        }
+    }
+  }
+  if (text.size() > n) out += "... (" + std::to_string(text.size()) + " bytes)";
+  return out;
+}
+
+std::string_view StripBom(std::string_view text) {
+  if (text.size() >= 3 && text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
+  return text;
+}
+
+}  // namespace vdyn::base

@@ -1,0 +1,80 @@
+// What a client sees of a domain: the newest state of every vehicle, its parameters (from the
+// transient-local topic: at once for a late joiner), each server's world and diagnostics, and
+// optionally the driver inputs (paddle presses for the viewer's north camera). Poll() takes what
+// has arrived; call it from one thread (a client's loop or a render frame).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+
+#include "vdyn/base/time.h"
+#include "vdyn/diagnostics.pb.h"
+#include "vdyn/input.pb.h"
+#include "vdyn/state.pb.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/vehicle_params.pb.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn::client {
+
+class SessionView {
+ public:
+  struct Topics {
+    bool states = true;
+    bool params = true;
+    bool world = true;
+    bool diagnostics = true;
+    bool inputs = false;
+  };
+  struct Vehicle {
+    pb::VehicleState state;                 // the newest
+    base::MonoTime received;                // when it was taken here
+    std::int64_t source_timestamp_ns = 0;   // the server's wall clock when it wrote it
+    std::uint64_t states = 0;               // states received
+    std::optional<pb::VehicleParams> params;
+    std::optional<pb::DriverInput> input;   // the newest driver input seen (Topics::inputs)
+  };
+
+  SessionView(transport::Participant& participant, Topics topics);
+  SessionView(const SessionView&) = delete;
+  SessionView& operator=(const SessionView&) = delete;
+
+  // Takes every sample that has arrived; returns how many.
+  int Poll();
+  // Waits up to `timeout` for a state (or, without states, anything) to arrive.
+  bool Wait(std::chrono::nanoseconds timeout);
+
+  // Called by Poll() for every state, as it is taken (e.g. force feedback's lowest latency path).
+  std::function<void(const pb::VehicleState&, const transport::SampleInfo&)> on_state;
+  // Called by Poll() for every driver input (Topics::inputs).
+  std::function<void(const pb::DriverInput&, const transport::SampleInfo&)> on_input;
+
+  const std::map<std::uint32_t, Vehicle>& vehicles() const { return vehicles_; }
+  const Vehicle* vehicle(std::uint32_t id) const;
+  // Worlds and diagnostics by server id.
+  const std::map<std::string, pb::WorldDescription>& worlds() const { return worlds_; }
+  const std::map<std::string, pb::Diagnostics>& diagnostics() const { return diagnostics_; }
+  // Increases each time a world arrives (a viewer rebuilds its meshes when it changes).
+  std::uint64_t world_version() const { return world_version_; }
+  transport::DropCounters& drops() { return drops_; }
+
+ private:
+  transport::DropCounters drops_;
+  std::unique_ptr<transport::Reader<pb::VehicleState>> states_;
+  std::unique_ptr<transport::Reader<pb::VehicleParams>> params_;
+  std::unique_ptr<transport::Reader<pb::WorldDescription>> world_;
+  std::unique_ptr<transport::Reader<pb::Diagnostics>> diagnostics_reader_;
+  std::unique_ptr<transport::Reader<pb::DriverInput>> inputs_;
+  std::unique_ptr<transport::Waitset> waitset_;
+  std::map<std::uint32_t, Vehicle> vehicles_;
+  std::map<std::string, pb::WorldDescription> worlds_;
+  std::map<std::string, pb::Diagnostics> diagnostics_;
+  std::uint64_t world_version_ = 0;
+};
+
+}  // namespace vdyn::client

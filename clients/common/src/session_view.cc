@@ -1,0 +1,82 @@
+#include "vdyn/client/session_view.h"
+
+namespace vdyn::client {
+
+using transport::TopicId;
+
+SessionView::SessionView(transport::Participant& participant, Topics topics) {
+  waitset_ = std::make_unique<transport::Waitset>(participant);
+  if (topics.states) {
+    states_ = std::make_unique<transport::Reader<pb::VehicleState>>(participant, TopicId::kState,
+                                                                    &drops_);
+    waitset_->Attach(*states_);
+  }
+  if (topics.params) {
+    params_ = std::make_unique<transport::Reader<pb::VehicleParams>>(participant, TopicId::kParams,
+                                                                     &drops_);
+    if (!topics.states) waitset_->Attach(*params_);
+  }
+  if (topics.world) {
+    world_ = std::make_unique<transport::Reader<pb::WorldDescription>>(participant,
+                                                                       TopicId::kWorld, &drops_);
+    if (!topics.states) waitset_->Attach(*world_);
+  }
+  if (topics.diagnostics) {
+    diagnostics_reader_ = std::make_unique<transport::Reader<pb::Diagnostics>>(
+        participant, TopicId::kDiagnostics, &drops_);
+    if (!topics.states) waitset_->Attach(*diagnostics_reader_);
+  }
+  if (topics.inputs) {
+    inputs_ = std::make_unique<transport::Reader<pb::DriverInput>>(participant, TopicId::kInput,
+                                                                   &drops_);
+    if (!topics.states) waitset_->Attach(*inputs_);
+  }
+}
+
+const SessionView::Vehicle* SessionView::vehicle(std::uint32_t id) const {
+  const auto it = vehicles_.find(id);
+  return it == vehicles_.end() ? nullptr : &it->second;
+}
+
+bool SessionView::Wait(std::chrono::nanoseconds timeout) { return waitset_->Wait(timeout); }
+
+int SessionView::Poll() {
+  int n = 0;
+  if (world_) {
+    n += world_->Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      worlds_[w.server_id()] = w;
+      ++world_version_;
+    });
+  }
+  if (params_) {
+    n += params_->Take([&](const pb::VehicleParams& p, const transport::SampleInfo& info) {
+      vehicles_[info.key].params = p;
+    });
+  }
+  if (diagnostics_reader_) {
+    n += diagnostics_reader_->Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+      diagnostics_[d.server_id()] = d;
+    });
+  }
+  if (inputs_) {
+    n += inputs_->Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
+      if (info.key != in.vehicle_id()) return;
+      vehicles_[in.vehicle_id()].input = in;
+      if (on_input) on_input(in, info);
+    });
+  }
+  if (states_) {
+    n += states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
+      if (info.key != s.vehicle_id()) return;
+      Vehicle& v = vehicles_[s.vehicle_id()];
+      v.state = s;
+      v.received = base::MonotonicNow();
+      v.source_timestamp_ns = info.source_timestamp_ns;
+      ++v.states;
+      if (on_state) on_state(s, info);
+    });
+  }
+  return n;
+}
+
+}  // namespace vdyn::client

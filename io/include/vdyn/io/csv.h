@@ -1,0 +1,41 @@
+// The vehicle CSV: one row per state, every computed quantity, units in the header. Written from
+// the vdyn.pb.VehicleState message, so the batch run (vdyn-server --batch) and the recorder's
+// export give the same columns, units and order, and one analysis script reads both.
+#pragma once
+
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "vdyn/state.pb.h"
+
+namespace vdyn {
+
+// The column names, in order (docs/formats.md explains each).
+std::vector<std::string> CsvColumns();
+
+// The values of one row, in column order (what WriteRow prints).
+void CsvRowValues(const pb::VehicleState& s, std::vector<double>& out);
+
+class CsvWriter {
+ public:
+  // Opens `path` for writing (creating parent folders). Throws std::runtime_error with the reason.
+  explicit CsvWriter(const std::filesystem::path& path);
+  ~CsvWriter();
+  CsvWriter(const CsvWriter&) = delete;
+  CsvWriter& operator=(const CsvWriter&) = delete;
+
+  void WriteRow(const pb::VehicleState& s);
+  // Flushes and closes; throws std::runtime_error when the data did not all reach the file.
+  void Close();
+  std::size_t rows() const { return rows_; }
+
+ private:
+  std::FILE* file_ = nullptr;
+  std::filesystem::path path_;
+  std::vector<char> buffer_;
+  std::size_t rows_ = 0;
+};
+
+}  // namespace vdyn

@@ -1,0 +1,148 @@
+#include "vdyn/io/vehicle_params.h"
+
+#include <fstream>
+#include <sstream>
+
+#include <google/protobuf/io/tokenizer.h>
+#include <google/protobuf/text_format.h>
+#include <google/protobuf/util/json_util.h>
+
+namespace vdyn {
+namespace {
+
+namespace gp = google::protobuf;
+
+pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, double cornering) {
+  pb::WheelParams w;
+  w.set_z_offset(z_offset);
+  w.set_spring_stiffness(stiffness);
+  w.set_damper_coefficient(damping);
+  w.set_free_length(0.35);
+  w.set_radius(0.32);
+  w.set_cornering_stiffness(cornering);
+  w.set_bump_stop_length(0.06);
+  w.set_bump_stop_stiffness(300000.0);
+  return w;
+}
+
+class CollectErrors : public gp::io::ErrorCollector {
+ public:
+  void AddError(int line, gp::io::ColumnNumber column, const std::string& message) override {
+    if (!text.empty()) text += "; ";
+    text += "line " + std::to_string(line + 1) + ", column " + std::to_string(column + 1) + ": " +
+            message;
+  }
+  void AddWarning(int line, gp::io::ColumnNumber column, const std::string& message) override {
+    AddError(line, column, "warning: " + message);
+  }
+  std::string text;
+};
+
+}  // namespace
+
+pb::VehicleParams DefaultVehicleParams() {
+  pb::VehicleParams p;
+  p.set_mass(1500.0);
+  p.set_ixx(550.0);
+  p.set_iyy(2400.0);
+  p.set_izz(2700.0);
+  p.set_b(1.2);
+  p.set_c(1.5);
+  p.set_b_l(0.78);
+  p.set_b_p(0.78);
+  // Front: 4.09 kN static load per wheel, 1.35 Hz ride, damping ratio ~0.3.
+  *p.mutable_lf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0);
+  *p.mutable_rf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0);
+  // Rear: 3.27 kN static load per wheel, 1.38 Hz ride; stiffer tires make the car understeer.
+  *p.mutable_lr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0);
+  *p.mutable_rr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0);
+  p.set_mu(0.9);
+  p.set_cx(0.30);
+  p.set_rho(1.225);
+  p.set_sx(2.2);
+  p.set_ha(0.10);
+  p.set_rolling_resistance(0.012);
+  p.set_drive_force_max(6000.0);
+  p.set_drive_front_fraction(1.0);
+  p.set_brake_force_max(15000.0);
+  p.set_brake_front_fraction(0.65);
+  p.set_steering_lock(0.6);
+  p.set_yaw_mode(pb::YAW_MODE_DYNAMIC);
+  p.set_tire_law(pb::TIRE_LAW_FIALA);
+  p.set_tire_slip_speed(0.5);
+  p.set_cruise_kp(0.6);
+  p.set_cruise_ki(0.15);
+  p.set_body_front(2.2);
+  p.set_body_rear(2.5);
+  p.set_body_half_width(0.9);
+  p.set_body_probe_height(0.0);
+  p.set_wall_stiffness(5.0e6);
+  p.set_wall_damping(0.5);
+  p.set_wall_friction(0.3);
+  p.set_gravity(9.81);
+  p.set_steering_trail(0.04);
+  p.set_steering_ratio(15.0);
+  return p;
+}
+
+pb::VehicleParams MergeVehicleParams(const pb::VehicleParams& base,
+                                     const pb::VehicleParams& update) {
+  pb::VehicleParams out = base;
+  out.MergeFrom(update);  // proto3 `optional`: only fields present in `update` override
+  return out;
+}
+
+pb::VehicleParams ParseVehicleParamsText(const std::string& text, bool json,
+                                         const std::string& source_name,
+                                         const pb::VehicleParams& base) {
+  pb::VehicleParams update;
+  if (json) {
+    gp::util::JsonParseOptions options;
+    options.ignore_unknown_fields = false;
+    const auto status = gp::util::JsonStringToMessage(text, &update, options);
+    if (!status.ok()) {
+      throw ParamsError(source_name + ": not valid vehicle parameters JSON: " +
+                        std::string(status.message()));
+    }
+  } else {
+    gp::TextFormat::Parser parser;
+    CollectErrors errors;
+    parser.RecordErrorsTo(&errors);
+    if (!parser.ParseFromString(text, &update)) {
+      throw ParamsError(source_name + ": " +
+                        (errors.text.empty() ? std::string("cannot parse") : errors.text));
+    }
+  }
+  return MergeVehicleParams(base, update);
+}
+
+pb::VehicleParams ReadVehicleParamsFile(const std::filesystem::path& path,
+                                        const pb::VehicleParams& base) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) {
+    throw ParamsError(path.string() + ": is a directory, not a vehicle parameter file");
+  }
+  if (!std::filesystem::exists(path, ec)) {
+    throw ParamsError(path.string() + ": no such vehicle parameter file");
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw ParamsError(path.string() + ": cannot open the vehicle parameter file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw ParamsError(path.string() + ": read error");
+  const bool json = path.extension() == ".json";
+  return ParseVehicleParamsText(ss.str(), json, path.string(), base);
+}
+
+std::string DumpVehicleParamsText(const pb::VehicleParams& msg) {
+  std::string body;
+  gp::TextFormat::Printer printer;
+  printer.SetUseShortRepeatedPrimitives(true);
+  printer.PrintToString(msg, &body);
+  return "# vdyn vehicle parameters (protobuf text format, vdyn.pb.VehicleParams).\n"
+         "# SI units; field meanings in proto/vdyn/vehicle_params.proto and docs/model.md.\n"
+         "# Pass back with --vehicle FILE; a file may list only the fields it changes.\n" +
+         body;
+}
+
+}  // namespace vdyn

@@ -1,0 +1,145 @@
+#include "vdyn/bridge/params.h"
+
+#include <set>
+
+#include "vdyn/base/limits.h"
+
+namespace vdyn {
+namespace {
+
+namespace gp = google::protobuf;
+
+const pb::WheelParams& Wheel(const pb::VehicleParams& m, int w) {
+  switch (w) {
+    case kLF: return m.lf();
+    case kRF: return m.rf();
+    case kLR: return m.lr();
+    default: return m.rr();
+  }
+}
+
+// The plain struct from the message, field by field (no checks).
+Params RawParams(const pb::VehicleParams& m) {
+  Params p;
+  p.mass = m.mass();
+  p.inertia_B = Eigen::Vector3d(m.ixx(), m.iyy(), m.izz());
+  p.b = m.b();
+  p.c = m.c();
+  p.b_l = m.b_l();
+  p.b_p = m.b_p();
+  for (int w = 0; w < kNumWheels; ++w) {
+    const pb::WheelParams& s = Wheel(m, w);
+    WheelParams& d = p.wheel[w];
+    d.z_offset = s.z_offset();
+    d.spring_stiffness = s.spring_stiffness();
+    d.damper_coefficient = s.damper_coefficient();
+    d.free_length = s.free_length();
+    d.radius = s.radius();
+    d.cornering_stiffness = s.cornering_stiffness();
+    d.bump_stop_length = s.bump_stop_length();
+    d.bump_stop_stiffness = s.bump_stop_stiffness();
+  }
+  p.mu = m.mu();
+  p.cx = m.cx();
+  p.rho = m.rho();
+  p.sx = m.sx();
+  p.ha = m.ha();
+  p.rolling_resistance = m.rolling_resistance();
+  p.drive_force_max = m.drive_force_max();
+  p.drive_front_fraction = m.drive_front_fraction();
+  p.brake_force_max = m.brake_force_max();
+  p.brake_front_fraction = m.brake_front_fraction();
+  p.steering_lock = m.steering_lock();
+  p.yaw_mode = m.yaw_mode() == pb::YAW_MODE_PAPER ? YawMode::kPaper : YawMode::kDynamic;
+  p.tire_law = m.tire_law() == pb::TIRE_LAW_LINEAR_SATURATED ? TireLaw::kLinearSaturated
+                                                               : TireLaw::kFiala;
+  p.tire_slip_speed = m.tire_slip_speed();
+  p.cruise_kp = m.cruise_kp();
+  p.cruise_ki = m.cruise_ki();
+  p.body_front = m.body_front();
+  p.body_rear = m.body_rear();
+  p.body_half_width = m.body_half_width();
+  p.body_probe_height = m.body_probe_height();
+  p.wall_stiffness = m.wall_stiffness();
+  p.wall_damping = m.wall_damping();
+  p.wall_friction = m.wall_friction();
+  p.gravity = m.gravity();
+  p.steering_trail = m.steering_trail();
+  p.steering_ratio = m.steering_ratio();
+  return p;
+}
+
+bool Has(const gp::Message& msg, std::string_view name) {
+  const gp::FieldDescriptor* f = msg.GetDescriptor()->FindFieldByName(std::string(name));
+  return f != nullptr && msg.GetReflection()->HasField(msg, f);
+}
+
+// An enum field: present, not UNSPECIFIED, and one of the enum's values.
+void CheckEnum(const gp::Message& msg, const char* name, std::vector<ParamIssue>& out) {
+  const gp::FieldDescriptor* f = msg.GetDescriptor()->FindFieldByName(name);
+  const gp::EnumDescriptor* e = f->enum_type();
+  std::string choices;
+  for (int i = 1; i < e->value_count(); ++i) {
+    choices += (choices.empty() ? "" : " or ") + e->value(i)->name();
+  }
+  if (!msg.GetReflection()->HasField(msg, f)) {
+    out.push_back({name, "missing (" + choices + ")"});
+    return;
+  }
+  const int v = msg.GetReflection()->GetEnumValue(msg, f);
+  if (v == 0 || e->FindValueByNumber(v) == nullptr) {
+    out.push_back({name, std::to_string(v) + " is not one of " + choices});
+  }
+}
+
+}  // namespace
+
+std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
+  std::vector<ParamIssue> out;
+  std::set<std::string> missing;
+  for (const limits::ParamLimit& l : limits::VehicleParamLimits()) {
+    if (!Has(msg, l.path)) missing.insert(std::string(l.path));
+  }
+  for (int w = 0; w < kNumWheels; ++w) {
+    for (const limits::ParamLimit& l : limits::WheelParamLimits()) {
+      if (!Has(Wheel(msg, w), l.path)) {
+        missing.insert(std::string(kWheelFields[w]) + "." + std::string(l.path));
+      }
+    }
+  }
+  for (const std::string& m : missing) out.push_back({m, "missing"});
+  CheckEnum(msg, "yaw_mode", out);
+  CheckEnum(msg, "tire_law", out);
+  for (ParamIssue& i : CheckParams(RawParams(msg))) {
+    if (missing.count(i.field) == 0) out.push_back(std::move(i));
+  }
+  return out;
+}
+
+ValidParams ParamsFromProto(const pb::VehicleParams& msg) {
+  std::vector<ParamIssue> issues = ValidateVehicleParams(msg);
+  if (issues.empty()) {
+    std::optional<ValidParams> v = Validate(RawParams(msg), &issues);
+    if (v) return *v;
+  }
+  throw ParamsError("invalid vehicle parameters: " + FormatIssues(issues));
+}
+
+pb::VehicleParams ParseVehicleParams(const std::string& text, bool json,
+                                     const std::string& source_name,
+                                     const pb::VehicleParams& base) {
+  pb::VehicleParams merged = ParseVehicleParamsText(text, json, source_name, base);
+  const std::vector<ParamIssue> issues = ValidateVehicleParams(merged);
+  if (!issues.empty()) throw ParamsError(source_name + ": " + FormatIssues(issues));
+  return merged;
+}
+
+pb::VehicleParams LoadVehicleParamsFile(const std::filesystem::path& path,
+                                        const pb::VehicleParams& base) {
+  pb::VehicleParams merged = ReadVehicleParamsFile(path, base);
+  const std::vector<ParamIssue> issues = ValidateVehicleParams(merged);
+  if (!issues.empty()) throw ParamsError(path.string() + ": " + FormatIssues(issues));
+  return merged;
+}
+
+}  // namespace vdyn

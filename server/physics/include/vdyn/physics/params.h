@@ -1,0 +1,102 @@
+// Vehicle parameters: the SI, plain-struct form the physics reads in its step, and the only way to
+// give it to a simulator: validated (ValidParams).
+//
+// Data kinds are kept apart (docs/architecture.md): parameters are validated once, at the edge,
+// and replaced only between steps; the step reads them and never changes them. The limits come
+// from the one table (vdyn/base/limits.h); the field names in issues are the paths of
+// proto/vdyn/vehicle_params.proto ("lf.free_length"), so a reply or a file error names the field
+// the user wrote.
+#pragma once
+
+#include <array>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace vdyn {
+
+// Wheel order everywhere: Left Front, Right Front, Left Rear, Right Rear (the paper's suffixes).
+enum WheelIndex : int { kLF = 0, kRF = 1, kLR = 2, kRR = 3 };
+inline constexpr int kNumWheels = 4;
+inline constexpr std::array<std::string_view, kNumWheels> kWheelNames = {"LF", "RF", "LR", "RR"};
+inline constexpr std::array<std::string_view, kNumWheels> kWheelFields = {"lf", "rf", "lr", "rr"};
+inline constexpr bool IsFront(int w) { return w == kLF || w == kRF; }
+
+enum class YawMode { kDynamic, kPaper };
+enum class TireLaw { kFiala, kLinearSaturated };
+
+struct WheelParams {
+  double z_offset = 0;            // m, T down to mount point A along -Z_B
+  double spring_stiffness = 0;    // N/m   (paper: c)
+  double damper_coefficient = 0;  // N*s/m (paper: k)
+  double free_length = 0;         // m
+  double radius = 0;              // m
+  double cornering_stiffness = 0; // N/rad
+  double bump_stop_length = 0;    // m
+  double bump_stop_stiffness = 0; // N/m
+};
+
+struct Params {
+  double mass = 0;
+  Eigen::Vector3d inertia_B = Eigen::Vector3d::Zero();  // principal moments about T, kg*m^2
+  double b = 0, c = 0, b_l = 0, b_p = 0;
+  std::array<WheelParams, kNumWheels> wheel{};
+  double mu = 0;
+  double cx = 0, rho = 0, sx = 0, ha = 0;
+  double rolling_resistance = 0;
+  double drive_force_max = 0, drive_front_fraction = 0;
+  double brake_force_max = 0, brake_front_fraction = 0;
+  double steering_lock = 0;
+  YawMode yaw_mode = YawMode::kDynamic;
+  TireLaw tire_law = TireLaw::kFiala;
+  double tire_slip_speed = 0;
+  double cruise_kp = 0, cruise_ki = 0;
+  double body_front = 0, body_rear = 0, body_half_width = 0, body_probe_height = 0;
+  double wall_stiffness = 0, wall_damping = 0 /* s/m */, wall_friction = 0;
+  double gravity = 0;
+  double steering_trail = 0;  // m
+  double steering_ratio = 1;  // hand wheel / road wheel
+
+  // Derived once, when the parameters are validated (never inside a step).
+  std::array<Eigen::Vector3d, kNumWheels> p_TA_B{};  // mount points A from T, body frame
+  double wheelbase = 0;                                // b + c
+  // Horizontal traces (the paper's C-D): from O (probe_height above T) towards the body box's
+  // four faces and four corners; a probe's point S is where its ray leaves the box.
+  static constexpr int kNumProbes = 8;
+  Eigen::Vector3d p_TO_B = Eigen::Vector3d::Zero();
+  std::array<Eigen::Vector3d, kNumProbes> probe_dir_B{};  // unit
+  std::array<double, kNumProbes> probe_length{};          // |OS|, m
+};
+
+// One rejected value: the field's path ("lf.free_length") and why.
+struct ParamIssue {
+  std::string field;
+  std::string reason;
+};
+// Joins issues as "field: reason; field: reason".
+std::string FormatIssues(const std::vector<ParamIssue>& issues);
+
+// Parameters that passed validation, with their derived members filled. A simulator accepts
+// nothing else. Read them as a Params (implicit conversion, or get()).
+class ValidParams {
+ public:
+  const Params& get() const { return p_; }
+  const Params* operator->() const { return &p_; }
+  operator const Params&() const { return p_; }  // NOLINT: read-only view, on purpose
+
+ private:
+  friend std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues);
+  ValidParams() = default;
+  Params p_;
+};
+
+// Checks every value against the table of limits and the rules between them (a bump stop inside
+// the spring's travel, a rigid body's inertia, a body that reaches its axles). Empty when valid.
+std::vector<ParamIssue> CheckParams(const Params& p);
+// The validated parameters with their derived members, or nullopt and the issues.
+std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues = nullptr);
+
+}  // namespace vdyn

@@ -1,0 +1,108 @@
+// Simulator: one vehicle on one world, stepped by RK4 at a fixed step h.
+//
+// Data kinds kept apart (docs/architecture.md):
+//   parameters  ValidParams   - validated, replaced only between steps (SetParams)
+//   state       State         - exactly what is integrated and hashed
+//   workspace   Workspace     - preallocated scratch; a step allocates nothing
+// A step reads as its stages: latch input -> controls -> find walls -> RK4 (sense terrain,
+// forces, derivatives at each of 4 stages) -> post-step (normalise, checks, record).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "vdyn/physics/controls.h"
+#include "vdyn/physics/params.h"
+#include "vdyn/physics/rk4.h"
+#include "vdyn/physics/state.h"
+#include "vdyn/physics/vehicle_model.h"
+#include "vdyn/physics/world.h"
+
+namespace vdyn {
+
+struct SimConfig {
+  std::int64_t step_ns = 1'000'000;  // h = 1 ms
+};
+
+// What one step saw and did, reported at its start time t_n = step * h: the state x_n, the input
+// latched at t_n and the controls applied over [t_n, t_n + h], and every derived quantity at x_n.
+struct StepRecord {
+  std::int64_t step = 0;
+  double t = 0;  // s
+  State state;
+  DriverInput input;
+  AppliedControl control;
+  Derived derived;
+  std::uint64_t hash_after = 0;  // StateHash of x_{n+1}
+};
+
+enum class StepStatus { kOk, kNonFinite };
+
+class Simulator {
+ public:
+  // Starts at rest at the world's spawn pose (throws WorldError when no terrain is below it).
+  Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config = {});
+  // Starts from `initial` as it is (a recorded state, or one Spawn() replaces at once).
+  Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config,
+            const State& initial);
+
+  // Takes effect at the next step boundary.
+  void SetParams(const ValidParams& params) { params_ = params; }
+  // Latched at the next step boundary. Non-finite or out-of-range values are clamped and counted.
+  void SetInput(const DriverInput& input);
+  // Places the vehicle at rest (or moving at `speed` along its heading) in static equilibrium on
+  // the terrain below (x, y). Throws WorldError when there is no terrain below.
+  void Spawn(const Pose2& pose, double speed = 0.0);
+  void SetState(const State& state) { state_ = state; }
+
+  // Advances by h. A step whose result is not finite is contained: the state stays at x_n, the
+  // count is raised and kNonFinite is returned.
+  StepStatus Step();
+
+  // Derived quantities (and the controls) at the current state with the current input; nothing
+  // advances.
+  void Forward(Derived& out, AppliedControl* control = nullptr) const;
+
+  const Params& params() const { return params_.get(); }
+  const ValidParams& valid_params() const { return params_; }
+  const State& state() const { return state_; }
+  const DriverInput& input() const { return input_; }
+  const StepRecord& last_step() const { return record_; }
+  const World& world() const { return *world_; }
+  double h() const { return h_; }
+  double time() const { return static_cast<double>(state_.step) * h_; }
+  std::int64_t step_ns() const { return config_.step_ns; }
+  std::uint64_t nonfinite_steps() const { return nonfinite_steps_; }
+  std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
+  // Steps whose horizontal (wall) traces were cast: near a steep surface.
+  std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
+
+ private:
+  struct Workspace {
+    Rk4Workspace rk4;
+    WallPlanes walls;
+    Derived stage_derived;
+    State start;
+  };
+
+  std::shared_ptr<const World> world_;
+  ValidParams params_;
+  SimConfig config_;
+  double h_;
+  State state_;
+  DriverInput input_;
+  StepRecord record_;
+  Workspace ws_;
+  std::uint64_t nonfinite_steps_ = 0;
+  std::uint64_t sanitized_inputs_ = 0;
+  std::uint64_t wall_traced_steps_ = 0;
+};
+
+// Static equilibrium at (x, y, yaw) on the terrain: level in yaw, height, pitch and roll fitted so
+// that each spring carries its static share of the weight. Throws WorldError without terrain.
+State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed);
+
+// Static load of wheel w on level ground, N: m g (c or b)/L * (bP or bL)/(bL + bP).
+double StaticWheelLoad(const Params& p, int w);
+
+}  // namespace vdyn

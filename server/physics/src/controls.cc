@@ -1,0 +1,70 @@
+#include "vdyn/physics/controls.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "vdyn/base/limits.h"
+
+namespace vdyn {
+
+bool SanitizeInput(DriverInput& in) {
+  bool clean = true;
+  auto fix = [&clean](double& v, double lo, double hi) {
+    if (!std::isfinite(v)) {
+      v = 0.0;
+      clean = false;
+    } else if (v < lo || v > hi) {
+      v = std::clamp(v, lo, hi);
+      clean = false;
+    }
+  };
+  fix(in.steer, limits::kSteer.lo, limits::kSteer.hi);
+  fix(in.throttle, limits::kThrottle.lo, limits::kThrottle.hi);
+  fix(in.brake, limits::kBrake.lo, limits::kBrake.hi);
+  fix(in.cruise_speed, limits::kCruiseSetKmh.lo / 3.6, limits::kCruiseSetKmh.hi / 3.6);
+  return clean;
+}
+
+AppliedControl ComputeControls(const Params& p, const DriverInput& in, double h, State& state) {
+  AppliedControl u;
+  u.gamma = std::clamp(in.steer, -p.steering_lock, p.steering_lock);
+  u.throttle = in.throttle;
+  u.brake = in.brake;
+
+  // Automatic speed control: PI on the longitudinal speed vx (body X), output in [-1, 1]:
+  // positive drives, negative brakes. Conditional integration is the anti-windup: the integral
+  // only moves when the output is not saturated in the direction the error pushes. Pressing the
+  // brake pedal overrides the control and clears its integral.
+  if (in.cruise_on && in.brake <= 0.0) {
+    const Eigen::Matrix3d R_WB = Orientation(state.x).normalized().toRotationMatrix();
+    const double vx = (R_WB.transpose() * Velocity(state.x)).x();
+    const double e = in.cruise_speed - vx;
+    const double unsat = p.cruise_kp * e + state.cruise_integral;
+    const bool wind_up = (unsat >= 1.0 && e > 0.0) || (unsat <= -1.0 && e < 0.0);
+    // A driver pressing the throttle beyond the control's output overrides it: hold the integral.
+    const bool overridden = in.throttle > 0.0 && in.throttle > std::clamp(unsat, -1.0, 1.0);
+    if (!wind_up && !overridden) {
+      state.cruise_integral = std::clamp(state.cruise_integral + p.cruise_ki * e * h, -1.0, 1.0);
+    }
+    u.cruise_u = std::clamp(p.cruise_kp * e + state.cruise_integral, -1.0, 1.0);
+    u.cruise_active = true;
+    if (u.throttle >= 0.0) u.throttle = std::max(u.throttle, u.cruise_u);
+    u.brake = std::max(u.brake, -u.cruise_u);
+  } else {
+    state.cruise_integral = 0.0;
+  }
+
+  const double drive = u.throttle * p.drive_force_max;
+  const double brake = u.brake * p.brake_force_max;
+  for (int w = 0; w < kNumWheels; ++w) {
+    const bool front = IsFront(w);
+    u.gamma_W[w] = front ? u.gamma : 0.0;  // parallel front steering, rear wheels fixed
+    u.cos_gamma_W[w] = std::cos(u.gamma_W[w]);
+    u.sin_gamma_W[w] = std::sin(u.gamma_W[w]);
+    u.drive_W[w] = 0.5 * drive * (front ? p.drive_front_fraction : 1.0 - p.drive_front_fraction);
+    u.brake_W[w] = 0.5 * brake * (front ? p.brake_front_fraction : 1.0 - p.brake_front_fraction);
+  }
+  return u;
+}
+
+}  // namespace vdyn

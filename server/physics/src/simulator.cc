@@ -1,0 +1,132 @@
+#include "vdyn/physics/simulator.h"
+
+#include <cmath>
+
+#include <Eigen/Dense>
+
+namespace vdyn {
+
+double StaticWheelLoad(const Params& p, int w) {
+  const double axle = IsFront(w) ? p.c / p.wheelbase : p.b / p.wheelbase;
+  const bool left = w == kLF || w == kLR;
+  const double side = left ? p.b_p / (p.b_l + p.b_p) : p.b_l / (p.b_l + p.b_p);
+  return p.mass * p.gravity * axle * side;
+}
+
+State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed) {
+  const Eigen::Matrix3d R_yaw =
+      Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  const double top = terrain.bounds_max().z() + 10.0;
+  const double depth = top - terrain.bounds_min().z() + 10.0;
+  // Linearised mount height: z_T - x theta + y phi + (R p_TA)_z = required height, solved for
+  // (z_T, theta, phi) in the least-squares sense (pitch theta nose down, roll phi right down).
+  Eigen::Matrix<double, 4, 3> A;
+  Eigen::Vector4d rhs;
+  for (int w = 0; w < kNumWheels; ++w) {
+    const WheelParams& wp = p.wheel[w];
+    const Eigen::Vector3d a_W = R_yaw * p.p_TA_B[w];
+    const Eigen::Vector3d origin(pose.x + a_W.x(), pose.y + a_W.y(), top);
+    const TraceHit hit = terrain.Trace(origin, -Eigen::Vector3d::UnitZ(), depth);
+    if (!hit.hit) {
+      throw WorldError("no terrain below wheel " + std::string(kWheelNames[w]) + " at (" +
+                       std::to_string(origin.x()) + ", " + std::to_string(origin.y()) + ")");
+    }
+    const double ground_z = top - hit.distance;
+    // Spring deformation carrying the static load (with the bump stop if it reaches it).
+    const double F = StaticWheelLoad(p, w);
+    double lT = F / wp.spring_stiffness;
+    if (wp.free_length - lT < wp.bump_stop_length) {
+      lT = (F + wp.bump_stop_stiffness * (wp.free_length - wp.bump_stop_length)) /
+           (wp.spring_stiffness + wp.bump_stop_stiffness);
+    }
+    const double lS = wp.free_length - lT;
+    A(w, 0) = 1.0;
+    A(w, 1) = -p.p_TA_B[w].x();
+    A(w, 2) = p.p_TA_B[w].y();
+    rhs[w] = ground_z + wp.radius + lS + wp.z_offset;
+  }
+  const Eigen::Vector3d sol = A.colPivHouseholderQr().solve(rhs);
+  State s;
+  SetPosition(s.x, Eigen::Vector3d(pose.x, pose.y, sol[0]));
+  SetOrientation(s.x, QuaternionFromRollPitchYaw(sol[2], sol[1], pose.yaw));
+  SetVelocity(s.x, speed * (R_yaw * Eigen::Vector3d::UnitX()));
+  SetAngularVelocityB(s.x, Eigen::Vector3d::Zero());
+  return s;
+}
+
+Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& params,
+                     SimConfig config)
+    : world_(std::move(world)),
+      params_(params),
+      config_(config),
+      h_(static_cast<double>(config.step_ns) * 1e-9) {
+  Spawn(world_->spawn);
+}
+
+Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& params,
+                     SimConfig config, const State& initial)
+    : world_(std::move(world)),
+      params_(params),
+      config_(config),
+      h_(static_cast<double>(config.step_ns) * 1e-9),
+      state_(initial) {}
+
+void Simulator::SetInput(const DriverInput& input) {
+  input_ = input;
+  if (!SanitizeInput(input_)) ++sanitized_inputs_;
+}
+
+void Simulator::Spawn(const Pose2& pose, double speed) {
+  state_ = RestingState(params_.get(), world_->terrain, pose, speed);
+}
+
+StepStatus Simulator::Step() {
+  const Terrain& terrain = world_->terrain;
+  ws_.start = state_;
+
+  // Stage: controls (latched input, speed control) and walls, held for the whole step.
+  record_.input = input_;
+  record_.control = ComputeControls(params_.get(), input_, h_, state_);
+  if (FindWalls(params_.get(), terrain, state_.x, ws_.walls)) ++wall_traced_steps_;
+
+  // Stage: RK4 over the equations of motion; stage 0 is evaluated at x_n and is what we report.
+  const AppliedControl& u = record_.control;
+  auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
+    Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
+    EvaluateDerivative(params_.get(), terrain, u, ws_.walls, x, xdot, d, stage == 0);
+  };
+  Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
+
+  // Stage: post-step.
+  StateVector& x = state_.x;
+  const double qn = x.segment<4>(sx::kQ).norm();
+  if (!x.allFinite() || !(qn > 0.0)) {
+    state_ = ws_.start;  // contain: the state stays at x_n
+    ++nonfinite_steps_;
+    return StepStatus::kNonFinite;
+  }
+  x.segment<4>(sx::kQ) /= qn;
+  if (params_->yaw_mode == YawMode::kPaper && ws_.stage_derived.any_contact) {
+    // The yaw rate is eq. 6 of the new state (contact as seen by the last stage).
+    const Eigen::Matrix3d R_WB = Orientation(x).toRotationMatrix();
+    x[sx::kW + 2] = R_WB.col(0).dot(Velocity(x)) * std::sin(u.gamma) / params_->wheelbase;
+  }
+  record_.step = ws_.start.step;
+  record_.t = static_cast<double>(ws_.start.step) * h_;
+  record_.state = ws_.start;
+  state_.step = ws_.start.step + 1;
+  record_.hash_after = StateHash(state_);
+  return StepStatus::kOk;
+}
+
+void Simulator::Forward(Derived& out, AppliedControl* control) const {
+  State s = state_;
+  const AppliedControl u = ComputeControls(params_.get(), input_, h_, s);
+  if (control != nullptr) *control = u;
+  WallPlanes walls;
+  FindWalls(params_.get(), world_->terrain, state_.x, walls);
+  StateVector xdot;
+  EvaluateDerivative(params_.get(), world_->terrain, u, walls, state_.x, xdot, out);
+}
+
+}  // namespace vdyn

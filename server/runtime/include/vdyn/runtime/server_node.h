@@ -1,0 +1,172 @@
+// The networked server: a Session driven over DDS in real time or in lockstep.
+//
+//  receiver   takes driver inputs and control requests from DDS, decodes and checks them (sizes,
+//             finite numbers, ranges), answers what it must refuse, and hands the rest over
+//  loop       (SCHED_FIFO where permitted) at each step boundary: the inputs, at most 16 requests,
+//             then Session::Step and each state serialised into the state outbox; no lock, no
+//             allocation while stepping, nothing logged
+//  states     the state outbox's writer: vdyn/state, best effort (state_outbox.h)
+//  publisher  replies, parameters, world, events, diagnostics and the status line: every reliable
+//             write, and every log line
+//
+// The threads hand work to each other through bounded lock-free queues (vdyn/base/spsc_queue.h)
+// and ring doorbells; a full queue drops and counts, it never blocks the loop. Shutdown drains
+// what is queued for at most a deadline, whatever a reader does.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "vdyn/base/doorbell.h"
+#include "vdyn/base/spsc_queue.h"
+#include "vdyn/base/time.h"
+#include "vdyn/control.pb.h"
+#include "vdyn/diagnostics.pb.h"
+#include "vdyn/runtime/pacing.h"
+#include "vdyn/runtime/session.h"
+#include "vdyn/runtime/state_outbox.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn {
+
+struct ServerOptions {
+  enum class Mode { kRealtime, kLockstep };
+  Mode mode = Mode::kRealtime;
+  std::uint32_t domain_id = 0;
+  std::vector<std::uint32_t> vehicle_ids = {1};
+  SessionConfig session;
+  double duration_s = 0;          // real time: stop after this much simulated time (0: never)
+  double lockstep_timeout_s = 10;  // lockstep: give up without a request for this long
+  int rt_priority = 50;
+  std::int64_t max_lag_steps = 1000;  // beyond this backlog the schedule is rebased
+  bool status_line = false;       // a terminal line of speed, step rate and lateness
+  std::string stats_out;          // real time: write a run summary here at the end
+  double shutdown_deadline_s = 2.0;  // how long the publisher may drain at the end
+};
+
+class ServerNode {
+ public:
+  ServerNode(std::shared_ptr<const World> world, ServerOptions options);
+  ~ServerNode();
+  ServerNode(const ServerNode&) = delete;
+  ServerNode& operator=(const ServerNode&) = delete;
+
+  // Runs until `stop` is set, the duration is reached or (lockstep) the client is gone.
+  // Returns the process exit code: 0 done, 3 lockstep timeout.
+  int Run(const std::atomic<bool>& stop);
+
+  transport::DropCounters& drops() { return drops_; }
+
+  // One reporting window of the loop, handed to the publisher (plain data, no allocation).
+  struct VehicleReport {
+    std::uint32_t id = 0;
+    bool safe_state = false;
+    double input_age_ms = -1;
+    char source[72] = {};
+    std::uint64_t nonfinite_steps = 0;
+    std::uint64_t sanitized_inputs = 0;
+    double speed_kmh = 0;
+  };
+  struct WindowReport {
+    std::int64_t wall_ns = 0;  // length of the window
+    std::int64_t cpu_ns = 0;   // process CPU in the window
+    std::int64_t sim_time_ns = 0;
+    std::int64_t steps = 0;
+    std::int64_t window_steps = 0;
+    std::uint64_t steps_caught_up = 0;
+    std::uint64_t max_lag_steps = 0;
+    LatenessWindow lateness;
+    int n_vehicles = 0;
+    std::array<VehicleReport, 64> vehicles{};
+  };
+
+ private:
+  struct Outgoing {
+    transport::TopicId topic = transport::TopicId::kControlReply;
+    std::uint32_t key = 0;
+    std::unique_ptr<google::protobuf::Message> msg;
+  };
+  struct DeferredReply {
+    std::int64_t target_steps;
+    pb::ControlReply reply;
+  };
+
+  // Loop thread.
+  void Send(transport::TopicId topic, std::uint32_t key,
+            std::unique_ptr<google::protobuf::Message> msg);
+  void OnEvent(SessionEventRecord&& r);
+  bool Boundary();  // true when a control request arrived
+  void HandleRequest(const pb::ControlRequest& r);
+  void StepOnce();
+  void SendDueStepReplies();
+  void CancelStepReplies(const std::string& why);
+  void PushReport(base::MonoTime now);
+  int RunRealtime(const std::atomic<bool>& stop);
+  int RunLockstep(const std::atomic<bool>& stop);
+  void WriteStats(base::MonoTime start, base::MonoTime end, base::Nanos start_cpu) const;
+
+  // Receiver thread.
+  void ReceiverLoop();
+  // Publisher thread.
+  void PublisherLoop();
+  bool PublishOne(transport::TopicId topic, std::uint32_t key, const google::protobuf::Message& m,
+                  base::MonoTime give_up);
+  void PublishReport(WindowReport& r);
+
+  std::shared_ptr<const World> world_;
+  ServerOptions options_;
+  transport::DropCounters drops_{/*deferred=*/true};
+  transport::Participant participant_;
+  std::unique_ptr<StateOutbox> states_;
+  std::vector<std::unique_ptr<transport::RawWriter>> writers_;  // by TopicId
+  transport::Reader<pb::DriverInput> input_reader_;
+  transport::Reader<pb::ControlRequest> control_reader_;
+  std::unique_ptr<Session> session_;
+  Session::StateSink state_sink_;
+
+  // Receiver -> loop.
+  base::SpscQueue<pb::DriverInput> inputs_{1024};
+  base::SpscQueue<std::unique_ptr<pb::ControlRequest>> requests_{256};
+  // Loop -> receiver: requests done with, freed off the loop thread.
+  base::SpscQueue<std::unique_ptr<pb::ControlRequest>> spent_requests_{256};
+  // Loop -> publisher.
+  base::SpscQueue<Outgoing> outbox_{1024};
+  base::SpscQueue<SessionEventRecord> events_{4096};
+  base::SpscQueue<WindowReport> reports_{8};
+  // Receiver -> publisher: requests refused before they reached the loop.
+  base::SpscQueue<std::unique_ptr<pb::ControlReply>> early_replies_{256};
+  base::Doorbell publisher_bell_;
+  base::Doorbell loop_bell_;
+  std::atomic<bool> receiver_stop_{false};
+  std::atomic<bool> publisher_stop_{false};
+  std::atomic<std::int64_t> publisher_deadline_ns_{0};
+  std::thread receiver_;
+  std::thread publisher_;
+
+  std::vector<DeferredReply> deferred_step_replies_;
+
+  // Drop kinds counted on the loop thread (registered up front: counting allocates nothing).
+  int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1,
+      drop_inputs_full_ = -1, drop_requests_full_ = -1, drop_key_mismatch_ = -1,
+      drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1;
+
+  // Loop statistics: the current window and the whole run.
+  std::string scheduling_;
+  LatenessWindow lateness_;
+  Histogram lateness_all_;
+  std::uint64_t steps_caught_up_ = 0;
+  std::uint64_t max_lag_steps_seen_ = 0;
+  std::uint64_t schedule_rebases_ = 0;
+  base::MonoTime window_start_;
+  base::Nanos window_start_cpu_;
+  std::int64_t window_start_steps_ = 0;
+  // Publisher's view for the status line.
+  std::int64_t last_status_ns_ = 0;
+};
+
+}  // namespace vdyn

@@ -1,0 +1,60 @@
+// The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
+// serialised sample, an instance lookup), so the loop serialises each state into a preallocated
+// frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
+// effort, keep last 1). The loop neither allocates nor blocks; a full queue drops the state and
+// counts it.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <thread>
+
+#include "vdyn/base/doorbell.h"
+#include "vdyn/base/limits.h"
+#include "vdyn/base/spsc_queue.h"
+#include "vdyn/state.pb.h"
+#include "vdyn/transport/dds.h"
+
+namespace vdyn {
+
+class StateOutbox {
+ public:
+  StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
+              std::size_t frames = 512);
+  ~StateOutbox();
+  StateOutbox(const StateOutbox&) = delete;
+  StateOutbox& operator=(const StateOutbox&) = delete;
+
+  // Loop thread: serialises `s` into a free frame and hands it to the writer. False (and
+  // counted) when the queue is full or the state is larger than a frame.
+  bool Push(std::uint32_t key, const pb::VehicleState& s);
+  // Waits until every frame handed over has been written (or `timeout`); true when drained.
+  bool Drain(base::Nanos timeout);
+
+  std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
+  std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
+
+  static constexpr std::size_t kFrameBytes = 8192;
+
+ private:
+  struct Frame {
+    std::uint32_t key = 0;
+    std::uint32_t size = 0;
+    std::array<std::uint8_t, kFrameBytes> bytes;
+  };
+  void WriterLoop();
+
+  transport::Writer<pb::VehicleState> writer_;
+  transport::DropCounters& drops_;
+  int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1;
+  base::SpscQueue<Frame> frames_;
+  base::Doorbell bell_;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> written_{0};
+  std::atomic<std::uint64_t> failures_{0};
+  std::atomic<std::uint64_t> pushed_{0};
+  std::thread thread_;
+};
+
+}  // namespace vdyn

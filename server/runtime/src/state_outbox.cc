@@ -1,0 +1,67 @@
+#include "vdyn/runtime/state_outbox.h"
+
+namespace vdyn {
+
+StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
+                         std::size_t frames)
+    : writer_(participant, transport::TopicId::kState), drops_(drops), frames_(frames) {
+  drop_full_ = drops_.Register("state queue full, state not sent");
+  drop_large_ = drops_.Register("state larger than a frame, not sent");
+  drop_write_ = drops_.Register("write failed on vdyn/state");
+  thread_ = std::thread([this] { WriterLoop(); });
+}
+
+StateOutbox::~StateOutbox() {
+  stop_ = true;
+  bell_.Ring();
+  if (thread_.joinable()) thread_.join();
+}
+
+bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
+  const std::size_t size = s.ByteSizeLong();
+  if (size > kFrameBytes) {
+    drops_.Count(drop_large_);
+    return false;
+  }
+  Frame* f = frames_.Reserve();
+  if (f == nullptr) {
+    drops_.Count(drop_full_);
+    return false;
+  }
+  f->key = key;
+  f->size = static_cast<std::uint32_t>(size);
+  s.SerializeWithCachedSizesToArray(f->bytes.data());
+  frames_.Commit();
+  pushed_.fetch_add(1, std::memory_order_relaxed);
+  bell_.Ring();
+  return true;
+}
+
+bool StateOutbox::Drain(base::Nanos timeout) {
+  const base::MonoTime end = base::MonotonicNow() + timeout;
+  const std::uint64_t target = pushed_.load();
+  while (written() + write_failures() < target) {
+    if (base::MonotonicNow() >= end) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  return true;
+}
+
+void StateOutbox::WriterLoop() {
+  while (true) {
+    const std::uint32_t token = bell_.Token();
+    while (Frame* f = frames_.Front()) {
+      if (writer_.WriteBytes(f->key, {f->bytes.data(), f->size})) {
+        written_.fetch_add(1, std::memory_order_relaxed);
+      } else {
+        failures_.fetch_add(1, std::memory_order_relaxed);
+        drops_.Count(drop_write_, writer_.last_error());
+      }
+      frames_.Pop();
+    }
+    if (stop_.load()) return;
+    bell_.Wait(token, base::Milliseconds(200));
+  }
+}
+
+}  // namespace vdyn

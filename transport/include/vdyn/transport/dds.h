@@ -1,0 +1,220 @@
+// DDS entities for vdyn: a participant, and typed writers and readers that carry Protocol
+// Buffers messages in the envelope of idl/vdyn_envelope.idl. QoS comes from topics.cc only.
+// Every DDS return code is checked: construction throws TransportError with the call and the
+// reason; a failed write, take or wait is reported (last_error(), a drop counter), never ignored.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <algorithm>
+#include <functional>
+#include <limits>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <dds/dds.h>
+#include <google/protobuf/message.h>
+
+#include "vdyn/transport/drops.h"
+#include "vdyn/transport/topics.h"
+
+namespace vdyn::transport {
+
+class TransportError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// "what: reason" for a DDS return code.
+std::string DdsError(std::string_view what, dds_return_t rc);
+
+// A DDS domain participant and the vdyn topics created in it (once each).
+class Participant {
+ public:
+  explicit Participant(std::uint32_t domain_id);
+  ~Participant();
+  Participant(const Participant&) = delete;
+  Participant& operator=(const Participant&) = delete;
+
+  dds_entity_t handle() const { return participant_; }
+  dds_entity_t Topic(TopicId id);
+  std::uint32_t domain_id() const { return domain_id_; }
+
+ private:
+  dds_entity_t participant_ = 0;
+  std::uint32_t domain_id_ = 0;
+  dds_entity_t topics_[8] = {};
+};
+
+// Writes protobuf messages on one topic. Serialises into a buffer it keeps between writes (no
+// allocation once the buffer has grown to the message's size).
+class RawWriter {
+ public:
+  RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength = 0);
+  ~RawWriter();
+  RawWriter(const RawWriter&) = delete;
+  RawWriter& operator=(const RawWriter&) = delete;
+
+  // False when the message is not the topic's payload, cannot be serialised, is larger than the
+  // topic allows, or DDS refused it (see last_error()).
+  bool Write(std::uint32_t key, const google::protobuf::Message& msg);
+  // Writes an already serialised payload of the topic's type as it is (a recording played back).
+  bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  // Number of readers matched right now (0 when the status cannot be read; last_error() says).
+  std::uint32_t MatchedReaders();
+  const std::string& last_error() const { return last_error_; }
+  dds_entity_t handle() const { return writer_; }
+  TopicId topic() const { return id_; }
+
+ private:
+  TopicId id_;
+  dds_entity_t writer_ = 0;
+  std::string buffer_;
+  std::string last_error_;
+};
+
+// What a reader knows of one received sample besides the message.
+struct SampleInfo {
+  std::uint32_t key = 0;
+  std::int64_t source_timestamp_ns = 0;   // the writer's wall clock
+  std::uint64_t publication_handle = 0;   // which writer
+};
+
+// One sample as it arrived: the envelope's key and type name and the payload's bytes.
+struct RawSample {
+  std::string_view type_name;
+  std::span<const std::uint8_t> payload;
+  SampleInfo info;
+};
+
+// Reads one topic. Each sample is checked - envelope type name, payload size, protobuf parse,
+// finite numbers, string lengths - and one that fails is dropped and counted in `drops` with its
+// kind; the rest reach the caller.
+class RawReader {
+ public:
+  RawReader(Participant& participant, TopicId id, DropCounters* drops);
+  ~RawReader();
+  RawReader(const RawReader&) = delete;
+  RawReader& operator=(const RawReader&) = delete;
+
+  // Blocks until data is available or the timeout passes; true when data is available.
+  bool Wait(std::chrono::nanoseconds timeout);
+  // Calls fn from DDS's receive thread as soon as data arrives (the lowest latency: no hand-over
+  // to another thread). Take from inside fn, and then from nowhere else: Take is not reentrant.
+  void OnDataAvailable(std::function<void()> fn);
+  std::uint32_t MatchedWriters();
+  dds_entity_t handle() const { return reader_; }
+  TopicId topic() const { return id_; }
+  const std::string& last_error() const { return last_error_; }
+
+  // Takes every available sample (at most max_samples) and hands each valid one to fn as raw
+  // bytes, unparsed: the envelope's type name must be the topic's and the size within its limit.
+  // Returns how many were handed over.
+  int TakeRaw(const std::function<void(const RawSample&)>& fn,
+              int max_samples = std::numeric_limits<int>::max());
+
+ protected:
+  // Takes every available sample; for each valid one parses into `scratch` and calls fn.
+  template <class F>
+  int TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples);
+
+ private:
+  static constexpr int kBatch = 64;
+  struct Batch {
+    void* samples[kBatch];
+    dds_sample_info_t infos[kBatch];
+  };
+  int TakeBatch(Batch& b, int max_samples);
+  void ReturnBatch(Batch& b, int n);
+  bool Envelope(const void* sample, RawSample& out);
+  bool Decode(const RawSample& raw, google::protobuf::Message& scratch);
+
+  TopicId id_;
+  dds_entity_t reader_ = 0;
+  dds_entity_t waitset_ = 0;
+  dds_entity_t condition_ = 0;
+  DropCounters* drops_;
+  // Drop kinds, registered at construction so counting never allocates.
+  int drop_unknown_type_ = -1, drop_oversized_ = -1, drop_malformed_ = -1, drop_nonfinite_ = -1,
+      drop_long_string_ = -1, drop_dds_error_ = -1;
+  std::unique_ptr<std::function<void()>> on_data_;
+  std::string last_error_;
+};
+
+// Waits on several readers at once (one thread serving several topics).
+class Waitset {
+ public:
+  explicit Waitset(Participant& participant);
+  ~Waitset();
+  Waitset(const Waitset&) = delete;
+  Waitset& operator=(const Waitset&) = delete;
+  void Attach(RawReader& reader);
+  // Blocks until one of the readers has data or the timeout passes; true when one has.
+  bool Wait(std::chrono::nanoseconds timeout);
+  const std::string& last_error() const { return last_error_; }
+
+ private:
+  dds_entity_t waitset_ = 0;
+  std::vector<dds_entity_t> conditions_;
+  std::string last_error_;
+};
+
+template <class M>
+class Writer : public RawWriter {
+ public:
+  using RawWriter::RawWriter;
+  bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
+};
+
+template <class M>
+class Reader : public RawReader {
+ public:
+  using RawReader::RawReader;
+  // Calls fn(const M&, const SampleInfo&) for every valid sample available now (at most
+  // max_samples taken); returns how many valid ones.
+  template <class F>
+  int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
+    return TakeInto(
+        scratch_,
+        [&](const google::protobuf::Message&, const SampleInfo& info) {
+          fn(static_cast<const M&>(scratch_), info);
+        },
+        max_samples);
+  }
+
+ private:
+  M scratch_;
+};
+
+// --- implementation of the template part -------------------------------------------------------
+
+template <class F>
+int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples) {
+  int delivered = 0;
+  int taken = 0;
+  Batch b;
+  while (taken < max_samples) {
+    const int n = TakeBatch(b, std::min(kBatch, max_samples - taken));
+    if (n <= 0) break;
+    taken += n;
+    for (int i = 0; i < n; ++i) {
+      if (!b.infos[i].valid_data) continue;
+      RawSample raw;
+      if (!Envelope(b.samples[i], raw)) continue;
+      raw.info.source_timestamp_ns = b.infos[i].source_timestamp;
+      raw.info.publication_handle = b.infos[i].publication_handle;
+      if (!Decode(raw, scratch)) continue;
+      fn(scratch, raw.info);
+      ++delivered;
+    }
+    ReturnBatch(b, n);
+    if (n < kBatch) break;
+  }
+  return delivered;
+}
+
+}  // namespace vdyn::transport

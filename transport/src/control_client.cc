@@ -1,0 +1,54 @@
+#include "vdyn/transport/control_client.h"
+
+namespace vdyn::transport {
+
+ControlClient::ControlClient(Participant& participant, std::string client_id)
+    : client_id_(std::move(client_id)),
+      writer_(participant, TopicId::kControl),
+      reader_(participant, TopicId::kControlReply, &drops_) {}
+
+bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (writer_.MatchedReaders() == 0 || reader_.MatchedWriters() == 0) {
+    if (std::chrono::steady_clock::now() >= deadline) {
+      last_error_ = "no server matched within " + std::to_string(timeout.count()) + " ms";
+      return false;
+    }
+    reader_.Wait(std::chrono::milliseconds(20));
+  }
+  return true;
+}
+
+std::optional<pb::ControlReply> ControlClient::Call(pb::ControlRequest request,
+                                                    std::chrono::milliseconds timeout) {
+  request.set_request_id(next_id_++);
+  request.set_client_id(client_id_);
+  if (!writer_.Write(request.vehicle_id(), request)) {
+    last_error_ = writer_.last_error();
+    return std::nullopt;
+  }
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::optional<pb::ControlReply> reply;
+  while (!reply) {
+    reader_.Take([&](const pb::ControlReply& r, const SampleInfo&) {
+      if (r.client_id() == client_id_ && r.request_id() == request.request_id()) reply = r;
+    });
+    if (reply) break;
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= deadline) {
+      last_error_ = "no reply to request " + std::to_string(request.request_id()) + " within " +
+                    std::to_string(timeout.count()) + " ms";
+      if (request.server_id().empty()) {
+        last_error_ += " (no server answered: is a server running that owns vehicle " +
+                       std::to_string(request.vehicle_id()) + "?)";
+      } else {
+        last_error_ += " (no server '" + request.server_id() + "' answered)";
+      }
+      return std::nullopt;
+    }
+    reader_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
+  }
+  return reply;
+}
+
+}  // namespace vdyn::transport

@@ -1,0 +1,285 @@
+#include "vdyn/transport/dds.h"
+
+#include <algorithm>
+#include <cstring>
+
+#include "vdyn/base/text.h"
+#include "vdyn/messages/checks.h"
+#include "vdyn_envelope.h"
+
+namespace vdyn::transport {
+
+std::string DdsError(std::string_view what, dds_return_t rc) {
+  return std::string(what) + ": " + dds_strretcode(rc);
+}
+
+Participant::Participant(std::uint32_t domain_id) : domain_id_(domain_id) {
+  participant_ = dds_create_participant(domain_id, nullptr, nullptr);
+  if (participant_ < 0) {
+    throw TransportError(DdsError("cannot create the DDS participant on domain " +
+                                      std::to_string(domain_id),
+                                  participant_));
+  }
+}
+
+Participant::~Participant() {
+  if (participant_ > 0) dds_delete(participant_);  // deletes every child entity too
+}
+
+dds_entity_t Participant::Topic(TopicId id) {
+  auto& t = topics_[static_cast<int>(id)];
+  if (t == 0) {
+    const TopicSpec& s = Spec(id);
+    dds_qos_t* q = ReaderQos(id);
+    t = dds_create_topic(participant_, &vdyn_dds_Envelope_desc, s.name, q, nullptr);
+    dds_delete_qos(q);
+    if (t < 0) {
+      const dds_entity_t rc = t;
+      t = 0;
+      throw TransportError(DdsError(std::string("cannot create topic ") + s.name, rc));
+    }
+  }
+  return t;
+}
+
+RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength)
+    : id_(id) {
+  dds_qos_t* q = WriterQos(id, ownership_strength);
+  writer_ = dds_create_writer(participant.handle(), participant.Topic(id), q, nullptr);
+  dds_delete_qos(q);
+  if (writer_ < 0) {
+    throw TransportError(DdsError(std::string("cannot create a writer on ") + Spec(id).name, writer_));
+  }
+}
+
+RawWriter::~RawWriter() {
+  if (writer_ > 0) dds_delete(writer_);
+}
+
+bool RawWriter::Write(std::uint32_t key, const google::protobuf::Message& msg) {
+  const TopicSpec& s = Spec(id_);
+  if (msg.GetDescriptor()->full_name() != s.payload) {
+    last_error_ = "a " + msg.GetDescriptor()->full_name() + " does not belong on " + s.name;
+    return false;
+  }
+  if (!msg.SerializeToString(&buffer_)) {
+    last_error_ = "cannot serialise " + msg.GetDescriptor()->full_name();
+    return false;
+  }
+  return WriteBytes(key, {reinterpret_cast<const std::uint8_t*>(buffer_.data()), buffer_.size()});
+}
+
+bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload) {
+  const TopicSpec& s = Spec(id_);
+  if (payload.size() > s.max_payload_bytes) {
+    last_error_ = "a " + std::to_string(payload.size()) + "-byte " + s.payload +
+                  " is larger than " + s.name + " allows (" +
+                  std::to_string(s.max_payload_bytes) + " bytes)";
+    return false;
+  }
+  vdyn_dds_Envelope env;
+  env.key = key;
+  std::strncpy(env.type_name, s.payload, sizeof env.type_name - 1);
+  env.type_name[sizeof env.type_name - 1] = '\0';
+  env.payload._maximum = static_cast<std::uint32_t>(payload.size());
+  env.payload._length = static_cast<std::uint32_t>(payload.size());
+  // dds_write copies (serialises) the sample; the buffer stays ours.
+  env.payload._buffer = const_cast<std::uint8_t*>(payload.data());
+  env.payload._release = false;
+  const dds_return_t rc = dds_write(writer_, &env);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError(std::string("dds_write on ") + s.name, rc);
+    return false;
+  }
+  return true;
+}
+
+std::uint32_t RawWriter::MatchedReaders() {
+  dds_publication_matched_status_t st;
+  const dds_return_t rc = dds_get_publication_matched_status(writer_, &st);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError("dds_get_publication_matched_status", rc);
+    return 0;
+  }
+  return st.current_count;
+}
+
+RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops)
+    : id_(id), drops_(drops) {
+  dds_qos_t* q = ReaderQos(id);
+  reader_ = dds_create_reader(participant.handle(), participant.Topic(id), q, nullptr);
+  dds_delete_qos(q);
+  const std::string name = Spec(id).name;
+  if (reader_ < 0) throw TransportError(DdsError("cannot create a reader on " + name, reader_));
+  waitset_ = dds_create_waitset(participant.handle());
+  if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset for " + name, waitset_));
+  condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
+  if (condition_ < 0) {
+    throw TransportError(DdsError("cannot create a read condition for " + name, condition_));
+  }
+  if (const dds_return_t rc = dds_waitset_attach(waitset_, condition_, 0); rc != DDS_RETCODE_OK) {
+    throw TransportError(DdsError("cannot attach the read condition of " + name, rc));
+  }
+  if (drops_ != nullptr) {
+    drop_unknown_type_ = drops_->Register("unknown type on " + name);
+    drop_oversized_ = drops_->Register("oversized payload on " + name);
+    drop_malformed_ = drops_->Register("malformed payload on " + name);
+    drop_nonfinite_ = drops_->Register("non-finite value on " + name);
+    drop_long_string_ = drops_->Register("oversized string on " + name);
+    drop_dds_error_ = drops_->Register("DDS error on " + name);
+  }
+}
+
+RawReader::~RawReader() {
+  if (on_data_ && reader_ > 0) dds_set_listener(reader_, nullptr);  // no callback after this
+  if (waitset_ > 0) dds_delete(waitset_);
+  if (condition_ > 0) dds_delete(condition_);
+  if (reader_ > 0) dds_delete(reader_);
+}
+
+bool RawReader::Wait(std::chrono::nanoseconds timeout) {
+  dds_attach_t triggered;
+  const dds_return_t n = dds_waitset_wait(waitset_, &triggered, 1, timeout.count());
+  if (n < 0) {
+    last_error_ = DdsError("dds_waitset_wait", n);
+    if (drops_ != nullptr) drops_->Count(drop_dds_error_, "dds_waitset_wait");
+    return false;
+  }
+  return n > 0;
+}
+
+void RawReader::OnDataAvailable(std::function<void()> fn) {
+  on_data_ = std::make_unique<std::function<void()>>(std::move(fn));
+  dds_listener_t* l = dds_create_listener(on_data_.get());
+  if (l == nullptr) throw TransportError("dds_create_listener failed");
+  dds_lset_data_available(l, [](dds_entity_t, void* arg) {
+    (*static_cast<std::function<void()>*>(arg))();
+  });
+  const dds_return_t rc = dds_set_listener(reader_, l);
+  dds_delete_listener(l);
+  if (rc != DDS_RETCODE_OK) throw TransportError(DdsError("dds_set_listener", rc));
+}
+
+std::uint32_t RawReader::MatchedWriters() {
+  dds_subscription_matched_status_t st;
+  const dds_return_t rc = dds_get_subscription_matched_status(reader_, &st);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError("dds_get_subscription_matched_status", rc);
+    return 0;
+  }
+  return st.current_count;
+}
+
+Waitset::Waitset(Participant& participant) {
+  waitset_ = dds_create_waitset(participant.handle());
+  if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset", waitset_));
+}
+
+Waitset::~Waitset() {
+  for (dds_entity_t c : conditions_) {
+    dds_waitset_detach(waitset_, c);
+    dds_delete(c);
+  }
+  if (waitset_ > 0) dds_delete(waitset_);
+}
+
+void Waitset::Attach(RawReader& reader) {
+  const dds_entity_t c = dds_create_readcondition(reader.handle(), DDS_ANY_STATE);
+  if (c < 0) throw TransportError(DdsError("cannot create a read condition", c));
+  conditions_.push_back(c);
+  if (const dds_return_t rc = dds_waitset_attach(waitset_, c, 0); rc != DDS_RETCODE_OK) {
+    throw TransportError(DdsError("cannot attach a read condition", rc));
+  }
+}
+
+bool Waitset::Wait(std::chrono::nanoseconds timeout) {
+  dds_attach_t triggered[8];
+  const dds_return_t n = dds_waitset_wait(waitset_, triggered, 8, timeout.count());
+  if (n < 0) {
+    last_error_ = DdsError("dds_waitset_wait", n);
+    return false;
+  }
+  return n > 0;
+}
+
+int RawReader::TakeBatch(Batch& b, int max_samples) {
+  for (void*& p : b.samples) p = nullptr;  // loans from DDS
+  const auto n_max = static_cast<std::uint32_t>(std::clamp(max_samples, 1, kBatch));
+  const dds_return_t n = dds_take(reader_, b.samples, b.infos, n_max, n_max);
+  if (n < 0) {
+    last_error_ = DdsError("dds_take", n);
+    if (drops_ != nullptr) drops_->Count(drop_dds_error_, "dds_take");
+    return 0;
+  }
+  return static_cast<int>(n);
+}
+
+void RawReader::ReturnBatch(Batch& b, int n) {
+  if (n <= 0) return;
+  const dds_return_t rc = dds_return_loan(reader_, b.samples, n);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError("dds_return_loan", rc);
+    if (drops_ != nullptr) drops_->Count(drop_dds_error_, "dds_return_loan");
+  }
+}
+
+bool RawReader::Envelope(const void* sample, RawSample& out) {
+  const auto* env = static_cast<const vdyn_dds_Envelope*>(sample);
+  const TopicSpec& s = Spec(id_);
+  out.info.key = env->key;
+  out.type_name = std::string_view(env->type_name, strnlen(env->type_name, sizeof env->type_name));
+  if (out.type_name != s.payload) {
+    if (drops_ != nullptr) drops_->Count(drop_unknown_type_, out.type_name);
+    return false;
+  }
+  if (env->payload._length > s.max_payload_bytes) {
+    if (drops_ != nullptr) {
+      drops_->Count(drop_oversized_, std::to_string(env->payload._length) + " bytes");
+    }
+    return false;
+  }
+  out.payload = {env->payload._buffer, env->payload._length};
+  return true;
+}
+
+bool RawReader::Decode(const RawSample& raw, google::protobuf::Message& scratch) {
+  if (!scratch.ParseFromArray(raw.payload.data(), static_cast<int>(raw.payload.size()))) {
+    if (drops_ != nullptr) drops_->Count(drop_malformed_);
+    return false;
+  }
+  const messages::Finding f = messages::CheckMessage(scratch);
+  if (f.problem == messages::Problem::kNonFinite) {
+    if (drops_ != nullptr) drops_->Count(drop_nonfinite_, f.field);
+    return false;
+  }
+  if (f.problem == messages::Problem::kStringTooLong) {
+    if (drops_ != nullptr) drops_->Count(drop_long_string_, f.field);
+    return false;
+  }
+  return true;
+}
+
+int RawReader::TakeRaw(const std::function<void(const RawSample&)>& fn, int max_samples) {
+  int delivered = 0;
+  int taken = 0;
+  Batch b;
+  while (taken < max_samples) {
+    const int n = TakeBatch(b, std::min(kBatch, max_samples - taken));
+    if (n <= 0) break;
+    taken += n;
+    for (int i = 0; i < n; ++i) {
+      if (!b.infos[i].valid_data) continue;
+      RawSample raw;
+      if (!Envelope(b.samples[i], raw)) continue;
+      raw.info.source_timestamp_ns = b.infos[i].source_timestamp;
+      raw.info.publication_handle = b.infos[i].publication_handle;
+      fn(raw);
+      ++delivered;
+    }
+    ReturnBatch(b, n);
+    if (n < kBatch) break;
+  }
+  return delivered;
+}
+
+}  // namespace vdyn::transport

@@ -1,0 +1,97 @@
+#include "vdyn/transport/topics.h"
+
+#include <array>
+#include <stdexcept>
+
+#include "vdyn/base/hash.h"
+#include "vdyn/base/limits.h"
+
+namespace vdyn::transport {
+namespace {
+
+constexpr std::int64_t kMs = 1'000'000;
+
+// clang-format off
+// name, payload, reliable, depth (0 = all), transient-local, exclusive, deadline, liveliness,
+// largest payload (vdyn/base/limits.h)
+constexpr std::array<TopicSpec, 8> kTopics = {{
+  // State every step: the newest sample is all that matters; never block the 1 kHz loop.
+  {TopicId::kState, "vdyn/state", "vdyn.pb.VehicleState", false, 1, false, false, 0, 0, limits::kMaxStateBytes},
+  // Driver input: the strongest live writer per vehicle drives (primary rig, backup device).
+  // Liveliness is asserted by each write (manual by topic), so a writer that stops writing -
+  // a crashed process or a hung input loop - loses ownership to the next one after the lease.
+  {TopicId::kInput, "vdyn/input", "vdyn.pb.DriverInput", true, 1, false, true, 50 * kMs, 200 * kMs, limits::kMaxInputBytes},
+  // Requests and replies: every one delivered, in order.
+  {TopicId::kControl, "vdyn/control", "vdyn.pb.ControlRequest", true, 0, false, false, 0, 0, limits::kMaxControlBytes},
+  {TopicId::kControlReply, "vdyn/control_reply", "vdyn.pb.ControlReply", true, 0, false, false, 0, 0, limits::kMaxReplyBytes},
+  // Parameters in effect and the world: a viewer or recorder that joins late gets them at once.
+  {TopicId::kParams, "vdyn/params", "vdyn.pb.VehicleParams", true, 1, true, false, 0, 0, limits::kMaxParamsBytes},
+  {TopicId::kWorld, "vdyn/world", "vdyn.pb.WorldDescription", true, 1, true, false, 0, 0, limits::kMaxWorldBytes},
+  // Session events: every one delivered (a re-simulation needs all of them).
+  {TopicId::kEvents, "vdyn/events", "vdyn.pb.SessionEvent", true, 0, false, false, 0, 0, limits::kMaxEventBytes},
+  {TopicId::kDiagnostics, "vdyn/diagnostics", "vdyn.pb.Diagnostics", true, 1, false, false, 0, 0, limits::kMaxDiagnosticsBytes},
+}};
+// clang-format on
+
+dds_qos_t* BaseQos(const TopicSpec& s) {
+  dds_qos_t* q = dds_create_qos();
+  // A reliable writer blocks at most 10 ms when the reader's history is full (keep-all topics
+  // only); the server writes those from a thread of their own, never from the step loop.
+  dds_qset_reliability(q, s.reliable ? DDS_RELIABILITY_RELIABLE : DDS_RELIABILITY_BEST_EFFORT,
+                       DDS_MSECS(10));
+  if (s.history_depth == 0) {
+    dds_qset_history(q, DDS_HISTORY_KEEP_ALL, 0);
+  } else {
+    dds_qset_history(q, DDS_HISTORY_KEEP_LAST, s.history_depth);
+  }
+  dds_qset_durability(q, s.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL
+                                           : DDS_DURABILITY_VOLATILE);
+  if (s.transient_local) {
+    // How many samples per instance a late joiner receives.
+    dds_qset_durability_service(q, 0, DDS_HISTORY_KEEP_LAST, s.history_depth == 0 ? 1 : s.history_depth,
+                                DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED);
+  }
+  dds_qset_ownership(q, s.exclusive_ownership ? DDS_OWNERSHIP_EXCLUSIVE : DDS_OWNERSHIP_SHARED);
+  dds_qset_deadline(q, s.deadline_ns > 0 ? s.deadline_ns : DDS_INFINITY);
+  if (s.liveliness_lease_ns > 0) {
+    dds_qset_liveliness(q, DDS_LIVELINESS_MANUAL_BY_TOPIC, s.liveliness_lease_ns);
+  } else {
+    dds_qset_liveliness(q, DDS_LIVELINESS_AUTOMATIC, DDS_INFINITY);
+  }
+  dds_qset_destination_order(q, DDS_DESTINATIONORDER_BY_RECEPTION_TIMESTAMP);
+  dds_qset_resource_limits(q, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED);
+  return q;
+}
+
+}  // namespace
+
+const TopicSpec& Spec(TopicId id) {
+  for (const TopicSpec& s : kTopics) {
+    if (s.id == id) return s;
+  }
+  throw std::logic_error("unknown topic id");
+}
+
+std::span<const TopicSpec> AllTopics() { return kTopics; }
+
+dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
+  const TopicSpec& s = Spec(id);
+  dds_qos_t* q = BaseQos(s);
+  if (s.exclusive_ownership) dds_qset_ownership_strength(q, ownership_strength);
+  // Instances stay alive when a writer goes away: a restarted server keeps its keys.
+  dds_qset_writer_data_lifecycle(q, false);
+  return q;
+}
+
+dds_qos_t* ReaderQos(TopicId id) { return BaseQos(Spec(id)); }
+
+std::uint32_t ServerKey(const std::string& server_id) { return base::ServerKey(server_id); }
+
+const TopicSpec* SpecByName(const std::string& name) {
+  for (const TopicSpec& s : kTopics) {
+    if (name == s.name) return &s;
+  }
+  return nullptr;
+}
+
+}  // namespace vdyn::transport
