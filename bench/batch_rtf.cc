@@ -15,12 +15,12 @@
 
 #include <unistd.h>
 
-#include "batch.h"
-#include "csv_output.h"
-#include "maneuver.h"
-#include "params_io.h"
-#include "simulator.h"
-#include "world.h"
+#include "vdyn/runtime/batch.h"
+#include "vdyn/io/csv.h"
+#include "vdyn/io/maneuver.h"
+#include "vdyn/bridge/params.h"
+#include "vdyn/physics/simulator.h"
+#include "vdyn/physics/world.h"
 
 namespace {
 

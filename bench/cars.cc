@@ -10,7 +10,7 @@
 #include <BulletDynamics/Vehicle/btRaycastVehicle.h>
 #include <btBulletDynamicsCommon.h>
 
-#include "params_io.h"
+#include "vdyn/bridge/params.h"
 #include "terrain_gen.h"
 
 namespace vdyn::bench {
@@ -56,7 +56,7 @@ bool Course::Leaving(const Pose2& pose) const {
   return std::abs(pose.x) > limit || std::abs(pose.y) > limit;
 }
 
-Params BenchParams() {
+ValidParams BenchParams() {
   return ParamsFromProto(DefaultVehicleParams());
 }
 
@@ -71,7 +71,7 @@ Pose2 PoseOf(const State& s) {
 }
 }  // namespace
 
-VdynCar::VdynCar(const Course& course, const Params& params)
+VdynCar::VdynCar(const Course& course, const ValidParams& params)
     : course_(course), sim_(course.world, params) {
   Respawn();
 }

@@ -11,9 +11,9 @@
 
 #include <Eigen/Core>
 
-#include "params.h"
-#include "simulator.h"
-#include "world.h"
+#include "vdyn/physics/params.h"
+#include "vdyn/physics/simulator.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn::bench {
 
@@ -37,11 +37,11 @@ Course FacilityCourse();
 // heading turned by the golden angle at each spawn.
 Course TerrainCourse();
 
-Params BenchParams();  // vdyn's default vehicle
+ValidParams BenchParams();  // vdyn's default vehicle
 
 class VdynCar {
  public:
-  VdynCar(const Course& course, const Params& params);
+  VdynCar(const Course& course, const ValidParams& params);
   // One step: the driver's input, then Simulator::Step. False when the step was not finite.
   bool Step();
   bool NeedsRespawn() const { return course_.Leaving(pose_); }

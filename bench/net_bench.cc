@@ -29,8 +29,9 @@
 #include <thread>
 #include <vector>
 
-#include "dds.h"
-#include "pacing.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/base/time.h"
+#include "vdyn/runtime/pacing.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/state.pb.h"
 
@@ -93,9 +94,9 @@ int Subscriber(std::uint32_t domain, double seconds) {
   vdyn::transport::Participant p(domain);
   vdyn::transport::DropCounters drops;
   vdyn::transport::Reader<vdyn::pb::VehicleState> states(p, TopicId::kState, &drops);
-  const std::int64_t end = vdyn::MonotonicNowNs() + static_cast<std::int64_t>(seconds * 1e9);
+  const std::int64_t end = vdyn::base::MonotonicNow().ns + static_cast<std::int64_t>(seconds * 1e9);
   std::uint64_t n = 0;
-  while (vdyn::MonotonicNowNs() < end) {
+  while (vdyn::base::MonotonicNow().ns < end) {
     states.Wait(std::chrono::milliseconds(10));
     n += static_cast<std::uint64_t>(
         states.Take([](const vdyn::pb::VehicleState&, const vdyn::transport::SampleInfo&) {}));
@@ -167,19 +168,19 @@ int main(int argc, char** argv) {
     msg.set_cruise_on(true);
     msg.set_cruise_set_kmh(30.0);
     std::uint64_t seq = 0;
-    std::int64_t next = vdyn::MonotonicNowNs();
+    std::int64_t next = vdyn::base::MonotonicNow().ns;
     while (!stop) {
-      vdyn::SleepUntilNs(next += 1'000'000);
+      vdyn::base::SleepUntil({next += 1'000'000});
       msg.set_sequence(++seq);
       msg.set_steer(0.05 * std::sin(static_cast<double>(seq) * 1e-3));  // the input really varies
-      msg.set_stamp_ns(vdyn::MonotonicNowNs());
+      msg.set_stamp_ns(vdyn::base::MonotonicNow().ns);
       input.Write(1, msg);
     }
   });
 
   vdyn::Histogram one_way, input_to_state;
   std::uint64_t received = 0, last_seq = 0;
-  const std::int64_t t0 = vdyn::MonotonicNowNs();
+  const std::int64_t t0 = vdyn::base::MonotonicNow().ns;
   const std::int64_t measure_from = t0 + static_cast<std::int64_t>(warmup * 1e9);
   const std::int64_t measure_to = measure_from + static_cast<std::int64_t>(seconds * 1e9);
   std::atomic<bool> measuring{false};
@@ -189,7 +190,7 @@ int main(int argc, char** argv) {
   states.OnDataAvailable([&] {
     states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
       const std::int64_t now_wall = dds_time();
-      const std::int64_t now_mono = vdyn::MonotonicNowNs();
+      const std::int64_t now_mono = vdyn::base::MonotonicNow().ns;
       if (!measuring) return;
       std::lock_guard<std::mutex> lock(mu);
       state_bytes = s.ByteSizeLong();
@@ -201,10 +202,10 @@ int main(int argc, char** argv) {
       }
     });
   });
-  vdyn::SleepUntilNs(measure_from);
+  vdyn::base::SleepUntil({measure_from});
   const double cpu0 = ProcessCpuSeconds(server);
   measuring = true;
-  vdyn::SleepUntilNs(measure_to);
+  vdyn::base::SleepUntil({measure_to});
   measuring = false;
   const double cpu1 = ProcessCpuSeconds(server);
   stop = true;

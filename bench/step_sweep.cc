@@ -23,11 +23,12 @@
 #include <string>
 #include <vector>
 
-#include "drivers.h"
-#include "maneuver.h"
-#include "params_io.h"
-#include "simulator.h"
-#include "world.h"
+#include "vdyn/physics/drivers.h"
+#include "vdyn/io/maneuver.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/bridge/params.h"
+#include "vdyn/physics/simulator.h"
+#include "vdyn/physics/world.h"
 
 namespace {
 
@@ -50,7 +51,7 @@ struct Metrics {
 enum class Drive { kDemo, kRough, kBarrier };
 const char* kDriveNames[] = {"demo", "rough", "barrier"};
 
-Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::Params& params,
+Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::ValidParams& params,
             Drive drive, std::int64_t step_ns) {
   vdyn::SimConfig cfg;
   cfg.step_ns = step_ns;
@@ -81,7 +82,7 @@ Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::Params&
   double az2 = 0;
   for (std::int64_t i = 0; i < n; ++i) {
     DriverInput in;
-    if (drive == Drive::kDemo) in = demo.At(sim.time());
+    if (drive == Drive::kDemo) in = vdyn::FromManeuver(demo.At(sim.time()));
     if (drive == Drive::kRough) in = circuit.Input(sim.state(), sim.time());
     if (drive == Drive::kBarrier) {
       in.cruise_on = true;
@@ -103,7 +104,7 @@ Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::Params&
     for (int k = 0; k < vdyn::Params::kNumProbes; ++k) {
       const Eigen::Vector3d corner =
           vdyn::Position(r.state.x) +
-          R * (params.p_TO_B + params.probe_length[k] * params.probe_dir_B[k]);
+          R * (params->p_TO_B + params->probe_length[k] * params->probe_dir_B[k]);
       m.max_body_y = std::max(m.max_body_y, corner.y());
     }
   }
@@ -123,7 +124,7 @@ int main(int argc, char** argv) {
     std::sort(steps_ms.begin(), steps_ms.end());
   }
   std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("facility");
-  const vdyn::Params params = vdyn::ParamsFromProto(vdyn::DefaultVehicleParams());
+  const vdyn::ValidParams params = vdyn::ParamsFromProto(vdyn::DefaultVehicleParams());
 
   Metrics ref[3];
   for (int d = 0; d < 3; ++d) ref[d] = Run(world, params, static_cast<Drive>(d), 1'000'000);

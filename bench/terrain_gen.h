@@ -7,8 +7,8 @@
 
 #include <memory>
 
-#include "mesh.h"
-#include "world.h"
+#include "vdyn/physics/mesh.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn::bench {
 

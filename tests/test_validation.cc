@@ -4,6 +4,7 @@
 #include <cmath>
 #include <numbers>
 #include <cstdio>
+#include <cstring>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -495,12 +496,19 @@ TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
 
 TEST(Properties, NonFiniteStateIsContained) {
   Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 50, {});  // a state with a history: step, cruise integral, motion all non-trivial
   State s = sim.state();
   s.x[sx::kV] = std::numeric_limits<double>::infinity();
+  s.cruise_integral = 0.125;
   sim.SetState(s);
   EXPECT_EQ(sim.Step(), StepStatus::kNonFinite);
   EXPECT_EQ(sim.nonfinite_steps(), 1u);
-  EXPECT_EQ(sim.state().step, s.step);  // stayed at x_n
+  // The rejected step left the state exactly as it was before it, bit for bit.
+  const State& after = sim.state();
+  EXPECT_EQ(std::memcmp(after.x.data(), s.x.data(), sizeof(double) * 13), 0);
+  EXPECT_EQ(std::memcmp(&after.cruise_integral, &s.cruise_integral, sizeof(double)), 0);
+  EXPECT_EQ(after.step, s.step);
+  EXPECT_EQ(StateHash(after), StateHash(s));
 }
 
 TEST(Properties, ParametersChangeBetweenSteps) {

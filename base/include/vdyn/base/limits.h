@@ -35,6 +35,12 @@ inline constexpr Range kSteer{-1.5, 1.5, false, false, "steer (front road-wheel 
 inline constexpr Range kThrottle{-1.0, 1.0, false, false, "throttle"};
 inline constexpr Range kBrake{0.0, 1.0, false, false, "brake"};
 inline constexpr Range kCruiseSetKmh{0.0, 400.0, false, false, "cruise_set_kmh"};
+// The hand-wheel angle (steer_mode STEER_HAND_WHEEL): three turns each way covers every rig.
+inline constexpr Range kHandWheel{-6.0 * 3.141592653589793, 6.0 * 3.141592653589793, false, false,
+                                  "steer (hand-wheel angle, rad)"};
+inline constexpr Range kClutch{0.0, 1.0, false, false, "clutch"};
+inline constexpr Range kHandbrake{0.0, 1.0, false, false, "handbrake"};
+inline constexpr Range kGear{-1.0, 10.0, false, false, "gear"};
 
 // --- Control requests (vdyn.pb.ControlRequest) -----------------------------------------------
 inline constexpr Range kPoseXY{-1e7, 1e7, false, false, "pose position, m"};

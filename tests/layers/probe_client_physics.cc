@@ -1,0 +1,2 @@
+// Must not compile: the client layer cannot see the physics (tests/layers/CMakeLists.txt).
+#include "vdyn/physics/state.h"

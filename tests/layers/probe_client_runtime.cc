@@ -1,0 +1,2 @@
+// Must not compile: the client layer cannot see the server runtime.
+#include "vdyn/runtime/session.h"
