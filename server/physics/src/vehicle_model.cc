@@ -243,7 +243,7 @@ void Derivatives(const Params& p, const BodyKinematics& k, const BodyLoads& load
   xdot.segment<3>(sx::kW) = out.dw_B;
 }
 
-void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedControl& u,
+[[gnu::flatten]] void EvaluateDerivative(const Params& p, const Terrain& terrain, const AppliedControl& u,
                         const WallPlanes& walls, const StateVector& x, StateVector& xdot,
                         Derived& out, bool report_all) {
   BodyKinematics k;
