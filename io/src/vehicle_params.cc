@@ -82,6 +82,7 @@ pb::VehicleParams DefaultVehicleParams() {
   p.set_gravity(9.81);
   p.set_steering_trail(0.04);
   p.set_steering_ratio(15.0);
+  p.set_model(pb::VEHICLE_MODEL_PAPER);
   return p;
 }
 

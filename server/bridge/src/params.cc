@@ -108,6 +108,7 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
     }
   }
   for (const std::string& m : missing) out.push_back({m, "missing"});
+  CheckEnum(msg, "model", out);
   CheckEnum(msg, "yaw_mode", out);
   CheckEnum(msg, "tire_law", out);
   for (ParamIssue& i : CheckParams(RawParams(msg))) {
