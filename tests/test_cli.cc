@@ -10,6 +10,7 @@
 #include "vdyn/io/csv.h"
 #include "vdyn/bridge/params.h"
 #include "process.h"
+#include <filesystem>
 #include "test_support.h"
 
 namespace vdyn {
@@ -106,7 +107,96 @@ TEST(Cli, BadOptionValueIsRefused) {
   EXPECT_THAT(r.output, HasSubstr("--step-ms"));
 }
 
+// Every numeric option of vdyn-server is checked for a finite number in its range, in one place
+// (vdyn/cli/options.h with the table of limits): NaN, infinities, absurd magnitudes and text are
+// usage errors (exit code 2) naming the option, never a run with a broken number.
+struct BadOption {
+  const char* args;
+  const char* message;
+};
+class ServerRefusesBadNumbers : public ::testing::TestWithParam<BadOption> {};
+
+TEST_P(ServerRefusesBadNumbers, WithExitCode2AndTheOptionNamed) {
+  testing::UseLoopbackDds();
+  const Result r = RunServer(std::string(GetParam().args) + " --domain 229");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr(GetParam().message));
+  EXPECT_EQ(r.output.find("e+"), std::string::npos) << "limits are printed as a person writes them";
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Options, ServerRefusesBadNumbers,
+    ::testing::Values(
+        BadOption{"--step-ms nan", "--step-ms: 'nan' is not a finite number"},
+        BadOption{"--step-ms 1e300", "--step-ms: integration step, ms must be in [0.01, 100], got 1e300"},
+        BadOption{"--lockstep --lockstep-timeout nan", "--lockstep-timeout: 'nan' is not a finite number"},
+        BadOption{"--watchdog-ms nan", "--watchdog-ms: 'nan' is not a finite number"},
+        BadOption{"--watchdog-ms -5", "watchdog, ms must be in [1, 60000], got -5"},
+        BadOption{"--batch --maneuver demo --duration nan", "--duration: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --duration 1e300", "duration, s must be in (0, 1e7], got 1e300"},
+        BadOption{"--duration inf", "--duration: 'inf' is not a finite number"},
+        BadOption{"--batch --maneuver demo --speed-kmh nan", "--speed-kmh: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --spawn nan,0,0", "--spawn: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --csv-every 0", "must be in [1, 1000000], got 0"},
+        BadOption{"--domain 1.5", "--domain: '1.5' is not a whole number"},
+        BadOption{"--domain 999", "DDS domain id must be in [0, 232], got 999"},
+        BadOption{"--rt-priority abc", "--rt-priority: 'abc' is not a number"},
+        BadOption{"--world-scale inf", "--world-scale: 'inf' is not a finite number"},
+        BadOption{"--heightmap-cell 0", "height-map cell, m must be in (0, 10000], got 0"}));
+
+// A number too small for a double is a number: it underflows to zero, as on paper.
+TEST(Cli, ANumberThatUnderflowsIsZero) {
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake\n0,1e-400,0,0\n1,0,0,0\n");
+  const Result r = RunServer("--batch --world flat --maneuver " + (dir / "m.csv").string() +
+                             " --speed-kmh 1e-400 --duration 0.5");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+}
+
+// Files that are not what they claim: a directory, a truncated binary height map, a mesh with one
+// NaN vertex (its triangle is dropped and counted; the rest is the world), a CSV with a BOM.
+TEST(Cli, DirectoriesAndBrokenFilesAreRefusedOrRepairedWithTheReason) {
+  TempDir dir;
+  const Result vehicle_dir = RunServer("--dump-vehicle --vehicle " + dir.path().string());
+  EXPECT_EQ(vehicle_dir.exit_code, 2);
+  EXPECT_THAT(vehicle_dir.output, HasSubstr("is a directory, not a vehicle parameter file"));
+  const Result maneuver_dir = RunServer("--batch --maneuver " + dir.path().string());
+  EXPECT_EQ(maneuver_dir.exit_code, 2);
+  EXPECT_THAT(maneuver_dir.output, HasSubstr("is a directory, not a maneuver file"));
+
+  std::string pgm = "P5\n64 64\n255\n";
+  pgm += std::string(100, '\x40');
+  WriteFile(dir / "short.pgm", pgm);
+  const Result short_pgm = RunServer("--batch --maneuver demo --world " + (dir / "short.pgm").string());
+  EXPECT_EQ(short_pgm.exit_code, 2);
+  EXPECT_THAT(short_pgm.output,
+              HasSubstr("short.pgm: the image data is cut short: 64 x 64 pixels need 4096 bytes "
+                        "of pixels, the file holds 100"));
+
+  WriteFile(dir / "nan.obj",
+            "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nv nan 0 1\nv 1 1 1\n"
+            "f 1 2 3\nf 1 3 4\nf 5 6 1\n");
+  const Result nan_obj = RunServer("--batch --maneuver demo --duration 1 --spawn 0,0,0 --world " +
+                                   (dir / "nan.obj").string());
+  EXPECT_EQ(nan_obj.exit_code, 0) << nan_obj.output;
+  EXPECT_THAT(nan_obj.output, HasSubstr("1 of 3 triangles dropped"));
+
+  WriteFile(dir / "bom.csv", "\xEF\xBB\xBFt_s,steer_deg,throttle,brake\n0,0,0.5,0\n1,0,0.5,0\n");
+  const Result bom = RunServer("--batch --world flat --maneuver " + (dir / "bom.csv").string());
+  EXPECT_EQ(bom.exit_code, 0) << bom.output;
+}
+
+// A spawn inside a wall is refused with the reason, not run at 2,338,476 km/h.
+TEST(Cli, ASpawnInsideAWallIsRefused) {
+  const Result r =
+      RunServer("--batch --world facility --spawn 290.15,0,0 --maneuver demo --duration 1");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("the body would start inside 'glass_barrier'"));
+}
+
+// A binary that reads no options still answers a bad command line with exit code 2.
 TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
+  testing::UseLoopbackDds();
   const Result twice = RunServer("--vehicle-ids 1,1 --domain 231 --duration 1");
   EXPECT_EQ(twice.exit_code, 2) << twice.output;
   EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));

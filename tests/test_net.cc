@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <thread>
+#include <cstdio>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -144,6 +145,10 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   // and, allowing generously for the input in flight on a loaded machine, well before 400.
   EXPECT_GE(*safe_step - stop_step, 100u);
   EXPECT_LE(*safe_step - stop_step, 400u);
+  // The figure the README quotes: from the last input applied to the safe state.
+  std::printf("  watchdog: safe state %llu ms (simulated) after the last state before the input "
+              "stopped (watchdog 100 ms)\n",
+              static_cast<unsigned long long>(*safe_step - stop_step));
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   bool said = false;
   ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 5s, [&](const auto& d) {
@@ -164,19 +169,31 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   std::string source;
+  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
   auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
     return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
       source = s.input().source_id();
+      if (source == "primary" && s.input().sequence() != last_sequence) {
+        last_sequence = s.input().sequence();
+        step_of_last_new_sample = s.step();
+      }
+      if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
       if (source == want) {
         EXPECT_DOUBLE_EQ(s.input().throttle(), want == "primary" ? 0.5 : 0.2);
       }
     }, [&] { return source == want; });
   };
   ASSERT_TRUE(until_source("primary", 20s)) << source << "\n" << server->Log();
-  // The primary rig dies without a goodbye: its liveliness lapses and the backup drives.
+  // The primary rig dies without a goodbye: its input stops and after the lease the backup drives.
   primary->Signal(SIGKILL);
   primary->Wait(5s);
   ASSERT_TRUE(until_source("backup", 10s)) << source;
+  const std::uint64_t failover_ms = first_backup_step - step_of_last_new_sample;
+  std::printf("  failover: the backup drives %llu ms (simulated) after the primary's last sample "
+              "(lease 200 ms)\n",
+              static_cast<unsigned long long>(failover_ms));
+  EXPECT_GE(failover_ms, 195u);
+  EXPECT_LE(failover_ms, 1000u);
   // It comes back and takes over again.
   primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
                         "primary", "--strength", "20"}, "primary2.log");
@@ -472,6 +489,254 @@ TEST_F(Net, TwoServersShareADomainWithDistinctVehicles) {
   EXPECT_EQ(latest[3].server_id(), "lab-b");
   EXPECT_LT(latest[1].v_wt_w().x(), 0.1);  // only vehicle 3 was driven
   EXPECT_LT(latest[2].v_wt_w().x(), 0.1);
+}
+
+// --- the edge: bad input of every kind is refused with a reason (issue: nothing gets past the edge)
+
+TEST_F(Net, ASpawnOrTeleportInsideAWallIsRefusedWithTheReason) {
+  auto server = StartServer({"--world", "facility"});
+  transport::Participant p(domain_);
+  transport::ControlClient control(p, "wall-test");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  pb::ControlRequest tp;
+  tp.set_vehicle_id(1);
+  tp.mutable_teleport()->mutable_pose()->set_x(290.15);  // inside the 0.3 m glass barrier
+  tp.mutable_teleport()->set_speed(20.0);
+  auto reply = control.Call(tp, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  EXPECT_FALSE(reply->accepted());
+  EXPECT_THAT(reply->reason(), HasSubstr("the body would start inside 'glass_barrier'"));
+  pb::ControlRequest spawn;
+  spawn.set_vehicle_id(7);
+  spawn.set_server_id("vdyn");
+  spawn.mutable_spawn()->mutable_pose()->set_x(3.5);
+  spawn.mutable_spawn()->mutable_pose()->set_y(170.1);  // on the billboard's east post
+  reply = control.Call(spawn, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  EXPECT_FALSE(reply->accepted());
+  EXPECT_THAT(reply->reason(), HasSubstr("inside 'billboard'"));
+  // Beside the wall, clear of it, is fine.
+  tp.mutable_teleport()->mutable_pose()->set_x(280.0);
+  reply = control.Call(tp, 10s);
+  ASSERT_TRUE(reply.has_value() && reply->accepted()) << (reply ? reply->reason() : "no reply");
+}
+
+TEST_F(Net, ASecondServerWithAVehicleOrAnIdInUseIsRefused) {
+  auto a = StartServer({"--server-id", "lab-a", "--vehicle-ids", "1"}, "a.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  bool running = false;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto&) { running = true; },
+                                          [&] { return running; })) << a->Log();
+  auto b = StartServer({"--server-id", "lab-b", "--vehicle-ids", "2,1"}, "b.log");
+  const auto b_code = b->Wait(60s);
+  ASSERT_TRUE(b_code.has_value()) << "the second server did not stop\n" << b->Log();
+  EXPECT_EQ(*b_code, 2);
+  EXPECT_THAT(b->Log(), HasSubstr("vehicle 1 is already run by server 'lab-a' on domain"));
+  auto c = StartServer({"--server-id", "lab-a", "--vehicle-ids", "5"}, "c.log");
+  const auto c_code = c->Wait(60s);
+  ASSERT_TRUE(c_code.has_value()) << c->Log();
+  EXPECT_EQ(*c_code, 2);
+  EXPECT_THAT(c->Log(), HasSubstr("another server with the id 'lab-a' runs on domain"));
+  // A server that starts cleanly beside it refuses to spawn lab-a's vehicle.
+  auto d = StartServer({"--server-id", "lab-d", "--vehicle-ids", "3"}, "d.log");
+  bool d_running = false;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+    d_running = d_running || s.server_id() == "lab-d";
+  }, [&] { return d_running; })) << d->Log();
+  transport::ControlClient control(p, "clash-test");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << d->Log();
+  pb::ControlRequest spawn;
+  spawn.set_vehicle_id(1);
+  spawn.set_server_id("lab-d");
+  spawn.mutable_spawn()->mutable_pose()->set_y(20.0);
+  const auto reply = control.Call(spawn, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error() << d->Log();
+  EXPECT_FALSE(reply->accepted());
+  EXPECT_THAT(reply->reason(), HasSubstr("vehicle 1 is run by server 'lab-a'"));
+  EXPECT_TRUE(a->running());
+  EXPECT_TRUE(d->running());
+}
+
+// A live rig whose input is refused loses the vehicle to a valid backup within the lease, and the
+// diagnostics name it and say why.
+TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
+  auto server = StartServer({"--watchdog-ms", "2000"});
+  const auto backup_csv = dir_ / "backup.csv";
+  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
+  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
+                            "backup", "--strength", "5"}, "backup.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Writer<pb::DriverInput> primary(p, TopicId::kInput, 20);
+  transport::Writer<pb::DriverInput> strong(p, TopicId::kInput, 30);
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  std::string source;
+  bool safe = false;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+    source = s.input().source_id();
+  }, [&] {
+    primary.Write(1, Input(1, 0.5, "primary"));
+    return source == "primary";
+  })) << source << server->Log();
+  // The primary goes on writing, but NaN steering: refused, it no longer counts as live.
+  pb::DriverInput nan_input = Input(1, 0.5, "primary");
+  nan_input.set_steer(std::numeric_limits<double>::quiet_NaN());
+  const auto t0 = std::chrono::steady_clock::now();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
+    source = s.input().source_id();
+    safe = safe || s.control().watchdog_safe_state();
+  }, [&] {
+    primary.Write(1, nan_input);
+    return source == "backup";
+  })) << source << server->Log();
+  std::printf("  a primary sending NaN lost the vehicle to the backup after %.0f ms (wall clock)\n",
+              std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  EXPECT_FALSE(safe);
+  // A stronger rig (30) with throttle 5: refused too; the backup keeps driving.
+  pb::DriverInput wild = Input(1, 5.0, "rig30");
+  bool rig30_drove = false;
+  int n = 0;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
+    rig30_drove = rig30_drove || s.input().source_id() == "rig30";
+  }, [&] {
+    strong.Write(1, wild);
+    primary.Write(1, nan_input);
+    return ++n > 100;
+  }));
+  EXPECT_FALSE(rig30_drove);
+  // The diagnostics say who was refused, and why.
+  std::map<std::string, pb::InputSourceDiagnostics> seen;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
+    for (const auto& v : d.vehicles()) {
+      for (const auto& src : v.sources()) seen[src.source_id()] = src;
+    }
+  }, [&] {
+    strong.Write(1, wild);
+    primary.Write(1, nan_input);
+    return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
+           seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
+  })) << server->Log();
+  EXPECT_THAT(seen["primary"].last_refusal(), HasSubstr("non-finite value on vdyn/input: steer"));
+  EXPECT_EQ(seen["primary"].strength(), 20);
+  EXPECT_FALSE(seen["primary"].driving());
+  EXPECT_THAT(seen["rig30"].last_refusal(), HasSubstr("throttle must be in [-1, 1], got 5"));
+  EXPECT_FALSE(seen["rig30"].driving());
+  EXPECT_TRUE(seen["backup"].driving());
+  EXPECT_EQ(seen["backup"].strength(), 5);
+}
+
+// Every request is answered, also one the server refuses before it could apply it.
+TEST_F(Net, EveryRequestIsAnsweredWithAReason) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::ControlClient control(p, "answers");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  pb::ControlRequest tp;
+  tp.set_vehicle_id(1);
+  tp.mutable_teleport()->mutable_pose()->set_x(nan);
+  auto reply = control.Call(tp, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  EXPECT_FALSE(reply->accepted());
+  EXPECT_THAT(reply->reason(), HasSubstr("teleport.pose.x must be a finite number"));
+  pb::ControlRequest mass;
+  mass.set_vehicle_id(1);
+  mass.mutable_set_params()->mutable_params()->set_mass(nan);
+  reply = control.Call(mass, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  EXPECT_THAT(reply->reason(), HasSubstr("set_params.params.mass must be a finite number"));
+
+  // Raw writes: an envelope key that is not the vehicle id, an id too long to be an id.
+  transport::Writer<pb::ControlRequest> raw(p, TopicId::kControl);
+  transport::Reader<pb::ControlReply> replies(p, TopicId::kControlReply, &drops);
+  pb::ControlRequest reset;
+  reset.set_vehicle_id(1);
+  reset.set_request_id(77);
+  reset.set_client_id("raw");
+  reset.mutable_reset();
+  ASSERT_TRUE(raw.Write(5, reset));
+  pb::ControlRequest long_id = reset;
+  long_id.set_request_id(78);
+  long_id.set_client_id(std::string(100, 'x'));
+  ASSERT_TRUE(raw.Write(1, long_id));
+  std::map<std::uint64_t, pb::ControlReply> got;
+  ASSERT_TRUE(ReadUntil<pb::ControlReply>(replies, 10s, [&](const auto& r) {
+    got[r.request_id()] = r;
+  }, [&] { return got.count(77) && got.count(78); })) << server->Log();
+  EXPECT_FALSE(got[77].accepted());
+  EXPECT_THAT(got[77].reason(), HasSubstr("envelope key 5 does not match vehicle_id 1"));
+  EXPECT_FALSE(got[78].accepted());
+  EXPECT_THAT(got[78].reason(), HasSubstr("client_id is longer than 64 bytes"));
+  EXPECT_EQ(got[78].client_id(), std::string(64, 'x'));
+
+  // A 10 MB request is not even parsed: dropped and counted, and the server goes on answering.
+  pb::ControlRequest huge = reset;
+  huge.set_request_id(79);
+  huge.set_client_id(std::string(10'000'000, 'y'));
+  EXPECT_FALSE(raw.Write(1, huge));  // our own writer refuses it...
+  dds_qos_t* q = transport::WriterQos(TopicId::kControl);
+  const dds_entity_t w = dds_create_writer(p.handle(), p.Topic(TopicId::kControl), q, nullptr);
+  dds_delete_qos(q);
+  ASSERT_GT(w, 0);
+  std::string bytes = huge.SerializeAsString();
+  vdyn_dds_Envelope env{};
+  env.key = 1;
+  std::strcpy(env.type_name, "vdyn.pb.ControlRequest");
+  env.payload._buffer = reinterpret_cast<std::uint8_t*>(bytes.data());
+  env.payload._length = env.payload._maximum = static_cast<std::uint32_t>(bytes.size());
+  ASSERT_EQ(dds_write(w, &env), DDS_RETCODE_OK);  // ...a foreign one need not
+  reply = control.Call(mass, 10s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  bool counted = false;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
+    for (const auto& dc : d.drops()) counted = counted || dc.kind() == "oversized payload on vdyn/control";
+  }, [&] { return counted; })) << server->Log();
+  dds_delete(w);
+
+  // A vehicle command for a vehicle no server owns: the client library says so, bounded.
+  pb::ControlRequest nobody;
+  nobody.set_vehicle_id(99);
+  nobody.mutable_reset();
+  EXPECT_FALSE(control.Call(nobody, 1500ms).has_value());
+  EXPECT_THAT(control.last_error(), HasSubstr("is a server running that owns vehicle 99?"));
+  EXPECT_TRUE(server->running());
+}
+
+// Steps asked for by a client that then leaves are not run for nobody: the server publishes its
+// diagnostics while it steps, and drops the remaining steps when the client is gone.
+TEST_F(Net, TheStepsOfAClientThatLeavesAreDropped) {
+  auto server = StartServer({"--lockstep", "--lockstep-timeout", "60"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  {
+    transport::Participant leaving(domain_);
+    transport::ControlClient client(leaving, "leaver");
+    ASSERT_TRUE(client.WaitForServer(20s)) << client.last_error() << server->Log();
+    pb::ControlRequest step;
+    step.set_vehicle_id(1);
+    step.mutable_step()->set_steps(600'000);
+    EXPECT_FALSE(client.Call(step, 300ms).has_value());  // still running: no answer yet
+  }  // the client's participant goes away
+  std::vector<std::uint64_t> steps;
+  std::uint64_t cancelled = 0;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 30s, [&](const auto& d) {
+    steps.push_back(d.steps());
+    for (const auto& dc : d.drops()) {
+      if (dc.kind() == "rejected control request") cancelled = dc.count();
+    }
+  }, [&] {
+    return steps.size() >= 3 && steps[steps.size() - 1] == steps[steps.size() - 2] &&
+           steps.back() > 0;
+  })) << server->Log();
+  EXPECT_LT(steps.back(), 600'000u);
+  EXPECT_GE(cancelled, 1u);
+  EXPECT_THAT(server->Log(), HasSubstr("steps cancelled: the client that asked for them is gone"));
 }
 
 }  // namespace

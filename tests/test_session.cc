@@ -225,13 +225,10 @@ TEST(Session, ResimulationFromEventsReproducesEveryHash) {
   EXPECT_GT(differing, 100);  // from the parameter change until the teleport re-sets the state
 }
 
-// Valid but absurd parameters (a 1 kg car on 1e8 N/m springs: h * omega = 20) make the state
-// blow up; the step is contained, the vehicle is put back at rest where it was, the session goes
-// on, and the re-simulation follows it through.
-TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
-  Recorder rec;
-  const auto world = testing::SharedWorld("flat");
-  Session s(world, Config(), Into(rec, world));
+// Absurd parameters are refused at the edge, with the mode they cannot resolve: a 1 kg car on
+// 1e8 N/m springs (h * omega = 20 at 1 ms) or a 1 g car.
+TEST(Session, ParametersTheStepCannotResolveAreRefused) {
+  Session s(testing::SharedWorld("flat"), Config(), {});
   pb::VehicleParams stiff;
   stiff.set_mass(1.0);
   stiff.set_ixx(0.1);
@@ -240,16 +237,43 @@ TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
   for (auto* w : {stiff.mutable_lf(), stiff.mutable_rf(), stiff.mutable_lr(), stiff.mutable_rr()}) {
     w->set_spring_stiffness(1e8);
   }
-  s.Spawn(1, {0, 0, 0}, 0.0, stiff);
-  pb::ControlRequest drop = Request(1);  // 1 cm above equilibrium: enough to set it off
-  drop.mutable_teleport()->mutable_pose()->set_x(0.0);
-  ASSERT_TRUE(s.Apply(drop).accepted());
-  StepAndRecord(s, rec, 400);
+  try {
+    s.Spawn(1, {0, 0, 0}, 0.0, stiff);
+    ADD_FAILURE() << "a 1 kg car on 1e8 N/m springs was accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_THAT(e.what(), HasSubstr("too long for these parameters"));
+  }
+  s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
+  pb::ControlRequest light = Request(1);
+  light.mutable_set_params()->mutable_params()->set_mass(0.001);
+  const pb::ControlReply r = s.Apply(light);
+  EXPECT_FALSE(r.accepted());
+  EXPECT_THAT(r.reason(), HasSubstr("needs h <="));
+  pb::ControlRequest soft = Request(1);
+  soft.mutable_set_params()->mutable_params()->mutable_lf()->set_spring_stiffness(1e-300);
+  EXPECT_THAT(s.Apply(soft).reason(), HasSubstr("lf.spring_stiffness: the static load"));
+  EXPECT_EQ(s.params(1).mass(), DefaultVehicleParams().mass());
+}
+
+// A state that blows up (injected: validated parameters give none) is contained: the step is
+// discarded, the vehicle is put back at rest where it was, the session goes on, and the
+// re-simulation follows it through.
+TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
+  Recorder rec;
+  const auto world = testing::SharedWorld("flat");
+  Session s(world, Config(), Into(rec, world));
+  s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
+  StepAndRecord(s, rec, 100);
+  State wild = s.simulator(1).state();
+  SetVelocity(wild.x, Eigen::Vector3d(1e300, 0.0, 0.0));  // drag ~ v^2 overflows at once
+  s.SetStateForTesting(1, wild);
+  StepAndRecord(s, rec, 300);
   EXPECT_GE(s.simulator(1).nonfinite_steps(), 1u);
   EXPECT_TRUE(s.simulator(1).state().x.allFinite());
+  EXPECT_LT(Velocity(s.simulator(1).state().x).norm(), 1.0);  // at rest again
   EXPECT_EQ(s.simulator(1).state().step, 400);
   int respawns = 0;
-  for (const auto& e : rec.events) respawns += e.has_spawned() && e.step() > 0;
+  for (const auto& e : rec.events) respawns += e.has_spawned() && e.step() > 100;
   EXPECT_GE(respawns, 1);
   const ResimResult res = Resimulate(world, rec.events, {{1, 400}});
   ASSERT_TRUE(res.ok) << res.error;

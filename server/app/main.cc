@@ -73,6 +73,17 @@ std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
   vdyn::WorldFileOptions wfo = o.world_file;
   wfo.up_axis = o.world_up.empty() ? 'z' : o.world_up[0];
   std::shared_ptr<const vdyn::World> world = vdyn::LoadWorld(o.world, wfo);
+  const vdyn::Terrain& t = world->terrain;
+  if (t.dropped_triangles() > 0) {
+    spdlog::warn("{}: {} of {} triangles dropped (degenerate, or with a vertex that is not a finite "
+                 "number or lies beyond 1e9 m); {} kept",
+                 o.world, t.dropped_triangles(), t.dropped_triangles() + t.triangle_count(),
+                 t.triangle_count());
+  }
+  if (t.embree_errors() > 0) {
+    spdlog::warn("{}: Embree reported {} error(s) while building the terrain (last code {})",
+                 o.world, t.embree_errors(), t.last_embree_error());
+  }
   if (!o.spawn.empty()) {
     auto w = std::const_pointer_cast<vdyn::World>(world);
     w->spawn = {o.spawn[0], o.spawn[1], o.spawn[2] * kDeg};
@@ -182,14 +193,15 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::InRange(vdyn::limits::kDurationS));
   app.add_option("--csv", o.csv, "Write every computed quantity to this CSV file");
   app.add_option("--csv-every", o.csv_every, "Write every Nth step to the CSV")
-      ->check(vdyn::cli::WholeInRange({1, 1e6, false, false, "--csv-every"}))
+      ->check(vdyn::cli::WholeInRange({1, 1e6, false, false, "rows interval"}))
       ->capture_default_str();
   app.add_option("--step-ms", o.step_ms, "Integration step h in milliseconds")
       ->check(vdyn::cli::InRange(vdyn::limits::kStepMs))
       ->capture_default_str();
   app.add_option("--spawn", o.spawn, "Start pose x_m,y_m,yaw_deg (default: the world's spawn)")
       ->expected(3)
-      ->delimiter(',');
+      ->delimiter(',')
+      ->check(vdyn::cli::InRange({-1e7, 1e7, false, false, "spawn coordinate"}));
   app.add_option("--speed-kmh", o.speed_kmh, "Initial speed along the heading, km/h")
       ->check(vdyn::cli::InRange(vdyn::limits::kSpeedKmh))
       ->capture_default_str();

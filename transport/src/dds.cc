@@ -94,6 +94,12 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
   return true;
 }
 
+std::uint64_t RawWriter::InstanceHandle() const {
+  dds_instance_handle_t h = 0;
+  if (dds_get_instance_handle(writer_, &h) != DDS_RETCODE_OK) return 0;
+  return h;
+}
+
 std::uint32_t RawWriter::MatchedReaders() {
   dds_publication_matched_status_t st;
   const dds_return_t rc = dds_get_publication_matched_status(writer_, &st);
@@ -202,6 +208,31 @@ bool Waitset::Wait(std::chrono::nanoseconds timeout) {
   return n > 0;
 }
 
+std::vector<std::uint64_t> RawReader::MatchedWriterHandles() {
+  std::vector<dds_instance_handle_t> handles(64);
+  while (true) {
+    const dds_return_t n =
+        dds_get_matched_publications(reader_, handles.data(), handles.size());
+    if (n < 0) {
+      last_error_ = DdsError("dds_get_matched_publications", n);
+      return {};
+    }
+    if (static_cast<std::size_t>(n) <= handles.size()) {
+      return std::vector<std::uint64_t>(handles.begin(), handles.begin() + n);
+    }
+    handles.resize(static_cast<std::size_t>(n));
+  }
+}
+
+std::int32_t RawReader::WriterStrength(std::uint64_t publication_handle) {
+  dds_builtintopic_endpoint_t* ep = dds_get_matched_publication_data(reader_, publication_handle);
+  if (ep == nullptr) return 0;
+  std::int32_t strength = 0;
+  if (ep->qos == nullptr || !dds_qget_ownership_strength(ep->qos, &strength)) strength = 0;
+  dds_builtintopic_free_endpoint(ep);
+  return strength;
+}
+
 int RawReader::TakeBatch(Batch& b, int max_samples) {
   for (void*& p : b.samples) p = nullptr;  // loans from DDS
   const auto n_max = static_cast<std::uint32_t>(std::clamp(max_samples, 1, kBatch));
@@ -223,19 +254,26 @@ void RawReader::ReturnBatch(Batch& b, int n) {
   }
 }
 
-bool RawReader::Envelope(const void* sample, RawSample& out) {
+void RawReader::Refused(const SampleInfo& info, int slot, const char* kind,
+                        std::string_view detail, const google::protobuf::Message* parsed) {
+  if (drops_ != nullptr) drops_->Count(slot, detail);
+  if (on_refused) on_refused(info, std::string(kind) + " on " + Spec(id_).name, detail, parsed);
+}
+
+bool RawReader::Envelope(const void* sample, const dds_sample_info_t& si, RawSample& out) {
   const auto* env = static_cast<const vdyn_dds_Envelope*>(sample);
   const TopicSpec& s = Spec(id_);
   out.info.key = env->key;
+  out.info.source_timestamp_ns = si.source_timestamp;
+  out.info.publication_handle = si.publication_handle;
   out.type_name = std::string_view(env->type_name, strnlen(env->type_name, sizeof env->type_name));
   if (out.type_name != s.payload) {
-    if (drops_ != nullptr) drops_->Count(drop_unknown_type_, out.type_name);
+    Refused(out.info, drop_unknown_type_, "unknown type", out.type_name, nullptr);
     return false;
   }
   if (env->payload._length > s.max_payload_bytes) {
-    if (drops_ != nullptr) {
-      drops_->Count(drop_oversized_, std::to_string(env->payload._length) + " bytes");
-    }
+    Refused(out.info, drop_oversized_, "oversized payload",
+            std::to_string(env->payload._length) + " bytes", nullptr);
     return false;
   }
   out.payload = {env->payload._buffer, env->payload._length};
@@ -244,16 +282,16 @@ bool RawReader::Envelope(const void* sample, RawSample& out) {
 
 bool RawReader::Decode(const RawSample& raw, google::protobuf::Message& scratch) {
   if (!scratch.ParseFromArray(raw.payload.data(), static_cast<int>(raw.payload.size()))) {
-    if (drops_ != nullptr) drops_->Count(drop_malformed_);
+    Refused(raw.info, drop_malformed_, "malformed payload", {}, nullptr);
     return false;
   }
   const messages::Finding f = messages::CheckMessage(scratch);
   if (f.problem == messages::Problem::kNonFinite) {
-    if (drops_ != nullptr) drops_->Count(drop_nonfinite_, f.field);
+    Refused(raw.info, drop_nonfinite_, "non-finite value", f.field, &scratch);
     return false;
   }
   if (f.problem == messages::Problem::kStringTooLong) {
-    if (drops_ != nullptr) drops_->Count(drop_long_string_, f.field);
+    Refused(raw.info, drop_long_string_, "oversized string", f.field, &scratch);
     return false;
   }
   return true;
@@ -270,9 +308,7 @@ int RawReader::TakeRaw(const std::function<void(const RawSample&)>& fn, int max_
     for (int i = 0; i < n; ++i) {
       if (!b.infos[i].valid_data) continue;
       RawSample raw;
-      if (!Envelope(b.samples[i], raw)) continue;
-      raw.info.source_timestamp_ns = b.infos[i].source_timestamp;
-      raw.info.publication_handle = b.infos[i].publication_handle;
+      if (!Envelope(b.samples[i], b.infos[i], raw)) continue;
       fn(raw);
       ++delivered;
     }

@@ -17,10 +17,12 @@ constexpr std::int64_t kMs = 1'000'000;
 constexpr std::array<TopicSpec, 8> kTopics = {{
   // State every step: the newest sample is all that matters; never block the 1 kHz loop.
   {TopicId::kState, "vdyn/state", "vdyn.pb.VehicleState", false, 1, false, false, 0, 0, limits::kMaxStateBytes},
-  // Driver input: the strongest live writer per vehicle drives (primary rig, backup device).
-  // Liveliness is asserted by each write (manual by topic), so a writer that stops writing -
-  // a crashed process or a hung input loop - loses ownership to the next one after the lease.
-  {TopicId::kInput, "vdyn/input", "vdyn.pb.DriverInput", true, 1, false, true, 50 * kMs, 200 * kMs, limits::kMaxInputBytes},
+  // Driver input: shared ownership, so the server sees every source and itself lets the
+  // strongest source whose input is *valid* and live drive (runtime/input_arbiter.h): a rig that
+  // crashes, hangs or sends refused input loses the vehicle to a backup after the lease (200 ms).
+  // Writers still declare their ownership strength (the server reads it from discovery).
+  // Liveliness is asserted by each write (manual by topic).
+  {TopicId::kInput, "vdyn/input", "vdyn.pb.DriverInput", true, 1, false, false, 50 * kMs, 200 * kMs, limits::kMaxInputBytes},
   // Requests and replies: every one delivered, in order.
   {TopicId::kControl, "vdyn/control", "vdyn.pb.ControlRequest", true, 0, false, false, 0, 0, limits::kMaxControlBytes},
   {TopicId::kControlReply, "vdyn/control_reply", "vdyn.pb.ControlReply", true, 0, false, false, 0, 0, limits::kMaxReplyBytes},
@@ -77,7 +79,11 @@ std::span<const TopicSpec> AllTopics() { return kTopics; }
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
   const TopicSpec& s = Spec(id);
   dds_qos_t* q = BaseQos(s);
-  if (s.exclusive_ownership) dds_qset_ownership_strength(q, ownership_strength);
+  // Exclusive topics use it to pick a writer; on vdyn/input (shared) the server reads it from
+  // discovery and arbitrates itself.
+  if (s.exclusive_ownership || id == TopicId::kInput) {
+    dds_qset_ownership_strength(q, ownership_strength);
+  }
   // Instances stay alive when a writer goes away: a restarted server keeps its keys.
   dds_qset_writer_data_lifecycle(q, false);
   return q;

@@ -4,6 +4,8 @@
 #include <cctype>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <sstream>
 
 #include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
@@ -40,10 +42,12 @@ std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOpti
   Assimp::Importer importer;
   importer.SetPropertyBool(AI_CONFIG_FBX_CONVERT_TO_M, true);
   importer.SetPropertyBool(AI_CONFIG_PP_FD_REMOVE, true);
+  // No aiProcess_FindInvalidData: it removes a whole mesh for one NaN vertex ("No meshes
+  // remaining"). Non-finite and degenerate triangles are dropped one by one, and counted, by
+  // Terrain::AddMesh; the rest of the mesh stays.
   const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
                          aiProcess_PreTransformVertices | aiProcess_FindDegenerates |
-                         aiProcess_FindInvalidData | aiProcess_ValidateDataStructure |
-                         aiProcess_SortByPType;
+                         aiProcess_ValidateDataStructure | aiProcess_SortByPType;
   const aiScene* scene = importer.ReadFile(path.string(), flags);
   if (scene == nullptr) {
     throw WorldError(path.string() + ": cannot read the mesh: " + importer.GetErrorString());
@@ -73,12 +77,127 @@ std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOpti
   return meshes;
 }
 
+// Image formats whose decoder would read past short data: the header says how many bytes the
+// pixels take; fewer than that is refused with what is missing (stb_image would otherwise build a
+// terrain from memory it never wrote). PNG and JPEG carry their own checks.
+std::uint32_t Le16(const std::string& b, std::size_t at) {
+  return static_cast<std::uint32_t>(static_cast<unsigned char>(b[at])) |
+         static_cast<std::uint32_t>(static_cast<unsigned char>(b[at + 1])) << 8;
+}
+std::uint32_t Le32(const std::string& b, std::size_t at) { return Le16(b, at) | Le16(b, at + 2) << 16; }
+
+void CheckImageData(const std::string& name, const std::string& b) {
+  auto short_data = [&](std::uint64_t need, std::uint64_t have, const std::string& what) {
+    throw WorldError(name + ": the image data is cut short: " + what + " need " +
+                     std::to_string(need) + " bytes of pixels, the file holds " +
+                     std::to_string(have));
+  };
+  if (b.size() >= 2 && b[0] == 'P' && b[1] >= '1' && b[1] <= '6') {
+    // PNM: magic, then width, height (and maxval, except P1/P4), separated by blanks or comments.
+    std::size_t i = 2;
+    std::uint64_t nums[3] = {0, 0, 1};
+    const int n_nums = (b[1] == '1' || b[1] == '4') ? 2 : 3;
+    for (int k = 0; k < n_nums; ++k) {
+      while (i < b.size() && (std::isspace(static_cast<unsigned char>(b[i])) || b[i] == '#')) {
+        if (b[i] == '#') {
+          while (i < b.size() && b[i] != '\n') ++i;
+        } else {
+          ++i;
+        }
+      }
+      std::uint64_t v = 0;
+      std::size_t digits = 0;
+      while (i < b.size() && std::isdigit(static_cast<unsigned char>(b[i])) && digits < 9) {
+        v = v * 10 + static_cast<std::uint64_t>(b[i] - '0');
+        ++i;
+        ++digits;
+      }
+      if (digits == 0) throw WorldError(name + ": not a valid PNM header");
+      nums[k] = v;
+    }
+    ++i;  // the one blank after the header
+    const std::uint64_t w = nums[0], h = nums[1], maxval = nums[2];
+    const std::uint64_t channels = (b[1] == '3' || b[1] == '6') ? 3 : 1;
+    const std::uint64_t have = b.size() > i ? b.size() - i : 0;
+    if (b[1] == '5' || b[1] == '6') {
+      const std::uint64_t need = w * h * channels * (maxval > 255 ? 2 : 1);
+      if (have < need) {
+        short_data(need, have, std::to_string(w) + " x " + std::to_string(h) + " pixels");
+      }
+    } else if (b[1] == '2' || b[1] == '3') {
+      std::uint64_t values = 0;
+      bool in_number = false;
+      for (std::size_t k = i - 1; k < b.size(); ++k) {
+        const bool digit = std::isdigit(static_cast<unsigned char>(b[k])) != 0;
+        if (digit && !in_number) ++values;
+        in_number = digit;
+      }
+      if (values < w * h * channels) {
+        throw WorldError(name + ": the image data is cut short: " + std::to_string(w) + " x " +
+                         std::to_string(h) + " pixels need " + std::to_string(w * h * channels) +
+                         " values, the file holds " + std::to_string(values));
+      }
+    }
+  } else if (b.size() >= 2 && b[0] == 'B' && b[1] == 'M') {
+    if (b.size() < 34) throw WorldError(name + ": the BMP header is cut short");
+    const std::uint64_t offset = Le32(b, 10);
+    const auto w = static_cast<std::int32_t>(Le32(b, 18));
+    const auto h = static_cast<std::int32_t>(Le32(b, 22));
+    const std::uint64_t bpp = Le16(b, 28), compression = Le32(b, 30);
+    if (w > 1'000'000 || h > 1'000'000 || h < -1'000'000) {
+      throw WorldError(name + ": a " + std::to_string(w) + " x " + std::to_string(h) +
+                       " BMP is larger than a height map may be");
+    }
+    if (compression == 0 && w > 0 && h != 0) {
+      const std::uint64_t row = (bpp * static_cast<std::uint64_t>(w) + 31) / 32 * 4;
+      const std::uint64_t need = row * static_cast<std::uint64_t>(h < 0 ? -static_cast<std::int64_t>(h) : h);
+      const std::uint64_t have = b.size() > offset ? b.size() - offset : 0;
+      if (have < need) short_data(need, have, "the BMP's rows");
+    }
+  } else {
+    // TGA has no magic; an uncompressed one is recognised by its extension only (caller).
+  }
+}
+
+void CheckTgaData(const std::string& name, const std::string& b) {
+  if (b.size() < 18) throw WorldError(name + ": the TGA header is cut short");
+  const std::uint64_t id_len = static_cast<unsigned char>(b[0]);
+  const std::uint64_t type = static_cast<unsigned char>(b[2]);
+  const std::uint64_t cmap_len = Le16(b, 5), cmap_bits = static_cast<unsigned char>(b[7]);
+  const std::uint64_t w = Le16(b, 12), h = Le16(b, 14), bpp = static_cast<unsigned char>(b[16]);
+  if (type == 1 || type == 2 || type == 3) {  // uncompressed
+    const std::uint64_t header = 18 + id_len + cmap_len * ((cmap_bits + 7) / 8);
+    const std::uint64_t need = w * h * ((bpp + 7) / 8);
+    const std::uint64_t have = b.size() > header ? b.size() - header : 0;
+    if (have < need) {
+      throw WorldError(name + ": the image data is cut short: the TGA's " + std::to_string(w) +
+                       " x " + std::to_string(h) + " pixels need " + std::to_string(need) +
+                       " bytes, the file holds " + std::to_string(have));
+    }
+  }
+}
+
 TriangleMesh LoadHeightmap(const fs::path& path, const WorldFileOptions& o) {
   const std::string name = path.string();
+  std::string bytes;
+  {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream ss;
+    ss << in.rdbuf();
+    bytes = ss.str();
+    if (!in.good() && !in.eof()) throw WorldError(name + ": cannot read the height map");
+  }
+  if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) {
+    throw WorldError(name + ": a height-map image may hold at most 2 GB");
+  }
+  CheckImageData(name, bytes);
+  if (Lower(path.extension().string()) == ".tga") CheckTgaData(name, bytes);
+  const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
+  const int size = static_cast<int>(bytes.size());
   int w = 0, h = 0, channels = 0;
   std::vector<double> heights;
-  if (stbi_is_16_bit(name.c_str()) != 0) {
-    stbi_us* px = stbi_load_16(name.c_str(), &w, &h, &channels, 1);
+  if (stbi_is_16_bit_from_memory(data, size) != 0) {
+    stbi_us* px = stbi_load_16_from_memory(data, size, &w, &h, &channels, 1);
     if (px == nullptr) {
       throw WorldError(name + ": cannot read the height map: " + stbi_failure_reason());
     }
@@ -86,7 +205,7 @@ TriangleMesh LoadHeightmap(const fs::path& path, const WorldFileOptions& o) {
     for (double& v : heights) v /= 65535.0;
     stbi_image_free(px);
   } else {
-    stbi_uc* px = stbi_load(name.c_str(), &w, &h, &channels, 1);
+    stbi_uc* px = stbi_load_from_memory(data, size, &w, &h, &channels, 1);
     if (px == nullptr) {
       throw WorldError(name + ": cannot read the height map: " + stbi_failure_reason());
     }

@@ -1,5 +1,8 @@
 #include "vdyn/physics/params.h"
 
+#include <cmath>
+#include <limits>
+
 #include "vdyn/base/limits.h"
 #include "vdyn/base/text.h"
 
@@ -144,7 +147,71 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
   if (p.body_rear < p.c) {
     out.push_back({"body_rear", "must reach at least the rear axle (c = " + FormatNumber(p.c) + " m)"});
   }
+  if (!out.empty()) return out;  // the rules below need every value in range
+  // The car rests on its springs: the static load compresses each spring by less than its travel
+  // to the bump stop.
+  for (int w = 0; w < kNumWheels; ++w) {
+    const WheelParams& wp = p.wheel[w];
+    const double sag = StaticWheelLoad(p, w) / wp.spring_stiffness;
+    const double travel = wp.free_length - wp.bump_stop_length;
+    if (!(sag < travel)) {
+      out.push_back({std::string(kWheelFields[w]) + ".spring_stiffness",
+                     "the static load (" + FormatNumber(std::round(StaticWheelLoad(p, w))) +
+                         " N) compresses this spring by " + FormatNumber(sag) +
+                         " m, more than its travel to the bump stop (" + FormatNumber(travel) +
+                         " m): it needs at least " +
+                         FormatNumber(StaticWheelLoad(p, w) / travel) + " N/m"});
+    }
+  }
   return out;
+}
+
+double StaticWheelLoad(const Params& p, int w) {
+  const double wheelbase = p.b + p.c;
+  const double axle = IsFront(w) ? p.c / wheelbase : p.b / wheelbase;
+  const bool left = w == kLF || w == kLR;
+  const double side = left ? p.b_p / (p.b_l + p.b_p) : p.b_l / (p.b_l + p.b_p);
+  return p.mass * p.gravity * axle * side;
+}
+
+double MaxResolvedStep(const Params& p, std::string* why) {
+  double best = std::numeric_limits<double>::infinity();
+  auto limit = [&](double h, const std::string& mode) {
+    if (h < best) {
+      best = h;
+      if (why != nullptr) *why = mode;
+    }
+  };
+  const double x[kNumWheels] = {p.b, p.b, -p.c, -p.c};
+  const double y[kNumWheels] = {p.b_l, -p.b_p, p.b_l, -p.b_p};
+  double roll_spring = 0, pitch_spring = 0, roll_stop = 0, pitch_stop = 0;
+  for (int w = 0; w < kNumWheels; ++w) {
+    const WheelParams& wp = p.wheel[w];
+    const double m_corner = StaticWheelLoad(p, w) / p.gravity;
+    const std::string name(kWheelNames[w]);
+    limit(1.0 / std::sqrt(wp.spring_stiffness / m_corner), name + " spring (heave)");
+    limit(2.0 / std::sqrt((wp.spring_stiffness + wp.bump_stop_stiffness) / m_corner),
+          name + " bump stop");
+    if (wp.damper_coefficient > 0.0) limit(2.5 / (wp.damper_coefficient / m_corner), name + " damper");
+    roll_spring += wp.spring_stiffness * y[w] * y[w];
+    pitch_spring += wp.spring_stiffness * x[w] * x[w];
+    roll_stop += (wp.spring_stiffness + wp.bump_stop_stiffness) * y[w] * y[w];
+    pitch_stop += (wp.spring_stiffness + wp.bump_stop_stiffness) * x[w] * x[w];
+  }
+  limit(1.0 / std::sqrt(roll_spring / p.inertia_B.x()), "roll on the springs");
+  limit(1.0 / std::sqrt(pitch_spring / p.inertia_B.y()), "pitch on the springs");
+  limit(2.0 / std::sqrt(roll_stop / p.inertia_B.x()), "roll on the bump stops");
+  limit(2.0 / std::sqrt(pitch_stop / p.inertia_B.y()), "pitch on the bump stops");
+  limit(2.0 / std::sqrt(p.wall_stiffness / p.mass), "wall contact");
+  return best;
+}
+
+std::string CheckStep(const ValidParams& p, double h) {
+  if (h <= p.max_step()) return {};
+  std::string mode;
+  MaxResolvedStep(p.get(), &mode);
+  return "the step " + FormatNumber(h) + " s is too long for these parameters: their fastest mode (" +
+         mode + ") needs h <= " + FormatNumber(p.max_step()) + " s";
 }
 
 std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues) {
@@ -156,6 +223,7 @@ std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues) {
   DeriveParams(p);
   ValidParams v;
   v.p_ = p;
+  v.max_step_ = MaxResolvedStep(p);
   return v;
 }
 

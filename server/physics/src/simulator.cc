@@ -1,19 +1,16 @@
 #include "vdyn/physics/simulator.h"
 
 #include <cmath>
+#include <cstdio>
+#include <stdexcept>
+#include <string>
 
 #include <Eigen/Dense>
 
 namespace vdyn {
 
-double StaticWheelLoad(const Params& p, int w) {
-  const double axle = IsFront(w) ? p.c / p.wheelbase : p.b / p.wheelbase;
-  const bool left = w == kLF || w == kLR;
-  const double side = left ? p.b_p / (p.b_l + p.b_p) : p.b_l / (p.b_l + p.b_p);
-  return p.mass * p.gravity * axle * side;
-}
-
-State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed) {
+State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed,
+                   double* max_misfit) {
   const Eigen::Matrix3d R_yaw =
       Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
   const double top = terrain.bounds_max().z() + 10.0;
@@ -46,6 +43,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
     rhs[w] = ground_z + wp.radius + lS + wp.z_offset;
   }
   const Eigen::Vector3d sol = A.colPivHouseholderQr().solve(rhs);
+  if (max_misfit != nullptr) *max_misfit = (A * sol - rhs).cwiseAbs().maxCoeff();
   State s;
   SetPosition(s.x, Eigen::Vector3d(pose.x, pose.y, sol[0]));
   SetOrientation(s.x, QuaternionFromRollPitchYaw(sol[2], sol[1], pose.yaw));
@@ -60,6 +58,7 @@ Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& para
       params_(params),
       config_(config),
       h_(static_cast<double>(config.step_ns) * 1e-9) {
+  if (const std::string why = CheckStep(params_, h_); !why.empty()) throw std::invalid_argument(why);
   Spawn(world_->spawn);
 }
 
@@ -69,15 +68,54 @@ Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& para
       params_(params),
       config_(config),
       h_(static_cast<double>(config.step_ns) * 1e-9),
-      state_(initial) {}
+      state_(initial) {
+  if (const std::string why = CheckStep(params_, h_); !why.empty()) throw std::invalid_argument(why);
+}
+
+void Simulator::SetParams(const ValidParams& params) {
+  if (const std::string why = CheckStep(params, h_); !why.empty()) throw std::invalid_argument(why);
+  params_ = params;
+}
 
 void Simulator::SetInput(const DriverInput& input) {
   input_ = input;
   if (!SanitizeInput(input_)) ++sanitized_inputs_;
 }
 
+std::string SpawnObstruction(const Params& p, const Terrain& terrain, const State& s,
+                             double max_misfit) {
+  const Eigen::Matrix3d R_WB = Orientation(s.x).normalized().toRotationMatrix();
+  const Eigen::Vector3d p_WO = Position(s.x) + R_WB * p.p_TO_B;
+  for (int k = 0; k < Params::kNumProbes; ++k) {
+    const TraceHit hit = terrain.Trace(p_WO, R_WB * p.probe_dir_B[k], p.probe_length[k]);
+    if (hit.hit) {
+      const std::string& mesh = terrain.meshes()[hit.mesh].name;
+      char where[96];
+      std::snprintf(where, sizeof where, "%.2f m from its centre, %.2f m inside the body",
+                    hit.distance, p.probe_length[k] - hit.distance);
+      return "the body would start inside '" + mesh + "' (" + where + ")";
+    }
+  }
+  // The wheels rest on one plane within the suspension's travel.
+  double travel = 1e300;
+  for (const WheelParams& wp : p.wheel) travel = std::min(travel, wp.free_length - wp.bump_stop_length);
+  if (max_misfit > travel) {
+    char why[160];
+    std::snprintf(why, sizeof why,
+                  "the ground under the wheels departs from one plane by %.2f m, more than the "
+                  "suspension's travel (%.2f m): no place to rest",
+                  max_misfit, travel);
+    return why;
+  }
+  return {};
+}
+
 void Simulator::Spawn(const Pose2& pose, double speed) {
-  state_ = RestingState(params_.get(), world_->terrain, pose, speed);
+  double misfit = 0.0;
+  const State s = RestingState(params_.get(), world_->terrain, pose, speed, &misfit);
+  const std::string obstruction = SpawnObstruction(params_.get(), world_->terrain, s, misfit);
+  if (!obstruction.empty()) throw WorldError(obstruction);
+  state_ = s;
 }
 
 StepStatus Simulator::Step() {

@@ -205,7 +205,10 @@ BodyLoads BodyForces(const Params& p, const WallPlanes& walls, const BodyKinemat
     const double vn = v_S.dot(wall.n_W);
     // Hunt-Crossley contact: damping grows with penetration, so the force starts from zero at
     // first touch instead of jumping to c * v (Hunt & Crossley 1975, J. Appl. Mech. 42(2)).
-    const double Fn = std::max(0.0, p.wall_stiffness * pen * (1.0 - p.wall_damping * vn));
+    // Bounded: however deep a probe is, the contact pushes with at most k_w times
+    // kWallPenetrationCap, so no contact can inject unbounded energy.
+    const double Fn = std::clamp(p.wall_stiffness * pen * (1.0 - p.wall_damping * vn), 0.0,
+                                 p.wall_stiffness * kWallPenetrationCap);
     const Eigen::Vector3d v_t = v_S - vn * wall.n_W;
     const double vt = v_t.norm();
     Eigen::Vector3d F_c = Fn * wall.n_W;

@@ -12,6 +12,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/text.h"
 #include "vdyn/bridge/convert.h"
+#include "vdyn/messages/checks.h"
 
 namespace vdyn {
 
@@ -42,6 +43,7 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_rejected_ = drops_.Register("rejected control request");
   drop_step_input_ = drops_.Register("out-of-range input in a step request");
 
+  if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
   states_ = std::make_unique<StateOutbox>(participant_, drops_);
@@ -98,7 +100,7 @@ void ServerNode::OnEvent(SessionEventRecord&& r) {
   publisher_bell_.Ring();
 }
 
-void ServerNode::HandleRequest(const pb::ControlRequest& r) {
+void ServerNode::HandleRequest(const pb::ControlRequest& r, std::uint64_t writer) {
   const std::string& me = options_.session.server_id;
   if (!r.server_id().empty() && r.server_id() != me) return;  // for another server
   const bool server_wide = r.has_pause() || r.has_resume() || r.has_step() || r.has_spawn();
@@ -117,8 +119,7 @@ void ServerNode::HandleRequest(const pb::ControlRequest& r) {
   }
   if (r.has_step() && reply.accepted()) {
     // Answered when its steps are done: the ones pending before it, then its own.
-    deferred_step_replies_.push_back(
-        {session_->steps() + static_cast<std::int64_t>(session_->pending_steps()), reply});
+    deferred_step_replies_.push_back({r.step().steps(), writer, reply});
     return;
   }
   if ((r.has_pause() || r.has_resume()) && reply.accepted()) {
@@ -134,12 +135,14 @@ bool ServerNode::Boundary() {
   // At most 16 requests per step boundary: a flood waits in the queue instead of stretching one
   // step of the 1 kHz loop. Requests are applied here (they may allocate); the request objects go
   // back to the receiver to be freed.
-  std::unique_ptr<pb::ControlRequest> req;
+  Request req;
   for (int n = 0; n < limits::kMaxRequestsPerBoundary && requests_.TryPop(req); ++n) {
     got_request = true;
-    HandleRequest(*req);
-    if (!spent_requests_.TryPush(std::move(req))) req.reset();
+    HandleRequest(*req.msg, req.writer);
+    if (!spent_requests_.TryPush(std::move(req.msg))) req.msg.reset();
   }
+  std::uint64_t gone = 0;
+  while (gone_clients_.TryPop(gone)) ClientGone(gone);
   // Inputs were checked by the receiver (key, ranges); the newest of each vehicle wins.
   while (pb::DriverInput* in = inputs_.Front()) {
     if (session_->HasVehicle(in->vehicle_id())) session_->OfferInput(*in, nullptr);
@@ -150,25 +153,49 @@ bool ServerNode::Boundary() {
 
 void ServerNode::StepOnce() {
   session_->Step(state_sink_);
-  if (session_->paused()) session_->ConsumePendingStep();
+  if (session_->paused() && session_->pending_steps() > 0) {
+    session_->ConsumePendingStep();
+    if (!deferred_step_replies_.empty() && deferred_step_replies_.front().remaining > 0) {
+      --deferred_step_replies_.front().remaining;
+    }
+  }
   if (!deferred_step_replies_.empty()) SendDueStepReplies();
 }
 
 void ServerNode::SendDueStepReplies() {
-  auto due = [this](const DeferredReply& d) { return d.target_steps <= session_->steps(); };
-  for (DeferredReply& d : deferred_step_replies_) {
-    if (!due(d)) continue;
-    pb::ControlReply& reply = d.reply;
+  // The requests are served in order: the first one's steps run first.
+  std::size_t done = 0;
+  while (done < deferred_step_replies_.size() && deferred_step_replies_[done].remaining == 0) {
+    pb::ControlReply& reply = deferred_step_replies_[done].reply;
     if (session_->HasVehicle(reply.vehicle_id())) {
       reply.set_applied_step(
           static_cast<std::uint64_t>(session_->simulator(reply.vehicle_id()).state().step));
     }
     reply.set_sim_time_ns(session_->steps() * session_->step_ns());
     Send(TopicId::kControlReply, reply.vehicle_id(), std::make_unique<pb::ControlReply>(reply));
+    ++done;
   }
-  deferred_step_replies_.erase(
-      std::remove_if(deferred_step_replies_.begin(), deferred_step_replies_.end(), due),
-      deferred_step_replies_.end());
+  deferred_step_replies_.erase(deferred_step_replies_.begin(),
+                               deferred_step_replies_.begin() + static_cast<std::ptrdiff_t>(done));
+}
+
+void ServerNode::ClientGone(std::uint64_t writer) {
+  // The steps a client asked for, and that have not run, are dropped with it: a long step
+  // request does not outlive the client that wanted it.
+  std::uint32_t dropped = 0;
+  for (auto it = deferred_step_replies_.begin(); it != deferred_step_replies_.end();) {
+    if (it->writer == writer) {
+      dropped += it->remaining;
+      it = deferred_step_replies_.erase(it);
+    } else {
+      ++it;
+    }
+  }
+  if (dropped > 0) {
+    session_->CancelPendingSteps(dropped);
+    drops_.Count(drop_rejected_, "steps cancelled: the client that asked for them is gone");
+  }
+  if (!deferred_step_replies_.empty()) SendDueStepReplies();
 }
 
 void ServerNode::CancelStepReplies(const std::string& why) {
@@ -361,38 +388,100 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
 
 // --- receiver thread -----------------------------------------------------------------------------
 
+void ServerNode::Refuse(const pb::ControlRequest& r, const std::string& why) {
+  // Answered here (the loop never sees it), from the request alone: the session belongs to the
+  // loop thread. An id too long to echo is cut to its limit (such a client cannot match it).
+  auto reply = std::make_unique<pb::ControlReply>();
+  reply->set_request_id(r.request_id());
+  reply->set_client_id(r.client_id().substr(0, limits::kMaxIdBytes));
+  reply->set_vehicle_id(r.vehicle_id());
+  reply->set_server_id(options_.session.server_id);
+  reply->set_accepted(false);
+  reply->set_reason(why.substr(0, limits::kMaxReasonBytes));
+  drops_.Count(drop_rejected_, why);
+  if (early_replies_.TryPush(std::move(reply))) publisher_bell_.Ring();
+}
+
 void ServerNode::ReceiverLoop() {
+  const std::string& me = options_.session.server_id;
   transport::Waitset waitset(participant_);
   waitset.Attach(input_reader_);
   waitset.Attach(control_reader_);
+  // What other servers on the domain run (their diagnostics, once a second, and worlds): a spawn
+  // of one of their vehicles is refused here.
+  transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops_);
+  transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
   std::unique_ptr<pb::ControlRequest> spent;
-  auto refuse = [this](const pb::ControlRequest& r, const std::string& why) {
-    // Answered here (the loop never sees it), from the request alone: the session belongs to the
-    // loop thread.
-    auto reply = std::make_unique<pb::ControlReply>();
-    reply->set_request_id(r.request_id());
-    reply->set_client_id(r.client_id());
-    reply->set_vehicle_id(r.vehicle_id());
-    reply->set_server_id(options_.session.server_id);
-    reply->set_accepted(false);
-    reply->set_reason(why);
-    drops_.Count(drop_rejected_, why);
-    if (early_replies_.TryPush(std::move(reply))) publisher_bell_.Ring();
+  std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
+  std::map<std::uint64_t, bool> control_writers;     // control writers that sent requests
+  base::MonoTime next_housekeeping = base::MonotonicNow();
+
+  // Inputs the reader refused (malformed, non-finite, ...): their source is blamed.
+  input_reader_.on_refused = [&](const transport::SampleInfo& info, std::string_view kind,
+                                 std::string_view detail, const google::protobuf::Message* m) {
+    const auto* in = dynamic_cast<const pb::DriverInput*>(m);
+    arbiter_.Refuse(info.publication_handle, in != nullptr ? in->vehicle_id() : info.key,
+                    in != nullptr ? in->source_id().substr(0, limits::kMaxIdBytes) : std::string(),
+                    std::string(kind) + (detail.empty() ? "" : ": ") + std::string(detail),
+                    base::MonotonicNow());
   };
+  // Requests the reader refused but could parse (a NaN, an id too long) are answered.
+  control_reader_.on_refused = [&](const transport::SampleInfo&, std::string_view kind,
+                                   std::string_view detail, const google::protobuf::Message* m) {
+    const auto* r = dynamic_cast<const pb::ControlRequest*>(m);
+    if (r == nullptr) return;
+    if (!r->server_id().empty() && r->server_id() != me) return;
+    std::string why(kind);
+    if (!detail.empty()) why += ": " + std::string(detail);
+    if (kind.find("non-finite") != std::string_view::npos) {
+      why = std::string(detail) + " must be a finite number";
+    } else if (kind.find("oversized string") != std::string_view::npos) {
+      why = std::string(detail) + " is longer than " +
+            std::to_string(messages::MaxStringBytes(std::string(
+                detail.substr(detail.find_last_of('.') == std::string_view::npos
+                                  ? 0
+                                  : detail.find_last_of('.') + 1)))) +
+            " bytes";
+    }
+    Refuse(*r, why);
+  };
+
   while (!receiver_stop_.load(std::memory_order_relaxed)) {
     waitset.Wait(std::chrono::milliseconds(50));
+    const base::MonoTime now = base::MonotonicNow();
     bool handed = false;
+    // What the other servers run, first: a spawn below is checked against it.
+    diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+      if (d.server_id() == me) return;
+      for (const auto& v : d.vehicles()) others_[v.vehicle_id()] = {d.server_id(), now};
+    });
+    worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      if (w.server_id() == me) return;
+      for (const auto& v : w.vehicles()) others_[v.vehicle_id()] = {w.server_id(), now};
+    });
     input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
       if (info.key != in.vehicle_id()) {
-        drops_.Count(drop_key_mismatch_, "envelope key " + std::to_string(info.key) +
-                                             " vs vehicle_id " + std::to_string(in.vehicle_id()));
+        const std::string why = "envelope key " + std::to_string(info.key) + " vs vehicle_id " +
+                                std::to_string(in.vehicle_id());
+        drops_.Count(drop_key_mismatch_, why);
+        arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
+                        "key mismatch: " + why, now);
         return;
       }
       const std::string why = CheckInputRanges(in);
       if (!why.empty()) {
         drops_.Count(drop_out_of_range_, why);
+        arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
+                        "out of range: " + why, now);
         return;
       }
+      auto known = strengths.find(info.publication_handle);
+      if (known == strengths.end()) {
+        known = strengths.emplace(info.publication_handle,
+                                  input_reader_.WriterStrength(info.publication_handle)).first;
+      }
+      // Only the source that drives this vehicle now reaches the loop.
+      if (!arbiter_.Offer(in, info.publication_handle, known->second, now)) return;
       pb::DriverInput* slot = inputs_.Reserve();
       if (slot == nullptr) {
         drops_.Count(drop_inputs_full_);
@@ -403,11 +492,26 @@ void ServerNode::ReceiverLoop() {
       handed = true;
     });
     control_reader_.Take(
-        [&](const pb::ControlRequest& r, const transport::SampleInfo&) {
-          auto req = std::make_unique<pb::ControlRequest>(r);
+        [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
+          if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
+          if (info.key != r.vehicle_id()) {
+            Refuse(r, "the envelope key " + std::to_string(info.key) +
+                          " does not match vehicle_id " + std::to_string(r.vehicle_id()));
+            return;
+          }
+          if (r.has_spawn()) {
+            const auto other = others_.find(r.vehicle_id());
+            if (other != others_.end() && now - other->second.seen < base::Seconds(3)) {
+              Refuse(r, "vehicle " + std::to_string(r.vehicle_id()) + " is run by server '" +
+                            other->second.server_id + "' on this domain");
+              return;
+            }
+          }
+          control_writers[info.publication_handle] = true;
+          Request req{std::make_unique<pb::ControlRequest>(r), info.publication_handle};
           if (!requests_.TryPush(std::move(req))) {
             drops_.Count(drop_requests_full_);
-            refuse(r, "the server is busy: too many requests waiting; try again");
+            Refuse(r, "the server is busy: too many requests waiting; try again");
             return;
           }
           handed = true;
@@ -415,7 +519,108 @@ void ServerNode::ReceiverLoop() {
         64);
     while (spent_requests_.TryPop(spent)) spent.reset();
     if (handed) loop_bell_.Ring();
+
+    if (now >= next_housekeeping) {
+      next_housekeeping = now + base::Milliseconds(200);
+      // Clients whose control writer has gone: their pending steps are dropped.
+      if (!control_writers.empty()) {
+        const std::vector<std::uint64_t> live = control_reader_.MatchedWriterHandles();
+        for (auto it = control_writers.begin(); it != control_writers.end();) {
+          if (std::find(live.begin(), live.end(), it->first) == live.end() &&
+              gone_clients_.TryPush(std::uint64_t{it->first})) {
+            it = control_writers.erase(it);
+            handed = true;
+          } else {
+            ++it;
+          }
+        }
+        if (handed) loop_bell_.Ring();
+      }
+      // Input writers that have gone are forgotten.
+      const std::vector<std::uint64_t> inputs_live = input_reader_.MatchedWriterHandles();
+      arbiter_.Forget(inputs_live);
+      for (auto it = strengths.begin(); it != strengths.end();) {
+        it = std::find(inputs_live.begin(), inputs_live.end(), it->first) == inputs_live.end()
+                 ? strengths.erase(it)
+                 : std::next(it);
+      }
+      std::vector<InputArbiter::Source> copy = arbiter_.Snapshot(now);
+      std::lock_guard<std::mutex> lock(sources_mu_);
+      sources_copy_ = std::move(copy);
+    }
   }
+  input_reader_.on_refused = nullptr;
+  control_reader_.on_refused = nullptr;
+}
+
+std::string ServerNode::FindClash() {
+  // Listen for what other servers publish about themselves: their worlds (transient-local, at
+  // once), diagnostics (once a second) and states. With nobody else on the domain the wait ends
+  // after discovery (300 ms); once another server is seen, for up to discovery_s.
+  const std::string& me = options_.session.server_id;
+  transport::DropCounters drops;
+  transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops);
+  transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops);
+  transport::Reader<pb::VehicleState> states(participant_, TopicId::kState, &drops);
+  transport::Waitset waitset(participant_);
+  waitset.Attach(worlds);
+  waitset.Attach(diagnostics);
+  waitset.Attach(states);
+  const base::MonoTime start = base::MonotonicNow();
+  const base::MonoTime quiet_end = start + base::Milliseconds(300);
+  const base::MonoTime end =
+      start + base::Nanos{static_cast<std::int64_t>(options_.discovery_s * 1e9)};
+  std::map<std::uint32_t, std::string> taken;  // vehicle -> server
+  bool same_id = false;
+  auto note = [&](const std::string& server, std::uint32_t vehicle) {
+    if (server == me) {
+      same_id = true;
+    } else {
+      taken.emplace(vehicle, server);
+    }
+  };
+  const std::uint64_t own[] = {writers_[static_cast<int>(TopicId::kWorld)]->InstanceHandle(),
+                              writers_[static_cast<int>(TopicId::kDiagnostics)]->InstanceHandle()};
+  auto foreign = [&](transport::RawReader& r) {
+    for (std::uint64_t h : r.MatchedWriterHandles()) {
+      if (h != own[0] && h != own[1]) return true;
+    }
+    return false;
+  };
+  while (true) {
+    const base::MonoTime now = base::MonotonicNow();
+    const bool others = foreign(worlds) || foreign(diagnostics) || foreign(states);
+    if (now >= end || (!others && now >= quiet_end)) break;
+    waitset.Wait(std::chrono::milliseconds(20));
+    worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      for (const auto& v : w.vehicles()) note(w.server_id(), v.vehicle_id());
+      if (w.server_id() == me) same_id = true;
+    });
+    diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+      for (const auto& v : d.vehicles()) note(d.server_id(), v.vehicle_id());
+      if (d.server_id() == me) same_id = true;
+    });
+    states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
+      note(st.server_id(), st.vehicle_id());
+    });
+    // Decided as soon as a clash is certain.
+    bool clash = same_id;
+    for (std::uint32_t id : options_.vehicle_ids) clash = clash || taken.count(id) != 0;
+    if (clash) break;
+  }
+  for (const auto& [vehicle, server] : taken) others_[vehicle] = {server, base::MonotonicNow()};
+  const std::string domain = std::to_string(options_.domain_id);
+  if (same_id) {
+    return "another server with the id '" + me + "' runs on domain " + domain +
+           ": give this one another --server-id, or another --domain";
+  }
+  for (std::uint32_t id : options_.vehicle_ids) {
+    if (const auto it = taken.find(id); it != taken.end()) {
+      return "vehicle " + std::to_string(id) + " is already run by server '" + it->second +
+             "' on domain " + domain + ": choose other --vehicle-ids, or another --domain";
+    }
+  }
+  return {};
 }
 
 // --- publisher thread ----------------------------------------------------------------------------
@@ -468,6 +673,21 @@ void ServerNode::PublishReport(WindowReport& r) {
     vd->set_input_source(v.source);
     vd->set_nonfinite_steps(v.nonfinite_steps);
     vd->set_sanitized_inputs(v.sanitized_inputs);
+    std::lock_guard<std::mutex> lock(sources_mu_);
+    const base::MonoTime now = base::MonotonicNow();
+    for (const InputArbiter::Source& src : sources_copy_) {
+      if (src.vehicle_id != v.id) continue;
+      pb::InputSourceDiagnostics* sd = vd->add_sources();
+      sd->set_source_id(src.source_id.empty() ? "writer " + std::to_string(src.handle)
+                                              : src.source_id);
+      sd->set_strength(src.strength);
+      sd->set_driving(src.driving);
+      sd->set_accepted(src.accepted);
+      sd->set_refused(src.refused);
+      sd->set_last_refusal(src.last_refusal.substr(0, limits::kMaxNameBytes));
+      sd->set_since_valid_ms(src.last_valid.ns >= 0 ? (now - src.last_valid).millis() : -1.0);
+      sd->set_since_refused_ms(src.last_refused.ns >= 0 ? (now - src.last_refused).millis() : -1.0);
+    }
   }
   d.set_scheduling(scheduling_);
   PublishOne(TopicId::kDiagnostics, transport::ServerKey(server_id), d,

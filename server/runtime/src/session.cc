@@ -112,6 +112,12 @@ void Session::FlushInputs(Vehicle& v) {
   if (on_event_) on_event_(std::move(r));
 }
 
+void Session::SetStateForTesting(std::uint32_t id, const State& s) {
+  Vehicle& v = vehicles_.at(id);
+  v.sim->SetState(s);
+  EmitSpawned(v);
+}
+
 void Session::FlushEvents() {
   for (auto& [id, v] : vehicles_) FlushInputs(v);
 }
@@ -264,8 +270,12 @@ pb::ControlReply Session::Apply(const pb::ControlRequest& r) {
       const pb::VehicleParams merged = MergeVehicleParams(*v.params, r.set_params().params());
       const auto issues = ValidateVehicleParams(merged);
       if (!issues.empty()) return Reply(r, false, FormatIssues(issues));
+      const ValidParams valid = ParamsFromProto(merged);
+      if (const std::string why = CheckStep(valid, v.sim->h()); !why.empty()) {
+        return Reply(r, false, why);
+      }
       v.params = std::make_shared<const pb::VehicleParams>(merged);
-      v.sim->SetParams(ParamsFromProto(merged));
+      v.sim->SetParams(valid);
       pb::ControlReply reply = Reply(r, true, {});
       auto e = std::make_unique<pb::SessionEvent>();
       *e->mutable_params_changed()->mutable_params() = merged;
@@ -339,19 +349,20 @@ void Session::Step(const StateSink& on_state) {
   for (auto& [id, v] : vehicles_) {
     LatchInput(v);
     if (v.sim->Step() != StepStatus::kOk) {
-      // Contained by the simulator (state kept at x_n); put the vehicle back at rest where it is
-      // so the session goes on, and say so in the event stream.
+      // Contained by the simulator (state kept at x_n, its last finite state); put the vehicle
+      // back at rest where it is so the session goes on, and say so in the event stream. Where it
+      // cannot rest (no ground below, inside a wall), it is stopped where it was: x_n at rest.
       const Eigen::Vector3d p = Position(v.sim->state().x);
       const double yaw = RollPitchYaw(Orientation(v.sim->state().x)).z();
       const std::int64_t step = v.sim->state().step;
+      State last = v.sim->state();
       try {
         v.sim->Spawn({p.x(), p.y(), yaw}, 0.0);
       } catch (const std::exception&) {
-        try {
-          v.sim->Spawn(v.spawn_pose, 0.0);  // nothing below it: back to where it started
-        } catch (const std::exception&) {
-          continue;  // not even there (cannot happen on a world it spawned on): keep x_n
-        }
+        SetVelocity(last.x, Eigen::Vector3d::Zero());
+        SetAngularVelocityB(last.x, Eigen::Vector3d::Zero());
+        last.cruise_integral = 0.0;
+        v.sim->SetState(last);
       }
       State s = v.sim->state();
       s.step = step + 1;

@@ -69,6 +69,8 @@ class RawWriter {
   const std::string& last_error() const { return last_error_; }
   dds_entity_t handle() const { return writer_; }
   TopicId topic() const { return id_; }
+  // The writer's instance handle, as a reader sees it in SampleInfo::publication_handle.
+  std::uint64_t InstanceHandle() const;
 
  private:
   TopicId id_;
@@ -107,9 +109,21 @@ class RawReader {
   // to another thread). Take from inside fn, and then from nowhere else: Take is not reentrant.
   void OnDataAvailable(std::function<void()> fn);
   std::uint32_t MatchedWriters();
+  // The instance handles of the writers matched right now (empty on error; last_error() says).
+  std::vector<std::uint64_t> MatchedWriterHandles();
+  // The ownership strength a matched writer declared in its QoS (0 when it declared none or is
+  // not matched).
+  std::int32_t WriterStrength(std::uint64_t publication_handle);
   dds_entity_t handle() const { return reader_; }
   TopicId topic() const { return id_; }
   const std::string& last_error() const { return last_error_; }
+
+  // Called for every sample this reader drops, with why (the drop kind, e.g. "non-finite value
+  // on vdyn/input", and a detail such as the field) and the parsed message when it did parse
+  // (a server answers a refused request, or blames the source of a refused input).
+  std::function<void(const SampleInfo&, std::string_view kind, std::string_view detail,
+                     const google::protobuf::Message* parsed)>
+      on_refused;
 
   // Takes every available sample (at most max_samples) and hands each valid one to fn as raw
   // bytes, unparsed: the envelope's type name must be the topic's and the size within its limit.
@@ -130,7 +144,9 @@ class RawReader {
   };
   int TakeBatch(Batch& b, int max_samples);
   void ReturnBatch(Batch& b, int n);
-  bool Envelope(const void* sample, RawSample& out);
+  bool Envelope(const void* sample, const dds_sample_info_t& si, RawSample& out);
+  void Refused(const SampleInfo& info, int slot, const char* kind, std::string_view detail,
+               const google::protobuf::Message* parsed);
   bool Decode(const RawSample& raw, google::protobuf::Message& scratch);
 
   TopicId id_;
@@ -204,9 +220,7 @@ int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samp
     for (int i = 0; i < n; ++i) {
       if (!b.infos[i].valid_data) continue;
       RawSample raw;
-      if (!Envelope(b.samples[i], raw)) continue;
-      raw.info.source_timestamp_ns = b.infos[i].source_timestamp;
-      raw.info.publication_handle = b.infos[i].publication_handle;
+      if (!Envelope(b.samples[i], b.infos[i], raw)) continue;
       if (!Decode(raw, scratch)) continue;
       fn(scratch, raw.info);
       ++delivered;

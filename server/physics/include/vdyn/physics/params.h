@@ -86,17 +86,35 @@ class ValidParams {
   const Params& get() const { return p_; }
   const Params* operator->() const { return &p_; }
   operator const Params&() const { return p_; }  // NOLINT: read-only view, on purpose
+  // The largest integration step that resolves these parameters' fastest modes, s (see
+  // MaxResolvedStep). A simulator with a longer step refuses them.
+  double max_step() const { return max_step_; }
 
  private:
   friend std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues);
   ValidParams() = default;
   Params p_;
+  double max_step_ = 0;
 };
 
 // Checks every value against the table of limits and the rules between them (a bump stop inside
-// the spring's travel, a rigid body's inertia, a body that reaches its axles). Empty when valid.
+// the spring's travel, the static load carried by the spring within its travel, a rigid body's
+// inertia, a body that reaches its axles). Empty when valid.
 std::vector<ParamIssue> CheckParams(const Params& p);
 // The validated parameters with their derived members, or nullopt and the issues.
 std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues = nullptr);
+
+// Static load of wheel w on level ground, N: m g (c or b)/L * (bP or bL)/(bL + bP).
+double StaticWheelLoad(const Params& p, int w);
+
+// The largest step h, s, at which RK4 still resolves the fastest modes of the parameters: every
+// suspension mode (heave per corner, roll, pitch) with h * omega <= 1 (six steps a period), the
+// stiff contacts (bump stops, walls) with h * omega <= 2, and the dampers' decay with h * rate
+// <= 2.5 (RK4's real-axis limit is 2.79). `why` (if given) names the mode that sets it.
+double MaxResolvedStep(const Params& p, std::string* why = nullptr);
+
+// The issue for running parameters at step h (empty when max_step() >= h), e.g. "the step
+// 0.05 s is too long for these parameters: ... needs h <= 0.035 s".
+std::string CheckStep(const ValidParams& p, double h);
 
 }  // namespace vdyn

@@ -40,18 +40,22 @@ enum class StepStatus { kOk, kNonFinite };
 
 class Simulator {
  public:
-  // Starts at rest at the world's spawn pose (throws WorldError when no terrain is below it).
+  // Starts at rest at the world's spawn pose (throws WorldError when it cannot start there).
+  // Both constructors throw std::invalid_argument when the parameters do not resolve at the step.
   Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config = {});
   // Starts from `initial` as it is (a recorded state, or one Spawn() replaces at once).
   Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config,
             const State& initial);
 
-  // Takes effect at the next step boundary.
-  void SetParams(const ValidParams& params) { params_ = params; }
+  // Takes effect at the next step boundary. Throws std::invalid_argument when the parameters do
+  // not resolve at this simulator's step (CheckStep; the edge checks it first, with a reason).
+  void SetParams(const ValidParams& params);
   // Latched at the next step boundary. Non-finite or out-of-range values are clamped and counted.
   void SetInput(const DriverInput& input);
   // Places the vehicle at rest (or moving at `speed` along its heading) in static equilibrium on
-  // the terrain below (x, y). Throws WorldError when there is no terrain below.
+  // the terrain below (x, y). Throws WorldError, with the reason, when there is no terrain below,
+  // when the body would start inside a wall or any other surface, or when the ground under the
+  // wheels is too uneven to rest on (SpawnObstruction).
   void Spawn(const Pose2& pose, double speed = 0.0);
   void SetState(const State& state) { state_ = state; }
 
@@ -100,9 +104,16 @@ class Simulator {
 
 // Static equilibrium at (x, y, yaw) on the terrain: level in yaw, height, pitch and roll fitted so
 // that each spring carries its static share of the weight. Throws WorldError without terrain.
-State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed);
+// `max_misfit` (if given) gets the largest distance, m, between a wheel's ground and the plane the
+// four wheels were fitted to (0 on even ground).
+State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed,
+                   double* max_misfit = nullptr);
 
-// Static load of wheel w on level ground, N: m g (c or b)/L * (bP or bL)/(bL + bP).
-double StaticWheelLoad(const Params& p, int w);
+// Why a vehicle cannot start in state s (empty when it can): a horizontal trace from the body's
+// centre meets a surface inside the body box (the vehicle would start inside a wall, a ramp, a
+// building), or the ground under the wheels departs from one plane by more than the suspension's
+// travel (`max_misfit` from RestingState).
+std::string SpawnObstruction(const Params& p, const Terrain& terrain, const State& s,
+                             double max_misfit);
 
 }  // namespace vdyn

@@ -47,6 +47,9 @@ struct WallPlane {
 };
 using WallPlanes = std::array<WallPlane, Params::kNumProbes>;
 
+// A wall contact's normal force never exceeds wall_stiffness times this depth, m.
+inline constexpr double kWallPenetrationCap = 0.2;
+
 struct Derived {
   std::array<WheelOutputs, kNumWheels> wheel{};
   bool any_contact = false;

@@ -16,7 +16,9 @@
 
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <thread>
 #include <vector>
@@ -26,6 +28,7 @@
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/diagnostics.pb.h"
+#include "vdyn/runtime/input_arbiter.h"
 #include "vdyn/runtime/pacing.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/runtime/state_outbox.h"
@@ -47,6 +50,9 @@ struct ServerOptions {
   bool status_line = false;       // a terminal line of speed, step rate and lateness
   std::string stats_out;          // real time: write a run summary here at the end
   double shutdown_deadline_s = 2.0;  // how long the publisher may drain at the end
+  // At start, how long to listen for other servers on the domain (a vehicle id or a server id
+  // already in use is refused) once one has been discovered; with none, 300 ms.
+  double discovery_s = 1.5;
 };
 
 class ServerNode {
@@ -91,8 +97,14 @@ class ServerNode {
     std::uint32_t key = 0;
     std::unique_ptr<google::protobuf::Message> msg;
   };
+  struct Request {
+    std::unique_ptr<pb::ControlRequest> msg;
+    std::uint64_t writer = 0;  // the DDS writer it came from (its client)
+  };
+  // A step request waits for its steps: `remaining` counts down as they run, in order.
   struct DeferredReply {
-    std::int64_t target_steps;
+    std::uint32_t remaining;
+    std::uint64_t writer;
     pb::ControlReply reply;
   };
 
@@ -101,17 +113,21 @@ class ServerNode {
             std::unique_ptr<google::protobuf::Message> msg);
   void OnEvent(SessionEventRecord&& r);
   bool Boundary();  // true when a control request arrived
-  void HandleRequest(const pb::ControlRequest& r);
+  void HandleRequest(const pb::ControlRequest& r, std::uint64_t writer);
   void StepOnce();
   void SendDueStepReplies();
   void CancelStepReplies(const std::string& why);
+  void ClientGone(std::uint64_t writer);
   void PushReport(base::MonoTime now);
   int RunRealtime(const std::atomic<bool>& stop);
   int RunLockstep(const std::atomic<bool>& stop);
   void WriteStats(base::MonoTime start, base::MonoTime end, base::Nanos start_cpu) const;
 
+  // Start: another server on the domain that runs one of our vehicles, or has our id.
+  std::string FindClash();
   // Receiver thread.
   void ReceiverLoop();
+  void Refuse(const pb::ControlRequest& r, const std::string& why);
   // Publisher thread.
   void PublisherLoop();
   bool PublishOne(transport::TopicId topic, std::uint32_t key, const google::protobuf::Message& m,
@@ -131,7 +147,9 @@ class ServerNode {
 
   // Receiver -> loop.
   base::SpscQueue<pb::DriverInput> inputs_{1024};
-  base::SpscQueue<std::unique_ptr<pb::ControlRequest>> requests_{256};
+  base::SpscQueue<Request> requests_{256};
+  // Receiver -> loop: clients (control writers) that have gone away.
+  base::SpscQueue<std::uint64_t> gone_clients_{64};
   // Loop -> receiver: requests done with, freed off the loop thread.
   base::SpscQueue<std::unique_ptr<pb::ControlRequest>> spent_requests_{256};
   // Loop -> publisher.
@@ -149,6 +167,16 @@ class ServerNode {
   std::thread publisher_;
 
   std::vector<DeferredReply> deferred_step_replies_;
+
+  // Receiver's: input arbitration and what other servers run; copies for the publisher.
+  InputArbiter arbiter_{base::Milliseconds(200)};
+  std::mutex sources_mu_;
+  std::vector<InputArbiter::Source> sources_copy_;
+  struct OtherVehicle {
+    std::string server_id;
+    base::MonoTime seen;
+  };
+  std::map<std::uint32_t, OtherVehicle> others_;
 
   // Drop kinds counted on the loop thread (registered up front: counting allocates nothing).
   int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1,

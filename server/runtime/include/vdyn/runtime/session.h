@@ -10,6 +10,7 @@
 // the server's publisher thread turns into messages. Applying a request may allocate.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <functional>
@@ -99,6 +100,8 @@ class Session {
   void Step(const StateSink& on_state = {});
   // Sends the input changes still gathered (at shutdown, before a recorder is told to stop).
   void FlushEvents();
+  // Tests only: sets a vehicle's state as it is (no checks), announced like a teleport.
+  void SetStateForTesting(std::uint32_t id, const State& s);
 
   bool paused() const { return paused_; }
   std::int64_t steps() const { return steps_; }  // steps taken by the session
@@ -127,6 +130,8 @@ class Session {
   void ConsumePendingStep() {
     if (pending_steps_ > 0) --pending_steps_;
   }
+  // Drops `n` of the pending steps (their client is gone).
+  void CancelPendingSteps(std::uint32_t n) { pending_steps_ -= std::min(n, pending_steps_); }
 
  private:
   struct Vehicle {
