@@ -86,6 +86,14 @@ TEST(Text, NumbersPrintedWithoutNoise) {
   EXPECT_EQ(base::FormatNumber(-3), "-3");
 }
 
+TEST(Text, ComputedQuantitiesToAFewDigits) {
+  EXPECT_EQ(base::FormatApprox(14094.827586206897), "14095");
+  EXPECT_EQ(base::FormatApprox(3.086419753086419e-7), "3.086e-7");
+  EXPECT_EQ(base::FormatApprox(4.087499999999999e303), "4.087e303");
+  EXPECT_EQ(base::FormatApprox(0.29), "0.29");
+  EXPECT_EQ(base::FormatApprox(0.034641016151377546, 3), "0.0346");
+}
+
 TEST(Text, QuoteCutsAndEscapesUntrustedText) {
   EXPECT_EQ(base::Quote("ok"), "ok");
   EXPECT_EQ(base::Quote(std::string("a\nb\x01", 4)), "a\\nb\\x01");
@@ -128,6 +136,40 @@ TEST(SpscQueue, TwoThreadsPassEveryItemInOrder) {
     }
   }
   producer.join();
+}
+
+}  // namespace
+}  // namespace vdyn
+
+#include "vdyn/control.pb.h"
+#include "vdyn/messages/checks.h"
+#include "vdyn/state.pb.h"
+
+namespace vdyn {
+namespace {
+
+TEST(Messages, EveryFieldIsCheckedNestedAndRepeated) {
+  pb::VehicleState s;
+  s.add_wheels()->set_fp(1.0);
+  s.add_wheels()->mutable_f_w()->set_y(std::numeric_limits<double>::infinity());
+  messages::Finding f = messages::CheckMessage(s);
+  EXPECT_EQ(f.problem, messages::Problem::kNonFinite);
+  EXPECT_EQ(f.field, "wheels[1].f_w.y");
+  pb::ControlRequest r;
+  r.set_client_id(std::string(64, 'c'));
+  EXPECT_EQ(messages::CheckMessage(r).problem, messages::Problem::kNone);
+  r.set_client_id(std::string(65, 'c'));
+  f = messages::CheckMessage(r);
+  EXPECT_EQ(f.problem, messages::Problem::kStringTooLong);
+  EXPECT_EQ(f.field, "client_id");
+  r.set_client_id("ok");
+  r.mutable_teleport()->mutable_pose()->set_yaw(std::nan(""));
+  f = messages::CheckMessage(r);
+  EXPECT_EQ(f.problem, messages::Problem::kNonFinite);
+  EXPECT_EQ(f.field, "teleport.pose.yaw");
+  EXPECT_EQ(messages::MaxStringBytes("reason"), limits::kMaxReasonBytes);
+  EXPECT_EQ(messages::MaxStringBytes("server_id"), limits::kMaxIdBytes);
+  EXPECT_EQ(messages::MaxStringBytes("name"), limits::kMaxNameBytes);
 }
 
 }  // namespace

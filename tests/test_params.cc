@@ -57,6 +57,18 @@ TEST(Params, OutOfRangeAndNonFiniteValuesNameFieldAndReason) {
   EXPECT_THROW(ParamsFromProto(m), ParamsError);
 }
 
+TEST(Params, UnknownEnumValuesAreRefused) {
+  pb::VehicleParams m = DefaultVehicleParams();
+  m.set_yaw_mode(static_cast<pb::YawMode>(7));
+  m.set_tire_law(static_cast<pb::TireLaw>(9));
+  m.set_model(static_cast<pb::VehicleModel>(5));
+  const auto issues = ValidateVehicleParams(m);
+  EXPECT_TRUE(HasIssue(issues, "yaw_mode", "7 is not one of YAW_MODE_DYNAMIC or YAW_MODE_PAPER"))
+      << FormatIssues(issues);
+  EXPECT_TRUE(HasIssue(issues, "tire_law", "9 is not one of"));
+  EXPECT_TRUE(HasIssue(issues, "model", "5 is not one of"));
+}
+
 TEST(Params, TextFileOverridesOnlyTheFieldsItLists) {
   TempDir dir;
   WriteFile(dir / "car.txt", "# a heavier car\nmass: 1800\nlf { spring_stiffness: 40000 }\n");

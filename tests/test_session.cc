@@ -389,3 +389,76 @@ TEST(Session, ResimulationRefusesAnotherTerrainAndGaps) {
 
 }  // namespace
 }  // namespace vdyn
+
+#include "vdyn/runtime/input_arbiter.h"
+
+namespace vdyn {
+namespace {
+
+pb::DriverInput From(const std::string& source) {
+  pb::DriverInput in;
+  in.set_vehicle_id(1);
+  in.set_source_id(source);
+  return in;
+}
+
+// The strongest live valid source drives; refused input never counts as live.
+TEST(InputArbiter, TheStrongestLiveValidSourceDrives) {
+  InputArbiter a(base::Milliseconds(200));
+  base::MonoTime t{1'000'000'000};
+  const std::uint64_t primary = 11, backup = 12, wild = 13;
+  EXPECT_TRUE(a.Offer(From("backup"), backup, 5, t));      // alone: it drives
+  EXPECT_TRUE(a.Offer(From("primary"), primary, 20, t));   // stronger: takes over at once
+  EXPECT_FALSE(a.Offer(From("backup"), backup, 5, t));
+  // The primary's samples are refused from now on; within the lease it still owns the vehicle.
+  for (int ms = 10; ms <= 200; ms += 10) {
+    a.Refuse(primary, 1, "primary", "non-finite value on vdyn/input: steer",
+             t + base::Milliseconds(ms));
+    EXPECT_FALSE(a.Offer(From("backup"), backup, 5, t + base::Milliseconds(ms))) << ms << " ms";
+  }
+  // Past the lease without a valid sample: the backup drives.
+  EXPECT_TRUE(a.Offer(From("backup"), backup, 5, t + base::Milliseconds(201)));
+  // A stronger source whose every sample is refused never drives.
+  for (int ms = 210; ms < 600; ms += 10) {
+    a.Refuse(wild, 1, "rig30", "out of range: throttle must be in [-1, 1], got 5",
+             t + base::Milliseconds(ms));
+    EXPECT_TRUE(a.Offer(From("backup"), backup, 5, t + base::Milliseconds(ms)));
+  }
+  const auto snapshot = a.Snapshot(t + base::Milliseconds(600));
+  int checked = 0;
+  for (const auto& s : snapshot) {
+    if (s.handle == primary) {
+      EXPECT_EQ(s.last_refusal, "non-finite value on vdyn/input: steer");
+      EXPECT_FALSE(s.driving);
+      ++checked;
+    }
+    if (s.handle == wild) {
+      EXPECT_EQ(s.source_id, "rig30");
+      EXPECT_EQ(s.accepted, 0u);
+      EXPECT_GT(s.refused, 30u);
+      ++checked;
+    }
+    if (s.handle == backup) {
+      EXPECT_TRUE(s.driving);
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 3);
+  // When the primary sends valid input again it takes the vehicle back.
+  EXPECT_TRUE(a.Offer(From("primary"), primary, 20, t + base::Milliseconds(700)));
+  // A writer that is gone is forgotten.
+  a.Forget({primary});
+  EXPECT_FALSE(a.Knows(backup));
+  EXPECT_TRUE(a.Knows(primary));
+}
+
+TEST(InputArbiter, EqualStrengthsKeepTheCurrentOwner) {
+  InputArbiter a(base::Milliseconds(200));
+  const base::MonoTime t{5'000'000'000};
+  EXPECT_TRUE(a.Offer(From("a"), 2, 10, t));
+  EXPECT_FALSE(a.Offer(From("b"), 1, 10, t));  // no flapping between equals
+  EXPECT_TRUE(a.Offer(From("a"), 2, 10, t + base::Milliseconds(1)));
+}
+
+}  // namespace
+}  // namespace vdyn

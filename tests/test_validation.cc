@@ -7,6 +7,7 @@
 #include <cstring>
 #include <thread>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "vdyn/bridge/convert.h"
@@ -523,6 +524,114 @@ TEST(Properties, ParametersChangeBetweenSteps) {
   double sum = 0.0;
   for (const auto& w : d.wheel) sum += w.Fp;
   EXPECT_NEAR(sum, heavy->mass * heavy->gravity, 1e-3 * heavy->mass * heavy->gravity);
+}
+
+}  // namespace
+}  // namespace vdyn
+
+namespace vdyn {
+namespace {
+
+using Eigen::Vector3d;
+using testing::Drive;
+using testing::SharedWorld;
+
+// --- the edge of the physics: starts that cannot be, contacts that cannot blow up ---------------
+
+TEST(Spawn, InsideAWallOrAPostIsRefusedWithTheReason) {
+  const auto world = SharedWorld("facility");
+  Simulator sim(world, testing::DefaultParams());
+  const Vector3d inner = world->LandmarkAt("barrier_inner_max");
+  try {
+    sim.Spawn({inner.x() + 0.15, 0.0, 0.0});  // inside the 0.3 m east barrier
+    ADD_FAILURE() << "a spawn inside the barrier was accepted";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("the body would start inside 'glass_barrier'"));
+  }
+  EXPECT_THROW(sim.Spawn({3.5, 170.1, 0.0}), WorldError);  // on a billboard post
+  // A metre from the wall, with the body clear of it, is a start.
+  const State before = sim.state();
+  sim.Spawn({inner.x() - 3.5, 0.0, 0.0});
+  EXPECT_NE(Position(sim.state().x).x(), Position(before.x).x());
+}
+
+TEST(Spawn, GroundTooUnevenToRestOnIsRefused) {
+  // Ground twisted under the car: the left-front and right-rear wheels on 0.7 m pads, the other
+  // two on the ground. No plane fits the four within the suspension's 0.29 m of travel.
+  const ValidParams vp = testing::DefaultParams();
+  const Params& p = vp;
+  TriangleMesh m;
+  m.name = "twist";
+  m.AddQuad(Vector3d(-50, -50, 0), Vector3d(50, -50, 0), Vector3d(50, 50, 0), Vector3d(-50, 50, 0));
+  const std::array<Vector3d, 2> pads = {Vector3d(p.b, p.b_l, 0.7), Vector3d(-p.c, -p.b_p, 0.7)};
+  for (const Vector3d& c : pads) {
+    m.AddQuad(c + Vector3d(-0.5, -0.5, 0), c + Vector3d(0.5, -0.5, 0), c + Vector3d(0.5, 0.5, 0),
+              c + Vector3d(-0.5, 0.5, 0));
+  }
+  const auto world = WorldFromMesh(std::move(m), {-20, 0, 0});
+  Simulator sim(std::shared_ptr<const World>(world.get(), [](const World*) {}),
+                testing::DefaultParams());
+  try {
+    sim.Spawn({0.0, 0.0, 0.0});
+    ADD_FAILURE() << "a start across a 1.5 m step was accepted";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr("more than the suspension's travel"));
+  }
+}
+
+// However deep a probe ends up in a wall (a state no spawn allows, reached here by force), the
+// contact pushes with at most k_w * kWallPenetrationCap per probe: bounded, never 5e9 N.
+TEST(Properties, WallForcesAreBoundedHoweverDeepTheContact) {
+  const auto world = SharedWorld("facility");
+  const ValidParams p = testing::DefaultParams();
+  Simulator sim(world, p);
+  const Vector3d inner = world->LandmarkAt("barrier_inner_max");
+  const double bound = Params::kNumProbes * p->wall_stiffness * kWallPenetrationCap *
+                       (1.0 + p->wall_friction);
+  for (double depth : {0.05, 0.5, 1.5}) {
+    sim.Spawn({inner.x() - 10.0, 0.0, 0.0});
+    State s = sim.state();
+    Vector3d pos = Position(s.x);
+    pos.x() = inner.x() - p->body_front + depth;  // the front face `depth` into the east wall
+    SetPosition(s.x, pos);
+    SetVelocity(s.x, Vector3d(20.0, 0.0, 0.0));     // still driving into it
+    sim.SetState(s);
+    double max_force = 0.0;
+    Drive(sim, 2000, {}, [&](const StepRecord& r) {
+      max_force = std::max(max_force, r.derived.F_wall_W.norm());
+      return false;
+    });
+    EXPECT_GT(max_force, 0.0) << "no contact at depth " << depth;
+    EXPECT_LE(max_force, bound) << "depth " << depth;
+    EXPECT_TRUE(sim.state().x.allFinite());
+  }
+}
+
+// The largest step that resolves the parameters, against the modes' closed forms.
+TEST(Params, TheLargestResolvedStepFollowsTheFastestMode) {
+  const ValidParams p = testing::DefaultParams();
+  // The default car's fastest mode is the wall contact: omega = sqrt(k_w / m), h * omega <= 2.
+  const double wall = 2.0 / std::sqrt(p->wall_stiffness / p->mass);
+  std::string why;
+  EXPECT_NEAR(MaxResolvedStep(p, &why), wall, 1e-12);
+  EXPECT_EQ(why, "wall contact");
+  EXPECT_EQ(p.max_step(), MaxResolvedStep(p));
+  EXPECT_EQ(CheckStep(p, 0.01), "");
+  EXPECT_THAT(CheckStep(p, 0.05), ::testing::HasSubstr("wall contact) needs h <= 0.0346"));
+  // Stiffer springs on a light car: the heave of a corner sets it, omega = sqrt(k / m_corner).
+  const ValidParams light = testing::ParamsWith([](pb::VehicleParams& m) {
+    m.set_mass(300.0);
+    m.set_wall_stiffness(1e5);
+    for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()}) {
+      w->set_spring_stiffness(2e6);
+      w->set_bump_stop_stiffness(0.0);
+    }
+  });
+  // The rear corners carry less (b < c): theirs is the fastest heave.
+  const double m_corner = StaticWheelLoad(light, kLR) / light->gravity;
+  EXPECT_NEAR(MaxResolvedStep(light, &why), 1.0 / std::sqrt(2e6 / m_corner), 1e-12) << why;
+  EXPECT_EQ(why, "LR spring (heave)");
+  EXPECT_THROW(Simulator(SharedWorld("flat"), light, SimConfig{20'000'000}), std::invalid_argument);
 }
 
 }  // namespace

@@ -137,6 +137,70 @@ INSTANTIATE_TEST_SUITE_P(
                       BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
                       BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"}));
 
+std::string Le(std::uint32_t v, int bytes) {
+  std::string out;
+  for (int i = 0; i < bytes; ++i) out += static_cast<char>((v >> (8 * i)) & 0xff);
+  return out;
+}
+
+// Short pixel data is refused with what is missing (stb_image would build a terrain from memory it
+// never wrote; valgrind saw it).
+TEST(WorldFiles, ImagesWithShortPixelDataAreRefused) {
+  TempDir dir;
+  struct Case {
+    std::string name, bytes, reason;
+  };
+  std::string bmp = "BM" + Le(0, 4) + Le(0, 4) + Le(54, 4) + Le(40, 4) + Le(64, 4) + Le(64, 4) +
+                    Le(1, 2) + Le(8, 2) + Le(0, 4) + Le(0, 4) + Le(0, 4) + Le(0, 4) + Le(0, 4) +
+                    Le(0, 4);
+  bmp += std::string(100, '\x20');
+  std::string tga = std::string(2, '\0') + '\3' + std::string(9, '\0') + Le(64, 2) + Le(64, 2) +
+                    '\x08' + '\0';
+  tga += std::string(100, '\x20');
+  const Case cases[] = {
+      {"short.pgm", "P5\n64 64\n255\n" + std::string(100, '\x40'),
+       "64 x 64 pixels need 4096 bytes of pixels, the file holds 100"},
+      {"short16.pgm", "P5 # a comment\n4 4\n65535\n" + std::string(31, '\x40'),
+       "4 x 4 pixels need 32 bytes of pixels, the file holds 31"},
+      {"short.ppm", "P6\n8 8\n255\n" + std::string(100, '\x40'), "need 192 bytes"},
+      {"short.bmp", bmp, "the BMP's rows need 4096 bytes of pixels, the file holds 100"},
+      {"short.tga", tga, "the TGA's 64 x 64 pixels need 4096 bytes, the file holds 100"},
+  };
+  for (const Case& c : cases) {
+    WriteFile(dir / c.name, c.bytes);
+    try {
+      LoadWorld((dir / c.name).string(), WorldFileOptions{});
+      ADD_FAILURE() << c.name << " was accepted";
+    } catch (const WorldError& e) {
+      EXPECT_THAT(e.what(), HasSubstr((dir / c.name).string() + ": the image data is cut short"));
+      EXPECT_THAT(e.what(), HasSubstr(c.reason));
+    }
+  }
+  // The same formats complete load (the checks do not refuse good files).
+  WriteFile(dir / "full.pgm", "P5\n2 2\n255\n\x10\x20\x30\x40");
+  EXPECT_NO_THROW(LoadWorld((dir / "full.pgm").string(), WorldFileOptions{}));
+  // Plain-text PGM is refused with what to do instead.
+  WriteFile(dir / "ascii.pgm", "P2\n2 2\n255\n1 2\n3 4\n");
+  try {
+    LoadWorld((dir / "ascii.pgm").string(), WorldFileOptions{});
+    ADD_FAILURE() << "a plain-text PGM was accepted";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("save the height map as binary PGM (P5)"));
+  }
+}
+
+// One NaN vertex costs its triangles, not the mesh (Assimp's FindInvalidData would drop it all).
+TEST(WorldFiles, ANonFiniteVertexDropsItsTrianglesOnly) {
+  TempDir dir;
+  WriteFile(dir / "nan.obj",
+            "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nv nan 0 1\nv 1 1 1\n"
+            "f 1 2 3\nf 1 3 4\nf 5 6 1\n");
+  const auto world = LoadWorld((dir / "nan.obj").string(), WorldFileOptions{});
+  EXPECT_EQ(world->terrain.triangle_count(), 2u);
+  EXPECT_EQ(world->terrain.dropped_triangles(), 1u);
+  EXPECT_NEAR(GroundZ(*world, 10.0, -20.0), 0.0, 1e-9);
+}
+
 TEST(WorldFiles, BadOptionsAreRefused) {
   TempDir dir;
   WriteFile(dir / "g.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");

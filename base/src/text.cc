@@ -71,6 +71,17 @@ std::string FormatNumber(double v) {
   return s;
 }
 
+std::string FormatApprox(double v, int digits) {
+  if (!std::isfinite(v)) return FormatNumber(v);
+  // Whole numbers up to seven digits stay whole (14095, not 1.409e4).
+  if (std::abs(v) >= std::pow(10.0, digits) && std::abs(v) < 1e7) return FormatNumber(std::round(v));
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.*g", digits, v);
+  // Read back and print shortest: drops trailing zeros; then the exponent as a person writes it.
+  const auto parsed = ParseNumber(buf);
+  return parsed ? FormatNumber(*parsed) : std::string(buf);
+}
+
 std::string Quote(std::string_view text, std::size_t max_bytes) {
   std::string out;
   const std::size_t n = std::min(text.size(), max_bytes);

@@ -124,19 +124,9 @@ void CheckImageData(const std::string& name, const std::string& b) {
       if (have < need) {
         short_data(need, have, std::to_string(w) + " x " + std::to_string(h) + " pixels");
       }
-    } else if (b[1] == '2' || b[1] == '3') {
-      std::uint64_t values = 0;
-      bool in_number = false;
-      for (std::size_t k = i - 1; k < b.size(); ++k) {
-        const bool digit = std::isdigit(static_cast<unsigned char>(b[k])) != 0;
-        if (digit && !in_number) ++values;
-        in_number = digit;
-      }
-      if (values < w * h * channels) {
-        throw WorldError(name + ": the image data is cut short: " + std::to_string(w) + " x " +
-                         std::to_string(h) + " pixels need " + std::to_string(w * h * channels) +
-                         " values, the file holds " + std::to_string(values));
-      }
+    } else {
+      throw WorldError(name + ": plain-text and bitmap PNM (P1 to P4) is not read; save the " +
+                       "height map as binary PGM (P5) or PPM (P6)");
     }
   } else if (b.size() >= 2 && b[0] == 'B' && b[1] == 'M') {
     if (b.size() < 34) throw WorldError(name + ": the BMP header is cut short");

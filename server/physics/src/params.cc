@@ -9,6 +9,7 @@
 namespace vdyn {
 namespace {
 
+using base::FormatApprox;
 using base::FormatNumber;
 
 // Where each limited field of the table lives in Params.
@@ -156,11 +157,11 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
     const double travel = wp.free_length - wp.bump_stop_length;
     if (!(sag < travel)) {
       out.push_back({std::string(kWheelFields[w]) + ".spring_stiffness",
-                     "the static load (" + FormatNumber(std::round(StaticWheelLoad(p, w))) +
-                         " N) compresses this spring by " + FormatNumber(sag) +
-                         " m, more than its travel to the bump stop (" + FormatNumber(travel) +
+                     "the static load (" + FormatApprox(StaticWheelLoad(p, w)) +
+                         " N) compresses this spring by " + FormatApprox(sag) +
+                         " m, more than its travel to the bump stop (" + FormatApprox(travel) +
                          " m): it needs at least " +
-                         FormatNumber(StaticWheelLoad(p, w) / travel) + " N/m"});
+                         FormatApprox(StaticWheelLoad(p, w) / travel) + " N/m"});
     }
   }
   return out;
@@ -210,8 +211,8 @@ std::string CheckStep(const ValidParams& p, double h) {
   if (h <= p.max_step()) return {};
   std::string mode;
   MaxResolvedStep(p.get(), &mode);
-  return "the step " + FormatNumber(h) + " s is too long for these parameters: their fastest mode (" +
-         mode + ") needs h <= " + FormatNumber(p.max_step()) + " s";
+  return "the step " + FormatApprox(h) + " s is too long for these parameters: their fastest mode (" +
+         mode + ") needs h <= " + FormatApprox(p.max_step(), 3) + " s";
 }
 
 std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues) {

@@ -7,6 +7,8 @@
 
 #include <Eigen/Dense>
 
+#include "vdyn/base/text.h"
+
 namespace vdyn {
 
 State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed,
@@ -26,7 +28,8 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
     const TraceHit hit = terrain.Trace(origin, -Eigen::Vector3d::UnitZ(), depth);
     if (!hit.hit) {
       throw WorldError("no terrain below wheel " + std::string(kWheelNames[w]) + " at (" +
-                       std::to_string(origin.x()) + ", " + std::to_string(origin.y()) + ")");
+                       base::FormatApprox(origin.x(), 6) + ", " + base::FormatApprox(origin.y(), 6) +
+                       ")");
     }
     const double ground_z = top - hit.distance;
     // Spring deformation carrying the static load (with the bump stop if it reaches it).

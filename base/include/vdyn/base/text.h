@@ -18,6 +18,10 @@ std::optional<double> ParseNumber(std::string_view text);
 // 100000, 0.25, 1e9, 1.5e-7, -3. Never 17 significant digits of noise.
 std::string FormatNumber(double v);
 
+// A computed quantity to `digits` significant digits, exponent as a person writes it:
+// 14094.8275... -> "14095", 3.0864e-07 -> "3.086e-7", 0.29 -> "0.29".
+std::string FormatApprox(double v, int digits = 4);
+
 // Untrusted text made safe for one log line or reply: at most `max_bytes` bytes of it, printable
 // ASCII kept, everything else escaped (\n, \x1b, ...), and "... (N bytes)" when cut.
 std::string Quote(std::string_view text, std::size_t max_bytes = 80);
