@@ -4,11 +4,13 @@
 #include <signal.h>
 #include <spawn.h>
 #include <poll.h>
+#include <sys/file.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
+#include <mutex>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -92,9 +94,21 @@ void UseLoopbackDds() {
 }
 
 std::uint32_t FreshDomain() {
-  // Domains 100..229, starting where this process's id points, one per call.
-  static std::atomic<std::uint32_t> next{static_cast<std::uint32_t>(getpid()) % 64};
-  return 100 + (next.fetch_add(1) % 130);
+  // Domains 100..229, each taken by at most one test process on this machine at a time: a
+  // process holds a lock file per domain it uses (released when it exits), so test binaries
+  // that run side by side (ctest -j) never meet on a domain.
+  static std::mutex mu;
+  static std::uint32_t next = static_cast<std::uint32_t>(getpid()) % 130;
+  std::lock_guard<std::mutex> lock(mu);
+  for (int tries = 0; tries < 130; ++tries) {
+    const std::uint32_t domain = 100 + (next++ % 130);
+    const std::string path = "/tmp/vdyn-test-domain-" + std::to_string(domain) + ".lock";
+    const int fd = open(path.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0666);
+    if (fd < 0) continue;
+    if (flock(fd, LOCK_EX | LOCK_NB) == 0) return domain;  // fd stays open: the lock is held
+    close(fd);
+  }
+  throw std::runtime_error("no free DDS domain among 100..229 for this test");
 }
 
 }  // namespace vdyn::testing

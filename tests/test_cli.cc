@@ -118,7 +118,8 @@ class ServerRefusesBadNumbers : public ::testing::TestWithParam<BadOption> {};
 
 TEST_P(ServerRefusesBadNumbers, WithExitCode2AndTheOptionNamed) {
   testing::UseLoopbackDds();
-  const Result r = RunServer(std::string(GetParam().args) + " --domain 229");
+  const Result r =
+      RunServer(std::string(GetParam().args) + " --domain " + std::to_string(testing::FreshDomain()));
   EXPECT_EQ(r.exit_code, 2) << r.output;
   EXPECT_THAT(r.output, HasSubstr(GetParam().message));
   EXPECT_EQ(r.output.find("e+"), std::string::npos) << "limits are printed as a person writes them";
@@ -197,10 +198,11 @@ TEST(Cli, ASpawnInsideAWallIsRefused) {
 // A binary that reads no options still answers a bad command line with exit code 2.
 TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   testing::UseLoopbackDds();
-  const Result twice = RunServer("--vehicle-ids 1,1 --domain 231 --duration 1");
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const Result twice = RunServer("--vehicle-ids 1,1 --duration 1" + domain);
   EXPECT_EQ(twice.exit_code, 2) << twice.output;
   EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));
-  const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --domain 231 --duration 1");
+  const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --duration 1" + domain);
   EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
   EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
 }
@@ -228,9 +230,11 @@ TEST(CliInput, BadManeuverIsRefusedWithTheReason) {
 
 TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
   testing::UseLoopbackDds();
-  const Result r = RunInput("--maneuver demo --domain 230 --wait 1");
+  const std::uint32_t domain = testing::FreshDomain();
+  const Result r = RunInput("--maneuver demo --wait 1 --domain " + std::to_string(domain));
   EXPECT_EQ(r.exit_code, 1);
-  EXPECT_THAT(r.output, HasSubstr("no state of vehicle 1 on domain 230 within 1 s"));
+  EXPECT_THAT(r.output, HasSubstr("no state of vehicle 1 on domain " + std::to_string(domain) +
+                                  " within 1 s"));
 }
 
 }  // namespace
