@@ -16,3 +16,8 @@ if(VDYN_SANITIZE)
     -fno-omit-frame-pointer)
   target_link_options(vdyn_options INTERFACE -fsanitize=address,undefined,float-cast-overflow)
 endif()
+if(VDYN_FUZZ)
+  # Coverage for libFuzzer in every library; clang's warnings differ from GCC's, so they are not
+  # errors in this configuration (the GCC builds keep -Werror).
+  target_compile_options(vdyn_options INTERFACE -fsanitize=fuzzer-no-link -Wno-error)
+endif()

@@ -13,6 +13,25 @@ std::string DdsError(std::string_view what, dds_return_t rc) {
   return std::string(what) + ": " + dds_strretcode(rc);
 }
 
+Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
+                       std::span<const std::uint8_t> payload, google::protobuf::Message& into) {
+  const TopicSpec& s = Spec(topic);
+  Decoded d;
+  if (type_name != s.payload || into.GetDescriptor()->full_name() != s.payload) {
+    d.outcome = Decoded::Outcome::kUnknownType;
+  } else if (payload.size() > s.max_payload_bytes) {
+    d.outcome = Decoded::Outcome::kOversized;
+  } else if (!into.ParseFromArray(payload.data(), static_cast<int>(payload.size()))) {
+    d.outcome = Decoded::Outcome::kMalformed;
+  } else {
+    const messages::Finding f = messages::CheckMessage(into);
+    if (f.problem == messages::Problem::kNonFinite) d.outcome = Decoded::Outcome::kNonFinite;
+    if (f.problem == messages::Problem::kStringTooLong) d.outcome = Decoded::Outcome::kLongString;
+    d.field = f.field;
+  }
+  return d;
+}
+
 Participant::Participant(std::uint32_t domain_id) : domain_id_(domain_id) {
   participant_ = dds_create_participant(domain_id, nullptr, nullptr);
   if (participant_ < 0) {
@@ -281,20 +300,28 @@ bool RawReader::Envelope(const void* sample, const dds_sample_info_t& si, RawSam
 }
 
 bool RawReader::Decode(const RawSample& raw, google::protobuf::Message& scratch) {
-  if (!scratch.ParseFromArray(raw.payload.data(), static_cast<int>(raw.payload.size()))) {
-    Refused(raw.info, drop_malformed_, "malformed payload", {}, nullptr);
-    return false;
+  // The envelope's type name and size were checked by Envelope(); here the payload.
+  const Decoded d = DecodeEnvelope(id_, raw.type_name, raw.payload, scratch);
+  switch (d.outcome) {
+    case Decoded::Outcome::kOk:
+      return true;
+    case Decoded::Outcome::kNonFinite:
+      Refused(raw.info, drop_nonfinite_, "non-finite value", d.field, &scratch);
+      return false;
+    case Decoded::Outcome::kLongString:
+      Refused(raw.info, drop_long_string_, "oversized string", d.field, &scratch);
+      return false;
+    case Decoded::Outcome::kUnknownType:
+      Refused(raw.info, drop_unknown_type_, "unknown type", raw.type_name, nullptr);
+      return false;
+    case Decoded::Outcome::kOversized:
+      Refused(raw.info, drop_oversized_, "oversized payload", {}, nullptr);
+      return false;
+    case Decoded::Outcome::kMalformed:
+      break;
   }
-  const messages::Finding f = messages::CheckMessage(scratch);
-  if (f.problem == messages::Problem::kNonFinite) {
-    Refused(raw.info, drop_nonfinite_, "non-finite value", f.field, &scratch);
-    return false;
-  }
-  if (f.problem == messages::Problem::kStringTooLong) {
-    Refused(raw.info, drop_long_string_, "oversized string", f.field, &scratch);
-    return false;
-  }
-  return true;
+  Refused(raw.info, drop_malformed_, "malformed payload", {}, nullptr);
+  return false;
 }
 
 int RawReader::TakeRaw(const std::function<void(const RawSample&)>& fn, int max_samples) {

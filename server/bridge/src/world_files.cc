@@ -38,22 +38,26 @@ Eigen::Vector3d ToWorld(double x, double y, double z, const WorldFileOptions& o)
   return o.scale * v;
 }
 
-std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOptions& o) {
-  Assimp::Importer importer;
-  importer.SetPropertyBool(AI_CONFIG_FBX_CONVERT_TO_M, true);
-  importer.SetPropertyBool(AI_CONFIG_PP_FD_REMOVE, true);
+unsigned ImportFlags() {
   // No aiProcess_FindInvalidData: it removes a whole mesh for one NaN vertex ("No meshes
   // remaining"). Non-finite and degenerate triangles are dropped one by one, and counted, by
   // Terrain::AddMesh; the rest of the mesh stays.
-  const unsigned flags = aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
-                         aiProcess_PreTransformVertices | aiProcess_FindDegenerates |
-                         aiProcess_ValidateDataStructure | aiProcess_SortByPType;
-  const aiScene* scene = importer.ReadFile(path.string(), flags);
+  return aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
+         aiProcess_FindDegenerates | aiProcess_ValidateDataStructure | aiProcess_SortByPType;
+}
+
+void ConfigureImporter(Assimp::Importer& importer) {
+  importer.SetPropertyBool(AI_CONFIG_FBX_CONVERT_TO_M, true);
+  importer.SetPropertyBool(AI_CONFIG_PP_FD_REMOVE, true);
+}
+
+std::vector<TriangleMesh> MeshesFromScene(const aiScene* scene, const Assimp::Importer& importer,
+                                          const std::string& name, const WorldFileOptions& o) {
   if (scene == nullptr) {
-    throw WorldError(path.string() + ": cannot read the mesh: " + importer.GetErrorString());
+    throw WorldError(name + ": cannot read the mesh: " + importer.GetErrorString());
   }
   if ((scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) != 0u) {
-    throw WorldError(path.string() + ": the mesh file is incomplete");
+    throw WorldError(name + ": the mesh file is incomplete");
   }
   std::vector<TriangleMesh> meshes;
   for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
@@ -75,6 +79,24 @@ std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOpti
     if (!mesh.triangles.empty()) meshes.push_back(std::move(mesh));
   }
   return meshes;
+}
+
+std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOptions& o) {
+  // From the file (not from memory): a glTF's buffers and an OBJ's materials are found beside it.
+  Assimp::Importer importer;
+  ConfigureImporter(importer);
+  const aiScene* scene = importer.ReadFile(path.string(), ImportFlags());
+  return MeshesFromScene(scene, importer, path.string(), o);
+}
+
+std::vector<TriangleMesh> LoadMeshBytes(const std::string& bytes, const std::string& name,
+                                        const std::string& ext, const WorldFileOptions& o) {
+  Assimp::Importer importer;
+  ConfigureImporter(importer);
+  const std::string hint = ext.empty() ? std::string() : ext.substr(1);
+  const aiScene* scene =
+      importer.ReadFileFromMemory(bytes.data(), bytes.size(), ImportFlags(), hint.c_str());
+  return MeshesFromScene(scene, importer, name, o);
 }
 
 // Image formats whose decoder would read past short data: the header says how many bytes the
@@ -167,21 +189,13 @@ void CheckTgaData(const std::string& name, const std::string& b) {
   }
 }
 
-TriangleMesh LoadHeightmap(const fs::path& path, const WorldFileOptions& o) {
-  const std::string name = path.string();
-  std::string bytes;
-  {
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream ss;
-    ss << in.rdbuf();
-    bytes = ss.str();
-    if (!in.good() && !in.eof()) throw WorldError(name + ": cannot read the height map");
-  }
+TriangleMesh HeightmapFromBytes(const std::string& bytes, const std::string& name,
+                                const std::string& ext, const WorldFileOptions& o) {
   if (bytes.size() > static_cast<std::size_t>(std::numeric_limits<int>::max())) {
     throw WorldError(name + ": a height-map image may hold at most 2 GB");
   }
   CheckImageData(name, bytes);
-  if (Lower(path.extension().string()) == ".tga") CheckTgaData(name, bytes);
+  if (ext == ".tga") CheckTgaData(name, bytes);
   const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int size = static_cast<int>(bytes.size());
   int w = 0, h = 0, channels = 0;
@@ -207,9 +221,13 @@ TriangleMesh LoadHeightmap(const fs::path& path, const WorldFileOptions& o) {
     throw WorldError(name + ": a height map needs at least 2 x 2 pixels, got " +
                      std::to_string(w) + " x " + std::to_string(h));
   }
+  if (static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) > 64'000'000) {
+    throw WorldError(name + ": a " + std::to_string(w) + " x " + std::to_string(h) +
+                     " height map is larger than 64 million pixels");
+  }
   // Pixel (i, j) -> x = (i - (w-1)/2) * cell, y = ((h-1)/2 - j) * cell: image up is north (+Y).
   TriangleMesh mesh;
-  mesh.name = path.filename().string();
+  mesh.name = fs::path(name).filename().string();
   mesh.kind = SurfaceKind::kGround;
   const double cx = 0.5 * (w - 1), cy = 0.5 * (h - 1);
   for (int j = 0; j < h; ++j) {
@@ -232,12 +250,9 @@ TriangleMesh LoadHeightmap(const fs::path& path, const WorldFileOptions& o) {
 
 }  // namespace
 
-std::unique_ptr<World> LoadWorld(const std::string& name_or_path, const WorldFileOptions& options) {
-  for (const std::string& builtin : BuiltinWorldNames()) {
-    if (name_or_path == builtin) return BuildBuiltinWorld(builtin);
-  }
-  const fs::path path(name_or_path);
-  const std::string name = path.string();
+namespace {
+
+void CheckOptions(const std::string& name, const WorldFileOptions& options) {
   if (!(options.scale > 0.0) || !std::isfinite(options.scale)) {
     throw WorldError(name + ": scale must be a positive number");
   }
@@ -248,30 +263,12 @@ std::unique_ptr<World> LoadWorld(const std::string& name_or_path, const WorldFil
       !std::isfinite(options.heightmap_cell) || !std::isfinite(options.heightmap_height)) {
     throw WorldError(name + ": height-map cell size and height must be positive numbers");
   }
-  std::error_code ec;
-  if (!fs::exists(path, ec)) {
-    throw WorldError(name + ": no such file (and not a built-in world: facility, flat)");
-  }
-  if (!fs::is_regular_file(path, ec)) throw WorldError(name + ": not a regular file");
-  if (fs::file_size(path, ec) == 0) throw WorldError(name + ": the file is empty");
-  {
-    std::ifstream probe(path, std::ios::binary);
-    if (!probe) throw WorldError(name + ": cannot open the file for reading");
-  }
+}
 
-  auto world = std::make_unique<World>();
-  world->name = path.filename().string();
-  const std::string ext = Lower(path.extension().string());
-  std::size_t added = 0;
-  if (IsImage(ext)) {
-    world->terrain.AddMesh(LoadHeightmap(path, options));
-    added = 1;
-  } else {
-    for (TriangleMesh& m : LoadMeshFile(path, options)) {
-      world->terrain.AddMesh(std::move(m));
-      ++added;
-    }
-  }
+std::unique_ptr<World> Finish(std::unique_ptr<World> world, const std::string& name,
+                              std::vector<TriangleMesh> meshes) {
+  const std::size_t added = meshes.size();
+  for (TriangleMesh& m : meshes) world->terrain.AddMesh(std::move(m));
   if (added == 0 || world->terrain.triangle_count() == 0) {
     throw WorldError(name + ": contains no usable triangles" +
                      (world->terrain.dropped_triangles() > 0
@@ -284,6 +281,51 @@ std::unique_ptr<World> LoadWorld(const std::string& name_or_path, const WorldFil
   world->spawn = {0.5 * (lo.x() + hi.x()), 0.5 * (lo.y() + hi.y()), 0.0};
   world->landmarks = {{"bounds_min", lo}, {"bounds_max", hi}};
   return world;
+}
+
+}  // namespace
+
+std::unique_ptr<World> LoadWorldFromBytes(const std::string& bytes, const std::string& name,
+                                          const WorldFileOptions& options) {
+  CheckOptions(name, options);
+  if (bytes.empty()) throw WorldError(name + ": the file is empty");
+  auto world = std::make_unique<World>();
+  world->name = fs::path(name).filename().string();
+  const std::string ext = Lower(fs::path(name).extension().string());
+  std::vector<TriangleMesh> meshes;
+  if (IsImage(ext)) {
+    meshes.push_back(HeightmapFromBytes(bytes, name, ext, options));
+  } else {
+    meshes = LoadMeshBytes(bytes, name, ext, options);
+  }
+  return Finish(std::move(world), name, std::move(meshes));
+}
+
+std::unique_ptr<World> LoadWorld(const std::string& name_or_path, const WorldFileOptions& options) {
+  for (const std::string& builtin : BuiltinWorldNames()) {
+    if (name_or_path == builtin) return BuildBuiltinWorld(builtin);
+  }
+  const fs::path path(name_or_path);
+  const std::string name = path.string();
+  CheckOptions(name, options);
+  std::error_code ec;
+  if (!fs::exists(path, ec)) {
+    throw WorldError(name + ": no such file (and not a built-in world: facility, flat)");
+  }
+  if (!fs::is_regular_file(path, ec)) throw WorldError(name + ": not a regular file");
+  if (fs::file_size(path, ec) == 0) throw WorldError(name + ": the file is empty");
+  const std::string ext = Lower(path.extension().string());
+  auto world = std::make_unique<World>();
+  world->name = path.filename().string();
+  if (!IsImage(ext)) return Finish(std::move(world), name, LoadMeshFile(path, options));
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw WorldError(name + ": cannot open the file for reading");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) throw WorldError(name + ": cannot read the height map");
+  std::vector<TriangleMesh> meshes;
+  meshes.push_back(HeightmapFromBytes(ss.str(), name, ext, options));
+  return Finish(std::move(world), name, std::move(meshes));
 }
 
 }  // namespace vdyn

@@ -32,6 +32,22 @@ class TransportError : public std::runtime_error {
 // "what: reason" for a DDS return code.
 std::string DdsError(std::string_view what, dds_return_t rc);
 
+// What a reader concludes about one envelope (its type name and payload) on a topic: the checks
+// every received sample passes, in order, without DDS (readers use it; so do the fuzz targets).
+struct Decoded {
+  enum class Outcome {
+    kOk,
+    kUnknownType,    // the type name is not the topic's payload
+    kOversized,      // larger than the topic allows (not parsed)
+    kMalformed,      // does not parse as the payload
+    kNonFinite,      // a NaN or an infinity somewhere
+    kLongString,     // a string field longer than its limit
+  } outcome = Outcome::kOk;
+  std::string field;  // the offending field, for kNonFinite and kLongString
+};
+Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
+                       std::span<const std::uint8_t> payload, google::protobuf::Message& into);
+
 // A DDS domain participant and the vdyn topics created in it (once each).
 class Participant {
  public:

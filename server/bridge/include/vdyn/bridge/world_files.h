@@ -21,4 +21,9 @@ struct WorldFileOptions {
 // (PNG, PGM, ...). Throws WorldError naming the file and the reason.
 std::unique_ptr<World> LoadWorld(const std::string& name_or_path, const WorldFileOptions& options);
 
+// The same from a file's bytes held in memory; `name` gives the format by its extension and names
+// the data in errors. (A glTF whose buffers are separate files needs LoadWorld.)
+std::unique_ptr<World> LoadWorldFromBytes(const std::string& bytes, const std::string& name,
+                                          const WorldFileOptions& options);
+
 }  // namespace vdyn

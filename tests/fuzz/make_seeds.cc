@@ -1,0 +1,108 @@
+// Writes the seed corpora of the fuzz targets (tests/fuzz/corpus/<target>/): run it once after a
+// format changes and commit what it writes. Usage: fuzz_make_seeds CORPUS_DIR
+#include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "vdyn/bridge/convert.h"
+#include "vdyn/control.pb.h"
+#include "vdyn/input.pb.h"
+#include "vdyn/io/maneuver.h"
+#include "vdyn/io/vehicle_params.h"
+#include "vdyn/physics/world.h"
+
+namespace fs = std::filesystem;
+
+namespace {
+void Write(const fs::path& dir, const std::string& name, const std::string& bytes) {
+  fs::create_directories(dir);
+  std::ofstream(dir / name, std::ios::binary) << bytes;
+}
+std::string Tagged(char tag, const std::string& bytes) { return std::string(1, tag) + bytes; }
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s CORPUS_DIR\n", argv[0]);
+    return 2;
+  }
+  const fs::path root(argv[1]);
+  // Maneuvers.
+  Write(root / "maneuver", "demo.csv", vdyn::DemoManeuverCsv());
+  Write(root / "maneuver", "reordered.csv",
+        "# comment\r\nbrake,t_s,throttle,steer_deg\r\n0,0,0.5,1\r\n0.2,1.5,0,-2\r\n");
+  Write(root / "maneuver", "cruise.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0,0,36\n10,0,0,0,\n");
+  // Vehicle parameters: text (first byte even) and JSON (odd).
+  Write(root / "vehicle_params", "defaults.txt", Tagged('\0', vdyn::DumpVehicleParamsText(vdyn::DefaultVehicleParams())));
+  Write(root / "vehicle_params", "change.txt", Tagged('\0', "mass: 1600\nlf { spring_stiffness: 32000 }\nmodel: VEHICLE_MODEL_PAPER\n"));
+  Write(root / "vehicle_params", "change.json", Tagged('\1', R"({"mass": 1400, "yawMode": "YAW_MODE_PAPER", "rr": {"radius": 0.33}})"));
+  // Terrain files (first byte picks the format: 0 obj, 1 stl, 7 pgm, 8 bmp).
+  Write(root / "world_file", "quad.obj", Tagged('\0', "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nf 1 2 3\nf 1 3 4\n"));
+  Write(root / "world_file", "tri.stl", Tagged('\1', "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 10 0 0\nvertex 0 10 0\nendloop\nendfacet\nendsolid t\n"));
+  Write(root / "world_file", "hm.pgm", Tagged('\7', std::string("P5\n3 2\n255\n") + std::string("\x00\x40\x80\xc0\xff\x10", 6)));
+  {
+    std::string bmp = "BM";
+    auto le = [&bmp](std::uint32_t v, int n) { for (int i = 0; i < n; ++i) bmp += static_cast<char>((v >> (8 * i)) & 0xff); };
+    le(54 + 8, 4); le(0, 4); le(54, 4); le(40, 4); le(2, 4); le(2, 4); le(1, 2); le(8, 2);
+    le(0, 4); le(8, 4); le(0, 4); le(0, 4); le(0, 4); le(0, 4);
+    bmp += std::string("\x10\x20\x00\x00\x30\x40\x00\x00", 8);
+    Write(root / "world_file", "hm.bmp", Tagged('\x08', bmp));
+  }
+  // World descriptions: a small world of two meshes, as a server describes it.
+  {
+    vdyn::TriangleMesh ground;
+    ground.name = "ground";
+    ground.AddQuad({-20, -20, 0}, {20, -20, 0}, {20, 20, 0}, {-20, 20, 0});
+    vdyn::TriangleMesh box;
+    box.name = "box";
+    box.kind = vdyn::SurfaceKind::kBarrier;
+    box.AddBox({5, 5, 0}, {6, 6, 1});
+    vdyn::World w;
+    w.name = "seed";
+    w.terrain.AddMesh(std::move(ground));
+    w.terrain.AddMesh(std::move(box));
+    w.terrain.Commit();
+    Write(root / "world_description", "small.pb", vdyn::DescribeWorld(w, "seed", 1'000'000).SerializeAsString());
+  }
+  // What the server reads: inputs (first byte 0) and control requests (1).
+  {
+    vdyn::pb::DriverInput in;
+    in.set_vehicle_id(1);
+    in.set_source_id("seed-rig");
+    in.set_throttle(0.6);
+    in.set_steer(0.05);
+    in.set_cruise_on(true);
+    in.set_cruise_set_kmh(50);
+    Write(root / "server_messages", "input.pb", Tagged('\0', in.SerializeAsString()));
+    in.set_steer_mode(vdyn::pb::STEER_HAND_WHEEL);
+    in.set_steer(1.5);
+    in.set_gear(2);
+    in.set_clutch(0.2);
+    Write(root / "server_messages", "input_wheel.pb", Tagged('\0', in.SerializeAsString()));
+    auto request = [&](const std::string& name, const vdyn::pb::ControlRequest& r) {
+      Write(root / "server_messages", name, Tagged('\1', r.SerializeAsString()));
+    };
+    vdyn::pb::ControlRequest r;
+    r.set_vehicle_id(1);
+    r.set_client_id("seed");
+    r.mutable_teleport()->mutable_pose()->set_x(-100);
+    r.mutable_teleport()->mutable_pose()->set_y(-150);
+    r.mutable_teleport()->set_speed(10);
+    request("teleport.pb", r);
+    r.mutable_set_params()->mutable_params()->set_mass(1700);
+    request("set_params.pb", r);
+    r.set_vehicle_id(2);
+    r.set_server_id("fuzz");
+    r.mutable_spawn()->mutable_pose()->set_x(0);
+    r.mutable_spawn()->mutable_pose()->set_y(40);
+    request("spawn.pb", r);
+    r.mutable_step()->set_steps(3);
+    request("step.pb", r);
+    r.mutable_remove();
+    request("remove.pb", r);
+  }
+  std::printf("seeds written under %s\n", root.c_str());
+  return 0;
+}
