@@ -48,6 +48,10 @@ const char* KindName(DeviceInfo::Kind k) {
 SdlContext::SdlContext(bool want_video) {
   SDL_SetHint(SDL_HINT_JOYSTICK_ALLOW_BACKGROUND_EVENTS, "1");
   SDL_SetHint(SDL_HINT_NO_SIGNAL_HANDLERS, "1");
+  // The window is a few rectangles and letters drawn in software: blit it to X directly rather
+  // than through an OpenGL texture (SDL's default on X11, which costs a GL context and, without a
+  // GPU, llvmpipe's threads).
+  SDL_SetHint(SDL_HINT_FRAMEBUFFER_ACCELERATION, "0");
   if (SDL_Init(SDL_INIT_JOYSTICK | SDL_INIT_HAPTIC | SDL_INIT_EVENTS) != 0) {
     // Haptic may be missing on a machine without force feedback support: joysticks still work.
     if (SDL_Init(SDL_INIT_JOYSTICK | SDL_INIT_EVENTS) != 0) {

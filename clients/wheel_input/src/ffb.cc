@@ -54,6 +54,7 @@ void ForceFeedback::StopDevice(FfbOutput::Mode mode) {
   device_stopped_ = true;
   filtered_ = 0;
   slewed_ = 0;
+  have_time_ = false;  // playing again starts from zero, through the slew limit
   last_ = FfbOutput{};
   last_.mode = mode;
 }
@@ -103,7 +104,8 @@ void ForceFeedback::ClipMeter(base::MonoTime now, bool clipped) {
 }
 
 FfbOutput ForceFeedback::Update(base::MonoTime now, const FfbInput& in, bool estop) {
-  const double dt = have_time_ ? std::clamp((now - last_time_).seconds(), 0.0, 0.1) : 0.0;
+  // A late update (the loop was held up) counts as at most 20 ms: the slew limit stays a limit.
+  const double dt = have_time_ ? std::clamp((now - last_time_).seconds(), 0.0, 0.02) : 0.0;
   have_time_ = true;
   last_time_ = now;
   ++updates_;
