@@ -3,6 +3,7 @@
 #include <SDL2/SDL.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <stdexcept>
 
 #include "vdyn/wheel_input/mapping.h"
@@ -63,6 +64,15 @@ SdlContext::SdlContext(bool want_video) {
   if (want_video) {
     if (SDL_InitSubSystem(SDL_INIT_VIDEO) == 0) {
       video_ = true;
+      // Without a display SDL falls back to its offscreen driver: a window nobody sees or types
+      // into. That counts as no display unless asked for by name (tests: SDL_VIDEODRIVER=dummy).
+      const std::string driver = SDL_GetCurrentVideoDriver() ? SDL_GetCurrentVideoDriver() : "";
+      const char* asked = std::getenv("SDL_VIDEODRIVER");
+      if ((driver == "offscreen" || driver == "dummy") && (asked == nullptr || driver != asked)) {
+        SDL_QuitSubSystem(SDL_INIT_VIDEO);
+        video_ = false;
+        video_error_ = "no display: SDL found only its " + driver + " video driver (is DISPLAY set?)";
+      }
     } else {
       video_error_ = SDL_GetError();
     }

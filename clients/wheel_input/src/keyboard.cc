@@ -22,6 +22,7 @@ void KeyboardDriver::OnKey(SDL_Scancode key, bool down) {
   const bool was = down_[key] != 0;
   down_[key] = down ? 1 : 0;
   if (down && !was) {
+    tapped_[key] = 1;
     if (key == SDL_SCANCODE_ESCAPE) estop_press_ = true;
     if (key == SDL_SCANCODE_F2) rearm_press_ = true;
   }
@@ -29,10 +30,15 @@ void KeyboardDriver::OnKey(SDL_Scancode key, bool down) {
 
 void KeyboardDriver::ReleaseAll() {
   for (auto& d : down_) d = 0;
+  for (auto& t : tapped_) t = 0;
 }
 
 bool KeyboardDriver::held(SDL_Scancode key) const {
   return key >= 0 && key < SDL_NUM_SCANCODES && down_[key] != 0;
+}
+
+bool KeyboardDriver::pressed(SDL_Scancode key) const {
+  return held(key) || (key >= 0 && key < SDL_NUM_SCANCODES && tapped_[key] != 0);
 }
 
 bool KeyboardDriver::TakeEstopPress() {
@@ -76,19 +82,21 @@ WheelControls KeyboardDriver::Step(double dt_s, const VehicleInfo& v) {
   c.brake = brake_;
   c.handbrake = held(SDL_SCANCODE_SPACE) ? 1.0 : 0.0;
   std::uint32_t b = 0;
-  if (held(SDL_SCANCODE_Q)) b |= pb::BUTTON_PADDLE_LEFT;
-  if (held(SDL_SCANCODE_E)) b |= pb::BUTTON_PADDLE_RIGHT;
-  if (held(SDL_SCANCODE_C)) b |= pb::BUTTON_CRUISE_TOGGLE;
-  if (held(SDL_SCANCODE_PAGEUP) || held(SDL_SCANCODE_EQUALS) || held(SDL_SCANCODE_KP_PLUS)) {
+  if (pressed(SDL_SCANCODE_Q)) b |= pb::BUTTON_PADDLE_LEFT;
+  if (pressed(SDL_SCANCODE_E)) b |= pb::BUTTON_PADDLE_RIGHT;
+  if (pressed(SDL_SCANCODE_C)) b |= pb::BUTTON_CRUISE_TOGGLE;
+  if (pressed(SDL_SCANCODE_PAGEUP) || pressed(SDL_SCANCODE_EQUALS) || pressed(SDL_SCANCODE_KP_PLUS)) {
     b |= pb::BUTTON_CRUISE_UP;
   }
-  if (held(SDL_SCANCODE_PAGEDOWN) || held(SDL_SCANCODE_MINUS) || held(SDL_SCANCODE_KP_MINUS)) {
+  if (pressed(SDL_SCANCODE_PAGEDOWN) || pressed(SDL_SCANCODE_MINUS) ||
+      pressed(SDL_SCANCODE_KP_MINUS)) {
     b |= pb::BUTTON_CRUISE_DOWN;
   }
-  if (held(SDL_SCANCODE_BACKSPACE)) b |= pb::BUTTON_RESET;
-  if (held(SDL_SCANCODE_V)) b |= pb::BUTTON_CAMERA;
-  if (held(SDL_SCANCODE_H)) b |= pb::BUTTON_HORN;
+  if (pressed(SDL_SCANCODE_BACKSPACE)) b |= pb::BUTTON_RESET;
+  if (pressed(SDL_SCANCODE_V)) b |= pb::BUTTON_CAMERA;
+  if (pressed(SDL_SCANCODE_H)) b |= pb::BUTTON_HORN;
   c.buttons = b;
+  for (auto& t : tapped_) t = 0;
   return c;
 }
 

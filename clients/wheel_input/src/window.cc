@@ -30,8 +30,10 @@ void Bar(SDL_Renderer* r, int x, int y, int w, int h, double value, std::uint8_t
   Color(r, 60, 60, 60);
   SDL_Rect frame{x, y, w, h};
   SDL_RenderDrawRect(r, &frame);
+  const int len = static_cast<int>(std::lround(std::clamp(value, 0.0, 1.0) * (w - 2)));
+  if (len <= 0) return;
   Color(r, red, green, blue);
-  SDL_Rect fill{x + 1, y + 1, static_cast<int>(std::lround(std::clamp(value, 0.0, 1.0) * (w - 2))), h - 2};
+  SDL_Rect fill{x + 1, y + 1, len, h - 2};
   SDL_RenderFillRect(r, &fill);
 }
 
@@ -42,9 +44,11 @@ void CentredBar(SDL_Renderer* r, int x, int y, int w, int h, double value) {
   SDL_RenderDrawRect(r, &frame);
   const int mid = x + w / 2;
   const int len = static_cast<int>(std::lround(std::clamp(std::abs(value), 0.0, 1.0) * (w / 2 - 1)));
-  Color(r, 80, 160, 255);
-  SDL_Rect fill = value >= 0 ? SDL_Rect{mid - len, y + 1, len, h - 2} : SDL_Rect{mid, y + 1, len, h - 2};
-  SDL_RenderFillRect(r, &fill);
+  if (len > 0) {
+    Color(r, 80, 160, 255);
+    SDL_Rect fill = value >= 0 ? SDL_Rect{mid - len, y + 1, len, h - 2} : SDL_Rect{mid, y + 1, len, h - 2};
+    SDL_RenderFillRect(r, &fill);
+  }
   Color(r, 200, 200, 200);
   SDL_RenderDrawLine(r, mid, y - 2, mid, y + h + 1);
 }

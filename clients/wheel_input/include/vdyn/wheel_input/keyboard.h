@@ -42,13 +42,18 @@ class KeyboardDriver {
 
   double steer_fraction() const { return steer_; }  // [-1, 1] of the lock, positive left
   bool held(SDL_Scancode key) const;
+  // Held now, or pressed since the last Step.
+  bool pressed(SDL_Scancode key) const;
   // True once per press of the e-stop key / the re-arm key.
   bool TakeEstopPress();
   bool TakeRearmPress();
 
  private:
   KeyboardParams params_;
+  // Whether a key is down, and whether it went down since the last Step (a tap shorter than the
+  // loop's event period still presses a button once).
   std::uint8_t down_[SDL_NUM_SCANCODES] = {};
+  std::uint8_t tapped_[SDL_NUM_SCANCODES] = {};
   double steer_ = 0, throttle_ = 0, brake_ = 0;
   bool estop_press_ = false, rearm_press_ = false;
 };
