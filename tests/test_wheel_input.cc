@@ -839,11 +839,11 @@ TEST_F(SdlTest, RigDrivesFromAWheelAndFallsBackToNeutralWhenItIsUnplugged) {
   EXPECT_NEAR(sink.last.throttle(), (0.5 - 0.02) / 0.98, 1e-4);
   // The server now runs the full model: the same wheel sends its hand-wheel angle.
   feed.vehicle.set_model(pb::VEHICLE_MODEL_FULL);
-  tick(2);
+  tick(4);  // parameters are taken at the force-feedback rate (every 2 ms)
   EXPECT_EQ(sink.last.steer_mode(), pb::STEER_HAND_WHEEL);
   EXPECT_NEAR(sink.last.steer(), 90 * kDeg, 0.01 * kDeg);
   feed.vehicle.set_model(pb::VEHICLE_MODEL_PAPER);
-  tick(2);
+  tick(4);
 
   // Unplugged mid-drive: reported, and a safe neutral - no throttle, the neutral brake, steering
   // held where it was, cruise off.

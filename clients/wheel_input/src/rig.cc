@@ -235,23 +235,24 @@ bool RigLoop::Tick(base::MonoTime now) {
     if (publish_errors_++ == 0) spdlog::warn("vdyn-input: cannot write input: {}", sink_.last_error());
   }
 
-  feed_.Poll();
-  if (const pb::VehicleParams* p = feed_.params()) ApplyParams(*p, info_);
-  const pb::VehicleState* s = feed_.state();
-  if (s != nullptr) {
-    info_.speed_known = true;
-    info_.speed_kmh = s->v_wt_b().x() * 3.6;
-    driving_ = s->input().source_id() == cfg_.source_id;
-  }
-
   if (builder_.TakeResetRequest()) {
     ++resets_;
     if (resetter_ != nullptr) resetter_->RequestReset();
   }
 
-  if (ffb_ && now >= next_ffb_) {
+  // The vehicle's newest state and parameters are taken at the force-feedback rate, just before
+  // the update that plays them (the input needs only the speed and the steering ratio from them).
+  if (now >= next_ffb_) {
     const base::Nanos period = Period(cfg_.ffb_rate_hz);
     next_ffb_ = next_ffb_.ns == 0 || now - next_ffb_ > period ? now + period : next_ffb_ + period;
+    feed_.Poll();
+    if (const pb::VehicleParams* p = feed_.params()) ApplyParams(*p, info_);
+    const pb::VehicleState* s = feed_.state();
+    if (s != nullptr) {
+      info_.speed_known = true;
+      info_.speed_kmh = s->v_wt_b().x() * 3.6;
+      driving_ = s->input().source_id() == cfg_.source_id;
+    }
     FfbInput in;
     if (s != nullptr) {
       in.has_state = true;
@@ -261,7 +262,7 @@ bool RigLoop::Tick(base::MonoTime now) {
       in.source_wall_ns = feed_.state_source_wall_ns();
       in.step = s->step();
     }
-    ffb_->Update(now, in, builder_.estop());
+    if (ffb_) ffb_->Update(now, in, builder_.estop());
   }
 
   if (window_ && now >= next_draw_) {

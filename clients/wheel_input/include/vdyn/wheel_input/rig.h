@@ -1,8 +1,9 @@
 // The rig loop of `vdyn-input drive` and `keyboard`, one thread, one tick per input period:
 //
-//   SDL events (keys, window) -> read the wheel (or step the keyboard ramps) -> build the input
-//   -> publish it (the latency from the sample to the write is measured) -> take the newest state
-//   and parameters -> force feedback (at its own rate) -> the window (at its own rate)
+//   SDL events (keys, window; at their own rate) -> read the wheel (or step the keyboard ramps)
+//   -> build the input -> publish it (the latency from the sample to the write is measured)
+//   -> at the force-feedback rate: take the newest state and parameters, update the force
+//   -> the window (at its own rate)
 //
 // A wheel unplugged mid-drive is reported and the input falls back to a safe neutral (no throttle,
 // brake, steering held) until a device with the same USB ids is plugged in again. The loop talks
@@ -72,8 +73,8 @@ struct RigConfig {
   InputBuilderParams builder;
   double neutral_brake = 0.3;     // while the wheel is unplugged
   bool window = true;             // when SDL video is available (the keyboard needs it)
-  double window_hz = 20;
-  double events_hz = 250;         // SDL event pumping (keys, window)
+  double window_hz = 15;
+  double events_hz = 100;         // SDL event pumping (keys, window): a key within 10 ms
   std::filesystem::path screenshot_dir = ".";  // F12
   std::uint32_t vehicle_id = 1;
   std::string source_id = "vdyn-input";
