@@ -799,6 +799,94 @@ TEST_F(SdlTest, CalibrationFindsCombinedPedals) {
   EXPECT_THAT(ValidateMapping(m, 2, 4), ::testing::IsEmpty());
 }
 
+// A direct-drive base without pedal inputs (Simucube 2) with a pedal set on its own USB device:
+// calibrated together (`calibrate --pedals N`), driven together; unplugging the pedals is an
+// unplug too.
+TEST_F(SdlTest, ABaseWithoutPedalsDrivesWithAUsbPedalSet) {
+  SdlContext sdl(false);
+  VirtualWheel base(0x16d0, 0x0d61, 1, 16, "Simucube 2 Sport");
+  auto pedals = std::make_unique<VirtualWheel>(0x30b7, 0x1001, 3, 1, "pedal set");
+  base.Axis(0, 0);
+  for (int a = 0; a < 3; ++a) pedals->Axis(a, -32768);
+  Calibrator::Options opt;
+  opt.vendor_id = 0x16d0;
+  opt.product_id = 0x0d61;
+  opt.pedal_vendor_id = 0x30b7;
+  opt.pedal_product_id = 0x1001;
+  opt.base = *FindBuiltinWheel(0x16d0, 0x0d61);
+  Calibrator cal(opt);
+  MonoTime t{1'000'000'000};
+  RawFrame f;
+  auto run = [&](double seconds) {
+    for (int i = 0; i < static_cast<int>(seconds * 200); ++i) {
+      t = t + Milliseconds(5);
+      SDL_JoystickUpdate();
+      ReadJoysticks(base.joystick(), pedals->joystick(), f);
+      cal.Feed(t, f);
+    }
+  };
+  run(0.1);
+  cal.Confirm(t);
+  base.Axis(0, -32768);
+  run(1);
+  base.Axis(0, 0);
+  run(0.1);
+  base.Axis(0, 32767);
+  run(1);
+  base.Axis(0, 0);
+  run(0.1);
+  pedals->Axis(1, 32767);  // throttle: the pedal set's axis 1
+  run(1);
+  pedals->Axis(1, -32768);
+  run(0.1);
+  pedals->Axis(0, 32767);  // brake: its axis 0
+  run(1);
+  pedals->Axis(0, -32768);
+  run(0.1);
+  while (!cal.done()) cal.Skip(t);
+  const pb::WheelMapping m = cal.result();
+  EXPECT_TRUE(m.throttle().on_pedal_device());
+  EXPECT_EQ(m.throttle().axis(), 1);
+  EXPECT_TRUE(m.brake().on_pedal_device());
+  EXPECT_EQ(m.brake().axis(), 0);
+  EXPECT_EQ(m.pedal_vendor_id(), 0x30b7u);
+  EXPECT_EQ(m.pedal_product_id(), 0x1001u);
+  EXPECT_EQ(m.ffb().peak_torque_nm(), 17.0);
+  WriteMappingFile(DefaultMappingPath(0x16d0, 0x0d61), m);
+
+  RecordingSink sink;
+  FakeFeed feed;
+  RigConfig cfg;
+  cfg.source = RigConfig::Source::kWheel;
+  cfg.window = false;
+  cfg.ffb = false;
+  cfg.replug_scan = Milliseconds(50);
+  RigLoop rig(cfg, sdl, sink, feed, nullptr);
+  rig.Start();
+  ASSERT_EQ(rig.device_name(), "Simucube 2 Sport");
+  pedals->Axis(1, 32767);
+  base.Axis(0, 32767);
+  ASSERT_TRUE(rig.Tick(t = t + Milliseconds(1)));
+  EXPECT_EQ(sink.last.throttle(), 1.0);
+  EXPECT_NEAR(sink.last.steer(), -450.0 / 15.0 * kDeg, 1e-12);  // half of 900 degrees, right
+  {
+    testing::ExpectLogs logs;
+    pedals->Detach();
+    ASSERT_TRUE(rig.Tick(t = t + Milliseconds(1)));
+  }
+  EXPECT_EQ(sink.last.throttle(), 0.0);
+  EXPECT_EQ(sink.last.brake(), 0.3);
+  EXPECT_EQ(rig.unplugs(), 1u);
+  pedals = std::make_unique<VirtualWheel>(0x30b7, 0x1001, 3, 1, "pedal set");
+  pedals->Axis(0, 32767);
+  pedals->Axis(1, -32768);
+  pedals->Axis(2, -32768);
+  for (int i = 0; i < 60; ++i) ASSERT_TRUE(rig.Tick(t = t + Milliseconds(1)));
+  EXPECT_EQ(rig.replugs(), 1u);
+  EXPECT_EQ(sink.last.brake(), 1.0);
+  EXPECT_EQ(sink.last.throttle(), 0.0);
+}
+
 // --- the rig loop with a wheel: steering per model, hot-unplug ---------------------------------
 
 TEST_F(SdlTest, RigDrivesFromAWheelAndFallsBackToNeutralWhenItIsUnplugged) {
