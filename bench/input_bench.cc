@@ -12,7 +12,9 @@
 //    at 1 kHz (the maneuver player) and a bare 1 kHz sleep loop (the floor of any 1 kHz process on
 //    this machine) as peers.
 //
-// Usage: input_bench [seconds=30]
+// Usage: input_bench [seconds=30] [--breakdown]
+//   --breakdown also splits the rig thread's CPU into writing, taking states and the rest (it reads
+//   the thread's CPU clock around each part, a system call each: the totals grow a little).
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -129,11 +131,49 @@ int StartXvfb(pid_t& pid, const std::string& tmp) {
   return -1;
 }
 
+// Decorators that add up the rig thread's CPU time spent writing inputs and taking states.
+class TimedSink : public wi::InputSink {
+ public:
+  explicit TimedSink(wi::InputSink& s) : s_(s) {}
+  bool Publish(vdyn::pb::DriverInput& msg, vdyn::base::MonoTime sampled) override {
+    const double t = ThreadCpuSeconds();
+    const bool ok = s_.Publish(msg, sampled);
+    if (on) cpu += ThreadCpuSeconds() - t;
+    return ok;
+  }
+  std::string last_error() const override { return s_.last_error(); }
+  bool on = false;
+  double cpu = 0;
+
+ private:
+  wi::InputSink& s_;
+};
+
+class TimedFeed : public wi::VehicleFeed {
+ public:
+  explicit TimedFeed(wi::VehicleFeed& f) : f_(f) {}
+  void Poll() override {
+    const double t = ThreadCpuSeconds();
+    f_.Poll();
+    if (on) cpu += ThreadCpuSeconds() - t;
+  }
+  const vdyn::pb::VehicleState* state() const override { return f_.state(); }
+  vdyn::base::MonoTime state_received() const override { return f_.state_received(); }
+  std::int64_t state_source_wall_ns() const override { return f_.state_source_wall_ns(); }
+  const vdyn::pb::VehicleParams* params() const override { return f_.params(); }
+  bool on = false;
+  double cpu = 0;
+
+ private:
+  wi::VehicleFeed& f_;
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
   if (argc >= 3 && std::string(argv[1]) == "--sleep-loop") return SleepLoop(std::atof(argv[2]));
   const double seconds = argc > 1 ? std::atof(argv[1]) : 30.0;
+  const bool breakdown = argc > 2 && std::string(argv[2]) == "--breakdown";
   if (std::getenv("CYCLONEDDS_URI") == nullptr) {
     setenv("CYCLONEDDS_URI",
            "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
@@ -198,7 +238,9 @@ int main(int argc, char** argv) {
   cfg.source_id = "input_bench";
   cfg.ffb_rate_hz = 500;
   wi::RecordingHaptic* haptic = nullptr;
-  wi::RigLoop rig(cfg, sdl, link, link, &link,
+  TimedSink sink(link);
+  TimedFeed feed(link);
+  wi::RigLoop rig(cfg, sdl, sink, feed, &link,
                   [&](const wi::WheelDevice&, std::string*) -> std::unique_ptr<wi::HapticDevice> {
                     auto h = std::make_unique<wi::RecordingHaptic>();
                     haptic = h.get();
@@ -231,7 +273,7 @@ int main(int argc, char** argv) {
   const auto measure_to = measure_from + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
   vdyn::client::FixedRateLoop clock(vdyn::base::Milliseconds(1), t0);
   bool started = false;
-  double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, self0 = 0;
+  double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, self0 = 0, tick_cpu = 0;
   std::uint64_t haptic_before = 0;
   while (true) {
     const auto tick = clock.Wait();
@@ -247,13 +289,20 @@ int main(int argc, char** argv) {
         measuring = true;
       }
       thread0 = ThreadCpuSeconds();
+      sink.on = feed.on = breakdown;
       self0 = ProcessCpuSeconds(getpid());
       if (keyboard > 0) kb0 = ProcessCpuSeconds(keyboard);
       play0 = ProcessCpuSeconds(player);
       floor0 = ProcessCpuSeconds(floor);
       haptic_before = haptic ? haptic->calls.size() : 0;
     }
-    rig.Tick(tick.now);
+    if (started && breakdown) {
+      const double before = ThreadCpuSeconds();
+      rig.Tick(tick.now);
+      tick_cpu += ThreadCpuSeconds() - before;
+    } else {
+      rig.Tick(tick.now);
+    }
   }
   const double rig_cpu = ThreadCpuSeconds() - thread0;
   const double self_cpu = ProcessCpuSeconds(getpid()) - self0;
@@ -297,6 +346,14 @@ int main(int argc, char** argv) {
   std::printf("CPU, %% of one core over the same %.0f s:\n", seconds);
   std::printf("  rig loop thread (wheel read, input built and written, states taken, FFB): %.2f %%\n",
               100.0 * rig_cpu / seconds);
+  if (breakdown) {
+    std::printf("    inside the ticks %.2f %% (the rest: sleeping and waking at 1 kHz)\n",
+                100.0 * tick_cpu / seconds);
+    std::printf("    inside the ticks: writing the input (DDS) %.2f %%, taking states and parameters "
+              "(500 Hz) %.2f %%, the rest (SDL, input, force feedback) %.2f %%\n",
+              100.0 * sink.cpu / seconds, 100.0 * feed.cpu / seconds,
+              100.0 * (tick_cpu - sink.cpu - feed.cpu) / seconds);
+  }
   std::printf("  this process (the rig, DDS's threads, the measuring subscriber): %.2f %%\n",
               100.0 * self_cpu / seconds);
   if (keyboard > 0) {
