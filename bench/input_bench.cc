@@ -115,9 +115,9 @@ int StartXvfb(pid_t& pid, const std::string& tmp) {
   for (int i = 0; i < 100; ++i) {
     const int n = 600 + static_cast<int>((getpid() + i) % 300);
     if (stat(fmt::format("/tmp/.X{}-lock", n).c_str(), &st) == 0) continue;
-    pid = Spawn({"/usr/bin/Xvfb", fmt::format(":{}", n), "-screen", "0", "800x600x24", "-nolisten",
-                 "tcp"},
-                tmp + "-xvfb.log");
+    pid = Spawn(
+        {"/usr/bin/Xvfb", fmt::format(":{}", n), "-screen", "0", "800x600x24", "-nolisten", "tcp"},
+        tmp + "-xvfb.log");
     const std::string socket = fmt::format("/tmp/.X11-unix/X{}", n);
     for (int k = 0; k < 500; ++k) {
       if (stat(socket.c_str(), &st) == 0) return n;
@@ -188,8 +188,7 @@ int main(int argc, char** argv) {
   const std::string total = std::to_string(static_cast<int>(seconds + warmup + 2));
 
   const pid_t server = Spawn({VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status",
-                              "--duration",
-                              std::to_string(seconds + warmup + 4)},
+                              "--duration", std::to_string(seconds + warmup + 4)},
                              tmp + "-server.log");
   pid_t xvfb = -1;
   const int display = StartXvfb(xvfb, tmp);
@@ -270,7 +269,8 @@ int main(int argc, char** argv) {
 
   const auto t0 = MonotonicNow();
   const auto measure_from = t0 + vdyn::base::Nanos{static_cast<std::int64_t>(warmup * 1e9)};
-  const auto measure_to = measure_from + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
+  const auto measure_to =
+      measure_from + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
   vdyn::client::FixedRateLoop clock(vdyn::base::Milliseconds(1), t0);
   bool started = false;
   double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, self0 = 0, tick_cpu = 0;
@@ -280,8 +280,9 @@ int main(int argc, char** argv) {
     if (tick.now >= measure_to) break;
     // A hand on the wheel: +-90 degrees at 0.5 Hz, a new value every sample.
     const double t = (tick.now - t0).seconds();
-    SDL_JoystickSetVirtualAxis(wheel, 0, static_cast<Sint16>(std::lround(
-                                             -6553.5 * std::sin(2 * std::numbers::pi * 0.5 * t))));
+    SDL_JoystickSetVirtualAxis(
+        wheel, 0,
+        static_cast<Sint16>(std::lround(-6553.5 * std::sin(2 * std::numbers::pi * 0.5 * t))));
     if (!started && tick.now >= measure_from) {
       started = true;
       {
@@ -327,32 +328,38 @@ int main(int argc, char** argv) {
   }
 
   const auto& ffb = rig.ffb()->state_to_haptic();
-  std::printf("input_bench: %.0f s, the rig loop at 1 kHz with a virtual G29 (steering swept every "
-              "sample), force feedback at 500 Hz on a recording device; server on flat, exit %d\n",
-              seconds, server_code);
-  std::printf("SDL sample -> first state applying it, seen by a client (%llu inputs): p50 %.0f us, "
-              "p99 %.0f us, max %.0f us\n",
-              static_cast<unsigned long long>(sample_to_state.count()), sample_to_state.PercentileUs(50),
-              sample_to_state.PercentileUs(99), sample_to_state.MaxUs());
-  std::printf("SDL sample -> DDS write (%llu inputs, whole run): p50 %.0f us, p99 %.0f us, max %.0f us\n",
-              static_cast<unsigned long long>(rig.sample_to_write().count()),
-              rig.sample_to_write().PercentileUs(50), rig.sample_to_write().PercentileUs(99),
-              rig.sample_to_write().MaxUs());
-  std::printf("state -> haptic update (%llu states played, whole run): p50 %.0f us, p99 %.0f us, "
-              "max %.0f us; %llu updates in the measured seconds\n",
-              static_cast<unsigned long long>(ffb.count()), ffb.PercentileUs(50), ffb.PercentileUs(99),
-              ffb.MaxUs(),
-              static_cast<unsigned long long>(haptic ? haptic->calls.size() - haptic_before : 0));
+  std::printf(
+      "input_bench: %.0f s, the rig loop at 1 kHz with a virtual G29 (steering swept every "
+      "sample), force feedback at 500 Hz on a recording device; server on flat, exit %d\n",
+      seconds, server_code);
+  std::printf(
+      "SDL sample -> first state applying it, seen by a client (%llu inputs): p50 %.0f us, "
+      "p99 %.0f us, max %.0f us\n",
+      static_cast<unsigned long long>(sample_to_state.count()), sample_to_state.PercentileUs(50),
+      sample_to_state.PercentileUs(99), sample_to_state.MaxUs());
+  std::printf(
+      "SDL sample -> DDS write (%llu inputs, whole run): p50 %.0f us, p99 %.0f us, max %.0f us\n",
+      static_cast<unsigned long long>(rig.sample_to_write().count()),
+      rig.sample_to_write().PercentileUs(50), rig.sample_to_write().PercentileUs(99),
+      rig.sample_to_write().MaxUs());
+  std::printf(
+      "state -> haptic update (%llu states played, whole run): p50 %.0f us, p99 %.0f us, "
+      "max %.0f us; %llu updates in the measured seconds\n",
+      static_cast<unsigned long long>(ffb.count()), ffb.PercentileUs(50), ffb.PercentileUs(99),
+      ffb.MaxUs(),
+      static_cast<unsigned long long>(haptic ? haptic->calls.size() - haptic_before : 0));
   std::printf("CPU, %% of one core over the same %.0f s:\n", seconds);
-  std::printf("  rig loop thread (wheel read, input built and written, states taken, FFB): %.2f %%\n",
-              100.0 * rig_cpu / seconds);
+  std::printf(
+      "  rig loop thread (wheel read, input built and written, states taken, FFB): %.2f %%\n",
+      100.0 * rig_cpu / seconds);
   if (breakdown) {
     std::printf("    inside the ticks %.2f %% (the rest: sleeping and waking at 1 kHz)\n",
                 100.0 * tick_cpu / seconds);
-    std::printf("    inside the ticks: writing the input (DDS) %.2f %%, taking states and parameters "
-              "(500 Hz) %.2f %%, the rest (SDL, input, force feedback) %.2f %%\n",
-              100.0 * sink.cpu / seconds, 100.0 * feed.cpu / seconds,
-              100.0 * (tick_cpu - sink.cpu - feed.cpu) / seconds);
+    std::printf(
+        "    inside the ticks: writing the input (DDS) %.2f %%, taking states and parameters "
+        "(500 Hz) %.2f %%, the rest (SDL, input, force feedback) %.2f %%\n",
+        100.0 * sink.cpu / seconds, 100.0 * feed.cpu / seconds,
+        100.0 * (tick_cpu - sink.cpu - feed.cpu) / seconds);
   }
   std::printf("  this process (the rig, DDS's threads, the measuring subscriber): %.2f %%\n",
               100.0 * self_cpu / seconds);
@@ -362,8 +369,10 @@ int main(int argc, char** argv) {
   } else {
     std::printf("  vdyn-input keyboard: not measured (no Xvfb)\n");
   }
-  std::printf("  peer: vdyn-input play demo at 1 kHz (whole process): %.2f %%\n", 100.0 * play_cpu / seconds);
-  std::printf("  peer: a bare 1 kHz sleep loop (whole process): %.2f %%\n", 100.0 * floor_cpu / seconds);
+  std::printf("  peer: vdyn-input play demo at 1 kHz (whole process): %.2f %%\n",
+              100.0 * play_cpu / seconds);
+  std::printf("  peer: a bare 1 kHz sleep loop (whole process): %.2f %%\n",
+              100.0 * floor_cpu / seconds);
   std::printf("drops seen by the subscriber: %llu; rig ticks skipped: %llu\n",
               static_cast<unsigned long long>(drops.Total()),
               static_cast<unsigned long long>(clock.skipped_total()));

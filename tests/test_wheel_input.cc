@@ -30,10 +30,10 @@
 namespace vdyn::wheel_input {
 namespace {
 
-using ::testing::HasSubstr;
 using base::Milliseconds;
 using base::MonoTime;
 using base::Nanos;
+using ::testing::HasSubstr;
 
 constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
@@ -93,8 +93,8 @@ int AxesNeeded(const pb::WheelMapping& m) {
 int ButtonsNeeded(const pb::WheelMapping& m) {
   int n = 1;
   const auto& b = m.buttons();
-  for (int v : {b.paddle_left(), b.paddle_right(), b.cruise_toggle(), b.cruise_up(), b.cruise_down(),
-                b.reset(), b.camera(), b.estop(), b.horn()}) {
+  for (int v : {b.paddle_left(), b.paddle_right(), b.cruise_toggle(), b.cruise_up(),
+                b.cruise_down(), b.reset(), b.camera(), b.estop(), b.horn()}) {
     n = std::max(n, v + 1);
   }
   return n;
@@ -120,8 +120,12 @@ class VirtualWheel {
     id_ = SDL_JoystickInstanceID(js_);
   }
   ~VirtualWheel() { Detach(); }
-  void Axis(int a, int raw) { EXPECT_EQ(SDL_JoystickSetVirtualAxis(js_, a, static_cast<Sint16>(raw)), 0); }
-  void Button(int b, bool down) { EXPECT_EQ(SDL_JoystickSetVirtualButton(js_, b, down ? 1 : 0), 0); }
+  void Axis(int a, int raw) {
+    EXPECT_EQ(SDL_JoystickSetVirtualAxis(js_, a, static_cast<Sint16>(raw)), 0);
+  }
+  void Button(int b, bool down) {
+    EXPECT_EQ(SDL_JoystickSetVirtualButton(js_, b, down ? 1 : 0), 0);
+  }
   void Detach() {
     if (js_ == nullptr) return;
     // The device index of a virtual joystick is its position now.
@@ -163,9 +167,9 @@ TEST(WheelTable, EveryEntryIsValidAndEveryIdBelongsToOneWheel) {
     }
   }
   // The models the issue names are all there (a model that enumerates under a second id too).
-  for (const char* name : {"G25", "G27", "G29", "G920", "G923", "T150", "TMX", "T300", "T248",
-                           "T-GT", "CSL DD", "ClubSport", "Moza R5", "Moza R9", "Moza R12",
-                           "Simucube 2", "Ferrari 458"}) {
+  for (const char* name :
+       {"G25", "G27", "G29", "G920", "G923", "T150", "TMX", "T300", "T248", "T-GT", "CSL DD",
+        "ClubSport", "Moza R5", "Moza R9", "Moza R12", "Simucube 2", "Ferrari 458"}) {
     bool found = false;
     for (const auto& m : BuiltinWheels()) found = found || m.name().find(name) != std::string::npos;
     EXPECT_TRUE(found) << name;
@@ -243,7 +247,8 @@ TEST_F(SdlTest, EveryTableWheelAsAVirtualJoystick) {
     SDL_JoystickUpdate();
     dev->Read(f);
     c = reader.Read(f);
-    const double t = (mid - m.brake().rest()) / static_cast<double>(m.brake().full() - m.brake().rest());
+    const double t =
+        (mid - m.brake().rest()) / static_cast<double>(m.brake().full() - m.brake().rest());
     const double dz = m.brake().dead_zone();
     EXPECT_NEAR(c.brake, (t - dz) / (1 - dz), 1e-12);
     if (m.clutch().has_axis()) {
@@ -423,7 +428,8 @@ TEST(InputBuilder, EstopLatchesAndRearmsOnlyWhenHeld) {
   EXPECT_EQ(out.buttons() & pb::BUTTON_ESTOP, 0u);
 }
 
-// --- bad axis values -------------------------------------------------------------------------------
+// --- bad axis values
+// -------------------------------------------------------------------------------
 
 TEST(WheelReader, NanAndOutOfRangeAxesAreClampedAndCounted) {
   WheelReader r(*FindBuiltinWheel(0x046d, 0xc24f));  // G29: steer 0, clutch 1, throttle 2, brake 3
@@ -528,8 +534,11 @@ TEST_F(SdlTest, MappingFilesRoundTripAndBadOnesAreRefusedWithTheReason) {
     ReadMappingFile(dir_ / "values.txt");
     ADD_FAILURE() << "accepted";
   } catch (const MappingError& e) {
-    EXPECT_THAT(e.what(), HasSubstr("steer: left 100 and right 200 are less than 1000 raw units apart"));
-    EXPECT_THAT(e.what(), HasSubstr("steer.range_deg: wheel rotation range, degree must be in [90, 3600], got 20"));
+    EXPECT_THAT(e.what(),
+                HasSubstr("steer: left 100 and right 200 are less than 1000 raw units apart"));
+    EXPECT_THAT(
+        e.what(),
+        HasSubstr("steer.range_deg: wheel rotation range, degree must be in [90, 3600], got 20"));
     EXPECT_THAT(e.what(), HasSubstr("throttle: rest 0 and full 0"));
   }
   EXPECT_THROW(ReadMappingFile(dir_ / "missing.txt"), MappingError);
@@ -986,7 +995,8 @@ TEST_F(SdlTest, TheWheelIsReadWhileTheWindowHasNoFocus) {
   EXPECT_EQ(sink.last.throttle(), 1.0);
 }
 
-// --- keyboard --------------------------------------------------------------------------------------
+// --- keyboard
+// --------------------------------------------------------------------------------------
 
 void Key(SDL_Scancode sc, bool down) {
   SDL_Event e{};
@@ -1058,7 +1068,8 @@ TEST_F(SdlTest, KeyboardDrivesWithRampsAndSteeringReturnsToCentre) {
   // Brake, paddles, cruise on at the current speed, e-stop key.
   Key(SDL_SCANCODE_E, true);
   run(0.01);
-  EXPECT_EQ(sink.last.buttons() & pb::BUTTON_PADDLE_RIGHT, static_cast<std::uint32_t>(pb::BUTTON_PADDLE_RIGHT));
+  EXPECT_EQ(sink.last.buttons() & pb::BUTTON_PADDLE_RIGHT,
+            static_cast<std::uint32_t>(pb::BUTTON_PADDLE_RIGHT));
   Key(SDL_SCANCODE_E, false);
   run(0.01);
   EXPECT_EQ(sink.last.gear(), 1);

@@ -134,14 +134,15 @@ TEST_F(WheelNet, KeyboardDrivesTheVehicleWithRealKeyEvents) {
   setenv("DISPLAY", x.display().c_str(), 1);
   auto server = StartServer();
   const auto shot = dir_ / "keyboard.png";
-  auto kb = StartInput({"--source-id", "kb", "keyboard", "--screenshot", shot.string(),
-                        "--duration", "300"},
-                       "keyboard.log");
+  auto kb = StartInput(
+      {"--source-id", "kb", "keyboard", "--screenshot", shot.string(), "--duration", "300"},
+      "keyboard.log");
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   pb::VehicleState s;
-  ASSERT_TRUE(StatesUntil(states, 30s, s, [](const auto& st) { return st.input().source_id() == "kb"; }))
+  ASSERT_TRUE(
+      StatesUntil(states, 30s, s, [](const auto& st) { return st.input().source_id() == "kb"; }))
       << server->Log() << kb->Log();
   const double x0 = s.p_wt_w().x();
   const std::string win = WindowOf(*kb);
@@ -164,9 +165,11 @@ TEST_F(WheelNet, KeyboardDrivesTheVehicleWithRealKeyEvents) {
   Key(win, "Up", false);
   // The brake: the car slows.
   Key(win, "Down", true);
-  ASSERT_TRUE(StatesUntil(states, 10s, s, [](const auto& st) { return st.input().brake() == 1.0; }));
+  ASSERT_TRUE(
+      StatesUntil(states, 10s, s, [](const auto& st) { return st.input().brake() == 1.0; }));
   const double braking_from = s.speed_kmh();
-  ASSERT_TRUE(StatesUntil(states, 10s, s, [&](const auto& st) { return st.speed_kmh() < braking_from - 5; }));
+  ASSERT_TRUE(StatesUntil(states, 10s, s,
+                          [&](const auto& st) { return st.speed_kmh() < braking_from - 5; }));
   Key(win, "Down", false);
   // Back to speed, then Backspace: the server resets the vehicle to its spawn pose, at rest.
   Key(win, "w", true);
@@ -176,9 +179,10 @@ TEST_F(WheelNet, KeyboardDrivesTheVehicleWithRealKeyEvents) {
   Key(win, "w", false);
   Key(win, "BackSpace", true);
   Key(win, "BackSpace", false);
-  ASSERT_TRUE(StatesUntil(states, 20s, s, [&](const auto& st) {
-    return st.speed_kmh() < 0.5 && std::abs(st.p_wt_w().x() - x0) < 0.5;
-  })) << s.DebugString() << kb->Log();
+  ASSERT_TRUE(StatesUntil(
+      states, 20s, s,
+      [&](const auto& st) { return st.speed_kmh() < 0.5 && std::abs(st.p_wt_w().x() - x0) < 0.5; }))
+      << s.DebugString() << kb->Log();
 
   // Ctrl+C: a summary with the latency from the key sample to its DDS write, and the screenshot.
   kb->Signal(SIGINT);
@@ -203,11 +207,12 @@ TEST_F(WheelNet, OwnershipFailsOverBetweenTwoRigs) {
   auto server = StartServer();
   const auto backup_csv = dir_ / "backup.csv";
   testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
-  auto backup = StartInput({"--source-id", "backup", "--strength", "5", "play", backup_csv.string(),
-                            "--clock", "wall"},
-                           "backup.log");
-  auto primary = StartInput({"--source-id", "primary", "--strength", "20", "keyboard", "--duration", "300"},
-                            "primary.log");
+  auto backup = StartInput(
+      {"--source-id", "backup", "--strength", "5", "play", backup_csv.string(), "--clock", "wall"},
+      "backup.log");
+  auto primary =
+      StartInput({"--source-id", "primary", "--strength", "20", "keyboard", "--duration", "300"},
+                 "primary.log");
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
@@ -221,8 +226,9 @@ TEST_F(WheelNet, OwnershipFailsOverBetweenTwoRigs) {
   primary->Wait(10s);
   ASSERT_TRUE(until("backup", 10s)) << s.input().DebugString();
   EXPECT_DOUBLE_EQ(s.input().throttle(), 0.2);
-  primary = StartInput({"--source-id", "primary", "--strength", "20", "keyboard", "--duration", "300"},
-                       "primary2.log");
+  primary =
+      StartInput({"--source-id", "primary", "--strength", "20", "keyboard", "--duration", "300"},
+                 "primary2.log");
   ASSERT_TRUE(until("primary", 30s)) << s.input().DebugString() << primary->Log();
 }
 

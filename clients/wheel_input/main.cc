@@ -23,17 +23,17 @@
 #include <map>
 #include <thread>
 
-#include <CLI/CLI.hpp>
 #include <SDL2/SDL.h>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include "vdyn/base/time.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/loop.h"
-#include "vdyn/io/maneuver.h"
 #include "vdyn/input.pb.h"
+#include "vdyn/io/maneuver.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/wheel_input/calibrate.h"
 #include "vdyn/wheel_input/dds_link.h"
@@ -50,7 +50,9 @@ using vdyn::base::MonotonicNow;
 using vdyn::base::Nanos;
 
 std::atomic<bool> g_stop{false};
-extern "C" void OnSignal(int) { g_stop.store(true); }
+extern "C" void OnSignal(int) {
+  g_stop.store(true);
+}
 
 struct Common {
   std::uint32_t domain = 0, vehicle_id = 1;
@@ -61,7 +63,9 @@ struct Common {
   bool status = false;
 };
 
-Nanos Period(double hz) { return Nanos{static_cast<std::int64_t>(1e9 / hz)}; }
+Nanos Period(double hz) {
+  return Nanos{static_cast<std::int64_t>(1e9 / hz)};
+}
 
 // --- play ------------------------------------------------------------------------------------
 
@@ -76,8 +80,8 @@ int Play(const Common& c, const PlayOptions& o) {
   vdyn::transport::DropCounters drops;
   vdyn::transport::Participant participant(c.domain);
   vdyn::client::InputPublisher writer(participant, c.vehicle_id, c.source_id, c.strength);
-  vdyn::transport::Reader<vdyn::pb::VehicleState> states(
-      participant, vdyn::transport::TopicId::kState, &drops);
+  vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant,
+                                                         vdyn::transport::TopicId::kState, &drops);
 
   // Simulation time of the vehicle, from its newest state (clock=server).
   std::int64_t sim_ns = -1;
@@ -87,7 +91,8 @@ int Play(const Common& c, const PlayOptions& o) {
     });
   };
   if (o.clock == "server") {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(c.wait_s);
+    const auto deadline =
+        std::chrono::steady_clock::now() + std::chrono::duration<double>(c.wait_s);
     while (sim_ns < 0 && !g_stop && std::chrono::steady_clock::now() < deadline) {
       states.Wait(std::chrono::milliseconds(50));
       poll_states();
@@ -182,8 +187,8 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
     std::cerr << "vdyn-input: " << e.what() << "\n";
     return 2;
   }
-  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz", rig.device_name(),
-               c.vehicle_id, c.source_id, c.strength, c.rate_hz);
+  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz",
+               rig.device_name(), c.vehicle_id, c.source_id, c.strength, c.rate_hz);
   const MonoTime start = MonotonicNow();
   vdyn::client::FixedRateLoop clock(Period(c.rate_hz), start);
   MonoTime next_status = start + vdyn::base::Seconds(1);
@@ -205,10 +210,11 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
     rig.DrawNow();
     if (rig.window() == nullptr) std::cerr << "vdyn-input: no window to take a screenshot of\n";
   }
-  std::printf("%s\n  ticks skipped (this machine was busy) %llu; process CPU %.1f %% of one core "
-              "over %.1f s\n",
-              rig.Summary().c_str(), static_cast<unsigned long long>(clock.skipped_total()),
-              wall > 0 ? 100.0 * cpu / wall : 0.0, wall);
+  std::printf(
+      "%s\n  ticks skipped (this machine was busy) %llu; process CPU %.1f %% of one core "
+      "over %.1f s\n",
+      rig.Summary().c_str(), static_cast<unsigned long long>(clock.skipped_total()),
+      wall > 0 ? 100.0 * cpu / wall : 0.0, wall);
   return 0;
 }
 
@@ -216,14 +222,16 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
 
 void PrintDevices(const std::vector<wi::DeviceInfo>& devices) {
   if (devices.empty()) {
-    std::printf("no joystick devices (plug in a wheel; on Linux the user needs read access to "
-                "/dev/input/event*)\n");
+    std::printf(
+        "no joystick devices (plug in a wheel; on Linux the user needs read access to "
+        "/dev/input/event*)\n");
     return;
   }
   for (const auto& d : devices) {
     std::printf("[%d] %s  %s  (%s%s)  %d axes, %d buttons, %d hats, force feedback: %s\n", d.index,
                 d.name.c_str(), wi::VidPid(d.vendor_id, d.product_id).c_str(), d.type.c_str(),
-                d.is_virtual ? ", virtual" : "", d.axes, d.buttons, d.hats, d.haptic ? "yes" : "no");
+                d.is_virtual ? ", virtual" : "", d.axes, d.buttons, d.hats,
+                d.haptic ? "yes" : "no");
     std::printf("    recognised as: %s\n", d.recognised_as.c_str());
     if (d.kind == wi::DeviceInfo::Kind::kUserFile || d.kind == wi::DeviceInfo::Kind::kTable ||
         d.kind == wi::DeviceInfo::Kind::kGeneric) {
@@ -242,8 +250,8 @@ void PrintDevices(const std::vector<wi::DeviceInfo>& devices) {
         pedals += " throttle+brake combined=" + std::to_string(m.combined().axis());
       }
       std::printf("    steering axis %d (%.0f deg lock to lock), pedals:%s, peak torque %.1f N*m\n",
-                  m.steer().axis(), m.steer().range_deg(), pedals.empty() ? " none" : pedals.c_str(),
-                  m.ffb().peak_torque_nm());
+                  m.steer().axis(), m.steer().range_deg(),
+                  pedals.empty() ? " none" : pedals.c_str(), m.ffb().peak_torque_nm());
     }
   }
 }
@@ -347,7 +355,8 @@ int Calibrate(const CalibrateOptions& o) {
   }
   if (wheel == nullptr && o.device < 0 && !devices.empty()) wheel = &devices.front();
   if (wheel == nullptr) {
-    std::cerr << "vdyn-input: " << (o.device >= 0 ? "no device " + std::to_string(o.device) : "no device")
+    std::cerr << "vdyn-input: "
+              << (o.device >= 0 ? "no device " + std::to_string(o.device) : "no device")
               << " to calibrate (vdyn-input list shows what SDL sees)\n";
     return 2;
   }
@@ -368,7 +377,8 @@ int Calibrate(const CalibrateOptions& o) {
     return 2;
   }
   wi::Calibrator::Options opt;
-  opt.base = wheel->kind == wi::DeviceInfo::Kind::kNotAWheel || wheel->kind == wi::DeviceInfo::Kind::kBrokenFile
+  opt.base = wheel->kind == wi::DeviceInfo::Kind::kNotAWheel ||
+                     wheel->kind == wi::DeviceInfo::Kind::kBrokenFile
                  ? wi::GenericWheel(wheel->vendor_id, wheel->product_id, wheel->axes)
                  : wheel->mapping;
   if (wheel->kind == wi::DeviceInfo::Kind::kNotAWheel) opt.base.set_name(wheel->name);
@@ -378,8 +388,9 @@ int Calibrate(const CalibrateOptions& o) {
     opt.pedal_vendor_id = pedals->vendor_id;
     opt.pedal_product_id = pedals->product_id;
   }
-  opt.range_deg = o.range_deg > 0 ? o.range_deg
-                                  : (opt.base.steer().has_range_deg() ? opt.base.steer().range_deg() : 900.0);
+  opt.range_deg = o.range_deg > 0
+                      ? o.range_deg
+                      : (opt.base.steer().has_range_deg() ? opt.base.steer().range_deg() : 900.0);
   opt.pedal_dead_zone = o.pedal_dead_zone;
   opt.pedal_gamma = o.pedal_gamma;
   opt.steer_dead_zone = o.steer_dead_zone;
@@ -395,8 +406,9 @@ int Calibrate(const CalibrateOptions& o) {
               wi::VidPid(wheel->vendor_id, wheel->product_id).c_str(),
               pedals ? ("pedal set [" + std::to_string(pedals->index) + "] " + pedals->name).c_str()
                      : "pedals on the wheel");
-  std::printf("The wheel's rotation lock to lock is taken as %.0f degrees (--range-deg changes it).\n",
-              opt.range_deg);
+  std::printf(
+      "The wheel's rotation lock to lock is taken as %.0f degrees (--range-deg changes it).\n",
+      opt.range_deg);
   const MonoTime start = MonotonicNow();
   vdyn::client::FixedRateLoop clock(vdyn::base::Milliseconds(5), start);
   std::string prompt;
@@ -433,7 +445,8 @@ int Calibrate(const CalibrateOptions& o) {
       }
       playing = level;
     }
-    for (; logged < cal.log().size(); ++logged) std::printf("  ok: %s\n", cal.log()[logged].c_str());
+    for (; logged < cal.log().size(); ++logged)
+      std::printf("  ok: %s\n", cal.log()[logged].c_str());
     if (cal.Prompt() != prompt && !cal.done()) {
       prompt = cal.Prompt();
       std::printf("> %s\n", prompt.c_str());
@@ -451,7 +464,8 @@ int Calibrate(const CalibrateOptions& o) {
     return 1;
   }
   const std::filesystem::path out =
-      o.out.empty() ? wi::DefaultMappingPath(wheel->vendor_id, wheel->product_id) : std::filesystem::path(o.out);
+      o.out.empty() ? wi::DefaultMappingPath(wheel->vendor_id, wheel->product_id)
+                    : std::filesystem::path(o.out);
   wi::WriteMappingFile(out, result);
   std::printf("\nwrote %s:\n%s", out.string().c_str(), wi::DumpMappingText(result).c_str());
   if (js) SDL_JoystickClose(js);
@@ -462,7 +476,8 @@ int Calibrate(const CalibrateOptions& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"vdyn-input: drive a vdyn vehicle over DDS with a wheel, the keyboard or a maneuver"};
+  CLI::App app{
+      "vdyn-input: drive a vdyn vehicle over DDS with a wheel, the keyboard or a maneuver"};
   app.require_subcommand(0, 1);
   app.fallthrough();
   Common c;
@@ -501,8 +516,10 @@ int main(int argc, char** argv) {
   RigOptions rig;
   auto add_rig = [&](CLI::App* a, bool wheel) {
     if (wheel) {
-      a->add_option("--mapping", rig.mapping, "Wheel mapping file (default: the user's, else the table)");
-      a->add_option("--device", rig.device, "SDL device index (vdyn-input list); default: the first wheel")
+      a->add_option("--mapping", rig.mapping,
+                    "Wheel mapping file (default: the user's, else the table)");
+      a->add_option("--device", rig.device,
+                    "SDL device index (vdyn-input list); default: the first wheel")
           ->check(CLI::Range(0, 255));
       a->add_option("--range-deg", rig.range_deg, "The wheel's rotation lock to lock, degrees")
           ->check(vdyn::cli::InRange(vdyn::limits::kWheelRangeDeg));
@@ -525,10 +542,12 @@ int main(int argc, char** argv) {
       a->add_option("--ffb-filter-hz", rig.ffb_filter_hz, "Torque low-pass cut-off, Hz")
           ->check(vdyn::cli::InRange(vdyn::limits::kFfbFilterHz))
           ->capture_default_str();
-      a->add_option("--ffb-damper", rig.ffb_damper, "Damper at standstill (fraction of the device's)")
+      a->add_option("--ffb-damper", rig.ffb_damper,
+                    "Damper at standstill (fraction of the device's)")
           ->check(vdyn::cli::InRange(vdyn::limits::kFfbDamper))
           ->capture_default_str();
-      a->add_option("--ffb-damper-below-kmh", rig.ffb_damper_below_kmh, "The damper fades out up to this speed")
+      a->add_option("--ffb-damper-below-kmh", rig.ffb_damper_below_kmh,
+                    "The damper fades out up to this speed")
           ->check(vdyn::cli::InRange(vdyn::limits::kSpeedKmh))
           ->capture_default_str();
       a->add_option("--ffb-effect-ms", rig.ffb_effect_ms, "Length of each effect update, ms")
@@ -549,25 +568,29 @@ int main(int argc, char** argv) {
     a->add_option("--duration", rig.duration_s, "Stop after this many seconds (default: Ctrl+C)")
         ->check(vdyn::cli::InRange(vdyn::limits::kDurationS));
   };
-  CLI::App* drive = app.add_subcommand("drive", "Drive with the first wheel found, else the keyboard");
+  CLI::App* drive =
+      app.add_subcommand("drive", "Drive with the first wheel found, else the keyboard");
   add_rig(drive, true);
   CLI::App* keyboard = app.add_subcommand("keyboard", "Drive with the keyboard (a small window)");
   add_rig(keyboard, false);
 
   bool list_once = false;
   double list_seconds = 0;
-  CLI::App* list = app.add_subcommand("list", "The devices SDL sees and what each is recognised as, live");
+  CLI::App* list =
+      app.add_subcommand("list", "The devices SDL sees and what each is recognised as, live");
   list->add_flag("--once", list_once, "Print the devices and end");
   list->add_option("--seconds", list_seconds, "Show live values this long (default: until Ctrl+C)")
       ->check(vdyn::cli::InRange(vdyn::limits::kDurationS));
 
   CalibrateOptions cal;
-  CLI::App* calibrate = app.add_subcommand("calibrate", "Write a wheel's mapping file, step by step");
+  CLI::App* calibrate =
+      app.add_subcommand("calibrate", "Write a wheel's mapping file, step by step");
   calibrate->add_option("--device", cal.device, "SDL device index (default: the first wheel)")
       ->check(CLI::Range(0, 255));
   calibrate->add_option("--pedals", cal.pedals, "SDL device index of a separate pedal set")
       ->check(CLI::Range(0, 255));
-  calibrate->add_option("--out", cal.out, "Mapping file to write (default: the user's for this wheel)");
+  calibrate->add_option("--out", cal.out,
+                        "Mapping file to write (default: the user's for this wheel)");
   calibrate->add_option("--range-deg", cal.range_deg, "The wheel's rotation lock to lock, degrees")
       ->check(vdyn::cli::InRange(vdyn::limits::kWheelRangeDeg));
   calibrate->add_option("--pedal-dead-zone", cal.pedal_dead_zone, "Pedal dead zone (fraction)")
@@ -595,8 +618,9 @@ int main(int argc, char** argv) {
     if (*keyboard) return Drive(c, rig, wi::RigConfig::Source::kKeyboard);
     if (*list) return List(list_once, list_seconds);
     if (*calibrate) return Calibrate(cal);
-    std::cerr << "vdyn-input: choose what drives: drive, keyboard, list, calibrate, or play FILE|demo "
-                 "(--help)\n";
+    std::cerr
+        << "vdyn-input: choose what drives: drive, keyboard, list, calibrate, or play FILE|demo "
+           "(--help)\n";
     return 2;
   } catch (const vdyn::ManeuverError& e) {
     std::cerr << "vdyn-input: " << e.what() << "\n";

@@ -25,24 +25,42 @@ bool ButtonStepId(Calibrator::Step s) {
 const char* StepName(Calibrator::Step s) {
   using S = Calibrator::Step;
   switch (s) {
-    case S::kRest: return "rest";
-    case S::kSteerLeft: return "steering left";
-    case S::kSteerRight: return "steering right";
-    case S::kThrottle: return "throttle";
-    case S::kBrake: return "brake";
-    case S::kClutch: return "clutch";
-    case S::kHandbrake: return "handbrake";
-    case S::kPaddleLeft: return "left paddle";
-    case S::kPaddleRight: return "right paddle";
-    case S::kCruiseToggle: return "cruise on/off";
-    case S::kCruiseUp: return "cruise up";
-    case S::kCruiseDown: return "cruise down";
-    case S::kReset: return "reset";
-    case S::kCamera: return "camera";
-    case S::kEstop: return "e-stop";
-    case S::kHorn: return "horn";
-    case S::kFfbDirection: return "force-feedback direction";
-    case S::kDone: return "done";
+    case S::kRest:
+      return "rest";
+    case S::kSteerLeft:
+      return "steering left";
+    case S::kSteerRight:
+      return "steering right";
+    case S::kThrottle:
+      return "throttle";
+    case S::kBrake:
+      return "brake";
+    case S::kClutch:
+      return "clutch";
+    case S::kHandbrake:
+      return "handbrake";
+    case S::kPaddleLeft:
+      return "left paddle";
+    case S::kPaddleRight:
+      return "right paddle";
+    case S::kCruiseToggle:
+      return "cruise on/off";
+    case S::kCruiseUp:
+      return "cruise up";
+    case S::kCruiseDown:
+      return "cruise down";
+    case S::kReset:
+      return "reset";
+    case S::kCamera:
+      return "camera";
+    case S::kEstop:
+      return "e-stop";
+    case S::kHorn:
+      return "horn";
+    case S::kFfbDirection:
+      return "force-feedback direction";
+    case S::kDone:
+      return "done";
   }
   return "?";
 }
@@ -75,32 +93,49 @@ bool Calibrator::optional() const {
 std::string Calibrator::Prompt() const {
   const std::string skip = " (optional: press Enter to skip)";
   if (waiting_release_ && step_ != Step::kDone) {
-    if (step_ == Step::kSteerRight) return "Now turn the wheel fully to the RIGHT and hold it there";
+    if (step_ == Step::kSteerRight)
+      return "Now turn the wheel fully to the RIGHT and hold it there";
     return "Release everything (wheel centred, pedals up, no button pressed)";
   }
   switch (step_) {
     case Step::kRest:
       return "Centre the wheel, release every pedal and button, then press Enter";
-    case Step::kSteerLeft: return "Turn the wheel fully to the LEFT and hold it there";
-    case Step::kSteerRight: return "Now turn the wheel fully to the RIGHT and hold it there";
-    case Step::kThrottle: return "Press the THROTTLE pedal fully and hold it";
-    case Step::kBrake: return "Press the BRAKE pedal fully and hold it";
-    case Step::kClutch: return "Press the CLUTCH pedal fully and hold it" + skip;
-    case Step::kHandbrake: return "Pull the HANDBRAKE fully and hold it" + skip;
-    case Step::kPaddleLeft: return "Press the LEFT paddle (shift down)" + skip;
-    case Step::kPaddleRight: return "Press the RIGHT paddle (shift up)" + skip;
-    case Step::kCruiseToggle: return "Press the button for CRUISE CONTROL on/off" + skip;
-    case Step::kCruiseUp: return "Press the button for cruise SET SPEED UP" + skip;
-    case Step::kCruiseDown: return "Press the button for cruise SET SPEED DOWN" + skip;
-    case Step::kReset: return "Press the button to RESET the vehicle" + skip;
-    case Step::kCamera: return "Press the button for the CAMERA" + skip;
-    case Step::kEstop: return "Press the button for the EMERGENCY STOP of force feedback" + skip;
-    case Step::kHorn: return "Press the button for the HORN" + skip;
+    case Step::kSteerLeft:
+      return "Turn the wheel fully to the LEFT and hold it there";
+    case Step::kSteerRight:
+      return "Now turn the wheel fully to the RIGHT and hold it there";
+    case Step::kThrottle:
+      return "Press the THROTTLE pedal fully and hold it";
+    case Step::kBrake:
+      return "Press the BRAKE pedal fully and hold it";
+    case Step::kClutch:
+      return "Press the CLUTCH pedal fully and hold it" + skip;
+    case Step::kHandbrake:
+      return "Pull the HANDBRAKE fully and hold it" + skip;
+    case Step::kPaddleLeft:
+      return "Press the LEFT paddle (shift down)" + skip;
+    case Step::kPaddleRight:
+      return "Press the RIGHT paddle (shift up)" + skip;
+    case Step::kCruiseToggle:
+      return "Press the button for CRUISE CONTROL on/off" + skip;
+    case Step::kCruiseUp:
+      return "Press the button for cruise SET SPEED UP" + skip;
+    case Step::kCruiseDown:
+      return "Press the button for cruise SET SPEED DOWN" + skip;
+    case Step::kReset:
+      return "Press the button to RESET the vehicle" + skip;
+    case Step::kCamera:
+      return "Press the button for the CAMERA" + skip;
+    case Step::kEstop:
+      return "Press the button for the EMERGENCY STOP of force feedback" + skip;
+    case Step::kHorn:
+      return "Press the button for the HORN" + skip;
     case Step::kFfbDirection:
       return ffb_running_ ? "Hands off: a small force is turning the wheel..."
                           : "Let go of the wheel (a small force will turn it), then press Enter; "
                             "type s and Enter to skip";
-    case Step::kDone: return "Done";
+    case Step::kDone:
+      return "Done";
   }
   return "";
 }
@@ -165,9 +200,10 @@ void Calibrator::Confirm(base::MonoTime now) {
     if (last_.n_axes == 0) return;  // no frame yet
     rest_ = last_;
     have_rest_ = true;
-    log_.push_back("rest position taken (" + std::to_string(rest_.n_axes) + " axes" +
-                   (rest_.n_pedal_axes ? ", " + std::to_string(rest_.n_pedal_axes) + " pedal-set axes" : "") +
-                   ")");
+    log_.push_back(
+        "rest position taken (" + std::to_string(rest_.n_axes) + " axes" +
+        (rest_.n_pedal_axes ? ", " + std::to_string(rest_.n_pedal_axes) + " pedal-set axes" : "") +
+        ")");
     Next(now);
     waiting_release_ = false;
     return;
@@ -192,9 +228,10 @@ void Calibrator::Feed(base::MonoTime now, const RawFrame& f) {
   last_ = f;
   if (!have_rest_ || step_ == Step::kDone) return;
   if (waiting_release_) {
-    const bool released = step_ == Step::kSteerRight
-                              ? std::abs(Value(f, steer_) - RestValue(steer_)) < opt_.threshold / 2.0
-                              : Released(f);
+    const bool released =
+        step_ == Step::kSteerRight
+            ? std::abs(Value(f, steer_) - RestValue(steer_)) < opt_.threshold / 2.0
+            : Released(f);
     if (released) {
       waiting_release_ = false;
       step_started_ = now;
@@ -236,7 +273,8 @@ void Calibrator::AxisStep(base::MonoTime now, const RawFrame& f) {
       const int n = dev ? f.n_pedal_axes : f.n_axes;
       for (int i = 0; i < n; ++i) {
         const AxisRef a{dev == 1, i};
-        const bool combined_brake = step_ == Step::kBrake && a.pedal_device == throttle_.pedal_device &&
+        const bool combined_brake = step_ == Step::kBrake &&
+                                    a.pedal_device == throttle_.pedal_device &&
                                     a.index == throttle_.index;
         if (combined_brake) {
           // The brake on the throttle's axis must move the other way.
@@ -290,7 +328,8 @@ void Calibrator::AxisStep(base::MonoTime now, const RawFrame& f) {
       steer_ = best;
       result_.mutable_steer()->set_axis(best.index);
       result_.mutable_steer()->set_left(raw_full);
-      log_.push_back("steering: " + where(best) + ", " + std::to_string(raw_full) + " at the left lock");
+      log_.push_back("steering: " + where(best) + ", " + std::to_string(raw_full) +
+                     " at the left lock");
       break;
     case Step::kSteerRight:
       result_.mutable_steer()->set_right(raw_full);
@@ -320,9 +359,14 @@ void Calibrator::AxisStep(base::MonoTime now, const RawFrame& f) {
         pedal(result_.mutable_brake(), "brake");
       }
       break;
-    case Step::kClutch: pedal(result_.mutable_clutch(), "clutch"); break;
-    case Step::kHandbrake: pedal(result_.mutable_handbrake(), "handbrake"); break;
-    default: break;
+    case Step::kClutch:
+      pedal(result_.mutable_clutch(), "clutch");
+      break;
+    case Step::kHandbrake:
+      pedal(result_.mutable_handbrake(), "handbrake");
+      break;
+    default:
+      break;
   }
   used_.push_back(best);
   if (best.pedal_device) {
@@ -340,16 +384,44 @@ void Calibrator::ButtonStep(base::MonoTime now, const RawFrame& f) {
     auto* b = result_.mutable_buttons();
     const char* name = "";
     switch (step_) {
-      case Step::kPaddleLeft: b->set_paddle_left(i); name = "left paddle"; break;
-      case Step::kPaddleRight: b->set_paddle_right(i); name = "right paddle"; break;
-      case Step::kCruiseToggle: b->set_cruise_toggle(i); name = "cruise on/off"; break;
-      case Step::kCruiseUp: b->set_cruise_up(i); name = "cruise up"; break;
-      case Step::kCruiseDown: b->set_cruise_down(i); name = "cruise down"; break;
-      case Step::kReset: b->set_reset(i); name = "reset"; break;
-      case Step::kCamera: b->set_camera(i); name = "camera"; break;
-      case Step::kEstop: b->set_estop(i); name = "e-stop"; break;
-      case Step::kHorn: b->set_horn(i); name = "horn"; break;
-      default: return;
+      case Step::kPaddleLeft:
+        b->set_paddle_left(i);
+        name = "left paddle";
+        break;
+      case Step::kPaddleRight:
+        b->set_paddle_right(i);
+        name = "right paddle";
+        break;
+      case Step::kCruiseToggle:
+        b->set_cruise_toggle(i);
+        name = "cruise on/off";
+        break;
+      case Step::kCruiseUp:
+        b->set_cruise_up(i);
+        name = "cruise up";
+        break;
+      case Step::kCruiseDown:
+        b->set_cruise_down(i);
+        name = "cruise down";
+        break;
+      case Step::kReset:
+        b->set_reset(i);
+        name = "reset";
+        break;
+      case Step::kCamera:
+        b->set_camera(i);
+        name = "camera";
+        break;
+      case Step::kEstop:
+        b->set_estop(i);
+        name = "e-stop";
+        break;
+      case Step::kHorn:
+        b->set_horn(i);
+        name = "horn";
+        break;
+      default:
+        return;
     }
     used_buttons_.push_back(i);
     log_.push_back(std::string(name) + ": button " + std::to_string(i));

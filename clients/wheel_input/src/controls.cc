@@ -51,7 +51,8 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
       cruise_on_ = false;
     } else if (v.speed_known) {
       cruise_on_ = true;
-      cruise_set_kmh_ = limits::Clamp(limits::kCruiseSetKmh, std::round(std::max(v.speed_kmh, 0.0)));
+      cruise_set_kmh_ =
+          limits::Clamp(limits::kCruiseSetKmh, std::round(std::max(v.speed_kmh, 0.0)));
     } else {
       ++cruise_ignored_;
     }
@@ -59,13 +60,15 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
   if (pressed & pb::BUTTON_CRUISE_UP) {
     // "Resume / +": switches a set cruise control on, or raises the set speed.
     if (cruise_on_) {
-      cruise_set_kmh_ = limits::Clamp(limits::kCruiseSetKmh, cruise_set_kmh_ + params_.cruise_step_kmh);
+      cruise_set_kmh_ =
+          limits::Clamp(limits::kCruiseSetKmh, cruise_set_kmh_ + params_.cruise_step_kmh);
     } else if (cruise_set_kmh_ > 0) {
       cruise_on_ = true;
     }
   }
   if ((pressed & pb::BUTTON_CRUISE_DOWN) && cruise_on_) {
-    cruise_set_kmh_ = limits::Clamp(limits::kCruiseSetKmh, cruise_set_kmh_ - params_.cruise_step_kmh);
+    cruise_set_kmh_ =
+        limits::Clamp(limits::kCruiseSetKmh, cruise_set_kmh_ - params_.cruise_step_kmh);
   }
   if (c.brake > params_.cruise_cancel_brake) cruise_on_ = false;
 

@@ -13,16 +13,26 @@ namespace {
 
 const char* TypeName(SDL_JoystickType t) {
   switch (t) {
-    case SDL_JOYSTICK_TYPE_GAMECONTROLLER: return "gamepad";
-    case SDL_JOYSTICK_TYPE_WHEEL: return "wheel";
-    case SDL_JOYSTICK_TYPE_ARCADE_STICK: return "arcade stick";
-    case SDL_JOYSTICK_TYPE_FLIGHT_STICK: return "flight stick";
-    case SDL_JOYSTICK_TYPE_DANCE_PAD: return "dance pad";
-    case SDL_JOYSTICK_TYPE_GUITAR: return "guitar";
-    case SDL_JOYSTICK_TYPE_DRUM_KIT: return "drum kit";
-    case SDL_JOYSTICK_TYPE_ARCADE_PAD: return "arcade pad";
-    case SDL_JOYSTICK_TYPE_THROTTLE: return "throttle";
-    default: return "joystick";
+    case SDL_JOYSTICK_TYPE_GAMECONTROLLER:
+      return "gamepad";
+    case SDL_JOYSTICK_TYPE_WHEEL:
+      return "wheel";
+    case SDL_JOYSTICK_TYPE_ARCADE_STICK:
+      return "arcade stick";
+    case SDL_JOYSTICK_TYPE_FLIGHT_STICK:
+      return "flight stick";
+    case SDL_JOYSTICK_TYPE_DANCE_PAD:
+      return "dance pad";
+    case SDL_JOYSTICK_TYPE_GUITAR:
+      return "guitar";
+    case SDL_JOYSTICK_TYPE_DRUM_KIT:
+      return "drum kit";
+    case SDL_JOYSTICK_TYPE_ARCADE_PAD:
+      return "arcade pad";
+    case SDL_JOYSTICK_TYPE_THROTTLE:
+      return "throttle";
+    default:
+      return "joystick";
   }
 }
 
@@ -37,11 +47,16 @@ bool NamesIds(const pb::WheelMapping& m, std::uint16_t vid, std::uint16_t pid) {
 
 const char* KindName(DeviceInfo::Kind k) {
   switch (k) {
-    case DeviceInfo::Kind::kUserFile: return "user mapping";
-    case DeviceInfo::Kind::kTable: return "built-in table";
-    case DeviceInfo::Kind::kGeneric: return "generic wheel";
-    case DeviceInfo::Kind::kBrokenFile: return "broken mapping file";
-    case DeviceInfo::Kind::kNotAWheel: return "not a wheel";
+    case DeviceInfo::Kind::kUserFile:
+      return "user mapping";
+    case DeviceInfo::Kind::kTable:
+      return "built-in table";
+    case DeviceInfo::Kind::kGeneric:
+      return "generic wheel";
+    case DeviceInfo::Kind::kBrokenFile:
+      return "broken mapping file";
+    case DeviceInfo::Kind::kNotAWheel:
+      return "not a wheel";
   }
   return "?";
 }
@@ -71,7 +86,8 @@ SdlContext::SdlContext(bool want_video) {
       if ((driver == "offscreen" || driver == "dummy") && (asked == nullptr || driver != asked)) {
         SDL_QuitSubSystem(SDL_INIT_VIDEO);
         video_ = false;
-        video_error_ = "no display: SDL found only its " + driver + " video driver (is DISPLAY set?)";
+        video_error_ =
+            "no display: SDL found only its " + driver + " video driver (is DISPLAY set?)";
       }
     } else {
       video_error_ = SDL_GetError();
@@ -79,7 +95,9 @@ SdlContext::SdlContext(bool want_video) {
   }
 }
 
-SdlContext::~SdlContext() { SDL_Quit(); }
+SdlContext::~SdlContext() {
+  SDL_Quit();
+}
 
 std::vector<DeviceInfo> ScanDevices(const std::optional<std::filesystem::path>& mapping_file) {
   std::optional<pb::WheelMapping> given;
@@ -143,12 +161,18 @@ std::vector<DeviceInfo> ScanDevices(const std::optional<std::filesystem::path>& 
       case DeviceInfo::Kind::kUserFile:
         d.recognised_as = d.mapping.name() + " (user mapping " + d.mapping_path.string() + ")";
         break;
-      case DeviceInfo::Kind::kTable: d.recognised_as = d.mapping.name() + " (built-in table)"; break;
+      case DeviceInfo::Kind::kTable:
+        d.recognised_as = d.mapping.name() + " (built-in table)";
+        break;
       case DeviceInfo::Kind::kGeneric:
         d.recognised_as = "a wheel not in the table (generic mapping: run vdyn-input calibrate)";
         break;
-      case DeviceInfo::Kind::kBrokenFile: d.recognised_as = "broken mapping: " + d.problem; break;
-      case DeviceInfo::Kind::kNotAWheel: d.recognised_as = "not a wheel"; break;
+      case DeviceInfo::Kind::kBrokenFile:
+        d.recognised_as = "broken mapping: " + d.problem;
+        break;
+      case DeviceInfo::Kind::kNotAWheel:
+        d.recognised_as = "not a wheel";
+        break;
     }
     out.push_back(std::move(d));
   }
@@ -165,7 +189,8 @@ pb::WheelMapping FitToDevice(const pb::WheelMapping& in, int axes, int buttons, 
     if (!p->has_axis()) return;
     const int n = p->on_pedal_device() ? pedal_axes : axes;
     if (p->axis() >= n) {
-      note(std::string(name) + " (axis " + std::to_string(p->axis()) + ") is not on this device: none");
+      note(std::string(name) + " (axis " + std::to_string(p->axis()) +
+           ") is not on this device: none");
       p->Clear();
     }
   };
@@ -185,14 +210,15 @@ pb::WheelMapping FitToDevice(const pb::WheelMapping& in, int axes, int buttons, 
   std::vector<std::string> why = ValidateMapping(m, axes, buttons);
   for (const pb::PedalAxis* p : {&m.throttle(), &m.brake()}) {
     if (p->has_axis() && p->on_pedal_device() && p->axis() >= pedal_axes) {
-      why.push_back("a pedal is on axis " + std::to_string(p->axis()) + " of the pedal device, which has " +
-                    std::to_string(pedal_axes));
+      why.push_back("a pedal is on axis " + std::to_string(p->axis()) +
+                    " of the pedal device, which has " + std::to_string(pedal_axes));
     }
   }
   const bool combined = m.has_combined() && m.combined().has_axis();
   if (!combined && (!m.throttle().has_axis() || !m.brake().has_axis())) {
-    why.push_back("no throttle and brake axes (a base without pedal inputs needs a pedal set: "
-                  "vdyn-input calibrate --pedals N)");
+    why.push_back(
+        "no throttle and brake axes (a base without pedal inputs needs a pedal set: "
+        "vdyn-input calibrate --pedals N)");
   }
   if (!why.empty()) {
     std::string all;
@@ -227,8 +253,9 @@ std::unique_ptr<WheelDevice> WheelDevice::Open(const DeviceInfo& wheel,
       }
     }
     if (d->pedals_ == nullptr) {
-      return fail(m.name() + ": its pedal set " + VidPid(static_cast<std::uint16_t>(m.pedal_vendor_id()),
-                                                         static_cast<std::uint16_t>(m.pedal_product_id())) +
+      return fail(m.name() + ": its pedal set " +
+                  VidPid(static_cast<std::uint16_t>(m.pedal_vendor_id()),
+                         static_cast<std::uint16_t>(m.pedal_product_id())) +
                   " is not plugged in");
     }
   }
@@ -253,7 +280,8 @@ bool WheelDevice::attached() const {
 
 void ReadJoysticks(SDL_Joystick* wheel, SDL_Joystick* pedals, RawFrame& f) {
   f.n_axes = std::min(SDL_JoystickNumAxes(wheel), RawFrame::kMaxAxes);
-  for (int i = 0; i < f.n_axes; ++i) f.axes[static_cast<std::size_t>(i)] = SDL_JoystickGetAxis(wheel, i);
+  for (int i = 0; i < f.n_axes; ++i)
+    f.axes[static_cast<std::size_t>(i)] = SDL_JoystickGetAxis(wheel, i);
   f.n_buttons = std::min(SDL_JoystickNumButtons(wheel), RawFrame::kMaxButtons);
   for (int i = 0; i < f.n_buttons; ++i) {
     f.buttons[static_cast<std::size_t>(i)] = SDL_JoystickGetButton(wheel, i);
@@ -267,6 +295,8 @@ void ReadJoysticks(SDL_Joystick* wheel, SDL_Joystick* pedals, RawFrame& f) {
   }
 }
 
-void WheelDevice::Read(RawFrame& f) const { ReadJoysticks(joystick_, pedals_, f); }
+void WheelDevice::Read(RawFrame& f) const {
+  ReadJoysticks(joystick_, pedals_, f);
+}
 
 }  // namespace vdyn::wheel_input

@@ -10,11 +10,16 @@ namespace vdyn::wheel_input {
 
 const char* ModeName(FfbOutput::Mode m) {
   switch (m) {
-    case FfbOutput::Mode::kOff: return "off";
-    case FfbOutput::Mode::kPlaying: return "on";
-    case FfbOutput::Mode::kFading: return "fading (state late)";
-    case FfbOutput::Mode::kStopped: return "stopped (no state)";
-    case FfbOutput::Mode::kEstop: return "E-STOP";
+    case FfbOutput::Mode::kOff:
+      return "off";
+    case FfbOutput::Mode::kPlaying:
+      return "on";
+    case FfbOutput::Mode::kFading:
+      return "fading (state late)";
+    case FfbOutput::Mode::kStopped:
+      return "stopped (no state)";
+    case FfbOutput::Mode::kEstop:
+      return "E-STOP";
   }
   return "?";
 }
@@ -35,7 +40,9 @@ bool RecordingHaptic::SetDamper(double coefficient, base::Nanos length) {
   return true;
 }
 
-void RecordingHaptic::Stop() { Record({Call::Kind::kStop, base::MonotonicNow(), 0.0, {}}); }
+void RecordingHaptic::Stop() {
+  Record({Call::Kind::kStop, base::MonotonicNow(), 0.0, {}});
+}
 
 ForceFeedback::ForceFeedback(FfbParams params, HapticDevice* device)
     : params_(params), device_(device) {
@@ -132,7 +139,8 @@ FfbOutput ForceFeedback::Update(base::MonoTime now, const FfbInput& in, bool est
                                    static_cast<double>(params_.fade_over.ns));
   }
   const double requested = std::isfinite(in.torque_nm) ? params_.gain * in.torque_nm : 0.0;
-  const double alpha = dt > 0 ? 1.0 - std::exp(-2.0 * std::numbers::pi * params_.filter_hz * dt) : 1.0;
+  const double alpha =
+      dt > 0 ? 1.0 - std::exp(-2.0 * std::numbers::pi * params_.filter_hz * dt) : 1.0;
   filtered_ += alpha * (requested - filtered_);
   const double limit = std::min(params_.cap_nm, params_.peak_torque_nm);
   FfbOutput out;

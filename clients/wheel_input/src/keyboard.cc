@@ -73,7 +73,8 @@ WheelControls KeyboardDriver::Step(double dt_s, const VehicleInfo& v) {
   const double target = left == right ? 0.0 : (left ? limit : -limit);
   const bool returning = target == 0.0 || (target > 0) != (steer_ > 0);
   steer_ = Ramp(steer_, target, returning ? params_.steer_return_rate : params_.steer_rate, dt);
-  throttle_ = Ramp(throttle_, gas ? 1.0 : 0.0, gas ? params_.throttle_rise : params_.throttle_fall, dt);
+  throttle_ =
+      Ramp(throttle_, gas ? 1.0 : 0.0, gas ? params_.throttle_rise : params_.throttle_fall, dt);
   brake_ = Ramp(brake_, brake ? 1.0 : 0.0, brake ? params_.brake_rise : params_.brake_fall, dt);
 
   WheelControls c;
@@ -85,7 +86,8 @@ WheelControls KeyboardDriver::Step(double dt_s, const VehicleInfo& v) {
   if (pressed(SDL_SCANCODE_Q)) b |= pb::BUTTON_PADDLE_LEFT;
   if (pressed(SDL_SCANCODE_E)) b |= pb::BUTTON_PADDLE_RIGHT;
   if (pressed(SDL_SCANCODE_C)) b |= pb::BUTTON_CRUISE_TOGGLE;
-  if (pressed(SDL_SCANCODE_PAGEUP) || pressed(SDL_SCANCODE_EQUALS) || pressed(SDL_SCANCODE_KP_PLUS)) {
+  if (pressed(SDL_SCANCODE_PAGEUP) || pressed(SDL_SCANCODE_EQUALS) ||
+      pressed(SDL_SCANCODE_KP_PLUS)) {
     b |= pb::BUTTON_CRUISE_UP;
   }
   if (pressed(SDL_SCANCODE_PAGEDOWN) || pressed(SDL_SCANCODE_MINUS) ||

@@ -108,8 +108,10 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
       const long t = static_cast<long>(c.throttle_full()) - c.rest();
       const long b = static_cast<long>(c.brake_full()) - c.rest();
       if (std::abs(t) < kMinSpan || std::abs(b) < kMinSpan || (t > 0) == (b > 0)) {
-        why.push_back("combined: throttle_full and brake_full must lie on opposite sides of rest, "
-                      "each at least " + std::to_string(kMinSpan) + " raw units from it");
+        why.push_back(
+            "combined: throttle_full and brake_full must lie on opposite sides of rest, "
+            "each at least " +
+            std::to_string(kMinSpan) + " raw units from it");
       }
     }
     if (c.has_dead_zone()) CheckRange(why, "combined.dead_zone", limits::kDeadZone, c.dead_zone());
@@ -117,7 +119,8 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
   const bool pedal_device = m.pedal_vendor_id() != 0 || m.pedal_product_id() != 0;
   for (const pb::PedalAxis* p : {&m.throttle(), &m.brake(), &m.clutch(), &m.handbrake()}) {
     if (p->has_axis() && p->on_pedal_device() && !pedal_device) {
-      why.push_back("a pedal is on the pedal device, but pedal_vendor_id/pedal_product_id are not set");
+      why.push_back(
+          "a pedal is on the pedal device, but pedal_vendor_id/pedal_product_id are not set");
       break;
     }
   }
@@ -125,7 +128,8 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
   const std::pair<const char*, std::optional<int>> buttons_used[] = {
       {"paddle_left", b.has_paddle_left() ? std::optional<int>(b.paddle_left()) : std::nullopt},
       {"paddle_right", b.has_paddle_right() ? std::optional<int>(b.paddle_right()) : std::nullopt},
-      {"cruise_toggle", b.has_cruise_toggle() ? std::optional<int>(b.cruise_toggle()) : std::nullopt},
+      {"cruise_toggle",
+       b.has_cruise_toggle() ? std::optional<int>(b.cruise_toggle()) : std::nullopt},
       {"cruise_up", b.has_cruise_up() ? std::optional<int>(b.cruise_up()) : std::nullopt},
       {"cruise_down", b.has_cruise_down() ? std::optional<int>(b.cruise_down()) : std::nullopt},
       {"reset", b.has_reset() ? std::optional<int>(b.reset()) : std::nullopt},

@@ -17,8 +17,9 @@
 namespace vdyn::wheel_input {
 namespace {
 
-base::Nanos Period(double hz) { return base::Nanos{static_cast<std::int64_t>(1e9 / hz)}; }
-
+base::Nanos Period(double hz) {
+  return base::Nanos{static_cast<std::int64_t>(1e9 / hz)};
+}
 
 }  // namespace
 
@@ -68,8 +69,10 @@ bool RigLoop::OpenWheel(const std::vector<DeviceInfo>& devices, const DeviceInfo
   if (!cfg_.ffb) {
     p.peak_torque_nm = 0;
   } else if (p.peak_torque_nm <= 0) {
-    spdlog::info("vdyn-input: {}: no force feedback (no peak torque known: --ffb-peak-nm or the "
-                 "mapping's ffb.peak_torque_nm)", d.name);
+    spdlog::info(
+        "vdyn-input: {}: no force feedback (no peak torque known: --ffb-peak-nm or the "
+        "mapping's ffb.peak_torque_nm)",
+        d.name);
   } else {
     std::string reason;
     haptic_ = haptics_ ? haptics_(*wheel_, &reason) : nullptr;
@@ -124,8 +127,8 @@ void RigLoop::Start() {
   }
   if (sdl_.video() && (cfg_.window || !wheel_mode_)) {
     std::string why;
-    window_ = StatusWindow::Create("vdyn-input: " + device_name_ + " -> vehicle " +
-                                       std::to_string(cfg_.vehicle_id), &why);
+    window_ = StatusWindow::Create(
+        "vdyn-input: " + device_name_ + " -> vehicle " + std::to_string(cfg_.vehicle_id), &why);
     if (!window_) {
       if (!wheel_mode_) throw std::runtime_error("the keyboard needs a window: " + why);
       spdlog::info("vdyn-input: no window: {}", why);
@@ -145,14 +148,16 @@ void RigLoop::PumpEvents(base::MonoTime now) {
   SDL_Event e;
   while (SDL_PollEvent(&e) != 0) {
     switch (e.type) {
-      case SDL_QUIT: quit_ = true; break;
+      case SDL_QUIT:
+        quit_ = true;
+        break;
       case SDL_KEYDOWN:
       case SDL_KEYUP:
         if (e.key.repeat != 0) break;
         keyboard_.OnKey(e.key.keysym.scancode, e.type == SDL_KEYDOWN);
         if (e.type == SDL_KEYDOWN && e.key.keysym.scancode == SDL_SCANCODE_F12 && window_) {
-          const auto path = cfg_.screenshot_dir /
-                            ("vdyn-input-" + std::to_string(++screenshots_) + ".png");
+          const auto path =
+              cfg_.screenshot_dir / ("vdyn-input-" + std::to_string(++screenshots_) + ".png");
           window_->RequestScreenshot(path);
           spdlog::info("vdyn-input: screenshot {}", path.string());
         }
@@ -161,7 +166,8 @@ void RigLoop::PumpEvents(base::MonoTime now) {
         if (e.window.event == SDL_WINDOWEVENT_FOCUS_LOST) keyboard_.ReleaseAll();
         if (e.window.event == SDL_WINDOWEVENT_CLOSE) quit_ = true;
         break;
-      default: break;
+      default:
+        break;
     }
   }
   if (keyboard_.TakeEstopPress()) {
@@ -203,8 +209,10 @@ bool RigLoop::Tick(base::MonoTime now) {
     sampled = base::MonotonicNow();
     if (wheel_ && !wheel_->attached()) {
       ++unplugs_;
-      spdlog::warn("vdyn-input: wheel {} unplugged: safe neutral (no throttle, brake {:.2f}, "
-                   "steering held) until it is plugged in again", device_name_, cfg_.neutral_brake);
+      spdlog::warn(
+          "vdyn-input: wheel {} unplugged: safe neutral (no throttle, brake {:.2f}, "
+          "steering held) until it is plugged in again",
+          device_name_, cfg_.neutral_brake);
       if (ffb_) ffb_->SetDevice(nullptr);
       haptic_.reset();
       wheel_.reset();
@@ -217,7 +225,8 @@ bool RigLoop::Tick(base::MonoTime now) {
       wheel_->Read(frame_);
       const WheelControls c = reader_->Read(frame_);
       builder_.Build(sampled, c, info_, msg_);
-      const double half_range = 0.5 * reader_->mapping().steer().range_deg() * std::numbers::pi / 180.0;
+      const double half_range =
+          0.5 * reader_->mapping().steer().range_deg() * std::numbers::pi / 180.0;
       steer_fraction_ = half_range > 0 ? c.hand_angle_rad / half_range : 0.0;
     } else {
       builder_.Neutral(cfg_.neutral_brake, info_, msg_);
@@ -232,7 +241,8 @@ bool RigLoop::Tick(base::MonoTime now) {
     ++published_;
     sample_to_write_.Add(base::MonotonicNow() - sampled);
   } else {
-    if (publish_errors_++ == 0) spdlog::warn("vdyn-input: cannot write input: {}", sink_.last_error());
+    if (publish_errors_++ == 0)
+      spdlog::warn("vdyn-input: cannot write input: {}", sink_.last_error());
   }
 
   if (builder_.TakeResetRequest()) {
@@ -302,17 +312,20 @@ void RigLoop::DrawWindow() {
 
 std::string RigLoop::StatusLine() const {
   const double deg = msg_.steer() * 180.0 / std::numbers::pi;
-  std::string line = device_name_ + (wheel_mode_ && !wheel_ ? " UNPLUGGED" : "") +
-                     fmt::format(" | steer {:+6.1f} deg ", deg) +
-                     (msg_.steer_mode() == pb::STEER_HAND_WHEEL ? "hand" : "road") +
-                     fmt::format(" | thr {:.2f} brk {:.2f}", msg_.throttle(), msg_.brake()) +
-                     " | gear " + (msg_.gear() == 0 ? std::string("auto") : std::to_string(msg_.gear())) +
-                     " | cruise " + (msg_.cruise_on() ? fmt::format("{:.0f} km/h", msg_.cruise_set_kmh()) : "off");
+  std::string line =
+      device_name_ + (wheel_mode_ && !wheel_ ? " UNPLUGGED" : "") +
+      fmt::format(" | steer {:+6.1f} deg ", deg) +
+      (msg_.steer_mode() == pb::STEER_HAND_WHEEL ? "hand" : "road") +
+      fmt::format(" | thr {:.2f} brk {:.2f}", msg_.throttle(), msg_.brake()) + " | gear " +
+      (msg_.gear() == 0 ? std::string("auto") : std::to_string(msg_.gear())) + " | cruise " +
+      (msg_.cruise_on() ? fmt::format("{:.0f} km/h", msg_.cruise_set_kmh()) : "off");
   if (feed_.state() != nullptr) {
-    line += fmt::format(" | {:.1f} km/h", info_.speed_kmh) + (driving_ ? " driving" : " NOT driving");
+    line +=
+        fmt::format(" | {:.1f} km/h", info_.speed_kmh) + (driving_ ? " driving" : " NOT driving");
   }
   if (ffb_ && ffb_->params().peak_torque_nm > 0) {
-    line += fmt::format(" | ffb {:+.2f} N*m ", ffb_->last().torque_nm) + ModeName(ffb_->last().mode) +
+    line += fmt::format(" | ffb {:+.2f} N*m ", ffb_->last().torque_nm) +
+            ModeName(ffb_->last().mode) +
             fmt::format(" clip {:.1f} %", 100.0 * ffb_->clip_fraction());
   }
   if (builder_.estop()) line += " | E-STOP";
@@ -321,10 +334,11 @@ std::string RigLoop::StatusLine() const {
 }
 
 std::string RigLoop::Summary() const {
-  std::string s = "vdyn-input: " + std::to_string(published_) + " inputs written (" +
-                  std::to_string(publish_errors_) + " failed); sample to DDS write p50 " +
-                  fmt::format("{:.0f} us, p99 {:.0f} us, max {:.0f} us", sample_to_write_.PercentileUs(50),
-                              sample_to_write_.PercentileUs(99), sample_to_write_.MaxUs());
+  std::string s =
+      "vdyn-input: " + std::to_string(published_) + " inputs written (" +
+      std::to_string(publish_errors_) + " failed); sample to DDS write p50 " +
+      fmt::format("{:.0f} us, p99 {:.0f} us, max {:.0f} us", sample_to_write_.PercentileUs(50),
+                  sample_to_write_.PercentileUs(99), sample_to_write_.MaxUs());
   if (wheel_mode_) {
     s += "\n  wheel " + device_name_ + ": unplugged " + std::to_string(unplugs_) + " times, back " +
          std::to_string(replugs_) + " times";
@@ -340,7 +354,8 @@ std::string RigLoop::Summary() const {
          std::to_string(ffb_->device_errors()) + ", clipping warnings " +
          std::to_string(ffb_->clip_warnings()) +
          fmt::format(", state to haptic update p50 {:.0f} us, p99 {:.0f} us",
-                     ffb_->state_to_haptic().PercentileUs(50), ffb_->state_to_haptic().PercentileUs(99));
+                     ffb_->state_to_haptic().PercentileUs(50),
+                     ffb_->state_to_haptic().PercentileUs(99));
   }
   return s;
 }

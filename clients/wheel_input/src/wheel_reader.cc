@@ -67,7 +67,8 @@ WheelControls WheelReader::Read(const RawFrame& f) {
   if (mapping_.has_combined() && mapping_.combined().has_axis()) {
     const auto& cb = mapping_.combined();
     if (Raw(f, cb.axis(), cb.on_pedal_device(), raw)) {
-      const double to_throttle = (raw - cb.rest()) / static_cast<double>(cb.throttle_full() - cb.rest());
+      const double to_throttle =
+          (raw - cb.rest()) / static_cast<double>(cb.throttle_full() - cb.rest());
       const double to_brake = (raw - cb.rest()) / static_cast<double>(cb.brake_full() - cb.rest());
       if (to_throttle > 1.0 + kTolerance || to_brake > 1.0 + kTolerance) ++out_of_range_;
       c.throttle = DeadZone(std::clamp(to_throttle, 0.0, 1.0), cb.dead_zone());

@@ -44,9 +44,10 @@ struct Buttons {
       reset = -1, camera = -1, estop = -1, horn = -1;
 };
 
-pb::WheelMapping Make(const std::string& name, std::uint16_t vid, std::initializer_list<std::uint16_t> pids,
-                      double range_deg, double peak_nm, const Pedal& throttle, const Pedal& brake,
-                      const Pedal& clutch, const Buttons& b, const char* source) {
+pb::WheelMapping Make(const std::string& name, std::uint16_t vid,
+                      std::initializer_list<std::uint16_t> pids, double range_deg, double peak_nm,
+                      const Pedal& throttle, const Pedal& brake, const Pedal& clutch,
+                      const Buttons& b, const char* source) {
   pb::WheelMapping m;
   m.set_name(name);
   m.set_vendor_id(vid);
@@ -97,16 +98,21 @@ std::vector<pb::WheelMapping> BuildTable() {
   const char* lg4ff =
       "ids: SDL wheel list, hid-lg4ff; axes: lg4ff HID descriptor (clutch ABS_Y, throttle ABS_Z, "
       "brake ABS_RZ), pedals rest at full scale";
-  const char* hidpp = "ids: SDL wheel list, hid-logitech-hidpp; axes: throttle ABS_Y, brake ABS_Z, "
-                      "clutch ABS_RZ, pedals rest at full scale";
-  const char* tmff2 = "ids: SDL wheel list, hid-tmff2; axes: throttle ABS_Y, brake ABS_Z, clutch "
-                      "ABS_RZ; paddles buttons 0 (right) and 1 (left)";
-  const char* fanatec = "ids: hid-fanatecff, oversteer; axes: throttle ABS_Y, brake ABS_Z, clutch "
-                        "ABS_RZ; rim buttons differ: calibrate";
-  const char* pidff = "ids: hid-universal-pidff; pedals connected to the base: throttle ABS_Y, "
-                      "brake ABS_Z, clutch ABS_RZ; rim buttons differ: calibrate";
-  const char* simucube = "ids: Simucube developer docs, linux-steering-wheels; the base has no "
-                         "pedal inputs: calibrate with --pedals for a USB pedal set";
+  const char* hidpp =
+      "ids: SDL wheel list, hid-logitech-hidpp; axes: throttle ABS_Y, brake ABS_Z, "
+      "clutch ABS_RZ, pedals rest at full scale";
+  const char* tmff2 =
+      "ids: SDL wheel list, hid-tmff2; axes: throttle ABS_Y, brake ABS_Z, clutch "
+      "ABS_RZ; paddles buttons 0 (right) and 1 (left)";
+  const char* fanatec =
+      "ids: hid-fanatecff, oversteer; axes: throttle ABS_Y, brake ABS_Z, clutch "
+      "ABS_RZ; rim buttons differ: calibrate";
+  const char* pidff =
+      "ids: hid-universal-pidff; pedals connected to the base: throttle ABS_Y, "
+      "brake ABS_Z, clutch ABS_RZ; rim buttons differ: calibrate";
+  const char* simucube =
+      "ids: Simucube developer docs, linux-steering-wheels; the base has no "
+      "pedal inputs: calibrate with --pedals for a USB pedal set";
   std::vector<pb::WheelMapping> t;
   t.push_back(Make("Logitech G25", 0x046d, {0xc299}, 900, 2.5, lg_throttle, lg_brake, lg_clutch,
                    logitech_paddles, lg4ff));
@@ -145,12 +151,12 @@ std::vector<pb::WheelMapping> BuildTable() {
                    std_clutch, none_b, pidff));
   t.push_back(Make("Moza R12", 0x346e, {0x0006, 0x0016}, 900, 12.0, std_throttle, std_brake,
                    std_clutch, none_b, pidff));
-  t.push_back(Make("Simucube 2 Sport", 0x16d0, {0x0d61}, 900, 17.0, none, none, none, none_b,
-                   simucube));
-  t.push_back(Make("Simucube 2 Pro", 0x16d0, {0x0d60}, 900, 25.0, none, none, none, none_b,
-                   simucube));
-  t.push_back(Make("Simucube 2 Ultimate", 0x16d0, {0x0d5f}, 900, 32.0, none, none, none, none_b,
-                   simucube));
+  t.push_back(
+      Make("Simucube 2 Sport", 0x16d0, {0x0d61}, 900, 17.0, none, none, none, none_b, simucube));
+  t.push_back(
+      Make("Simucube 2 Pro", 0x16d0, {0x0d60}, 900, 25.0, none, none, none, none_b, simucube));
+  t.push_back(
+      Make("Simucube 2 Ultimate", 0x16d0, {0x0d5f}, 900, 32.0, none, none, none, none_b, simucube));
   // The paper's wheel: an Xbox 360 wheel without force feedback (xpad): steering on the left
   // stick's X, brake and throttle on the left and right triggers, paddles on the shoulder buttons.
   t.push_back(Make("Thrustmaster Ferrari 458 Italia", 0x24c6, {0x5b00}, 240, 0.0, Pedal{5},

@@ -43,16 +43,17 @@ void CentredBar(SDL_Renderer* r, int x, int y, int w, int h, double value) {
   SDL_Rect frame{x, y, w, h};
   SDL_RenderDrawRect(r, &frame);
   const int mid = x + w / 2;
-  const int len = static_cast<int>(std::lround(std::clamp(std::abs(value), 0.0, 1.0) * (w / 2 - 1)));
+  const int len =
+      static_cast<int>(std::lround(std::clamp(std::abs(value), 0.0, 1.0) * (w / 2 - 1)));
   if (len > 0) {
     Color(r, 80, 160, 255);
-    SDL_Rect fill = value >= 0 ? SDL_Rect{mid - len, y + 1, len, h - 2} : SDL_Rect{mid, y + 1, len, h - 2};
+    SDL_Rect fill =
+        value >= 0 ? SDL_Rect{mid - len, y + 1, len, h - 2} : SDL_Rect{mid, y + 1, len, h - 2};
     SDL_RenderFillRect(r, &fill);
   }
   Color(r, 200, 200, 200);
   SDL_RenderDrawLine(r, mid, y - 2, mid, y + h + 1);
 }
-
 
 }  // namespace
 
@@ -105,7 +106,8 @@ void StatusWindow::Draw(const WindowView& v) {
   Color(r, 255, 255, 255);
   Text(r, kMargin, y,
        "STEER " + fmt::format("{:+7.1f} DEG ", in.steer() * 180.0 / 3.141592653589793) +
-           (hand ? "HAND WHEEL" : "ROAD WHEEL") + fmt::format("   (WHEEL {:+6.0f} DEG)", v.hand_angle_deg));
+           (hand ? "HAND WHEEL" : "ROAD WHEEL") +
+           fmt::format("   (WHEEL {:+6.0f} DEG)", v.hand_angle_deg));
   y += kLine;
   CentredBar(r, kMargin, y, kWidth - 2 * kMargin, 14, v.steer_fraction);
   y += 24;
@@ -124,9 +126,12 @@ void StatusWindow::Draw(const WindowView& v) {
   y += 26;
 
   Color(r, 255, 255, 255);
-  const std::string gear = in.gear() == 0 ? "AUTO" : (in.gear() < 0 ? "R" : std::to_string(in.gear()));
+  const std::string gear =
+      in.gear() == 0 ? "AUTO" : (in.gear() < 0 ? "R" : std::to_string(in.gear()));
   std::string cruise = in.cruise_on() ? fmt::format("ON {:.0f} KM/H", in.cruise_set_kmh())
-                                      : (in.cruise_set_kmh() > 0 ? fmt::format("OFF (SET {:.0f})", in.cruise_set_kmh()) : "OFF");
+                                      : (in.cruise_set_kmh() > 0
+                                             ? fmt::format("OFF (SET {:.0f})", in.cruise_set_kmh())
+                                             : "OFF");
   Text(r, kMargin, y, "GEAR " + gear + "   CRUISE " + cruise);
   y += kLine;
   const std::uint32_t b = in.buttons();
@@ -144,8 +149,9 @@ void StatusWindow::Draw(const WindowView& v) {
   y += kLine;
   Text(r, kMargin, y,
        (v.have_state ? fmt::format("SPEED {:6.1f} KM/H", v.speed_kmh) : std::string("SPEED   --")) +
-           (v.ffb_present ? "   FFB " + fmt::format("{:+5.2f} N*M", v.ffb_torque_nm) + fmt::format(" (CAP {:.1f}) ", v.ffb_cap_nm) +
-                                v.ffb_mode + fmt::format("  CLIP {:.1f} %", v.clip_percent)
+           (v.ffb_present ? "   FFB " + fmt::format("{:+5.2f} N*M", v.ffb_torque_nm) +
+                                fmt::format(" (CAP {:.1f}) ", v.ffb_cap_nm) + v.ffb_mode +
+                                fmt::format("  CLIP {:.1f} %", v.clip_percent)
                           : std::string("   FFB NONE")));
   y += kLine + 4;
   if (v.estop) {
@@ -153,7 +159,8 @@ void StatusWindow::Draw(const WindowView& v) {
     SDL_Rect box{kMargin, y, kWidth - 2 * kMargin, 18};
     SDL_RenderFillRect(r, &box);
     Color(r, 255, 255, 255);
-    Text(r, kMargin + 6, y + 5, "EMERGENCY STOP: FORCE FEEDBACK OFF  (F2 OR HOLD THE BUTTON 2 S TO RE-ARM)");
+    Text(r, kMargin + 6, y + 5,
+         "EMERGENCY STOP: FORCE FEEDBACK OFF  (F2 OR HOLD THE BUTTON 2 S TO RE-ARM)");
   }
   y += 24;
   if (v.keyboard_help) {
@@ -168,7 +175,8 @@ void StatusWindow::Draw(const WindowView& v) {
     std::vector<std::uint8_t> rgba(static_cast<std::size_t>(kWidth) * kHeight * 4);
     if (SDL_RenderReadPixels(r, nullptr, SDL_PIXELFORMAT_ABGR8888, rgba.data(), kWidth * 4) != 0) {
       screenshot_error_ = std::string("SDL_RenderReadPixels: ") + SDL_GetError();
-    } else if (stbi_write_png(screenshot_.c_str(), kWidth, kHeight, 4, rgba.data(), kWidth * 4) == 0) {
+    } else if (stbi_write_png(screenshot_.c_str(), kWidth, kHeight, 4, rgba.data(), kWidth * 4) ==
+               0) {
       screenshot_error_ = screenshot_.string() + ": cannot write the PNG";
     } else {
       screenshot_error_.clear();

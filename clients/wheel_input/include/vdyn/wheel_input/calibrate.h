@@ -24,20 +24,35 @@ namespace vdyn::wheel_input {
 class Calibrator {
  public:
   enum class Step {
-    kRest, kSteerLeft, kSteerRight, kThrottle, kBrake, kClutch, kHandbrake, kPaddleLeft,
-    kPaddleRight, kCruiseToggle, kCruiseUp, kCruiseDown, kReset, kCamera, kEstop, kHorn,
-    kFfbDirection, kDone
+    kRest,
+    kSteerLeft,
+    kSteerRight,
+    kThrottle,
+    kBrake,
+    kClutch,
+    kHandbrake,
+    kPaddleLeft,
+    kPaddleRight,
+    kCruiseToggle,
+    kCruiseUp,
+    kCruiseDown,
+    kReset,
+    kCamera,
+    kEstop,
+    kHorn,
+    kFfbDirection,
+    kDone
   };
   struct Options {
-    pb::WheelMapping base;            // name, ids, range and peak torque come from here
+    pb::WheelMapping base;  // name, ids, range and peak torque come from here
     std::uint16_t vendor_id = 0, product_id = 0;
     std::uint16_t pedal_vendor_id = 0, pedal_product_id = 0;  // with a separate pedal set
-    double range_deg = 900;           // the hand wheel's lock-to-lock rotation (not measurable)
+    double range_deg = 900;  // the hand wheel's lock-to-lock rotation (not measurable)
     double pedal_dead_zone = 0.02;
     double pedal_gamma = 1.0;
     double steer_dead_zone = 0.0;
-    bool ffb = false;                 // run the force-feedback direction step
-    int threshold = 8000;             // raw units an axis must move to count
+    bool ffb = false;      // run the force-feedback direction step
+    int threshold = 8000;  // raw units an axis must move to count
     base::Nanos hold = base::Milliseconds(500);
     base::Nanos optional_timeout = base::Seconds(20);  // 0: wait for Enter
     base::Nanos ffb_test = base::Milliseconds(1500);

@@ -20,7 +20,7 @@ struct VehicleInfo {
   double steering_lock = 0.6;    // rad, the largest road-wheel angle
   double wheelbase_m = 2.7;      // b + c
   bool speed_known = false;
-  double speed_kmh = 0;          // along the body's X axis (negative backwards)
+  double speed_kmh = 0;  // along the body's X axis (negative backwards)
 };
 // The fields of VehicleInfo a parameter message gives (unset fields keep their defaults).
 void ApplyParams(const pb::VehicleParams& p, VehicleInfo& info);
@@ -35,8 +35,8 @@ struct SteerCommand {
 SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v);
 
 struct InputBuilderParams {
-  int forward_gears = 6;            // the paddles count -1 (reverse), 0 (automatic), 1..N
-  double cruise_step_kmh = 5.0;     // per press of cruise up / down
+  int forward_gears = 6;              // the paddles count -1 (reverse), 0 (automatic), 1..N
+  double cruise_step_kmh = 5.0;       // per press of cruise up / down
   double cruise_cancel_brake = 0.05;  // braking beyond this switches cruise off, as in a car
   base::Nanos estop_rearm_hold = base::Milliseconds(2000);  // hold the e-stop button to re-arm
 };

@@ -39,19 +39,19 @@ class SdlContext {
 
 struct DeviceInfo {
   enum class Kind { kUserFile, kTable, kGeneric, kBrokenFile, kNotAWheel };
-  int index = -1;                 // SDL device index now
+  int index = -1;  // SDL device index now
   SDL_JoystickID instance_id = -1;
   std::string name;
   std::uint16_t vendor_id = 0, product_id = 0;
-  std::string type;               // SDL's guess: "wheel", "gamepad", ...
+  std::string type;  // SDL's guess: "wheel", "gamepad", ...
   bool is_virtual = false;
   int axes = 0, buttons = 0, hats = 0;
   bool haptic = false;
   Kind kind = Kind::kNotAWheel;
-  std::string recognised_as;      // "Logitech G29 (built-in table)", "user mapping FILE", ...
-  pb::WheelMapping mapping;       // for kUserFile, kTable, kGeneric
+  std::string recognised_as;           // "Logitech G29 (built-in table)", "user mapping FILE", ...
+  pb::WheelMapping mapping;            // for kUserFile, kTable, kGeneric
   std::filesystem::path mapping_path;  // the user file looked for (kUserFile, kBrokenFile)
-  std::string problem;            // kBrokenFile: why the file cannot be used
+  std::string problem;                 // kBrokenFile: why the file cannot be used
 };
 
 const char* KindName(DeviceInfo::Kind k);

@@ -46,7 +46,9 @@ class RecordingHaptic : public HapticDevice {
     double value = 0;
     base::Nanos length{};
   };
-  explicit RecordingHaptic(bool has_damper = true) : has_damper_(has_damper) { calls.reserve(1 << 16); }
+  explicit RecordingHaptic(bool has_damper = true) : has_damper_(has_damper) {
+    calls.reserve(1 << 16);
+  }
   bool SetConstant(double level, base::Nanos length) override;
   bool SetDamper(double coefficient, base::Nanos length) override;
   void Stop() override;
@@ -64,17 +66,17 @@ class RecordingHaptic : public HapticDevice {
 };
 
 struct FfbParams {
-  double gain = 1.0;            // user gain on the server's torque
-  double peak_torque_nm = 0;    // the device's torque at level 1 (0: no force feedback)
-  double cap_nm = 4.0;          // the user's cap on the commanded torque
+  double gain = 1.0;          // user gain on the server's torque
+  double peak_torque_nm = 0;  // the device's torque at level 1 (0: no force feedback)
+  double cap_nm = 4.0;        // the user's cap on the commanded torque
   double slew_nm_per_s = 200.0;
-  double filter_hz = 40.0;      // first-order low-pass cut-off
-  bool invert = false;          // the device turns right for a positive level
+  double filter_hz = 40.0;  // first-order low-pass cut-off
+  bool invert = false;      // the device turns right for a positive level
   base::Nanos fade_after = base::Milliseconds(20);
   base::Nanos fade_over = base::Milliseconds(100);
   base::Nanos stop_after = base::Milliseconds(250);
   base::Nanos effect_length = base::Milliseconds(100);
-  double damper = 0.0;          // at standstill, fraction of the device's; 0: none
+  double damper = 0.0;             // at standstill, fraction of the device's; 0: none
   double damper_below_kmh = 15.0;  // the damper fades out linearly up to this speed
   base::Nanos clip_window = base::Seconds(10);
   double clip_warn_fraction = 0.025;
@@ -85,9 +87,9 @@ struct FfbInput {
   bool has_state = false;
   double torque_nm = 0;
   double speed_kmh = 0;
-  base::MonoTime received{};       // when this client took it
-  std::int64_t source_wall_ns = 0; // the server's wall clock when it wrote it (latency)
-  std::uint64_t step = 0;          // identifies the state
+  base::MonoTime received{};        // when this client took it
+  std::int64_t source_wall_ns = 0;  // the server's wall clock when it wrote it (latency)
+  std::uint64_t step = 0;           // identifies the state
 };
 
 struct FfbOutput {

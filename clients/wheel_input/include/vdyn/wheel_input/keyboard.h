@@ -4,9 +4,9 @@
 // acceleration (a keyboard has no feel for the road).
 //
 //   Up / W     throttle            Down / S   brake           Left / A, Right / D  steer
-//   Space      handbrake           C          cruise on/off   PageUp / =, PageDown / -  cruise set speed
-//   Q / E      paddles (gear down / up)       Backspace  reset the vehicle
-//   V          camera              H          horn            Esc  emergency stop (F2 re-arms)
+//   Space      handbrake           C          cruise on/off   PageUp / =, PageDown / -  cruise set
+//   speed Q / E      paddles (gear down / up)       Backspace  reset the vehicle V          camera
+//   H          horn            Esc  emergency stop (F2 re-arms)
 #pragma once
 
 #include <cstdint>
@@ -25,7 +25,7 @@ struct KeyboardParams {
   double throttle_fall = 4.0;
   double brake_rise = 3.0;
   double brake_fall = 6.0;
-  double lateral_accel = 7.0;      // m/s^2 the full held steering asks for at speed
+  double lateral_accel = 7.0;  // m/s^2 the full held steering asks for at speed
 };
 
 class KeyboardDriver {

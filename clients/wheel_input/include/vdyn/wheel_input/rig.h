@@ -63,18 +63,18 @@ struct RigConfig {
   enum class Source { kAuto, kWheel, kKeyboard };
   Source source = Source::kAuto;  // kAuto: the first wheel found, else the keyboard
   std::optional<std::filesystem::path> mapping_file;
-  int device_index = -1;          // SDL device index; -1: the first wheel
-  std::optional<double> range_deg;     // overrides the mapping's rotation range
-  std::optional<double> ffb_peak_nm;   // overrides the mapping's peak torque
+  int device_index = -1;              // SDL device index; -1: the first wheel
+  std::optional<double> range_deg;    // overrides the mapping's rotation range
+  std::optional<double> ffb_peak_nm;  // overrides the mapping's peak torque
   bool ffb = true;
-  FfbParams ffb_params;           // peak and direction come from the mapping
+  FfbParams ffb_params;  // peak and direction come from the mapping
   double ffb_rate_hz = 500;
   KeyboardParams keyboard;
   InputBuilderParams builder;
-  double neutral_brake = 0.3;     // while the wheel is unplugged
-  bool window = true;             // when SDL video is available (the keyboard needs it)
+  double neutral_brake = 0.3;  // while the wheel is unplugged
+  bool window = true;          // when SDL video is available (the keyboard needs it)
   double window_hz = 15;
-  double events_hz = 100;         // SDL event pumping (keys, window): a key within 10 ms
+  double events_hz = 100;  // SDL event pumping (keys, window): a key within 10 ms
   std::filesystem::path screenshot_dir = ".";  // F12
   std::uint32_t vehicle_id = 1;
   std::string source_id = "vdyn-input";
@@ -88,8 +88,8 @@ HapticFactory SdlHapticFactory();
 
 class RigLoop {
  public:
-  RigLoop(RigConfig config, SdlContext& sdl, InputSink& sink, VehicleFeed& feed,
-          Resetter* resetter, HapticFactory haptics = SdlHapticFactory());
+  RigLoop(RigConfig config, SdlContext& sdl, InputSink& sink, VehicleFeed& feed, Resetter* resetter,
+          HapticFactory haptics = SdlHapticFactory());
   ~RigLoop();
 
   // Finds and opens the wheel (or makes the keyboard window); throws std::runtime_error with the

@@ -21,7 +21,7 @@ struct WindowView {
   bool status_alarm = false;  // shown in red
   std::uint32_t vehicle_id = 0;
   std::string source_id;
-  bool driving = false;       // the newest state applied this rig's input
+  bool driving = false;  // the newest state applied this rig's input
   bool have_state = false;
   double speed_kmh = 0;
   pb::DriverInput input;      // as sent
