@@ -252,6 +252,7 @@ void PrintDevices(const std::vector<wi::DeviceInfo>& devices) {
       std::printf("    steering axis %d (%.0f deg lock to lock), pedals:%s, peak torque %.1f N*m\n",
                   m.steer().axis(), m.steer().range_deg(),
                   pedals.empty() ? " none" : pedals.c_str(), m.ffb().peak_torque_nm());
+      if (!m.source().empty()) std::printf("    source: %s\n", m.source().c_str());
     }
   }
 }
