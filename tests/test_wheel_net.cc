@@ -54,6 +54,13 @@ class Xvfb {
       }
     }
   }
+  ~Xvfb() {
+    // SIGTERM, so it removes its lock file and socket (the Process would SIGKILL it).
+    if (process_) {
+      process_->Signal(SIGTERM);
+      process_->Wait(10s);
+    }
+  }
   bool ok() const { return display_ >= 0; }
   std::string display() const { return fmt::format(":{}", display_); }
 
