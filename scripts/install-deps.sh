@@ -9,6 +9,7 @@ packages=(
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
   cyclonedds-dev cyclonedds-tools
+  libsdl2-dev xvfb xdotool
 )
 
 missing=()

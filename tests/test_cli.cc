@@ -228,6 +228,44 @@ TEST(CliInput, BadManeuverIsRefusedWithTheReason) {
   EXPECT_THAT(r.output, HasSubstr("/nonexistent/m.csv: no such maneuver file"));
 }
 
+TEST(CliInput, PlayIsTheManeuverPlaybackAndASubcommandIsNeeded) {
+  Result r = RunInput("play /nonexistent/m.csv");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("/nonexistent/m.csv: no such maneuver file"));
+  r = RunInput("");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("choose what drives: drive, keyboard, list, calibrate, or play"));
+}
+
+TEST(CliInput, RigOptionsAreCheckedAgainstTheLimits) {
+  Result r = RunInput("drive --ffb-cap-nm 60");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("hand-wheel torque, N*m must be in [0, 50], got 60"));
+  r = RunInput("drive --ffb-gain nan");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("'nan' is not a finite number"));
+  r = RunInput("calibrate --range-deg 10");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("wheel rotation range, degree must be in [90, 3600], got 10"));
+}
+
+TEST(CliInput, WithoutDevicesListSaysSoAndCalibrateRefuses) {
+  // The test machine has no joystick devices (and SDL's virtual ones live only in a process).
+  Result r = RunInput("list --once");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("no joystick devices"));
+  r = RunInput("calibrate --timeout 5");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_THAT(r.output, HasSubstr("no device to calibrate"));
+}
+
+TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
+  testing::UseLoopbackDds();
+  const Result r = RunInput("--domain 229 --wait 1 drive");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain 229 within 1 s"));
+}
+
 TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
   testing::UseLoopbackDds();
   const std::uint32_t domain = testing::FreshDomain();

@@ -25,10 +25,21 @@ int ClampToLimits(pb::DriverInput& in) {
       set(c);
     }
   };
-  fix(in.steer(), limits::kSteer, [&](double v) { in.set_steer(v); });
+  if (!pb::SteerMode_IsValid(in.steer_mode())) {
+    ++changed;
+    in.set_steer_mode(pb::STEER_ROAD_WHEEL);
+    in.set_steer(0.0);
+  }
+  const limits::Range& steer =
+      in.steer_mode() == pb::STEER_HAND_WHEEL ? limits::kHandWheel : limits::kSteer;
+  fix(in.steer(), steer, [&](double v) { in.set_steer(v); });
   fix(in.throttle(), limits::kThrottle, [&](double v) { in.set_throttle(v); });
   fix(in.brake(), limits::kBrake, [&](double v) { in.set_brake(v); });
   fix(in.cruise_set_kmh(), limits::kCruiseSetKmh, [&](double v) { in.set_cruise_set_kmh(v); });
+  fix(in.clutch(), limits::kClutch, [&](double v) { in.set_clutch(v); });
+  fix(in.handbrake(), limits::kHandbrake, [&](double v) { in.set_handbrake(v); });
+  fix(static_cast<double>(in.gear()), limits::kGear,
+      [&](double v) { in.set_gear(static_cast<std::int32_t>(v)); });
   return changed;
 }
 
@@ -39,10 +50,14 @@ InputPublisher::InputPublisher(transport::Participant& participant, std::uint32_
       source_id_(std::move(source_id)) {}
 
 bool InputPublisher::Publish(pb::DriverInput& msg) {
+  return Publish(msg, base::MonotonicNow());
+}
+
+bool InputPublisher::Publish(pb::DriverInput& msg, base::MonoTime sampled) {
   msg.set_vehicle_id(vehicle_id_);
   msg.set_source_id(source_id_);
   msg.set_sequence(sequence_++);
-  msg.set_stamp_ns(base::MonotonicNow().ns);
+  msg.set_stamp_ns(sampled.ns);
   return writer_.Write(vehicle_id_, msg);
 }
 

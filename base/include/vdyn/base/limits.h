@@ -76,6 +76,25 @@ std::span<const ParamLimit> WheelParamLimits();  // per wheel, path without the 
 // The limit of a field path ("mass", "lf.radius"); nullptr for a path with no limit.
 const Range* ParamRange(std::string_view path);
 
+// --- Driving rigs (vdyn-input: wheel mapping files and force feedback options) -------------
+// SDL's raw axis values.
+inline constexpr Range kRawAxis{-32768.0, 32767.0, false, false, "raw axis value"};
+inline constexpr Range kAxisIndex{0.0, 63.0, false, false, "axis index"};
+inline constexpr Range kButtonIndex{0.0, 255.0, false, false, "button index"};
+inline constexpr Range kWheelRangeDeg{90.0, 3600.0, false, false, "wheel rotation range, degree"};
+inline constexpr Range kDeadZone{0.0, 0.5, false, false, "dead zone (fraction of the travel)"};
+inline constexpr Range kPedalGamma{0.2, 5.0, false, false, "pedal curve exponent"};
+// Peak torque of a device and the user's cap; no wheel base reaches 50 N*m.
+inline constexpr Range kTorqueNm{0.0, 50.0, false, false, "hand-wheel torque, N*m"};
+inline constexpr Range kFfbGain{0.0, 4.0, false, false, "force feedback gain"};
+inline constexpr Range kFfbRateHz{10.0, 1000.0, false, false, "force feedback update rate, Hz"};
+inline constexpr Range kFfbSlewNmPerS{1.0, 10000.0, false, false, "torque slew limit, N*m/s"};
+inline constexpr Range kFfbFilterHz{1.0, 500.0, false, false, "torque filter cut-off, Hz"};
+inline constexpr Range kFfbEffectMs{10.0, 1000.0, false, false, "effect length, ms"};
+inline constexpr Range kFfbDamper{0.0, 1.0, false, false, "damper (fraction of the device's)"};
+inline constexpr Range kGears{1.0, 10.0, false, false, "forward gears"};
+inline constexpr Range kKeyRatePerS{0.1, 100.0, false, false, "keyboard ramp, full travel per s"};
+
 // --- Command-line options -------------------------------------------------------------------
 inline constexpr Range kDomainId{0, 232, false, false, "DDS domain id"};
 inline constexpr Range kStepMs{0.01, 100.0, false, false, "integration step, ms"};

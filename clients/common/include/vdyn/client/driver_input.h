@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <string>
 
+#include "vdyn/base/time.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/transport/dds.h"
@@ -16,8 +17,9 @@ namespace vdyn::client {
 // message carries it), clamped to the limits.
 void FillFromManeuver(const ManeuverInput& in, pb::DriverInput& out);
 
-// Clamps the physics fields of `in` to the limits (non-finite values become 0); returns how many
-// fields had to change.
+// Clamps the physics fields of `in` to the limits (non-finite values become 0; the steering angle
+// to the road-wheel or hand-wheel range its steer_mode names; a steer mode that is none becomes
+// STEER_ROAD_WHEEL with steer 0); returns how many fields had to change.
 int ClampToLimits(pb::DriverInput& in);
 
 class InputPublisher {
@@ -26,6 +28,8 @@ class InputPublisher {
                  std::string source_id, std::int32_t strength);
   // Sets vehicle, source, the next sequence number and the stamp (now, monotonic) and writes.
   bool Publish(pb::DriverInput& msg);
+  // The same with the time the input was read (a device's sample), for latency measurements.
+  bool Publish(pb::DriverInput& msg, base::MonoTime sampled);
   std::uint64_t sent() const { return sequence_; }
   const std::string& last_error() const { return writer_.last_error(); }
   std::uint32_t vehicle_id() const { return vehicle_id_; }

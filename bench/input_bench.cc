@@ -1,0 +1,380 @@
+// input_bench: vdyn-input's rig loop measured against the real-time server over loopback DDS
+// (issue: drive it with a wheel, pedals and keyboard through SDL2). One run, one machine:
+//  - a wheel (an SDL virtual joystick with the G29's ids, its steering swept every sample) read by
+//    the rig loop at 1 kHz in this process, its force feedback played on a recording device;
+//  - SDL sample -> the first state that applied it, as a client sees it (the input's stamp is the
+//    sample's monotonic time and travels back in the state, as in net_bench);
+//  - SDL sample -> its DDS write;
+//  - state -> the haptic update that played it (the server's wall-clock source timestamp to the
+//    update, same machine);
+//  - CPU: the rig loop's own thread, and whole processes over the same seconds: `vdyn-input
+//    keyboard` with its window on an Xvfb display (when Xvfb is installed), `vdyn-input play demo`
+//    at 1 kHz (the maneuver player) and a bare 1 kHz sleep loop (the floor of any 1 kHz process on
+//    this machine) as peers.
+//
+// Usage: input_bench [seconds=30] [--breakdown]
+//   --breakdown also splits the rig thread's CPU into writing, taking states and the rest (it reads
+//   the thread's CPU clock around each part, a system call each: the totals grow a little).
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include <SDL2/SDL.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <mutex>
+#include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "vdyn/base/time.h"
+#include "vdyn/client/loop.h"
+#include "vdyn/state.pb.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/wheel_input/dds_link.h"
+#include "vdyn/wheel_input/devices.h"
+#include "vdyn/wheel_input/ffb.h"
+#include "vdyn/wheel_input/latency.h"
+#include "vdyn/wheel_input/rig.h"
+
+extern char** environ;
+
+namespace {
+
+namespace wi = vdyn::wheel_input;
+using vdyn::base::MonotonicNow;
+
+pid_t Spawn(std::vector<std::string> argv, const std::string& log) {
+  std::vector<char*> args;
+  for (auto& a : argv) args.push_back(a.data());
+  args.push_back(nullptr);
+  posix_spawn_file_actions_t fa;
+  posix_spawn_file_actions_init(&fa);
+  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, 1, 2);
+  pid_t pid = -1;
+  if (posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ) != 0) {
+    std::fprintf(stderr, "cannot start %s\n", args[0]);
+    std::exit(1);
+  }
+  posix_spawn_file_actions_destroy(&fa);
+  return pid;
+}
+
+int WaitPid(pid_t pid) {
+  int status = 0;
+  waitpid(pid, &status, 0);
+  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+}
+
+// utime + stime of a process, seconds.
+double ProcessCpuSeconds(pid_t pid) {
+  std::ifstream in(fmt::format("/proc/{}/stat", pid));
+  std::string s;
+  std::getline(in, s);
+  const auto close = s.rfind(')');
+  if (close == std::string::npos) return 0.0;
+  std::istringstream rest(s.substr(close + 2));
+  std::string field;
+  double utime = 0, stime = 0;
+  for (int i = 3; i <= 15 && rest >> field; ++i) {
+    if (i == 14) utime = std::stod(field);
+    if (i == 15) stime = std::stod(field);
+  }
+  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
+}
+
+double ThreadCpuSeconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + static_cast<double>(t.tv_nsec) * 1e-9;
+}
+
+// The floor: a process that only wakes up every millisecond.
+int SleepLoop(double seconds) {
+  vdyn::client::FixedRateLoop loop(vdyn::base::Milliseconds(1));
+  const auto end = MonotonicNow() + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
+  while (MonotonicNow() < end) loop.Wait();
+  return 0;
+}
+
+// An Xvfb display for the keyboard client, or -1.
+int StartXvfb(pid_t& pid, const std::string& tmp) {
+  struct stat st {};
+  if (stat("/usr/bin/Xvfb", &st) != 0) return -1;
+  for (int i = 0; i < 100; ++i) {
+    const int n = 600 + static_cast<int>((getpid() + i) % 300);
+    if (stat(fmt::format("/tmp/.X{}-lock", n).c_str(), &st) == 0) continue;
+    pid = Spawn(
+        {"/usr/bin/Xvfb", fmt::format(":{}", n), "-screen", "0", "800x600x24", "-nolisten", "tcp"},
+        tmp + "-xvfb.log");
+    const std::string socket = fmt::format("/tmp/.X11-unix/X{}", n);
+    for (int k = 0; k < 500; ++k) {
+      if (stat(socket.c_str(), &st) == 0) return n;
+      int status = 0;
+      if (waitpid(pid, &status, WNOHANG) == pid) break;
+      vdyn::base::SleepUntil(MonotonicNow() + vdyn::base::Milliseconds(20));
+    }
+    kill(pid, SIGKILL);
+    WaitPid(pid);
+  }
+  return -1;
+}
+
+// Decorators that add up the rig thread's CPU time spent writing inputs and taking states.
+class TimedSink : public wi::InputSink {
+ public:
+  explicit TimedSink(wi::InputSink& s) : s_(s) {}
+  bool Publish(vdyn::pb::DriverInput& msg, vdyn::base::MonoTime sampled) override {
+    const double t = ThreadCpuSeconds();
+    const bool ok = s_.Publish(msg, sampled);
+    if (on) cpu += ThreadCpuSeconds() - t;
+    return ok;
+  }
+  std::string last_error() const override { return s_.last_error(); }
+  bool on = false;
+  double cpu = 0;
+
+ private:
+  wi::InputSink& s_;
+};
+
+class TimedFeed : public wi::VehicleFeed {
+ public:
+  explicit TimedFeed(wi::VehicleFeed& f) : f_(f) {}
+  void Poll() override {
+    const double t = ThreadCpuSeconds();
+    f_.Poll();
+    if (on) cpu += ThreadCpuSeconds() - t;
+  }
+  const vdyn::pb::VehicleState* state() const override { return f_.state(); }
+  vdyn::base::MonoTime state_received() const override { return f_.state_received(); }
+  std::int64_t state_source_wall_ns() const override { return f_.state_source_wall_ns(); }
+  const vdyn::pb::VehicleParams* params() const override { return f_.params(); }
+  bool on = false;
+  double cpu = 0;
+
+ private:
+  wi::VehicleFeed& f_;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc >= 3 && std::string(argv[1]) == "--sleep-loop") return SleepLoop(std::atof(argv[2]));
+  const double seconds = argc > 1 ? std::atof(argv[1]) : 30.0;
+  const bool breakdown = argc > 2 && std::string(argv[2]) == "--breakdown";
+  if (std::getenv("CYCLONEDDS_URI") == nullptr) {
+    setenv("CYCLONEDDS_URI",
+           "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
+           "<Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery>",
+           1);
+  }
+  setenv("VDYN_CONFIG_DIR", "/nonexistent-vdyn-input-bench", 1);  // the table's G29, no user file
+  const std::uint32_t domain = 150 + static_cast<std::uint32_t>(getpid()) % 60;
+  const std::string tmp = fmt::format("/tmp/vdyn-input-bench-{}", getpid());
+  const double warmup = 3.0;
+  const std::string dom = std::to_string(domain);
+  const std::string total = std::to_string(static_cast<int>(seconds + warmup + 2));
+
+  const pid_t server = Spawn({VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status",
+                              "--duration", std::to_string(seconds + warmup + 4)},
+                             tmp + "-server.log");
+  pid_t xvfb = -1;
+  const int display = StartXvfb(xvfb, tmp);
+  pid_t keyboard = -1;
+  if (display >= 0) {
+    setenv("DISPLAY", fmt::format(":{}", display).c_str(), 1);
+    keyboard = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "20", "--source-id", "kbd",
+                      "--wait", "30", "keyboard", "--duration", total},
+                     tmp + "-keyboard.log");
+  }
+  const pid_t player = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "5", "--wait", "30",
+                              "play", "demo", "--clock", "wall", "--loop"},
+                             tmp + "-player.log");
+  const pid_t floor = Spawn({argv[0], "--sleep-loop", total}, tmp + "-floor.log");
+
+  // The rig in this process: a virtual G29, DDS, a recording force-feedback device.
+  wi::SdlContext sdl(false);
+  SDL_VirtualJoystickDesc d{};
+  d.version = SDL_VIRTUAL_JOYSTICK_DESC_VERSION;
+  d.type = SDL_JOYSTICK_TYPE_WHEEL;
+  d.naxes = 4;
+  d.nbuttons = 25;
+  d.vendor_id = 0x046d;
+  d.product_id = 0xc24f;
+  d.name = "virtual G29";
+  const int index = SDL_JoystickAttachVirtualEx(&d);
+  SDL_Joystick* wheel = SDL_JoystickOpen(index);
+  if (wheel == nullptr) {
+    std::fprintf(stderr, "input_bench: no virtual joystick: %s\n", SDL_GetError());
+    return 1;
+  }
+  SDL_JoystickSetVirtualAxis(wheel, 1, 32767);  // clutch released
+  SDL_JoystickSetVirtualAxis(wheel, 2, 0);      // half throttle
+  SDL_JoystickSetVirtualAxis(wheel, 3, 32767);  // brake released
+  vdyn::transport::Participant participant(domain);
+  // One vehicle, three sources: the rig (strongest, it drives), the keyboard client and the
+  // player write their input all the same (a backup's cost is a primary's).
+  wi::DdsLink link(participant, 1, "input_bench", 30);
+  if (!link.WaitForParams(std::chrono::seconds(30))) {
+    std::fprintf(stderr, "input_bench: no server\n");
+    return 1;
+  }
+  wi::RigConfig cfg;
+  cfg.source = wi::RigConfig::Source::kWheel;
+  cfg.window = false;
+  cfg.source_id = "input_bench";
+  cfg.ffb_rate_hz = 500;
+  wi::RecordingHaptic* haptic = nullptr;
+  TimedSink sink(link);
+  TimedFeed feed(link);
+  wi::RigLoop rig(cfg, sdl, sink, feed, &link,
+                  [&](const wi::WheelDevice&, std::string*) -> std::unique_ptr<wi::HapticDevice> {
+                    auto h = std::make_unique<wi::RecordingHaptic>();
+                    haptic = h.get();
+                    return h;
+                  });
+  rig.Start();
+
+  // The measuring subscriber: a participant of its own, taking on DDS's receive thread.
+  vdyn::transport::Participant observer(domain);
+  vdyn::transport::DropCounters drops;
+  vdyn::transport::Reader<vdyn::pb::VehicleState> states(observer, vdyn::transport::TopicId::kState,
+                                                         &drops);
+  std::mutex mu;
+  wi::LatencyHistogram sample_to_state;
+  std::uint64_t last_seq = 0;
+  bool measuring = false;
+  states.OnDataAvailable([&] {
+    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+      const std::int64_t now = MonotonicNow().ns;
+      if (s.vehicle_id() != 1 || s.input().source_id() != "input_bench") return;
+      std::lock_guard<std::mutex> lock(mu);
+      if (!measuring || s.input().sequence() <= last_seq) return;
+      last_seq = s.input().sequence();
+      sample_to_state.Add(vdyn::base::Nanos{now - s.input().stamp_ns()});
+    });
+  });
+
+  const auto t0 = MonotonicNow();
+  const auto measure_from = t0 + vdyn::base::Nanos{static_cast<std::int64_t>(warmup * 1e9)};
+  const auto measure_to =
+      measure_from + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
+  vdyn::client::FixedRateLoop clock(vdyn::base::Milliseconds(1), t0);
+  bool started = false;
+  double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, self0 = 0, tick_cpu = 0;
+  std::uint64_t haptic_before = 0;
+  while (true) {
+    const auto tick = clock.Wait();
+    if (tick.now >= measure_to) break;
+    // A hand on the wheel: +-90 degrees at 0.5 Hz, a new value every sample.
+    const double t = (tick.now - t0).seconds();
+    SDL_JoystickSetVirtualAxis(
+        wheel, 0,
+        static_cast<Sint16>(std::lround(-6553.5 * std::sin(2 * std::numbers::pi * 0.5 * t))));
+    if (!started && tick.now >= measure_from) {
+      started = true;
+      {
+        std::lock_guard<std::mutex> lock(mu);
+        measuring = true;
+      }
+      thread0 = ThreadCpuSeconds();
+      sink.on = feed.on = breakdown;
+      self0 = ProcessCpuSeconds(getpid());
+      if (keyboard > 0) kb0 = ProcessCpuSeconds(keyboard);
+      play0 = ProcessCpuSeconds(player);
+      floor0 = ProcessCpuSeconds(floor);
+      haptic_before = haptic ? haptic->calls.size() : 0;
+    }
+    if (started && breakdown) {
+      const double before = ThreadCpuSeconds();
+      rig.Tick(tick.now);
+      tick_cpu += ThreadCpuSeconds() - before;
+    } else {
+      rig.Tick(tick.now);
+    }
+  }
+  const double rig_cpu = ThreadCpuSeconds() - thread0;
+  const double self_cpu = ProcessCpuSeconds(getpid()) - self0;
+  const double kb_cpu = keyboard > 0 ? ProcessCpuSeconds(keyboard) - kb0 : 0;
+  const double play_cpu = ProcessCpuSeconds(player) - play0;
+  const double floor_cpu = ProcessCpuSeconds(floor) - floor0;
+  {
+    std::lock_guard<std::mutex> lock(mu);
+    measuring = false;
+  }
+  kill(player, SIGTERM);
+  WaitPid(player);
+  if (keyboard > 0) {
+    kill(keyboard, SIGTERM);
+    WaitPid(keyboard);
+  }
+  WaitPid(floor);
+  const int server_code = WaitPid(server);
+  if (xvfb > 0) {
+    kill(xvfb, SIGTERM);
+    WaitPid(xvfb);
+  }
+
+  const auto& ffb = rig.ffb()->state_to_haptic();
+  std::printf(
+      "input_bench: %.0f s, the rig loop at 1 kHz with a virtual G29 (steering swept every "
+      "sample), force feedback at 500 Hz on a recording device; server on flat, exit %d\n",
+      seconds, server_code);
+  std::printf(
+      "SDL sample -> first state applying it, seen by a client (%llu inputs): p50 %.0f us, "
+      "p99 %.0f us, max %.0f us\n",
+      static_cast<unsigned long long>(sample_to_state.count()), sample_to_state.PercentileUs(50),
+      sample_to_state.PercentileUs(99), sample_to_state.MaxUs());
+  std::printf(
+      "SDL sample -> DDS write (%llu inputs, whole run): p50 %.0f us, p99 %.0f us, max %.0f us\n",
+      static_cast<unsigned long long>(rig.sample_to_write().count()),
+      rig.sample_to_write().PercentileUs(50), rig.sample_to_write().PercentileUs(99),
+      rig.sample_to_write().MaxUs());
+  std::printf(
+      "state -> haptic update (%llu states played, whole run): p50 %.0f us, p99 %.0f us, "
+      "max %.0f us; %llu updates in the measured seconds\n",
+      static_cast<unsigned long long>(ffb.count()), ffb.PercentileUs(50), ffb.PercentileUs(99),
+      ffb.MaxUs(),
+      static_cast<unsigned long long>(haptic ? haptic->calls.size() - haptic_before : 0));
+  std::printf("CPU, %% of one core over the same %.0f s:\n", seconds);
+  std::printf(
+      "  rig loop thread (wheel read, input built and written, states taken, FFB): %.2f %%\n",
+      100.0 * rig_cpu / seconds);
+  if (breakdown) {
+    std::printf("    inside the ticks %.2f %% (the rest: sleeping and waking at 1 kHz)\n",
+                100.0 * tick_cpu / seconds);
+    std::printf(
+        "    inside the ticks: writing the input (DDS) %.2f %%, taking states and parameters "
+        "(500 Hz) %.2f %%, the rest (SDL, input, force feedback) %.2f %%\n",
+        100.0 * sink.cpu / seconds, 100.0 * feed.cpu / seconds,
+        100.0 * (tick_cpu - sink.cpu - feed.cpu) / seconds);
+  }
+  std::printf("  this process (the rig, DDS's threads, the measuring subscriber): %.2f %%\n",
+              100.0 * self_cpu / seconds);
+  if (keyboard > 0) {
+    std::printf("  vdyn-input keyboard with its window on Xvfb (whole process): %.2f %%\n",
+                100.0 * kb_cpu / seconds);
+  } else {
+    std::printf("  vdyn-input keyboard: not measured (no Xvfb)\n");
+  }
+  std::printf("  peer: vdyn-input play demo at 1 kHz (whole process): %.2f %%\n",
+              100.0 * play_cpu / seconds);
+  std::printf("  peer: a bare 1 kHz sleep loop (whole process): %.2f %%\n",
+              100.0 * floor_cpu / seconds);
+  std::printf("drops seen by the subscriber: %llu; rig ticks skipped: %llu\n",
+              static_cast<unsigned long long>(drops.Total()),
+              static_cast<unsigned long long>(clock.skipped_total()));
+  return server_code;
+}

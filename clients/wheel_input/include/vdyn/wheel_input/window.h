@@ -1,0 +1,65 @@
+// The small SDL window of vdyn-input: what is being sent (steering, throttle, brake, clutch,
+// handbrake, gear, cruise, paddles and buttons), whether this rig drives the vehicle, its speed,
+// force feedback and the emergency stop, and the keys. Drawn with SDL's renderer and its built-in
+// 8x8 font (SDL2_test); it receives the keyboard. Screenshots as PNG.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include <SDL2/SDL.h>
+
+#include "vdyn/input.pb.h"
+
+namespace vdyn::wheel_input {
+
+struct WindowView {
+  std::string mode;           // "KEYBOARD", "WHEEL: Logitech G29"
+  std::string status;         // one line: "driving", "wheel unplugged: neutral", ...
+  bool status_alarm = false;  // shown in red
+  std::uint32_t vehicle_id = 0;
+  std::string source_id;
+  bool driving = false;  // the newest state applied this rig's input
+  bool have_state = false;
+  double speed_kmh = 0;
+  pb::DriverInput input;      // as sent
+  double steer_fraction = 0;  // of the lock (road wheel) or of the hand-wheel range, [-1, 1]
+  double hand_angle_deg = 0;
+  bool ffb_present = false;
+  double ffb_torque_nm = 0;
+  double ffb_cap_nm = 0;
+  std::string ffb_mode;
+  double clip_percent = 0;
+  bool estop = false;
+  bool keyboard_help = false;
+};
+
+class StatusWindow {
+ public:
+  // Needs SDL video; nullptr and the reason when a window cannot be made.
+  static std::unique_ptr<StatusWindow> Create(const std::string& title, std::string* why);
+  ~StatusWindow();
+  StatusWindow(const StatusWindow&) = delete;
+  StatusWindow& operator=(const StatusWindow&) = delete;
+
+  void Draw(const WindowView& v);
+  // The next frame drawn is also written to `path` as a PNG; screenshot_error() says if it failed.
+  void RequestScreenshot(const std::filesystem::path& path) { screenshot_ = path; }
+  bool screenshot_pending() const { return !screenshot_.empty(); }
+  const std::string& screenshot_error() const { return screenshot_error_; }
+  std::uint32_t window_id() const { return SDL_GetWindowID(window_); }
+
+  static constexpr int kWidth = 560;
+  static constexpr int kHeight = 300;
+
+ private:
+  StatusWindow() = default;
+  SDL_Window* window_ = nullptr;
+  SDL_Renderer* renderer_ = nullptr;
+  std::filesystem::path screenshot_;
+  std::string screenshot_error_;
+};
+
+}  // namespace vdyn::wheel_input
