@@ -1,5 +1,7 @@
-// Physics validation against closed forms and properties (issue: foundation and physics core).
-// Every expected value here comes from a formula and the parameters, never from earlier output.
+// Physics validation of the paper's model against closed forms and properties (issue: foundation
+// and physics core). Every test here runs the paper's model (VEHICLE_MODEL_PAPER), as it did when
+// it was the only model; the full model's validation is in test_full_model.cc. Every expected
+// value here comes from a formula and the parameters, never from earlier output.
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -20,9 +22,14 @@ namespace {
 
 using Eigen::Vector3d;
 using testing::Drive;
-using testing::ParamsWith;
 using testing::SharedWorld;
 constexpr double kDeg = std::numbers::pi / 180.0;
+
+// The paper's model with the default parameters, and with `edit` applied.
+ValidParams PaperDefaults() { return testing::PaperParams(); }
+ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
+  return testing::PaperParamsWith(edit);
+}
 
 Vector3d BodyVelocity(const State& s) {
   return Orientation(s.x).toRotationMatrix().transpose() * Velocity(s.x);
@@ -130,7 +137,7 @@ void ExpectFourthOrder(const ValidParams& p, const State& start, const DriverInp
 }
 
 TEST(Validation, Rk4ObservedOrderIsFourInHeave) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   State s = sim.state();
   s.x[sx::kP + 2] += 0.04;                  // heave, with pitch coupling (b != c)
@@ -141,7 +148,7 @@ TEST(Validation, Rk4ObservedOrderIsFourWhileCornering) {
   // Full 3-D motion with tire forces: 20 m/s, a 2 degree steer held. Start from the turn already
   // established, so no slip angle crosses zero (the Fiala law's |z| z is only C1 there, which
   // would show up as a local O(h^3) error at the crossing).
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   sim.Spawn({0, 0, 0}, 20.0);
   DriverInput in;
@@ -210,7 +217,7 @@ TEST(Validation, BicycleModelGainOversteer) {
 
 // --- static equilibrium -------------------------------------------------------------------------
 TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   Drive(sim, 5000, {});
   Derived d;
@@ -228,7 +235,7 @@ TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
 // --- jump ---------------------------------------------------------------------------------------
 TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Vector3d ramp = world->LandmarkAt("jump_ramp_a");
   sim.Spawn({ramp.x() - 60.0, ramp.y(), 0.0}, 50.0 / 3.6);
@@ -276,7 +283,7 @@ TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
 // --- glass barrier ------------------------------------------------------------------------------
 void DriveIntoBarrier(double heading_deg) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Vector3d inner = world->LandmarkAt("barrier_inner_max");  // north wall at y = inner.y()
   const double yaw = heading_deg * kDeg;
@@ -312,7 +319,7 @@ TEST(Validation, BarrierStopsTheCarAtAnAngleAt50kmh) { DriveIntoBarrier(60.0); }
 
 // --- cruise control -----------------------------------------------------------------------------
 void ExpectCruiseHolds(double slope) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   const std::shared_ptr<const World> world =
       WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
   Simulator sim(world, p);
@@ -352,7 +359,7 @@ RoughDriveStats RoughDrive(std::int64_t step_ns, double seconds) {
   const auto world = SharedWorld("facility");
   SimConfig cfg;
   cfg.step_ns = step_ns;
-  Simulator sim(world, testing::DefaultParams(), cfg);
+  Simulator sim(world, PaperDefaults(), cfg);
   const Vector3d c = world->LandmarkAt("rough_terrain_center");
   const Vector3d lo = world->LandmarkAt("rough_terrain_min");
   const Vector3d hi = world->LandmarkAt("rough_terrain_max");
@@ -397,7 +404,7 @@ TEST(Validation, DemoDriveStableAtTheDocumentedLargestStep) {
   auto run = [&m](std::int64_t step_ns, double* max_Fp, double* max_rate) {
     SimConfig cfg;
     cfg.step_ns = step_ns;
-    Simulator sim(SharedWorld("facility"), testing::DefaultParams(), cfg);
+    Simulator sim(SharedWorld("facility"), PaperDefaults(), cfg);
     Drive(sim, std::llround(m.end_time() / sim.h()),
           [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
           [&](const StepRecord& r) {
@@ -422,7 +429,7 @@ TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   auto run = [&m](const std::filesystem::path& out, std::uint64_t* hash) {
     std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
-    Simulator sim(world, testing::DefaultParams());
+    Simulator sim(world, PaperDefaults());
     CsvWriter csv(out);
     BatchOptions o;
     o.duration = m.end_time();
@@ -443,7 +450,7 @@ TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
 // --- friction circle, paper yaw mode, containment -----------------------------------------------
 TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   int checked = 0;
@@ -482,7 +489,7 @@ TEST(Properties, PaperYawModeFollowsEquation6AsAYawRate) {
 }
 
 TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   DriverInput in;
   in.steer = std::numeric_limits<double>::quiet_NaN();
   in.throttle = 7.0;
@@ -495,7 +502,7 @@ TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
 }
 
 TEST(Properties, NonFiniteStateIsContained) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 50, {});  // a state with a history: step, cruise integral, motion all non-trivial
   State s = sim.state();
   s.x[sx::kV] = std::numeric_limits<double>::infinity();
@@ -512,7 +519,7 @@ TEST(Properties, NonFiniteStateIsContained) {
 }
 
 TEST(Properties, ParametersChangeBetweenSteps) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 1000, {});
   // A heavier car sinks: the new static deflection follows k and the new weight.
   const ValidParams heavy = ParamsWith([](pb::VehicleParams& m) { m.set_mass(2000.0); });

@@ -256,6 +256,7 @@ void Derivatives(const Params& p, const BodyKinematics& k, const BodyLoads& load
   }
   const BodyLoads loads = BodyForces(p, walls, k, out);
   Derivatives(p, k, loads, x, xdot, out);
+  xdot.tail<kStateSize - kPaperStateSize>().setZero();  // the full model's numbers stay put
 }
 
 }  // namespace vdyn

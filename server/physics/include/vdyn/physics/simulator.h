@@ -12,6 +12,7 @@
 #include <memory>
 
 #include "vdyn/physics/controls.h"
+#include "vdyn/physics/full_model.h"
 #include "vdyn/physics/params.h"
 #include "vdyn/physics/rk4.h"
 #include "vdyn/physics/state.h"
@@ -46,14 +47,16 @@ class Simulator {
   Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config,
             const State& initial);
 
-  // Takes effect at the next step boundary.
-  void SetParams(const ValidParams& params) { params_ = params; }
+  // Takes effect at the next step boundary. A change of model converts the state to the new
+  // model's layout (ConvertState).
+  void SetParams(const ValidParams& params);
   // Latched at the next step boundary. Non-finite or out-of-range values are clamped and counted.
   void SetInput(const DriverInput& input);
   // Places the vehicle at rest (or moving at `speed` along its heading) in static equilibrium on
   // the terrain below (x, y). Throws WorldError when there is no terrain below.
   void Spawn(const Pose2& pose, double speed = 0.0);
-  void SetState(const State& state) { state_ = state; }
+  // The state as given, converted to the parameters' model if it is in the other's layout.
+  void SetState(const State& state);
 
   // Advances by h. A step whose result is not finite is contained: the state stays at x_n, the
   // count is raised and kNonFinite is returned.
@@ -76,11 +79,14 @@ class Simulator {
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
+  // Full model: steps whose wheel-level horizontal traces (kerb edges) were cast.
+  std::uint64_t edge_traced_steps() const { return edge_traced_steps_; }
 
  private:
   struct Workspace {
     Rk4Workspace rk4;
     WallPlanes walls;
+    WheelEdges edges;
     Derived stage_derived;
     State start;
   };
@@ -96,6 +102,7 @@ class Simulator {
   std::uint64_t nonfinite_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
+  std::uint64_t edge_traced_steps_ = 0;
 };
 
 // Static equilibrium at (x, y, yaw) on the terrain: level in yaw, height, pitch and roll fitted so
