@@ -225,7 +225,7 @@ TEST(Session, ResimulationFromEventsReproducesEveryHash) {
   EXPECT_GT(differing, 100);  // from the parameter change until the teleport re-sets the state
 }
 
-// Valid but absurd parameters (a 1 kg car on 1e8 N/m springs: h * omega = 20) make the state
+// Valid but absurd parameters (a 1 kg car on 1e8 N/m springs and tires: h * omega = 20) make the state
 // blow up; the step is contained, the vehicle is put back at rest where it was, the session goes
 // on, and the re-simulation follows it through.
 TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
@@ -240,6 +240,7 @@ TEST(Session, ADivergingVehicleIsContainedAndTheSessionGoesOn) {
   for (auto* w : {stiff.mutable_lf(), stiff.mutable_rf(), stiff.mutable_lr(), stiff.mutable_rr()}) {
     w->set_spring_stiffness(1e8);
   }
+  stiff.set_tire_vertical_stiffness(1e8);  // the full model's tire, in series with the spring
   s.Spawn(1, {0, 0, 0}, 0.0, stiff);
   pb::ControlRequest drop = Request(1);  // 1 cm above equilibrium: enough to set it off
   drop.mutable_teleport()->mutable_pose()->set_x(0.0);

@@ -43,7 +43,7 @@ constexpr ParamLimit kParams[] = {
   {"steering_trail",       {-0.5, 0.5, false, false, "steering trail, m"}},
   {"steering_ratio",       {1, 100, false, false, "steering ratio (hand wheel / road wheel)"}},
   // The full model (docs/model.md, "The full model").
-  {"mu_slide",             {0, 3, true, false, "sliding friction coefficient"}},
+  {"mu_slide_ratio",       {0.025, 1, false, false, "sliding friction / peak friction"}},
   {"tire_load_sensitivity", {0, 100, true, false, "load of the largest cornering stiffness, in nominal loads"}},
   {"tire_contact_half_length", {0, 1, true, false, "contact patch half length, m"}},
   {"tire_relaxation_long", {0, 10, true, false, "longitudinal relaxation length, m"}},

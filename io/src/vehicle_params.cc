@@ -91,7 +91,7 @@ pb::VehicleParams DefaultVehicleParams() {
   p.set_steering_ratio(15.0);
   p.set_model(pb::VEHICLE_MODEL_FULL);
   // The full model: a 110 kW petrol engine, six gears, front-wheel drive (drive_front_fraction).
-  p.set_mu_slide(0.75);
+  p.set_mu_slide_ratio(0.8);
   p.set_tire_load_sensitivity(2.0);
   p.set_tire_contact_half_length(0.09);
   p.set_tire_relaxation_long(0.15);

@@ -73,7 +73,7 @@ Params RawParams(const pb::VehicleParams& m) {
   p.steering_trail = m.steering_trail();
   p.steering_ratio = m.steering_ratio();
   p.model = m.model() == pb::VEHICLE_MODEL_PAPER ? VehicleModel::kPaper : VehicleModel::kFull;
-  p.mu_slide = m.mu_slide();
+  p.mu_slide_ratio = m.mu_slide_ratio();
   p.tire_load_sensitivity = m.tire_load_sensitivity();
   p.tire_contact_half_length = m.tire_contact_half_length();
   p.tire_relaxation_long = m.tire_relaxation_long();

@@ -21,13 +21,15 @@ constexpr double kRetraceOffset = 1e-3;       // m off a steep face before traci
 constexpr double kShiftDwell = 0.5;           // s from the end of a shift to the next
 constexpr double kReverseSpeed = 1.0;         // m/s: the automatic changes direction below this
 constexpr double kControlSpeed = 1.5;         // m/s: ABS acts above this; slip-ratio floor of TC
+constexpr double kSlipTarget = 0.9;           // ABS and TC hold this fraction of the peak slip
 constexpr double kAbsRelease = 40.0;          // 1/s per unit of excess slip
-constexpr double kAbsApply = 8.0;             // 1/s
+constexpr double kAbsApply = 20.0;            // 1/s per unit of missing slip
 constexpr double kTcRelease = 20.0;           // 1/s per unit of excess slip
 constexpr double kTcApply = 4.0;              // 1/s
 constexpr double kGovernorBand = 0.1;         // of idle speed: the idle governor's band
 constexpr double kLimiterBand = 0.02;         // of the rev limit: the limiter's band
 constexpr double kMaxShiftClock = 10.0;       // s: the shift clock stops here
+constexpr double kStickSlipRateMax = 500.0;   // 1/s: a friction element's fastest break-away
 
 double Sgn(double v) { return static_cast<double>((v > 0.0) - (v < 0.0)); }
 
@@ -39,13 +41,17 @@ double SmoothStep01(double t) {
 // LuGre friction with a constant Coulomb level (Canudas de Wit et al., IEEE TAC 40(3), 1995), in
 // a normalised state s = sigma0 z / capacity: ds/dt = (dw - s |dw|) / angle, torque =
 // capacity (s + damping_time ds/dt). A stuck element is a spring of stiffness capacity / angle,
-// a sliding one transmits the capacity: it holds without creeping.
+// a sliding one transmits the capacity: it holds without creeping. The bristles' saturation rate
+// |dw| / angle grows with the slip speed; above kStickSlipRateMax it is held there (the angle
+// grows instead), which keeps the sliding state's equation inside RK4's stable range while a
+// stuck element keeps its full stiffness.
 struct StickSlip {
   double rate;
   double torque;
 };
 StickSlip LuGre(double s, double dw, double capacity, double angle, double damping_time) {
-  const double rate = (dw - s * std::abs(dw)) / angle;
+  const double abs_dw = std::abs(dw);
+  const double rate = (dw - s * abs_dw) / std::max(angle, abs_dw / kStickSlipRateMax);
   return {rate, capacity * (s + damping_time * rate)};
 }
 
@@ -257,11 +263,11 @@ void TireForcesFull(const Params& p, int w, const BodyKinematics& k, double cos_
   const double mu0 = p.full.mu_static;
   const double force_max = 3.0 * mu0 * Fz;
   const double z = std::sqrt(phi_x * phi_x + phi_y * phi_y) / force_max;
-  const double g = BrushForceRatio(z, mu0, p.mu_slide);
+  const double g = BrushForceRatio(z, mu0, p.full.mu_slide);
   o.Fx = g * phi_x;
   o.Fy = -g * phi_y;
   const double a = p.tire_contact_half_length * std::sqrt(load);
-  o.Mz = -a * BrushTrailRatio(z, mu0, p.mu_slide) * o.Fy;
+  o.Mz = -a * BrushTrailRatio(z, mu0, p.full.mu_slide) * o.Fy;
   o.F_W = Fz * n_W + o.Fx * t_long + o.Fy * t_lat;
 
   // Relaxation: sigma du/dt... as deflections: du/dt = V_slip - |V| u / sigma_long,
@@ -586,7 +592,7 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
     double excess = -1.0;
     for (int w = 0; w < kNumWheels; ++w) {
       if (d.drive_share[w] <= 0.0) continue;
-      excess = std::max(excess, dir * kappa[w] / d.peak_slip[w] - 1.0);
+      excess = std::max(excess, dir * kappa[w] / (kSlipTarget * d.peak_slip[w]) - 1.0);
     }
     excess = std::max(excess, -1.0);
     ds.tc = std::clamp(ds.tc + h * (excess > 0.0 ? -kTcRelease * excess : -kTcApply * excess),
@@ -602,7 +608,7 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
     if (p.abs && brake > 0.0) {
       double excess = -1.0;
       if (std::abs(v_long[w]) > kControlSpeed) {
-        excess = std::max(-Sgn(v_long[w]) * kappa[w] / d.peak_slip[w] - 1.0, -1.0);
+        excess = std::max(-Sgn(v_long[w]) * kappa[w] / (kSlipTarget * d.peak_slip[w]) - 1.0, -1.0);
       }
       ds.abs[w] = std::clamp(
           ds.abs[w] + h * (excess > 0.0 ? -kAbsRelease * excess : -kAbsApply * excess), 0.0, 1.0);

@@ -73,7 +73,7 @@ struct Params {
   // --- The full model (docs/model.md, "The full model"); the paper's model reads none of these.
   VehicleModel model = VehicleModel::kPaper;
   // Tire: brush model with static (mu) and sliding (mu_slide) friction, relaxation, compliance.
-  double mu_slide = 0;
+  double mu_slide_ratio = 0;           // sliding friction / mu (the peak)
   double tire_load_sensitivity = 0;    // C_alpha is largest at this many nominal loads
   double tire_contact_half_length = 0; // m, at the nominal load
   double tire_relaxation_long = 0;     // m
@@ -128,6 +128,7 @@ struct Params {
     std::array<double, kNumWheels> handbrake_torque{};  // N*m per wheel at full lever
     std::array<double, kNumWheels> peak_slip{};      // slip ratio at the brush law's peak
     std::array<double, kNumWheels> load_sensitivity_norm{};  // 1 / sin(2 atan(1 / p))
+    double mu_slide = 0;         // sliding friction coefficient, mu * mu_slide_ratio
     double mu_static = 0;        // the brush's adhesion limit mu_0, so that the peak is mu
     double peak_z = 1;           // normalised slip of the law's peak (1: no peak)
     double omega_idle = 0, omega_limit = 0, omega_power = 0, omega_engage = 0;  // rad/s
