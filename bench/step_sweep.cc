@@ -13,7 +13,8 @@
 //    (0.11 rad/s at 1 ms: a resolved impact stays gentle).
 // The largest stable step is reported per drive and for all three together.
 //
-// Usage: step_sweep [h_ms ...]   (default: a list from 1 to 25 ms, 1/90 s included)
+// Usage: step_sweep [--model paper|full] [h_ms ...]   (default: the full model; a list of steps
+// from 1 to 25 ms, 1/90 s included)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -118,13 +119,27 @@ Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::ValidPa
 
 int main(int argc, char** argv) {
   std::vector<double> steps_ms;
-  for (int i = 1; i < argc; ++i) steps_ms.push_back(std::atof(argv[i]));
+  vdyn::pb::VehicleParams msg = vdyn::DefaultVehicleParams();
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--model" && i + 1 < argc) {
+      const std::string m = argv[++i];
+      if (m != "paper" && m != "full") {
+        std::fprintf(stderr, "usage: step_sweep [--model paper|full] [h_ms ...]\n");
+        return 2;
+      }
+      msg.set_model(m == "paper" ? vdyn::pb::VEHICLE_MODEL_PAPER : vdyn::pb::VEHICLE_MODEL_FULL);
+      continue;
+    }
+    steps_ms.push_back(std::atof(argv[i]));
+  }
   if (steps_ms.empty()) {
-    steps_ms = {1, 2, 4, 5, 6, 7, 8, 9, 10, 1000.0 / 120.0, 1000.0 / 90.0, 12.5, 15, 20, 25};
+    steps_ms = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 1000.0 / 120.0, 1000.0 / 90.0, 12.5, 15, 20, 25};
     std::sort(steps_ms.begin(), steps_ms.end());
   }
   std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("facility");
-  const vdyn::ValidParams params = vdyn::ParamsFromProto(vdyn::DefaultVehicleParams());
+  const vdyn::ValidParams params = vdyn::ParamsFromProto(msg);
+  std::printf("model: %s\n", msg.model() == vdyn::pb::VEHICLE_MODEL_PAPER ? "paper" : "full");
 
   Metrics ref[3];
   for (int d = 0; d < 3; ++d) ref[d] = Run(world, params, static_cast<Drive>(d), 1'000'000);

@@ -601,6 +601,9 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
     ds.tc = 1.0;
   }
   u.pedal = u.shifting ? 0.0 : pedal * ds.tc;
+  // For the record: the accelerator as the driver (or the speed control) applies it, signed by
+  // the direction of travel; traction control and shifts act at the engine (Derived::drivetrain).
+  const double accelerator = u.gear < 0 ? -pedal : pedal;
 
   // Brakes, with ABS: each wheel's braking slip held near the tire's peak by an integral action
   // on its brake pressure, above kControlSpeed.
@@ -619,7 +622,7 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
     u.abs_factor[w] = ds.abs[w];
   }
   u.tc_factor = ds.tc;
-  u.throttle = u.gear < 0 ? -u.pedal : u.pedal;
+  u.throttle = accelerator;
   u.brake = brake;
 
   // Road-wheel angles at the step start, for the record.
