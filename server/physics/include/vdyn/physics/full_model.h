@@ -17,7 +17,9 @@
 //   7. body forces and derivatives, as the paper's model
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 
 #include "vdyn/physics/controls.h"
 #include "vdyn/physics/params.h"
@@ -60,13 +62,30 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
 // normalised slip (1 at the onset of full sliding):
 //   F / Fz = 3 mu0 z (1 - z)^2 + mu_slide z^2 (3 - 2 z)        z < 1;   mu_slide   z >= 1
 // BrushForceRatio returns F / Phi with Phi = 3 mu0 Fz z, the linear force (finite at z = 0).
-double BrushForceRatio(double z, double mu0, double mu_slide);
+// (Inline: the derivative calls these at every stage.)
+inline double BrushForceRatio(double z, double mu0, double mu_slide) {
+  if (z >= 1.0) return mu_slide / (3.0 * mu0 * z);
+  const double q = 1.0 - z;
+  return q * q + mu_slide / (3.0 * mu0) * z * (3.0 - 2.0 * z);
+}
+
 // Pneumatic trail over the contact half length a:
 //   t / a = (1 - z)^2 (mu0 (1 - 4 z) + 3 mu_slide z) / (3 mu0 (1 - z)^2 + mu_slide z (3 - 2 z))
 // for z < 1 (a / 3 at z = 0), 0 for z >= 1.
-double BrushTrailRatio(double z, double mu0, double mu_slide);
-// Cornering stiffness at load Fz: C_alpha(Fz) = C_alpha sin(2 atan(Fz / (p Fz0))) / sin(2 atan(1/p)).
-double CorneringStiffnessAt(const Params& p, int w, double Fz);
+inline double BrushTrailRatio(double z, double mu0, double mu_slide) {
+  if (z >= 1.0) return 0.0;
+  const double q = 1.0 - z;
+  return q * q * (mu0 * (1.0 - 4.0 * z) + 3.0 * mu_slide * z) /
+         (3.0 * mu0 * q * q + mu_slide * z * (3.0 - 2.0 * z));
+}
+
+// Cornering stiffness at load Fz: C_alpha(Fz) = C_alpha sin(2 atan(Fz / (p Fz0))) / sin(2 atan(1/p)),
+// with sin(2 atan x) = 2 x / (1 + x^2).
+inline double CorneringStiffnessAt(const Params& p, int w, double Fz) {
+  const WheelParams& wp = p.wheel[w];
+  const double x = Fz / (p.tire_load_sensitivity * wp.nominal_load);
+  return wp.cornering_stiffness * p.full.load_sensitivity_norm[w] * 2.0 * x / (1.0 + x * x);
+}
 
 // The road-wheel angles of the front wheels for a hand-wheel angle (Ackermann), and how fast
 // each turns with the rack's angle delta = hand-wheel angle / steering ratio.
@@ -74,7 +93,32 @@ struct FrontWheelAngles {
   std::array<double, 2> cos_gamma{1.0, 1.0}, sin_gamma{0.0, 0.0};  // LF, RF
   std::array<double, 2> dgamma_ddelta{1.0, 1.0};
 };
-FrontWheelAngles SteeringGeometry(const Params& p, double hand_wheel_angle);
+inline FrontWheelAngles SteeringGeometry(const Params& p, double hand_wheel_angle) {
+  FrontWheelAngles g;
+  // The rack's angle delta (a virtual centre wheel); Ackermann: cot(gamma_L) = cot(delta) - k/L,
+  // cot(gamma_R) = cot(delta) + k/L with k = ackermann * track / 2.
+  const double delta = std::clamp(hand_wheel_angle / p.steering_ratio, -1.55, 1.55);
+  const double t = std::tan(delta);
+  const double L = p.wheelbase;
+  const double num = L * t;
+  for (int i = 0; i < 2; ++i) {
+    const double den = i == 0 ? L - p.full.ackermann_offset * t : L + p.full.ackermann_offset * t;
+    const double hyp2 = num * num + den * den;
+    const double inv = 1.0 / std::sqrt(hyp2);
+    g.cos_gamma[i] = den * inv;
+    g.sin_gamma[i] = num * inv;
+    g.dgamma_ddelta[i] = L * L * (1.0 + t * t) / hyp2;
+  }
+  return g;
+}
+
+// The gearbox output speed per unit ratio: the drive-share-weighted wheel speeds (the open
+// differentials' kinematics), rad/s.
+inline double GearboxOutputSpeed(const Params& p, const StateVector& x) {
+  double w = 0.0;
+  for (int i = 0; i < kNumWheels; ++i) w += p.full.drive_share[i] * x[sx::kWheelSpin + i];
+  return w;
+}
 
 // The full model's state for body state `s` (a spawn, or a change of model between steps):
 // wheels rolling with the body, springs at their static length, relaxed tires, released brakes,
