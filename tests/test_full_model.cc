@@ -720,6 +720,32 @@ TEST(FullModelProperties, NoTireForceExceedsMuTimesItsLoadOverTheDemoDrive) {
   EXPECT_GT(checked, 100000);
 }
 
+// The documented largest stable step of the full model (docs/model.md 8.6, bench/step_sweep): the
+// demo drive at h = 5 ms stays finite, keeps its peak tire load and body rate within 1.5x of the
+// 1 ms run's, and the braked car ends at rest.
+TEST(FullModelProperties, DemoDriveStableAtTheDocumentedLargestStep) {
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  auto run = [&m](std::int64_t step_ns, double* max_Fp, double* max_rate) {
+    SimConfig cfg;
+    cfg.step_ns = step_ns;
+    Simulator sim(SharedWorld("facility"), testing::DefaultParams(), cfg);
+    Drive(sim, std::llround(m.end_time() / sim.h()),
+          [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
+          [&](const StepRecord& r) {
+            for (const WheelOutputs& w : r.derived.wheel) *max_Fp = std::max(*max_Fp, w.Fp);
+            *max_rate = std::max(*max_rate, r.derived.w_eff_B.norm());
+            return false;
+          });
+    return Velocity(sim.state().x).norm();
+  };
+  double fp1 = 0, rate1 = 0, fp5 = 0, rate5 = 0;
+  run(1'000'000, &fp1, &rate1);
+  const double end_speed = run(5'000'000, &fp5, &rate5);
+  EXPECT_LT(end_speed, 0.01);
+  EXPECT_LT(fp5, 1.5 * fp1);
+  EXPECT_LT(rate5, 1.5 * rate1);
+}
+
 TEST(FullModelProperties, TheModelCanChangeBetweenSteps) {
   Simulator sim(SharedWorld("flat"), testing::PaperParams());
   sim.Spawn({0, 0, 0}, 10.0);

@@ -32,6 +32,11 @@ TEST(Golden, PaperModelDemoDriveOnFacilityEndsOnTheStoredHash) {
   EXPECT_EQ(DemoDriveHash(p), 0xf00662dacbdc2b22ull);
 }
 
+// The full model (the default) over the same drive.
+TEST(Golden, FullModelDemoDriveOnFacilityEndsOnTheStoredHash) {
+  EXPECT_EQ(DemoDriveHash(testing::DefaultParams()), 0xfa23a84c6e39e665ull);
+}
+
 TEST(Golden, PaperYawModeWithTheLinearTireEndsOnTheStoredHash) {
   const ValidParams p = testing::ParamsWith([](pb::VehicleParams& m) {
     m.set_model(pb::VEHICLE_MODEL_PAPER);
