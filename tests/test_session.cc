@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/runtime/session.h"
@@ -86,7 +87,7 @@ TEST(Session, ExactStateCarriesEitherModelBitForBitAndRefusesMalformedStates) {
   Simulator full(testing::SharedWorld("flat"), testing::DefaultParams());
   full.Spawn({0, 0, 0}, 12.0);
   DriverInput in;
-  in.brake = 0.6;
+  in.brake = 1.0;
   full.SetInput(in);
   for (int i = 0; i < 300; ++i) full.Step();  // ABS, gear and shift clock all away from defaults
   const State s = full.state();
@@ -95,6 +96,18 @@ TEST(Session, ExactStateCarriesEitherModelBitForBitAndRefusesMalformedStates) {
   const State back = FromExactState(m);
   EXPECT_EQ(back.model, VehicleModel::kFull);
   EXPECT_EQ(StateHash(back), StateHash(s));
+  // The full state hash as docs/hash.md writes it: x, the integral, gear, shift time, ABS, TC, step.
+  base::WordHash h;
+  for (double v : m.x()) h.Double(v);
+  h.Double(m.cruise_integral());
+  h.Int(m.gear());
+  h.Double(m.shift_time());
+  for (double a : m.abs()) h.Double(a);
+  h.Double(m.tc());
+  h.Int(static_cast<std::int64_t>(m.step()));
+  EXPECT_EQ(h.Final(), StateHash(s));
+  EXPECT_NE(s.discrete.abs[kLR], 1.0);  // the discrete state is not at its defaults
+  EXPECT_GT(s.discrete.gear, 0);
   Simulator paper(testing::SharedWorld("flat"), testing::PaperParams());
   paper.Spawn({0, 0, 0}, 12.0);
   for (int i = 0; i < 30; ++i) paper.Step();
