@@ -1,8 +1,10 @@
 // Google Benchmark suite for the physics core, with Bullet's btRaycastVehicle as the peer measured
 // in the same run. Names: <what>/<engine>/<world>[/<pattern>].
 //
-//   step/vdyn/W     one Simulator::Step (RK4: 4 stages x 4 wheel rays = 16 rays, plus the wall
-//                   probes near steep surfaces) while driving course W (cars.h)
+//   step/vdyn/W     one Simulator::Step of the default (full) model (RK4: 4 stages x 4 wheel rays
+//                   = 16 rays, plus the wall probes and the wheels' kerb traces near steep
+//                   surfaces) while driving course W (cars.h)
+//   step/vdyn_paper/W  the same with the paper's model
 //   step/bullet/W   one btDiscreteDynamicsWorld::stepSimulation(1 ms) of the same car (4 wheel
 //                   rays, chassis box vs mesh collision, solver, integration)
 //   step/bullet_nobox/W  the same without the chassis box's collision: only the wheel rays touch
@@ -38,10 +40,12 @@ const Course& CourseNamed(const std::string& name) {
 
 // The cars live across benchmark invocations (Google Benchmark calls a function several times while
 // it sizes the run): each continues its drive instead of restarting from rest at the spawn.
-VdynCar& OurCar(const std::string& world) {
+VdynCar& OurCar(const std::string& world, bool paper = false) {
   static std::map<std::string, std::unique_ptr<VdynCar>> cars;
-  auto& car = cars[world];
-  if (!car) car = std::make_unique<VdynCar>(CourseNamed(world), BenchParams());
+  auto& car = cars[world + (paper ? "/paper" : "")];
+  if (!car) {
+    car = std::make_unique<VdynCar>(CourseNamed(world), paper ? PaperBenchParams() : BenchParams());
+  }
   return *car;
 }
 
@@ -67,8 +71,8 @@ void StepLoop(benchmark::State& st, Car& car) {
   }
 }
 
-void BM_StepVdyn(benchmark::State& st, const std::string& world) {
-  StepLoop(st, OurCar(world));
+void BM_StepVdyn(benchmark::State& st, const std::string& world, bool paper) {
+  StepLoop(st, OurCar(world, paper));
 }
 void BM_StepBullet(benchmark::State& st, const std::string& world, bool chassis_box) {
   StepLoop(st, PeerCar(world, chassis_box));
@@ -152,6 +156,8 @@ class RatioReporter : public benchmark::ConsoleReporter {
       const std::string w = world;
       Ratio("step/" + w, "step/vdyn/" + w, "step/bullet/" + w);
       Ratio("step/" + w + " (Bullet without box)", "step/vdyn/" + w, "step/bullet_nobox/" + w);
+      Ratio("step/" + w + " (paper model)", "step/vdyn_paper/" + w, "step/bullet/" + w);
+      Ratio("step/" + w + " (full / paper model)", "step/vdyn/" + w, "step/vdyn_paper/" + w);
       for (const char* pattern : {"moving", "random"}) {
         const std::string wp = std::string(world) + "/" + pattern;
         Ratio("ray/" + wp + " (Trace)", "trace/vdyn/" + wp, "ray/bullet/" + wp);
@@ -175,7 +181,8 @@ class RatioReporter : public benchmark::ConsoleReporter {
 
 void Register() {
   for (const std::string world : {"facility", "terrain_1m"}) {
-    benchmark::RegisterBenchmark(("step/vdyn/" + world).c_str(), BM_StepVdyn, world);
+    benchmark::RegisterBenchmark(("step/vdyn/" + world).c_str(), BM_StepVdyn, world, false);
+    benchmark::RegisterBenchmark(("step/vdyn_paper/" + world).c_str(), BM_StepVdyn, world, true);
     benchmark::RegisterBenchmark(("step/bullet/" + world).c_str(), BM_StepBullet, world, true);
     benchmark::RegisterBenchmark(("step/bullet_nobox/" + world).c_str(), BM_StepBullet, world,
                                  false);

@@ -60,6 +60,12 @@ ValidParams BenchParams() {
   return ParamsFromProto(DefaultVehicleParams());
 }
 
+ValidParams PaperBenchParams() {
+  pb::VehicleParams p = DefaultVehicleParams();
+  p.set_model(pb::VEHICLE_MODEL_PAPER);
+  return ParamsFromProto(p);
+}
+
 // --- vdyn --------------------------------------------------------------------------------------
 
 namespace {

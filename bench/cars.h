@@ -37,7 +37,8 @@ Course FacilityCourse();
 // heading turned by the golden angle at each spawn.
 Course TerrainCourse();
 
-ValidParams BenchParams();  // vdyn's default vehicle
+ValidParams BenchParams();       // vdyn's default vehicle (the full model, the default)
+ValidParams PaperBenchParams();  // the same vehicle with the paper's model
 
 class VdynCar {
  public:

@@ -30,7 +30,8 @@ run() {  # prints the command, then runs it
   run "$bin/bench_core" --benchmark_repetitions=5 --benchmark_report_aggregates_only=true "$@"
   run "$bin/step_latency" 200000
   run "$bin/batch_rtf" 5
-  run "$bin/step_sweep"
+  run "$bin/step_sweep" --model full
+  run "$bin/step_sweep" --model paper
   run "$bin/net_bench" 60 20
   run "$bin/input_bench" 30
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"

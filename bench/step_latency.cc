@@ -1,7 +1,8 @@
 // The distribution of single-step times: every one of N steps timed on its own with
 // std::chrono::steady_clock, for vdyn and for the Bullet peer (cars.h), on both courses.
 //
-// The cars (vdyn, Bullet, Bullet without the chassis box's collision) take turns in blocks of
+// The cars (vdyn's full model - the default -, vdyn's paper model, Bullet, Bullet without the
+// chassis box's collision) take turns in blocks of
 // 10,000 steps, so all see the same machine (a shared, noisy 2-core box drifts over seconds).
 // Respawns happen between timed steps, never inside one.
 // Usage: step_latency [N]   (default 200000 steps per car and world)
@@ -79,12 +80,13 @@ int main(int argc, char** argv) {
 
   for (const Course& course : {TerrainCourse(), FacilityCourse()}) {
     VdynCar ours(course, BenchParams());
+    VdynCar paper(course, PaperBenchParams());
     BulletCar peer(course, BenchParams());
     BulletCar peer_nobox(course, BenchParams(), /*chassis_box=*/false);
-    std::vector<double> ours_us, peer_us, nobox_us, discard;
-    auto run = [&](int steps, std::vector<double>& a, std::vector<double>& b,
-                   std::vector<double>& c) {
-      if (TimeSteps(ours, steps, a) && TimeSteps(peer, steps, b) &&
+    std::vector<double> ours_us, paper_us, peer_us, nobox_us, discard;
+    auto run = [&](int steps, std::vector<double>& a, std::vector<double>& p,
+                   std::vector<double>& b, std::vector<double>& c) {
+      if (TimeSteps(ours, steps, a) && TimeSteps(paper, steps, p) && TimeSteps(peer, steps, b) &&
           TimeSteps(peer_nobox, steps, c)) {
         return true;
       }
@@ -92,20 +94,26 @@ int main(int argc, char** argv) {
       return false;
     };
     // Warm-up: caches, page faults, the cars settling after the first spawn.
-    if (!run(5000, discard, discard, discard)) return 1;
-    for (auto* v : {&ours_us, &peer_us, &nobox_us}) v->reserve(static_cast<std::size_t>(n));
+    if (!run(5000, discard, discard, discard, discard)) return 1;
+    for (auto* v : {&ours_us, &paper_us, &peer_us, &nobox_us}) {
+      v->reserve(static_cast<std::size_t>(n));
+    }
     for (int done = 0; done < n; done += 10000) {
-      if (!run(std::min(10000, n - done), ours_us, peer_us, nobox_us)) return 1;
+      if (!run(std::min(10000, n - done), ours_us, paper_us, peer_us, nobox_us)) return 1;
     }
     const Stats a = Summarise(ours_us), b = Summarise(peer_us), c = Summarise(nobox_us);
+    const Stats pa = Summarise(paper_us);
     const char* w = course.name.c_str();
     Print(w, "vdyn", a);
+    Print(w, "vdyn_paper", pa);
     Print(w, "bullet", b);
     Print(w, "bullet_nobox", c);
     std::printf("%-11s %-12s %9.2f %9s %9.2f   (mean, p99)\n", w, "vdyn/bullet", a.mean / b.mean,
                 "", a.p99 / b.p99);
     std::printf("%-11s %-12s %9.2f %9s %9.2f   (mean, p99)\n", w, "vdyn/nobox", a.mean / c.mean, "",
                 a.p99 / c.p99);
+    std::printf("%-11s %-12s %9.2f %9s %9.2f   (mean, p99)\n", w, "full/paper", a.mean / pa.mean,
+                "", a.p99 / pa.p99);
     if (course.name == "terrain_1m") {
       std::printf("%-11s targets: mean <= 15 us %s, p99 <= 50 us %s\n", "",
                   a.mean <= 15.0 ? "met" : "NOT met", a.p99 <= 50.0 ? "met" : "NOT met");

@@ -13,7 +13,8 @@
 //    (0.11 rad/s at 1 ms: a resolved impact stays gentle).
 // The largest stable step is reported per drive and for all three together.
 //
-// Usage: step_sweep [h_ms ...]   (default: a list from 1 to 25 ms, 1/90 s included)
+// Usage: step_sweep [--model paper|full] [h_ms ...]   (default: the full model; a list of steps
+// from 1 to 25 ms, 1/90 s included)
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -55,6 +56,7 @@ Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::ValidPa
             Drive drive, std::int64_t step_ns) {
   vdyn::SimConfig cfg;
   cfg.step_ns = step_ns;
+  cfg.check_step = false;  // the sweep looks for the real limit, past CheckStep's bound
   Simulator sim(world, params, cfg);
   const vdyn::Maneuver demo = vdyn::Maneuver::Parse(vdyn::DemoManeuverCsv(), "demo");
   vdyn::CircuitDriver circuit;
@@ -118,13 +120,27 @@ Metrics Run(const std::shared_ptr<const vdyn::World>& world, const vdyn::ValidPa
 
 int main(int argc, char** argv) {
   std::vector<double> steps_ms;
-  for (int i = 1; i < argc; ++i) steps_ms.push_back(std::atof(argv[i]));
+  vdyn::pb::VehicleParams msg = vdyn::DefaultVehicleParams();
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--model" && i + 1 < argc) {
+      const std::string m = argv[++i];
+      if (m != "paper" && m != "full") {
+        std::fprintf(stderr, "usage: step_sweep [--model paper|full] [h_ms ...]\n");
+        return 2;
+      }
+      msg.set_model(m == "paper" ? vdyn::pb::VEHICLE_MODEL_PAPER : vdyn::pb::VEHICLE_MODEL_FULL);
+      continue;
+    }
+    steps_ms.push_back(std::atof(argv[i]));
+  }
   if (steps_ms.empty()) {
-    steps_ms = {1, 2, 4, 5, 6, 7, 8, 9, 10, 1000.0 / 120.0, 1000.0 / 90.0, 12.5, 15, 20, 25};
+    steps_ms = {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 1000.0 / 120.0, 1000.0 / 90.0, 12.5, 15, 20, 25};
     std::sort(steps_ms.begin(), steps_ms.end());
   }
   std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("facility");
-  const vdyn::ValidParams params = vdyn::ParamsFromProto(vdyn::DefaultVehicleParams());
+  const vdyn::ValidParams params = vdyn::ParamsFromProto(msg);
+  std::printf("model: %s\n", msg.model() == vdyn::pb::VEHICLE_MODEL_PAPER ? "paper" : "full");
 
   Metrics ref[3];
   for (int d = 0; d < 3; ++d) ref[d] = Run(world, params, static_cast<Drive>(d), 1'000'000);
@@ -163,5 +179,9 @@ int main(int argc, char** argv) {
   std::printf("largest stable step (it and every smaller step listed stable):\n");
   for (int d = 0; d < 3; ++d) std::printf("  %-8s %.3f ms\n", kDriveNames[d], largest[d]);
   std::printf("  %-8s %.3f ms\n", "all", largest[3]);
+  std::string mode;
+  const double bound_s = vdyn::MaxResolvedStep(params.get(), &mode);
+  std::printf("the parameters' largest resolved step (CheckStep, server refuses beyond): %.3f ms (%s)\n",
+              bound_s * 1e3, mode.c_str());
   return 0;
 }

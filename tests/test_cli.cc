@@ -52,6 +52,22 @@ TEST(Cli, DumpVehicleReadsBackThroughVehicle) {
   EXPECT_EQ(again.output, dump.output);
 }
 
+TEST(Cli, ModelOptionChoosesTheModelAndRefusesOthers) {
+  const Result paper = RunServer("--model paper --dump-vehicle");
+  ASSERT_EQ(paper.exit_code, 0) << paper.output;
+  EXPECT_THAT(paper.output, HasSubstr("model: VEHICLE_MODEL_PAPER"));
+  const Result full = RunServer("--dump-vehicle");
+  EXPECT_THAT(full.output, HasSubstr("model: VEHICLE_MODEL_FULL"));  // the default
+  const Result bad = RunServer("--model bicycle --dump-vehicle");
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_THAT(bad.output, HasSubstr("--model"));
+  // The paper's model's demo drive ends on its golden hash (tests/test_golden.cc).
+  TempDir dir;
+  const Result demo = RunServer("--demo --model paper --csv " + (dir / "d.csv").string());
+  ASSERT_EQ(demo.exit_code, 0) << demo.output;
+  EXPECT_THAT(demo.output, HasSubstr("state hash f00662dacbdc2b22"));
+}
+
 TEST(Cli, BatchWritesTheCsvWithUnitsInTheHeader) {
   TempDir dir;
   WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0,0,30\n2,3,0,0,30\n");
@@ -63,7 +79,9 @@ TEST(Cli, BatchWritesTheCsvWithUnitsInTheHeader) {
   const std::string header = csv.substr(0, csv.find('\n'));
   for (const char* col : {"t_s", "x_m", "y_m", "z_m", "roll_rad", "pitch_rad", "yaw_rad", "vx_mps",
                           "wz_radps", "ax_mps2", "az_mps2", "Da_N", "Fp_LF_N", "Fh_RF_N",
-                          "Fb_LR_N", "Fy_RR_N", "lS_LF_m", "contact_RR", "gamma_LF_rad"}) {
+                          "Fb_LR_N", "Fy_RR_N", "lS_LF_m", "contact_RR", "gamma_LF_rad",
+                          "Tsteer_align_Nm", "engine_rpm", "gear", "omega_LF_radps", "Mz_RF_Nm",
+                          "kappa_RR"}) {
     EXPECT_THAT(header, HasSubstr(col));
   }
   EXPECT_EQ(header.find(' '), std::string::npos);

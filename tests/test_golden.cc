@@ -24,12 +24,22 @@ std::uint64_t DemoDriveHash(const ValidParams& params) {
   return s.final_hash;
 }
 
-TEST(Golden, DemoDriveOnFacilityEndsOnTheStoredHash) {
-  EXPECT_EQ(DemoDriveHash(testing::DefaultParams()), 0xf00662dacbdc2b22ull);
+// The paper's model with the default parameters: the hash it has had since it was the only model.
+TEST(Golden, PaperModelDemoDriveOnFacilityEndsOnTheStoredHash) {
+  const ValidParams p = testing::ParamsWith([](pb::VehicleParams& m) {
+    m.set_model(pb::VEHICLE_MODEL_PAPER);
+  });
+  EXPECT_EQ(DemoDriveHash(p), 0xf00662dacbdc2b22ull);
+}
+
+// The full model (the default) over the same drive.
+TEST(Golden, FullModelDemoDriveOnFacilityEndsOnTheStoredHash) {
+  EXPECT_EQ(DemoDriveHash(testing::DefaultParams()), 0xfa23a84c6e39e665ull);
 }
 
 TEST(Golden, PaperYawModeWithTheLinearTireEndsOnTheStoredHash) {
   const ValidParams p = testing::ParamsWith([](pb::VehicleParams& m) {
+    m.set_model(pb::VEHICLE_MODEL_PAPER);
     m.set_yaw_mode(pb::YAW_MODE_PAPER);
     m.set_tire_law(pb::TIRE_LAW_LINEAR_SATURATED);
   });

@@ -39,6 +39,9 @@ TEST(Params, EmptyMessageReportsEveryMissingField) {
   EXPECT_TRUE(HasIssue(issues, "mass", "missing"));
   EXPECT_TRUE(HasIssue(issues, "rr.radius", "missing"));
   EXPECT_TRUE(HasIssue(issues, "yaw_mode", "missing"));
+  EXPECT_TRUE(HasIssue(issues, "model", "missing"));
+  EXPECT_TRUE(HasIssue(issues, "engine_power_max", "missing"));
+  EXPECT_TRUE(HasIssue(issues, "lf.spin_inertia", "missing"));
 }
 
 TEST(Params, OutOfRangeAndNonFiniteValuesNameFieldAndReason) {
@@ -67,6 +70,30 @@ TEST(Params, UnknownEnumValuesAreRefused) {
       << FormatIssues(issues);
   EXPECT_TRUE(HasIssue(issues, "tire_law", "9 is not one of"));
   EXPECT_TRUE(HasIssue(issues, "model", "5 is not one of"));
+}
+
+TEST(Params, FullModelRulesNameFieldAndReason) {
+  pb::VehicleParams m = DefaultVehicleParams();
+  m.set_shift_down_rpm(5500.0);               // an upshift at 6000 would land below it
+  m.mutable_lr()->set_max_length(0.4);        // beyond the 0.35 m free length
+  m.mutable_rf()->set_min_length(0.34);       // beyond max_length 0.33
+  m.set_gear_count(11);
+  m.set_mu_slide_ratio(0.0);
+  m.set_differential(static_cast<pb::Differential>(7));
+  m.mutable_lf()->set_damper_coefficient(0.0);  // the full model's wheel travel needs a damper
+  const auto issues = ValidateVehicleParams(m);
+  EXPECT_TRUE(HasIssue(issues, "shift_down_rpm", "hunt")) << FormatIssues(issues);
+  EXPECT_TRUE(HasIssue(issues, "lr.max_length", "free_length"));
+  EXPECT_TRUE(HasIssue(issues, "rf.min_length", "shorter than max_length"));
+  EXPECT_TRUE(HasIssue(issues, "gear_count", "must be in [1, 10], got 11"));
+  EXPECT_TRUE(HasIssue(issues, "mu_slide_ratio", "got 0"));
+  EXPECT_TRUE(HasIssue(issues, "differential", "7 is not one of"));
+  EXPECT_TRUE(HasIssue(issues, "lf.damper_coefficient", "full model"));
+  // The paper's model has no such wheel travel: an undamped spring is its own business.
+  pb::VehicleParams paper = DefaultVehicleParams();
+  paper.set_model(pb::VEHICLE_MODEL_PAPER);
+  paper.mutable_lf()->set_damper_coefficient(0.0);
+  EXPECT_TRUE(ValidateVehicleParams(paper).empty()) << FormatIssues(ValidateVehicleParams(paper));
 }
 
 TEST(Params, TextFileOverridesOnlyTheFieldsItLists) {

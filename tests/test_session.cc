@@ -7,6 +7,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/runtime/session.h"
@@ -78,6 +79,78 @@ TEST(Session, SpawnEmitsTheExactStateAndCompleteParams) {
   EXPECT_TRUE(ValidateVehicleParams(e.spawned().params()).empty());
   EXPECT_EQ(e.spawned().terrain_hash(), TerrainHash(testing::SharedWorld("flat")->terrain));
   EXPECT_THROW(s.Spawn(7, {0, 0, 0}, 0.0, pb::VehicleParams()), std::invalid_argument);
+}
+
+// ExactState carries either model's state bit for bit (13 numbers for the paper's model, 37 and
+// the discrete state for the full model) and refuses anything else.
+TEST(Session, ExactStateCarriesEitherModelBitForBitAndRefusesMalformedStates) {
+  Simulator full(testing::SharedWorld("flat"), testing::DefaultParams());
+  full.Spawn({0, 0, 0}, 12.0);
+  DriverInput in;
+  in.brake = 1.0;
+  full.SetInput(in);
+  for (int i = 0; i < 300; ++i) full.Step();  // ABS, gear and shift clock all away from defaults
+  const State s = full.state();
+  const pb::ExactState m = ToExactState(s);
+  EXPECT_EQ(m.x_size(), kStateSize);
+  const State back = FromExactState(m);
+  EXPECT_EQ(back.model, VehicleModel::kFull);
+  EXPECT_EQ(StateHash(back), StateHash(s));
+  // The full state hash as docs/hash.md writes it: x, the integral, gear, shift time, ABS, TC, step.
+  base::WordHash h;
+  for (double v : m.x()) h.Double(v);
+  h.Double(m.cruise_integral());
+  h.Int(m.gear());
+  h.Double(m.shift_time());
+  for (double a : m.abs()) h.Double(a);
+  h.Double(m.tc());
+  h.Int(static_cast<std::int64_t>(m.step()));
+  EXPECT_EQ(h.Final(), StateHash(s));
+  EXPECT_NE(s.discrete.abs[kLR], 1.0);  // the discrete state is not at its defaults
+  EXPECT_GT(s.discrete.gear, 0);
+  Simulator paper(testing::SharedWorld("flat"), testing::PaperParams());
+  paper.Spawn({0, 0, 0}, 12.0);
+  for (int i = 0; i < 30; ++i) paper.Step();
+  const pb::ExactState mp = ToExactState(paper.state());
+  EXPECT_EQ(mp.x_size(), kPaperStateSize);
+  EXPECT_EQ(StateHash(FromExactState(mp)), StateHash(paper.state()));
+
+  pb::ExactState bad = m;
+  bad.mutable_x()->RemoveLast();
+  EXPECT_THROW(FromExactState(bad), std::invalid_argument);
+  bad = m;
+  bad.mutable_abs()->RemoveLast();
+  EXPECT_THROW(FromExactState(bad), std::invalid_argument);
+  bad = m;
+  bad.set_gear(12);
+  EXPECT_THROW(FromExactState(bad), std::invalid_argument);
+  bad = m;
+  bad.set_tc(std::numeric_limits<double>::quiet_NaN());
+  EXPECT_THROW(FromExactState(bad), std::invalid_argument);
+}
+
+// The watchdog's safe state in the full model: the last steering (angle and mode) and gear are
+// kept, throttle, clutch and handbrake dropped, the brake at safe_brake.
+TEST(Session, WatchdogSafeStateKeepsTheRigsSteeringAndGear) {
+  Session s(testing::SharedWorld("flat"), Config(), {});
+  s.Spawn(1, {0, 0, 0}, 10.0, pb::VehicleParams());
+  pb::DriverInput rig = Input(1, 0.4, 0.7);
+  rig.set_steer_mode(pb::STEER_HAND_WHEEL);
+  rig.set_gear(3);
+  rig.set_clutch(0.2);
+  rig.set_handbrake(0.5);
+  std::string why;
+  ASSERT_TRUE(s.OfferInput(rig, &why)) << why;
+  for (int i = 0; i < 150; ++i) s.Step();
+  ASSERT_TRUE(s.in_safe_state(1));
+  const DriverInput& in = s.simulator(1).input();
+  EXPECT_EQ(in.steer_mode, SteerMode::kHandWheel);
+  EXPECT_EQ(in.steer, 0.7);
+  EXPECT_EQ(in.gear, 3);
+  EXPECT_EQ(in.throttle, 0.0);
+  EXPECT_EQ(in.clutch, 0.0);
+  EXPECT_EQ(in.handbrake, 0.0);
+  EXPECT_EQ(in.brake, Config().safe_brake);
 }
 
 TEST(Session, WatchdogBrakesWhenLiveInputStops) {

@@ -68,6 +68,15 @@ ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
   return ParamsFromProto(msg);
 }
 
+ValidParams PaperParams() { return PaperParamsWith([](pb::VehicleParams&) {}); }
+
+ValidParams PaperParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
+  pb::VehicleParams msg = DefaultVehicleParams();
+  msg.set_model(pb::VEHICLE_MODEL_PAPER);
+  edit(msg);
+  return ParamsFromProto(msg);
+}
+
 std::int64_t Drive(Simulator& sim, std::int64_t max_steps,
                    const std::function<void(Simulator&)>& before_step,
                    const std::function<bool(const StepRecord&)>& after_step) {

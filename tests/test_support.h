@@ -47,6 +47,9 @@ TriangleMesh InclinedPlane(double slope, double half_size);
 ValidParams DefaultParams();
 // The defaults with `edit` applied to the message first.
 ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
+// The defaults with the paper's model (VEHICLE_MODEL_PAPER), then `edit`.
+ValidParams PaperParams();
+ValidParams PaperParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
 
 // Steps until `stop` returns true or `max_steps` is reached; returns the steps taken. Fails the
 // test if a step is non-finite.

@@ -1,5 +1,7 @@
-// Physics validation against closed forms and properties (issue: foundation and physics core).
-// Every expected value here comes from a formula and the parameters, never from earlier output.
+// Physics validation of the paper's model against closed forms and properties (issue: foundation
+// and physics core). Every test here runs the paper's model (VEHICLE_MODEL_PAPER), as it did when
+// it was the only model; the full model's validation is in test_full_model.cc. Every expected
+// value here comes from a formula and the parameters, never from earlier output.
 #include <algorithm>
 #include <cmath>
 #include <numbers>
@@ -21,9 +23,14 @@ namespace {
 
 using Eigen::Vector3d;
 using testing::Drive;
-using testing::ParamsWith;
 using testing::SharedWorld;
 constexpr double kDeg = std::numbers::pi / 180.0;
+
+// The paper's model with the default parameters, and with `edit` applied.
+ValidParams PaperDefaults() { return testing::PaperParams(); }
+ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit) {
+  return testing::PaperParamsWith(edit);
+}
 
 Vector3d BodyVelocity(const State& s) {
   return Orientation(s.x).toRotationMatrix().transpose() * Velocity(s.x);
@@ -131,7 +138,7 @@ void ExpectFourthOrder(const ValidParams& p, const State& start, const DriverInp
 }
 
 TEST(Validation, Rk4ObservedOrderIsFourInHeave) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   State s = sim.state();
   s.x[sx::kP + 2] += 0.04;                  // heave, with pitch coupling (b != c)
@@ -142,7 +149,7 @@ TEST(Validation, Rk4ObservedOrderIsFourWhileCornering) {
   // Full 3-D motion with tire forces: 20 m/s, a 2 degree steer held. Start from the turn already
   // established, so no slip angle crosses zero (the Fiala law's |z| z is only C1 there, which
   // would show up as a local O(h^3) error at the crossing).
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   sim.Spawn({0, 0, 0}, 20.0);
   DriverInput in;
@@ -211,7 +218,7 @@ TEST(Validation, BicycleModelGainOversteer) {
 
 // --- static equilibrium -------------------------------------------------------------------------
 TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(SharedWorld("flat"), p);
   Drive(sim, 5000, {});
   Derived d;
@@ -229,7 +236,7 @@ TEST(Validation, StaticSpringForcesCarryTheWeightSplitByBAndC) {
 // --- jump ---------------------------------------------------------------------------------------
 TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Vector3d ramp = world->LandmarkAt("jump_ramp_a");
   sim.Spawn({ramp.x() - 60.0, ramp.y(), 0.0}, 50.0 / 3.6);
@@ -277,7 +284,7 @@ TEST(Validation, JumpIsBallisticInTheAirAndLandsBounded) {
 // --- glass barrier ------------------------------------------------------------------------------
 void DriveIntoBarrier(double heading_deg) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Vector3d inner = world->LandmarkAt("barrier_inner_max");  // north wall at y = inner.y()
   const double yaw = heading_deg * kDeg;
@@ -313,7 +320,7 @@ TEST(Validation, BarrierStopsTheCarAtAnAngleAt50kmh) { DriveIntoBarrier(60.0); }
 
 // --- cruise control -----------------------------------------------------------------------------
 void ExpectCruiseHolds(double slope) {
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   const std::shared_ptr<const World> world =
       WorldFromMesh(testing::InclinedPlane(slope, 3000.0), {0, 0, 0});
   Simulator sim(world, p);
@@ -353,7 +360,7 @@ RoughDriveStats RoughDrive(std::int64_t step_ns, double seconds) {
   const auto world = SharedWorld("facility");
   SimConfig cfg;
   cfg.step_ns = step_ns;
-  Simulator sim(world, testing::DefaultParams(), cfg);
+  Simulator sim(world, PaperDefaults(), cfg);
   const Vector3d c = world->LandmarkAt("rough_terrain_center");
   const Vector3d lo = world->LandmarkAt("rough_terrain_min");
   const Vector3d hi = world->LandmarkAt("rough_terrain_max");
@@ -398,7 +405,7 @@ TEST(Validation, DemoDriveStableAtTheDocumentedLargestStep) {
   auto run = [&m](std::int64_t step_ns, double* max_Fp, double* max_rate) {
     SimConfig cfg;
     cfg.step_ns = step_ns;
-    Simulator sim(SharedWorld("facility"), testing::DefaultParams(), cfg);
+    Simulator sim(SharedWorld("facility"), PaperDefaults(), cfg);
     Drive(sim, std::llround(m.end_time() / sim.h()),
           [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
           [&](const StepRecord& r) {
@@ -423,7 +430,7 @@ TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   auto run = [&m](const std::filesystem::path& out, std::uint64_t* hash) {
     std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
-    Simulator sim(world, testing::DefaultParams());
+    Simulator sim(world, PaperDefaults());
     CsvWriter csv(out);
     BatchOptions o;
     o.duration = m.end_time();
@@ -444,7 +451,7 @@ TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
 // --- friction circle, paper yaw mode, containment -----------------------------------------------
 TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
   const auto world = SharedWorld("facility");
-  const ValidParams p = testing::DefaultParams();
+  const ValidParams p = PaperDefaults();
   Simulator sim(world, p);
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   int checked = 0;
@@ -483,7 +490,7 @@ TEST(Properties, PaperYawModeFollowsEquation6AsAYawRate) {
 }
 
 TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   DriverInput in;
   in.steer = std::numeric_limits<double>::quiet_NaN();
   in.throttle = 7.0;
@@ -496,7 +503,7 @@ TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
 }
 
 TEST(Properties, NonFiniteStateIsContained) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 50, {});  // a state with a history: step, cruise integral, motion all non-trivial
   State s = sim.state();
   s.x[sx::kV] = std::numeric_limits<double>::infinity();
@@ -513,7 +520,7 @@ TEST(Properties, NonFiniteStateIsContained) {
 }
 
 TEST(Properties, ParametersChangeBetweenSteps) {
-  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 1000, {});
   // A heavier car sinks: the new static deflection follows k and the new weight.
   const ValidParams heavy = ParamsWith([](pb::VehicleParams& m) { m.set_mass(2000.0); });
@@ -609,8 +616,8 @@ TEST(Properties, WallForcesAreBoundedHoweverDeepTheContact) {
 
 // The largest step that resolves the parameters, against the modes' closed forms.
 TEST(Params, TheLargestResolvedStepFollowsTheFastestMode) {
-  const ValidParams p = testing::DefaultParams();
-  // The default car's fastest mode is the wall contact: omega = sqrt(k_w / m), h * omega <= 2.
+  const ValidParams p = testing::PaperParams();
+  // The paper car's fastest mode is the wall contact: omega = sqrt(k_w / m), h * omega <= 2.
   const double wall = 2.0 / std::sqrt(p->wall_stiffness / p->mass);
   std::string why;
   EXPECT_NEAR(MaxResolvedStep(p, &why), wall, 1e-12);
@@ -620,6 +627,7 @@ TEST(Params, TheLargestResolvedStepFollowsTheFastestMode) {
   EXPECT_THAT(CheckStep(p, 0.05), ::testing::HasSubstr("wall contact) needs h <= 0.0346"));
   // Stiffer springs on a light car: the heave of a corner sets it, omega = sqrt(k / m_corner).
   const ValidParams light = testing::ParamsWith([](pb::VehicleParams& m) {
+    m.set_model(pb::VEHICLE_MODEL_PAPER);
     m.set_mass(300.0);
     m.set_wall_stiffness(1e5);
     for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()}) {
@@ -632,6 +640,44 @@ TEST(Params, TheLargestResolvedStepFollowsTheFastestMode) {
   EXPECT_NEAR(MaxResolvedStep(light, &why), 1.0 / std::sqrt(2e6 / m_corner), 1e-12) << why;
   EXPECT_EQ(why, "LR spring (heave)");
   EXPECT_THROW(Simulator(SharedWorld("flat"), light, SimConfig{20'000'000}), std::invalid_argument);
+}
+
+// The full model's stick-slip elements (docs/model.md 8.6): a wheel on a held brake is a torsional
+// spring, omega^2 = (T_cap / theta_b + C_kappa R^2 / sigma_kappa) / J, damped at a rate
+// T_cap tau / (theta_b J). The rear wheels hold the most (foot brake and handbrake), so theirs is
+// the default car's fastest mode; a step beyond it is refused.
+TEST(Params, TheFullModelsHeldBrakeBoundsTheStep) {
+  const ValidParams def = testing::DefaultParams();
+  ASSERT_EQ(def->model, VehicleModel::kFull);
+  EXPECT_EQ(CheckStep(def, 0.001), "");  // the default car at vdyn's step
+  auto held = [](const ValidParams& p, double* damping_rate) {
+    const WheelParams& wp = p->wheel[kLR];
+    // A rear wheel: the foot brake's (1 - front fraction) share of brake_force_max and the
+    // handbrake's, half each per wheel, at radius R.
+    const double T_cap = 0.5 * p->brake_force_max * (1.0 - p->brake_front_fraction) * wp.radius +
+                         0.5 * p->handbrake_force_max * wp.radius;
+    const double k_brake = T_cap / p->brake_stick_angle;
+    *damping_rate = k_brake * p->stick_damping_time / wp.spin_inertia;
+    const double k = k_brake + wp.longitudinal_stiffness * wp.radius * wp.radius /
+                                   p->tire_relaxation_long;
+    return std::sqrt(k / wp.spin_inertia);
+  };
+  double rate = 0;
+  std::string why;
+  EXPECT_NEAR(MaxResolvedStep(def, &why), 2.0 / held(def, &rate), 1e-12) << why;
+  EXPECT_EQ(why, "LR wheel on a held brake");
+  EXPECT_THAT(CheckStep(def, 0.006), ::testing::HasSubstr("LR wheel on a held brake"));
+  EXPECT_THROW(Simulator(SharedWorld("flat"), def, SimConfig{6'000'000}), std::invalid_argument);
+  // A light wheel: the stick damping's real pole comes first (RK4: h * rate <= 2.5).
+  const ValidParams light = testing::ParamsWith([](pb::VehicleParams& m) {
+    for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()}) {
+      w->set_spin_inertia(0.02);
+    }
+  });
+  held(light, &rate);
+  EXPECT_NEAR(MaxResolvedStep(light, &why), 2.5 / rate, 1e-12) << why;
+  EXPECT_EQ(why, "LR brake stick damping");
+  EXPECT_THROW(Simulator(SharedWorld("flat"), light, SimConfig{1'000'000}), std::invalid_argument);
 }
 
 }  // namespace

@@ -321,6 +321,10 @@ TEST(Steering, PaperModelGetsTheRoadWheelAngleFullModelTheHandWheel) {
   s = ToSteer(540 * kDeg, v);
   EXPECT_EQ(s.mode, pb::STEER_HAND_WHEEL);
   EXPECT_NEAR(s.steer, 540 * kDeg, 1e-15);
+  // The keyboard has no hand wheel: it sends the road-wheel angle to the full model too.
+  s = ToSteer(135 * kDeg, v, /*road_wheel_only=*/true);
+  EXPECT_EQ(s.mode, pb::STEER_ROAD_WHEEL);
+  EXPECT_NEAR(s.steer, 135 * kDeg / 15, 1e-15);
   // A message with an unspecified model is the paper's (today's servers).
   pb::VehicleParams q;
   q.set_steering_ratio(12);

@@ -88,9 +88,59 @@ const WheelColumn kWheelColumns[] = {
   {"yB",    "m",     [](const pb::WheelState& w) { return w.p_b_w().y(); }},
   {"zB",    "m",     [](const pb::WheelState& w) { return w.p_b_w().z(); }},
 };
+// Appended for the full model (issue 8), after every column above: the columns a reader of an
+// older file knows keep their places.
+const Column kExtraColumns[] = {
+  {"model",          [](const State& s) { return static_cast<double>(s.model()); }},
+  {"steer_mode_in",  [](const State& s) { return static_cast<double>(s.input().steer_mode()); }},
+  {"clutch_in",      [](const State& s) { return s.input().clutch(); }},
+  {"handbrake_in",   [](const State& s) { return s.input().handbrake(); }},
+  {"gear_in",        [](const State& s) { return static_cast<double>(s.input().gear()); }},
+  {"Tsteer_align_Nm", [](const State& s) { return s.steering().torque_aligning(); }},
+  {"Tsteer_trail_Nm", [](const State& s) { return s.steering().torque_trail(); }},
+  {"Tsteer_fric_Nm", [](const State& s) { return s.steering().torque_friction(); }},
+  {"Tsteer_damp_Nm", [](const State& s) { return s.steering().torque_damping(); }},
+  {"Tsteer_stop_Nm", [](const State& s) { return s.steering().torque_end_stop(); }},
+  {"Tdriver_Nm",     [](const State& s) { return s.steering().driver_torque(); }},
+  {"hw_angle_rad",   [](const State& s) { return s.steering().hand_wheel_angle(); }},
+  {"hw_rate_radps",  [](const State& s) { return s.steering().hand_wheel_rate(); }},
+  {"hands_on",       [](const State& s) { return s.steering().hands_on() ? 1.0 : 0.0; }},
+  {"engine_rpm",     [](const State& s) { return s.drivetrain().engine_rpm(); }},
+  {"engine_torque_Nm", [](const State& s) { return s.drivetrain().engine_torque(); }},
+  {"gear",           [](const State& s) { return static_cast<double>(s.drivetrain().gear()); }},
+  {"shifting",       [](const State& s) { return s.drivetrain().shifting() ? 1.0 : 0.0; }},
+  {"clutch_torque_Nm", [](const State& s) { return s.drivetrain().clutch_torque(); }},
+  {"clutch_slip_rpm", [](const State& s) { return s.drivetrain().clutch_slip_rpm(); }},
+  {"engine_throttle", [](const State& s) { return s.drivetrain().throttle(); }},
+  {"tc_factor",      [](const State& s) { return s.drivetrain().tc_factor(); }},
+};
+const WheelColumn kExtraWheelColumns[] = {
+  {"omega", "radps", [](const pb::WheelState& w) { return w.omega(); }},
+  {"kappa", "",      [](const pb::WheelState& w) { return w.slip_ratio(); }},
+  {"kappa_t", "",    [](const pb::WheelState& w) { return w.slip_ratio_t(); }},
+  {"alpha_t", "rad", [](const pb::WheelState& w) { return w.slip_angle_t(); }},
+  {"Fx",    "N",     [](const pb::WheelState& w) { return w.fx(); }},
+  {"Mz",    "Nm",    [](const pb::WheelState& w) { return w.mz(); }},
+  {"Tdrive", "Nm",   [](const pb::WheelState& w) { return w.drive_torque(); }},
+  {"Tbrake", "Nm",   [](const pb::WheelState& w) { return w.brake_torque(); }},
+  {"vlong", "mps",   [](const pb::WheelState& w) { return w.v_long(); }},
+  {"abs",   "",      [](const pb::WheelState& w) { return w.abs_factor(); }},
+  {"kerb",  "",      [](const pb::WheelState& w) { return w.kerb() ? 1.0 : 0.0; }},
+};
 // clang-format on
 
-constexpr std::size_t kNumValues = std::size(kColumns) + 4 * std::size(kWheelColumns);
+constexpr std::size_t kNumValues = std::size(kColumns) + 4 * std::size(kWheelColumns) +
+                                   std::size(kExtraColumns) + 4 * std::size(kExtraWheelColumns);
+
+void AddWheelNames(const WheelColumn* cols, std::size_t n, std::vector<std::string>& names) {
+  for (std::string_view wheel : kWheels) {
+    for (std::size_t i = 0; i < n; ++i) {
+      std::string name = std::string(cols[i].prefix) + "_" + std::string(wheel);
+      if (*cols[i].unit != '\0') name += std::string("_") + cols[i].unit;
+      names.push_back(std::move(name));
+    }
+  }
+}
 
 const pb::WheelState& WheelOf(const State& s, int w) {
   return w < s.wheels_size() ? s.wheels(w) : pb::WheelState::default_instance();
@@ -101,13 +151,9 @@ const pb::WheelState& WheelOf(const State& s, int w) {
 std::vector<std::string> CsvColumns() {
   std::vector<std::string> names;
   for (const Column& c : kColumns) names.emplace_back(c.name);
-  for (std::string_view wheel : kWheels) {
-    for (const WheelColumn& c : kWheelColumns) {
-      std::string n = std::string(c.prefix) + "_" + std::string(wheel);
-      if (*c.unit != '\0') n += std::string("_") + c.unit;
-      names.push_back(std::move(n));
-    }
-  }
+  AddWheelNames(kWheelColumns, std::size(kWheelColumns), names);
+  for (const Column& c : kExtraColumns) names.emplace_back(c.name);
+  AddWheelNames(kExtraWheelColumns, std::size(kExtraWheelColumns), names);
   return names;
 }
 
@@ -116,6 +162,10 @@ void CsvRowValues(const State& s, std::vector<double>& out) {
   for (const Column& c : kColumns) out.push_back(c.get(s));
   for (int w = 0; w < 4; ++w) {
     for (const WheelColumn& c : kWheelColumns) out.push_back(c.get(WheelOf(s, w)));
+  }
+  for (const Column& c : kExtraColumns) out.push_back(c.get(s));
+  for (int w = 0; w < 4; ++w) {
+    for (const WheelColumn& c : kExtraWheelColumns) out.push_back(c.get(WheelOf(s, w)));
   }
 }
 
@@ -154,6 +204,10 @@ void CsvWriter::WriteRow(const State& s) {
   for (const Column& c : kColumns) put(c.get(s));
   for (int w = 0; w < 4; ++w) {
     for (const WheelColumn& c : kWheelColumns) put(c.get(WheelOf(s, w)));
+  }
+  for (const Column& c : kExtraColumns) put(c.get(s));
+  for (int w = 0; w < 4; ++w) {
+    for (const WheelColumn& c : kExtraWheelColumns) put(c.get(WheelOf(s, w)));
   }
   p[-1] = '\n';
   std::fwrite(line.data(), 1, static_cast<std::size_t>(p - line.data()), file_);

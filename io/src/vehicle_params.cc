@@ -12,7 +12,8 @@ namespace {
 
 namespace gp = google::protobuf;
 
-pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, double cornering) {
+pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, double cornering,
+                          double longitudinal, double nominal_load, double spin_inertia) {
   pb::WheelParams w;
   w.set_z_offset(z_offset);
   w.set_spring_stiffness(stiffness);
@@ -22,6 +23,11 @@ pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, dou
   w.set_cornering_stiffness(cornering);
   w.set_bump_stop_length(0.06);
   w.set_bump_stop_stiffness(300000.0);
+  w.set_longitudinal_stiffness(longitudinal);
+  w.set_nominal_load(nominal_load);
+  w.set_spin_inertia(spin_inertia);
+  w.set_min_length(0.03);
+  w.set_max_length(0.33);
   return w;
 }
 
@@ -50,12 +56,13 @@ pb::VehicleParams DefaultVehicleParams() {
   p.set_c(1.5);
   p.set_b_l(0.78);
   p.set_b_p(0.78);
-  // Front: 4.09 kN static load per wheel, 1.35 Hz ride, damping ratio ~0.3.
-  *p.mutable_lf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0);
-  *p.mutable_rf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0);
+  // Front: 4.09 kN static load per wheel, 1.35 Hz ride, damping ratio ~0.3. The tire stiffnesses
+  // are given at the static load (nominal_load); C_kappa ~ 20 Fz. The front wheels are driven.
+  *p.mutable_lf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0, 80000.0, 4087.5, 1.2);
+  *p.mutable_rf() = MakeWheel(0.02, 30000.0, 2200.0, 65000.0, 80000.0, 4087.5, 1.2);
   // Rear: 3.27 kN static load per wheel, 1.38 Hz ride; stiffer tires make the car understeer.
-  *p.mutable_lr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0);
-  *p.mutable_rr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0);
+  *p.mutable_lr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0, 65000.0, 3270.0, 1.0);
+  *p.mutable_rr() = MakeWheel(0.02, 25000.0, 1800.0, 75000.0, 65000.0, 3270.0, 1.0);
   p.set_mu(0.9);
   p.set_cx(0.30);
   p.set_rho(1.225);
@@ -82,7 +89,46 @@ pb::VehicleParams DefaultVehicleParams() {
   p.set_gravity(9.81);
   p.set_steering_trail(0.04);
   p.set_steering_ratio(15.0);
-  p.set_model(pb::VEHICLE_MODEL_PAPER);
+  p.set_model(pb::VEHICLE_MODEL_FULL);
+  // The full model: a 110 kW petrol engine, six gears, front-wheel drive (drive_front_fraction).
+  p.set_mu_slide_ratio(0.8);
+  p.set_tire_load_sensitivity(2.0);
+  p.set_tire_contact_half_length(0.09);
+  p.set_tire_relaxation_long(0.15);
+  p.set_tire_relaxation_lat(0.4);
+  p.set_tire_low_speed_damping(6000.0);
+  p.set_tire_vertical_stiffness(250000.0);
+  p.set_engine_power_max(110000.0);
+  p.set_engine_rpm_power_max(6000.0);
+  p.set_engine_rpm_idle(800.0);
+  p.set_engine_rpm_limit(6800.0);
+  p.set_engine_inertia(0.2);
+  p.set_engine_brake_torque(60.0);
+  p.set_clutch_torque_max(350.0);
+  p.set_clutch_engage_rpm(1400.0);
+  p.set_clutch_stick_angle(0.3);
+  p.set_brake_stick_angle(0.01);
+  p.set_stick_damping_time(0.002);
+  p.set_gear_count(6);
+  p.set_gear_ratio_first(3.6);
+  p.set_gear_ratio_top(0.84);
+  p.set_gear_ratio_reverse(3.4);
+  p.set_final_drive_ratio(4.0);
+  p.set_drivetrain_efficiency(0.9);
+  p.set_shift_up_rpm(6000.0);
+  p.set_shift_down_rpm(2500.0);
+  p.set_shift_time(0.25);
+  p.set_differential(pb::DIFFERENTIAL_OPEN);
+  p.set_handbrake_force_max(8000.0);
+  p.set_abs(true);
+  p.set_traction_control(true);
+  p.set_caster_trail(0.02);
+  p.set_scrub_radius(0.01);
+  p.set_ackermann(0.5);
+  p.set_steering_inertia(0.04);
+  p.set_steering_friction(0.8);
+  p.set_steering_damping(0.1);
+  p.set_steering_follow_frequency(300.0);
   return p;
 }
 

@@ -44,6 +44,7 @@ struct Options {
   vdyn::WorldFileOptions world_file;
   std::string world_up = "z";
   std::string vehicle;
+  std::string model;  // "paper" or "full": overrides the parameters' model
   std::string maneuver;
   std::optional<double> duration;
   std::string csv;
@@ -66,7 +67,17 @@ struct Options {
 };
 
 vdyn::pb::VehicleParams LoadParams(const Options& o) {
-  return o.vehicle.empty() ? vdyn::DefaultVehicleParams() : vdyn::LoadVehicleParamsFile(o.vehicle);
+  vdyn::pb::VehicleParams p =
+      o.vehicle.empty() ? vdyn::DefaultVehicleParams() : vdyn::LoadVehicleParamsFile(o.vehicle);
+  if (o.model == "paper") p.set_model(vdyn::pb::VEHICLE_MODEL_PAPER);
+  if (o.model == "full") p.set_model(vdyn::pb::VEHICLE_MODEL_FULL);
+  if (!o.model.empty()) {
+    const auto issues = vdyn::ValidateVehicleParams(p);
+    if (!issues.empty()) {
+      throw vdyn::ParamsError("--model " + o.model + ": " + vdyn::FormatIssues(issues));
+    }
+  }
+  return p;
 }
 
 std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
@@ -187,6 +198,10 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--vehicle", o.vehicle,
                  "Vehicle parameter file (protobuf text, or JSON if *.json); lists only changes");
+  app.add_option("--model", o.model,
+                 "Vehicle model: full (default: tires, wheel spin, drivetrain, steering system) or "
+                 "paper (the paper's model, bit for bit); overrides the parameters' model")
+      ->check(CLI::IsMember({"paper", "full"}));
   app.add_option("--maneuver", o.maneuver,
                  "Maneuver CSV (t_s,steer_deg,throttle,brake,cruise_kmh) or 'demo'");
   app.add_option("--duration", o.duration, "Simulated seconds (default: the maneuver's last row)")
@@ -238,9 +253,7 @@ int main(int argc, char** argv) {
 
   try {
     if (o.dump_vehicle) {
-      const auto msg = o.vehicle.empty() ? vdyn::DefaultVehicleParams()
-                                         : vdyn::LoadVehicleParamsFile(o.vehicle);
-      std::cout << vdyn::DumpVehicleParamsText(msg);
+      std::cout << vdyn::DumpVehicleParamsText(LoadParams(o));
       return 0;
     }
     if (!o.dump_maneuver.empty()) {

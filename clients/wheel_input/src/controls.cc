@@ -17,9 +17,9 @@ void ApplyParams(const pb::VehicleParams& p, VehicleInfo& info) {
   if (p.has_b() && p.has_c() && p.b() + p.c() > 0) info.wheelbase_m = p.b() + p.c();
 }
 
-SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v) {
+SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v, bool road_wheel_only) {
   SteerCommand s;
-  if (v.model == pb::VEHICLE_MODEL_FULL) {
+  if (v.model == pb::VEHICLE_MODEL_FULL && !road_wheel_only) {
     s.mode = pb::STEER_HAND_WHEEL;
     s.steer = limits::Clamp(limits::kHandWheel, hand_angle_rad);
   } else {
@@ -88,7 +88,8 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
   if (released & pb::BUTTON_ESTOP) estop_press_started_latched_ = false;
 
   last_hand_angle_ = c.hand_angle_rad;
-  const SteerCommand s = ToSteer(c.hand_angle_rad, v);
+  last_road_wheel_only_ = c.road_wheel_only;
+  const SteerCommand s = ToSteer(c.hand_angle_rad, v, c.road_wheel_only);
   out.set_steer_mode(s.mode);
   out.set_steer(s.steer);
   out.set_throttle(c.throttle);
@@ -106,7 +107,7 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
 void InputBuilder::Neutral(double brake, const VehicleInfo& v, pb::DriverInput& out) {
   previous_buttons_ = 0;
   cruise_on_ = false;
-  const SteerCommand s = ToSteer(last_hand_angle_, v);
+  const SteerCommand s = ToSteer(last_hand_angle_, v, last_road_wheel_only_);
   out.set_steer_mode(s.mode);
   out.set_steer(s.steer);
   out.set_throttle(0.0);

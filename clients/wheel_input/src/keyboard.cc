@@ -79,6 +79,7 @@ WheelControls KeyboardDriver::Step(double dt_s, const VehicleInfo& v) {
 
   WheelControls c;
   c.hand_angle_rad = steer_ * v.steering_lock * v.steering_ratio;
+  c.road_wheel_only = true;
   c.throttle = throttle_;
   c.brake = brake_;
   c.handbrake = held(SDL_SCANCODE_SPACE) ? 1.0 : 0.0;

@@ -1,5 +1,6 @@
 #include "vdyn/bridge/convert.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -14,6 +15,27 @@ void SetVec(pb::Vec3* v, const Eigen::Vector3d& e) {
   v->set_z(e.z());
 }
 
+SteerMode FromProto(pb::SteerMode m) {
+  switch (m) {
+    case pb::STEER_HAND_WHEEL: return SteerMode::kHandWheel;
+    case pb::STEER_HANDS_OFF: return SteerMode::kHandsOff;
+    default: return SteerMode::kRoadWheel;  // STEER_ROAD_WHEEL, and any unknown value
+  }
+}
+
+pb::SteerMode ToProto(SteerMode m) {
+  switch (m) {
+    case SteerMode::kHandWheel: return pb::STEER_HAND_WHEEL;
+    case SteerMode::kHandsOff: return pb::STEER_HANDS_OFF;
+    case SteerMode::kRoadWheel: break;
+  }
+  return pb::STEER_ROAD_WHEEL;
+}
+
+// Gear numbers beyond int's range cannot reach the physics (the server refuses them first);
+// clamp anyway so a conversion never overflows.
+int GearFrom(std::int32_t g) { return std::clamp<std::int32_t>(g, -1000, 1000); }
+
 }  // namespace
 
 DriverInput FromProto(const pb::DriverInput& in) {
@@ -23,6 +45,10 @@ DriverInput FromProto(const pb::DriverInput& in) {
   d.brake = in.brake();
   d.cruise_on = in.cruise_on();
   d.cruise_speed = in.cruise_set_kmh() / 3.6;
+  d.steer_mode = FromProto(in.steer_mode());
+  d.clutch = in.clutch();
+  d.handbrake = in.handbrake();
+  d.gear = GearFrom(in.gear());
   return d;
 }
 
@@ -32,6 +58,10 @@ void ToProto(const DriverInput& in, pb::DriverInput& out) {
   out.set_brake(in.brake);
   out.set_cruise_on(in.cruise_on);
   out.set_cruise_set_kmh(in.cruise_speed * 3.6);
+  out.set_steer_mode(ToProto(in.steer_mode));
+  out.set_clutch(in.clutch);
+  out.set_handbrake(in.handbrake);
+  out.set_gear(in.gear);
 }
 
 DriverInput FromManeuver(const ManeuverInput& in) {
@@ -51,6 +81,10 @@ void ToInputSample(const DriverInput& in, std::int64_t step, pb::InputSample& ou
   out.set_brake(in.brake);
   out.set_cruise_on(in.cruise_on);
   out.set_cruise_speed_mps(in.cruise_speed);
+  out.set_steer_mode(ToProto(in.steer_mode));
+  out.set_clutch(in.clutch);
+  out.set_handbrake(in.handbrake);
+  out.set_gear(in.gear);
 }
 
 DriverInput FromInputSample(const pb::InputSample& s) {
@@ -60,28 +94,59 @@ DriverInput FromInputSample(const pb::InputSample& s) {
   d.brake = s.brake();
   d.cruise_on = s.cruise_on();
   d.cruise_speed = s.cruise_speed_mps();
+  d.steer_mode = FromProto(s.steer_mode());
+  d.clutch = s.clutch();
+  d.handbrake = s.handbrake();
+  d.gear = GearFrom(s.gear());
   return d;
 }
 
 pb::ExactState ToExactState(const State& s) {
   pb::ExactState m;
-  for (int i = 0; i < s.x.size(); ++i) m.add_x(s.x[i]);
+  const int n = IntegratedSize(s.model);
+  for (int i = 0; i < n; ++i) m.add_x(s.x[i]);
   m.set_cruise_integral(s.cruise_integral);
   m.set_step(static_cast<std::uint64_t>(s.step));
+  if (s.model == VehicleModel::kFull) {
+    m.set_gear(s.discrete.gear);
+    m.set_shift_time(s.discrete.shift_time);
+    for (double a : s.discrete.abs) m.add_abs(a);
+    m.set_tc(s.discrete.tc);
+  }
   return m;
 }
 
 State FromExactState(const pb::ExactState& m) {
   State s;
-  if (m.x_size() != s.x.size()) {
-    throw std::invalid_argument("a state has " + std::to_string(s.x.size()) + " numbers, got " +
-                                std::to_string(m.x_size()));
+  if (m.x_size() == kStateSize) {
+    s.model = VehicleModel::kFull;
+  } else if (m.x_size() != kPaperStateSize) {
+    throw std::invalid_argument("a state has " + std::to_string(kPaperStateSize) +
+                                " numbers (the paper's model) or " + std::to_string(kStateSize) +
+                                " (the full model), got " + std::to_string(m.x_size()));
   }
-  for (int i = 0; i < s.x.size(); ++i) s.x[i] = m.x(i);
+  for (int i = 0; i < m.x_size(); ++i) s.x[i] = m.x(i);
   s.cruise_integral = m.cruise_integral();
   s.step = static_cast<std::int64_t>(m.step());
   if (!s.x.allFinite() || !std::isfinite(s.cruise_integral)) {
     throw std::invalid_argument("the state holds a non-finite number");
+  }
+  if (s.model == VehicleModel::kFull) {
+    if (m.abs_size() != kNumWheels) {
+      throw std::invalid_argument("a full-model state has 4 ABS factors, got " +
+                                  std::to_string(m.abs_size()));
+    }
+    if (m.gear() < -1 || m.gear() > kMaxGears) {
+      throw std::invalid_argument("a state's gear must be in [-1, " + std::to_string(kMaxGears) +
+                                  "], got " + std::to_string(m.gear()));
+    }
+    s.discrete.gear = m.gear();
+    s.discrete.shift_time = m.shift_time();
+    for (int w = 0; w < kNumWheels; ++w) s.discrete.abs[w] = m.abs(w);
+    s.discrete.tc = m.tc();
+    bool finite = std::isfinite(s.discrete.shift_time) && std::isfinite(s.discrete.tc);
+    for (double a : s.discrete.abs) finite = finite && std::isfinite(a);
+    if (!finite) throw std::invalid_argument("the state holds a non-finite number");
   }
   return s;
 }
@@ -91,6 +156,7 @@ void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
                       const pb::DriverInput& input, bool watchdog_safe_state,
                       double steering_torque, pb::VehicleState& out) {
   const Eigen::Matrix3d R = Orientation(r.state.x).toRotationMatrix();
+  const bool full = r.state.model == VehicleModel::kFull;
   out.set_vehicle_id(vehicle_id);
   out.set_server_id(server_id);
   out.set_step(static_cast<std::uint64_t>(r.step));
@@ -134,6 +200,17 @@ void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
     SetVec(ws->mutable_p_b_w(), o.p_B_W);
     SetVec(ws->mutable_n_w(), o.n_W);
     SetVec(ws->mutable_f_w(), o.F_W);
+    ws->set_omega(o.omega);
+    ws->set_slip_ratio(o.slip_ratio);
+    ws->set_fx(o.Fx);
+    ws->set_mz(o.Mz);
+    ws->set_drive_torque(o.drive_torque);
+    ws->set_brake_torque(o.brake_torque);
+    ws->set_slip_ratio_t(o.slip_ratio_t);
+    ws->set_slip_angle_t(o.slip_angle_t);
+    ws->set_v_long(o.v_long);
+    ws->set_abs_factor(r.control.abs_factor[w]);
+    ws->set_kerb(o.kerb);
   }
   *out.mutable_input() = input;
   pb::AppliedControl* c = out.mutable_control();
@@ -146,6 +223,30 @@ void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
   out.set_state_hash(r.hash_after);
   out.set_steering_torque(steering_torque);
   out.set_speed_kmh(3.6 * Velocity(r.state.x).norm());
+  out.set_model(full ? pb::VEHICLE_MODEL_FULL : pb::VEHICLE_MODEL_PAPER);
+  // The full model's steering system and drivetrain (zero for the paper's model).
+  const Derived::Steering& st = r.derived.steering;
+  pb::SteeringState* ps = out.mutable_steering();
+  ps->set_hand_wheel_angle(st.angle);
+  ps->set_hand_wheel_rate(st.rate);
+  ps->set_torque_aligning(st.aligning);
+  ps->set_torque_trail(st.trail);
+  ps->set_torque_friction(st.friction);
+  ps->set_torque_damping(st.damping);
+  ps->set_torque_end_stop(st.end_stop);
+  ps->set_driver_torque(st.driver);
+  ps->set_hands_on(full && r.control.hands_on);
+  const Derived::Drivetrain& dt = r.derived.drivetrain;
+  pb::DrivetrainState* pd = out.mutable_drivetrain();
+  pd->set_engine_rpm(dt.engine_speed * 60.0 / (2.0 * 3.14159265358979323846));
+  pd->set_engine_torque(dt.engine_torque);
+  pd->set_gear(full ? r.control.gear : 0);
+  pd->set_shifting(full && r.control.shifting);
+  pd->set_automatic(full && r.control.automatic);
+  pd->set_clutch_torque(dt.clutch_torque);
+  pd->set_clutch_slip_rpm(dt.clutch_slip * 60.0 / (2.0 * 3.14159265358979323846));
+  pd->set_throttle(dt.throttle);
+  pd->set_tc_factor(r.control.tc_factor);
 }
 
 std::uint64_t TerrainHash(const Terrain& terrain) {

@@ -1,5 +1,6 @@
 #include "vdyn/bridge/params.h"
 
+#include <algorithm>
 #include <set>
 
 #include "vdyn/base/limits.h"
@@ -38,6 +39,11 @@ Params RawParams(const pb::VehicleParams& m) {
     d.cornering_stiffness = s.cornering_stiffness();
     d.bump_stop_length = s.bump_stop_length();
     d.bump_stop_stiffness = s.bump_stop_stiffness();
+    d.longitudinal_stiffness = s.longitudinal_stiffness();
+    d.nominal_load = s.nominal_load();
+    d.spin_inertia = s.spin_inertia();
+    d.min_length = s.min_length();
+    d.max_length = s.max_length();
   }
   p.mu = m.mu();
   p.cx = m.cx();
@@ -66,6 +72,47 @@ Params RawParams(const pb::VehicleParams& m) {
   p.gravity = m.gravity();
   p.steering_trail = m.steering_trail();
   p.steering_ratio = m.steering_ratio();
+  p.model = m.model() == pb::VEHICLE_MODEL_PAPER ? VehicleModel::kPaper : VehicleModel::kFull;
+  p.mu_slide_ratio = m.mu_slide_ratio();
+  p.tire_load_sensitivity = m.tire_load_sensitivity();
+  p.tire_contact_half_length = m.tire_contact_half_length();
+  p.tire_relaxation_long = m.tire_relaxation_long();
+  p.tire_relaxation_lat = m.tire_relaxation_lat();
+  p.tire_low_speed_damping = m.tire_low_speed_damping();
+  p.tire_vertical_stiffness = m.tire_vertical_stiffness();
+  p.engine_power_max = m.engine_power_max();
+  p.engine_rpm_power_max = m.engine_rpm_power_max();
+  p.engine_rpm_idle = m.engine_rpm_idle();
+  p.engine_rpm_limit = m.engine_rpm_limit();
+  p.engine_inertia = m.engine_inertia();
+  p.engine_brake_torque = m.engine_brake_torque();
+  p.clutch_torque_max = m.clutch_torque_max();
+  p.clutch_engage_rpm = m.clutch_engage_rpm();
+  p.clutch_stick_angle = m.clutch_stick_angle();
+  p.brake_stick_angle = m.brake_stick_angle();
+  p.stick_damping_time = m.stick_damping_time();
+  // The table of limits refuses more than 10 gears; clamp first so the cast cannot overflow.
+  p.gear_count = static_cast<int>(std::min<std::uint32_t>(m.gear_count(), 1000u));
+  p.gear_ratio_first = m.gear_ratio_first();
+  p.gear_ratio_top = m.gear_ratio_top();
+  p.gear_ratio_reverse = m.gear_ratio_reverse();
+  p.final_drive_ratio = m.final_drive_ratio();
+  p.drivetrain_efficiency = m.drivetrain_efficiency();
+  p.shift_up_rpm = m.shift_up_rpm();
+  p.shift_down_rpm = m.shift_down_rpm();
+  p.shift_time = m.shift_time();
+  p.differential = m.differential() == pb::DIFFERENTIAL_LOCKED ? Differential::kLocked
+                                                                : Differential::kOpen;
+  p.handbrake_force_max = m.handbrake_force_max();
+  p.abs = m.abs();
+  p.traction_control = m.traction_control();
+  p.caster_trail = m.caster_trail();
+  p.scrub_radius = m.scrub_radius();
+  p.ackermann = m.ackermann();
+  p.steering_inertia = m.steering_inertia();
+  p.steering_friction = m.steering_friction();
+  p.steering_damping = m.steering_damping();
+  p.steering_follow_frequency = m.steering_follow_frequency();
   return p;
 }
 
@@ -111,6 +158,7 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
   CheckEnum(msg, "model", out);
   CheckEnum(msg, "yaw_mode", out);
   CheckEnum(msg, "tire_law", out);
+  CheckEnum(msg, "differential", out);
   for (ParamIssue& i : CheckParams(RawParams(msg))) {
     if (missing.count(i.field) == 0) out.push_back(std::move(i));
   }

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "vdyn/base/limits.h"
+#include "vdyn/physics/full_model.h"
 
 namespace vdyn {
 
@@ -18,19 +19,25 @@ bool SanitizeInput(DriverInput& in) {
       clean = false;
     }
   };
-  fix(in.steer, limits::kSteer.lo, limits::kSteer.hi);
+  const limits::Range& steer =
+      in.steer_mode == SteerMode::kHandWheel ? limits::kHandWheel : limits::kSteer;
+  fix(in.steer, steer.lo, steer.hi);
   fix(in.throttle, limits::kThrottle.lo, limits::kThrottle.hi);
   fix(in.brake, limits::kBrake.lo, limits::kBrake.hi);
   fix(in.cruise_speed, limits::kCruiseSetKmh.lo / 3.6, limits::kCruiseSetKmh.hi / 3.6);
+  fix(in.clutch, limits::kClutch.lo, limits::kClutch.hi);
+  fix(in.handbrake, limits::kHandbrake.lo, limits::kHandbrake.hi);
+  const int gear = std::clamp(in.gear, static_cast<int>(limits::kGear.lo),
+                              static_cast<int>(limits::kGear.hi));
+  if (gear != in.gear) {
+    in.gear = gear;
+    clean = false;
+  }
   return clean;
 }
 
-AppliedControl ComputeControls(const Params& p, const DriverInput& in, double h, State& state) {
-  AppliedControl u;
-  u.gamma = std::clamp(in.steer, -p.steering_lock, p.steering_lock);
-  u.throttle = in.throttle;
-  u.brake = in.brake;
-
+void CruiseControl(const Params& p, const DriverInput& in, double h, State& state,
+                   AppliedControl& u) {
   // Automatic speed control: PI on the longitudinal speed vx (body X), output in [-1, 1]:
   // positive drives, negative brakes. Conditional integration is the anti-windup: the integral
   // only moves when the output is not saturated in the direction the error pushes. Pressing the
@@ -53,6 +60,20 @@ AppliedControl ComputeControls(const Params& p, const DriverInput& in, double h,
   } else {
     state.cruise_integral = 0.0;
   }
+}
+
+AppliedControl ComputeControls(const Params& p, const DriverInput& in, double h, State& state) {
+  if (p.model == VehicleModel::kFull) return ComputeControlsFull(p, in, h, state);
+  AppliedControl u;
+  // The paper's model steers the road wheels directly: a hand-wheel angle is divided by the
+  // steering ratio, and hands off the wheel steer straight ahead.
+  double steer = in.steer;
+  if (in.steer_mode == SteerMode::kHandWheel) steer = in.steer / p.steering_ratio;
+  if (in.steer_mode == SteerMode::kHandsOff) steer = 0.0;
+  u.gamma = std::clamp(steer, -p.steering_lock, p.steering_lock);
+  u.throttle = in.throttle;
+  u.brake = in.brake;
+  CruiseControl(p, in, h, state, u);
 
   const double drive = u.throttle * p.drive_force_max;
   const double brake = u.brake * p.brake_force_max;

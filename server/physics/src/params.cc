@@ -56,6 +56,43 @@ constexpr Field kFields[] = {
   {"gravity", [](const Params& p) { return p.gravity; }},
   {"steering_trail", [](const Params& p) { return p.steering_trail; }},
   {"steering_ratio", [](const Params& p) { return p.steering_ratio; }},
+  {"mu_slide_ratio", [](const Params& p) { return p.mu_slide_ratio; }},
+  {"tire_load_sensitivity", [](const Params& p) { return p.tire_load_sensitivity; }},
+  {"tire_contact_half_length", [](const Params& p) { return p.tire_contact_half_length; }},
+  {"tire_relaxation_long", [](const Params& p) { return p.tire_relaxation_long; }},
+  {"tire_relaxation_lat", [](const Params& p) { return p.tire_relaxation_lat; }},
+  {"tire_low_speed_damping", [](const Params& p) { return p.tire_low_speed_damping; }},
+  {"tire_vertical_stiffness", [](const Params& p) { return p.tire_vertical_stiffness; }},
+  {"engine_power_max", [](const Params& p) { return p.engine_power_max; }},
+  {"engine_rpm_power_max", [](const Params& p) { return p.engine_rpm_power_max; }},
+  {"engine_rpm_idle", [](const Params& p) { return p.engine_rpm_idle; }},
+  {"engine_rpm_limit", [](const Params& p) { return p.engine_rpm_limit; }},
+  {"engine_inertia", [](const Params& p) { return p.engine_inertia; }},
+  {"engine_brake_torque", [](const Params& p) { return p.engine_brake_torque; }},
+  {"clutch_torque_max", [](const Params& p) { return p.clutch_torque_max; }},
+  {"clutch_engage_rpm", [](const Params& p) { return p.clutch_engage_rpm; }},
+  {"clutch_stick_angle", [](const Params& p) { return p.clutch_stick_angle; }},
+  {"brake_stick_angle", [](const Params& p) { return p.brake_stick_angle; }},
+  {"stick_damping_time", [](const Params& p) { return p.stick_damping_time; }},
+  {"gear_count", [](const Params& p) { return static_cast<double>(p.gear_count); }},
+  {"gear_ratio_first", [](const Params& p) { return p.gear_ratio_first; }},
+  {"gear_ratio_top", [](const Params& p) { return p.gear_ratio_top; }},
+  {"gear_ratio_reverse", [](const Params& p) { return p.gear_ratio_reverse; }},
+  {"final_drive_ratio", [](const Params& p) { return p.final_drive_ratio; }},
+  {"drivetrain_efficiency", [](const Params& p) { return p.drivetrain_efficiency; }},
+  {"shift_up_rpm", [](const Params& p) { return p.shift_up_rpm; }},
+  {"shift_down_rpm", [](const Params& p) { return p.shift_down_rpm; }},
+  {"shift_time", [](const Params& p) { return p.shift_time; }},
+  {"handbrake_force_max", [](const Params& p) { return p.handbrake_force_max; }},
+  {"abs", [](const Params& p) { return p.abs ? 1.0 : 0.0; }},
+  {"traction_control", [](const Params& p) { return p.traction_control ? 1.0 : 0.0; }},
+  {"caster_trail", [](const Params& p) { return p.caster_trail; }},
+  {"scrub_radius", [](const Params& p) { return p.scrub_radius; }},
+  {"ackermann", [](const Params& p) { return p.ackermann; }},
+  {"steering_inertia", [](const Params& p) { return p.steering_inertia; }},
+  {"steering_friction", [](const Params& p) { return p.steering_friction; }},
+  {"steering_damping", [](const Params& p) { return p.steering_damping; }},
+  {"steering_follow_frequency", [](const Params& p) { return p.steering_follow_frequency; }},
 };
 constexpr WheelField kWheelFieldsTable[] = {
   {"z_offset", &WheelParams::z_offset},
@@ -66,6 +103,11 @@ constexpr WheelField kWheelFieldsTable[] = {
   {"cornering_stiffness", &WheelParams::cornering_stiffness},
   {"bump_stop_length", &WheelParams::bump_stop_length},
   {"bump_stop_stiffness", &WheelParams::bump_stop_stiffness},
+  {"longitudinal_stiffness", &WheelParams::longitudinal_stiffness},
+  {"nominal_load", &WheelParams::nominal_load},
+  {"spin_inertia", &WheelParams::spin_inertia},
+  {"min_length", &WheelParams::min_length},
+  {"max_length", &WheelParams::max_length},
 };
 // clang-format on
 
@@ -76,6 +118,61 @@ void Check(std::string path, const limits::Range* range, double v, std::vector<P
   }
   std::string why = limits::Check(*range, v);
   if (!why.empty()) out.push_back({std::move(path), std::move(why)});
+}
+
+constexpr double kRpm = 2.0 * 3.14159265358979323846 / 60.0;  // rad/s per rpm
+
+// The full model's derived constants (docs/model.md, "The full model").
+void DeriveFullModel(Params& p) {
+  Params::Derived& d = p.full;
+  const int n = p.gear_count;
+  // Gear ratios in geometric progression from the first to the top gear.
+  d.ratio_step = n > 1 ? std::pow(p.gear_ratio_top / p.gear_ratio_first, 1.0 / (n - 1)) : 1.0;
+  d.gear_ratio.fill(0.0);
+  for (int g = 1; g <= n; ++g) {
+    d.gear_ratio[g] = g == n ? p.gear_ratio_top : p.gear_ratio_first * std::pow(d.ratio_step, g - 1);
+  }
+  // Brush law with adhesion limit mu_0 and sliding friction mu_slide (docs/model.md): with
+  // r = mu_slide / mu_0 it peaks at z* = 1 / (3 - 2 r) with F / Fz = mu_0 g(r),
+  // g(r) = 3 z* (1 - z*)^2 + r z*^2 (3 - 2 z*). mu is that peak: solve g(r) / r = mu / mu_slide
+  // for r (g(r) / r falls from infinity at r -> 0 to 1 at r = 1) by bisection.
+  auto peak_over_slide = [](double r) {
+    const double z = 1.0 / (3.0 - 2.0 * r);
+    return (3.0 * z * (1.0 - z) * (1.0 - z) + r * z * z * (3.0 - 2.0 * z)) / r;
+  };
+  d.mu_slide = p.mu * p.mu_slide_ratio;
+  const double q = 1.0 / p.mu_slide_ratio;
+  double lo = 1e-9, hi = 1.0;
+  for (int i = 0; i < 100 && q > 1.0; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (peak_over_slide(mid) > q ? lo : hi) = mid;
+  }
+  const double r = q > 1.0 ? 0.5 * (lo + hi) : 1.0;
+  d.mu_static = d.mu_slide / r;
+  d.peak_z = 1.0 / (3.0 - 2.0 * r);
+  const double f = p.drive_front_fraction;
+  for (int w = 0; w < kNumWheels; ++w) {
+    const WheelParams& wp = p.wheel[w];
+    const bool front = IsFront(w);
+    d.drive_share[w] = 0.5 * (front ? f : 1.0 - f);
+    d.brake_torque[w] = 0.5 * p.brake_force_max *
+                        (front ? p.brake_front_fraction : 1.0 - p.brake_front_fraction) * wp.radius;
+    d.handbrake_torque[w] = front ? 0.0 : 0.5 * p.handbrake_force_max * wp.radius;
+    // z = C_kappa kappa / (3 mu Fz) with C_kappa proportional to the load: kappa* is load-free.
+    d.peak_slip[w] = d.peak_z * 3.0 * d.mu_static * wp.nominal_load / wp.longitudinal_stiffness;
+    const double x = 1.0 / p.tire_load_sensitivity;  // sin(2 atan x) = 2x / (1 + x^2)
+    d.load_sensitivity_norm[w] = (1.0 + x * x) / (2.0 * x);
+  }
+  d.omega_idle = p.engine_rpm_idle * kRpm;
+  d.omega_limit = p.engine_rpm_limit * kRpm;
+  d.omega_power = p.engine_rpm_power_max * kRpm;
+  d.omega_engage = p.clutch_engage_rpm * kRpm;
+  d.omega_shift_up = p.shift_up_rpm * kRpm;
+  d.omega_shift_down = p.shift_down_rpm * kRpm;
+  d.engine_torque_base = p.engine_power_max / d.omega_power;
+  d.track = p.b_l + p.b_p;
+  d.ackermann_offset = 0.5 * p.ackermann * d.track;
+  d.hand_wheel_lock = p.steering_lock * p.steering_ratio;
 }
 
 void DeriveParams(Params& p) {
@@ -103,6 +200,37 @@ void DeriveParams(Params& p) {
     p.probe_length[k] = ends[k].norm();
     p.probe_dir_B[k] = Eigen::Vector3d(ends[k].x(), ends[k].y(), 0.0) / p.probe_length[k];
   }
+  DeriveFullModel(p);
+}
+
+// Rules between the full model's parameters (each named by the field a user would change).
+void CheckFullModel(const Params& p, std::vector<ParamIssue>& out) {
+  auto need = [&out](bool ok, const char* field, std::string why) {
+    if (!ok) out.push_back({field, std::move(why)});
+  };
+  need(p.engine_rpm_idle < p.engine_rpm_limit, "engine_rpm_idle",
+       "must be below engine_rpm_limit (" + FormatNumber(p.engine_rpm_limit) + ")");
+  need(p.clutch_engage_rpm > p.engine_rpm_idle, "clutch_engage_rpm",
+       "must be above engine_rpm_idle (" + FormatNumber(p.engine_rpm_idle) + ")");
+  need(p.shift_down_rpm > p.clutch_engage_rpm, "shift_down_rpm",
+       "must be above clutch_engage_rpm (" + FormatNumber(p.clutch_engage_rpm) +
+           "), or the automatic would let the clutch slip before it shifts down");
+  need(p.shift_up_rpm <= p.engine_rpm_limit, "shift_up_rpm",
+       "must not exceed engine_rpm_limit (" + FormatNumber(p.engine_rpm_limit) + ")");
+  need(p.gear_ratio_top <= p.gear_ratio_first, "gear_ratio_top",
+       "must not exceed gear_ratio_first (" + FormatNumber(p.gear_ratio_first) + ")");
+  if (p.gear_count > 1 && p.gear_ratio_top <= p.gear_ratio_first) {
+    // After an upshift at shift_up_rpm the engine must land above shift_down_rpm, or the
+    // automatic would shift back at once.
+    const double step = std::pow(p.gear_ratio_top / p.gear_ratio_first, 1.0 / (p.gear_count - 1));
+    need(p.shift_up_rpm * step > p.shift_down_rpm, "shift_down_rpm",
+         "must be below shift_up_rpm times the ratio step between gears (" +
+             FormatNumber(p.shift_up_rpm * step) + " rpm), or the automatic would hunt");
+  }
+  // Ackermann: the outer wheel's angle needs L - offset * tan(lock) > 0; keep a margin.
+  const double offset = 0.5 * std::abs(p.ackermann) * (p.b_l + p.b_p);
+  need(offset * std::tan(p.steering_lock) < 0.8 * (p.b + p.c), "ackermann",
+       "with this track and steering_lock the outer wheel would turn past 90 degrees");
 }
 
 }  // namespace
@@ -131,7 +259,22 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
                      "must be shorter than free_length (" + FormatNumber(wp.free_length) +
                          " m), got " + FormatNumber(wp.bump_stop_length)});
     }
+    if (wp.max_length > wp.free_length) {
+      out.push_back({prefix + "max_length", "the rebound stop must not be beyond free_length (" +
+                                                FormatNumber(wp.free_length) + " m), got " +
+                                                FormatNumber(wp.max_length)});
+    }
+    if (wp.min_length >= wp.max_length) {
+      out.push_back({prefix + "min_length", "the end of travel must be shorter than max_length (" +
+                                                FormatNumber(wp.max_length) + " m), got " +
+                                                FormatNumber(wp.min_length)});
+    }
+    if (p.model == VehicleModel::kFull && !(wp.damper_coefficient > 0.0)) {
+      out.push_back({prefix + "damper_coefficient",
+                     "must be positive for the full model (the wheel's travel is set by it)"});
+    }
   }
+  CheckFullModel(p, out);
   // A rigid body's principal moments obey the triangle inequality (each <= the sum of the others).
   const double i[3] = {p.inertia_B.x(), p.inertia_B.y(), p.inertia_B.z()};
   const char* names[3] = {"ixx", "iyy", "izz"};
@@ -204,6 +347,33 @@ double MaxResolvedStep(const Params& p, std::string* why) {
   limit(2.0 / std::sqrt(roll_stop / p.inertia_B.x()), "roll on the bump stops");
   limit(2.0 / std::sqrt(pitch_stop / p.inertia_B.y()), "pitch on the bump stops");
   limit(2.0 / std::sqrt(p.wall_stiffness / p.mass), "wall contact");
+  if (p.model == VehicleModel::kFull) {
+    // The stick-slip (LuGre) elements: a stuck brake or clutch is a torsional spring of stiffness
+    // capacity / stick angle with damping capacity * stick_damping_time / stick angle; at a held
+    // brake the tire's deflection adds C_kappa R^2 / sigma_kappa (docs/model.md, 8.6).
+    const Params::Derived& d = p.full;
+    for (int w = 0; w < kNumWheels; ++w) {
+      const WheelParams& wp = p.wheel[w];
+      const std::string name(kWheelNames[w]);
+      const double k_brake = (d.brake_torque[w] + d.handbrake_torque[w]) / p.brake_stick_angle;
+      const double k_tire =
+          wp.longitudinal_stiffness * wp.radius * wp.radius / p.tire_relaxation_long;
+      limit(2.0 / std::sqrt((k_brake + k_tire) / wp.spin_inertia), name + " wheel on a held brake");
+      if (p.stick_damping_time > 0.0) {
+        limit(2.5 / (k_brake * p.stick_damping_time / wp.spin_inertia), name + " brake stick damping");
+      }
+    }
+    const double k_clutch = p.clutch_torque_max / p.clutch_stick_angle;
+    limit(2.0 / std::sqrt(k_clutch / p.engine_inertia), "engine on a stuck clutch");
+    if (p.stick_damping_time > 0.0) {
+      limit(2.5 / (k_clutch * p.stick_damping_time / p.engine_inertia), "clutch stick damping");
+    }
+    // The steering column follows the driver's angle as a critically damped pair of poles at -f.
+    limit(2.5 / p.steering_follow_frequency, "steering column follower");
+    if (p.steering_damping > 0.0) {
+      limit(2.5 / (p.steering_damping / p.steering_inertia), "steering column damping");
+    }
+  }
   return best;
 }
 

@@ -1,5 +1,6 @@
 #include "vdyn/physics/simulator.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -8,6 +9,7 @@
 #include <Eigen/Dense>
 
 #include "vdyn/base/text.h"
+#include "vdyn/physics/full_model.h"
 
 namespace vdyn {
 
@@ -39,7 +41,12 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
       lT = (F + wp.bump_stop_stiffness * (wp.free_length - wp.bump_stop_length)) /
            (wp.spring_stiffness + wp.bump_stop_stiffness);
     }
-    const double lS = wp.free_length - lT;
+    double lS = wp.free_length - lT;
+    if (p.model == VehicleModel::kFull) {
+      // The full model's wheel hangs on its spring (within its travel) and its tire is
+      // compressed by the load.
+      lS = std::clamp(lS, wp.min_length, wp.max_length) - F / p.tire_vertical_stiffness;
+    }
     A(w, 0) = 1.0;
     A(w, 1) = -p.p_TA_B[w].x();
     A(w, 2) = p.p_TA_B[w].y();
@@ -52,7 +59,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
   SetOrientation(s.x, QuaternionFromRollPitchYaw(sol[2], sol[1], pose.yaw));
   SetVelocity(s.x, speed * (R_yaw * Eigen::Vector3d::UnitX()));
   SetAngularVelocityB(s.x, Eigen::Vector3d::Zero());
-  return s;
+  return p.model == VehicleModel::kFull ? InitFullState(p, s) : s;
 }
 
 Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& params,
@@ -61,7 +68,10 @@ Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& para
       params_(params),
       config_(config),
       h_(static_cast<double>(config.step_ns) * 1e-9) {
-  if (const std::string why = CheckStep(params_, h_); !why.empty()) throw std::invalid_argument(why);
+  if (const std::string why = config_.check_step ? CheckStep(params_, h_) : std::string();
+      !why.empty()) {
+    throw std::invalid_argument(why);
+  }
   Spawn(world_->spawn);
 }
 
@@ -71,14 +81,23 @@ Simulator::Simulator(std::shared_ptr<const World> world, const ValidParams& para
       params_(params),
       config_(config),
       h_(static_cast<double>(config.step_ns) * 1e-9),
-      state_(initial) {
-  if (const std::string why = CheckStep(params_, h_); !why.empty()) throw std::invalid_argument(why);
+      state_(ConvertState(params, initial)) {
+  if (const std::string why = config_.check_step ? CheckStep(params_, h_) : std::string();
+      !why.empty()) {
+    throw std::invalid_argument(why);
+  }
 }
 
 void Simulator::SetParams(const ValidParams& params) {
-  if (const std::string why = CheckStep(params, h_); !why.empty()) throw std::invalid_argument(why);
+  if (const std::string why = config_.check_step ? CheckStep(params, h_) : std::string();
+      !why.empty()) {
+    throw std::invalid_argument(why);
+  }
   params_ = params;
+  state_ = ConvertState(params_, state_);
 }
+
+void Simulator::SetState(const State& state) { state_ = ConvertState(params_, state); }
 
 void Simulator::SetInput(const DriverInput& input) {
   input_ = input;
@@ -132,11 +151,23 @@ StepStatus Simulator::Step() {
 
   // Stage: RK4 over the equations of motion; stage 0 is evaluated at x_n and is what we report.
   const AppliedControl& u = record_.control;
-  auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
-    Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-    EvaluateDerivative(params_.get(), terrain, u, ws_.walls, x, xdot, d, stage == 0);
-  };
-  Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
+  const bool full = params_->model == VehicleModel::kFull;
+  if (full) {
+    // The wheel-level horizontal traces (kerb edges), held for the step like the walls.
+    if (FindWheelEdges(params_.get(), terrain, state_.x, ws_.edges)) ++edge_traced_steps_;
+    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
+      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
+      EvaluateDerivativeFull(params_.get(), terrain, u, ws_.walls, ws_.edges, x, xdot, d,
+                             stage == 0);
+    };
+    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
+  } else {
+    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
+      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
+      EvaluateDerivative(params_.get(), terrain, u, ws_.walls, x, xdot, d, stage == 0);
+    };
+    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
+  }
 
   // Stage: post-step.
   StateVector& x = state_.x;
@@ -147,7 +178,7 @@ StepStatus Simulator::Step() {
     return StepStatus::kNonFinite;
   }
   x.segment<4>(sx::kQ) /= qn;
-  if (params_->yaw_mode == YawMode::kPaper && ws_.stage_derived.any_contact) {
+  if (!full && params_->yaw_mode == YawMode::kPaper && ws_.stage_derived.any_contact) {
     // The yaw rate is eq. 6 of the new state (contact as seen by the last stage).
     const Eigen::Matrix3d R_WB = Orientation(x).toRotationMatrix();
     x[sx::kW + 2] = R_WB.col(0).dot(Velocity(x)) * std::sin(u.gamma) / params_->wheelbase;
@@ -167,7 +198,13 @@ void Simulator::Forward(Derived& out, AppliedControl* control) const {
   WallPlanes walls;
   FindWalls(params_.get(), world_->terrain, state_.x, walls);
   StateVector xdot;
-  EvaluateDerivative(params_.get(), world_->terrain, u, walls, state_.x, xdot, out);
+  if (params_->model == VehicleModel::kFull) {
+    WheelEdges edges;
+    FindWheelEdges(params_.get(), world_->terrain, state_.x, edges);
+    EvaluateDerivativeFull(params_.get(), world_->terrain, u, walls, edges, state_.x, xdot, out);
+  } else {
+    EvaluateDerivative(params_.get(), world_->terrain, u, walls, state_.x, xdot, out);
+  }
 }
 
 }  // namespace vdyn

@@ -23,10 +23,18 @@ Eigen::Quaterniond QuaternionFromRollPitchYaw(double roll, double pitch, double 
 }
 
 std::uint64_t StateHash(const State& s) {
-  // vdyn-hash64 (docs/hash.md): the 13 numbers of x, the speed control's integral, the step.
+  // vdyn-hash64 (docs/hash.md): the integrated numbers of x, the speed control's integral, the
+  // full model's discrete state, the step.
   base::WordHash h;
-  for (int i = 0; i < s.x.size(); ++i) h.Double(s.x[i]);
+  const int n = IntegratedSize(s.model);
+  for (int i = 0; i < n; ++i) h.Double(s.x[i]);
   h.Double(s.cruise_integral);
+  if (s.model == VehicleModel::kFull) {
+    h.Int(s.discrete.gear);
+    h.Double(s.discrete.shift_time);
+    for (double a : s.discrete.abs) h.Double(a);
+    h.Double(s.discrete.tc);
+  }
   h.Int(s.step);
   return h.Final();
 }

@@ -15,7 +15,9 @@ Pose2 FromProto(const pb::Pose2& p) { return {p.x(), p.y(), p.yaw()}; }
 
 bool SamePhysics(const DriverInput& a, const DriverInput& b) {
   return a.steer == b.steer && a.throttle == b.throttle && a.brake == b.brake &&
-         a.cruise_on == b.cruise_on && a.cruise_speed == b.cruise_speed;
+         a.cruise_on == b.cruise_on && a.cruise_speed == b.cruise_speed &&
+         a.steer_mode == b.steer_mode && a.clutch == b.clutch && a.handbrake == b.handbrake &&
+         a.gear == b.gear;
 }
 
 std::string CheckPose(const pb::Pose2& p, double speed) {
@@ -320,12 +322,19 @@ std::vector<std::uint32_t> Session::vehicle_ids() const {
 void Session::LatchInput(Vehicle& v) {
   // Watchdog: without live input for longer than watchdog_s the vehicle brakes, steering held.
   // Compared in whole steps: an input is live for watchdog_s after the boundary it arrived at.
+  // The safe state keeps the last steering (angle and mode: a rig's hand-wheel angle stays a
+  // hand-wheel angle, hands off stay off) and the last gear asked for (no surprise shift), drops
+  // the throttle, clutch and handbrake, and brakes at safe_brake.
   const auto limit = static_cast<std::int64_t>(
       std::llround(config_.watchdog_s * 1e9 / static_cast<double>(config_.step_ns)));
   v.safe_state = v.live_input_step < 0 || v.sim->state().step - v.live_input_step > limit;
   DriverInput in;
   if (v.safe_state) {
-    in.steer = v.applied_valid ? v.applied.steer : 0.0;
+    if (v.applied_valid) {
+      in.steer = v.applied.steer;
+      in.steer_mode = v.applied.steer_mode;
+      in.gear = v.applied.gear;
+    }
     in.brake = config_.safe_brake;
     v.applied_msg.Clear();
     v.applied_msg.set_vehicle_id(v.id);

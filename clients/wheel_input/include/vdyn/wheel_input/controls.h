@@ -26,13 +26,13 @@ struct VehicleInfo {
 void ApplyParams(const pb::VehicleParams& p, VehicleInfo& info);
 
 // The steer command for a hand-wheel angle: for the full model (which has a steering column) the
-// hand-wheel angle itself; for the paper's model the road-wheel angle it turns, angle / ratio,
-// clamped to the steering lock.
+// hand-wheel angle itself; for the paper's model, or a source with no hand wheel (road_wheel_only:
+// the keyboard), the road-wheel angle it turns, angle / ratio, clamped to the steering lock.
 struct SteerCommand {
   pb::SteerMode mode = pb::STEER_ROAD_WHEEL;
   double steer = 0;  // rad
 };
-SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v);
+SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v, bool road_wheel_only = false);
 
 struct InputBuilderParams {
   int forward_gears = 6;              // the paddles count -1 (reverse), 0 (automatic), 1..N
@@ -81,6 +81,7 @@ class InputBuilder {
   base::MonoTime estop_pressed_at_{};
   bool reset_request_ = false;
   double last_hand_angle_ = 0;
+  bool last_road_wheel_only_ = false;
   std::uint64_t clamped_ = 0;
   std::uint64_t cruise_ignored_ = 0;
 };

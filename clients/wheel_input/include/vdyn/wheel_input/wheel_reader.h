@@ -32,6 +32,9 @@ struct WheelControls {
   double clutch = 0;          // [0, 1], 1 = pedal down
   double handbrake = 0;       // [0, 1]
   std::uint32_t buttons = 0;  // vdyn.pb.Button bits held
+  // No physical hand wheel (the keyboard): the angle stands for the road wheels' and is sent as
+  // STEER_ROAD_WHEEL whatever the model, so the server's steering column does not filter it.
+  bool road_wheel_only = false;
 };
 
 class WheelReader {

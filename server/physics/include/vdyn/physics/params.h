@@ -16,6 +16,8 @@
 
 #include <Eigen/Core>
 
+#include "vdyn/physics/state.h"
+
 namespace vdyn {
 
 // Wheel order everywhere: Left Front, Right Front, Left Rear, Right Rear (the paper's suffixes).
@@ -27,6 +29,8 @@ inline constexpr bool IsFront(int w) { return w == kLF || w == kRF; }
 
 enum class YawMode { kDynamic, kPaper };
 enum class TireLaw { kFiala, kLinearSaturated };
+enum class Differential { kOpen, kLocked };
+inline constexpr int kMaxGears = 10;
 
 struct WheelParams {
   double z_offset = 0;            // m, T down to mount point A along -Z_B
@@ -37,6 +41,12 @@ struct WheelParams {
   double cornering_stiffness = 0; // N/rad
   double bump_stop_length = 0;    // m
   double bump_stop_stiffness = 0; // N/m
+  // Full model only.
+  double longitudinal_stiffness = 0;  // N per unit slip ratio, at the nominal load
+  double nominal_load = 0;            // N: the load the tire stiffnesses are given at
+  double spin_inertia = 0;            // kg*m^2: wheel, tire, hub, brake disc, half shaft
+  double min_length = 0;              // m: the spring's end of travel (bump)
+  double max_length = 0;              // m: the rebound stop (the wheel hangs here)
 };
 
 struct Params {
@@ -57,8 +67,49 @@ struct Params {
   double body_front = 0, body_rear = 0, body_half_width = 0, body_probe_height = 0;
   double wall_stiffness = 0, wall_damping = 0 /* s/m */, wall_friction = 0;
   double gravity = 0;
-  double steering_trail = 0;  // m
+  double steering_trail = 0;  // m (paper model)
   double steering_ratio = 1;  // hand wheel / road wheel
+
+  // --- The full model (docs/model.md, "The full model"); the paper's model reads none of these.
+  VehicleModel model = VehicleModel::kPaper;
+  // Tire: brush model with static (mu) and sliding (mu_slide) friction, relaxation, compliance.
+  double mu_slide_ratio = 0;           // sliding friction / mu (the peak)
+  double tire_load_sensitivity = 0;    // C_alpha is largest at this many nominal loads
+  double tire_contact_half_length = 0; // m, at the nominal load
+  double tire_relaxation_long = 0;     // m
+  double tire_relaxation_lat = 0;      // m
+  double tire_low_speed_damping = 0;   // N*s/m
+  double tire_vertical_stiffness = 0;  // N/m
+  // Engine, clutch, gearbox, differentials.
+  double engine_power_max = 0;         // W
+  double engine_rpm_power_max = 0;     // rpm
+  double engine_rpm_idle = 0;          // rpm
+  double engine_rpm_limit = 0;         // rpm
+  double engine_inertia = 0;           // kg*m^2
+  double engine_brake_torque = 0;      // N*m at the rev limit, closed throttle
+  double clutch_torque_max = 0;        // N*m
+  double clutch_engage_rpm = 0;        // rpm: the automatic clutch is fully engaged from here
+  double clutch_stick_angle = 0;       // rad (LuGre breakaway angle at the engine)
+  double brake_stick_angle = 0;        // rad (LuGre breakaway angle at the wheel)
+  double stick_damping_time = 0;       // s (LuGre sigma1 / sigma0)
+  int gear_count = 1;
+  double gear_ratio_first = 0, gear_ratio_top = 0, gear_ratio_reverse = 0;
+  double final_drive_ratio = 0;
+  double drivetrain_efficiency = 0;
+  double shift_up_rpm = 0, shift_down_rpm = 0;  // rpm
+  double shift_time = 0;                        // s
+  Differential differential = Differential::kOpen;
+  double handbrake_force_max = 0;  // N, summed over the rear wheels
+  bool abs = false;
+  bool traction_control = false;
+  // Steering system.
+  double caster_trail = 0;          // m, the steering axis meets the ground this far ahead of B
+  double scrub_radius = 0;          // m, ... and this far inboard of B
+  double ackermann = 0;             // 0 parallel steering, 1 full Ackermann
+  double steering_inertia = 0;      // kg*m^2 at the hand wheel
+  double steering_friction = 0;     // N*m at the hand wheel
+  double steering_damping = 0;      // N*m*s/rad at the hand wheel
+  double steering_follow_frequency = 0;  // rad/s: how fast the column follows a commanded angle
 
   // Derived once, when the parameters are validated (never inside a step).
   std::array<Eigen::Vector3d, kNumWheels> p_TA_B{};  // mount points A from T, body frame
@@ -69,6 +120,25 @@ struct Params {
   Eigen::Vector3d p_TO_B = Eigen::Vector3d::Zero();
   std::array<Eigen::Vector3d, kNumProbes> probe_dir_B{};  // unit
   std::array<double, kNumProbes> probe_length{};          // |OS|, m
+  // Full model, derived.
+  struct Derived {
+    std::array<double, kMaxGears + 1> gear_ratio{};  // [1..gear_count]; [0] unused
+    std::array<double, kNumWheels> drive_share{};    // c_i: share of the gearbox torque per wheel
+    std::array<double, kNumWheels> brake_torque{};   // N*m per wheel at full pedal
+    std::array<double, kNumWheels> handbrake_torque{};  // N*m per wheel at full lever
+    std::array<double, kNumWheels> peak_slip{};      // slip ratio at the brush law's peak
+    std::array<double, kNumWheels> load_sensitivity_norm{};  // 1 / sin(2 atan(1 / p))
+    double mu_slide = 0;         // sliding friction coefficient, mu * mu_slide_ratio
+    double mu_static = 0;        // the brush's adhesion limit mu_0, so that the peak is mu
+    double peak_z = 1;           // normalised slip of the law's peak (1: no peak)
+    double omega_idle = 0, omega_limit = 0, omega_power = 0, omega_engage = 0;  // rad/s
+    double omega_shift_up = 0, omega_shift_down = 0;                            // rad/s
+    double engine_torque_base = 0;  // P_max / omega_power, N*m
+    double track = 0;               // bL + bP, m
+    double ackermann_offset = 0;    // ackermann * track / 2, m
+    double hand_wheel_lock = 0;     // steering_lock * steering_ratio, rad
+    double ratio_step = 1;          // geometric step between neighbouring gears (< 1)
+  } full;
 };
 
 // One rejected value: the field's path ("lf.free_length") and why.

@@ -12,6 +12,7 @@
 #include <memory>
 
 #include "vdyn/physics/controls.h"
+#include "vdyn/physics/full_model.h"
 #include "vdyn/physics/params.h"
 #include "vdyn/physics/rk4.h"
 #include "vdyn/physics/state.h"
@@ -22,6 +23,9 @@ namespace vdyn {
 
 struct SimConfig {
   std::int64_t step_ns = 1'000'000;  // h = 1 ms
+  // Refuse parameters the step cannot resolve (CheckStep). Only bench/step_sweep turns this off,
+  // to find where RK4 really goes unstable beyond the bound.
+  bool check_step = true;
 };
 
 // What one step saw and did, reported at its start time t_n = step * h: the state x_n, the input
@@ -47,8 +51,9 @@ class Simulator {
   Simulator(std::shared_ptr<const World> world, const ValidParams& params, SimConfig config,
             const State& initial);
 
-  // Takes effect at the next step boundary. Throws std::invalid_argument when the parameters do
-  // not resolve at this simulator's step (CheckStep; the edge checks it first, with a reason).
+  // Takes effect at the next step boundary. A change of model converts the state to the new
+  // model's layout (ConvertState). Throws std::invalid_argument when the parameters do not
+  // resolve at this simulator's step (CheckStep; the edge checks it first, with a reason).
   void SetParams(const ValidParams& params);
   // Latched at the next step boundary. Non-finite or out-of-range values are clamped and counted.
   void SetInput(const DriverInput& input);
@@ -57,7 +62,8 @@ class Simulator {
   // when the body would start inside a wall or any other surface, or when the ground under the
   // wheels is too uneven to rest on (SpawnObstruction).
   void Spawn(const Pose2& pose, double speed = 0.0);
-  void SetState(const State& state) { state_ = state; }
+  // The state as given, converted to the parameters' model if it is in the other's layout.
+  void SetState(const State& state);
 
   // Advances by h. A step whose result is not finite is contained: the state stays at x_n, the
   // count is raised and kNonFinite is returned.
@@ -80,11 +86,14 @@ class Simulator {
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
+  // Full model: steps whose wheel-level horizontal traces (kerb edges) were cast.
+  std::uint64_t edge_traced_steps() const { return edge_traced_steps_; }
 
  private:
   struct Workspace {
     Rk4Workspace rk4;
     WallPlanes walls;
+    WheelEdges edges;
     Derived stage_derived;
     State start;
   };
@@ -100,6 +109,7 @@ class Simulator {
   std::uint64_t nonfinite_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
+  std::uint64_t edge_traced_steps_ = 0;
 };
 
 // Static equilibrium at (x, y, yaw) on the terrain: level in yaw, height, pitch and roll fitted so

@@ -36,6 +36,16 @@ struct WheelOutputs {
   Eigen::Vector3d p_B_W = Eigen::Vector3d::Zero();  // contact point B (or wheel bottom in the air)
   Eigen::Vector3d n_W = Eigen::Vector3d::UnitZ();   // terrain normal at B
   Eigen::Vector3d F_W = Eigen::Vector3d::Zero();    // total wheel force on the body at B
+  // Full model (zero for the paper's): the wheel's spin and the tire's own forces.
+  double omega = 0;         // spin rate, rad/s
+  double slip_ratio = 0;    // (omega R - v_long) / max(|v_long|, 1 m/s)
+  double slip_ratio_t = 0;  // transient slip ratio kappa' = u / sigma_long
+  double slip_angle_t = 0;  // transient slip angle atan(v / sigma_lat), rad
+  double Fx = 0;            // tire force along the wheel heading, N
+  double Mz = 0;            // aligning moment about the contact normal, N*m (positive: turns left)
+  double drive_torque = 0;  // N*m
+  double brake_torque = 0;  // N*m (>= 0, applied)
+  bool kerb = false;        // an edge found by the C-D traces carries part of the load
 };
 
 // A wall found by a horizontal trace at the start of a step; contact at each stage is evaluated
@@ -63,6 +73,21 @@ struct Derived {
   Eigen::Vector3d F_wall_W = Eigen::Vector3d::Zero();   // sum of wall contact forces
   double wall_penetration_max = 0;                      // m
   int wall_contacts = 0;
+
+  // Full model: the steering system (torques at the hand wheel, positive turning it left; their
+  // sum is steering_torque) and the drivetrain.
+  struct Steering {
+    double angle = 0, rate = 0;  // hand wheel, rad and rad/s
+    double aligning = 0, trail = 0, friction = 0, damping = 0, end_stop = 0;  // N*m
+    double driver = 0;           // the hands' torque that makes the column follow, N*m
+  } steering;
+  struct Drivetrain {
+    double engine_speed = 0;   // rad/s
+    double engine_torque = 0;  // N*m
+    double throttle = 0;       // at the engine, [0, 1]
+    double clutch_torque = 0;  // N*m
+    double clutch_slip = 0;    // rad/s, engine minus gearbox input
+  } drivetrain;
 };
 
 // The body's pose and motion at one state, computed once per evaluation and read by every stage.
