@@ -912,43 +912,42 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     pos = f.end();
     res.good_until = pos;
   }
-  // The summary and footer: grouped records, a footer whose CRC covers the summary, the magic.
+  // The footer at the end of the file (and the magic after it), whose CRC covers the summary;
+  // then the summary's records between the data end and the footer.
   const std::uint64_t summary_pos = pos;
-  while (true) {
-    Frame f;
-    if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) {
-      problem(pos, why + " (in the summary)");
+  if (size_ - pos < kFooterRecord + 8) {
+    problem(pos, "truncated: the file ends after the data end record, before its footer");
+    return res;
+  }
+  const std::uint64_t footer = size_ - 8 - kFooterRecord;
+  if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
+      Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
+    problem(footer, "truncated: the file does not end with a footer record and the MCAP magic");
+    return res;
+  }
+  {
+    Cursor r({data_ + footer + 9, static_cast<std::size_t>(kFooterContent)});
+    const std::uint64_t summary_start = r.U64("summary_start");
+    r.U64("summary_offset_start");
+    const std::uint32_t stored = r.U32("summary_crc");
+    if (stored != 0) {
+      const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
+      if (got != stored) {
+        problem(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
+        return res;
+      }
+    }
+    if (summary_start != 0 && summary_start != summary_pos) {
+      problem(footer, "the footer places the summary at offset " + std::to_string(summary_start) +
+                          ", but it starts at " + std::to_string(summary_pos));
       return res;
     }
-    if (f.op == kFooter) {
-      try {
-        Cursor r(f.content);
-        const std::uint64_t summary_start = r.U64("summary_start");
-        r.U64("summary_offset_start");
-        const std::uint32_t stored = r.U32("summary_crc");
-        if (summary_start != 0 && summary_start != summary_pos) {
-          problem(pos, "the footer places the summary at offset " + std::to_string(summary_start) +
-                           ", but it starts at " + std::to_string(summary_pos));
-          return res;
-        }
-        if (stored != 0) {
-          const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_pos, static_cast<std::size_t>(pos + 1 + 8 + 16 - summary_pos)));
-          if (got != stored) {
-            problem(pos, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
-            return res;
-          }
-        }
-      } catch (const Malformed& e) {
-        problem(pos, std::string("a malformed footer: ") + e.what);
-        return res;
-      }
-      pos = f.end();
-      if (size_ - pos != 8 || std::memcmp(data_ + pos, kMagic, 8) != 0) {
-        problem(pos, size_ - pos < 8 ? "truncated: the closing magic is missing"
-                                     : "the footer is not followed by the closing magic and the end of the file");
-        return res;
-      }
-      break;
+  }
+  while (pos < footer) {
+    Frame f;
+    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) {
+      problem(pos, why + " (in the summary)");
+      return res;
     }
     if (f.op == kStatistics) {
       try {
