@@ -118,6 +118,7 @@ struct Capture::Impl {
     std::map<TopicId, std::uint16_t> schemas;
     std::map<std::uint16_t, std::uint32_t> sequence;
     std::uint64_t first_log = 0;
+    std::uint64_t own_messages = 0;  // not counting the world and parameters it starts with
   };
   File file;
   int part = 0;
@@ -218,7 +219,8 @@ struct Capture::Impl {
 
   // --- writer -----------------------------------------------------------------------------------
 
-  void OpenFile() {
+  // `now`: the log time the new file starts at (the re-emitted world and parameters carry it).
+  void OpenFile(std::uint64_t now) {
     file = File{};
     file.w = std::make_unique<mcap::Writer>(PartPath(), o.writer);
     files.push_back(PartPath());
@@ -247,7 +249,6 @@ struct Capture::Impl {
     }
     file.w->WriteMetadata("vdyn.recording", m);
     // A later part starts with the world and parameters in effect, so it stands on its own.
-    const std::uint64_t now = LogNow();
     for (const auto& [id, l] : latched) {
       WriteMessage(id.first, id.second, now, l.publish_time,
                    std::span<const std::uint8_t>(l.data.data(), l.data.size()));
@@ -286,6 +287,8 @@ struct Capture::Impl {
       for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
       char hash[24];
       std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(w.terrain_hash()));
+      spdlog::info("vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
+                   w.name(), w.server_id(), hash, triangles);
       file.w->WriteMetadata("vdyn.world", {{"server_id", w.server_id()},
                                            {"name", w.name()},
                                            {"terrain_hash", hash},
@@ -328,7 +331,7 @@ struct Capture::Impl {
   void WriterLoop() {
     Batch work;
     try {
-      OpenFile();
+      OpenFile(LogNow());
       while (true) {
         {
           std::unique_lock<std::mutex> lock(mu);
@@ -338,17 +341,21 @@ struct Capture::Impl {
           std::swap(work, pending);
           writer_bytes = work.bytes.size();
         }
+        const auto split_ns = static_cast<std::uint64_t>(o.split_s * 1e9);
         for (const Entry& e : work.entries) {
-          WriteMessage(e.topic, e.key, e.log_time, e.publish_time,
-                       std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
-          const bool split_size = o.split_bytes > 0 && file.w->bytes_written() >= o.split_bytes;
-          const bool split_time = o.split_s > 0 && e.log_time - file.first_log >=
-                                                       static_cast<std::uint64_t>(o.split_s * 1e9);
+          // A new part before this message when the current one is full or old enough.
+          const bool split_size = o.split_bytes > 0 && file.own_messages > 0 &&
+                                  file.w->bytes_written() >= o.split_bytes;
+          const bool split_time = o.split_s > 0 && file.own_messages > 0 &&
+                                  e.log_time >= file.first_log + split_ns;
           if (split_size || split_time) {
             CloseFile("split");
             ++part;
-            OpenFile();
+            OpenFile(e.log_time);
           }
+          WriteMessage(e.topic, e.key, e.log_time, e.publish_time,
+                       std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
+          ++file.own_messages;
         }
         file.w->FlushIfOlder(LogNow());
         disk_bytes = bytes_closed + file.w->bytes_written();

@@ -309,6 +309,10 @@ VerifyResult Verify(const VerifyOptions& o) {
     if (auto fresh = run.Fresh(m.key, &why); fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
                                               recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
       Diff(recorded, Resimulated(*fresh, recorded), "", d.fields);
+      // Causes first: the input and controls applied over the step, then what they moved.
+      std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
+        return f.field.rfind("input.", 0) == 0 || f.field.rfind("control.", 0) == 0;
+      });
     }
     // Only the hash differs: the step's start agrees, so look at the state after it.
     if (d.fields.size() <= 1) compare_next = std::make_pair(m.key, step + 1);
@@ -482,7 +486,7 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
 int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
   const BranchPoint bp = FindBranchPoint(o.file, o.at_s, o.vehicle);
   out << "branch point: " << bp.label << " on world '" << bp.world_name << "'"
-      << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << "\n";
+      << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << std::endl;
   transport::Participant participant(o.domain);
   // The live server, and its world: the recording must continue on the terrain it was made on.
   std::optional<pb::WorldDescription> live;
