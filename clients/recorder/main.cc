@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <csignal>
+#include <cstdio>
 #include <iostream>
 
 #include <CLI/CLI.hpp>
@@ -187,7 +188,10 @@ int main(int argc, char** argv) {
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
       std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds) << " to "
                 << files << " (" << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
-      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped() << "\n";
+      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped();
+      std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
+                  s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
+                  recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
       return 0;
     }
     if (info->parsed()) return recorder::RunInfo(file, std::cout);

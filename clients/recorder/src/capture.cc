@@ -403,6 +403,7 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
   Impl& m = *impl_;
   m.wall0 = base::WallNow();
   m.mono0 = base::MonotonicNow();
+  const base::Nanos cpu0 = base::ProcessCpuTime();
   std::thread writer([&m] { m.WriterLoop(); });
   transport::Waitset waitset(m.participant);
   for (auto& [topic, reader] : m.readers) waitset.Attach(*reader);
@@ -469,6 +470,7 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
   for (const auto& [t, c] : s.topics) s.messages += c.messages;
   s.bytes_on_disk = m.bytes_closed;
   s.seconds = (base::MonotonicNow() - m.mono0).seconds();
+  s.cpu_seconds = (base::ProcessCpuTime() - cpu0).seconds();
   s.queue_peak_bytes = m.peak;
   for (auto& [topic, reader] : m.readers) s.dds_samples_lost += reader->SamplesLost();
   return s;

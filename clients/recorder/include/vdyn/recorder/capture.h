@@ -57,6 +57,7 @@ struct CaptureSummary {
   std::uint64_t messages = 0;
   std::uint64_t bytes_on_disk = 0;
   double seconds = 0;
+  double cpu_seconds = 0;  // this process's CPU (all threads) while recording
   std::size_t queue_peak_bytes = 0;
   std::uint64_t dds_samples_lost = 0;  // as DDS reports it
   std::uint64_t total_lost() const;
