@@ -217,6 +217,18 @@ TEST_F(RecorderTest, VerifyIsBitExactOnALiveSessionAndPinpointsAnInjectedDiverge
   ASSERT_TRUE(std::regex_search(verify, m, std::regex("bit-exact over ([0-9]+) steps"))) << verify;
   EXPECT_GT(std::stoull(m[1]), 4000u) << verify;
 
+  // The figures a person looks at, and the page that shows them.
+  auto [pcode, plotted] = Run({"plot", file.string(), "--out", (dir_ / "plots").string()});
+  ASSERT_EQ(pcode, 0) << plotted;
+  const std::string html = testing::ReadFile(dir_ / "plots" / "index.html");
+  for (const std::string f : {"speed", "acceleration", "spring_forces", "drive_forces", "brake_forces",
+                              "side_forces", "controls", "trajectory"}) {
+    const std::string png = testing::ReadFile(dir_ / "plots" / (f + ".png"));
+    EXPECT_GT(png.size(), 5000u) << f;
+    EXPECT_EQ(png.substr(0, 4), "\x89PNG") << f;
+    EXPECT_THAT(html, HasSubstr("src=\"" + f + ".png\"")) << f;
+  }
+
   // The input batches really vary; change one sample in the recording and verify finds it.
   const std::uint64_t step = InjectDivergence(file, dir_ / "edited.mcap", 2000);
   ASSERT_GT(step, 2000u);
@@ -307,14 +319,25 @@ TEST_F(RecorderTest, ExportMatchesABatchRunOfTheSameDriveColumnForColumn) {
   ASSERT_EQ(e[0], b[0]);  // the header: the same columns, units and order
   std::size_t matched = 0;
   for (std::size_t i = 1; i < e.size(); ++i) {
-    const std::size_t comma = e[i].find(',', e[i].find(',') + 1);
-    const std::uint64_t step = std::stoull(e[i].substr(e[i].find(',') + 1, comma));
+    const std::size_t c0 = e[i].find(','), c1 = e[i].find(',', c0 + 1);
+    const std::uint64_t step = std::stoull(e[i].substr(c0 + 1, c1 - c0 - 1));
     ASSERT_LT(step + 1, b.size());
     ASSERT_EQ(e[i], b[step + 1]) << "step " << step;
     ++matched;
   }
   // Best effort on loopback: (nearly) every state arrived; each one matched to the last digit.
   EXPECT_GE(matched, kSteps * 99 / 100);
+  // Decimated: the rows whose step is a multiple of 10, as --csv-every 10 gives them.
+  auto [dcode, decimated] = Run({"export", file.string(), "--csv", (dir_ / "every10.csv").string(), "--every", "10"});
+  ASSERT_EQ(dcode, 0) << decimated;
+  const std::vector<std::string> d = lines(dir_ / "every10.csv");
+  ASSERT_GE(d.size(), kSteps / 10 * 99 / 100);
+  for (std::size_t i = 1; i < d.size(); ++i) {
+    const std::size_t c0 = d[i].find(','), c1 = d[i].find(',', c0 + 1);
+    const std::uint64_t step = std::stoull(d[i].substr(c0 + 1, c1 - c0 - 1));
+    ASSERT_EQ(step % 10, 0u);
+    ASSERT_EQ(d[i], b[step + 1]);
+  }
 }
 
 // --- play ----------------------------------------------------------------------------------------

@@ -373,6 +373,13 @@ void Player::Status(bool force) {
 int Player::Run(const std::atomic<bool>& stop) {
   if (!Load()) return 1;
   participant_ = std::make_unique<transport::Participant>(o_.domain);
+  // Writers first: readers discover them while we look for a live server, so the first states
+  // of the playback are not sent before anyone listens.
+  for (const auto& [id, ch] : channels_) {
+    if (ch.play && !writers_[ch.topic]) {
+      writers_[ch.topic] = std::make_unique<transport::RawWriter>(*participant_, ch.topic);
+    }
+  }
   if (!o_.force) {
     // A live server on this domain would get our states and (worse) our driver inputs.
     transport::Reader<pb::WorldDescription> worlds(*participant_, TopicId::kWorld, &drops_);
