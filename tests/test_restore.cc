@@ -128,7 +128,8 @@ TEST_F(RestoreRequest, ADifferentInputAfterTheBranchPointDiverges) {
 TEST_F(RestoreRequest, TheRestoredInputDrivesUntilALiveOneArrivesThenTheWatchdogCounts) {
   Session b(world_, Config(), {});
   ASSERT_TRUE(b.Apply(RestoreFrom(original_, 1, 1500)).accepted());
-  const pb::InputSample& recorded = RestoreFrom(original_, 1, 1500).restore().input();
+  const pb::ControlRequest request = RestoreFrom(original_, 1, 1500);
+  const pb::InputSample& recorded = request.restore().input();
   b.Step();
   EXPECT_FALSE(b.in_safe_state(1));
   EXPECT_EQ(b.simulator(1).input().steer, recorded.steer());

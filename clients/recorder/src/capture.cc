@@ -408,6 +408,8 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
   transport::Waitset waitset(m.participant);
   for (auto& [topic, reader] : m.readers) waitset.Attach(*reader);
   base::MonoTime last_status = m.mono0;
+  base::MonoTime last_match_check{0};
+  std::vector<std::uint32_t> matched(m.readers.size(), 0);
   std::uint64_t last_dropped = 0;
   base::MonoTime last_warning{0};
   const auto end_ns = static_cast<std::int64_t>(m.o.duration_s * 1e9);
@@ -426,6 +428,18 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
     take_all();
     const base::MonoTime now = base::MonotonicNow();
     if (end_ns > 0 && (now - m.mono0).ns >= end_ns) break;
+    if ((now - last_match_check).ns >= 100'000'000) {
+      // Say when a topic's writers come and go: a person (or a test) sees the recorder hears
+      // the server before anything happens.
+      last_match_check = now;
+      for (std::size_t i = 0; i < m.readers.size(); ++i) {
+        const std::uint32_t n = m.readers[i].second->MatchedWriters();
+        if (n != matched[i]) {
+          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n, transport::Spec(m.readers[i].first).name);
+          matched[i] = n;
+        }
+      }
+    }
     if ((now - last_status).ns >= 1'000'000'000) {
       last_status = now;
       std::uint64_t dropped = 0, file_bytes = 0;

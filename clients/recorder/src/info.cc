@@ -221,7 +221,7 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       if (loss && val != "0") gaps += "\n  the recorder counted " + val + " " + k.substr(k.rfind('.') + 1) + " on " + k.substr(0, k.rfind('.'));
     }
   }
-  out << "gaps        " << (gaps.empty() ? "none" : gaps.substr(1).insert(0, "")) << "\n";
+  out << "gaps" << (gaps.empty() ? "        none" : gaps) << "\n";
   for (const auto& [server, s] : servers) {
     std::snprintf(line, sizeof line, "events      server '%s': %llu events, sequence %llu..%llu%s\n", server.c_str(),
                   static_cast<unsigned long long>(s.count), static_cast<unsigned long long>(s.first),
