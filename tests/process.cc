@@ -85,6 +85,7 @@ std::string Process::Log() const {
 std::string ServerBinary() { return VDYN_SERVER_BINARY; }
 std::string InputBinary() { return VDYN_INPUT_BINARY; }
 std::string StateSubscriberBinary() { return VDYN_STATE_SUBSCRIBER_BINARY; }
+std::string RecorderBinary() { return VDYN_RECORDER_BINARY; }
 
 void UseLoopbackDds() {
   setenv("CYCLONEDDS_URI",

@@ -37,6 +37,7 @@ class Process {
 std::string ServerBinary();
 std::string InputBinary();
 std::string StateSubscriberBinary();
+std::string RecorderBinary();
 
 // Cyclone DDS restricted to loopback, with room for many processes per domain.
 void UseLoopbackDds();

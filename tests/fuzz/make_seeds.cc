@@ -4,6 +4,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <utility>
 #include <string>
 
 #include "vdyn/bridge/convert.h"
@@ -12,6 +13,8 @@
 #include "vdyn/io/maneuver.h"
 #include "vdyn/io/vehicle_params.h"
 #include "vdyn/physics/world.h"
+#include "vdyn/recorder/mcap.h"
+#include "vdyn/state.pb.h"
 
 namespace fs = std::filesystem;
 
@@ -103,6 +106,36 @@ int main(int argc, char** argv) {
     r.mutable_remove();
     request("remove.pb", r);
   }
+  // Recordings: a small MCAP file per compression (two channels, chunks of a few messages,
+  // metadata, a summary), and one cut short as a killed recorder leaves it.
+  for (const auto& [name, compression] :
+       {std::pair{"zstd.mcap", vdyn::mcap::Compression::kZstd},
+        std::pair{"lz4.mcap", vdyn::mcap::Compression::kLz4},
+        std::pair{"none.mcap", vdyn::mcap::Compression::kNone}}) {
+    const fs::path path = root / "mcap" / name;
+    fs::create_directories(path.parent_path());
+    vdyn::mcap::WriterOptions options;
+    options.compression = compression;
+    options.chunk_bytes = 300;
+    vdyn::mcap::Writer w(path, options);
+    const std::uint16_t schema = w.AddSchema("vdyn.pb.VehicleState", "protobuf", "seed-descriptor");
+    const std::uint16_t a = w.AddChannel(schema, "vdyn/state/1", "protobuf", {{"vehicle_id", "1"}});
+    const std::uint16_t b = w.AddChannel(schema, "vdyn/state/2", "protobuf", {{"vehicle_id", "2"}});
+    w.WriteMetadata("vdyn.recording", {{"format", "vdyn-recording 1"}, {"domain", "0"}});
+    for (std::uint32_t i = 0; i < 12; ++i) {
+      vdyn::pb::VehicleState s;
+      s.set_vehicle_id(1 + i % 2);
+      s.set_step(i);
+      s.set_speed_kmh(10.0 * i);
+      const std::string bytes = s.SerializeAsString();
+      w.WriteMessage(i % 2 == 0 ? a : b, i / 2, 1'000'000 * (i + 1), 1'000'000 * i,
+                     {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()});
+    }
+    w.Close();
+  }
+  fs::copy_file(root / "mcap" / "zstd.mcap", root / "mcap" / "truncated.mcap",
+                fs::copy_options::overwrite_existing);
+  fs::resize_file(root / "mcap" / "truncated.mcap", fs::file_size(root / "mcap" / "zstd.mcap") * 2 / 3);
   std::printf("seeds written under %s\n", root.c_str());
   return 0;
 }

@@ -129,9 +129,9 @@ std::uint32_t RawWriter::MatchedReaders() {
   return st.current_count;
 }
 
-RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops)
+RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops, ReaderRole role)
     : id_(id), drops_(drops) {
-  dds_qos_t* q = ReaderQos(id);
+  dds_qos_t* q = ReaderQos(id, role);
   reader_ = dds_create_reader(participant.handle(), participant.Topic(id), q, nullptr);
   dds_delete_qos(q);
   const std::string name = Spec(id).name;
@@ -183,6 +183,16 @@ void RawReader::OnDataAvailable(std::function<void()> fn) {
   const dds_return_t rc = dds_set_listener(reader_, l);
   dds_delete_listener(l);
   if (rc != DDS_RETCODE_OK) throw TransportError(DdsError("dds_set_listener", rc));
+}
+
+std::uint64_t RawReader::SamplesLost() {
+  dds_sample_lost_status_t st;
+  const dds_return_t rc = dds_get_sample_lost_status(reader_, &st);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError("dds_get_sample_lost_status", rc);
+    return 0;
+  }
+  return st.total_count;
 }
 
 std::uint32_t RawReader::MatchedWriters() {

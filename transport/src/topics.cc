@@ -89,7 +89,17 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
   return q;
 }
 
-dds_qos_t* ReaderQos(TopicId id) { return BaseQos(Spec(id)); }
+dds_qos_t* ReaderQos(TopicId id, ReaderRole role) {
+  const TopicSpec& s = Spec(id);
+  dds_qos_t* q = BaseQos(s);
+  if (role == ReaderRole::kRecorder && s.history_depth > 0 && id != TopicId::kWorld) {
+    // A recorder takes every sample: a deeper (bounded) history per instance absorbs a late take
+    // instead of overwriting samples. History is the reader's own business: it matches the
+    // same writers.
+    dds_qset_history(q, DDS_HISTORY_KEEP_LAST, limits::kRecorderHistoryDepth);
+  }
+  return q;
+}
 
 std::uint32_t ServerKey(const std::string& server_id) { return base::ServerKey(server_id); }
 

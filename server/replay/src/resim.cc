@@ -117,14 +117,17 @@ bool VehicleReplayer::Run(std::uint64_t end_step,
                           const std::function<void(std::uint64_t, std::uint64_t)>& on_step,
                           std::string* error) {
   const std::string who = "vehicle " + std::to_string(vehicle_id_);
-  std::size_t next = 0;
-  while (next < actions_.size() && actions_[next].kind != Action::Kind::kSpawned &&
-         actions_[next].kind != Action::Kind::kCheckpoint) {
-    ++next;
-  }
-  if (next == actions_.size()) {
-    *error = who + ": no spawn or checkpoint event";
-    return false;
+  std::size_t& next = next_;
+  if (!started_) {
+    while (next < actions_.size() && actions_[next].kind != Action::Kind::kSpawned &&
+           actions_[next].kind != Action::Kind::kCheckpoint) {
+      ++next;
+    }
+    if (next == actions_.size()) {
+      *error = who + ": no spawn or checkpoint event";
+      return false;
+    }
+    started_ = true;
   }
   while (true) {
     const std::uint64_t step =

@@ -124,9 +124,10 @@ void Session::FlushEvents() {
   for (auto& [id, v] : vehicles_) FlushInputs(v);
 }
 
-void Session::EmitSpawned(Vehicle& v) {
+void Session::EmitSpawned(Vehicle& v, const std::string& branched_from) {
   auto e = std::make_unique<pb::SessionEvent>();
   auto* s = e->mutable_spawned();
+  s->set_branched_from(branched_from);
   *s->mutable_state() = ToExactState(v.sim->state());
   *s->mutable_params() = *v.params;
   s->set_world_name(world_->name);
@@ -284,10 +285,78 @@ pb::ControlReply Session::Apply(const pb::ControlRequest& r) {
       EmitMessage(v.id, v.sim->state().step, std::move(e));
       return reply;
     }
+    case pb::ControlRequest::kRestore:
+      return Restore(r);
+    case pb::ControlRequest::kPlayback:
+      return Reply(r, false, "playback requests are for a player (vdyn-recorder play), not a server");
     case pb::ControlRequest::COMMAND_NOT_SET:
       break;
   }
   return Reply(r, false, "the request names no command");
+}
+
+pb::ControlReply Session::Restore(const pb::ControlRequest& r) {
+  const pb::ControlRequest::Restore& rs = r.restore();
+  const std::uint32_t id = r.vehicle_id();
+  const auto it = vehicles_.find(id);
+  State state;
+  try {
+    state = FromExactState(rs.state());
+  } catch (const std::exception& e) {
+    return Reply(r, false, std::string("restore: ") + e.what());
+  }
+  if (state.step < 0) return Reply(r, false, "restore: the state's step is beyond range");
+  // (vehicle, step) names one moment of a session: a vehicle's steps never go back.
+  std::int64_t floor = 0;
+  if (it != vehicles_.end()) floor = it->second.sim->state().step;
+  if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
+    floor = std::max(floor, ret->second);
+  }
+  if (state.step < floor) {
+    return Reply(r, false, "restore: vehicle " + std::to_string(id) + " is at step " +
+                               std::to_string(floor) + " and a vehicle's steps only go forward; " +
+                               "restore step " + std::to_string(state.step) +
+                               " into a fresh server or another vehicle id");
+  }
+  const pb::VehicleParams params = MergeVehicleParams(config_.default_params, rs.params());
+  const auto issues = ValidateVehicleParams(params);
+  if (!issues.empty()) return Reply(r, false, "restore: " + FormatIssues(issues));
+  if (it == vehicles_.end()) {
+    if (r.server_id().empty()) {
+      return Reply(r, false, "restore of a new vehicle needs server_id, as spawn does");
+    }
+    if (vehicles_.size() >= config_.max_vehicles) {
+      return Reply(r, false, "this server runs its maximum of " +
+                                 std::to_string(config_.max_vehicles) + " vehicles");
+    }
+  }
+  const ValidParams valid = ParamsFromProto(params);
+  if (it != vehicles_.end()) {
+    // The old life ends here; the restored one starts at its own step (a re-simulation starts
+    // afresh from the Spawned event).
+    auto removed = std::make_unique<pb::SessionEvent>();
+    removed->mutable_removed();
+    EmitMessage(id, it->second.sim->state().step, std::move(removed));
+    vehicles_.erase(it);
+  }
+  SimConfig sc;
+  sc.step_ns = config_.step_ns;
+  Vehicle v;
+  v.id = id;
+  v.sim = std::make_unique<Simulator>(world_, valid, sc, state);
+  v.params = std::make_shared<const pb::VehicleParams>(params);
+  const Eigen::Vector3d p = Position(state.x);
+  v.spawn_pose = {p.x(), p.y(), RollPitchYaw(Orientation(state.x)).z()};
+  v.spawn_speed = 0.0;
+  // The restored input drives until a live input arrives; the watchdog counts from here.
+  v.restored_input = FromInputSample(rs.input());
+  v.input_restored = true;
+  v.live_input.set_vehicle_id(id);
+  v.live_input.set_source_id("restore");
+  v.live_input_step = state.step;
+  auto [ins, inserted] = vehicles_.emplace(id, std::move(v));
+  EmitSpawned(ins->second, rs.branched_from());
+  return Reply(r, true, {});
 }
 
 bool Session::OfferInput(const pb::DriverInput& input, std::string* reason) {
@@ -303,6 +372,7 @@ bool Session::OfferInput(const pb::DriverInput& input, std::string* reason) {
   }
   Vehicle& v = it->second;
   v.live_input = input;
+  v.input_restored = false;
   v.live_input_step = v.sim->state().step;
   return true;
 }
@@ -340,7 +410,7 @@ void Session::LatchInput(Vehicle& v) {
     v.applied_msg.set_vehicle_id(v.id);
     v.applied_msg.set_source_id("watchdog");
   } else {
-    in = FromProto(v.live_input);
+    in = v.input_restored ? v.restored_input : FromProto(v.live_input);
     v.applied_msg = v.live_input;
   }
   v.sim->SetInput(in);

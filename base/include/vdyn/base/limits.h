@@ -109,4 +109,16 @@ inline constexpr Range kHeightmapCell{0.0, 1e4, true, false, "height-map cell, m
 inline constexpr Range kHeightmapHeight{0.0, 1e5, true, false, "height-map height, m"};
 inline constexpr Range kStrength{0, 1e6, false, false, "ownership strength"};
 
+// --- Recordings (vdyn-recorder) ---------------------------------------------------------------
+// A recorder's reader history per instance on keep-last topics (vdyn/state: one second of a
+// vehicle at 1 kHz), so a recorder that takes a little late loses nothing; bounded, so one that
+// stops taking cannot grow without end.
+inline constexpr int kRecorderHistoryDepth = 1000;
+inline constexpr Range kRecorderQueueMb{1.0, 65536.0, false, false, "recorder queue, MiB"};
+inline constexpr Range kPlaybackRate{0.01, 1000.0, false, false, "playback rate"};
+inline constexpr Range kSplitMb{1.0, 1e7, false, false, "split size, MiB"};
+inline constexpr Range kSplitS{1.0, 1e7, false, false, "split duration, s"};
+inline constexpr Range kChunkKb{1.0, 65536.0, false, false, "chunk size, KiB"};
+inline constexpr Range kRecordingTimeS{0.0, 1e9, false, false, "time from the recording's start, s"};
+
 }  // namespace vdyn::limits

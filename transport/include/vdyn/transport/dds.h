@@ -114,7 +114,8 @@ struct RawSample {
 // kind; the rest reach the caller.
 class RawReader {
  public:
-  RawReader(Participant& participant, TopicId id, DropCounters* drops);
+  RawReader(Participant& participant, TopicId id, DropCounters* drops,
+            ReaderRole role = ReaderRole::kDefault);
   ~RawReader();
   RawReader(const RawReader&) = delete;
   RawReader& operator=(const RawReader&) = delete;
@@ -144,6 +145,8 @@ class RawReader {
   // Takes every available sample (at most max_samples) and hands each valid one to fn as raw
   // bytes, unparsed: the envelope's type name must be the topic's and the size within its limit.
   // Returns how many were handed over.
+  // Samples DDS reports lost to this reader so far (best-effort gaps, overwritten history).
+  std::uint64_t SamplesLost();
   int TakeRaw(const std::function<void(const RawSample&)>& fn,
               int max_samples = std::numeric_limits<int>::max());
 

@@ -40,8 +40,13 @@ std::span<const TopicSpec> AllTopics();
 
 // Writer and reader QoS of a topic, for use with dds_create_writer/reader; the caller deletes
 // the returned object with dds_delete_qos. `ownership_strength` applies to exclusive topics.
+// Who reads: a client or the server (the newest sample of a keep-last topic is what matters), or
+// a recorder (every sample matters: keep-last topics keep limits::kRecorderHistoryDepth samples
+// per instance, world descriptions one).
+enum class ReaderRole { kDefault, kRecorder };
+
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength = 0);
-dds_qos_t* ReaderQos(TopicId id);
+dds_qos_t* ReaderQos(TopicId id, ReaderRole role = ReaderRole::kDefault);
 
 // The envelope key of a server's own topics (world, diagnostics): vdyn/base/hash.h's ServerKey.
 std::uint32_t ServerKey(const std::string& server_id);

@@ -31,7 +31,9 @@ class VehicleReplayer {
   bool Add(const pb::SessionEvent& e, std::string* error);
 
   // Replays from the first spawn or checkpoint up to step `end_step` (exclusive), calling
-  // on_step(step, hash_after) for every step. False, and why, when it cannot go on.
+  // on_step(step, hash_after) for every step. False, and why, when it cannot go on. Called again
+  // with a later end_step it goes on where it stopped (a recorder's verify streams a file this
+  // way); the events at the step it stopped at are already applied.
   bool Run(std::uint64_t end_step,
            const std::function<void(std::uint64_t, std::uint64_t)>& on_step, std::string* error);
 
@@ -53,6 +55,8 @@ class VehicleReplayer {
   std::uint64_t terrain_hash_;
   std::uint32_t vehicle_id_;
   std::vector<Action> actions_;
+  std::size_t next_ = 0;   // the next action to apply
+  bool started_ = false;
   std::unique_ptr<Simulator> sim_;
 };
 

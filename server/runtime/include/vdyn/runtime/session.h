@@ -141,6 +141,9 @@ class Session {
     Pose2 spawn_pose;
     double spawn_speed = 0;
     pb::DriverInput live_input;        // the last live input received
+    // A Restore request's exact input, applied in place of live_input until a live one arrives.
+    bool input_restored = false;
+    DriverInput restored_input;
     std::int64_t live_input_step = -1;  // vehicle step at which it was received (-1: none yet)
     bool safe_state = true;
     DriverInput applied;               // physics fields of the input applied last step
@@ -154,7 +157,8 @@ class Session {
 
   void EmitMessage(std::uint32_t vehicle_id, std::int64_t step,
                    std::unique_ptr<pb::SessionEvent> e);
-  void EmitSpawned(Vehicle& v);
+  void EmitSpawned(Vehicle& v, const std::string& branched_from = {});
+  pb::ControlReply Restore(const pb::ControlRequest& r);
   void FlushInputs(Vehicle& v);
   pb::ControlReply Reply(const pb::ControlRequest& r, bool accepted, const std::string& reason);
   void LatchInput(Vehicle& v);

@@ -1,0 +1,259 @@
+// MCAP files (https://mcap.dev/spec), written and read by our own code: magic, opcode + length
+// records, chunks (zstd or lz4 frames, or none) with message indexes, a summary with statistics,
+// CRC-32 (zlib's) of chunks, of the data section and of the summary. docs/formats.md says what a
+// vdyn recording puts in one.
+//
+// The writer appends chunk by chunk (a killed writer loses at most its open chunk); the reader
+// maps the file and walks it record by record, checking every length against the file and every
+// CRC, and refuses a truncated, corrupted, empty or foreign file with the file, the byte offset
+// and the reason (McapError). A lenient scan stops at the first problem instead and says where:
+// `recover` keeps what came before.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <span>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace vdyn::mcap {
+
+inline constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', 0x30, '\r', '\n'};
+
+enum Op : std::uint8_t {
+  kHeader = 0x01,
+  kFooter = 0x02,
+  kSchema = 0x03,
+  kChannel = 0x04,
+  kMessage = 0x05,
+  kChunk = 0x06,
+  kMessageIndex = 0x07,
+  kChunkIndex = 0x08,
+  kAttachment = 0x09,
+  kAttachmentIndex = 0x0A,
+  kStatistics = 0x0B,
+  kMetadata = 0x0C,
+  kMetadataIndex = 0x0D,
+  kSummaryOffset = 0x0E,
+  kDataEnd = 0x0F,
+};
+
+// A bad file: which one, where, and why. what() reads "FILE: offset N: REASON".
+class McapError : public std::runtime_error {
+ public:
+  McapError(const std::filesystem::path& file, std::uint64_t offset, const std::string& reason);
+  const std::filesystem::path& file() const { return file_; }
+  std::uint64_t offset() const { return offset_; }
+  const std::string& reason() const { return reason_; }
+
+ private:
+  std::filesystem::path file_;
+  std::uint64_t offset_;
+  std::string reason_;
+};
+
+using StringMap = std::map<std::string, std::string>;
+
+struct Schema {
+  std::uint16_t id = 0;
+  std::string name;
+  std::string encoding;
+  std::string data;
+};
+
+struct Channel {
+  std::uint16_t id = 0;
+  std::uint16_t schema_id = 0;
+  std::string topic;
+  std::string message_encoding;
+  StringMap metadata;
+};
+
+struct Message {
+  std::uint16_t channel_id = 0;
+  std::uint32_t sequence = 0;
+  std::uint64_t log_time = 0;      // ns
+  std::uint64_t publish_time = 0;  // ns
+  std::span<const std::uint8_t> data;
+};
+
+struct Metadata {
+  std::string name;
+  StringMap values;
+};
+
+struct ChunkIndex {
+  std::uint64_t message_start_time = 0;
+  std::uint64_t message_end_time = 0;
+  std::uint64_t chunk_start_offset = 0;
+  std::uint64_t chunk_length = 0;  // the whole record, opcode and length included
+  std::map<std::uint16_t, std::uint64_t> message_index_offsets;
+  std::uint64_t message_index_length = 0;
+  std::string compression;
+  std::uint64_t compressed_size = 0;
+  std::uint64_t uncompressed_size = 0;
+};
+
+struct Statistics {
+  std::uint64_t message_count = 0;
+  std::uint16_t schema_count = 0;
+  std::uint32_t channel_count = 0;
+  std::uint32_t attachment_count = 0;
+  std::uint32_t metadata_count = 0;
+  std::uint32_t chunk_count = 0;
+  std::uint64_t message_start_time = 0;
+  std::uint64_t message_end_time = 0;
+  std::map<std::uint16_t, std::uint64_t> channel_message_counts;
+};
+
+enum class Compression { kNone, kZstd, kLz4 };
+std::string_view CompressionName(Compression c);  // "", "zstd", "lz4"
+
+// --- writing ------------------------------------------------------------------------------------
+
+struct WriterOptions {
+  Compression compression = Compression::kZstd;
+  int zstd_level = 1;
+  // A chunk is closed when its records reach this size or its messages span this much log time
+  // (small chunks: a killed recorder loses little, and a reader can seek finely).
+  std::size_t chunk_bytes = 1 << 20;
+  std::uint64_t chunk_ns = 250'000'000;
+  std::string profile;
+  std::string library = "vdyn-recorder";
+};
+
+class Writer {
+ public:
+  // Creates `path` (parent folders too) and writes the magic and the header. Throws McapError.
+  Writer(const std::filesystem::path& path, WriterOptions options);
+  ~Writer();  // closes (a destructor cannot report: call Close() to see errors)
+  Writer(const Writer&) = delete;
+  Writer& operator=(const Writer&) = delete;
+
+  // Schema and channel records go into the data section at once (before any message of theirs).
+  std::uint16_t AddSchema(const std::string& name, const std::string& encoding,
+                          const std::string& data);
+  std::uint16_t AddChannel(std::uint16_t schema_id, const std::string& topic,
+                           const std::string& message_encoding, const StringMap& metadata);
+  void WriteMessage(std::uint16_t channel_id, std::uint32_t sequence, std::uint64_t log_time,
+                    std::uint64_t publish_time, std::span<const std::uint8_t> data);
+  void WriteMetadata(const std::string& name, const StringMap& values);
+  // Closes the open chunk (written with its message indexes) and hands the bytes to the kernel.
+  void Flush();
+  // Flushes when the open chunk's first message is older than options.chunk_ns at `now_ns`
+  // (log time): a quiet topic does not keep its last messages in memory, where a kill loses them.
+  void FlushIfOlder(std::uint64_t now_ns);
+  // Flushes, then writes the data end, the summary (schemas, channels, statistics, metadata and
+  // chunk indexes, summary offsets), the footer and the closing magic. Throws McapError.
+  void Close();
+
+  std::uint64_t bytes_written() const { return offset_; }
+  std::uint64_t messages() const { return stats_.message_count; }
+  std::uint32_t chunks() const { return stats_.chunk_count; }
+  std::uint64_t uncompressed_bytes() const { return uncompressed_total_; }
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  void Append(const std::string& bytes);  // to the file, updating the data CRC
+  void CloseChunk();
+
+  std::filesystem::path path_;
+  WriterOptions options_;
+  int fd_ = -1;
+  bool closed_ = false;
+  std::uint64_t offset_ = 0;
+  std::uint32_t data_crc_ = 0;
+  std::vector<Schema> schemas_;
+  std::vector<Channel> channels_;
+  std::vector<std::pair<std::string, std::pair<std::uint64_t, std::uint64_t>>> metadata_index_;
+  std::vector<ChunkIndex> chunk_indexes_;
+  Statistics stats_;
+  std::uint64_t uncompressed_total_ = 0;
+  // The open chunk.
+  std::string chunk_;
+  std::uint64_t chunk_start_ = 0, chunk_end_ = 0;
+  std::map<std::uint16_t, std::vector<std::pair<std::uint64_t, std::uint64_t>>> chunk_index_;
+  struct Codec;
+  std::unique_ptr<Codec> codec_;
+};
+
+// --- reading ------------------------------------------------------------------------------------
+
+// What a scan visits, in file order. Message data points into the mapped file or into the
+// decompressed chunk: valid during the call only.
+struct Visitor {
+  std::function<void(const Schema&)> on_schema;
+  std::function<void(const Channel&)> on_channel;
+  std::function<void(const Message&, std::uint64_t record_offset)> on_message;
+  std::function<void(const Metadata&, std::uint64_t record_offset)> on_metadata;
+  // A chunk, before its messages; false skips it (not decompressed, not checked).
+  std::function<bool(const ChunkIndex&)> on_chunk;
+  // Progress: bytes of the file scanned so far.
+  std::function<void(std::uint64_t)> on_progress;
+};
+
+struct ScanResult {
+  bool complete = false;          // reached the data end record and a valid summary and footer
+  std::uint64_t good_until = 0;   // offset just past the last whole, valid record
+  std::string problem;            // lenient scans: what stopped it (empty when complete)
+  std::uint64_t problem_offset = 0;
+  std::uint64_t messages = 0;
+  std::uint32_t chunks = 0;
+  std::uint32_t chunks_skipped = 0;  // lenient: chunks dropped for a bad CRC or compression
+  std::optional<Statistics> statistics;  // from the summary
+};
+
+class Reader {
+ public:
+  // Maps the file; refuses an empty file, a foreign one (no MCAP magic) or a directory.
+  explicit Reader(const std::filesystem::path& path);
+  ~Reader();
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
+
+  // Walks every record of the data section in order, checking lengths, opcodes, CRCs and
+  // decompression, then the summary and footer. Strict (the default): throws McapError at the
+  // first problem. Lenient: stops there and reports it in the result (a bad chunk whose framing
+  // is intact is skipped and counted, and the scan goes on).
+  ScanResult Scan(const Visitor& visitor, bool lenient = false) const;
+
+  // The summary when the file has a valid footer and summary (nullopt otherwise): channels,
+  // schemas, statistics and chunk indexes without reading the data.
+  struct Summary {
+    std::vector<Schema> schemas;
+    std::vector<Channel> channels;
+    std::optional<Statistics> statistics;
+    std::vector<ChunkIndex> chunk_indexes;
+    std::vector<std::pair<std::string, std::uint64_t>> metadata_offsets;
+  };
+  std::optional<Summary> ReadSummary() const;
+
+  // The messages of one chunk (decompressed and checked), for random access (play, seek).
+  void ReadChunk(const ChunkIndex& chunk, const std::function<void(const Message&)>& on_message,
+                 std::vector<std::uint8_t>& scratch) const;
+  // Every chunk's place and time range, from the summary or (without one) a scan of the records.
+  std::vector<ChunkIndex> Chunks() const;
+  // The bytes of the file from offset for length (a chunk's raw record, for recovery).
+  std::span<const std::uint8_t> Bytes(std::uint64_t offset, std::uint64_t length) const;
+
+  std::uint64_t size() const { return size_; }
+  const std::filesystem::path& path() const { return path_; }
+  std::string header_library() const;  // the writer's name, from the header record
+
+ private:
+  [[noreturn]] void Fail(std::uint64_t offset, const std::string& reason) const;
+  std::filesystem::path path_;
+  const std::uint8_t* data_ = nullptr;
+  std::uint64_t size_ = 0;
+};
+
+// CRC-32 (zlib) of bytes, continuing from `crc` (0 to start).
+std::uint32_t Crc32(std::uint32_t crc, std::span<const std::uint8_t> bytes);
+
+}  // namespace vdyn::mcap

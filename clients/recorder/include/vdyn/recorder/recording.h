@@ -1,0 +1,104 @@
+// A vdyn recording: what goes into the MCAP file and how it is read back (docs/formats.md).
+//
+//   channel   one per topic and envelope key: "vdyn/state/1" (topic/vehicle), "vdyn/world/7e3f..."
+//             (server topics are keyed by the server key, in hex); metadata dds_topic, key,
+//             vehicle_id or server_key
+//   schema    one per message type: encoding "protobuf", the FileDescriptorSet of its .proto
+//             file and every import
+//   message   the payload exactly as it arrived (no re-encoding); log_time = when the recorder
+//             took it (wall clock, ns since the Unix epoch), publish_time = the DDS source
+//             timestamp (the sender's wall clock)
+//   metadata  "vdyn.recording" at the start (version, domain, command line, filters, what it
+//             branched from), "vdyn.world" and "vdyn.vehicle" as they arrive, "vdyn.recording.end"
+//             at the close (duration, counts, losses)
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <google/protobuf/descriptor.h>
+
+#include "vdyn/recorder/mcap.h"
+#include "vdyn/transport/topics.h"
+
+namespace vdyn::recorder {
+
+inline constexpr const char* kRecorderVersion = "0.1.0";
+inline constexpr const char* kFormatVersion = "vdyn-recording 1";
+
+// The FileDescriptorSet (binary) of a message type: its .proto file and every file it imports,
+// each after its imports (what `protoc --include_imports --descriptor_set_out` writes).
+std::string FileDescriptorSetOf(const google::protobuf::Descriptor* d);
+// The descriptor of a topic's payload type.
+const google::protobuf::Descriptor* PayloadDescriptor(transport::TopicId topic);
+
+// Topics whose envelope key is the server key rather than a vehicle id.
+bool ServerKeyed(transport::TopicId topic);
+std::string ChannelTopic(transport::TopicId topic, std::uint32_t key);
+mcap::StringMap ChannelMetadata(transport::TopicId topic, std::uint32_t key);
+
+// A channel of a vdyn recording, parsed back.
+struct ChannelInfo {
+  transport::TopicId topic = transport::TopicId::kState;
+  std::uint32_t key = 0;
+};
+// nullopt for a channel that is not a vdyn topic (a file written by another tool).
+std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c);
+
+struct RecordedMessage {
+  transport::TopicId topic;
+  std::uint32_t key = 0;
+  std::uint64_t log_time = 0;
+  std::uint64_t publish_time = 0;
+  std::span<const std::uint8_t> data;
+};
+
+// Walks a recording in file order (strict: a bad file throws mcap::McapError). Messages of
+// channels that are not vdyn topics are skipped. `on_progress` gets the fraction of the file read.
+struct RecordingVisitor {
+  std::function<void(const RecordedMessage&)> on_message;
+  std::function<void(const mcap::Metadata&)> on_metadata;
+  std::function<void(double)> on_progress;
+  // Topics to decompress at all (chunks holding none of them are still checked).
+  std::function<bool(transport::TopicId)> wants;
+};
+mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisitor& visitor);
+
+// Every metadata record of the file, in order (a full scan; cheap next to the messages).
+std::vector<mcap::Metadata> ReadMetadata(const mcap::Reader& reader);
+
+// Times: the recording's time axis is the log time since its first message, in seconds.
+std::uint64_t FirstLogTime(const mcap::Reader& reader);
+
+// "12.345 s", "1 min 2.3 s"; "1.2 MB".
+std::string FormatDuration(double seconds);
+std::string FormatBytes(double bytes);
+// Wall-clock ns since the epoch as "2026-01-02 03:04:05.678 UTC".
+std::string FormatUtc(std::uint64_t ns);
+
+// Top-level fields of a protobuf payload without parsing it into a message (the recorder reads
+// a state's step and a event's sequence at 64 kHz this way).
+namespace wire {
+struct Field {
+  std::uint32_t number = 0;
+  int type = 0;              // 0 varint, 1 fixed64, 2 length-delimited, 5 fixed32
+  std::uint64_t value = 0;   // varint, fixed64 or fixed32
+  std::span<const std::uint8_t> bytes;  // length-delimited
+};
+// Calls fn for each top-level field until fn returns false; false when the bytes are not a
+// well-formed sequence of fields (a truncated varint, a length past the end, a bad wire type).
+bool ForEachField(std::span<const std::uint8_t> payload,
+                  const std::function<bool(const Field&)>& fn);
+// The first occurrence of a varint or fixed field, or a length-delimited field's bytes.
+std::optional<std::uint64_t> Number(std::span<const std::uint8_t> payload, std::uint32_t field);
+std::optional<std::string_view> Bytes(std::span<const std::uint8_t> payload, std::uint32_t field);
+}  // namespace wire
+
+}  // namespace vdyn::recorder

@@ -1,0 +1,107 @@
+// The subcommands of vdyn-recorder that need the physics, linked by name (vdyn_replay, the
+// bridge): `verify` re-simulates a recording from its events and compares the state hash of every
+// recorded step; `takeover` finds the exact state at a moment of a recording and has a live server
+// restore it. This library (vdyn_recorder_physics) is the only part of the recorder that links
+// the physics; record, info, export, play, plot and recover never do.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <map>
+#include <optional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "vdyn/session.pb.h"
+#include "vdyn/state.pb.h"
+#include "vdyn/vehicle_params.pb.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn::recorder {
+
+// --- verify -------------------------------------------------------------------------------------
+
+struct FieldDiff {
+  std::string field;      // "wheels[2].fy", "input.throttle", "state_hash"
+  std::string recorded;
+  std::string resimulated;
+};
+
+struct Divergence {
+  std::uint32_t vehicle = 0;
+  std::uint64_t step = 0;
+  double t = 0;  // s of simulation at the step's start
+  std::uint64_t recorded_hash = 0, resimulated_hash = 0;
+  // The state message of the step, recorded against re-simulated, in field order (the hash is
+  // the state after the step: it differs; the fields are at the step's start).
+  std::vector<FieldDiff> fields;
+  // When the step's own fields all agree: the state after it (the next recorded state).
+  std::vector<FieldDiff> next_fields;
+  std::uint64_t matched_before = 0;  // steps of this vehicle that matched before it
+};
+
+struct VerifyResult {
+  bool resimulated = false;   // false: it could not be re-simulated (see cannot)
+  std::string cannot;
+  std::uint64_t compared = 0;        // recorded states whose hash was compared
+  std::uint64_t mismatched = 0;
+  std::uint64_t not_resimulated = 0;  // states before a vehicle's first spawn or checkpoint
+  struct Range {
+    std::uint64_t first = 0, last = 0, count = 0;
+  };
+  std::map<std::uint32_t, Range> vehicles;
+  std::optional<Divergence> first;
+  double sim_seconds = 0;  // simulated time re-simulated
+  double wall_seconds = 0;
+  bool ok() const { return resimulated && mismatched == 0 && compared > 0; }
+};
+
+struct VerifyOptions {
+  std::filesystem::path file;
+  std::optional<std::uint32_t> vehicle;
+  std::function<void(double)> on_progress;
+};
+VerifyResult Verify(const VerifyOptions& o);
+// Prints the result as a person reads it; 0 bit-exact, 1 diverged or cannot re-simulate.
+int RunVerify(const VerifyOptions& o, std::ostream& out);
+
+// --- takeover -----------------------------------------------------------------------------------
+
+// The exact moment of a recording a live session resumes from.
+struct BranchPoint {
+  std::uint32_t vehicle = 0;
+  std::uint64_t step = 0;
+  double at_s = 0;             // s from the recording's start
+  pb::ExactState state;        // at the step boundary
+  pb::VehicleParams params;    // complete, in effect
+  pb::InputSample input;       // applied from the step
+  std::string server_id;
+  std::string world_name;
+  std::uint64_t terrain_hash = 0;
+  bool checked = false;        // the re-simulated hash before it matched the recording
+  std::string label;           // "run.mcap@12.500s (vehicle 1, step 12500)"
+};
+// Re-simulates the recording up to the first recorded state of `vehicle` (default: the first
+// vehicle) at or after `at_s` and returns that moment. Throws std::runtime_error saying why not.
+BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
+                            std::optional<std::uint32_t> vehicle);
+
+struct TakeoverOptions {
+  std::filesystem::path file;
+  double at_s = 0;
+  std::optional<std::uint32_t> vehicle;
+  std::optional<std::uint32_t> as_vehicle;  // restore into this live vehicle id (default: same)
+  std::uint32_t domain = 0;
+  std::filesystem::path out;                // the new recording (default: FILE-takeover.mcap)
+  double duration_s = 0;                    // 0: until stopped
+  double wait_s = 10;                       // for the live server's world
+  std::string command_line;
+  bool status_line = false;
+  bool status_tty = false;
+};
+int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out);
+
+}  // namespace vdyn::recorder

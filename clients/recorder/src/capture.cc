@@ -1,0 +1,493 @@
+#include "vdyn/recorder/capture.h"
+
+#include <unistd.h>
+
+#include <condition_variable>
+#include <cstdio>
+#include <exception>
+#include <thread>
+#include <tuple>
+#include <unordered_map>
+
+#include <spdlog/spdlog.h>
+
+#include "vdyn/base/time.h"
+#include "vdyn/io/vehicle_params.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/vehicle_params.pb.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn::recorder {
+
+using transport::TopicId;
+
+std::uint64_t CaptureSummary::total_lost() const {
+  std::uint64_t n = 0;
+  for (const auto& [t, c] : topics) n += c.lost;
+  return n;
+}
+
+std::uint64_t CaptureSummary::total_dropped() const {
+  std::uint64_t n = 0;
+  for (const auto& [t, c] : topics) n += c.dropped;
+  return n;
+}
+
+std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
+  char suffix[16];
+  std::snprintf(suffix, sizeof suffix, "-%03d", index);
+  std::filesystem::path p = out;
+  p.replace_filename(out.stem().string() + suffix + out.extension().string());
+  return p;
+}
+
+namespace {
+
+// A gap of more than this many steps is a jump (a restart or a restore), not lost states.
+constexpr std::uint64_t kMaxStepGap = 5000;
+
+struct Entry {
+  TopicId topic;
+  std::uint32_t key;
+  std::uint64_t log_time;
+  std::uint64_t publish_time;
+  std::size_t offset;
+  std::uint32_t size;
+};
+
+// A run of samples and their bytes in one arena: the taker fills one while the writer drains the
+// other, and both keep their capacity (no allocation once warm).
+struct Batch {
+  std::vector<Entry> entries;
+  std::vector<std::uint8_t> bytes;
+  void clear() {
+    entries.clear();
+    bytes.clear();
+  }
+};
+
+std::string TopicShort(TopicId t) {
+  std::string n = transport::Spec(t).name;
+  return n.substr(n.find('/') + 1);
+}
+
+std::string Count(std::uint64_t n) {
+  char b[32];
+  if (n < 10'000) {
+    std::snprintf(b, sizeof b, "%llu", static_cast<unsigned long long>(n));
+  } else if (n < 10'000'000) {
+    std::snprintf(b, sizeof b, "%.1fk", static_cast<double>(n) / 1e3);
+  } else {
+    std::snprintf(b, sizeof b, "%.1fM", static_cast<double>(n) / 1e6);
+  }
+  return b;
+}
+
+}  // namespace
+
+struct Capture::Impl {
+  transport::Participant& participant;
+  RecordOptions o;
+  transport::DropCounters drops;
+  std::vector<std::pair<TopicId, std::unique_ptr<transport::RawReader>>> readers;
+  base::WallTime wall0;
+  base::MonoTime mono0;
+
+  // The buffer between taker and writer.
+  std::mutex mu;
+  std::condition_variable cv;
+  Batch pending;
+  std::size_t writer_bytes = 0;
+  std::size_t peak = 0;
+  bool done = false;
+  std::exception_ptr writer_error;
+  std::atomic<bool> writer_failed{false};
+
+  // Counters: the taker's, copied for Counts() under counts_mu.
+  mutable std::mutex counts_mu;
+  std::map<TopicId, TopicCounts> counts;
+
+  // Gap detection (taker only).
+  std::unordered_map<std::uint32_t, std::uint64_t> last_step;
+  std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, std::uint64_t> last_sequence;
+
+  // Writer side.
+  struct File {
+    std::unique_ptr<mcap::Writer> w;
+    std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> channels;
+    std::map<TopicId, std::uint16_t> schemas;
+    std::map<std::uint16_t, std::uint32_t> sequence;
+    std::uint64_t first_log = 0;
+    std::uint64_t own_messages = 0;  // not counting the world and parameters it starts with
+  };
+  File file;
+  int part = 0;
+  std::vector<std::filesystem::path> files;
+  std::uint64_t bytes_closed = 0;  // bytes of files already closed
+  std::atomic<std::uint64_t> disk_bytes{0};  // closed files and the open one, for the status
+  // The newest world and parameters of each key, re-emitted at the start of each split part.
+  struct Latched {
+    std::uint64_t publish_time = 0;
+    std::vector<std::uint8_t> data;
+  };
+  std::map<std::pair<TopicId, std::uint32_t>, Latched> latched;
+
+  Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {}
+
+  std::uint64_t LogNow() const {
+    return static_cast<std::uint64_t>((wall0 + (base::MonotonicNow() - mono0)).ns);
+  }
+  bool Wanted(TopicId t) const { return o.topics.empty() || o.topics.count(t) != 0; }
+  std::filesystem::path PartPath() const {
+    return (o.split_bytes > 0 || o.split_s > 0) ? SplitPath(o.out, part) : o.out;
+  }
+
+  // --- taker ----------------------------------------------------------------------------------
+
+  void OnSample(TopicId topic, const transport::RawSample& s, std::uint64_t now) {
+    TopicCounts& c = counts[topic];
+    const std::uint32_t key = s.info.key;
+    if (!o.vehicles.empty() && !ServerKeyed(topic) && topic != TopicId::kEvents && key != 0 &&
+        o.vehicles.count(key) == 0) {
+      return;  // filtered out (events are kept for every vehicle: their sequence shows loss)
+    }
+    std::optional<std::uint64_t> step, sequence;
+    const bool framed = wire::ForEachField(s.payload, [&](const wire::Field& f) {
+      if (topic == TopicId::kState && f.number == 3 && f.type == 0) step = f.value;
+      if (topic == TopicId::kEvents && f.number == 4 && f.type == 0) sequence = f.value;
+      if (topic == TopicId::kInput && f.number == 3 && f.type == 0) sequence = f.value;
+      return true;
+    });
+    if (!framed) {
+      ++c.malformed;
+      drops.Count("malformed payload on " + std::string(transport::Spec(topic).name));
+      return;
+    }
+    // Gaps: samples that never reached the recorder.
+    if (topic == TopicId::kState) {
+      const std::uint64_t st = step.value_or(0);  // proto3 leaves 0 out
+      auto [it, fresh] = last_step.try_emplace(key, st);
+      if (!fresh) {
+        if (st > it->second + 1 && st - it->second - 1 <= kMaxStepGap) c.lost += st - it->second - 1;
+        it->second = st;
+      }
+    } else if (topic == TopicId::kEvents || topic == TopicId::kInput) {
+      const std::uint64_t seq = sequence.value_or(0);
+      const auto id = std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key,
+                                      s.info.publication_handle);
+      auto [it, fresh] = last_sequence.try_emplace(id, seq);
+      if (!fresh) {
+        if (seq > it->second + 1) c.lost += seq - it->second - 1;
+        it->second = seq;
+      }
+    }
+    std::lock_guard<std::mutex> lock(mu);
+    const std::size_t in_use = pending.bytes.size() + writer_bytes;
+    if (in_use + s.payload.size() > o.queue_bytes) {
+      ++c.dropped;
+      return;
+    }
+    pending.entries.push_back({topic, key, now,
+                               static_cast<std::uint64_t>(std::max<std::int64_t>(0, s.info.source_timestamp_ns)),
+                               pending.bytes.size(), static_cast<std::uint32_t>(s.payload.size())});
+    pending.bytes.insert(pending.bytes.end(), s.payload.begin(), s.payload.end());
+    peak = std::max(peak, in_use + s.payload.size());
+    ++c.messages;
+    c.bytes += s.payload.size();
+  }
+
+  std::string StatusLine(double elapsed_s, std::uint64_t file_bytes, double fill) const {
+    std::string line;
+    char b[96];
+    std::snprintf(b, sizeof b, "rec %8.1f s", elapsed_s);
+    line += b;
+    for (const auto& [topic, c] : counts) {
+      if (c.messages == 0 && c.lost == 0 && c.dropped == 0) continue;
+      line += " | " + TopicShort(topic) + " " + Count(c.messages);
+      if (topic == TopicId::kState || c.bytes > 1'000'000) line += " " + FormatBytes(static_cast<double>(c.bytes));
+      if (c.lost > 0) line += " " + Count(c.lost) + " lost";
+      if (c.dropped > 0) line += " " + Count(c.dropped) + " DROPPED";
+      if (c.malformed > 0) line += " " + Count(c.malformed) + " malformed";
+    }
+    line += " | " + FormatBytes(static_cast<double>(file_bytes)) + " on disk";
+    if (fill > 0.5) {
+      std::snprintf(b, sizeof b, " | BEHIND: buffer %.0f%% full", 100.0 * fill);
+      line += b;
+    }
+    return line;
+  }
+
+  // --- writer -----------------------------------------------------------------------------------
+
+  // `now`: the log time the new file starts at (the re-emitted world and parameters carry it).
+  void OpenFile(std::uint64_t now) {
+    file = File{};
+    file.w = std::make_unique<mcap::Writer>(PartPath(), o.writer);
+    files.push_back(PartPath());
+    mcap::StringMap m;
+    m["format"] = kFormatVersion;
+    m["recorder_version"] = kRecorderVersion;
+    m["domain"] = std::to_string(participant.domain_id());
+    m["command_line"] = o.command_line;
+    m["started_utc"] = FormatUtc(static_cast<std::uint64_t>(wall0.ns));
+    char host[256] = {};
+    gethostname(host, sizeof host - 1);
+    m["host"] = host;
+    std::string topics;
+    for (const transport::TopicSpec& s : transport::AllTopics()) {
+      if (Wanted(s.id)) topics += (topics.empty() ? "" : ",") + std::string(s.name);
+    }
+    m["topics"] = topics;
+    std::string vehicles;
+    for (std::uint32_t v : o.vehicles) vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
+    m["vehicles"] = vehicles.empty() ? "all" : vehicles;
+    m["compression"] = std::string(mcap::CompressionName(o.writer.compression));
+    if (!o.branched_from.empty()) m["branched_from"] = o.branched_from;
+    if (part > 0) {
+      m["part"] = std::to_string(part);
+      m["previous_part"] = files[files.size() - 2].filename().string();
+    }
+    file.w->WriteMetadata("vdyn.recording", m);
+    // A later part starts with the world and parameters in effect, so it stands on its own.
+    for (const auto& [id, l] : latched) {
+      WriteMessage(id.first, id.second, now, l.publish_time,
+                   std::span<const std::uint8_t>(l.data.data(), l.data.size()));
+    }
+  }
+
+  void CloseFile(const std::string& reason) {
+    if (!file.w) return;
+    mcap::StringMap m;
+    const std::uint64_t now = LogNow();
+    m["ended_utc"] = FormatUtc(now);
+    m["reason"] = reason;
+    m["duration_s"] = std::to_string(static_cast<double>(now - static_cast<std::uint64_t>(wall0.ns)) * 1e-9);
+    {
+      std::lock_guard<std::mutex> lock(counts_mu);
+      for (const auto& [topic, c] : counts) {
+        const std::string t = transport::Spec(topic).name;
+        m[t + ".messages"] = std::to_string(c.messages);
+        m[t + ".lost"] = std::to_string(c.lost);
+        m[t + ".dropped"] = std::to_string(c.dropped);
+        m[t + ".malformed"] = std::to_string(c.malformed);
+      }
+    }
+    file.w->WriteMetadata("vdyn.recording.end", m);
+    file.w->Close();
+    bytes_closed += file.w->bytes_written();
+    disk_bytes = bytes_closed;
+    file.w.reset();
+  }
+
+  void Metadata(TopicId topic, std::uint32_t key, std::span<const std::uint8_t> data) {
+    if (topic == TopicId::kWorld) {
+      pb::WorldDescription w;
+      if (!w.ParseFromArray(data.data(), static_cast<int>(data.size()))) return;
+      std::size_t triangles = 0;
+      for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+      char hash[24];
+      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(w.terrain_hash()));
+      spdlog::info("vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
+                   w.name(), w.server_id(), hash, triangles);
+      file.w->WriteMetadata("vdyn.world", {{"server_id", w.server_id()},
+                                           {"name", w.name()},
+                                           {"terrain_hash", hash},
+                                           {"step_ns", std::to_string(w.step_ns())},
+                                           {"meshes", std::to_string(w.meshes_size())},
+                                           {"triangles", std::to_string(triangles)},
+                                           {"north_yaw", std::to_string(w.north_yaw())},
+                                           {"vehicles", std::to_string(w.vehicles_size())}});
+    } else if (topic == TopicId::kParams) {
+      pb::VehicleParams p;
+      if (!p.ParseFromArray(data.data(), static_cast<int>(data.size()))) return;
+      file.w->WriteMetadata("vdyn.vehicle", {{"vehicle_id", std::to_string(key)},
+                                             {"params", DumpVehicleParamsText(p)}});
+    }
+  }
+
+  void WriteMessage(TopicId topic, std::uint32_t key, std::uint64_t log_time,
+                    std::uint64_t publish_time, std::span<const std::uint8_t> data) {
+    auto ch = file.channels.find({topic, key});
+    if (ch == file.channels.end()) {
+      auto sc = file.schemas.find(topic);
+      if (sc == file.schemas.end()) {
+        const auto* d = PayloadDescriptor(topic);
+        sc = file.schemas.emplace(topic, file.w->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))).first;
+      }
+      const std::uint16_t id = file.w->AddChannel(sc->second, ChannelTopic(topic, key), "protobuf",
+                                                  ChannelMetadata(topic, key));
+      ch = file.channels.emplace(std::make_pair(topic, key), id).first;
+    }
+    if (file.first_log == 0) file.first_log = log_time;
+    file.w->WriteMessage(ch->second, file.sequence[ch->second]++, log_time, publish_time, data);
+    if (topic == TopicId::kWorld || topic == TopicId::kParams) {
+      Metadata(topic, key, data);
+      Latched& l = latched[{topic, key}];
+      l.publish_time = publish_time;
+      l.data.assign(data.begin(), data.end());
+    }
+  }
+
+  void WriterLoop() {
+    Batch work;
+    try {
+      OpenFile(LogNow());
+      while (true) {
+        {
+          std::unique_lock<std::mutex> lock(mu);
+          cv.wait_for(lock, std::chrono::milliseconds(50),
+                      [&] { return !pending.entries.empty() || done; });
+          if (pending.entries.empty() && done) break;
+          std::swap(work, pending);
+          writer_bytes = work.bytes.size();
+        }
+        const auto split_ns = static_cast<std::uint64_t>(o.split_s * 1e9);
+        for (const Entry& e : work.entries) {
+          // A new part before this message when the current one is full or old enough.
+          const bool split_size = o.split_bytes > 0 && file.own_messages > 0 &&
+                                  file.w->bytes_written() >= o.split_bytes;
+          const bool split_time = o.split_s > 0 && file.own_messages > 0 &&
+                                  e.log_time >= file.first_log + split_ns;
+          if (split_size || split_time) {
+            CloseFile("split");
+            ++part;
+            OpenFile(e.log_time);
+          }
+          WriteMessage(e.topic, e.key, e.log_time, e.publish_time,
+                       std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
+          ++file.own_messages;
+        }
+        file.w->FlushIfOlder(LogNow());
+        disk_bytes = bytes_closed + file.w->bytes_written();
+        {
+          std::lock_guard<std::mutex> lock(mu);
+          writer_bytes = 0;
+        }
+        work.clear();
+      }
+      CloseFile("stopped");
+    } catch (...) {
+      writer_error = std::current_exception();
+      writer_failed = true;
+    }
+  }
+};
+
+Capture::Capture(transport::Participant& participant, RecordOptions options)
+    : impl_(std::make_unique<Impl>(participant, std::move(options))) {
+  for (const transport::TopicSpec& s : transport::AllTopics()) {
+    if (!impl_->Wanted(s.id)) continue;
+    impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
+                                          participant, s.id, &impl_->drops,
+                                          transport::ReaderRole::kRecorder));
+    impl_->counts[s.id];
+  }
+  ready_ = true;
+}
+
+Capture::~Capture() = default;
+
+std::uint32_t Capture::MatchedWriters(TopicId topic) const {
+  for (auto& [t, reader] : impl_->readers) {
+    if (t == topic) return reader->MatchedWriters();
+  }
+  return 0;
+}
+
+std::map<TopicId, TopicCounts> Capture::Counts() const {
+  std::lock_guard<std::mutex> lock(impl_->counts_mu);
+  return impl_->counts;
+}
+
+CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
+  Impl& m = *impl_;
+  m.wall0 = base::WallNow();
+  m.mono0 = base::MonotonicNow();
+  const base::Nanos cpu0 = base::ProcessCpuTime();
+  std::thread writer([&m] { m.WriterLoop(); });
+  transport::Waitset waitset(m.participant);
+  for (auto& [topic, reader] : m.readers) waitset.Attach(*reader);
+  base::MonoTime last_status = m.mono0;
+  base::MonoTime last_match_check{0};
+  std::vector<std::uint32_t> matched(m.readers.size(), 0);
+  std::uint64_t last_dropped = 0;
+  base::MonoTime last_warning{0};
+  const auto end_ns = static_cast<std::int64_t>(m.o.duration_s * 1e9);
+  auto take_all = [&] {
+    bool any = false;
+    for (auto& [topic, reader] : m.readers) {
+      const TopicId t = topic;
+      std::unique_lock<std::mutex> counts_lock(m.counts_mu);
+      const int n = reader->TakeRaw([&](const transport::RawSample& s) { m.OnSample(t, s, m.LogNow()); });
+      any = any || n > 0;
+    }
+    if (any) m.cv.notify_one();
+  };
+  while (!stop.load() && !m.writer_failed.load()) {
+    waitset.Wait(std::chrono::milliseconds(100));
+    take_all();
+    const base::MonoTime now = base::MonotonicNow();
+    if (end_ns > 0 && (now - m.mono0).ns >= end_ns) break;
+    if ((now - last_match_check).ns >= 100'000'000) {
+      // Say when a topic's writers come and go: a person (or a test) sees the recorder hears
+      // the server before anything happens.
+      last_match_check = now;
+      for (std::size_t i = 0; i < m.readers.size(); ++i) {
+        const std::uint32_t n = m.readers[i].second->MatchedWriters();
+        if (n != matched[i]) {
+          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n, transport::Spec(m.readers[i].first).name);
+          matched[i] = n;
+        }
+      }
+    }
+    if ((now - last_status).ns >= 1'000'000'000) {
+      last_status = now;
+      std::uint64_t dropped = 0, file_bytes = 0;
+      double fill = 0;
+      std::string line;
+      {
+        std::lock_guard<std::mutex> lock(m.mu);
+        fill = static_cast<double>(m.pending.bytes.size() + m.writer_bytes) /
+               static_cast<double>(m.o.queue_bytes);
+      }
+      {
+        std::lock_guard<std::mutex> lock(m.counts_mu);
+        for (const auto& [t, c] : m.counts) dropped += c.dropped;
+        file_bytes = m.disk_bytes.load();
+        line = m.StatusLine((now - m.mono0).seconds(), file_bytes, fill);
+      }
+      if (dropped > last_dropped && (now - last_warning).ns >= 10'000'000'000) {
+        last_warning = now;
+        spdlog::warn("vdyn-recorder is falling behind: {} messages dropped so far (the buffer of {} "
+                     "is full: the disk or the compression cannot keep up)",
+                     dropped, FormatBytes(static_cast<double>(m.o.queue_bytes)));
+      }
+      last_dropped = dropped;
+      if (m.o.status_line) {
+        std::fprintf(stderr, m.o.status_tty ? "\r%s\033[K" : "%s\n", line.c_str());
+        std::fflush(stderr);
+      }
+    }
+  }
+  take_all();  // what arrived up to the stop
+  {
+    std::lock_guard<std::mutex> lock(m.mu);
+    m.done = true;
+  }
+  m.cv.notify_one();
+  writer.join();
+  if (m.o.status_line && m.o.status_tty) std::fprintf(stderr, "\n");
+  if (m.writer_error) std::rethrow_exception(m.writer_error);
+  CaptureSummary s;
+  s.files = m.files;
+  s.topics = Counts();
+  for (const auto& [t, c] : s.topics) s.messages += c.messages;
+  s.bytes_on_disk = m.bytes_closed;
+  s.seconds = (base::MonotonicNow() - m.mono0).seconds();
+  s.cpu_seconds = (base::ProcessCpuTime() - cpu0).seconds();
+  s.queue_peak_bytes = m.peak;
+  for (auto& [topic, reader] : m.readers) s.dds_samples_lost += reader->SamplesLost();
+  return s;
+}
+
+}  // namespace vdyn::recorder

@@ -1,0 +1,103 @@
+// `vdyn-recorder export FILE --csv OUT.csv`: the recorded states as the batch CSV (io's
+// CsvWriter over VehicleState: the same columns, units and order as `vdyn-server --batch --csv`,
+// so one analysis script reads both).
+#include <map>
+#include <memory>
+#include <set>
+
+#include "vdyn/io/csv.h"
+#include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/state.pb.h"
+
+namespace vdyn::recorder {
+
+namespace {
+
+std::filesystem::path VehiclePath(const std::filesystem::path& csv, std::uint32_t id) {
+  std::filesystem::path p = csv;
+  p.replace_filename(csv.stem().string() + "-v" + std::to_string(id) + csv.extension().string());
+  return p;
+}
+
+}  // namespace
+
+int RunExport(const ExportOptions& o, std::ostream& out) {
+  mcap::Reader reader(o.file);
+  // The vehicles first (from the summary's channels when there is one: no second full scan).
+  std::set<std::uint32_t> vehicles;
+  if (auto s = reader.ReadSummary()) {
+    for (const mcap::Channel& c : s->channels) {
+      const auto info = ParseChannelInfo(c);
+      if (info && info->topic == transport::TopicId::kState) vehicles.insert(info->key);
+    }
+  } else {
+    RecordingVisitor v;
+    v.wants = [](transport::TopicId t) { return t == transport::TopicId::kState; };
+    v.on_message = [&](const RecordedMessage& m) { vehicles.insert(m.key); };
+    ScanRecording(reader, v);
+  }
+  if (vehicles.empty()) {
+    out << "vdyn-recorder export: " << o.file.string() << " holds no vehicle states (vdyn/state)\n";
+    return 1;
+  }
+  std::set<std::uint32_t> chosen;
+  if (o.vehicle) {
+    if (vehicles.count(*o.vehicle) == 0) {
+      std::string have;
+      for (std::uint32_t v : vehicles) have += (have.empty() ? "" : ", ") + std::to_string(v);
+      out << "vdyn-recorder export: no states of vehicle " << *o.vehicle << " in " << o.file.string()
+          << " (it has vehicle " << have << ")\n";
+      return 2;
+    }
+    chosen = {*o.vehicle};
+  } else if (o.each || vehicles.size() == 1) {
+    chosen = vehicles;
+  } else {
+    std::string have;
+    for (std::uint32_t v : vehicles) have += (have.empty() ? "" : ", ") + std::to_string(v);
+    out << "vdyn-recorder export: " << o.file.string() << " holds vehicles " << have
+        << ": choose one with --vehicle ID, or --each for a file per vehicle\n";
+    return 2;
+  }
+  std::map<std::uint32_t, std::unique_ptr<CsvWriter>> writers;
+  for (std::uint32_t id : chosen) {
+    writers[id] = std::make_unique<CsvWriter>(o.each ? VehiclePath(o.csv, id) : o.csv);
+  }
+  const std::uint64_t start = FirstLogTime(reader);
+  const auto from = start + static_cast<std::uint64_t>(o.from_s * 1e9);
+  const auto to = o.to_s ? start + static_cast<std::uint64_t>(*o.to_s * 1e9) : ~0ull;
+  const auto every = static_cast<std::uint64_t>(std::max(1, o.every));
+  pb::VehicleState state;
+  std::uint64_t malformed = 0;
+  Progress progress("export");
+  RecordingVisitor v;
+  v.wants = [](transport::TopicId t) { return t == transport::TopicId::kState; };
+  v.on_progress = [&](double f) { progress.Update(f); };
+  v.on_message = [&](const RecordedMessage& m) {
+    if (m.log_time < from || m.log_time > to) return;
+    const auto w = writers.find(m.key);
+    if (w == writers.end()) return;
+    // The step first, without parsing: decimation skips most states cheaply.
+    if (every > 1 && wire::Number(m.data, 3).value_or(0) % every != 0) return;
+    if (!state.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+      ++malformed;
+      return;
+    }
+    w->second->WriteRow(state);
+  };
+  ScanRecording(reader, v);
+  progress.Finish();
+  for (auto& [id, w] : writers) {
+    w->Close();
+    out << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
+        << " columns -> " << (o.each ? VehiclePath(o.csv, id) : o.csv).string() << "\n";
+  }
+  if (malformed > 0) {
+    out << "vdyn-recorder export: " << malformed << " state messages did not parse and were skipped\n";
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace vdyn::recorder

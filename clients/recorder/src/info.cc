@@ -1,0 +1,264 @@
+// `vdyn-recorder info FILE`: what a recording holds - channels, counts, time range, vehicles,
+// world, gaps - and whether it re-simulates (decided from its events and world, without physics).
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <set>
+
+#include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/session.pb.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn::recorder {
+
+using transport::TopicId;
+
+Progress::Progress(std::string label)
+    : label_(std::move(label)), enabled_(isatty(STDERR_FILENO) == 1) {}
+Progress::~Progress() { Finish(); }
+void Progress::Update(double fraction) {
+  if (!enabled_) return;
+  const int percent = std::clamp(static_cast<int>(fraction * 100.0), 0, 100);
+  if (percent == last_percent_) return;
+  last_percent_ = percent;
+  constexpr int kWidth = 40;
+  const int filled = percent * kWidth / 100;
+  std::fprintf(stderr, "\r%s [%.*s%*s] %3d%%", label_.c_str(), filled,
+               "########################################", kWidth - filled, "", percent);
+  std::fflush(stderr);
+}
+void Progress::Finish() {
+  if (!enabled_ || last_percent_ < 0) return;
+  std::fprintf(stderr, "\r\033[K");
+  std::fflush(stderr);
+  last_percent_ = -1;
+  enabled_ = false;
+}
+
+namespace {
+
+struct ChannelStats {
+  std::uint64_t messages = 0, bytes = 0, first = 0, last = 0;
+};
+
+struct VehicleStats {
+  std::uint64_t states = 0;
+  std::uint64_t first_step = 0, last_step = 0;
+  std::uint64_t missing = 0, largest_gap = 0, gap_at = 0, jumps = 0;
+  bool any = false;
+  std::int64_t step_ns = 0;
+};
+
+struct ServerEvents {
+  std::uint64_t count = 0, first = 0, last = 0, gaps = 0, missing = 0;
+  bool any = false;
+  std::set<std::uint64_t> terrain_hashes;
+  std::map<std::uint32_t, std::uint64_t> start_step;  // vehicle -> first spawn or checkpoint
+  std::map<std::uint32_t, std::string> branched_from;
+};
+
+std::string Hex(std::uint64_t v) {
+  char b[24];
+  std::snprintf(b, sizeof b, "%016llx", static_cast<unsigned long long>(v));
+  return b;
+}
+
+}  // namespace
+
+int RunInfo(const std::filesystem::path& path, std::ostream& out) {
+  mcap::Reader reader(path);
+  std::map<std::string, ChannelStats> channels;
+  std::map<std::uint32_t, VehicleStats> vehicles;
+  std::map<std::string, ServerEvents> servers;
+  std::map<std::string, pb::WorldDescription> worlds;  // by server id (meshes dropped)
+  std::vector<mcap::Metadata> meta;
+  std::uint64_t first = 0, last = 0, messages = 0;
+  std::map<std::string, std::uint64_t> compression_chunks;
+  std::uint64_t packed = 0, unpacked = 0;
+  Progress progress("info");
+  RecordingVisitor v;
+  v.on_progress = [&](double f) { progress.Update(f); };
+  v.on_metadata = [&](const mcap::Metadata& m) { meta.push_back(m); };
+  v.on_message = [&](const RecordedMessage& m) {
+    ++messages;
+    if (first == 0 || m.log_time < first) first = m.log_time;
+    last = std::max(last, m.log_time);
+    ChannelStats& c = channels[ChannelTopic(m.topic, m.key)];
+    if (c.messages == 0) c.first = m.log_time;
+    ++c.messages;
+    c.bytes += m.data.size();
+    c.last = m.log_time;
+    if (m.topic == TopicId::kState) {
+      const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
+      VehicleStats& vs = vehicles[m.key];
+      if (!vs.any) {
+        vs.any = true;
+        vs.first_step = step;
+        vs.step_ns = static_cast<std::int64_t>(wire::Number(m.data, 5).value_or(0));
+      } else if (step > vs.last_step + 1) {
+        const std::uint64_t gap = step - vs.last_step - 1;
+        if (gap > 5000) {
+          ++vs.jumps;
+        } else {
+          vs.missing += gap;
+          if (gap > vs.largest_gap) {
+            vs.largest_gap = gap;
+            vs.gap_at = vs.last_step + 1;
+          }
+        }
+      }
+      vs.last_step = std::max(vs.any ? vs.last_step : step, step);
+      ++vs.states;
+    } else if (m.topic == TopicId::kEvents) {
+      pb::SessionEvent e;
+      if (!e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
+      ServerEvents& s = servers[e.server_id()];
+      if (s.any && e.sequence() > s.last + 1) {
+        ++s.gaps;
+        s.missing += e.sequence() - s.last - 1;
+      }
+      if (!s.any) s.first = e.sequence();
+      s.any = true;
+      s.last = std::max(s.last, e.sequence());
+      ++s.count;
+      if (e.has_spawned() || e.has_checkpoint()) {
+        s.terrain_hashes.insert(e.has_spawned() ? e.spawned().terrain_hash() : e.checkpoint().terrain_hash());
+        s.start_step.try_emplace(e.vehicle_id(), e.step());
+        if (e.has_spawned() && !e.spawned().branched_from().empty()) {
+          s.branched_from[e.vehicle_id()] = e.spawned().branched_from();
+        }
+      }
+    } else if (m.topic == TopicId::kWorld) {
+      pb::WorldDescription w;
+      if (!w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
+      std::size_t triangles = 0;
+      for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+      w.mutable_landmarks()->Clear();
+      w.clear_meshes();
+      w.add_meshes()->set_name(std::to_string(triangles));  // keeps the count, not the data
+      worlds[w.server_id()] = std::move(w);
+    }
+  };
+  const mcap::ScanResult scan = ScanRecording(reader, v);
+  for (const mcap::ChunkIndex& c : reader.Chunks()) {
+    ++compression_chunks[c.compression.empty() ? "none" : c.compression];
+    packed += c.compressed_size;
+    unpacked += c.uncompressed_size;
+  }
+  progress.Finish();
+
+  char line[512];
+  auto t = [&](std::uint64_t ns) { return first == 0 ? 0.0 : static_cast<double>(ns - first) * 1e-9; };
+  std::string comp;
+  for (const auto& [name, n] : compression_chunks) comp += (comp.empty() ? "" : ", ") + std::to_string(n) + " " + name;
+  std::snprintf(line, sizeof line, "file        %s (%s; %llu messages; chunks: %s; %.0f%% of the raw size)\n",
+                path.string().c_str(), FormatBytes(static_cast<double>(reader.size())).c_str(),
+                static_cast<unsigned long long>(messages), comp.empty() ? "none" : comp.c_str(),
+                unpacked > 0 ? 100.0 * static_cast<double>(packed) / static_cast<double>(unpacked) : 100.0);
+  out << line;
+  out << "written by  " << reader.header_library() << (scan.complete ? ", closed with index and summary\n" : "\n");
+  for (const mcap::Metadata& m : meta) {
+    if (m.name == "vdyn.recording") {
+      auto get = [&](const char* k) { auto it = m.values.find(k); return it == m.values.end() ? std::string() : it->second; };
+      out << "recorded    " << get("started_utc") << " on domain " << get("domain") << " (host " << get("host") << ")"
+          << (get("part").empty() ? "" : ", part " + get("part") + " after " + get("previous_part")) << "\n";
+      out << "command     " << get("command_line") << "\n";
+      if (get("vehicles") != "all" || get("topics").find("vdyn/diagnostics") == std::string::npos) {
+        out << "filters     topics " << get("topics") << "; vehicles " << get("vehicles") << "\n";
+      }
+      if (!get("branched_from").empty()) out << "branched    from " << get("branched_from") << "\n";
+    }
+  }
+  std::snprintf(line, sizeof line, "time        %s (log time %s .. %s)\n", FormatDuration(t(last)).c_str(),
+                first ? FormatUtc(first).c_str() : "-", last ? FormatUtc(last).c_str() : "-");
+  out << line;
+  for (const auto& [server, w] : worlds) {
+    std::snprintf(line, sizeof line, "world       '%s' of server '%s': terrain hash %s, %d meshes, %s triangles, step %g ms\n",
+                  w.name().c_str(), server.c_str(), Hex(w.terrain_hash()).c_str(), w.meshes_size(),
+                  w.meshes(0).name().c_str(), static_cast<double>(w.step_ns()) * 1e-6);
+    out << line;
+  }
+  if (worlds.empty()) out << "world       none recorded\n";
+  out << "vehicles    " << (vehicles.empty() ? "no states recorded" : "") << "\n";
+  for (const auto& [id, vs] : vehicles) {
+    const double h = static_cast<double>(vs.step_ns) * 1e-9;
+    std::snprintf(line, sizeof line, "  %-9u steps %llu..%llu (%.3f .. %.3f s of simulation), %llu states, %llu missing%s\n", id,
+                  static_cast<unsigned long long>(vs.first_step), static_cast<unsigned long long>(vs.last_step),
+                  static_cast<double>(vs.first_step) * h, static_cast<double>(vs.last_step + 1) * h,
+                  static_cast<unsigned long long>(vs.states), static_cast<unsigned long long>(vs.missing),
+                  vs.jumps ? (" (" + std::to_string(vs.jumps) + " jumps: restarts or restores)").c_str() : "");
+    out << line;
+  }
+  out << "channels\n";
+  for (const auto& [name, c] : channels) {
+    const double span = static_cast<double>(c.last - c.first) * 1e-9;
+    std::snprintf(line, sizeof line, "  %-26s %9llu msgs %9.1f Hz %10s   %8.3f .. %8.3f s\n", name.c_str(),
+                  static_cast<unsigned long long>(c.messages),
+                  span > 0 ? static_cast<double>(c.messages - 1) / span : 0.0,
+                  FormatBytes(static_cast<double>(c.bytes)).c_str(), t(c.first), t(c.last));
+    out << line;
+  }
+  // Gaps: states and events that never reached the recorder, and what it counted itself.
+  std::string gaps;
+  for (const auto& [id, vs] : vehicles) {
+    if (vs.missing == 0) continue;
+    gaps += "\n  vehicle " + std::to_string(id) + ": " + std::to_string(vs.missing) +
+            " states missing (largest gap " + std::to_string(vs.largest_gap) + " steps, from step " +
+            std::to_string(vs.gap_at) + ")";
+  }
+  for (const auto& [server, s] : servers) {
+    if (s.missing == 0) continue;
+    gaps += "\n  server '" + server + "': " + std::to_string(s.missing) + " events missing in " +
+            std::to_string(s.gaps) + " gaps";
+  }
+  for (const mcap::Metadata& m : meta) {
+    if (m.name != "vdyn.recording.end") continue;
+    for (const auto& [k, val] : m.values) {
+      const bool loss = k.ends_with(".lost") || k.ends_with(".dropped") || k.ends_with(".malformed");
+      if (loss && val != "0") gaps += "\n  the recorder counted " + val + " " + k.substr(k.rfind('.') + 1) + " on " + k.substr(0, k.rfind('.'));
+    }
+  }
+  out << "gaps" << (gaps.empty() ? "        none" : gaps) << "\n";
+  for (const auto& [server, s] : servers) {
+    std::snprintf(line, sizeof line, "events      server '%s': %llu events, sequence %llu..%llu%s\n", server.c_str(),
+                  static_cast<unsigned long long>(s.count), static_cast<unsigned long long>(s.first),
+                  static_cast<unsigned long long>(s.last), s.gaps ? "" : ", no gap");
+    out << line;
+    for (const auto& [veh, from] : s.branched_from) {
+      out << "            vehicle " << veh << " continues " << from << "\n";
+    }
+  }
+  // Re-simulation: the world it ran on, a start for each vehicle, no lost event.
+  std::string no;
+  if (servers.empty()) no = "no session events recorded (vdyn/events)";
+  for (const auto& [server, s] : servers) {
+    if (!no.empty()) break;
+    const auto w = worlds.find(server);
+    if (w == worlds.end()) {
+      no = "no world description of server '" + server + "' (vdyn/world)";
+    } else if (s.terrain_hashes.size() > 1 || (s.terrain_hashes.size() == 1 && *s.terrain_hashes.begin() != w->second.terrain_hash())) {
+      no = "the events name another terrain than the recorded world";
+    } else if (s.gaps > 0) {
+      no = std::to_string(s.missing) + " events of server '" + server + "' are missing";
+    }
+  }
+  std::string starts;
+  for (const auto& [id, vs] : vehicles) {
+    std::optional<std::uint64_t> start;
+    for (const auto& [server, s] : servers) {
+      if (auto it = s.start_step.find(id); it != s.start_step.end()) start = it->second;
+    }
+    if (!start) {
+      if (no.empty()) no = "vehicle " + std::to_string(id) + " has no spawn or checkpoint event";
+    } else {
+      starts += (starts.empty() ? "" : ", ") + std::string("vehicle ") + std::to_string(id) + " from step " + std::to_string(*start);
+    }
+  }
+  out << "re-simulates " << (no.empty() ? "yes: " + (starts.empty() ? std::string("no states to check") : starts) + " (`vdyn-recorder verify` checks every state hash)" : "no: " + no) << "\n";
+  return 0;
+}
+
+}  // namespace vdyn::recorder

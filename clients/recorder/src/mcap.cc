@@ -1,0 +1,1076 @@
+#include "vdyn/recorder/mcap.h"
+
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <limits>
+
+#include <lz4frame.h>
+#include <zlib.h>
+#include <zstd.h>
+
+namespace vdyn::mcap {
+namespace {
+
+// The largest chunk we agree to decompress: a corrupted size field must not make us allocate
+// without bound.
+constexpr std::uint64_t kMaxUncompressedChunk = 1ull << 31;
+constexpr std::uint64_t kFooterContent = 8 + 8 + 4;
+constexpr std::uint64_t kFooterRecord = 1 + 8 + kFooterContent;
+
+const char* OpName(std::uint8_t op) {
+  switch (op) {
+    case kHeader: return "header";
+    case kFooter: return "footer";
+    case kSchema: return "schema";
+    case kChannel: return "channel";
+    case kMessage: return "message";
+    case kChunk: return "chunk";
+    case kMessageIndex: return "message index";
+    case kChunkIndex: return "chunk index";
+    case kAttachment: return "attachment";
+    case kAttachmentIndex: return "attachment index";
+    case kStatistics: return "statistics";
+    case kMetadata: return "metadata";
+    case kMetadataIndex: return "metadata index";
+    case kSummaryOffset: return "summary offset";
+    case kDataEnd: return "data end";
+    default: return op >= 0x80 ? "private" : "unknown";
+  }
+}
+
+std::string Hex32(std::uint32_t v) {
+  char b[16];
+  std::snprintf(b, sizeof b, "0x%08x", v);
+  return b;
+}
+
+// --- serialisation (little endian, as the spec says) ----------------------------------------------
+
+void PutU8(std::string& o, std::uint8_t v) { o.push_back(static_cast<char>(v)); }
+template <class T>
+void PutLe(std::string& o, T v) {
+  for (std::size_t i = 0; i < sizeof(T); ++i) {
+    o.push_back(static_cast<char>(static_cast<std::uint8_t>(v >> (8 * i))));
+  }
+}
+void PutU16(std::string& o, std::uint16_t v) { PutLe(o, v); }
+void PutU32(std::string& o, std::uint32_t v) { PutLe(o, v); }
+void PutU64(std::string& o, std::uint64_t v) { PutLe(o, v); }
+void PutStr(std::string& o, std::string_view s) {
+  PutU32(o, static_cast<std::uint32_t>(s.size()));
+  o.append(s);
+}
+void PutMap(std::string& o, const StringMap& m) {
+  std::string body;
+  for (const auto& [k, v] : m) {
+    PutStr(body, k);
+    PutStr(body, v);
+  }
+  PutStr(o, body);
+}
+// Opens a record: opcode and a length placeholder; CloseRecord fills the length in.
+std::size_t OpenRecord(std::string& o, Op op) {
+  PutU8(o, op);
+  const std::size_t at = o.size();
+  PutU64(o, 0);
+  return at;
+}
+void CloseRecord(std::string& o, std::size_t at) {
+  const std::uint64_t len = o.size() - at - 8;
+  for (int i = 0; i < 8; ++i) o[at + static_cast<std::size_t>(i)] = static_cast<char>(len >> (8 * i));
+}
+
+// Reads fields of one record's content; a field past the end is a malformed record.
+struct Malformed {
+  std::string what;
+};
+class Cursor {
+ public:
+  explicit Cursor(std::span<const std::uint8_t> b) : b_(b) {}
+  template <class T>
+  T Le(const char* field) {
+    Need(sizeof(T), field);
+    T v = 0;
+    for (std::size_t i = 0; i < sizeof(T); ++i) v |= static_cast<T>(static_cast<T>(b_[pos_ + i]) << (8 * i));
+    pos_ += sizeof(T);
+    return v;
+  }
+  std::uint8_t U8(const char* f) { return Le<std::uint8_t>(f); }
+  std::uint16_t U16(const char* f) { return Le<std::uint16_t>(f); }
+  std::uint32_t U32(const char* f) { return Le<std::uint32_t>(f); }
+  std::uint64_t U64(const char* f) { return Le<std::uint64_t>(f); }
+  std::span<const std::uint8_t> Take(std::uint64_t n, const char* field) {
+    Need(n, field);
+    auto s = b_.subspan(pos_, static_cast<std::size_t>(n));
+    pos_ += static_cast<std::size_t>(n);
+    return s;
+  }
+  std::string Str(const char* field) {
+    const std::uint32_t n = U32(field);
+    auto s = Take(n, field);
+    return {reinterpret_cast<const char*>(s.data()), s.size()};
+  }
+  StringMap Map(const char* field) {
+    const std::uint32_t n = U32(field);
+    Cursor m(Take(n, field));
+    StringMap out;
+    while (!m.done()) {
+      std::string k = m.Str(field);
+      out[k] = m.Str(field);
+    }
+    return out;
+  }
+  std::span<const std::uint8_t> Rest() { return Take(b_.size() - pos_, "data"); }
+  bool done() const { return pos_ == b_.size(); }
+  std::size_t pos() const { return pos_; }
+
+ private:
+  void Need(std::uint64_t n, const char* field) const {
+    if (n > b_.size() - pos_) {
+      throw Malformed{std::string("field '") + field + "' runs past the record's end (" +
+                      std::to_string(n) + " bytes wanted, " + std::to_string(b_.size() - pos_) +
+                      " left)"};
+    }
+  }
+  std::span<const std::uint8_t> b_;
+  std::size_t pos_ = 0;
+};
+
+Schema ParseSchema(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  Schema s;
+  s.id = r.U16("id");
+  s.name = r.Str("name");
+  s.encoding = r.Str("encoding");
+  const std::uint32_t n = r.U32("data");
+  auto d = r.Take(n, "data");
+  s.data.assign(reinterpret_cast<const char*>(d.data()), d.size());
+  return s;
+}
+
+Channel ParseChannel(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  Channel ch;
+  ch.id = r.U16("id");
+  ch.schema_id = r.U16("schema_id");
+  ch.topic = r.Str("topic");
+  ch.message_encoding = r.Str("message_encoding");
+  ch.metadata = r.Map("metadata");
+  return ch;
+}
+
+Message ParseMessage(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  Message m;
+  m.channel_id = r.U16("channel_id");
+  m.sequence = r.U32("sequence");
+  m.log_time = r.U64("log_time");
+  m.publish_time = r.U64("publish_time");
+  m.data = r.Rest();
+  return m;
+}
+
+struct ChunkHeader {
+  ChunkIndex index;
+  std::uint32_t crc = 0;
+  std::span<const std::uint8_t> records;
+};
+
+ChunkHeader ParseChunk(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  ChunkHeader h;
+  h.index.message_start_time = r.U64("message_start_time");
+  h.index.message_end_time = r.U64("message_end_time");
+  h.index.uncompressed_size = r.U64("uncompressed_size");
+  h.crc = r.U32("uncompressed_crc");
+  h.index.compression = r.Str("compression");
+  const std::uint64_t n = r.U64("records");
+  h.records = r.Take(n, "records");
+  h.index.compressed_size = n;
+  return h;
+}
+
+ChunkIndex ParseChunkIndex(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  ChunkIndex ci;
+  ci.message_start_time = r.U64("message_start_time");
+  ci.message_end_time = r.U64("message_end_time");
+  ci.chunk_start_offset = r.U64("chunk_start_offset");
+  ci.chunk_length = r.U64("chunk_length");
+  const std::uint32_t n = r.U32("message_index_offsets");
+  Cursor m(r.Take(n, "message_index_offsets"));
+  while (!m.done()) {
+    const std::uint16_t ch = m.U16("message_index_offsets");
+    ci.message_index_offsets[ch] = m.U64("message_index_offsets");
+  }
+  ci.message_index_length = r.U64("message_index_length");
+  ci.compression = r.Str("compression");
+  ci.compressed_size = r.U64("compressed_size");
+  ci.uncompressed_size = r.U64("uncompressed_size");
+  return ci;
+}
+
+Statistics ParseStatistics(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  Statistics s;
+  s.message_count = r.U64("message_count");
+  s.schema_count = r.U16("schema_count");
+  s.channel_count = r.U32("channel_count");
+  s.attachment_count = r.U32("attachment_count");
+  s.metadata_count = r.U32("metadata_count");
+  s.chunk_count = r.U32("chunk_count");
+  s.message_start_time = r.U64("message_start_time");
+  s.message_end_time = r.U64("message_end_time");
+  const std::uint32_t n = r.U32("channel_message_counts");
+  Cursor m(r.Take(n, "channel_message_counts"));
+  while (!m.done()) {
+    const std::uint16_t ch = m.U16("channel_message_counts");
+    s.channel_message_counts[ch] = m.U64("channel_message_counts");
+  }
+  return s;
+}
+
+Metadata ParseMetadata(std::span<const std::uint8_t> c) {
+  Cursor r(c);
+  Metadata m;
+  m.name = r.Str("name");
+  m.values = r.Map("metadata");
+  return m;
+}
+
+// Decompresses a chunk's records into `out` (exactly uncompressed_size bytes) or says why not.
+std::string Decompress(const std::string& compression, std::span<const std::uint8_t> in,
+                       std::uint64_t uncompressed_size, std::vector<std::uint8_t>& out) {
+  if (uncompressed_size > kMaxUncompressedChunk) {
+    return "a chunk claims " + std::to_string(uncompressed_size) +
+           " uncompressed bytes, more than this reader accepts";
+  }
+  out.resize(static_cast<std::size_t>(uncompressed_size));
+  if (compression.empty()) {
+    if (in.size() != uncompressed_size) {
+      return "an uncompressed chunk of " + std::to_string(in.size()) + " bytes claims " +
+             std::to_string(uncompressed_size);
+    }
+    std::memcpy(out.data(), in.data(), in.size());
+    return {};
+  }
+  if (compression == "zstd") {
+    thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> ctx(ZSTD_createDCtx(),
+                                                                          &ZSTD_freeDCtx);
+    const std::size_t n = ZSTD_decompressDCtx(ctx.get(), out.data(), out.size(), in.data(), in.size());
+    if (ZSTD_isError(n)) return std::string("zstd: ") + ZSTD_getErrorName(n);
+    if (n != uncompressed_size) {
+      return "zstd gave " + std::to_string(n) + " bytes, the chunk claims " +
+             std::to_string(uncompressed_size);
+    }
+    return {};
+  }
+  if (compression == "lz4") {
+    LZ4F_dctx* dctx = nullptr;
+    if (LZ4F_isError(LZ4F_createDecompressionContext(&dctx, LZ4F_VERSION))) {
+      return "lz4: cannot create a decompression context";
+    }
+    std::size_t in_pos = 0, out_pos = 0;
+    std::string why;
+    while (true) {
+      std::size_t src = in.size() - in_pos, dst = out.size() - out_pos;
+      const std::size_t hint =
+          LZ4F_decompress(dctx, out.data() + out_pos, &dst, in.data() + in_pos, &src, nullptr);
+      if (LZ4F_isError(hint)) {
+        why = std::string("lz4: ") + LZ4F_getErrorName(hint);
+        break;
+      }
+      in_pos += src;
+      out_pos += dst;
+      if (hint == 0) break;  // the frame is complete
+      if (src == 0 && dst == 0) {
+        why = "lz4: the frame ends early";
+        break;
+      }
+    }
+    LZ4F_freeDecompressionContext(dctx);
+    if (!why.empty()) return why;
+    if (out_pos != uncompressed_size) {
+      return "lz4 gave " + std::to_string(out_pos) + " bytes, the chunk claims " +
+             std::to_string(uncompressed_size);
+    }
+    return {};
+  }
+  return "unknown compression '" + compression + "'";
+}
+
+}  // namespace
+
+std::uint32_t Crc32(std::uint32_t crc, std::span<const std::uint8_t> bytes) {
+  // zlib takes 32-bit lengths: feed it in pieces.
+  uLong c = crc;
+  std::size_t at = 0;
+  while (at < bytes.size()) {
+    const std::size_t n = std::min<std::size_t>(bytes.size() - at, 1u << 30);
+    c = crc32(c, bytes.data() + at, static_cast<uInt>(n));
+    at += n;
+  }
+  return static_cast<std::uint32_t>(c);
+}
+
+namespace {
+std::uint32_t Crc32(std::uint32_t crc, std::string_view s) {
+  return mcap::Crc32(crc, {reinterpret_cast<const std::uint8_t*>(s.data()), s.size()});
+}
+}  // namespace
+
+McapError::McapError(const std::filesystem::path& file, std::uint64_t offset,
+                     const std::string& reason)
+    : std::runtime_error(file.string() + ": offset " + std::to_string(offset) + ": " + reason),
+      file_(file),
+      offset_(offset),
+      reason_(reason) {}
+
+std::string_view CompressionName(Compression c) {
+  switch (c) {
+    case Compression::kNone: return "";
+    case Compression::kZstd: return "zstd";
+    case Compression::kLz4: return "lz4";
+  }
+  return "";
+}
+
+// --- writer -------------------------------------------------------------------------------------
+
+struct Writer::Codec {
+  ZSTD_CCtx* zstd = nullptr;
+  std::vector<char> out;
+  ~Codec() {
+    if (zstd != nullptr) ZSTD_freeCCtx(zstd);
+  }
+  // Compressed bytes, or an empty view when compression does not pay (then stored as is).
+  std::string_view Compress(Compression c, int level, const std::string& in) {
+    if (c == Compression::kZstd) {
+      if (zstd == nullptr) zstd = ZSTD_createCCtx();
+      out.resize(ZSTD_compressBound(in.size()));
+      const std::size_t n =
+          ZSTD_compressCCtx(zstd, out.data(), out.size(), in.data(), in.size(), level);
+      if (ZSTD_isError(n) || n >= in.size()) return {};
+      return {out.data(), n};
+    }
+    if (c == Compression::kLz4) {
+      LZ4F_preferences_t prefs{};
+      prefs.frameInfo.contentSize = in.size();
+      out.resize(LZ4F_compressFrameBound(in.size(), &prefs));
+      const std::size_t n = LZ4F_compressFrame(out.data(), out.size(), in.data(), in.size(), &prefs);
+      if (LZ4F_isError(n) || n >= in.size()) return {};
+      return {out.data(), n};
+    }
+    return {};
+  }
+};
+
+Writer::Writer(const std::filesystem::path& path, WriterOptions options)
+    : path_(path), options_(std::move(options)), codec_(std::make_unique<Codec>()) {
+  std::error_code ec;
+  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
+  fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw McapError(path, 0, std::string("cannot create the file: ") + std::strerror(errno));
+  std::string head(reinterpret_cast<const char*>(kMagic), sizeof kMagic);
+  const std::size_t at = OpenRecord(head, kHeader);
+  PutStr(head, options_.profile);
+  PutStr(head, options_.library);
+  CloseRecord(head, at);
+  Append(head);
+  stats_.message_start_time = std::numeric_limits<std::uint64_t>::max();
+}
+
+Writer::~Writer() {
+  try {
+    Close();
+  } catch (const std::exception&) {
+    // Reported by an explicit Close(); a destructor cannot.
+  }
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void Writer::Append(const std::string& bytes) {
+  if (fd_ < 0) throw McapError(path_, offset_, "the file is closed");
+  data_crc_ = Crc32(data_crc_, bytes);
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd_, bytes.data() + done, bytes.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw McapError(path_, offset_ + done, std::string("write failed: ") + std::strerror(errno));
+    }
+    done += static_cast<std::size_t>(n);
+  }
+  offset_ += bytes.size();
+}
+
+std::uint16_t Writer::AddSchema(const std::string& name, const std::string& encoding,
+                                const std::string& data) {
+  Schema s{static_cast<std::uint16_t>(schemas_.size() + 1), name, encoding, data};
+  std::string rec;
+  const std::size_t at = OpenRecord(rec, kSchema);
+  PutU16(rec, s.id);
+  PutStr(rec, s.name);
+  PutStr(rec, s.encoding);
+  PutStr(rec, s.data);
+  CloseRecord(rec, at);
+  Append(rec);
+  schemas_.push_back(std::move(s));
+  return schemas_.back().id;
+}
+
+std::uint16_t Writer::AddChannel(std::uint16_t schema_id, const std::string& topic,
+                                 const std::string& message_encoding, const StringMap& metadata) {
+  if (channels_.size() >= 65535) throw McapError(path_, offset_, "more than 65535 channels");
+  Channel c{static_cast<std::uint16_t>(channels_.size() + 1), schema_id, topic, message_encoding,
+            metadata};
+  std::string rec;
+  const std::size_t at = OpenRecord(rec, kChannel);
+  PutU16(rec, c.id);
+  PutU16(rec, c.schema_id);
+  PutStr(rec, c.topic);
+  PutStr(rec, c.message_encoding);
+  PutMap(rec, c.metadata);
+  CloseRecord(rec, at);
+  Append(rec);
+  channels_.push_back(std::move(c));
+  return channels_.back().id;
+}
+
+void Writer::WriteMessage(std::uint16_t channel_id, std::uint32_t sequence, std::uint64_t log_time,
+                          std::uint64_t publish_time, std::span<const std::uint8_t> data) {
+  if (chunk_.empty()) {
+    chunk_start_ = log_time;
+    chunk_end_ = log_time;
+  }
+  chunk_start_ = std::min(chunk_start_, log_time);
+  chunk_end_ = std::max(chunk_end_, log_time);
+  chunk_index_[channel_id].emplace_back(log_time, chunk_.size());
+  const std::size_t at = OpenRecord(chunk_, kMessage);
+  PutU16(chunk_, channel_id);
+  PutU32(chunk_, sequence);
+  PutU64(chunk_, log_time);
+  PutU64(chunk_, publish_time);
+  chunk_.append(reinterpret_cast<const char*>(data.data()), data.size());
+  CloseRecord(chunk_, at);
+  ++stats_.message_count;
+  ++stats_.channel_message_counts[channel_id];
+  stats_.message_start_time = std::min(stats_.message_start_time, log_time);
+  stats_.message_end_time = std::max(stats_.message_end_time, log_time);
+  if (chunk_.size() >= options_.chunk_bytes || chunk_end_ - chunk_start_ >= options_.chunk_ns) {
+    CloseChunk();
+  }
+}
+
+void Writer::WriteMetadata(const std::string& name, const StringMap& values) {
+  std::string rec;
+  const std::size_t at = OpenRecord(rec, kMetadata);
+  PutStr(rec, name);
+  PutMap(rec, values);
+  CloseRecord(rec, at);
+  metadata_index_.push_back({name, {offset_, rec.size()}});
+  Append(rec);
+  ++stats_.metadata_count;
+}
+
+void Writer::CloseChunk() {
+  if (chunk_.empty()) return;
+  std::string_view packed = codec_->Compress(options_.compression, options_.zstd_level, chunk_);
+  std::string_view compression = CompressionName(options_.compression);
+  if (packed.empty()) {  // does not pay (or compression off): store as is
+    packed = chunk_;
+    compression = "";
+  }
+  ChunkIndex ci;
+  ci.message_start_time = chunk_start_;
+  ci.message_end_time = chunk_end_;
+  ci.chunk_start_offset = offset_;
+  ci.compression = std::string(compression);
+  ci.compressed_size = packed.size();
+  ci.uncompressed_size = chunk_.size();
+  std::string rec;
+  rec.reserve(packed.size() + 128);
+  const std::size_t at = OpenRecord(rec, kChunk);
+  PutU64(rec, chunk_start_);
+  PutU64(rec, chunk_end_);
+  PutU64(rec, chunk_.size());
+  PutU32(rec, Crc32(0, chunk_));
+  PutStr(rec, compression);
+  PutU64(rec, packed.size());
+  rec.append(packed);
+  CloseRecord(rec, at);
+  ci.chunk_length = rec.size();
+  // One message index per channel of the chunk, in channel order, right after it.
+  for (auto& [channel, entries] : chunk_index_) {
+    std::stable_sort(entries.begin(), entries.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
+    ci.message_index_offsets[channel] = offset_ + rec.size();
+    const std::size_t mi = OpenRecord(rec, kMessageIndex);
+    PutU16(rec, channel);
+    PutU32(rec, static_cast<std::uint32_t>(entries.size() * 16));
+    for (const auto& [t, off] : entries) {
+      PutU64(rec, t);
+      PutU64(rec, off);
+    }
+    CloseRecord(rec, mi);
+  }
+  ci.message_index_length = rec.size() - ci.chunk_length;
+  Append(rec);
+  uncompressed_total_ += chunk_.size();
+  chunk_indexes_.push_back(std::move(ci));
+  ++stats_.chunk_count;
+  chunk_.clear();
+  chunk_index_.clear();
+}
+
+void Writer::Flush() { CloseChunk(); }
+
+void Writer::FlushIfOlder(std::uint64_t now_ns) {
+  if (!chunk_.empty() && now_ns >= chunk_start_ && now_ns - chunk_start_ >= options_.chunk_ns) {
+    CloseChunk();
+  }
+}
+
+void Writer::Close() {
+  if (closed_ || fd_ < 0) return;
+  closed_ = true;
+  CloseChunk();
+  std::string end;
+  std::size_t at = OpenRecord(end, kDataEnd);
+  PutU32(end, data_crc_);  // every byte before this record
+  CloseRecord(end, at);
+  Append(end);
+
+  // The summary, grouped by opcode, each group located by a summary offset record.
+  const std::uint64_t summary_start = offset_;
+  std::string sum;
+  std::vector<std::tuple<Op, std::uint64_t, std::uint64_t>> groups;
+  auto group = [&](Op op, const std::function<void()>& write) {
+    const std::size_t before = sum.size();
+    write();
+    if (sum.size() > before) groups.emplace_back(op, summary_start + before, sum.size() - before);
+  };
+  group(kSchema, [&] {
+    for (const Schema& s : schemas_) {
+      const std::size_t a = OpenRecord(sum, kSchema);
+      PutU16(sum, s.id);
+      PutStr(sum, s.name);
+      PutStr(sum, s.encoding);
+      PutStr(sum, s.data);
+      CloseRecord(sum, a);
+    }
+  });
+  group(kChannel, [&] {
+    for (const Channel& c : channels_) {
+      const std::size_t a = OpenRecord(sum, kChannel);
+      PutU16(sum, c.id);
+      PutU16(sum, c.schema_id);
+      PutStr(sum, c.topic);
+      PutStr(sum, c.message_encoding);
+      PutMap(sum, c.metadata);
+      CloseRecord(sum, a);
+    }
+  });
+  group(kStatistics, [&] {
+    const std::size_t a = OpenRecord(sum, kStatistics);
+    const bool any = stats_.message_count > 0;
+    PutU64(sum, stats_.message_count);
+    PutU16(sum, static_cast<std::uint16_t>(schemas_.size()));
+    PutU32(sum, static_cast<std::uint32_t>(channels_.size()));
+    PutU32(sum, 0);
+    PutU32(sum, stats_.metadata_count);
+    PutU32(sum, stats_.chunk_count);
+    PutU64(sum, any ? stats_.message_start_time : 0);
+    PutU64(sum, any ? stats_.message_end_time : 0);
+    std::string counts;
+    for (const auto& [ch, n] : stats_.channel_message_counts) {
+      PutU16(counts, ch);
+      PutU64(counts, n);
+    }
+    PutStr(sum, counts);
+    CloseRecord(sum, a);
+  });
+  group(kMetadataIndex, [&] {
+    for (const auto& [name, where] : metadata_index_) {
+      const std::size_t a = OpenRecord(sum, kMetadataIndex);
+      PutU64(sum, where.first);
+      PutU64(sum, where.second);
+      PutStr(sum, name);
+      CloseRecord(sum, a);
+    }
+  });
+  group(kChunkIndex, [&] {
+    for (const ChunkIndex& ci : chunk_indexes_) {
+      const std::size_t a = OpenRecord(sum, kChunkIndex);
+      PutU64(sum, ci.message_start_time);
+      PutU64(sum, ci.message_end_time);
+      PutU64(sum, ci.chunk_start_offset);
+      PutU64(sum, ci.chunk_length);
+      std::string offsets;
+      for (const auto& [ch, off] : ci.message_index_offsets) {
+        PutU16(offsets, ch);
+        PutU64(offsets, off);
+      }
+      PutStr(sum, offsets);
+      PutU64(sum, ci.message_index_length);
+      PutStr(sum, ci.compression);
+      PutU64(sum, ci.compressed_size);
+      PutU64(sum, ci.uncompressed_size);
+      CloseRecord(sum, a);
+    }
+  });
+  const std::uint64_t summary_offset_start = summary_start + sum.size();
+  for (const auto& [op, start, length] : groups) {
+    const std::size_t a = OpenRecord(sum, kSummaryOffset);
+    PutU8(sum, op);
+    PutU64(sum, start);
+    PutU64(sum, length);
+    CloseRecord(sum, a);
+  }
+  PutU8(sum, kFooter);
+  PutU64(sum, kFooterContent);
+  PutU64(sum, summary_start);
+  PutU64(sum, summary_offset_start);
+  PutU32(sum, Crc32(0, sum));  // from the summary's start through summary_offset_start
+  sum.append(reinterpret_cast<const char*>(kMagic), sizeof kMagic);
+  Append(sum);
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    throw McapError(path_, offset_, std::string("closing the file failed: ") + std::strerror(errno));
+  }
+}
+
+// --- reader -------------------------------------------------------------------------------------
+
+Reader::Reader(const std::filesystem::path& path) : path_(path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) {
+    throw McapError(path, 0, std::string("cannot open the file: ") + std::strerror(errno));
+  }
+  if (S_ISDIR(st.st_mode)) throw McapError(path, 0, "a directory, not an MCAP file");
+  size_ = static_cast<std::uint64_t>(st.st_size);
+  if (size_ == 0) throw McapError(path, 0, "empty file (0 bytes): not an MCAP recording");
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw McapError(path, 0, std::string("cannot open the file: ") + std::strerror(errno));
+  void* m = ::mmap(nullptr, static_cast<std::size_t>(size_), PROT_READ, MAP_PRIVATE, fd, 0);
+  ::close(fd);
+  if (m == MAP_FAILED) throw McapError(path, 0, std::string("cannot map the file: ") + std::strerror(errno));
+  data_ = static_cast<const std::uint8_t*>(m);
+  const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(size_, 8));
+  if (std::memcmp(data_, kMagic, n) != 0) {
+    std::string start;
+    for (std::size_t i = 0; i < n; ++i) {
+      char b[8];
+      std::snprintf(b, sizeof b, "%s%02x", i ? " " : "", data_[i]);
+      start += b;
+    }
+    ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
+    data_ = nullptr;
+    throw McapError(path, 0, "not an MCAP file: it starts with bytes " + start +
+                                 ", not the MCAP magic 89 4d 43 41 50 30 0d 0a");
+  }
+  if (size_ < 8) {
+    ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
+    data_ = nullptr;
+    throw McapError(path, size_, "truncated: the file ends inside the MCAP magic");
+  }
+}
+
+Reader::~Reader() {
+  if (data_ != nullptr) ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
+}
+
+void Reader::Fail(std::uint64_t offset, const std::string& reason) const {
+  throw McapError(path_, offset, reason);
+}
+
+std::span<const std::uint8_t> Reader::Bytes(std::uint64_t offset, std::uint64_t length) const {
+  if (offset > size_ || length > size_ - offset) {
+    Fail(offset, "a range of " + std::to_string(length) + " bytes runs past the end of the file");
+  }
+  return {data_ + offset, static_cast<std::size_t>(length)};
+}
+
+std::string Reader::header_library() const {
+  if (size_ < 17 || data_[8] != kHeader) return {};
+  try {
+    const std::uint64_t len = Cursor({data_ + 9, 8}).U64("length");
+    if (len > size_ - 17) return {};
+    Cursor r({data_ + 17, static_cast<std::size_t>(len)});
+    r.Str("profile");
+    return r.Str("library");
+  } catch (const Malformed&) {
+    return {};
+  }
+}
+
+namespace {
+
+// One record's frame: where it is and what it holds.
+struct Frame {
+  std::uint8_t op = 0;
+  std::uint64_t offset = 0;
+  std::span<const std::uint8_t> content;
+  std::uint64_t end() const { return offset + 9 + content.size(); }
+};
+
+// The frame at `pos`, or why there is none (truncation).
+std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t pos, Frame& f) {
+  if (size - pos < 9) {
+    return "truncated: a record starts here but the file ends " + std::to_string(size - pos) +
+           " bytes later (a record header needs 9)";
+  }
+  f.op = data[pos];
+  f.offset = pos;
+  std::uint64_t len = 0;
+  for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(data[pos + 1 + static_cast<std::uint64_t>(i)]) << (8 * i);
+  if (f.op == 0) return "opcode 0 is not a record: the file is corrupted";
+  if (len > size - pos - 9) {
+    return std::string("truncated: a ") + OpName(f.op) + " record of " + std::to_string(len) +
+           " bytes starts here but only " + std::to_string(size - pos - 9) +
+           " bytes follow (the recorder was stopped before it closed the file?)";
+  }
+  f.content = {data + pos + 9, static_cast<std::size_t>(len)};
+  return {};
+}
+
+}  // namespace
+
+ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
+  ScanResult res;
+  std::vector<bool> schema_known(65536, false), channel_known(65536, false);
+  std::vector<std::uint8_t> scratch;
+  std::uint32_t crc = Crc32(0, std::span<const std::uint8_t>(data_, 8));
+  std::uint64_t pos = 8;
+  std::uint64_t last_progress = 0;
+  res.good_until = 8;
+  // Strict: throw. Lenient: record the problem and stop (return true).
+  auto problem = [&](std::uint64_t at, const std::string& why) {
+    if (!lenient) Fail(at, why);
+    res.problem = why;
+    res.problem_offset = at;
+    return true;
+  };
+  auto inner_records = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at) -> std::string {
+    std::uint64_t p = 0;
+    while (p < recs.size()) {
+      Frame f;
+      const std::string why = FrameAt(recs.data(), recs.size(), p, f);
+      if (!why.empty()) return "inside the chunk at offset " + std::to_string(chunk_at) + ", byte " + std::to_string(p) + ": " + why;
+      try {
+        if (f.op == kSchema) {
+          const Schema s = ParseSchema(f.content);
+          if (s.id == 0) return "a schema with id 0 inside a chunk";
+          schema_known[s.id] = true;
+          if (v.on_schema) v.on_schema(s);
+        } else if (f.op == kChannel) {
+          const Channel c = ParseChannel(f.content);
+          if (c.schema_id != 0 && !schema_known[c.schema_id]) {
+            return "channel " + std::to_string(c.id) + " names schema " + std::to_string(c.schema_id) + ", which no schema record defines";
+          }
+          channel_known[c.id] = true;
+          if (v.on_channel) v.on_channel(c);
+        } else if (f.op == kMessage) {
+          const Message m = ParseMessage(f.content);
+          if (!channel_known[m.channel_id]) {
+            return "a message on channel " + std::to_string(m.channel_id) + ", which no channel record defines";
+          }
+          ++res.messages;
+          if (v.on_message) v.on_message(m, chunk_at);
+        }
+      } catch (const Malformed& e) {
+        return std::string("inside the chunk at offset ") + std::to_string(chunk_at) + ": a malformed " + OpName(f.op) + " record: " + e.what;
+      }
+      p = f.end();
+    }
+    return {};
+  };
+  bool data_end = false;
+  while (!data_end) {
+    if (v.on_progress && pos - last_progress > (16u << 20)) {
+      v.on_progress(pos);
+      last_progress = pos;
+    }
+    if (pos == size_) {
+      problem(pos, "the file ends without a data end record and footer: the recorder did not close "
+                   "it (killed?); `vdyn-recorder recover` rebuilds its index and summary");
+      return res;
+    }
+    Frame f;
+    if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) {
+      problem(pos, why);
+      return res;
+    }
+    if (pos == 8 && f.op != kHeader) {
+      problem(pos, std::string("the first record is a ") + OpName(f.op) + " record, not the header");
+      return res;
+    }
+    try {
+      switch (f.op) {
+        case kHeader:
+          if (pos != 8) {
+            problem(pos, "a second header record");
+            return res;
+          }
+          {
+            Cursor r(f.content);
+            r.Str("profile");
+            r.Str("library");
+          }
+          break;
+        case kSchema: {
+          const Schema s = ParseSchema(f.content);
+          if (s.id == 0) {
+            problem(pos, "a schema with id 0");
+            return res;
+          }
+          schema_known[s.id] = true;
+          if (v.on_schema) v.on_schema(s);
+          break;
+        }
+        case kChannel: {
+          const Channel c = ParseChannel(f.content);
+          if (c.schema_id != 0 && !schema_known[c.schema_id]) {
+            problem(pos, "channel " + std::to_string(c.id) + " names schema " + std::to_string(c.schema_id) + ", which no schema record defines");
+            return res;
+          }
+          channel_known[c.id] = true;
+          if (v.on_channel) v.on_channel(c);
+          break;
+        }
+        case kMessage: {
+          const Message m = ParseMessage(f.content);
+          if (!channel_known[m.channel_id]) {
+            problem(pos, "a message on channel " + std::to_string(m.channel_id) + ", which no channel record defines");
+            return res;
+          }
+          ++res.messages;
+          if (v.on_message) v.on_message(m, pos);
+          break;
+        }
+        case kChunk: {
+          ChunkHeader h = ParseChunk(f.content);
+          h.index.chunk_start_offset = pos;
+          h.index.chunk_length = f.end() - pos;
+          if (v.on_chunk && !v.on_chunk(h.index)) break;
+          std::string why = Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch);
+          if (why.empty() && h.crc != 0) {
+            const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
+            if (got != h.crc) {
+              why = "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
+                    "): the file is corrupted";
+            }
+          }
+          if (why.empty()) why = inner_records(scratch, pos);
+          if (!why.empty()) {
+            if (!lenient) Fail(pos, why);
+            // The chunk's frame is whole: drop the chunk, keep going.
+            ++res.chunks_skipped;
+            if (res.problem.empty()) {
+              res.problem = why;
+              res.problem_offset = pos;
+            }
+            break;
+          }
+          ++res.chunks;
+          break;
+        }
+        case kMetadata: {
+          const Metadata m = ParseMetadata(f.content);
+          if (v.on_metadata) v.on_metadata(m, pos);
+          break;
+        }
+        case kDataEnd: {
+          Cursor r(f.content);
+          const std::uint32_t stored = r.U32("data_section_crc");
+          if (stored != 0 && stored != crc) {
+            problem(pos, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
+                             Hex32(crc) + "): the file is corrupted");
+            return res;
+          }
+          data_end = true;
+          break;
+        }
+        case kFooter:
+          problem(pos, "a footer before the data end record");
+          return res;
+        default:
+          break;  // message indexes, attachments, private records: nothing to check here
+      }
+    } catch (const Malformed& e) {
+      problem(pos, std::string("a malformed ") + OpName(f.op) + " record: " + e.what);
+      return res;
+    }
+    crc = Crc32(crc, std::span<const std::uint8_t>(data_ + pos, static_cast<std::size_t>(f.end() - pos)));
+    pos = f.end();
+    res.good_until = pos;
+  }
+  // The footer at the end of the file (and the magic after it), whose CRC covers the summary;
+  // then the summary's records between the data end and the footer.
+  const std::uint64_t summary_pos = pos;
+  if (size_ - pos < kFooterRecord + 8) {
+    problem(pos, "truncated: the file ends after the data end record, before its footer");
+    return res;
+  }
+  const std::uint64_t footer = size_ - 8 - kFooterRecord;
+  if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
+      Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
+    problem(footer, "truncated: the file does not end with a footer record and the MCAP magic");
+    return res;
+  }
+  {
+    Cursor r({data_ + footer + 9, static_cast<std::size_t>(kFooterContent)});
+    const std::uint64_t summary_start = r.U64("summary_start");
+    r.U64("summary_offset_start");
+    const std::uint32_t stored = r.U32("summary_crc");
+    if (stored != 0) {
+      const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
+      if (got != stored) {
+        problem(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
+        return res;
+      }
+    }
+    if (summary_start != 0 && summary_start != summary_pos) {
+      problem(footer, "the footer places the summary at offset " + std::to_string(summary_start) +
+                          ", but it starts at " + std::to_string(summary_pos));
+      return res;
+    }
+  }
+  while (pos < footer) {
+    Frame f;
+    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) {
+      problem(pos, why + " (in the summary)");
+      return res;
+    }
+    if (f.op == kStatistics) {
+      try {
+        res.statistics = ParseStatistics(f.content);
+      } catch (const Malformed& e) {
+        problem(pos, std::string("a malformed statistics record: ") + e.what);
+        return res;
+      }
+    }
+    pos = f.end();
+  }
+  res.complete = true;
+  if (v.on_progress) v.on_progress(size_);
+  return res;
+}
+
+std::optional<Reader::Summary> Reader::ReadSummary() const {
+  if (size_ < 8 + kFooterRecord + 8) return std::nullopt;
+  if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0) return std::nullopt;
+  const std::uint64_t footer = size_ - 8 - kFooterRecord;
+  if (data_[footer] != kFooter) return std::nullopt;
+  Cursor fr({data_ + footer + 1, 8 + kFooterContent});
+  if (fr.U64("length") != kFooterContent) return std::nullopt;
+  const std::uint64_t summary_start = fr.U64("summary_start");
+  fr.U64("summary_offset_start");
+  const std::uint32_t stored = fr.U32("summary_crc");
+  if (summary_start == 0 || summary_start > footer) return std::nullopt;
+  if (stored != 0) {
+    const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_start, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_start)));
+    if (got != stored) {
+      Fail(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
+    }
+  }
+  Summary s;
+  std::uint64_t pos = summary_start;
+  while (pos < footer) {
+    Frame f;
+    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) Fail(pos, why + " (in the summary)");
+    try {
+      switch (f.op) {
+        case kSchema: s.schemas.push_back(ParseSchema(f.content)); break;
+        case kChannel: s.channels.push_back(ParseChannel(f.content)); break;
+        case kStatistics: s.statistics = ParseStatistics(f.content); break;
+        case kChunkIndex: s.chunk_indexes.push_back(ParseChunkIndex(f.content)); break;
+        case kMetadataIndex: {
+          Cursor r(f.content);
+          const std::uint64_t off = r.U64("offset");
+          r.U64("length");
+          s.metadata_offsets.emplace_back(r.Str("name"), off);
+          break;
+        }
+        default: break;
+      }
+    } catch (const Malformed& e) {
+      Fail(pos, std::string("a malformed ") + OpName(f.op) + " record in the summary: " + e.what);
+    }
+    pos = f.end();
+  }
+  return s;
+}
+
+void Reader::ReadChunk(const ChunkIndex& chunk,
+                       const std::function<void(const Message&)>& on_message,
+                       std::vector<std::uint8_t>& scratch) const {
+  const std::uint64_t pos = chunk.chunk_start_offset;
+  if (pos >= size_) Fail(pos, "a chunk index points past the end of the file");
+  Frame f;
+  if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) Fail(pos, why);
+  if (f.op != kChunk) Fail(pos, std::string("a chunk index points at a ") + OpName(f.op) + " record");
+  ChunkHeader h;
+  try {
+    h = ParseChunk(f.content);
+  } catch (const Malformed& e) {
+    Fail(pos, std::string("a malformed chunk record: ") + e.what);
+  }
+  if (const std::string why = Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch); !why.empty()) {
+    Fail(pos, why);
+  }
+  if (h.crc != 0) {
+    const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
+    if (got != h.crc) Fail(pos, "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) + "): the file is corrupted");
+  }
+  std::uint64_t p = 0;
+  while (p < scratch.size()) {
+    Frame r;
+    if (const std::string why = FrameAt(scratch.data(), scratch.size(), p, r); !why.empty()) {
+      Fail(pos, "inside the chunk, byte " + std::to_string(p) + ": " + why);
+    }
+    if (r.op == kMessage) {
+      try {
+        on_message(ParseMessage(r.content));
+      } catch (const Malformed& e) {
+        Fail(pos, std::string("inside the chunk: a malformed message record: ") + e.what);
+      }
+    }
+    p = r.end();
+  }
+}
+
+std::vector<ChunkIndex> Reader::Chunks() const {
+  if (auto s = ReadSummary(); s && s->statistics && s->chunk_indexes.size() == s->statistics->chunk_count) {
+    return s->chunk_indexes;
+  }
+  // No summary: walk the record frames (chunk contents are not read), up to the first problem.
+  std::vector<ChunkIndex> out;
+  std::uint64_t pos = 8;
+  while (pos < size_) {
+    Frame f;
+    if (!FrameAt(data_, size_, pos, f).empty()) break;
+    if (f.op == kDataEnd) break;
+    if (f.op == kChunk) {
+      try {
+        ChunkHeader h = ParseChunk(f.content);
+        h.index.chunk_start_offset = pos;
+        h.index.chunk_length = f.end() - pos;
+        out.push_back(h.index);
+      } catch (const Malformed&) {
+        break;
+      }
+    }
+    pos = f.end();
+  }
+  return out;
+}
+
+}  // namespace vdyn::mcap

@@ -1,0 +1,589 @@
+// verify and takeover: the recorder's only code that links the physics (vdyn_replay, the bridge).
+#include "vdyn/recorder/verify.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cinttypes>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <set>
+#include <stdexcept>
+#include <thread>
+
+#include <google/protobuf/descriptor.h>
+#include <google/protobuf/message.h>
+#include <google/protobuf/reflection.h>
+
+#include "vdyn/bridge/convert.h"
+#include "vdyn/physics/world.h"
+#include "vdyn/recorder/capture.h"
+#include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/replay/resim.h"
+#include "vdyn/transport/control_client.h"
+
+namespace vdyn::recorder {
+
+using transport::TopicId;
+
+namespace {
+
+std::string Hex(std::uint64_t v) {
+  char b[24];
+  std::snprintf(b, sizeof b, "0x%016" PRIx64, v);
+  return b;
+}
+
+struct Server {
+  std::optional<pb::WorldDescription> world;
+  std::vector<pb::SessionEvent> events;
+};
+
+// Every server's world and events (the small part of a recording), in one pass.
+std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
+                                            const std::function<void(double)>& progress) {
+  std::map<std::string, Server> servers;
+  RecordingVisitor v;
+  v.wants = [](TopicId t) { return t == TopicId::kEvents || t == TopicId::kWorld; };
+  v.on_progress = progress;
+  v.on_message = [&](const RecordedMessage& m) {
+    if (m.topic == TopicId::kEvents) {
+      pb::SessionEvent e;
+      if (e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        servers[e.server_id()].events.push_back(std::move(e));
+      }
+    } else {
+      pb::WorldDescription w;
+      if (w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        const std::string id = w.server_id();
+        servers[id].world = std::move(w);
+      }
+    }
+  };
+  ScanRecording(reader, v);
+  for (auto& [id, s] : servers) {
+    std::stable_sort(s.events.begin(), s.events.end(),
+                     [](const auto& a, const auto& b) { return a.sequence() < b.sequence(); });
+  }
+  return servers;
+}
+
+// Why a server's events cannot be re-simulated, or empty.
+std::string CheckServer(const std::string& id, const Server& s) {
+  if (!s.world) return "no world description of server '" + id + "' was recorded (vdyn/world)";
+  for (std::size_t i = 1; i < s.events.size(); ++i) {
+    const std::uint64_t a = s.events[i - 1].sequence(), b = s.events[i].sequence();
+    if (b != a + 1 && b != a) {
+      return std::to_string(b - a - 1) + " events of server '" + id + "' are missing after sequence " +
+             std::to_string(a) + ": the recording lost them";
+    }
+  }
+  return {};
+}
+
+// The leaf fields in which two messages differ, in field order ("wheels[2].fy").
+void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b,
+          const std::string& prefix, std::vector<FieldDiff>& out) {
+  using FD = google::protobuf::FieldDescriptor;
+  const auto* d = a.GetDescriptor();
+  const auto* ra = a.GetReflection();
+  const auto* rb = b.GetReflection();
+  auto num = [](double v) {
+    char s[40];
+    std::snprintf(s, sizeof s, "%.17g", v);
+    return std::string(s);
+  };
+  for (int i = 0; i < d->field_count(); ++i) {
+    const FD* f = d->field(i);
+    const std::string name = prefix + f->name();
+    if (f->is_repeated()) {
+      const int na = ra->FieldSize(a, f), nb = rb->FieldSize(b, f);
+      if (na != nb) {
+        out.push_back({name + ".size", std::to_string(na), std::to_string(nb)});
+        continue;
+      }
+      for (int k = 0; k < na; ++k) {
+        const std::string item = name + "[" + std::to_string(k) + "]";
+        if (f->cpp_type() == FD::CPPTYPE_MESSAGE) {
+          Diff(ra->GetRepeatedMessage(a, f, k), rb->GetRepeatedMessage(b, f, k), item + ".", out);
+        } else if (f->cpp_type() == FD::CPPTYPE_DOUBLE) {
+          const double x = ra->GetRepeatedDouble(a, f, k), y = rb->GetRepeatedDouble(b, f, k);
+          if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({item, num(x), num(y)});
+        }
+      }
+      continue;
+    }
+    switch (f->cpp_type()) {
+      case FD::CPPTYPE_MESSAGE:
+        Diff(ra->GetMessage(a, f), rb->GetMessage(b, f), name + ".", out);
+        break;
+      case FD::CPPTYPE_DOUBLE: {
+        const double x = ra->GetDouble(a, f), y = rb->GetDouble(b, f);
+        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(x), num(y)});
+        break;
+      }
+      case FD::CPPTYPE_FLOAT: {
+        const float x = ra->GetFloat(a, f), y = rb->GetFloat(b, f);
+        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(x), num(y)});
+        break;
+      }
+      case FD::CPPTYPE_BOOL:
+        if (ra->GetBool(a, f) != rb->GetBool(b, f)) {
+          out.push_back({name, ra->GetBool(a, f) ? "true" : "false", rb->GetBool(b, f) ? "true" : "false"});
+        }
+        break;
+      case FD::CPPTYPE_UINT64:
+        if (ra->GetUInt64(a, f) != rb->GetUInt64(b, f)) {
+          const bool hash = f->type() == FD::TYPE_FIXED64;
+          out.push_back({name, hash ? Hex(ra->GetUInt64(a, f)) : std::to_string(ra->GetUInt64(a, f)),
+                         hash ? Hex(rb->GetUInt64(b, f)) : std::to_string(rb->GetUInt64(b, f))});
+        }
+        break;
+      case FD::CPPTYPE_INT64:
+        if (ra->GetInt64(a, f) != rb->GetInt64(b, f)) {
+          out.push_back({name, std::to_string(ra->GetInt64(a, f)), std::to_string(rb->GetInt64(b, f))});
+        }
+        break;
+      case FD::CPPTYPE_UINT32:
+        if (ra->GetUInt32(a, f) != rb->GetUInt32(b, f)) {
+          out.push_back({name, std::to_string(ra->GetUInt32(a, f)), std::to_string(rb->GetUInt32(b, f))});
+        }
+        break;
+      case FD::CPPTYPE_INT32:
+      case FD::CPPTYPE_ENUM:
+        break;  // ids and modes, not physics
+      case FD::CPPTYPE_STRING:
+        break;  // ids (server, source), not physics
+    }
+  }
+}
+
+// One vehicle's replay: streams forward as states arrive, keeps recent hashes for states that
+// arrive a little out of order.
+struct VehicleRun {
+  static constexpr std::size_t kRing = 1 << 14;
+  std::string server;
+  std::shared_ptr<const World> world;
+  std::uint64_t terrain_hash = 0;
+  std::vector<const pb::SessionEvent*> events;
+  std::unique_ptr<VehicleReplayer> replayer;
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> ring =
+      std::vector<std::pair<std::uint64_t, std::uint64_t>>(kRing, {~0ull, 0});
+  std::uint64_t replayed_to = 0;  // steps below this have been asked for
+  std::uint64_t matched = 0;
+  std::int64_t step_ns = 0;
+  std::string error;
+
+  std::unique_ptr<VehicleReplayer> Fresh(std::uint32_t id, std::string* why) const {
+    auto r = std::make_unique<VehicleReplayer>(world, terrain_hash, id);
+    for (const pb::SessionEvent* e : events) {
+      if (!r->Add(*e, why)) return nullptr;
+    }
+    return r;
+  }
+};
+
+// The state message the re-simulation gives for the step it just ran, made like the server's
+// (the recorded message lends what is not physics: server id, time, the input's source).
+pb::VehicleState Resimulated(const VehicleReplayer& r, const pb::VehicleState& recorded) {
+  const Simulator& sim = *r.simulator();
+  const StepRecord& rec = sim.last_step();
+  pb::DriverInput input = recorded.input();
+  ToProto(rec.input, input);
+  pb::VehicleState out;
+  FillVehicleState(recorded.vehicle_id(), recorded.server_id(), sim.step_ns(),
+                   recorded.sim_time_ns(), rec, input, recorded.control().watchdog_safe_state(),
+                   rec.derived.steering_torque, out);
+  return out;
+}
+
+}  // namespace
+
+VerifyResult Verify(const VerifyOptions& o) {
+  VerifyResult res;
+  const auto wall_start = std::chrono::steady_clock::now();
+  mcap::Reader reader(o.file);
+  auto progress = [&](double lo, double hi) {
+    return [&o, lo, hi](double f) {
+      if (o.on_progress) o.on_progress(lo + (hi - lo) * f);
+    };
+  };
+  std::map<std::string, Server> servers = CollectEvents(reader, progress(0.0, 0.1));
+  if (servers.empty()) {
+    res.cannot = "no session events were recorded (vdyn/events): nothing to re-simulate from";
+    return res;
+  }
+  std::map<std::uint32_t, VehicleRun> runs;
+  for (auto& [id, s] : servers) {
+    if (std::string why = CheckServer(id, s); !why.empty()) {
+      res.cannot = why;
+      return res;
+    }
+    std::shared_ptr<const World> world;
+    try {
+      world = WorldFromDescription(*s.world);
+    } catch (const std::exception& e) {
+      res.cannot = std::string("the recorded world cannot be rebuilt: ") + e.what();
+      return res;
+    }
+    const std::uint64_t hash = TerrainHash(world->terrain);
+    for (const pb::SessionEvent& e : s.events) {
+      if (o.vehicle && e.vehicle_id() != *o.vehicle) continue;
+      VehicleRun& run = runs[e.vehicle_id()];
+      run.server = id;
+      run.world = world;
+      run.terrain_hash = hash;
+      run.events.push_back(&e);
+      if (e.has_spawned()) run.step_ns = e.spawned().step_ns();
+      if (e.has_checkpoint()) run.step_ns = e.checkpoint().step_ns();
+    }
+  }
+  for (auto& [id, run] : runs) {
+    run.replayer = run.Fresh(id, &run.error);
+    if (!run.replayer) {
+      res.cannot = run.error;
+      return res;
+    }
+  }
+  // Stream the states: replay each vehicle up to the step of its next state and compare.
+  std::optional<std::pair<std::uint32_t, std::uint64_t>> compare_next;  // divergence: next state
+  pb::VehicleState recorded;
+  RecordingVisitor v;
+  v.wants = [](TopicId t) { return t == TopicId::kState; };
+  v.on_progress = progress(0.1, 1.0);
+  v.on_message = [&](const RecordedMessage& m) {
+    if (o.vehicle && m.key != *o.vehicle) return;
+    const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
+    const std::uint64_t hash = wire::Number(m.data, 21).value_or(0);
+    auto it = runs.find(m.key);
+    if (it == runs.end() || !it->second.error.empty()) {
+      ++res.not_resimulated;
+      return;
+    }
+    VehicleRun& run = it->second;
+    if (step + 1 > run.replayed_to) {
+      const double h = static_cast<double>(run.step_ns) * 1e-9;
+      if (!run.replayer->Run(step + 1, [&](std::uint64_t s, std::uint64_t hh) {
+            run.ring[s % VehicleRun::kRing] = {s, hh};
+            res.sim_seconds += h;
+          }, &run.error)) {
+        if (res.cannot.empty()) res.cannot = run.error;
+        return;
+      }
+      run.replayed_to = step + 1;
+    }
+    const auto& slot = run.ring[step % VehicleRun::kRing];
+    if (slot.first != step) {
+      ++res.not_resimulated;  // before the vehicle's first spawn or checkpoint
+      return;
+    }
+    auto& range = res.vehicles[m.key];
+    if (range.count == 0) range.first = step;
+    range.first = std::min(range.first, step);
+    range.last = std::max(range.last, step);
+    ++range.count;
+    ++res.compared;
+    if (compare_next && compare_next->first == m.key && compare_next->second == step) {
+      compare_next.reset();
+      std::string why;
+      if (auto fresh = run.Fresh(m.key, &why); fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+                                                recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        Diff(recorded, Resimulated(*fresh, recorded), "", res.first->next_fields);
+      }
+    }
+    if (slot.second == hash) {
+      ++run.matched;
+      return;
+    }
+    ++res.mismatched;
+    if (res.first) return;
+    Divergence d;
+    d.vehicle = m.key;
+    d.step = step;
+    d.t = static_cast<double>(step) * static_cast<double>(run.step_ns) * 1e-9;
+    d.recorded_hash = hash;
+    d.resimulated_hash = slot.second;
+    d.matched_before = run.matched;
+    std::string why;
+    if (auto fresh = run.Fresh(m.key, &why); fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+                                              recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+      Diff(recorded, Resimulated(*fresh, recorded), "", d.fields);
+      // Causes first: the input and controls applied over the step, then what they moved.
+      std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
+        return f.field.rfind("input.", 0) == 0 || f.field.rfind("control.", 0) == 0;
+      });
+    }
+    // Only the hash differs: the step's start agrees, so look at the state after it.
+    if (d.fields.size() <= 1) compare_next = std::make_pair(m.key, step + 1);
+    res.first = std::move(d);
+  };
+  ScanRecording(reader, v);
+  res.resimulated = res.cannot.empty();
+  res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  return res;
+}
+
+int RunVerify(const VerifyOptions& o, std::ostream& out) {
+  Progress bar("verify");
+  VerifyOptions with = o;
+  with.on_progress = [&bar](double f) { bar.Update(f); };
+  const VerifyResult r = Verify(with);
+  bar.Finish();
+  char line[256];
+  if (!r.resimulated) {
+    out << o.file.string() << ": cannot re-simulate: " << r.cannot << "\n";
+    return 1;
+  }
+  std::string ranges;
+  for (const auto& [id, rg] : r.vehicles) {
+    ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": steps " +
+              std::to_string(rg.first) + ".." + std::to_string(rg.last);
+  }
+  if (r.first) {
+    const Divergence& d = *r.first;
+    std::snprintf(line, sizeof line, "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)",
+                  d.vehicle, d.step, d.t);
+    out << o.file.string() << ": " << line << ": the state hash after the step was " << Hex(d.recorded_hash)
+        << " in the recording, " << Hex(d.resimulated_hash) << " re-simulated\n";
+    auto print = [&](const std::vector<FieldDiff>& fields) {
+      std::size_t shown = 0;
+      for (const FieldDiff& f : fields) {
+        if (f.field == "state_hash") continue;
+        if (++shown > 12) {
+          out << "    ... " << (fields.size() - 12) << " more\n";
+          break;
+        }
+        std::snprintf(line, sizeof line, "    %-22s %-26s %s\n", f.field.c_str(), f.recorded.c_str(),
+                      f.resimulated.c_str());
+        out << line;
+      }
+      return shown;
+    };
+    out << "  state fields that differ at that step (recorded, re-simulated):\n";
+    if (print(d.fields) == 0) {
+      out << "    none: the step started from the same state with the same input; the state after it\n"
+             "    differs";
+      if (!d.next_fields.empty()) {
+        out << " (the next recorded state, recorded vs re-simulated):\n";
+        print(d.next_fields);
+      } else {
+        out << "\n";
+      }
+    }
+    out << "  " << d.matched_before << " steps of vehicle " << d.vehicle << " matched bit for bit before it; "
+        << r.mismatched << " of " << r.compared << " compared steps differ\n";
+    return 1;
+  }
+  if (r.compared == 0) {
+    out << o.file.string() << ": nothing compared: no recorded state falls after a spawn or checkpoint\n";
+    return 1;
+  }
+  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps", r.compared);
+  out << o.file.string() << ": " << line << " (" << ranges << ")";
+  if (r.not_resimulated > 0) out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
+  std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n", r.sim_seconds,
+                r.wall_seconds, r.wall_seconds > 0 ? r.sim_seconds / r.wall_seconds : 0.0);
+  out << line;
+  return 0;
+}
+
+// --- takeover -----------------------------------------------------------------------------------
+
+BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
+                            std::optional<std::uint32_t> vehicle) {
+  mcap::Reader reader(file);
+  const std::uint64_t first = FirstLogTime(reader);
+  const auto at = first + static_cast<std::uint64_t>(at_s * 1e9);
+  // The vehicle and its step at that time, and the recorded hash of the step before.
+  std::optional<std::uint32_t> chosen = vehicle;
+  std::optional<std::uint64_t> step;
+  std::optional<std::uint64_t> hash_before;
+  std::uint64_t last_time = 0;
+  {
+    std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>> last;  // vehicle -> (step, hash)
+    RecordingVisitor v;
+    v.wants = [](TopicId t) { return t == TopicId::kState; };
+    v.on_message = [&](const RecordedMessage& m) {
+      last_time = std::max(last_time, m.log_time);
+      if (step) return;
+      if (!chosen) chosen = m.key;
+      if (m.key != *chosen) return;
+      const std::uint64_t s = wire::Number(m.data, 3).value_or(0);
+      const std::uint64_t h = wire::Number(m.data, 21).value_or(0);
+      if (m.log_time >= at) {
+        step = s;
+        if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s) hash_before = it->second.second;
+      }
+      last[m.key] = {s, h};
+    };
+    ScanRecording(reader, v);
+  }
+  if (!chosen) throw std::runtime_error(file.string() + " holds no vehicle states");
+  if (!step) {
+    char b[160];
+    std::snprintf(b, sizeof b, "no state of vehicle %u at or after %.3f s: the recording ends at %.3f s", *chosen,
+                  at_s, static_cast<double>(last_time - first) * 1e-9);
+    throw std::runtime_error(b);
+  }
+  std::map<std::string, Server> servers = CollectEvents(reader, {});
+  const Server* server = nullptr;
+  std::string server_id;
+  for (const auto& [id, s] : servers) {
+    for (const auto& e : s.events) {
+      if (e.vehicle_id() == *chosen) {
+        server = &s;
+        server_id = id;
+      }
+    }
+  }
+  if (server == nullptr) throw std::runtime_error("no session events of vehicle " + std::to_string(*chosen) + " were recorded");
+  if (std::string why = CheckServer(server_id, *server); !why.empty()) throw std::runtime_error(why);
+  std::shared_ptr<const World> world = WorldFromDescription(*server->world);
+  const std::uint64_t terrain_hash = TerrainHash(world->terrain);
+  VehicleReplayer replayer(world, terrain_hash, *chosen);
+  BranchPoint bp;
+  std::string why;
+  for (const auto& e : server->events) {
+    if (e.vehicle_id() != *chosen) continue;
+    if (!replayer.Add(e, &why)) throw std::runtime_error(why);
+    if (e.step() > *step) continue;
+    if (e.has_spawned()) bp.params = e.spawned().params();
+    if (e.has_checkpoint()) bp.params = e.checkpoint().params();
+    if (e.has_params_changed()) bp.params = e.params_changed().params();
+  }
+  std::optional<std::uint64_t> replayed_before;
+  if (!replayer.Run(*step, [&](std::uint64_t s, std::uint64_t h) {
+        if (s + 1 == *step) replayed_before = h;
+      }, &why)) {
+    throw std::runtime_error(why);
+  }
+  const Simulator* sim = replayer.simulator();
+  if (sim == nullptr || static_cast<std::uint64_t>(sim->state().step) != *step) {
+    throw std::runtime_error("vehicle " + std::to_string(*chosen) + " cannot be re-simulated to step " +
+                             std::to_string(*step) + " (no spawn or checkpoint before it?)");
+  }
+  if (hash_before && replayed_before && *hash_before != *replayed_before) {
+    throw std::runtime_error("the recording does not re-simulate up to step " + std::to_string(*step) +
+                             " (its hash differs before it): run `vdyn-recorder verify` to see where");
+  }
+  bp.checked = hash_before && replayed_before;
+  bp.vehicle = *chosen;
+  bp.step = *step;
+  bp.at_s = at_s;
+  bp.state = ToExactState(sim->state());
+  ToInputSample(sim->input(), static_cast<std::int64_t>(*step), bp.input);
+  bp.server_id = server_id;
+  bp.world_name = server->world->name();
+  bp.terrain_hash = server->world->terrain_hash();
+  char label[256];
+  std::snprintf(label, sizeof label, "%.180s@%.3fs (vehicle %u, step %" PRIu64 ")",
+                file.filename().string().c_str(), at_s, bp.vehicle, bp.step);
+  bp.label = label;
+  return bp;
+}
+
+int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
+  const BranchPoint bp = FindBranchPoint(o.file, o.at_s, o.vehicle);
+  out << "branch point: " << bp.label << " on world '" << bp.world_name << "'"
+      << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << std::endl;
+  transport::Participant participant(o.domain);
+  // The live server, and its world: the recording must continue on the terrain it was made on.
+  std::optional<pb::WorldDescription> live;
+  std::set<std::string> others;
+  {
+    transport::DropCounters drops;
+    transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
+    while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
+      worlds.Wait(std::chrono::milliseconds(100));
+      worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+        if (w.terrain_hash() == bp.terrain_hash) {
+          live = w;
+        } else {
+          others.insert("'" + w.name() + "' of server '" + w.server_id() + "'");
+        }
+      });
+    }
+  }
+  if (!live) {
+    out << "vdyn-recorder takeover: no server on domain " << o.domain << " runs world '" << bp.world_name
+        << "' (terrain hash " << Hex(bp.terrain_hash) << ") within " << o.wait_s << " s";
+    for (const std::string& w : others) out << "; seen: " << w;
+    out << "\n";
+    return 1;
+  }
+  // Record first, so the new recording holds the restore's events.
+  RecordOptions ro;
+  ro.out = o.out;
+  if (ro.out.empty()) {
+    ro.out = o.file;
+    ro.out.replace_filename(o.file.stem().string() + "-takeover" + o.file.extension().string());
+  }
+  ro.branched_from = bp.label;
+  ro.command_line = o.command_line;
+  ro.duration_s = o.duration_s;
+  ro.status_line = o.status_line;
+  ro.status_tty = o.status_tty;
+  Capture capture(participant, ro);
+  std::atomic<bool> capture_stop{false};
+  std::optional<CaptureSummary> summary;
+  std::exception_ptr capture_error;
+  std::thread recorder([&] {
+    try {
+      summary = capture.Run(capture_stop);
+    } catch (...) {
+      capture_error = std::current_exception();
+    }
+  });
+  auto finish = [&](int code) {
+    capture_stop = true;
+    recorder.join();
+    if (capture_error) std::rethrow_exception(capture_error);
+    if (summary) {
+      out << "recorded " << summary->messages << " messages to " << ro.out.string() << " (branched from "
+          << bp.label << ")\n";
+    }
+    return code;
+  };
+  // The restore's events must reach the recording: wait until the server's writers are matched.
+  const auto match_deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
+  while (capture.MatchedWriters(TopicId::kEvents) == 0 && std::chrono::steady_clock::now() < match_deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  transport::ControlClient control(participant, "vdyn-recorder takeover");
+  if (!control.WaitForServer(std::chrono::milliseconds(static_cast<std::int64_t>(o.wait_s * 1000)))) {
+    out << "vdyn-recorder takeover: " << control.last_error() << "\n";
+    return finish(1);
+  }
+  pb::ControlRequest req;
+  req.set_vehicle_id(o.as_vehicle.value_or(bp.vehicle));
+  req.set_server_id(live->server_id());
+  auto* rs = req.mutable_restore();
+  *rs->mutable_state() = bp.state;
+  *rs->mutable_params() = bp.params;
+  *rs->mutable_input() = bp.input;
+  rs->set_branched_from(bp.label);
+  const auto reply = control.Call(req, std::chrono::seconds(10));
+  if (!reply) {
+    out << "vdyn-recorder takeover: no reply to the restore request: " << control.last_error() << "\n";
+    return finish(1);
+  }
+  if (!reply->accepted()) {
+    out << "vdyn-recorder takeover: server '" << live->server_id() << "' refused the restore: " << reply->reason()
+        << "\n";
+    return finish(1);
+  }
+  out << "vehicle " << req.vehicle_id() << " of server '" << live->server_id() << "' continues from "
+      << bp.label << " at step " << reply->applied_step()
+      << ": drive it now (a rig or vdyn-input); recording to " << ro.out.string()
+      << (o.duration_s > 0 ? "" : "; Ctrl-C ends") << "\n";
+  out.flush();
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.duration_s);
+  while (!stop.load() && (o.duration_s <= 0 || std::chrono::steady_clock::now() < end)) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  return finish(0);
+}
+
+}  // namespace vdyn::recorder

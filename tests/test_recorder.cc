@@ -1,0 +1,654 @@
+// vdyn-recorder end to end, as real processes over loopback DDS (each test its own domain):
+// verify on a live session driven by a varying input and an injected divergence pinpointed; kill
+// -9, recover, verify; export against a batch run of the same drive, column for column; play into
+// a subscriber in order and in time, with pause, seek and step as requests; takeover continuing
+// bit for bit; a recorder that cannot keep up counting what it dropped; bad files refused.
+#include <signal.h>
+
+#include <chrono>
+#include <cctype>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <thread>
+
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include "vdyn/base/time.h"
+#include "vdyn/client/driver_input.h"
+#include "vdyn/io/maneuver.h"
+#include "vdyn/recorder/mcap.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/session.pb.h"
+#include "vdyn/state.pb.h"
+#include "vdyn/transport/control_client.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/world.pb.h"
+#include "process.h"
+#include "test_support.h"
+
+namespace vdyn {
+namespace {
+
+using ::testing::HasSubstr;
+using namespace std::chrono_literals;
+using testing::Process;
+using transport::TopicId;
+
+// A driver who keeps changing everything (lockstep tests send it with each step).
+pb::DriverInput InputAt(std::uint64_t step) {
+  const double t = static_cast<double>(step) * 1e-3;
+  pb::DriverInput in;
+  in.set_vehicle_id(1);
+  in.set_source_id("test-rig");
+  in.set_steer(0.15 * std::sin(1.7 * t));
+  in.set_throttle(0.35 + 0.25 * std::sin(0.9 * t));
+  in.set_brake(std::fmod(t, 1.3) > 1.1 ? 0.15 : 0.0);
+  in.set_buttons(std::fmod(t, 0.7) > 0.6 ? 1u : 0u);  // paddle presses
+  return in;
+}
+
+// The whole number that follows `prefix` in `text` (std::regex trips GCC 12's sanitizer build).
+std::optional<std::uint64_t> NumberAfter(const std::string& text, const std::string& prefix) {
+  const std::size_t at = text.find(prefix);
+  if (at == std::string::npos) return std::nullopt;
+  std::size_t end = at + prefix.size();
+  while (end < text.size() && std::isdigit(static_cast<unsigned char>(text[end]))) ++end;
+  if (end == at + prefix.size()) return std::nullopt;
+  return std::stoull(text.substr(at + prefix.size(), end - at - prefix.size()));
+}
+
+struct States {
+  std::map<std::uint64_t, std::uint64_t> hash;  // step -> state hash (vehicle 1)
+  std::uint64_t messages = 0;
+};
+
+States ReadStates(const std::filesystem::path& file) {
+  States s;
+  mcap::Reader reader(file);
+  recorder::RecordingVisitor v;
+  v.wants = [](TopicId t) { return t == TopicId::kState; };
+  v.on_message = [&](const recorder::RecordedMessage& m) {
+    if (m.key != 1) return;
+    ++s.messages;
+    s.hash[recorder::wire::Number(m.data, 3).value_or(0)] = recorder::wire::Number(m.data, 21).value_or(0);
+  };
+  recorder::ScanRecording(reader, v);
+  return s;
+}
+
+class RecorderTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    testing::UseLoopbackDds();
+    domain_ = testing::FreshDomain();
+  }
+
+  std::unique_ptr<Process> Server(std::vector<std::string> extra, std::uint32_t domain,
+                                  const std::string& log) {
+    std::vector<std::string> argv = {testing::ServerBinary(), "--domain", std::to_string(domain), "--no-status",
+                                     "--world", "facility"};
+    argv.insert(argv.end(), extra.begin(), extra.end());
+    return std::make_unique<Process>(argv, dir_ / log);
+  }
+  std::unique_ptr<Process> Recorder(std::vector<std::string> args, const std::string& log) {
+    args.insert(args.begin(), testing::RecorderBinary());
+    return std::make_unique<Process>(args, dir_ / log);
+  }
+  // Runs vdyn-recorder to its end: exit code and output.
+  std::pair<int, std::string> Run(std::vector<std::string> args, std::chrono::seconds timeout = 300s) {
+    const std::string log = "run" + std::to_string(runs_++) + ".log";
+    auto p = Recorder(std::move(args), log);
+    const auto code = p->Wait(timeout);
+    return {code.value_or(-1), p->Log()};
+  }
+  // Waits (bounded) until a recorder's log says it hears the server's states and events and has
+  // its world: from then on it takes everything the server publishes.
+  static bool WaitForWorld(Process& recorder, std::chrono::seconds timeout = 60s) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < deadline && recorder.running()) {
+      const std::string log = recorder.Log();
+      if (log.find("recording world") != std::string::npos &&
+          log.find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
+          log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos) {
+        return true;
+      }
+      std::this_thread::sleep_for(20ms);
+    }
+    return false;
+  }
+  // Stops a recorder as a person does (SIGINT) and waits for it to close its file.
+  static void Stop(Process& recorder) {
+    recorder.Signal(SIGINT);
+    const auto code = recorder.Wait(120s);
+    ASSERT_TRUE(code.has_value()) << recorder.Log();
+    ASSERT_EQ(*code, 0) << recorder.Log();
+  }
+  // A lockstep session of vehicle 1 driven step by step with InputAt(step), from a reset at
+  // step 0 (so the recording holds the spawn) to `steps`; recorded to `out`.
+  void LockstepSession(std::uint32_t domain, const std::filesystem::path& out, std::uint64_t steps,
+                       const std::function<pb::DriverInput(std::uint64_t)>& input) {
+    auto recorder = Recorder({"record", out.string(), "--domain", std::to_string(domain), "--status"},
+                             out.filename().string() + ".log");
+    auto server = Server({"--lockstep", "--lockstep-timeout", "300"}, domain, out.filename().string() + ".server.log");
+    ASSERT_TRUE(WaitForWorld(*recorder)) << recorder->Log() << server->Log();
+    transport::Participant p(domain);
+    transport::ControlClient control(p, "test");
+    ASSERT_TRUE(control.WaitForServer(60s)) << server->Log();
+    pb::ControlRequest reset;
+    reset.set_vehicle_id(1);
+    reset.mutable_reset();
+    auto reply = control.Call(reset, 60s);
+    ASSERT_TRUE(reply && reply->accepted()) << server->Log();
+    for (std::uint64_t k = 0; k < steps; ++k) {
+      pb::ControlRequest step;
+      step.set_vehicle_id(1);
+      step.mutable_step()->set_steps(1);
+      *step.mutable_step()->mutable_input() = input(k);
+      reply = control.Call(step, 60s);
+      ASSERT_TRUE(reply && reply->accepted()) << "step " << k << ": " << control.last_error();
+    }
+    server->Signal(SIGTERM);
+    ASSERT_TRUE(server->Wait(60s).has_value());
+    Stop(*recorder);
+  }
+
+  std::uint32_t domain_ = 0;
+  int runs_ = 0;
+  testing::TempDir dir_;
+};
+
+// --- verify ------------------------------------------------------------------------------------
+
+// Rewrites a recording with one input sample of one event changed (a recording that no longer
+// matches its states); returns the step of the changed sample.
+std::uint64_t InjectDivergence(const std::filesystem::path& in, const std::filesystem::path& out,
+                               std::uint64_t after_step) {
+  mcap::Reader reader(in);
+  mcap::Writer writer(out, {});
+  std::map<std::uint16_t, std::uint16_t> schemas, channels;
+  std::map<std::uint16_t, bool> events;
+  std::uint64_t changed = 0;
+  mcap::Visitor v;
+  v.on_schema = [&](const mcap::Schema& s) { schemas[s.id] = writer.AddSchema(s.name, s.encoding, s.data); };
+  v.on_channel = [&](const mcap::Channel& c) {
+    channels[c.id] = writer.AddChannel(schemas.at(c.schema_id), c.topic, c.message_encoding, c.metadata);
+    events[c.id] = c.metadata.at("dds_topic") == "vdyn/events";
+  };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) { writer.WriteMetadata(m.name, m.values); };
+  v.on_message = [&](const mcap::Message& m, std::uint64_t) {
+    std::string data(reinterpret_cast<const char*>(m.data.data()), m.data.size());
+    if (events[m.channel_id] && changed == 0) {
+      pb::SessionEvent e;
+      EXPECT_TRUE(e.ParseFromString(data));
+      if (e.has_input_batch() && e.input_batch().samples_size() >= 2 && e.step() > after_step) {
+        auto* s = e.mutable_input_batch()->mutable_samples(1);
+        s->set_throttle(s->throttle() + 1e-6);
+        changed = s->step();
+        data = e.SerializeAsString();
+      }
+    }
+    writer.WriteMessage(channels.at(m.channel_id), m.sequence, m.log_time, m.publish_time,
+                        {reinterpret_cast<const std::uint8_t*>(data.data()), data.size()});
+  };
+  reader.Scan(v);
+  writer.Close();
+  return changed;
+}
+
+TEST_F(RecorderTest, VerifyIsBitExactOnALiveSessionAndPinpointsAnInjectedDivergence) {
+  const auto file = dir_ / "live.mcap";
+  auto recorder = Recorder({"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  auto server = Server({"--duration", "6"}, domain_, "server.log");
+  ASSERT_TRUE(WaitForWorld(*recorder)) << recorder->Log();
+  // A rig whose every input differs from the last: steering, throttle and brake keep changing.
+  std::atomic<bool> done{false};
+  std::thread rig([&] {
+    transport::Participant p(domain_);
+    client::InputPublisher in(p, 1, "test-rig", 10);
+    const auto start = std::chrono::steady_clock::now();
+    for (int i = 0; !done && i < 20000; ++i) {
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      pb::DriverInput msg = InputAt(static_cast<std::uint64_t>(t * 1000));
+      in.Publish(msg);
+      std::this_thread::sleep_until(start + std::chrono::microseconds(2000 * (i + 1)));
+    }
+  });
+  const auto code = server->Wait(60s);
+  done = true;
+  rig.join();
+  ASSERT_EQ(code, 0) << server->Log();
+  Stop(*recorder);
+
+  auto [info_code, info] = Run({"info", file.string()});
+  ASSERT_EQ(info_code, 0) << info;
+  EXPECT_THAT(info, HasSubstr("re-simulates yes"));
+  EXPECT_THAT(info, HasSubstr("vdyn/input/1"));
+  auto [vcode, verify] = Run({"verify", file.string()});
+  ASSERT_EQ(vcode, 0) << verify;
+  const auto compared = NumberAfter(verify, "bit-exact over ");
+  ASSERT_TRUE(compared.has_value()) << verify;
+  EXPECT_GT(*compared, 4000u) << verify;
+
+  // The figures a person looks at, and the page that shows them.
+  auto [pcode, plotted] = Run({"plot", file.string(), "--out", (dir_ / "plots").string()});
+  ASSERT_EQ(pcode, 0) << plotted;
+  const std::string html = testing::ReadFile(dir_ / "plots" / "index.html");
+  for (const std::string f : {"speed", "acceleration", "spring_forces", "drive_forces", "brake_forces",
+                              "side_forces", "controls", "trajectory"}) {
+    const std::string png = testing::ReadFile(dir_ / "plots" / (f + ".png"));
+    EXPECT_GT(png.size(), 5000u) << f;
+    EXPECT_EQ(png.substr(0, 4), "\x89PNG") << f;
+    EXPECT_THAT(html, HasSubstr("src=\"" + f + ".png\"")) << f;
+  }
+
+  // The input batches really vary; change one sample in the recording and verify finds it.
+  const std::uint64_t step = InjectDivergence(file, dir_ / "edited.mcap", 2000);
+  ASSERT_GT(step, 2000u);
+  auto [ecode, edited] = Run({"verify", (dir_ / "edited.mcap").string()});
+  EXPECT_EQ(ecode, 1) << edited;
+  EXPECT_THAT(edited, HasSubstr("DIVERGES at vehicle 1, step " + std::to_string(step) + " "));
+  EXPECT_THAT(edited, HasSubstr("input.throttle"));
+}
+
+TEST_F(RecorderTest, AKilledRecordingIsRefusedThenRecoveredAndItStillVerifies) {
+  const auto file = dir_ / "killed.mcap";
+  auto recorder = Recorder({"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  auto server = Server({"--duration", "30"}, domain_, "server.log");
+  auto input = std::make_unique<Process>(
+      std::vector<std::string>{testing::InputBinary(), "--domain", std::to_string(domain_), "--maneuver", "demo"},
+      dir_ / "input.log");
+  ASSERT_TRUE(WaitForWorld(*recorder)) << recorder->Log();
+  // Kill it in the middle of the drive (the server runs on).
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::uint64_t step = 0;
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (step < 4000 && std::chrono::steady_clock::now() < deadline) {
+    states.Wait(50ms);
+    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { step = std::max<std::uint64_t>(step, s.step()); });
+  }
+  ASSERT_GE(step, 4000u);
+  recorder->Signal(SIGKILL);
+  ASSERT_EQ(recorder->Wait(10s), 128 + SIGKILL);
+
+  auto [icode, info] = Run({"info", file.string()});
+  EXPECT_EQ(icode, 2) << info;
+  EXPECT_THAT(info, HasSubstr(file.string() + ": offset "));
+  EXPECT_THAT(info, HasSubstr("recover"));
+  auto [rcode, rec] = Run({"recover", file.string()});
+  ASSERT_EQ(rcode, 0) << rec;
+  EXPECT_THAT(rec, HasSubstr("written, closed and indexed"));
+  const auto recovered = dir_ / "killed-recovered.mcap";
+  // It lost at most its open chunk: a quarter of a second (and what the kernel had not got).
+  const States s = ReadStates(recovered);
+  ASSERT_FALSE(s.hash.empty());
+  EXPECT_GE(s.hash.rbegin()->first + 1000, step) << "the last recovered state is far before the kill";
+  auto [vcode, verify] = Run({"verify", recovered.string()});
+  EXPECT_EQ(vcode, 0) << verify;
+  EXPECT_THAT(verify, HasSubstr("bit-exact over"));
+  server->Signal(SIGTERM);
+  input->Signal(SIGTERM);
+}
+
+// --- export --------------------------------------------------------------------------------------
+
+TEST_F(RecorderTest, ExportMatchesABatchRunOfTheSameDriveColumnForColumn) {
+  // A drive without the speed control: the maneuver's values reach the simulator unchanged on
+  // both paths (a set speed would pass through km/h on the network).
+  const auto maneuver_file = dir_ / "drive.csv";
+  testing::WriteFile(maneuver_file,
+                     "t_s,steer_deg,throttle,brake\n0,0,0.7,0\n0.8,4,0.7,0\n1.6,-6,0.4,0\n2.2,0,0,0.5\n3,2,0.2,0\n");
+  const Maneuver maneuver = Maneuver::Load(maneuver_file);
+  constexpr std::uint64_t kSteps = 2500;
+  const double h = static_cast<double>(1'000'000) * 1e-9;  // as the simulator computes its step
+  const auto file = dir_ / "drive.mcap";
+  LockstepSession(domain_, file, kSteps, [&](std::uint64_t k) {
+    pb::DriverInput in;
+    in.set_vehicle_id(1);
+    in.set_source_id("test");
+    client::FillFromManeuver(maneuver.At(static_cast<double>(k) * h), in);
+    return in;
+  });
+  if (HasFatalFailure()) return;
+  auto [ecode, exported] = Run({"export", file.string(), "--csv", (dir_ / "export.csv").string()});
+  ASSERT_EQ(ecode, 0) << exported;
+  auto batch = std::make_unique<Process>(
+      std::vector<std::string>{testing::ServerBinary(), "--batch", "--world", "facility", "--maneuver",
+                               maneuver_file.string(), "--duration", "2.5", "--csv", (dir_ / "batch.csv").string(),
+                               "--quiet"},
+      dir_ / "batch.log");
+  ASSERT_EQ(batch->Wait(120s), 0) << batch->Log();
+  auto lines = [](const std::filesystem::path& p) {
+    std::vector<std::string> out;
+    std::ifstream in(p);
+    for (std::string l; std::getline(in, l);) out.push_back(l);
+    return out;
+  };
+  const std::vector<std::string> e = lines(dir_ / "export.csv"), b = lines(dir_ / "batch.csv");
+  // The batch has a row per step and a last row with the final state.
+  ASSERT_EQ(b.size(), kSteps + 2);
+  ASSERT_EQ(e[0], b[0]);  // the header: the same columns, units and order
+  std::size_t matched = 0;
+  for (std::size_t i = 1; i < e.size(); ++i) {
+    const std::size_t c0 = e[i].find(','), c1 = e[i].find(',', c0 + 1);
+    const std::uint64_t step = std::stoull(e[i].substr(c0 + 1, c1 - c0 - 1));
+    ASSERT_LT(step + 1, b.size());
+    ASSERT_EQ(e[i], b[step + 1]) << "step " << step;
+    ++matched;
+  }
+  // Best effort on loopback: (nearly) every state arrived; each one matched to the last digit.
+  EXPECT_GE(matched, kSteps * 99 / 100);
+  // Decimated: the rows whose step is a multiple of 10, as --csv-every 10 gives them.
+  auto [dcode, decimated] = Run({"export", file.string(), "--csv", (dir_ / "every10.csv").string(), "--every", "10"});
+  ASSERT_EQ(dcode, 0) << decimated;
+  const std::vector<std::string> d = lines(dir_ / "every10.csv");
+  ASSERT_GE(d.size(), kSteps / 10 * 99 / 100);
+  for (std::size_t i = 1; i < d.size(); ++i) {
+    const std::size_t c0 = d[i].find(','), c1 = d[i].find(',', c0 + 1);
+    const std::uint64_t step = std::stoull(d[i].substr(c0 + 1, c1 - c0 - 1));
+    ASSERT_EQ(step % 10, 0u);
+    ASSERT_EQ(d[i], b[step + 1]);
+  }
+}
+
+// --- play ----------------------------------------------------------------------------------------
+
+// A recording written here: a small world, parameters, and 3000 states (and a driver input with
+// each) exactly 1 ms apart in log time.
+void WriteRecording(const std::filesystem::path& path) {
+  mcap::Writer w(path, {});
+  auto channel = [&](TopicId t, std::uint32_t key) {
+    const auto* d = recorder::PayloadDescriptor(t);
+    const std::uint16_t s = w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
+    return w.AddChannel(s, recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
+  };
+  const std::uint16_t world = channel(TopicId::kWorld, 77), params = channel(TopicId::kParams, 1),
+                      state = channel(TopicId::kState, 1), input = channel(TopicId::kInput, 1);
+  auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
+    const std::string b = m.SerializeAsString();
+    w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+  };
+  const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
+  pb::WorldDescription wd;
+  wd.set_server_id("recorded");
+  wd.set_name("square");
+  auto* mesh = wd.add_meshes();
+  for (double v : {-50.0, -50.0, 0.0, 50.0, -50.0, 0.0, 50.0, 50.0, 0.0, -50.0, 50.0, 0.0}) mesh->add_vertices(v);
+  for (std::uint32_t i : {0u, 1u, 2u, 0u, 2u, 3u}) mesh->add_indices(i);
+  put(world, t0, wd);
+  pb::VehicleParams vp;
+  vp.set_mass(1234.0);
+  put(params, t0 + 100, vp);
+  for (std::uint64_t k = 0; k < 3000; ++k) {
+    pb::VehicleState s;
+    s.set_vehicle_id(1);
+    s.set_server_id("recorded");
+    s.set_step(k);
+    s.set_step_ns(1'000'000);
+    s.mutable_p_wt_w()->set_x(0.01 * static_cast<double>(k));
+    put(state, t0 + 1'000'000 + k * 1'000'000, s);
+    put(input, t0 + 1'000'000 + k * 1'000'000 + 1000, InputAt(k));
+  }
+  w.Close();
+}
+
+struct Received {
+  std::uint64_t step;
+  std::int64_t at_ns;  // monotonic
+};
+
+TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInputsWithThem) {
+  const auto file = dir_ / "synthetic.mcap";
+  WriteRecording(file);
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops, transport::ReaderRole::kRecorder);
+  transport::Reader<pb::DriverInput> inputs(p, TopicId::kInput, &drops, transport::ReaderRole::kRecorder);
+  for (double rate : {1.0, 2.0}) {
+    auto play = Recorder({"play", file.string(), "--domain", std::to_string(domain_), "--rate",
+                          std::to_string(rate), "--no-keys", "--no-status"},
+                         "play" + std::to_string(static_cast<int>(rate)) + ".log");
+    std::vector<Received> got;
+    std::uint64_t presses = 0;
+    const auto deadline = std::chrono::steady_clock::now() + 120s;
+    while (play->running() && std::chrono::steady_clock::now() < deadline) {
+      states.Wait(20ms);
+      const std::int64_t now = base::MonotonicNow().ns;
+      states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { got.push_back({s.step(), now}); });
+      inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) { presses += in.buttons() & 1u; });
+    }
+    ASSERT_EQ(play->Wait(10s), 0) << play->Log();
+    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+      got.push_back({s.step(), base::MonotonicNow().ns});
+    });
+    // In order, (nearly) all of them, the paddle presses with them.
+    ASSERT_GE(got.size(), 2970u) << play->Log();
+    for (std::size_t i = 1; i < got.size(); ++i) ASSERT_GT(got[i].step, got[i - 1].step);
+    EXPECT_GT(presses, 100u);
+    // In time: each state's arrival against its recorded time, scaled by the rate. The offsets
+    // stay within a few milliseconds of each other (the clock of the player is the recording's).
+    std::vector<double> late;
+    for (const Received& r : got) {
+      const double recorded = static_cast<double>(r.step - got[0].step) * 1e-3 / rate;
+      late.push_back(static_cast<double>(r.at_ns - got[0].at_ns) * 1e-9 - recorded);
+    }
+    std::sort(late.begin(), late.end());
+    const double p05 = late[late.size() / 20], p95 = late[late.size() * 19 / 20];
+    EXPECT_GT(p05, -0.025) << "states arrive early: the player runs fast";
+    EXPECT_LT(p95, 0.060) << "states arrive late: the player falls behind";
+    const double span = static_cast<double>(got.back().at_ns - got.front().at_ns) * 1e-9;
+    const double recorded_span = static_cast<double>(got.back().step - got.front().step) * 1e-3 / rate;
+    EXPECT_NEAR(span, recorded_span, 0.1 + 0.05 * recorded_span);
+  }
+}
+
+TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
+  const auto file = dir_ / "synthetic.mcap";
+  WriteRecording(file);
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops, transport::ReaderRole::kRecorder);
+  auto play = Recorder({"play", file.string(), "--domain", std::to_string(domain_), "--paused", "--no-keys",
+                        "--no-status", "--server-id", "player-1"},
+                       "play.log");
+  transport::ControlClient control(p, "viewer");
+  ASSERT_TRUE(control.WaitForServer(60s)) << play->Log();
+  // A late joiner gets the world and parameters at once (they are republished as recorded).
+  transport::Reader<pb::WorldDescription> world(p, TopicId::kWorld, &drops);
+  bool got_world = false;
+  for (int i = 0; i < 200 && !got_world; ++i) {
+    world.Wait(50ms);
+    world.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { got_world = w.name() == "square"; });
+  }
+  EXPECT_TRUE(got_world);
+  auto request = [&](const std::function<void(pb::ControlRequest&)>& fill) {
+    pb::ControlRequest r;
+    r.set_server_id("player-1");
+    fill(r);
+    auto reply = control.Call(r, 30s);
+    EXPECT_TRUE(reply.has_value()) << control.last_error();
+    return reply.value_or(pb::ControlReply());
+  };
+  auto take = [&](std::size_t want, std::chrono::milliseconds within = 20s) {
+    std::vector<std::uint64_t> steps;
+    const auto until = std::chrono::steady_clock::now() + within;
+    while (steps.size() < want && std::chrono::steady_clock::now() < until) {
+      states.Wait(25ms);
+      states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { steps.push_back(s.step()); });
+    }
+    return steps;
+  };
+  // Seek to 2 s, then 10 steps: exactly the states of steps 1999..2008 (recorded 1 ms after the
+  // world, each at 1 ms + step ms).
+  EXPECT_TRUE(request([](auto& r) { r.mutable_playback()->set_seek_ns(2'000'000'000); }).accepted());
+  EXPECT_TRUE(request([](auto& r) { r.mutable_step()->set_steps(10); }).accepted());
+  std::vector<std::uint64_t> steps = take(10);
+  ASSERT_EQ(steps.size(), 10u);
+  for (std::size_t i = 0; i < steps.size(); ++i) EXPECT_EQ(steps[i], 1999 + i);
+  // Paused: nothing more comes (for half a second).
+  EXPECT_TRUE(take(1, 500ms).empty());
+  // A rate out of range is refused with the reason.
+  pb::ControlReply bad = request([](auto& r) { r.mutable_playback()->set_rate(0.0); });
+  EXPECT_FALSE(bad.accepted());
+  EXPECT_THAT(bad.reason(), HasSubstr("playback rate"));
+  // Resume at 4x: the rest, in order, and the player ends.
+  EXPECT_TRUE(request([](auto& r) { r.mutable_playback()->set_rate(4.0); }).accepted());
+  EXPECT_TRUE(request([](auto& r) { r.mutable_resume(); }).accepted());
+  steps = take(3000 - 2009);
+  ASSERT_GE(steps.size(), (3000u - 2009u) * 99 / 100);
+  EXPECT_EQ(steps.front(), 2009u);
+  for (std::size_t i = 1; i < steps.size(); ++i) ASSERT_GT(steps[i], steps[i - 1]);
+  EXPECT_EQ(play->Wait(30s), 0) << play->Log();
+}
+
+TEST_F(RecorderTest, PlayRefusesADomainWithALiveServer) {
+  const auto file = dir_ / "synthetic.mcap";
+  WriteRecording(file);
+  auto server = Server({}, domain_, "server.log");
+  {
+    // The server is up when its world arrives.
+    transport::Participant p(domain_);
+    transport::DropCounters drops;
+    transport::Reader<pb::WorldDescription> world(p, TopicId::kWorld, &drops);
+    bool up = false;
+    const auto deadline = std::chrono::steady_clock::now() + 60s;
+    while (!up && std::chrono::steady_clock::now() < deadline) {
+      world.Wait(50ms);
+      world.Take([&](const pb::WorldDescription&, const transport::SampleInfo&) { up = true; });
+    }
+    ASSERT_TRUE(up) << server->Log();
+  }
+  auto [code, out] = Run({"play", file.string(), "--domain", std::to_string(domain_), "--no-keys"});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("server 'vdyn' is live on domain " + std::to_string(domain_)));
+}
+
+// --- takeover ------------------------------------------------------------------------------------
+
+TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecordedInputs) {
+  const auto a = dir_ / "a.mcap";
+  LockstepSession(domain_, a, 2500, InputAt);
+  if (HasFatalFailure()) return;
+  const States original = ReadStates(a);
+  ASSERT_GE(original.hash.size(), 2400u);
+
+  // The recording's time of step 1200: halfway between its state and the one before.
+  std::uint64_t t1199 = 0, t1200 = 0, first = 0;
+  {
+    mcap::Reader reader(a);
+    first = recorder::FirstLogTime(reader);
+    recorder::RecordingVisitor v;
+    v.wants = [](TopicId t) { return t == TopicId::kState; };
+    v.on_message = [&](const recorder::RecordedMessage& m) {
+      const std::uint64_t s = recorder::wire::Number(m.data, 3).value_or(0);
+      if (s == 1199) t1199 = m.log_time;
+      if (s == 1200) t1200 = m.log_time;
+    };
+    recorder::ScanRecording(reader, v);
+  }
+  ASSERT_TRUE(t1199 != 0 && t1200 != 0) << "the recording lost state 1199 or 1200";
+  char at[32];
+  std::snprintf(at, sizeof at, "%.9f", static_cast<double>((t1199 + t1200) / 2 - first) * 1e-9);
+  // A fresh server elsewhere; the recorder restores it at that time of the recording and records.
+  const std::uint32_t live = testing::FreshDomain();
+  auto server = Server({"--lockstep", "--lockstep-timeout", "300"}, live, "live.log");
+  transport::Participant p(live);
+  transport::DropCounters drops;
+  transport::Reader<pb::SessionEvent> events(p, TopicId::kEvents, &drops, transport::ReaderRole::kRecorder);
+  const auto b = dir_ / "b.mcap";
+  auto takeover = Recorder({"takeover", a.string(), "--at", at, "--domain", std::to_string(live), "--out",
+                            b.string(), "--no-status"},
+                           "takeover.log");
+  std::optional<std::uint64_t> branch;
+  const auto deadline = std::chrono::steady_clock::now() + 120s;
+  while (!branch && std::chrono::steady_clock::now() < deadline && takeover->running()) {
+    events.Wait(50ms);
+    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
+      if (e.has_spawned() && !e.spawned().branched_from().empty()) branch = e.step();
+    });
+  }
+  ASSERT_TRUE(branch.has_value()) << takeover->Log() << server->Log();
+  ASSERT_EQ(*branch, 1200u) << takeover->Log();
+  for (int i = 0; i < 500 && takeover->Log().find("at step 1200") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(20ms);  // its reply may come a moment after the event
+  }
+  EXPECT_THAT(takeover->Log(), HasSubstr("at step 1200: drive it now"));
+  // The driver: the recorded session's own inputs, step by step, from the branch point on.
+  transport::ControlClient control(p, "test");
+  ASSERT_TRUE(control.WaitForServer(60s));
+  for (std::uint64_t k = *branch; k < 2500; ++k) {
+    pb::ControlRequest step;
+    step.set_vehicle_id(1);
+    step.mutable_step()->set_steps(1);
+    *step.mutable_step()->mutable_input() = InputAt(k);
+    auto reply = control.Call(step, 60s);
+    ASSERT_TRUE(reply && reply->accepted()) << "step " << k;
+  }
+  server->Signal(SIGTERM);
+  ASSERT_TRUE(server->Wait(60s).has_value());
+  Stop(*takeover);
+
+  // Every state after the branch point has the hash the original recording has at that step.
+  const States branched = ReadStates(b);
+  std::size_t compared = 0;
+  for (const auto& [step, hash] : branched.hash) {
+    if (step < *branch) continue;
+    const auto it = original.hash.find(step);
+    if (it == original.hash.end()) continue;  // a state the original recording lost
+    ASSERT_EQ(hash, it->second) << "step " << step;
+    ++compared;
+  }
+  EXPECT_GE(compared, (2500 - *branch) * 98 / 100);
+  auto [vcode, verify] = Run({"verify", b.string()});
+  EXPECT_EQ(vcode, 0) << verify;
+  auto [icode, info] = Run({"info", b.string()});
+  EXPECT_THAT(info, HasSubstr("branched    from a.mcap@"));
+  EXPECT_THAT(info, HasSubstr("(vehicle 1, step 1200)"));
+}
+
+// --- bad input and back pressure -------------------------------------------------------------------
+
+TEST_F(RecorderTest, ARecorderThatCannotKeepUpSaysSoAndCountsWhatItDropped) {
+  // A buffer of 1 MiB cannot hold the 2 MB world description: it is dropped and counted (and the
+  // buffer never grows past its bound); the states still fit.
+  const auto file = dir_ / "small.mcap";
+  auto recorder = Recorder({"record", file.string(), "--domain", std::to_string(domain_), "--queue-mb", "1",
+                            "--duration", "8", "--status"},
+                           "rec.log");
+  auto server = Server({"--duration", "4"}, domain_, "server.log");
+  ASSERT_EQ(recorder->Wait(120s), 0) << recorder->Log();
+  const std::string log = recorder->Log();
+  EXPECT_THAT(log, HasSubstr("world 0 1 DROPPED"));
+  const auto dropped = NumberAfter(log, ", dropped ");
+  ASSERT_TRUE(dropped.has_value()) << log;
+  EXPECT_GE(*dropped, 1u);
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  EXPECT_THAT(info, HasSubstr("the recorder counted 1 dropped on vdyn/world"));
+  EXPECT_THAT(info, HasSubstr("re-simulates no: no world description"));
+}
+
+TEST_F(RecorderTest, BadFilesAreRefusedWithFileOffsetAndReason) {
+  testing::WriteFile(dir_ / "empty.mcap", "");
+  testing::WriteFile(dir_ / "photo.mcap", "\x89PNG\r\n\x1a\n0000");
+  for (const std::string cmd : {"info", "verify", "export", "plot", "play"}) {
+    std::vector<std::string> args = {cmd, (dir_ / "empty.mcap").string()};
+    if (cmd == "export") args.insert(args.end(), {"--csv", (dir_ / "x.csv").string()});
+    auto [code, out] = Run(args);
+    EXPECT_EQ(code, 2) << cmd << ": " << out;
+    EXPECT_THAT(out, HasSubstr("empty.mcap: offset 0: empty file")) << cmd;
+  }
+  auto [code, out] = Run({"info", (dir_ / "photo.mcap").string()});
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(out, HasSubstr("photo.mcap: offset 0: not an MCAP file: it starts with bytes 89 50 4e 47"));
+  auto [ucode, usage] = Run({"play", (dir_ / "photo.mcap").string(), "--rate", "0"});
+  EXPECT_EQ(ucode, 2);
+  EXPECT_THAT(usage, HasSubstr("playback rate must be in [0.01, 1000]"));
+}
+
+}  // namespace
+}  // namespace vdyn
