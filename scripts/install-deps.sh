@@ -9,6 +9,8 @@ packages=(
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
   cyclonedds-dev cyclonedds-tools
+  libsdl2-dev libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
+  xvfb xauth libgl1-mesa-dri
 )
 
 missing=()

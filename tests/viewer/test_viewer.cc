@@ -217,6 +217,24 @@ int TipAlong(const Image& img, ForceKind kind, char direction, Rect r) {
   }
 }
 
+// Which way an arrow in a band points: its head (the widest cross-section of its colour, 2.2
+// times the shaft) lies towards that end of its span: 'r', 'l', 'u' or 'd'.
+char HeadEnd(const Image& img, viewer::Rgb8 c, Rect band, bool horizontal) {
+  const Blob b = FindColour(img, c.r, c.g, c.b, kTol, band);
+  int best = 0, at = 0;
+  const int from = horizontal ? b.min_x : b.min_y, to = horizontal ? b.max_x : b.max_y;
+  for (int i = from; i <= to; ++i) {
+    const Rect slice = horizontal ? Rect{i, band.y0, i + 1, band.y1} : Rect{band.x0, i, band.x1, i + 1};
+    const int n = FindColour(img, c.r, c.g, c.b, kTol, slice).count;
+    if (n > best) {
+      best = n;
+      at = i;
+    }
+  }
+  const bool high = at - from > to - at;
+  return horizontal ? (high ? 'r' : 'l') : (high ? 'd' : 'u');
+}
+
 TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);
@@ -245,18 +263,20 @@ TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
     const double len = f * scale;
     struct Check {
       ForceKind kind;
-      char dir;
-      double expected;  // pixel of the tip along the direction
+      char dir;         // the far end of its span from the anchor
+      char head;        // where it points
+      double expected;  // pixel of that far end
       double base_x, base_y;  // the arrow's line
     };
     const auto lf = px(TestCar::kB, TestCar::kBl), rr = px(-TestCar::kC, -TestCar::kBp);
     const auto nose = px(TestCar::kFront, 0), roof = px(0, 0);
     const Check checks[] = {
-        {ForceKind::kDrive, 'r', px(TestCar::kB + len, 0)[0], lf[0], lf[1]},
-        {ForceKind::kSide, 'u', px(0, TestCar::kBl + len)[1], lf[0], lf[1]},
-        {ForceKind::kBrake, 'l', px(-TestCar::kC - len, 0)[0], rr[0], rr[1]},
-        {ForceKind::kDrag, 'r', px(TestCar::kFront + len, 0)[0], nose[0], nose[1]},
-        {ForceKind::kWall, 'd', px(0, -len)[1], roof[0], roof[1]},
+        {ForceKind::kDrive, 'r', 'r', px(TestCar::kB + len, 0)[0], lf[0], lf[1]},
+        {ForceKind::kSide, 'u', 'u', px(0, TestCar::kBl + len)[1], lf[0], lf[1]},
+        {ForceKind::kBrake, 'l', 'l', px(-TestCar::kC - len, 0)[0], rr[0], rr[1]},
+        // Drag ends at the nose, pointing back at it: its tail is ahead of the car.
+        {ForceKind::kDrag, 'r', 'l', px(TestCar::kFront + len, 0)[0], nose[0], nose[1]},
+        {ForceKind::kWall, 'd', 'd', px(0, -len)[1], roof[0], roof[1]},
     };
     std::map<ForceKind, int> tips;
     for (const Check& c : checks) {
@@ -270,6 +290,8 @@ TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
       }
       const int tip = TipAlong(img, c.kind, c.dir, band);
       EXPECT_NEAR(tip, c.expected, 3.0) << "tip at pixel " << tip << ", expected " << c.expected;
+      const bool horizontal = c.dir == 'r' || c.dir == 'l';
+      EXPECT_EQ(HeadEnd(img, ForceColour(c.kind), band, horizontal), c.head) << "points the wrong way";
       // On the force's line: the colour's centroid across the band.
       const viewer::Rgb8 col = ForceColour(c.kind);
       const Blob b = FindColour(img, col.r, col.g, col.b, kTol, band);

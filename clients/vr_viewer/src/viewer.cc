@@ -204,10 +204,16 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
     throw std::runtime_error("no OpenGL 3.3 core context: " + e);
   }
   SDL_GL_MakeCurrent(m.window, m.gl);
+  if (std::string(SDL_GetCurrentVideoDriver()) == "offscreen" && !options_.hidden) {
+    spdlog::warn("vdyn-viewer: no display (SDL fell back to its offscreen driver): drawing without "
+                 "a window; --screenshot writes what is drawn. Run it on a desktop, or under Xvfb "
+                 "(xvfb-run) for OpenXR");
+  }
   SDL_GL_SetSwapInterval(0);  // the frame rate is paced here (--fps)
   stats_.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
-  spdlog::info("vdyn-viewer: OpenGL {} on {}", reinterpret_cast<const char*>(glGetString(GL_VERSION)),
-               stats_.renderer);
+  spdlog::info("vdyn-viewer: OpenGL {} on {} (SDL video: {})",
+               reinterpret_cast<const char*>(glGetString(GL_VERSION)), stats_.renderer,
+               SDL_GetCurrentVideoDriver());
 
   if (options_.samples < 0) {
     // Multisampling doubles the frame time of a software renderer: off there unless asked for.
@@ -259,7 +265,7 @@ Viewer::~Viewer() {
       const auto deadline = base::MonotonicNow() + base::Seconds(5);
       while (m.xr->PollEvents() && base::MonotonicNow() < deadline) {
         if (m.xr->running()) {
-          m.xr->Frame(Pose{}, 0.1, 100, [](const XrEye&) {}, {});
+          m.xr->EmptyFrame();  // frames go on, with nothing to show, until the runtime stops
         } else {
           SDL_Delay(5);
         }
@@ -703,10 +709,10 @@ bool Viewer::Frame() {
   if (m.xr && !m.xr_ended) {
     try {
       if (!m.xr->PollEvents()) {
+        // The headset session is over (the person left through the runtime): so is the viewer.
         m.xr_ended = true;
-        if (!m.xr->exit_requested()) {
-          spdlog::info("vdyn-viewer: the OpenXR session ended; back to the desktop window");
-        }
+        spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
+        m.quit = true;
       } else if (m.xr->running()) {
         // The reference space's origin in the world (docs in xr_session.h).
         Pose world_from_space;

@@ -453,6 +453,19 @@ bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
   return drawn;
 }
 
+void Headset::EmptyFrame() {
+  Impl& x = *impl_;
+  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
+  auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
+  x.Check(xrWaitFrame(x.session, &wi, &fs), "xrWaitFrame");
+  auto bi = XrStruct<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
+  x.Check(xrBeginFrame(x.session, &bi), "xrBeginFrame");
+  auto ei = XrStruct<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+  ei.displayTime = fs.predictedDisplayTime;
+  ei.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+  x.Check(xrEndFrame(x.session, &ei), "xrEndFrame");
+}
+
 void Headset::RequestExit() {
   Impl& x = *impl_;
   if (x.exit_requested || x.ended) return;

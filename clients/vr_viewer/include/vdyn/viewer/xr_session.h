@@ -62,6 +62,8 @@ class Headset {
   bool Frame(const Pose& world_from_space, double near_m, double far_m,
              const std::function<void(const XrEye&)>& draw_eye,
              const std::function<void(RenderTarget&)>& draw_hud);
+  // A frame submitted with no layers (while leaving: the runtime still expects frames).
+  void EmptyFrame();
   // Asks the runtime to end the session (it answers with STOPPING, then EXITING).
   void RequestExit();
   bool exit_requested() const;
