@@ -2,12 +2,14 @@
 # vdyn's main job on its built-in default world: installs what it needs, builds, and runs a live
 # session - the server on `facility` in real time (1 kHz), with the demo drive fed to it as live
 # driver input over DDS by vdyn-input, and a terminal line of speed, step rate and lateness.
+# With a display (DISPLAY or WAYLAND_DISPLAY set) vdyn-viewer opens on the live session
+# (VDYN_VIEWER=0 leaves it closed).
 #   scripts/demo.sh            the live session (about 45 s)
 #   scripts/demo.sh --batch    the same drive as a batch run, as fast as possible, to out/demo.csv
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
-./scripts/build.sh release vdyn-server vdyn-input
+./scripts/build.sh release vdyn-server vdyn-input vdyn-viewer
 bin=build/release
 if [ "${1:-}" = "--batch" ]; then
   shift
@@ -19,9 +21,19 @@ domain="${VDYN_DOMAIN:-42}"
 "$bin/server/vdyn-server" --domain "$domain" --world facility --duration 44 --status \
   --stats-out out/live-stats.txt &
 server=$!
-trap 'kill "$server" 2>/dev/null || true' EXIT
+viewer=""
+trap 'kill "$server" $viewer 2>/dev/null || true' EXIT
 mkdir -p out
+if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${VDYN_VIEWER:-1}" != 0 ]; then
+  # The viewer joins the session (it gets the world at once: transient local) and follows
+  # vehicle 1 on the chase camera; its keys: F1.
+  "$bin/clients/vr_viewer/vdyn-viewer" --domain "$domain" --follow 1 --camera chase \
+    --stats-out out/viewer-stats.txt > out/viewer.log 2>&1 &
+  viewer=$!
+  echo "vdyn-viewer open on domain $domain (log in out/viewer.log)"
+fi
 "$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30
 wait "$server"
+if [ -n "$viewer" ]; then kill -INT "$viewer" 2>/dev/null || true; wait "$viewer" || true; fi
 trap - EXIT
 echo "live session done; run summary in out/live-stats.txt"

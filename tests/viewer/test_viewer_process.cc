@@ -20,6 +20,7 @@
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/session_view.h"
+#include "vdyn/transport/control_client.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
@@ -182,6 +183,17 @@ TEST_F(ViewerProcess, TheArrowsOfAWheelAddUpToTheWheelForceTheServerComputed) {
   transport::Participant p(domain);
   client::SessionView view(p, {});
   client::InputPublisher rig(p, 1, "test-rig", 10);
+  // Just before the speed bumps (x = -180 m on the test road) at 10 m/s.
+  transport::ControlClient control(p, "viewer-test");
+  ASSERT_TRUE(control.WaitForServer(std::chrono::seconds(30))) << control.last_error();
+  pb::ControlRequest teleport;
+  teleport.set_vehicle_id(1);
+  teleport.mutable_teleport()->mutable_pose()->set_x(-195);
+  teleport.mutable_teleport()->mutable_pose()->set_y(-150);
+  teleport.mutable_teleport()->set_speed(10);
+  const auto reply = control.Call(teleport, std::chrono::seconds(30));
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  ASSERT_TRUE(reply->accepted()) << reply->reason();
   // Drive, steer and brake over the speed bumps: every force in play, on slopes too.
   int checked = 0, sloped = 0, braking = 0;
   const auto deadline = base::MonotonicNow() + base::Seconds(40);

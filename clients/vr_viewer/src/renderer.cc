@@ -409,12 +409,6 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 
   const Mat4 view_proj = v.proj * v.view;
-  // Sky at the far plane, no depth written.
-  glDisable(GL_DEPTH_TEST);
-  glUseProgram(sky_prog_);
-  SetMat(sky_prog_, "u_inv_view_proj", Inverse(view_proj));
-  glBindVertexArray(sky_vao_);
-  glDrawArrays(GL_TRIANGLES, 0, 3);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LEQUAL);
 
@@ -437,6 +431,14 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
     if (m.look.alpha >= 1.0f) draw_mesh(m);
   }
   DrawList(lists.opaque, Pass::kOpaque, v);
+  // The sky at the far plane, after what is opaque: only the pixels nothing covers are shaded
+  // (a software renderer pays for every pixel).
+  glUseProgram(sky_prog_);
+  SetMat(sky_prog_, "u_inv_view_proj", Inverse(view_proj));
+  glDepthMask(GL_FALSE);
+  glBindVertexArray(sky_vao_);
+  glDrawArrays(GL_TRIANGLES, 0, 3);
+  glDepthMask(GL_TRUE);
 
   glUseProgram(terrain_prog_);
   glEnable(GL_BLEND);
