@@ -119,9 +119,10 @@ int main(int argc, char** argv) {
   std::system(("mkdir -p " + tmp).c_str());
   const pid_t xvfb = StartXvfb(tmp + "/xvfb.log");
   std::string renderer;
-  std::printf("viewer_bench: vdyn-viewer on facility, chase camera, 1280x720, HUD on, %d runs x "
-              "%d frames per case\n",
-              runs, frames);
+  std::printf(
+      "viewer_bench: vdyn-viewer on facility, chase camera, 1280x720, HUD on, %d runs x "
+      "%d frames per case\n",
+      runs, frames);
   std::printf("%-9s %-28s %-10s %-28s\n", "vehicles", "frame p50 / p99 ms (no cap)", "fps",
               "latency p50 / p99 ms (60 Hz)");
   const int domain_base = 150 + getpid() % 40;
@@ -136,17 +137,16 @@ int main(int argc, char** argv) {
     for (int r = 0; r < runs; ++r) {
       for (bool capped : {false, true}) {
         ++domain;
-        const pid_t server = Spawn({VDYN_SERVER_BINARY, "--domain", std::to_string(domain),
-                                    "--world", "facility", "--vehicle-ids", ids, "--duration",
-                                    "600"},
-                                   tmp + "/server.log");
+        const pid_t server =
+            Spawn({VDYN_SERVER_BINARY, "--domain", std::to_string(domain), "--world", "facility",
+                   "--vehicle-ids", ids, "--duration", "600"},
+                  tmp + "/server.log");
         const std::string stats = tmp + "/stats.txt";
         std::remove(stats.c_str());
         const pid_t viewer = Spawn(
-            {VDYN_VIEWER_BINARY, "--domain", std::to_string(domain), "--follow", "1",
-             "--camera", "chase", "--width", "1280", "--height", "720", "--fps",
-             capped ? "60" : "0", "--frames", std::to_string(frames), "--wait", "60",
-             "--stats-out", stats},
+            {VDYN_VIEWER_BINARY, "--domain", std::to_string(domain), "--follow", "1", "--camera",
+             "chase", "--width", "1280", "--height", "720", "--fps", capped ? "60" : "0",
+             "--frames", std::to_string(frames), "--wait", "60", "--stats-out", stats},
             tmp + "/viewer.log");
         const int code = WaitPid(viewer);
         kill(server, SIGINT);

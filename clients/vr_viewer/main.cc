@@ -5,8 +5,8 @@
 #include <csignal>
 #include <iostream>
 
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include "vdyn/cli/options.h"
 #include "vdyn/viewer/viewer.h"
@@ -14,7 +14,9 @@
 namespace {
 
 volatile std::sig_atomic_t g_stop = 0;
-extern "C" void OnSignal(int) { g_stop = 1; }
+extern "C" void OnSignal(int) {
+  g_stop = 1;
+}
 
 }  // namespace
 
@@ -22,8 +24,9 @@ int main(int argc, char** argv) {
   namespace cli = vdyn::cli;
   namespace limits = vdyn::limits;
   using vdyn::viewer::Rad;
-  CLI::App app{"vdyn-viewer: the world, the vehicles and their force arrows, live or played back, "
-               "on the desktop or in an OpenXR headset"};
+  CLI::App app{
+      "vdyn-viewer: the world, the vehicles and their force arrows, live or played back, "
+      "on the desktop or in an OpenXR headset"};
   vdyn::viewer::ViewerOptions o;
   std::uint32_t follow = 0;
   std::string camera = "chase";
@@ -73,8 +76,9 @@ int main(int argc, char** argv) {
                  "are there, or after --wait)")
       ->check(cli::WholeInRange(limits::kFrames));
   app.add_option("--screenshot", o.screenshot, "Write the last frame to this PNG file at the end");
-  app.add_option("--wait", o.wait_s, "Seconds to wait for the world and a vehicle before "
-                                     "counting --frames anyway")
+  app.add_option("--wait", o.wait_s,
+                 "Seconds to wait for the world and a vehicle before "
+                 "counting --frames anyway")
       ->check(cli::InRange(limits::kWaitS))
       ->capture_default_str();
   app.add_option("--stats-out", o.stats_out,

@@ -13,10 +13,10 @@
 
 #include "../process.h"
 #include "../test_support.h"
-#include "viewer_support.h"
 #include "vdyn/base/time.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/viewer.h"
+#include "viewer_support.h"
 
 namespace vdyn::testing {
 namespace {
@@ -125,7 +125,8 @@ double BlobAxis(const Image& img, viewer::Rgb8 c, Rect r) {
   for (int y = r.y0; y < std::min(r.y1, img.height); ++y) {
     for (int x = r.x0; x < std::min(r.x1, img.width); ++x) {
       const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * img.width + x) * 4;
-      if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol || std::abs(p[2] - c.b) > kTol) continue;
+      if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol || std::abs(p[2] - c.b) > kTol)
+        continue;
       const double dx = x + 0.5 - b.cx, dy = y + 0.5 - b.cy;
       sxx += dx * dx;
       syy += dy * dy;
@@ -174,15 +175,18 @@ TEST_P(MapTest, EachVehicleIsDrawnWhereItIsTurnedAsItIs) {
     const Rect around{static_cast<int>(centre[0]) - 80, static_cast<int>(centre[1]) - 80,
                       static_cast<int>(centre[0]) + 80, static_cast<int>(centre[1]) + 80};
     const Blob roof = FindColour(img, c.r, c.g, c.b, kTol, around);
-    EXPECT_GT(roof.count, 400) << "vehicle not drawn near pixel (" << centre[0] << ", "
-                               << centre[1] << ")";
+    EXPECT_GT(roof.count, 400) << "vehicle not drawn near pixel (" << centre[0] << ", " << centre[1]
+                               << ")";
     int outside = 0;
     for (int y = around.y0; y < around.y1; ++y) {
       for (int x = around.x0; x < around.x1; ++x) {
         if (x < 0 || y < 0 || x >= kW || y >= kH) continue;
         const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
-        if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol || std::abs(p[2] - c.b) > kTol) continue;
-        const auto body = PixelInBody(x + 0.5, y + 0.5, a.x, a.y, north_yaw, 12, t->x, t->y, t->yaw);
+        if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol ||
+            std::abs(p[2] - c.b) > kTol)
+          continue;
+        const auto body =
+            PixelInBody(x + 0.5, y + 0.5, a.x, a.y, north_yaw, 12, t->x, t->y, t->yaw);
         const double tol = 2.0 * 24.0 / kH;  // two pixels, in metres
         if (body[0] > TestCar::kFront + tol || body[0] < -TestCar::kRear - tol ||
             std::abs(body[1]) > TestCar::kHalfWidth + tol) {
@@ -210,10 +214,14 @@ int TipAlong(const Image& img, ForceKind kind, char direction, Rect r) {
   const Blob b = FindColour(img, c.r, c.g, c.b, kTol, r);
   EXPECT_GT(b.count, 20) << viewer::ForceLabel(kind) << " arrow not found";
   switch (direction) {
-    case 'r': return b.max_x + 1;
-    case 'l': return b.min_x;
-    case 'u': return b.min_y;
-    default: return b.max_y + 1;
+    case 'r':
+      return b.max_x + 1;
+    case 'l':
+      return b.min_x;
+    case 'u':
+      return b.min_y;
+    default:
+      return b.max_y + 1;
   }
 }
 
@@ -224,7 +232,8 @@ char HeadEnd(const Image& img, viewer::Rgb8 c, Rect band, bool horizontal) {
   int best = 0, at = 0;
   const int from = horizontal ? b.min_x : b.min_y, to = horizontal ? b.max_x : b.max_y;
   for (int i = from; i <= to; ++i) {
-    const Rect slice = horizontal ? Rect{i, band.y0, i + 1, band.y1} : Rect{band.x0, i, band.x1, i + 1};
+    const Rect slice =
+        horizontal ? Rect{i, band.y0, i + 1, band.y1} : Rect{band.x0, i, band.x1, i + 1};
     const int n = FindColour(img, c.r, c.g, c.b, kTol, slice).count;
     if (n > best) {
       best = n;
@@ -253,19 +262,19 @@ TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
     t.step = step;
     t.speed = 5;  // rolling forward: the brake force points backwards
     for (auto& w : t.wheels) w.fp = 0;
-    t.wheels[0].fh = f;        // LF drive: forwards (+X, east: right on a north-up map)
-    t.wheels[0].fy = f;        // LF side, positive left (+Y, north: up)
-    t.wheels[3].fb = f;        // RR brake: against the rolling (-X: left)
-    t.da = f;                  // drag: against +X, ending at the nose
-    t.f_wall = {0, -f, 0};     // wall: -Y (down), from above the roof
+    t.wheels[0].fh = f;     // LF drive: forwards (+X, east: right on a north-up map)
+    t.wheels[0].fy = f;     // LF side, positive left (+Y, north: up)
+    t.wheels[3].fb = f;     // RR brake: against the rolling (-X: left)
+    t.da = f;               // drag: against +X, ending at the nose
+    t.f_wall = {0, -f, 0};  // wall: -Y (down), from above the roof
     const Image img = Show(v, pub, {MakeState(t)});
     auto px = [&](double x, double y) { return MapPixel(x, y, 0, 0, kPi / 2, hh, kW, kH); };
     const double len = f * scale;
     struct Check {
       ForceKind kind;
-      char dir;         // the far end of its span from the anchor
-      char head;        // where it points
-      double expected;  // pixel of that far end
+      char dir;               // the far end of its span from the anchor
+      char head;              // where it points
+      double expected;        // pixel of that far end
       double base_x, base_y;  // the arrow's line
     };
     const auto lf = px(TestCar::kB, TestCar::kBl), rr = px(-TestCar::kC, -TestCar::kBp);
@@ -291,7 +300,8 @@ TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
       const int tip = TipAlong(img, c.kind, c.dir, band);
       EXPECT_NEAR(tip, c.expected, 3.0) << "tip at pixel " << tip << ", expected " << c.expected;
       const bool horizontal = c.dir == 'r' || c.dir == 'l';
-      EXPECT_EQ(HeadEnd(img, ForceColour(c.kind), band, horizontal), c.head) << "points the wrong way";
+      EXPECT_EQ(HeadEnd(img, ForceColour(c.kind), band, horizontal), c.head)
+          << "points the wrong way";
       // On the force's line: the colour's centroid across the band.
       const viewer::Rgb8 col = ForceColour(c.kind);
       const Blob b = FindColour(img, col.r, col.g, col.b, kTol, band);
@@ -456,10 +466,11 @@ TEST_F(ViewerTest, MalformedWorldsAndStatesAreRefusedCountedAndTheViewGoesOn) {
   pb::VehicleState three = MakeState(moved);
   three.mutable_wheels()->RemoveLast();
   // (One kind at a time: the state topic keeps only the newest sample of a vehicle.)
-  ASSERT_TRUE(FramesUntil(v, [&] { pub.State(nan_state); }, [&] {
-    return v.session().drops().Of("non-finite value on vdyn/state") > 0;
-  }));
-  ASSERT_TRUE(FramesUntil(v, [&] { pub.State(three); }, [&] { return v.stats().states_refused > 0; }));
+  ASSERT_TRUE(FramesUntil(
+      v, [&] { pub.State(nan_state); },
+      [&] { return v.session().drops().Of("non-finite value on vdyn/state") > 0; }));
+  ASSERT_TRUE(FramesUntil(
+      v, [&] { pub.State(three); }, [&] { return v.stats().states_refused > 0; }));
   ASSERT_NE(v.vehicle(1), nullptr);
   EXPECT_EQ(v.vehicle(1)->step, 1u);
   EXPECT_DOUBLE_EQ(v.vehicle(1)->pose_WB.t.x, 0.0);
@@ -489,7 +500,8 @@ TEST_F(ViewerTest, AWorldArrivingWithNoVehicleIsDrawnAroundItsSpawn) {
   const Image img = Keep(v.Screenshot());
   const viewer::Rgb8 road = viewer::LookOf(pb::SURFACE_ROAD).colour;
   // The road (8 m wide along X through the spawn) across the middle of the map, ground beside.
-  const Blob r = FindColour(img, road.r, road.g, road.b, 6, {0, kH / 2 - 70, kW - 160, kH / 2 + 70});
+  const Blob r =
+      FindColour(img, road.r, road.g, road.b, 6, {0, kH / 2 - 70, kW - 160, kH / 2 + 70});
   EXPECT_GT(r.count, 100 * 100);
   EXPECT_NEAR(r.cy, kH / 2.0, 3.0);
   EXPECT_EQ(FindColour(img, road.r, road.g, road.b, 6, {0, 0, kW - 160, kH / 2 - 100}).count, 0);

@@ -16,7 +16,6 @@
 #include "../process.h"
 #include "../test_support.h"
 #include "test_runtime.h"
-#include "viewer_support.h"
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/session_view.h"
@@ -25,6 +24,7 @@
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
 #include "vdyn/viewer/xr_session.h"
+#include "viewer_support.h"
 
 namespace vdyn::testing {
 namespace {
@@ -81,10 +81,31 @@ TEST_F(ViewerProcess, AViewerThatJoinsLateDrawsTheWorldOfARunningServer) {
   ASSERT_TRUE(WaitForServer(domain, 1, 60)) << server.Log();
   // The world was published once, long before this viewer existed (transient local).
   const auto png = dir_ / "late.png", stats = dir_ / "stats.txt";
-  Process viewer({VDYN_VIEWER_BINARY, "--domain", std::to_string(domain), "--camera", "map",
-                  "--map-span", "20", "--width", "640", "--height", "480", "--msaa", "0",
-                  "--fps", "0", "--frames", "3", "--no-hud", "--hidden", "--wait", "60",
-                  "--screenshot", png.string(), "--stats-out", stats.string()},
+  Process viewer({VDYN_VIEWER_BINARY,
+                  "--domain",
+                  std::to_string(domain),
+                  "--camera",
+                  "map",
+                  "--map-span",
+                  "20",
+                  "--width",
+                  "640",
+                  "--height",
+                  "480",
+                  "--msaa",
+                  "0",
+                  "--fps",
+                  "0",
+                  "--frames",
+                  "3",
+                  "--no-hud",
+                  "--hidden",
+                  "--wait",
+                  "60",
+                  "--screenshot",
+                  png.string(),
+                  "--stats-out",
+                  stats.string()},
                  dir_ / "viewer.log");
   const auto code = viewer.Wait(std::chrono::seconds(120));
   ASSERT_TRUE(code.has_value()) << viewer.Log();
@@ -116,9 +137,9 @@ TEST_F(ViewerProcess, AViewerThatJoinsLateDrawsTheWorldOfARunningServer) {
 
 TEST_F(ViewerProcess, AParameterChangeIsAnsweredAndARejectedOneShowsItsReason) {
   const std::uint32_t domain = FreshDomain();
-  Process server({ServerBinary(), "--domain", std::to_string(domain), "--world", "flat",
-                  "--duration", "120"},
-                 dir_ / "server.log");
+  Process server(
+      {ServerBinary(), "--domain", std::to_string(domain), "--world", "flat", "--duration", "120"},
+      dir_ / "server.log");
   ASSERT_TRUE(WaitForServer(domain, 1, 60)) << server.Log();
   viewer::ViewerOptions o;
   o.domain = domain;
@@ -209,7 +230,8 @@ TEST_F(ViewerProcess, TheArrowsOfAWheelAddUpToTheWheelForceTheServerComputed) {
     const auto* sv = view.vehicle(1);
     if (sv == nullptr || sv->states == 0 || std::abs(sv->state.v_wt_b().x()) < 1.0) continue;
     const pb::VehicleState& s = sv->state;
-    const viewer::VehicleView vv = viewer::BuildVehicleView(s, viewer::GeometryFor(1, nullptr, nullptr));
+    const viewer::VehicleView vv =
+        viewer::BuildVehicleView(s, viewer::GeometryFor(1, nullptr, nullptr));
     for (int w = 0; w < 4; ++w) {
       const pb::WheelState& ws = s.wheels(w);
       if (!ws.contact()) continue;
@@ -220,7 +242,8 @@ TEST_F(ViewerProcess, TheArrowsOfAWheelAddUpToTheWheelForceTheServerComputed) {
       // The rolling resistance (no arrow of its own) opposes the rolling like the brake.
       const viewer::WheelView& wv = vv.wheels[static_cast<std::size_t>(w)];
       const viewer::Vec3 v_T{s.v_wt_w().x(), s.v_wt_w().y(), s.v_wt_w().z()};
-      const viewer::Vec3 w_W = vv.pose_WB.R * viewer::Vec3{s.w_wb_b().x(), s.w_wb_b().y(), s.w_wb_b().z()};
+      const viewer::Vec3 w_W =
+          vv.pose_WB.R * viewer::Vec3{s.w_wb_b().x(), s.w_wb_b().y(), s.w_wb_b().z()};
       const viewer::Vec3 v_B = v_T + viewer::Cross(w_W, wv.contact_W - vv.pose_WB.t);
       const double roll = viewer::Dot(v_B, wv.t_long_W) >= 0 ? 1.0 : -1.0;
       sum -= wv.t_long_W * (roll * ws.frr());
@@ -239,9 +262,14 @@ TEST_F(ViewerProcess, TheArrowsOfAWheelAddUpToTheWheelForceTheServerComputed) {
 }
 
 TEST_F(ViewerProcess, CommandLineMistakesExitWith2) {
-  for (std::vector<std::string> bad : std::vector<std::vector<std::string>>{
-           {"--fps", "-1"}, {"--camera", "sideways"}, {"--orbit", "1,2"}, {"--arrow-scale", "nan"},
-           {"--width", "10"}, {"--msaa", "3.5"}, {"--xr-space", "lying"}}) {
+  for (std::vector<std::string> bad :
+       std::vector<std::vector<std::string>>{{"--fps", "-1"},
+                                             {"--camera", "sideways"},
+                                             {"--orbit", "1,2"},
+                                             {"--arrow-scale", "nan"},
+                                             {"--width", "10"},
+                                             {"--msaa", "3.5"},
+                                             {"--xr-space", "lying"}}) {
     std::vector<std::string> argv = {VDYN_VIEWER_BINARY};
     argv.insert(argv.end(), bad.begin(), bad.end());
     Process p(argv, dir_ / "bad.log");
@@ -253,10 +281,10 @@ TEST_F(ViewerProcess, CommandLineMistakesExitWith2) {
 
 TEST_F(ViewerProcess, WithoutADisplayItSaysSoAndStillDrawsOffscreen) {
   const auto png = dir_ / "offscreen.png";
-  Process p({"/usr/bin/env", "-u", "DISPLAY", "-u", "WAYLAND_DISPLAY", VDYN_VIEWER_BINARY,
-             "--domain", std::to_string(FreshDomain()), "--frames", "1", "--wait", "0",
-             "--screenshot", png.string()},
-            dir_ / "nodisplay.log");
+  Process p(
+      {"/usr/bin/env", "-u", "DISPLAY", "-u", "WAYLAND_DISPLAY", VDYN_VIEWER_BINARY, "--domain",
+       std::to_string(FreshDomain()), "--frames", "1", "--wait", "0", "--screenshot", png.string()},
+      dir_ / "nodisplay.log");
   const auto code = p.Wait(std::chrono::seconds(60));
   ASSERT_TRUE(code.has_value());
   EXPECT_EQ(*code, 0) << p.Log();
@@ -315,17 +343,31 @@ class ViewerXr : public ViewerProcess {
     setenv(xrtest::kEnvOut, dir_.path().c_str(), 1);
     setenv(xrtest::kEnvExitAfter, exit_after.c_str(), 1);
     setenv(xrtest::kEnvStage, stage.c_str(), 1);
-    std::vector<std::string> argv = {VDYN_VIEWER_BINARY, "--domain", std::to_string(domain),
-                                     "--xr", "--hidden", "--fps", "0", "--msaa", "0",
-                                     "--width", "640", "--height", "400", "--wait", "60",
-                                     "--stats-out", (dir_ / "stats.txt").string()};
+    std::vector<std::string> argv = {VDYN_VIEWER_BINARY,
+                                     "--domain",
+                                     std::to_string(domain),
+                                     "--xr",
+                                     "--hidden",
+                                     "--fps",
+                                     "0",
+                                     "--msaa",
+                                     "0",
+                                     "--width",
+                                     "640",
+                                     "--height",
+                                     "400",
+                                     "--wait",
+                                     "60",
+                                     "--stats-out",
+                                     (dir_ / "stats.txt").string()};
     argv.insert(argv.end(), args.begin(), args.end());
     Process viewer(argv, dir_ / "viewer.log");
     unsetenv("XR_RUNTIME_JSON");
     // The state until the viewer ends (best effort topic: written repeatedly).
     const auto deadline = base::MonotonicNow() + base::Seconds(120);
     std::optional<int> code;
-    while (!(code = viewer.Wait(std::chrono::milliseconds(20))) && base::MonotonicNow() < deadline) {
+    while (!(code = viewer.Wait(std::chrono::milliseconds(20))) &&
+           base::MonotonicNow() < deadline) {
       pub.State(state);
     }
     EXPECT_TRUE(code.has_value()) << "the viewer did not end: " << viewer.Log();
@@ -377,8 +419,10 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   EXPECT_EQ(report.at("runtime_exit"), "0");
   EXPECT_GE(std::stoi(report.at("frames_with_projection")), 12);
   EXPECT_EQ(report.at("frames_with_projection"), report.at("frames_with_quad"));
-  EXPECT_EQ(report.at("projection_space"), std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
-  EXPECT_EQ(report.at("quad_space"), std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_VIEW)));
+  EXPECT_EQ(report.at("projection_space"),
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
+  EXPECT_EQ(report.at("quad_space"),
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_VIEW)));
   EXPECT_EQ(report.at("session_open"), "0");
   EXPECT_NE(log_.find("runtime 'vdyn test runtime'"), std::string::npos) << log_;
 
@@ -419,7 +463,8 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   auto centred = eyes;
   centred[0].position = centred[1].position = seat;
   const double no_offset = EyePixel(centred[0], tip)[0] - EyePixel(centred[1], tip)[0];
-  EXPECT_GT(std::abs((pl[0] - pr[0]) - no_offset), 8.0) << "the test would not see a missing offset";
+  EXPECT_GT(std::abs((pl[0] - pr[0]) - no_offset), 8.0)
+      << "the test would not see a missing offset";
   EXPECT_NE(left->rgba, right->rgba);
   // The HUD quad: the panels drawn on a transparent image.
   const Blob transparent = FindColour(*hud, 0, 0, 0, 0);
@@ -438,7 +483,8 @@ TEST_F(ViewerXr, StandingBesideTheVehicleTheRuntimeEndsTheSessionAndTheViewerFol
   EXPECT_EQ(report.at("states"), "idle ready synchronized visible focused stopping idle exiting");
   EXPECT_EQ(report.at("runtime_exit"), "1");
   EXPECT_EQ(report.at("requested_exit"), "0");
-  EXPECT_EQ(report.at("projection_space"), std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_STAGE)));
+  EXPECT_EQ(report.at("projection_space"),
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_STAGE)));
   EXPECT_EQ(report.at("session_open"), "0");
   EXPECT_NE(log_.find("session ended"), std::string::npos) << log_;
   // On the floor 6 m to the vehicle's left, facing it: OpenXR X = -X_W (east is to the left),
@@ -467,7 +513,8 @@ TEST_F(ViewerXr, WithoutAStageTheStandingViewStandsOnLocalAtEyeHeight) {
       RunInHeadset(MakeState(t), {"--xr-space", "standing", "--frames", "5"}, "0", "0");
   ASSERT_FALSE(report.empty()) << log_;
   EXPECT_EQ(report.at("lifecycle"), "ok");
-  EXPECT_EQ(report.at("projection_space"), std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
+  EXPECT_EQ(report.at("projection_space"),
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
   EXPECT_NE(log_.find("the runtime has no STAGE"), std::string::npos) << log_;
 }
 

@@ -31,9 +31,8 @@ Xvfb::Xvfb(int width, int height) {
   posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
   posix_spawn_file_actions_addopen(&fa, 2, "/dev/null", O_WRONLY, 0);
   const std::string screen = std::to_string(width) + "x" + std::to_string(height) + "x24";
-  std::vector<std::string> argv = {"/usr/bin/Xvfb", "-displayfd", "3",      "-screen",
-                                   "0",             screen,       "-nolisten", "tcp",
-                                   "-noreset"};
+  std::vector<std::string> argv = {"/usr/bin/Xvfb", "-displayfd", "3",   "-screen", "0",
+                                   screen,          "-nolisten",  "tcp", "-noreset"};
   std::vector<char*> args;
   for (auto& a : argv) args.push_back(a.data());
   args.push_back(nullptr);
@@ -143,7 +142,8 @@ pb::WorldDescription MakeWorld(const std::string& server, double north_yaw,
   ground->set_name("ground");
   ground->set_kind(pb::SURFACE_GROUND);
   for (int i = -4; i < 4; ++i) {
-    for (int j = -4; j < 4; ++j) AddRect(*ground, 50.0 * i, 50.0 * j, 50.0 * (i + 1), 50.0 * (j + 1), 0.0);
+    for (int j = -4; j < 4; ++j)
+      AddRect(*ground, 50.0 * i, 50.0 * j, 50.0 * (i + 1), 50.0 * (j + 1), 0.0);
   }
   pb::Mesh* road = w.add_meshes();
   road->set_name("road");
@@ -178,7 +178,9 @@ TestPublisher::TestPublisher(std::uint32_t domain)
 bool TestPublisher::World(const pb::WorldDescription& w) {
   return worlds_.Write(transport::ServerKey(w.server_id()), w);
 }
-bool TestPublisher::State(const pb::VehicleState& s) { return states_.Write(s.vehicle_id(), s); }
+bool TestPublisher::State(const pb::VehicleState& s) {
+  return states_.Write(s.vehicle_id(), s);
+}
 bool TestPublisher::Params(std::uint32_t vehicle_id, const pb::VehicleParams& p) {
   return params_.Write(vehicle_id, p);
 }
@@ -212,7 +214,8 @@ Blob FindColour(const viewer::Image& img, std::uint8_t r, std::uint8_t g, std::u
     for (int x = std::max(region.x0, 0); x < x1; ++x) {
       const std::uint8_t* p =
           img.rgba.data() + (static_cast<std::size_t>(y) * static_cast<std::size_t>(img.width) +
-                             static_cast<std::size_t>(x)) * 4;
+                             static_cast<std::size_t>(x)) *
+                                4;
       if (std::abs(p[0] - r) > tolerance || std::abs(p[1] - g) > tolerance ||
           std::abs(p[2] - b) > tolerance) {
         continue;
@@ -237,8 +240,8 @@ Blob FindColour(const viewer::Image& img, std::uint8_t r, std::uint8_t g, std::u
   return out;
 }
 
-std::array<double, 2> MapPixel(double x, double y, double centre_x, double centre_y,
-                               double up_yaw, double half_height_m, int width, int height) {
+std::array<double, 2> MapPixel(double x, double y, double centre_x, double centre_y, double up_yaw,
+                               double half_height_m, int width, int height) {
   const double ppm = height / (2.0 * half_height_m);
   const double dx = x - centre_x, dy = y - centre_y;
   const double up = dx * std::cos(up_yaw) + dy * std::sin(up_yaw);

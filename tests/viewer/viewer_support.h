@@ -112,7 +112,7 @@ Blob FindColour(const viewer::Image& img, std::uint8_t r, std::uint8_t g, std::u
 // Where a world point lands on the map camera's image (top-down, orthographic, centred on
 // `centre`, the geographic heading `up_yaw` pointing up, `half_height_m` from centre to the top):
 // pixel x right, y down. The closed form, independent of the viewer's matrices.
-std::array<double, 2> MapPixel(double x, double y, double centre_x, double centre_y,
-                               double up_yaw, double half_height_m, int width, int height);
+std::array<double, 2> MapPixel(double x, double y, double centre_x, double centre_y, double up_yaw,
+                               double half_height_m, int width, int height);
 
 }  // namespace vdyn::testing

@@ -7,11 +7,16 @@ namespace vdyn::viewer {
 
 std::string_view CameraName(CameraMode m) {
   switch (m) {
-    case CameraMode::kChase: return "chase";
-    case CameraMode::kDriver: return "driver";
-    case CameraMode::kOrbit: return "orbit";
-    case CameraMode::kMap: return "map";
-    case CameraMode::kNorth: return "north";
+    case CameraMode::kChase:
+      return "chase";
+    case CameraMode::kDriver:
+      return "driver";
+    case CameraMode::kOrbit:
+      return "orbit";
+    case CameraMode::kMap:
+      return "map";
+    case CameraMode::kNorth:
+      return "north";
   }
   return "?";
 }

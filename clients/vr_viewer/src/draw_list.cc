@@ -53,7 +53,7 @@ void DrawList::Box(const Pose& pose, const Vec3& mn, const Vec3& mx, Rgb8 c, std
     Vec3 n_B;
   };
   static const Face kFaces[] = {
-      {0, 2, 6, 4, {-1, 0, 0}}, {1, 5, 7, 3, {1, 0, 0}}, {0, 4, 5, 1, {0, -1, 0}},
+      {0, 2, 6, 4, {-1, 0, 0}}, {1, 5, 7, 3, {1, 0, 0}},  {0, 4, 5, 1, {0, -1, 0}},
       {2, 3, 7, 6, {0, 1, 0}},  {0, 1, 3, 2, {0, 0, -1}}, {4, 6, 7, 5, {0, 0, 1}},
   };
   for (const Face& f : kFaces) {

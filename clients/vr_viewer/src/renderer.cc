@@ -174,13 +174,11 @@ int ClampSamples(int samples) {
 void CheckFramebuffer(const char* what) {
   const GLenum status = glCheckFramebufferStatus(GL_FRAMEBUFFER);
   if (status != GL_FRAMEBUFFER_COMPLETE) {
-    throw GlError(std::string("viewer framebuffer '") + what + "' incomplete (status 0x" +
-                  [&] {
-                    char b[16];
-                    std::snprintf(b, sizeof b, "%x", status);
-                    return std::string(b);
-                  }() +
-                  ")");
+    throw GlError(std::string("viewer framebuffer '") + what + "' incomplete (status 0x" + [&] {
+      char b[16];
+      std::snprintf(b, sizeof b, "%x", status);
+      return std::string(b);
+    }() + ")");
   }
 }
 
@@ -194,7 +192,9 @@ bool WritePng(const std::string& path, const Image& image) {
 
 // --- RenderTarget -------------------------------------------------------------------------------
 
-RenderTarget::~RenderTarget() { Release(); }
+RenderTarget::~RenderTarget() {
+  Release();
+}
 
 void RenderTarget::Release() {
   if (msaa_fbo_ != 0) glDeleteFramebuffers(1, &msaa_fbo_);
@@ -229,8 +229,7 @@ void RenderTarget::Resize(int width, int height, int samples, bool external_colo
     glGenRenderbuffers(1, &resolve_depth_);
     glBindRenderbuffer(GL_RENDERBUFFER, resolve_depth_);
     glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT24, width_, height_);
-    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
-                              resolve_depth_);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, resolve_depth_);
   } else {
     glGenFramebuffers(1, &msaa_fbo_);
     glBindFramebuffer(GL_FRAMEBUFFER, msaa_fbo_);

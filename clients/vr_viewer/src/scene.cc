@@ -5,7 +5,9 @@
 namespace vdyn::viewer {
 namespace {
 
-Vec3 V(const pb::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+Vec3 V(const pb::Vec3& v) {
+  return {v.x(), v.y(), v.z()};
+}
 
 // A mid-size car (the server's defaults), for a vehicle whose geometry has not arrived yet.
 VehicleGeometry DefaultGeometry() {
@@ -19,10 +21,14 @@ VehicleGeometry DefaultGeometry() {
 
 const pb::WheelParams& WheelOf(const pb::VehicleParams& p, int w) {
   switch (w) {
-    case 0: return p.lf();
-    case 1: return p.rf();
-    case 2: return p.lr();
-    default: return p.rr();
+    case 0:
+      return p.lf();
+    case 1:
+      return p.rf();
+    case 2:
+      return p.lr();
+    default:
+      return p.rr();
   }
 }
 
@@ -30,24 +36,36 @@ const pb::WheelParams& WheelOf(const pb::VehicleParams& p, int w) {
 
 Rgb8 ForceColour(ForceKind kind) {
   switch (kind) {
-    case ForceKind::kSpring: return {40, 200, 60};
-    case ForceKind::kDrive: return {40, 110, 255};
-    case ForceKind::kBrake: return {235, 40, 40};
-    case ForceKind::kSide: return {255, 210, 0};
-    case ForceKind::kDrag: return {220, 60, 220};
-    case ForceKind::kWall: return {255, 130, 0};
+    case ForceKind::kSpring:
+      return {40, 200, 60};
+    case ForceKind::kDrive:
+      return {40, 110, 255};
+    case ForceKind::kBrake:
+      return {235, 40, 40};
+    case ForceKind::kSide:
+      return {255, 210, 0};
+    case ForceKind::kDrag:
+      return {220, 60, 220};
+    case ForceKind::kWall:
+      return {255, 130, 0};
   }
   return {255, 255, 255};
 }
 
 std::string_view ForceLabel(ForceKind kind) {
   switch (kind) {
-    case ForceKind::kSpring: return "spring Fp";
-    case ForceKind::kDrive: return "drive Fh";
-    case ForceKind::kBrake: return "brake Fb";
-    case ForceKind::kSide: return "side Fy";
-    case ForceKind::kDrag: return "drag Da";
-    case ForceKind::kWall: return "wall";
+    case ForceKind::kSpring:
+      return "spring Fp";
+    case ForceKind::kDrive:
+      return "drive Fh";
+    case ForceKind::kBrake:
+      return "brake Fb";
+    case ForceKind::kSide:
+      return "side Fy";
+    case ForceKind::kDrag:
+      return "drag Da";
+    case ForceKind::kWall:
+      return "wall";
   }
   return "?";
 }
@@ -75,8 +93,8 @@ std::string CheckGeometry(const pb::VehicleGeometry& g) {
   for (int w = 0; w < kWheels; ++w) {
     const double r = g.wheel_radius(w), l = g.free_length(w);
     if (!(r > 0 && r < 10) || !(l >= 0 && l < 10)) {
-      return "vehicle " + std::to_string(g.vehicle_id()) + ": wheel " +
-             std::string(WheelName(w)) + " radius or free length out of (0, 10) m";
+      return "vehicle " + std::to_string(g.vehicle_id()) + ": wheel " + std::string(WheelName(w)) +
+             " radius or free length out of (0, 10) m";
     }
     const Vec3 a = V(g.mount_points_b(w));
     if (!(Norm(a) < 100)) {

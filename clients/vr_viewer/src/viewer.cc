@@ -32,7 +32,9 @@ namespace {
 
 constexpr std::size_t kMaxSamples = 1'000'000;  // frame and latency samples kept
 
-ImU32 ImColour(Rgb8 c, int alpha = 255) { return IM_COL32(c.r, c.g, c.b, alpha); }
+ImU32 ImColour(Rgb8 c, int alpha = 255) {
+  return IM_COL32(c.r, c.g, c.b, alpha);
+}
 
 std::string FormatSeconds(std::int64_t ns) {
   char b[32];
@@ -51,8 +53,8 @@ struct AcceptedWorld {
 struct GoodState {
   pb::VehicleState state;
   std::int64_t source_timestamp_ns = 0;
-  std::uint64_t seen = 0;    // SessionView's count when it was taken
-  bool fresh = false;        // arrived since the last frame (its latency is measured)
+  std::uint64_t seen = 0;  // SessionView's count when it was taken
+  bool fresh = false;      // arrived since the last frame (its latency is measured)
 };
 
 }  // namespace
@@ -205,9 +207,10 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   }
   SDL_GL_MakeCurrent(m.window, m.gl);
   if (std::string(SDL_GetCurrentVideoDriver()) == "offscreen" && !options_.hidden) {
-    spdlog::warn("vdyn-viewer: no display (SDL fell back to its offscreen driver): drawing without "
-                 "a window; --screenshot writes what is drawn. Run it on a desktop, or under Xvfb "
-                 "(xvfb-run) for OpenXR");
+    spdlog::warn(
+        "vdyn-viewer: no display (SDL fell back to its offscreen driver): drawing without "
+        "a window; --screenshot writes what is drawn. Run it on a desktop, or under Xvfb "
+        "(xvfb-run) for OpenXR");
   }
   SDL_GL_SetSwapInterval(0);  // the frame rate is paced here (--fps)
   stats_.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
@@ -288,9 +291,15 @@ Viewer::~Viewer() {
   SDL_Quit();
 }
 
-bool Viewer::xr_active() const { return impl_->xr != nullptr && !impl_->xr_ended; }
-ParamsEditor& Viewer::params_editor() { return *impl_->params; }
-client::SessionView& Viewer::session() { return impl_->session; }
+bool Viewer::xr_active() const {
+  return impl_->xr != nullptr && !impl_->xr_ended;
+}
+ParamsEditor& Viewer::params_editor() {
+  return *impl_->params;
+}
+client::SessionView& Viewer::session() {
+  return impl_->session;
+}
 
 const VehicleView* Viewer::vehicle(std::uint32_t id) const {
   const auto it = impl_->views.find(id);
@@ -388,8 +397,7 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
   for (int i = 0; i < 4; ++i) {
     const ImVec2 d = dir(north_angle + i * kPi / 2);
     const ImVec2 p(centre.x + d.x * radius * 0.78f - 4, centre.y + d.y * radius * 0.78f - 7);
-    dl->AddText(p, i == 0 ? IM_COL32(255, 90, 90, 255) : IM_COL32(220, 220, 220, 255),
-                letters[i]);
+    dl->AddText(p, i == 0 ? IM_COL32(255, 90, 90, 255) : IM_COL32(220, 220, 220, 255), letters[i]);
   }
   const ImVec2 n = dir(north_angle), side = ImVec2(-n.y, n.x);
   const float len = radius * 0.55f, half = radius * 0.13f;
@@ -416,7 +424,9 @@ bool Viewer::Frame() {
   while (SDL_PollEvent(&ev)) {
     ImGui_ImplSDL2_ProcessEvent(&ev);
     switch (ev.type) {
-      case SDL_QUIT: m.quit = true; break;
+      case SDL_QUIT:
+        m.quit = true;
+        break;
       case SDL_WINDOWEVENT:
         if (ev.window.event == SDL_WINDOWEVENT_CLOSE) m.quit = true;
         if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !options_.xr) {
@@ -431,11 +441,13 @@ bool Viewer::Frame() {
         CameraState& c = options_.camera;
         if (k == SDLK_ESCAPE) m.quit = true;
         if (k >= SDLK_1 && k <= SDLK_5) c.mode = static_cast<CameraMode>(k - SDLK_1);
-        if (k == SDLK_c) c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
+        if (k == SDLK_c)
+          c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
         if (k == SDLK_q) TurnGeographic(c, +1);
         if (k == SDLK_e) TurnGeographic(c, -1);
         if (k == SDLK_n) c.geo_turn = 0;
-        if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS) options_.arrows.metres_per_newton *= 1.25;
+        if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS)
+          options_.arrows.metres_per_newton *= 1.25;
         if (k == SDLK_MINUS || k == SDLK_KP_MINUS) options_.arrows.metres_per_newton /= 1.25;
         if (k == SDLK_h) options_.hud = !options_.hud;
         if (k == SDLK_p) m.show_params = !m.show_params;
@@ -447,11 +459,13 @@ bool Viewer::Frame() {
           for (const auto& [id, g] : m.good) ids.push_back(id);
           auto it = followed_ ? std::find(ids.begin(), ids.end(), *followed_) : ids.end();
           std::size_t i = it == ids.end() ? 0 : static_cast<std::size_t>(it - ids.begin());
-          i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size() : (i + 1) % ids.size();
+          i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size()
+                                               : (i + 1) % ids.size();
           options_.follow = ids[i];
         }
         if (k == SDLK_F12) {
-          const std::string path = "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
+          const std::string path =
+              "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
           if (WritePng(path, Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
         }
         break;
@@ -459,7 +473,9 @@ bool Viewer::Frame() {
       case SDL_MOUSEBUTTONDOWN:
         if (!io.WantCaptureMouse) m.dragging = true;
         break;
-      case SDL_MOUSEBUTTONUP: m.dragging = false; break;
+      case SDL_MOUSEBUTTONUP:
+        m.dragging = false;
+        break;
       case SDL_MOUSEMOTION:
         if (m.dragging && !io.WantCaptureMouse) {
           CameraState& c = options_.camera;
@@ -469,7 +485,8 @@ bool Viewer::Frame() {
             const Vec3 d = last_camera_.eye_W - (f != nullptr ? f->pose_WB.t : Vec3{});
             c.orbit_yaw = std::atan2(d.y, d.x);
             c.orbit_distance = std::clamp(Norm(d), 1.0, 2000.0);
-            c.orbit_pitch = std::clamp(std::asin(std::clamp(d.z / std::max(Norm(d), 1e-9), -1.0, 1.0)), Rad(-5), Rad(89));
+            c.orbit_pitch = std::clamp(
+                std::asin(std::clamp(d.z / std::max(Norm(d), 1e-9), -1.0, 1.0)), Rad(-5), Rad(89));
             c.mode = CameraMode::kOrbit;
           }
           if (c.mode == CameraMode::kOrbit) {
@@ -483,14 +500,23 @@ bool Viewer::Frame() {
           CameraState& c = options_.camera;
           const double f = std::pow(0.9, ev.wheel.y);
           switch (c.mode) {
-            case CameraMode::kMap: c.map_half_height = std::clamp(c.map_half_height * f, 2.0, 5000.0); break;
-            case CameraMode::kChase: c.chase_distance = std::clamp(c.chase_distance * f, 2.0, 200.0); break;
-            case CameraMode::kNorth: c.north_distance = std::clamp(c.north_distance * f, 2.0, 500.0); break;
-            default: c.orbit_distance = std::clamp(c.orbit_distance * f, 1.0, 2000.0); break;
+            case CameraMode::kMap:
+              c.map_half_height = std::clamp(c.map_half_height * f, 2.0, 5000.0);
+              break;
+            case CameraMode::kChase:
+              c.chase_distance = std::clamp(c.chase_distance * f, 2.0, 200.0);
+              break;
+            case CameraMode::kNorth:
+              c.north_distance = std::clamp(c.north_distance * f, 2.0, 500.0);
+              break;
+            default:
+              c.orbit_distance = std::clamp(c.orbit_distance * f, 1.0, 2000.0);
+              break;
           }
         }
         break;
-      default: break;
+      default:
+        break;
     }
   }
 
@@ -546,7 +572,8 @@ bool Viewer::Frame() {
   cs.followed = followed;
   if (accepted != nullptr) {
     cs.north_yaw = world->north_yaw();
-    const double span = std::max(accepted->max_W.x - accepted->min_W.x, accepted->max_W.y - accepted->min_W.y);
+    const double span =
+        std::max(accepted->max_W.x - accepted->min_W.x, accepted->max_W.y - accepted->min_W.y);
     cs.top_z = accepted->max_W.z;
     cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
     cs.fallback_target_W = world->has_spawn() ? Vec3{world->spawn().x(), world->spawn().y(), 0}
@@ -561,8 +588,9 @@ bool Viewer::Frame() {
     m.lists.Clear();
     // Arrows at least ~3 px thick wherever they are.
     auto radius_at = [&](const Vec3& p) {
-      const double mpp = ortho ? metres_per_pixel
-                               : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
+      const double mpp = ortho
+                             ? metres_per_pixel
+                             : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
       return std::max(0.03, 1.6 * mpp);
     };
     for (const auto& [id, v] : m.views) {
@@ -589,14 +617,16 @@ bool Viewer::Frame() {
     const auto* gs = followed_ ? &m.good.at(*followed_) : nullptr;
     ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
     ImGui::SetNextWindowBgAlpha(0.7f);
-    ImGui::Begin("vdyn-viewer", nullptr, ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+    ImGui::Begin("vdyn-viewer", nullptr,
+                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
     std::string mode = options_.playback ? "PLAYBACK" : "LIVE";
     std::string server_mode;
     if (const auto d = m.session.diagnostics().find(server); d != m.session.diagnostics().end()) {
       server_mode = d->second.mode();
       if (server_mode == "playback") mode = "PLAYBACK";
     }
-    ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s", mode.c_str());
+    ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
+                       mode.c_str());
     ImGui::SameLine();
     ImGui::Text("server '%s'%s%s  world '%s'", server.c_str(), server_mode.empty() ? "" : " ",
                 server_mode.c_str(), world != nullptr ? world->name().c_str() : "(waiting)");
@@ -604,7 +634,8 @@ bool Viewer::Frame() {
       const pb::VehicleState& s = gs->state;
       ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), m.good.size());
       ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
-                  FormatSeconds(s.sim_time_ns()).c_str(), static_cast<unsigned long long>(s.step()));
+                  FormatSeconds(s.sim_time_ns()).c_str(),
+                  static_cast<unsigned long long>(s.step()));
       const std::string& src = s.input().source_id();
       ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
       ImGui::SameLine();
@@ -613,49 +644,60 @@ bool Viewer::Frame() {
       } else {
         ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
       }
-      const double age_ms = static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
+      const double age_ms =
+          static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
       ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
                   Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
     } else {
       ImGui::Text("no vehicle on domain %u yet", options_.domain);
     }
     const double frame_ms = stats_.frame_ms.empty() ? 0.0 : stats_.frame_ms.back();
-    ImGui::Text("camera %s (1-5, C)   frame %.1f ms", std::string(CameraName(options_.camera.mode)).c_str(), frame_ms);
-    if (m.xr) ImGui::Text("OpenXR: %s, %s", m.xr->runtime_name().c_str(), m.xr->state_name().c_str());
+    ImGui::Text("camera %s (1-5, C)   frame %.1f ms",
+                std::string(CameraName(options_.camera.mode)).c_str(), frame_ms);
+    if (m.xr)
+      ImGui::Text("OpenXR: %s, %s", m.xr->runtime_name().c_str(), m.xr->state_name().c_str());
     const std::uint64_t drops = m.session.drops().Total();
     if (drops > 0) {
-      ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu", static_cast<unsigned long long>(drops));
+      ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
+                         static_cast<unsigned long long>(drops));
       if (ImGui::IsItemHovered()) {
         ImGui::BeginTooltip();
-        for (const auto& [kind, n] : m.session.drops().Snapshot()) ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
-        if (!stats_.last_refusal.empty()) ImGui::TextWrapped("last: %s", stats_.last_refusal.c_str());
+        for (const auto& [kind, n] : m.session.drops().Snapshot())
+          ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
+        if (!stats_.last_refusal.empty())
+          ImGui::TextWrapped("last: %s", stats_.last_refusal.c_str());
         ImGui::EndTooltip();
       }
     }
     ImGui::End();
 
     if (m.show_legend) {
-      ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(options_.height) - 210), ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(options_.height) - 210),
+                              ImGuiCond_FirstUseEver);
       ImGui::SetNextWindowBgAlpha(0.7f);
-      ImGui::Begin("forces", &m.show_legend, ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+      ImGui::Begin("forces", &m.show_legend,
+                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
       for (int k = 0; k < kForceKinds; ++k) {
         const auto kind = static_cast<ForceKind>(k);
         const Rgb8 c = ForceColour(kind);
         const ImVec2 p = ImGui::GetCursorScreenPos();
-        ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13), ImColour(c));
+        ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
+                                                  ImColour(c));
         ImGui::Dummy(ImVec2(26, 14));
         ImGui::SameLine();
         ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &options_.arrows.show[k]);
       }
       float kn = static_cast<float>(options_.arrows.metres_per_newton * 1000.0);
       ImGui::SetNextItemWidth(140);
-      if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f", ImGuiSliderFlags_Logarithmic)) {
+      if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
+                             ImGuiSliderFlags_Logarithmic)) {
         options_.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
       }
       ImGui::End();
     }
     if (m.show_params && followed_) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) - 430, 160), ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) - 430, 160),
+                              ImGuiCond_FirstUseEver);
       ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
       ImGui::Begin("parameters", &m.show_params);
       const auto* sv = m.session.vehicle(*followed_);
@@ -664,7 +706,8 @@ bool Viewer::Frame() {
       ImGui::End();
     }
     if (m.show_help) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) * 0.5f - 200, 80), ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) * 0.5f - 200, 80),
+                              ImGuiCond_FirstUseEver);
       ImGui::Begin("keys", &m.show_help, ImGuiWindowFlags_AlwaysAutoResize);
       ImGui::TextUnformatted(
           "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
@@ -677,7 +720,8 @@ bool Viewer::Frame() {
     }
     // Compass, landmark and vehicle labels.
     ImDrawList* fg = ImGui::GetForegroundDrawList();
-    DrawCompass(fg, ImVec2(static_cast<float>(options_.width) - 75, 75), 55, north_angle, heading_deg);
+    DrawCompass(fg, ImVec2(static_cast<float>(options_.width) - 75, 75), 55, north_angle,
+                heading_deg);
     if (!xr_active()) {
       if (world != nullptr) {
         for (const pb::Landmark& l : world->landmarks()) {
@@ -699,8 +743,8 @@ bool Viewer::Frame() {
       }
     }
   } else {
-    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(options_.width) - 75, 75), 55,
-                north_angle, heading_deg);
+    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(options_.width) - 75, 75),
+                55, north_angle, heading_deg);
   }
   ImGui::Render();
 
@@ -726,7 +770,8 @@ bool Viewer::Frame() {
             const Vec3 place = followed->pose_WB.t + yaw * Vec3{0, 6, 0};
             double z = followed->ground_z;
             if (m.xr->standing_on_local()) z += 1.6;
-            world_from_space = {XrAxesIn(RotationZ(followed->yaw - kPi / 2)), {place.x, place.y, z}};
+            world_from_space = {XrAxesIn(RotationZ(followed->yaw - kPi / 2)),
+                                {place.x, place.y, z}};
           }
         }
         m.xr->Frame(
@@ -768,7 +813,8 @@ bool Viewer::Frame() {
                               static_cast<double>(options_.height) / mirror.height());
     const int w = static_cast<int>(mirror.width() * s), h = static_cast<int>(mirror.height() * s);
     const int x0 = (options_.width - w) / 2, y0 = (options_.height - h) / 2;
-    glBlitFramebuffer(0, 0, mirror.width(), mirror.height(), x0, y0, x0 + w, y0 + h, GL_COLOR_BUFFER_BIT, GL_LINEAR);
+    glBlitFramebuffer(0, 0, mirror.width(), mirror.height(), x0, y0, x0 + w, y0 + h,
+                      GL_COLOR_BUFFER_BIT, GL_LINEAR);
     glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
   } else {
     build_lists(cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy, options_.height,

@@ -67,14 +67,21 @@ TerrainData TerrainFromWorld(const pb::WorldDescription& world) {
 
 SurfaceLook LookOf(pb::SurfaceKind kind) {
   switch (kind) {
-    case pb::SURFACE_ROAD: return {{72, 74, 80}, 1.0f};
-    case pb::SURFACE_OBSTACLE: return {{190, 160, 90}, 1.0f};
-    case pb::SURFACE_ROUGH: return {{128, 104, 78}, 1.0f};
-    case pb::SURFACE_RAMP: return {{165, 170, 185}, 1.0f};
-    case pb::SURFACE_BARRIER: return {{170, 225, 240}, 0.35f};
-    case pb::SURFACE_PROP: return {{215, 205, 190}, 1.0f};
+    case pb::SURFACE_ROAD:
+      return {{72, 74, 80}, 1.0f};
+    case pb::SURFACE_OBSTACLE:
+      return {{190, 160, 90}, 1.0f};
+    case pb::SURFACE_ROUGH:
+      return {{128, 104, 78}, 1.0f};
+    case pb::SURFACE_RAMP:
+      return {{165, 170, 185}, 1.0f};
+    case pb::SURFACE_BARRIER:
+      return {{170, 225, 240}, 0.35f};
+    case pb::SURFACE_PROP:
+      return {{215, 205, 190}, 1.0f};
     case pb::SURFACE_GROUND:
-    default: return {{128, 146, 112}, 1.0f};
+    default:
+      return {{128, 146, 112}, 1.0f};
   }
 }
 

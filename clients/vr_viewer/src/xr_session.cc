@@ -43,11 +43,16 @@ std::string ResultName(XrInstance instance, XrResult r) {
     return std::string(buf) + " (" + std::to_string(r) + ")";
   }
   switch (r) {
-    case XR_ERROR_RUNTIME_UNAVAILABLE: return "XR_ERROR_RUNTIME_UNAVAILABLE (-51)";
-    case XR_ERROR_RUNTIME_FAILURE: return "XR_ERROR_RUNTIME_FAILURE (-2)";
-    case XR_ERROR_EXTENSION_NOT_PRESENT: return "XR_ERROR_EXTENSION_NOT_PRESENT (-9)";
-    case XR_ERROR_FORM_FACTOR_UNAVAILABLE: return "XR_ERROR_FORM_FACTOR_UNAVAILABLE (-35)";
-    default: return "XrResult " + std::to_string(r);
+    case XR_ERROR_RUNTIME_UNAVAILABLE:
+      return "XR_ERROR_RUNTIME_UNAVAILABLE (-51)";
+    case XR_ERROR_RUNTIME_FAILURE:
+      return "XR_ERROR_RUNTIME_FAILURE (-2)";
+    case XR_ERROR_EXTENSION_NOT_PRESENT:
+      return "XR_ERROR_EXTENSION_NOT_PRESENT (-9)";
+    case XR_ERROR_FORM_FACTOR_UNAVAILABLE:
+      return "XR_ERROR_FORM_FACTOR_UNAVAILABLE (-35)";
+    default:
+      return "XrResult " + std::to_string(r);
   }
 }
 
@@ -58,15 +63,24 @@ Pose PoseOf(const XrPosef& p) {
 
 const char* StateName(XrSessionState s) {
   switch (s) {
-    case XR_SESSION_STATE_IDLE: return "idle";
-    case XR_SESSION_STATE_READY: return "ready";
-    case XR_SESSION_STATE_SYNCHRONIZED: return "synchronized";
-    case XR_SESSION_STATE_VISIBLE: return "visible";
-    case XR_SESSION_STATE_FOCUSED: return "focused";
-    case XR_SESSION_STATE_STOPPING: return "stopping";
-    case XR_SESSION_STATE_LOSS_PENDING: return "loss pending";
-    case XR_SESSION_STATE_EXITING: return "exiting";
-    default: return "unknown";
+    case XR_SESSION_STATE_IDLE:
+      return "idle";
+    case XR_SESSION_STATE_READY:
+      return "ready";
+    case XR_SESSION_STATE_SYNCHRONIZED:
+      return "synchronized";
+    case XR_SESSION_STATE_VISIBLE:
+      return "visible";
+    case XR_SESSION_STATE_FOCUSED:
+      return "focused";
+    case XR_SESSION_STATE_STOPPING:
+      return "stopping";
+    case XR_SESSION_STATE_LOSS_PENDING:
+      return "loss pending";
+    case XR_SESSION_STATE_EXITING:
+      return "exiting";
+    default:
+      return "unknown";
   }
 }
 
@@ -134,7 +148,8 @@ struct Headset::Impl {
     auto wi = XrStruct<XrSwapchainImageWaitInfo>(XR_TYPE_SWAPCHAIN_IMAGE_WAIT_INFO);
     wi.timeout = 1'000'000'000;  // 1 s
     Check(xrWaitSwapchainImage(s.handle, &wi), "xrWaitSwapchainImage");
-    if (index >= s.images.size()) throw XrError("OpenXR runtime gave a swapchain image index past the end");
+    if (index >= s.images.size())
+      throw XrError("OpenXR runtime gave a swapchain image index past the end");
     s.target.SetExternalColour(s.images[index].image);
   }
 
@@ -171,15 +186,18 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
       throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
                     "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
     }
-    std::vector<XrExtensionProperties> exts(n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
+    std::vector<XrExtensionProperties> exts(
+        n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
     x.Check(xrEnumerateInstanceExtensionProperties(nullptr, n, &n, exts.data()),
             "xrEnumerateInstanceExtensionProperties");
     bool has_gl = false;
-    for (const auto& e : exts) has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
+    for (const auto& e : exts)
+      has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
     if (!has_gl) throw XrError("the OpenXR runtime does not offer XR_KHR_opengl_enable");
 
     auto ici = XrStruct<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
-    std::strncpy(ici.applicationInfo.applicationName, "vdyn-viewer", XR_MAX_APPLICATION_NAME_SIZE - 1);
+    std::strncpy(ici.applicationInfo.applicationName, "vdyn-viewer",
+                 XR_MAX_APPLICATION_NAME_SIZE - 1);
     ici.applicationInfo.applicationVersion = 1;
     std::strncpy(ici.applicationInfo.engineName, "vdyn", XR_MAX_ENGINE_NAME_SIZE - 1);
     ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
@@ -221,7 +239,8 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
     }
 
     // The Xlib binding of the current GLX context.
-    auto binding = XrStruct<XrGraphicsBindingOpenGLXlibKHR>(XR_TYPE_GRAPHICS_BINDING_OPENGL_XLIB_KHR);
+    auto binding =
+        XrStruct<XrGraphicsBindingOpenGLXlibKHR>(XR_TYPE_GRAPHICS_BINDING_OPENGL_XLIB_KHR);
     binding.xDisplay = glXGetCurrentDisplay();
     binding.glxContext = glXGetCurrentContext();
     binding.glxDrawable = glXGetCurrentDrawable();
@@ -232,8 +251,8 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
     glXQueryContext(binding.xDisplay, binding.glxContext, GLX_FBCONFIG_ID, &fb_id);
     const int attribs[] = {GLX_FBCONFIG_ID, fb_id, 0};
     int count = 0;
-    GLXFBConfig* configs = glXChooseFBConfig(binding.xDisplay, DefaultScreen(binding.xDisplay),
-                                             attribs, &count);
+    GLXFBConfig* configs =
+        glXChooseFBConfig(binding.xDisplay, DefaultScreen(binding.xDisplay), attribs, &count);
     if (configs != nullptr && count > 0) {
       binding.glxFBConfig = configs[0];
       if (XVisualInfo* vi = glXGetVisualFromFBConfig(binding.xDisplay, configs[0])) {
@@ -273,11 +292,11 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
 
     // Stereo views and their swapchains.
     std::uint32_t nv = 0;
-    x.Check(xrEnumerateViewConfigurationViews(x.instance, x.system,
-                                              XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &nv,
-                                              nullptr),
+    x.Check(xrEnumerateViewConfigurationViews(
+                x.instance, x.system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &nv, nullptr),
             "xrEnumerateViewConfigurationViews");
-    if (nv != 2) throw XrError("OpenXR runtime offers " + std::to_string(nv) + " stereo views, not 2");
+    if (nv != 2)
+      throw XrError("OpenXR runtime offers " + std::to_string(nv) + " stereo views, not 2");
     x.config_views.fill(XrStruct<XrViewConfigurationView>(XR_TYPE_VIEW_CONFIGURATION_VIEW));
     x.Check(xrEnumerateViewConfigurationViews(x.instance, x.system,
                                               XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 2, &nv,
@@ -297,7 +316,8 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
         }
       }
     }
-    if (!found) throw XrError("OpenXR runtime offers neither GL_RGBA8 nor GL_SRGB8_ALPHA8 swapchains");
+    if (!found)
+      throw XrError("OpenXR runtime offers neither GL_RGBA8 nor GL_SRGB8_ALPHA8 swapchains");
     for (int e = 0; e < 2; ++e) {
       const auto& cv = x.config_views[static_cast<std::size_t>(e)];
       x.CreateSwapchain(x.eyes[static_cast<std::size_t>(e)],
@@ -360,11 +380,13 @@ bool Headset::PollEvents() {
   return !x.ended;
 }
 
-bool Headset::running() const { return impl_->running; }
+bool Headset::running() const {
+  return impl_->running;
+}
 
 bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
-                      const std::function<void(const XrEye&)>& draw_eye,
-                      const std::function<void(RenderTarget&)>& draw_hud) {
+                    const std::function<void(const XrEye&)>& draw_eye,
+                    const std::function<void(RenderTarget&)>& draw_hud) {
   Impl& x = *impl_;
   auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
   auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
@@ -477,13 +499,29 @@ void Headset::RequestExit() {
   }
 }
 
-bool Headset::exit_requested() const { return impl_->exit_requested; }
-std::string Headset::runtime_name() const { return impl_->runtime; }
-std::string Headset::state_name() const { return StateName(impl_->state); }
-int Headset::eye_width() const { return impl_->eyes[0].width; }
-int Headset::eye_height() const { return impl_->eyes[0].height; }
-std::uint64_t Headset::frames_submitted() const { return impl_->frames; }
-const RenderTarget& Headset::mirror() const { return impl_->mirror; }
-bool Headset::standing_on_local() const { return impl_->standing_on_local; }
+bool Headset::exit_requested() const {
+  return impl_->exit_requested;
+}
+std::string Headset::runtime_name() const {
+  return impl_->runtime;
+}
+std::string Headset::state_name() const {
+  return StateName(impl_->state);
+}
+int Headset::eye_width() const {
+  return impl_->eyes[0].width;
+}
+int Headset::eye_height() const {
+  return impl_->eyes[0].height;
+}
+std::uint64_t Headset::frames_submitted() const {
+  return impl_->frames;
+}
+const RenderTarget& Headset::mirror() const {
+  return impl_->mirror;
+}
+bool Headset::standing_on_local() const {
+  return impl_->standing_on_local;
+}
 
 }  // namespace vdyn::viewer

@@ -84,9 +84,9 @@ struct Swapchain {
   int width = 0, height = 0;
   std::int64_t format = 0;
   std::vector<GLuint> textures;
-  int next = 0;                // next image to acquire
-  std::deque<int> acquired;    // acquired, not yet released
-  bool waited = false;         // the oldest acquired one has been waited for
+  int next = 0;              // next image to acquire
+  std::deque<int> acquired;  // acquired, not yet released
+  bool waited = false;       // the oldest acquired one has been waited for
   int last_released = -1;
 };
 
@@ -99,7 +99,7 @@ struct Space {
 struct State {
   bool instance = false, session = false;
   bool requirements_asked = false;
-  bool running = false;           // between xrBeginSession and xrEndSession
+  bool running = false;  // between xrBeginSession and xrEndSession
   XrSessionState state = XR_SESSION_STATE_UNKNOWN;
   std::deque<XrSessionState> events;
   std::vector<std::string> polled;  // session states in the order the application received them
@@ -124,7 +124,9 @@ struct State {
 // One lock for every call (applications may call from several threads).
 std::mutex g_mu;
 std::unique_ptr<State> g_state = std::make_unique<State>();
-State& S() { return *g_state; }
+State& S() {
+  return *g_state;
+}
 
 void Violation(const std::string& what) {
   State& s = S();
@@ -133,14 +135,22 @@ void Violation(const std::string& what) {
 
 const char* StateName(XrSessionState st) {
   switch (st) {
-    case XR_SESSION_STATE_IDLE: return "idle";
-    case XR_SESSION_STATE_READY: return "ready";
-    case XR_SESSION_STATE_SYNCHRONIZED: return "synchronized";
-    case XR_SESSION_STATE_VISIBLE: return "visible";
-    case XR_SESSION_STATE_FOCUSED: return "focused";
-    case XR_SESSION_STATE_STOPPING: return "stopping";
-    case XR_SESSION_STATE_EXITING: return "exiting";
-    default: return "other";
+    case XR_SESSION_STATE_IDLE:
+      return "idle";
+    case XR_SESSION_STATE_READY:
+      return "ready";
+    case XR_SESSION_STATE_SYNCHRONIZED:
+      return "synchronized";
+    case XR_SESSION_STATE_VISIBLE:
+      return "visible";
+    case XR_SESSION_STATE_FOCUSED:
+      return "focused";
+    case XR_SESSION_STATE_STOPPING:
+      return "stopping";
+    case XR_SESSION_STATE_EXITING:
+      return "exiting";
+    default:
+      return "other";
   }
 }
 
@@ -223,8 +233,10 @@ XrResult EnumerateInstanceExtensionProperties(const char* layer, std::uint32_t c
 XrResult CreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance) {
   std::lock_guard<std::mutex> lock(g_mu);
   if (S().instance) return XR_ERROR_LIMIT_REACHED;
-  if (info == nullptr || info->type != XR_TYPE_INSTANCE_CREATE_INFO) return XR_ERROR_VALIDATION_FAILURE;
-  if (XR_VERSION_MAJOR(info->applicationInfo.apiVersion) != 1) return XR_ERROR_API_VERSION_UNSUPPORTED;
+  if (info == nullptr || info->type != XR_TYPE_INSTANCE_CREATE_INFO)
+    return XR_ERROR_VALIDATION_FAILURE;
+  if (XR_VERSION_MAJOR(info->applicationInfo.apiVersion) != 1)
+    return XR_ERROR_API_VERSION_UNSUPPORTED;
   bool gl = false;
   for (std::uint32_t i = 0; i < info->enabledExtensionCount; ++i) {
     if (std::strcmp(info->enabledExtensionNames[i], XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0) {
@@ -271,7 +283,8 @@ XrResult StructureTypeToString(XrInstance, XrStructureType t,
 }
 
 XrResult GetSystem(XrInstance, const XrSystemGetInfo* info, XrSystemId* id) {
-  if (info->formFactor != XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY) return XR_ERROR_FORM_FACTOR_UNSUPPORTED;
+  if (info->formFactor != XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY)
+    return XR_ERROR_FORM_FACTOR_UNSUPPORTED;
   *id = 1;
   return XR_SUCCESS;
 }
@@ -306,7 +319,8 @@ XrResult EnumerateViewConfigurations(XrInstance, XrSystemId, std::uint32_t capac
 XrResult EnumerateViewConfigurationViews(XrInstance, XrSystemId, XrViewConfigurationType type,
                                          std::uint32_t capacity, std::uint32_t* count,
                                          XrViewConfigurationView* views) {
-  if (type != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO) return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
+  if (type != XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO)
+    return XR_ERROR_VIEW_CONFIGURATION_TYPE_UNSUPPORTED;
   *count = 2;
   if (capacity == 0) return XR_SUCCESS;
   if (capacity < 2) return XR_ERROR_SIZE_INSUFFICIENT;
@@ -473,9 +487,11 @@ XrResult LocateViews(XrSession, const XrViewLocateInfo* info, XrViewState* state
   // The head in the base space, looking along -Z; then into the space's own pose (translation
   // only: the tests create spaces with identity orientation, which this checks).
   double head_y = sp.type == XR_REFERENCE_SPACE_TYPE_STAGE ? kStageHeadHeight : 0.0;
-  if (sp.pose.orientation.w != 1.0f) Violation("reference space with a rotated pose (not supported here)");
+  if (sp.pose.orientation.w != 1.0f)
+    Violation("reference space with a rotated pose (not supported here)");
   state->viewStateFlags = XR_VIEW_STATE_ORIENTATION_VALID_BIT | XR_VIEW_STATE_POSITION_VALID_BIT |
-                          XR_VIEW_STATE_ORIENTATION_TRACKED_BIT | XR_VIEW_STATE_POSITION_TRACKED_BIT;
+                          XR_VIEW_STATE_ORIENTATION_TRACKED_BIT |
+                          XR_VIEW_STATE_POSITION_TRACKED_BIT;
   for (int e = 0; e < 2; ++e) {
     XrView& v = views[e];
     v.pose.orientation = {0, 0, 0, 1};
@@ -508,7 +524,8 @@ XrResult EnumerateSwapchainFormats(XrSession, std::uint32_t capacity, std::uint3
 XrResult CreateSwapchain(XrSession, const XrSwapchainCreateInfo* info, XrSwapchain* swapchain) {
   State& s = S();
   std::lock_guard<std::mutex> lock(g_mu);
-  if (info->format != kGlRgba8 && info->format != kGlSrgb8Alpha8) return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;
+  if (info->format != kGlRgba8 && info->format != kGlSrgb8Alpha8)
+    return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;
   if (info->width == 0 || info->height == 0 || info->arraySize != 1 || info->faceCount != 1) {
     return XR_ERROR_VALIDATION_FAILURE;
   }
@@ -687,9 +704,10 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
       s.projection_space = space->second->type;
       for (int e = 0; e < 2; ++e) {
         Swapchain* sc = nullptr;
-        if (!released(p->views[e].subImage.swapchain, p->views[e].subImage.imageRect, &sc)) continue;
-        Image img = ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)], sc->width,
-                                sc->height);
+        if (!released(p->views[e].subImage.swapchain, p->views[e].subImage.imageRect, &sc))
+          continue;
+        Image img = ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
+                                sc->width, sc->height);
         (e == 0 ? s.left : s.right) = std::move(img);
       }
       projection = true;
@@ -732,10 +750,12 @@ XrResult GetInstanceProcAddr(XrInstance instance, const char* name, PFN_xrVoidFu
     PFN_xrVoidFunction fn;
     bool without_instance;
   };
-#define VDYN_XR_ENTRY(api, impl, pre) {api, reinterpret_cast<PFN_xrVoidFunction>(&impl), pre}
+#define VDYN_XR_ENTRY(api, impl, pre) \
+  { api, reinterpret_cast<PFN_xrVoidFunction>(&impl), pre }
   static const Entry kEntries[] = {
       VDYN_XR_ENTRY("xrGetInstanceProcAddr", GetInstanceProcAddr, true),
-      VDYN_XR_ENTRY("xrEnumerateInstanceExtensionProperties", EnumerateInstanceExtensionProperties, true),
+      VDYN_XR_ENTRY("xrEnumerateInstanceExtensionProperties", EnumerateInstanceExtensionProperties,
+                    true),
       VDYN_XR_ENTRY("xrCreateInstance", CreateInstance, true),
       VDYN_XR_ENTRY("xrDestroyInstance", DestroyInstance, false),
       VDYN_XR_ENTRY("xrGetInstanceProperties", GetInstanceProperties, false),
@@ -788,8 +808,8 @@ extern "C" XrResult xrNegotiateLoaderRuntimeInterface(const XrNegotiateLoaderInf
       loader->structType != XR_LOADER_INTERFACE_STRUCT_LOADER_INFO ||
       loader->structSize != sizeof(XrNegotiateLoaderInfo) ||
       request->structType != XR_LOADER_INTERFACE_STRUCT_RUNTIME_REQUEST ||
-      request->structSize != sizeof(XrNegotiateRuntimeRequest) ||
-      loader->minInterfaceVersion > 1 || loader->maxInterfaceVersion < 1) {
+      request->structSize != sizeof(XrNegotiateRuntimeRequest) || loader->minInterfaceVersion > 1 ||
+      loader->maxInterfaceVersion < 1) {
     return XR_ERROR_INITIALIZATION_FAILED;
   }
   request->runtimeInterfaceVersion = 1;

@@ -33,7 +33,7 @@ struct CameraState {
   double chase_distance = 8, chase_height = 2.5;
   double north_distance = 14, north_height = 6;
   double orbit_yaw = Rad(-120), orbit_pitch = Rad(25), orbit_distance = 12;  // world frame
-  double map_half_height = 30;  // metres from the centre to the top edge
+  double map_half_height = 30;     // metres from the centre to the top edge
   Vec3 seat_B{-0.35, 0.37, 0.55};  // the driver's eyes from T, body frame, m
 };
 
@@ -45,8 +45,8 @@ struct CameraView {
   // map), rad from +X_W towards +Y_W: the compass turns with it.
   double heading = 0;
   bool orthographic = false;
-  double fovy = 0;             // perspective only
-  double metres_per_pixel = 0; // orthographic only (for arrow thickness)
+  double fovy = 0;              // perspective only
+  double metres_per_pixel = 0;  // orthographic only (for arrow thickness)
 };
 
 // What a camera looks at when no vehicle is followed: a point and the world's extent.

@@ -19,12 +19,18 @@ struct Vec3 {
   Vec3& operator+=(const Vec3& o) { return *this = *this + o; }
   Vec3& operator-=(const Vec3& o) { return *this = *this - o; }
 };
-constexpr Vec3 operator*(double s, const Vec3& v) { return v * s; }
-constexpr double Dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+constexpr Vec3 operator*(double s, const Vec3& v) {
+  return v * s;
+}
+constexpr double Dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 constexpr Vec3 Cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-inline double Norm(const Vec3& v) { return std::sqrt(Dot(v, v)); }
+inline double Norm(const Vec3& v) {
+  return std::sqrt(Dot(v, v));
+}
 // v / |v|, or `fallback` for a (near) zero vector.
 inline Vec3 Normalized(const Vec3& v, const Vec3& fallback = {1, 0, 0}) {
   const double n = Norm(v);
@@ -37,8 +43,8 @@ struct Mat3 {
   Vec3 operator*(const Vec3& v) const { return c[0] * v.x + c[1] * v.y + c[2] * v.z; }
   Mat3 operator*(const Mat3& o) const { return {{*this * o.c[0], *this * o.c[1], *this * o.c[2]}}; }
   Mat3 Transposed() const {
-    return {{Vec3{c[0].x, c[1].x, c[2].x}, Vec3{c[0].y, c[1].y, c[2].y},
-             Vec3{c[0].z, c[1].z, c[2].z}}};
+    return {
+        {Vec3{c[0].x, c[1].x, c[2].x}, Vec3{c[0].y, c[1].y, c[2].y}, Vec3{c[0].z, c[1].z, c[2].z}}};
   }
 };
 // Rotation of a unit quaternion (w, x, y, z); a non-unit one is normalised first.
@@ -81,8 +87,12 @@ Mat4 PerspectiveFov(double angle_left, double angle_right, double angle_up, doub
 Mat4 Orthographic(double half_width, double half_height, double near_m, double far_m);
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr double Deg(double rad) { return rad * 180.0 / kPi; }
-constexpr double Rad(double deg) { return deg * kPi / 180.0; }
+constexpr double Deg(double rad) {
+  return rad * 180.0 / kPi;
+}
+constexpr double Rad(double deg) {
+  return deg * kPi / 180.0;
+}
 // An angle in (-pi, pi].
 double WrapAngle(double a);
 

@@ -1,8 +1,8 @@
 // What the viewer draws of a vehicle, computed from its state message alone (no physics): the
 // body's pose, each wheel at its spring position and steering angle, and the force arrows of the
 // paper's Fig. 3 - per wheel at the contact point B the spring force Fp (along the terrain normal),
-// the drive force Fh and brake force Fb (along the wheel's heading in the ground plane) and the side
-// force Fy (across it), and at the body the aerodynamic drag and the wall force.
+// the drive force Fh and brake force Fb (along the wheel's heading in the ground plane) and the
+// side force Fy (across it), and at the body the aerodynamic drag and the wall force.
 //
 // The directions follow the model (docs/model.md): a wheel's heading is cos(gamma) X_B +
 // sin(gamma) Y_B projected on the ground plane (t_long), t_lat = n x t_long; Fb opposes the
@@ -34,8 +34,8 @@ struct Rgb8 {
 // The legend: spring green, drive blue, brake red, side yellow, drag magenta, wall orange. Arrows
 // are drawn unlit, in exactly these colours.
 Rgb8 ForceColour(ForceKind kind);
-std::string_view ForceLabel(ForceKind kind);   // "spring Fp"
-std::string_view WheelName(int wheel);         // "LF"
+std::string_view ForceLabel(ForceKind kind);  // "spring Fp"
+std::string_view WheelName(int wheel);        // "LF"
 
 // A vehicle's colour by id (a palette of eight that avoids the arrows' hues).
 Rgb8 VehicleColour(std::uint32_t vehicle_id);
@@ -62,18 +62,18 @@ struct WheelView {
   Vec3 forward_W;  // the steered wheel's frame: forward, left (the axle), up
   Vec3 left_W;
   Vec3 up_W;
-  Vec3 n_W;        // terrain normal at B
-  Vec3 t_long_W;   // the wheel's heading in the ground plane
-  Vec3 t_lat_W;    // n x t_long
+  Vec3 n_W;       // terrain normal at B
+  Vec3 t_long_W;  // the wheel's heading in the ground plane
+  Vec3 t_lat_W;   // n x t_long
   double radius = 0.3;
   bool contact = false;
 };
 
 struct ForceArrow {
   ForceKind kind = ForceKind::kSpring;
-  int wheel = -1;   // 0..3, or -1 for a force on the body
-  Vec3 anchor_W;    // where the force acts (B, or a point on the body)
-  Vec3 force_W;     // N
+  int wheel = -1;  // 0..3, or -1 for a force on the body
+  Vec3 anchor_W;   // where the force acts (B, or a point on the body)
+  Vec3 force_W;    // N
   // Drawn ending at the anchor (drag: the air pushes on the nose) instead of starting there.
   bool tip_at_anchor = false;
 };
@@ -81,7 +81,7 @@ struct ForceArrow {
 struct VehicleView {
   std::uint32_t id = 0;
   std::uint64_t step = 0;  // the state's step
-  Pose pose_WB;  // body frame at T
+  Pose pose_WB;            // body frame at T
   VehicleGeometry geometry;
   std::array<WheelView, kWheels> wheels{};
   std::vector<ForceArrow> arrows;  // every force, zero ones included (drawn when long enough)

@@ -33,9 +33,9 @@ struct ViewerOptions {
   CameraState camera;
   ArrowStyle arrows;
   int width = 1280, height = 720;
-  int samples = -1;      // multisampling of the scene; -1: 4, or 0 on a software renderer
-  double fps = 60;       // frame rate cap; 0: as fast as it draws
-  bool hidden = false;   // no window on the screen (headless use; rendering is offscreen anyway)
+  int samples = -1;     // multisampling of the scene; -1: 4, or 0 on a software renderer
+  double fps = 60;      // frame rate cap; 0: as fast as it draws
+  bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
   bool hud = true;
   // Headless: after `frames` frames (counted once the world and the followed vehicle are there,
   // or once `wait_s` has passed), write `screenshot` (when set) and end. 0: run until closed.
@@ -54,18 +54,18 @@ struct ViewerOptions {
 double Percentile(std::vector<double> v, double p);
 
 struct ViewerStats {
-  std::uint64_t frames = 0;           // frames drawn
-  std::uint64_t counted_frames = 0;   // frames counted towards --frames
-  std::uint64_t xr_frames = 0;        // frames submitted to an OpenXR runtime
+  std::uint64_t frames = 0;          // frames drawn
+  std::uint64_t counted_frames = 0;  // frames counted towards --frames
+  std::uint64_t xr_frames = 0;       // frames submitted to an OpenXR runtime
   std::uint64_t worlds_accepted = 0;
   std::uint64_t worlds_refused = 0;
-  std::uint64_t states_refused = 0;   // failed CheckState (non-finite ones: transport drops)
+  std::uint64_t states_refused = 0;  // failed CheckState (non-finite ones: transport drops)
   std::uint64_t paddle_presses = 0;
   std::string last_refusal;
-  std::vector<double> frame_ms;       // work per frame (events to presented), ms
-  std::vector<double> latency_ms;     // state's source stamp to the frame showing it, ms
-  std::string renderer;               // GL_RENDERER
-  std::string xr_status;              // "off", "runtime '...'", or why it fell back
+  std::vector<double> frame_ms;    // work per frame (events to presented), ms
+  std::vector<double> latency_ms;  // state's source stamp to the frame showing it, ms
+  std::string renderer;            // GL_RENDERER
+  std::string xr_status;           // "off", "runtime '...'", or why it fell back
 };
 
 class Viewer {

@@ -29,7 +29,7 @@ struct XrOptions {
   bool seated = true;
   bool hud = true;
   int hud_width = 1024, hud_height = 640;
-  double hud_width_m = 0.9;   // size of the HUD quad, m
+  double hud_width_m = 0.9;  // size of the HUD quad, m
   double hud_distance_m = 1.2;
   int samples = 4;
 };
