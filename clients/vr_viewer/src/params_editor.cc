@@ -194,8 +194,10 @@ void ParamsEditor::Draw(std::uint32_t vehicle_id, const std::string& server_id,
     ImGui::TextWrapped("No parameters of vehicle %u yet (they come on vdyn/params).", vehicle_id);
     return;
   }
-  if (!editing_valid_ || editing_vehicle_ != vehicle_id) {
-    edited_ = *current;
+  const bool untouched = Changes(base_, edited_).ByteSizeLong() == 0;
+  if (!editing_valid_ || editing_vehicle_ != vehicle_id ||
+      (untouched && Changes(base_, *current).ByteSizeLong() > 0)) {
+    base_ = edited_ = *current;
     editing_vehicle_ = vehicle_id;
     editing_valid_ = true;
   }
@@ -207,7 +209,7 @@ void ParamsEditor::Draw(std::uint32_t vehicle_id, const std::string& server_id,
   if (ImGui::Button("Apply")) Submit(vehicle_id, server_id, changes);
   ImGui::EndDisabled();
   ImGui::SameLine();
-  if (ImGui::Button("Revert")) edited_ = *current;
+  if (ImGui::Button("Revert")) base_ = edited_ = *current;
   ImGui::SameLine();
   if (dirty) {
     ImGui::TextDisabled("(%d changed)", CountFields(changes));

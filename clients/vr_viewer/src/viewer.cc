@@ -49,6 +49,19 @@ struct AcceptedWorld {
   std::uint64_t serial = 0;  // counts arrivals from its server
 };
 
+// The window's size in pixels (larger than its size in window units on a high-density screen):
+// the size of the desktop target, which ImGui draws into at its framebuffer scale.
+int DrawableWidth(SDL_Window* w) {
+  int x = 0, y = 0;
+  SDL_GL_GetDrawableSize(w, &x, &y);
+  return std::max(x, 1);
+}
+int DrawableHeight(SDL_Window* w) {
+  int x = 0, y = 0;
+  SDL_GL_GetDrawableSize(w, &x, &y);
+  return std::max(y, 1);
+}
+
 // A vehicle's newest drawable state.
 struct GoodState {
   pb::VehicleState state;
@@ -226,7 +239,7 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   }
   m.renderer = std::make_unique<Renderer>();
   m.desktop = std::make_unique<RenderTarget>();
-  m.desktop->Resize(options_.width, options_.height, options_.samples);
+  m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
 
   IMGUI_CHECKVERSION();
   ImGui::CreateContext();
@@ -432,7 +445,7 @@ bool Viewer::Frame() {
         if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !options_.xr) {
           options_.width = std::max(ev.window.data1, 64);
           options_.height = std::max(ev.window.data2, 64);
-          m.desktop->Resize(options_.width, options_.height, options_.samples);
+          m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
         }
         break;
       case SDL_KEYDOWN: {
@@ -579,7 +592,8 @@ bool Viewer::Frame() {
     cs.fallback_target_W = world->has_spawn() ? Vec3{world->spawn().x(), world->spawn().y(), 0}
                                               : 0.5 * (accepted->min_W + accepted->max_W);
   }
-  const CameraView cam = ComputeCamera(options_.camera, cs, options_.width, options_.height);
+  const CameraView cam =
+      ComputeCamera(options_.camera, cs, m.desktop->width(), m.desktop->height());
   last_camera_ = cam;
 
   // `inside`: the followed vehicle seen from its own seat (its body is left out).
@@ -817,7 +831,7 @@ bool Viewer::Frame() {
                       GL_COLOR_BUFFER_BIT, GL_LINEAR);
     glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
   } else {
-    build_lists(cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy, options_.height,
+    build_lists(cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy, desktop.height(),
                 options_.camera.mode == CameraMode::kDriver);
     desktop.BeginScene();
     Renderer::View rv{cam.view, cam.proj, cam.eye_W};

@@ -58,9 +58,11 @@ class ParamsEditor {
   bool stop_ = false;
   std::thread worker_;
 
-  // The panel's editing copy, for one vehicle.
+  // The panel's editing copy for one vehicle, and the parameters it started from (when the topic
+  // brings new ones and nothing is being edited, the copy follows them).
   std::uint32_t editing_vehicle_ = 0;
   bool editing_valid_ = false;
+  pb::VehicleParams base_;
   pb::VehicleParams edited_;
 };
 
