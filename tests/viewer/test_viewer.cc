@@ -14,6 +14,7 @@
 #include "../process.h"
 #include "../test_support.h"
 #include "vdyn/base/time.h"
+#include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/viewer.h"
 #include "viewer_support.h"
@@ -526,6 +527,26 @@ TEST(ParamsEditorChanges, OnlyTheChangedFieldsAreSent) {
   EXPECT_FALSE(c.has_lf());
   ASSERT_TRUE(c.has_rf());
   EXPECT_EQ(c.rf().radius(), 0.33);
+}
+
+}  // namespace
+}  // namespace vdyn::testing
+
+namespace vdyn::testing {
+namespace {
+
+TEST(ViewerCulling, SpheresOutsideTheViewAreLeftOut) {
+  using viewer::Vec3;
+  // A camera at the origin looking along +X, 60 deg tall, 4:3, seeing 0.2 .. 1000 m.
+  const viewer::Mat4 vp = viewer::Perspective(viewer::Rad(60), 4.0 / 3.0, 0.2, 1000) *
+                          viewer::LookAt({0, 0, 0}, {1, 0, 0}, {0, 0, 1});
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 0}, 1));
+  EXPECT_FALSE(viewer::InFrustum(vp, {-50, 0, 0}, 1));     // behind
+  EXPECT_FALSE(viewer::InFrustum(vp, {50, 60, 0}, 1));     // far to the left (half-width 38 m)
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 60, 0}, 25));     // ... unless it reaches into view
+  EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));    // beyond the far plane
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));      // just under the top (28.9 m)
+  EXPECT_FALSE(viewer::InFrustum(vp, {50, 0, 31}, 1));
 }
 
 }  // namespace

@@ -94,6 +94,19 @@ double CompassNorthAngle(double north_yaw, double view_heading) {
   return WrapAngle(north_yaw - view_heading);
 }
 
+bool InFrustum(const Mat4& m, const Vec3& c, double radius) {
+  // The clip planes are sums and differences of the matrix's rows (Gribb and Hartmann).
+  for (int axis = 0; axis < 3; ++axis) {
+    for (double sign : {1.0, -1.0}) {
+      const double a = m(3, 0) + sign * m(axis, 0), b = m(3, 1) + sign * m(axis, 1);
+      const double cc = m(3, 2) + sign * m(axis, 2), d = m(3, 3) + sign * m(axis, 3);
+      const double n = std::sqrt(a * a + b * b + cc * cc);
+      if (n > 0 && (a * c.x + b * c.y + cc * c.z + d) / n < -radius) return false;
+    }
+  }
+  return true;
+}
+
 void TurnGeographic(CameraState& c, int steps_counter_clockwise) {
   c.geo_turn = WrapAngle(c.geo_turn + steps_counter_clockwise * c.paddle_step);
 }

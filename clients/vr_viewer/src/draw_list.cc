@@ -99,14 +99,14 @@ void DrawList::Cone(const Vec3& base, const Vec3& tip, double radius, Rgb8 c, bo
   }
 }
 
-void DrawList::Arrow(const Vec3& from, const Vec3& to, double radius, Rgb8 c) {
+void DrawList::Arrow(const Vec3& from, const Vec3& to, double radius, Rgb8 c, int segments) {
   const double len = Norm(to - from);
   if (!(len > 1e-6)) return;
   const Vec3 dir = (to - from) / len;
   const double head = std::min(0.35 * len, 6.0 * radius);
   const Vec3 neck = to - dir * head;
-  if (len - head > 1e-6) Cylinder(from, neck, radius, c, false, 8);
-  Cone(neck, to, 2.2 * radius, c, false, 12);
+  if (len - head > 1e-6) Cylinder(from, neck, radius, c, false, std::max(4, segments * 2 / 3));
+  Cone(neck, to, 2.2 * radius, c, false, segments);
 }
 
 ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style) {
@@ -115,7 +115,15 @@ ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style) {
                          : ArrowSpan{a.anchor_W, a.anchor_W + d};
 }
 
-void AppendVehicleBody(const VehicleView& v, bool body, FrameLists& lists) {
+double BoundingRadius(const VehicleView& v, const ArrowStyle& style) {
+  const VehicleGeometry& g = v.geometry;
+  double r = std::hypot(std::max(g.front, g.rear), g.half_width) + 1.5;  // body, wheels, cabin
+  double longest = 0;
+  for (const ForceArrow& a : v.arrows) longest = std::max(longest, Norm(a.force_W));
+  return r + longest * style.metres_per_newton;
+}
+
+void AppendVehicleBody(const VehicleView& v, bool body, bool coarse, FrameLists& lists) {
   DrawList& opaque = lists.opaque;
   if (body) {
     const BodyBoxes boxes = BodyBoxesFor(v.geometry);
@@ -126,11 +134,12 @@ void AppendVehicleBody(const VehicleView& v, bool body, FrameLists& lists) {
   for (const WheelView& w : v.wheels) {
     const double half_width = 0.35 * w.radius;
     opaque.Cylinder(w.centre_W - w.left_W * half_width, w.centre_W + w.left_W * half_width,
-                    w.radius, kTyre, true, 20);
+                    w.radius, kTyre, true, coarse ? 10 : 20);
     // The rim, a little proud of the tyre on both sides, shows the steering angle from above.
     opaque.Cylinder(w.centre_W - w.left_W * (half_width + 0.01),
-                    w.centre_W + w.left_W * (half_width + 0.01), 0.6 * w.radius, kRim, true, 12);
-    opaque.Cylinder(w.mount_W, w.centre_W, 0.035, kSpring, true, 8);
+                    w.centre_W + w.left_W * (half_width + 0.01), 0.6 * w.radius, kRim, true,
+                    coarse ? 6 : 12);
+    if (!coarse) opaque.Cylinder(w.mount_W, w.centre_W, 0.035, kSpring, true, 8);
   }
 }
 

@@ -597,8 +597,9 @@ bool Viewer::Frame() {
   last_camera_ = cam;
 
   // `inside`: the followed vehicle seen from its own seat (its body is left out).
-  auto build_lists = [&](const Vec3& eye, bool ortho, double metres_per_pixel, double fovy,
-                         int height_px, bool inside) {
+  // Vehicles out of sight are left out; far ones get fewer facets.
+  auto build_lists = [&](const Mat4& view_proj, const Vec3& eye, bool ortho,
+                         double metres_per_pixel, double fovy, int height_px, bool inside) {
     m.lists.Clear();
     // Arrows at least ~3 px thick wherever they are.
     auto radius_at = [&](const Vec3& p) {
@@ -608,8 +609,10 @@ bool Viewer::Frame() {
       return std::max(0.03, 1.6 * mpp);
     };
     for (const auto& [id, v] : m.views) {
+      if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, options_.arrows))) continue;
       const bool own = inside && followed_ && id == *followed_;
-      AppendVehicle(v, options_.arrows, radius_at, !own, m.lists);
+      const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
+      AppendVehicle(v, options_.arrows, radius_at, !own, px_per_m < 40.0, m.lists);
     }
     if (world != nullptr) {
       // Landmarks: a small marker on the ground (their names are labels on the desktop).
@@ -791,7 +794,8 @@ bool Viewer::Frame() {
         m.xr->Frame(
             world_from_space, 0.05, cs.far_m,
             [&](const XrEye& eye) {
-              build_lists(eye.eye_W, false, 0, Rad(90), eye.target->height(), options_.xr_seated);
+              build_lists(eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
+                          options_.xr_seated);
               eye.target->BeginScene();
               Renderer::View rv{eye.view, eye.proj, eye.eye_W};
               m.renderer->Draw(rv, m.lists);
@@ -831,8 +835,8 @@ bool Viewer::Frame() {
                       GL_COLOR_BUFFER_BIT, GL_LINEAR);
     glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
   } else {
-    build_lists(cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy, desktop.height(),
-                options_.camera.mode == CameraMode::kDriver);
+    build_lists(cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
+                desktop.height(), options_.camera.mode == CameraMode::kDriver);
     desktop.BeginScene();
     Renderer::View rv{cam.view, cam.proj, cam.eye_W};
     rv.haze = !cam.orthographic;

@@ -64,6 +64,9 @@ CameraView ComputeCamera(const CameraState& c, const CameraScene& s, int width_p
 // up direction, rad (0: north is straight ahead / up).
 double CompassNorthAngle(double north_yaw, double view_heading);
 
+// True when a sphere may be seen through a view-projection (outside all six clip planes: not).
+bool InFrustum(const Mat4& view_proj, const Vec3& centre, double radius);
+
 // A paddle press: right turns the geographic cameras clockwise (seen from above) by one step.
 void TurnGeographic(CameraState& c, int steps_counter_clockwise);
 

@@ -32,7 +32,7 @@ class DrawList {
   void Cone(const Vec3& base, const Vec3& tip, double radius, Rgb8 c, bool lit, int segments = 12);
   // An arrow from `from` to `to`: a shaft and a head (unlit). The head takes at most 35 % of the
   // length; a shorter arrow than 2 radii is drawn as its head only.
-  void Arrow(const Vec3& from, const Vec3& to, double radius, Rgb8 c);
+  void Arrow(const Vec3& from, const Vec3& to, double radius, Rgb8 c, int segments = 12);
   void Triangle(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& n, Rgb8 col,
                 std::uint8_t alpha = 255);
 
@@ -62,10 +62,14 @@ struct FrameLists {
 // Appends a vehicle: the translucent lower body, the cabin (both left out with `body` false: the
 // driver's own car seen from its seat), the wheels at their spring positions and steering
 // angles, the springs A to wheel centre, and the force arrows. `radius_at(p)` gives an arrow's
-// shaft radius at a point (thicker far away, so an arrow stays a few pixels wide).
+// shaft radius at a point (thicker far away, so an arrow stays a few pixels wide). `coarse`: fewer
+// facets, for a vehicle far from the eye.
 template <class RadiusAt>
 void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
-                   FrameLists& lists);
+                   bool coarse, FrameLists& lists);
+
+// The radius of a sphere about T that holds the vehicle and its arrows (for culling).
+double BoundingRadius(const VehicleView& v, const ArrowStyle& style);
 
 // Where an arrow starts and ends for a style (shared by the renderer and tests).
 struct ArrowSpan {
@@ -75,17 +79,18 @@ ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style);
 
 // --- implementation of the template ---------------------------------------------------------
 
-void AppendVehicleBody(const VehicleView& v, bool body, FrameLists& lists);
+void AppendVehicleBody(const VehicleView& v, bool body, bool coarse, FrameLists& lists);
 
 template <class RadiusAt>
 void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
-                   FrameLists& lists) {
-  AppendVehicleBody(v, body, lists);
+                   bool coarse, FrameLists& lists) {
+  AppendVehicleBody(v, body, coarse, lists);
   for (const ForceArrow& a : v.arrows) {
     if (!style.show[static_cast<int>(a.kind)]) continue;
     if (Norm(a.force_W) * style.metres_per_newton < style.min_length_m) continue;
     const ArrowSpan s = ArrowSpanOf(a, style);
-    lists.arrows.Arrow(s.from, s.to, radius_at(0.5 * (s.from + s.to)), ForceColour(a.kind));
+    lists.arrows.Arrow(s.from, s.to, radius_at(0.5 * (s.from + s.to)), ForceColour(a.kind),
+                       coarse ? 6 : 12);
   }
 }
 
