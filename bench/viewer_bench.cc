@@ -18,6 +18,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -28,6 +29,18 @@
 extern char** environ;
 
 namespace {
+
+// Children still running (Xvfb, server, viewer): a signal to the bench ends them too.
+volatile pid_t g_children[3] = {-1, -1, -1};
+extern "C" void OnSignal(int sig) {
+  for (pid_t p : g_children) {
+    if (p > 0) kill(p, SIGKILL);
+  }
+  _exit(128 + sig);
+}
+void Track(int slot, pid_t pid) {
+  g_children[slot] = pid;
+}
 
 // Starts argv with its output in `log`; `to_fd3` becomes the child's fd 3 (after `close_fd`,
 // which may be 3 itself, is closed in the child).
@@ -101,6 +114,14 @@ double Median(std::vector<double> v) {
   return v[v.size() / 2];
 }
 
+// The 1-minute load average (other work on a shared machine slows a CPU renderer down).
+std::string LoadAverage() {
+  std::ifstream in("/proc/loadavg");
+  std::string one;
+  in >> one;
+  return one.empty() ? "?" : one;
+}
+
 double Num(const std::map<std::string, std::string>& kv, const std::string& key) {
   const auto it = kv.find(key);
   return it == kv.end() ? 0.0 : std::atof(it->second.c_str());
@@ -117,12 +138,15 @@ int main(int argc, char** argv) {
          1);
   const std::string tmp = "/tmp/vdyn-viewer-bench-" + std::to_string(getpid());
   std::system(("mkdir -p " + tmp).c_str());
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
   const pid_t xvfb = StartXvfb(tmp + "/xvfb.log");
+  Track(0, xvfb);
   std::string renderer;
   std::printf(
       "viewer_bench: vdyn-viewer on facility, chase camera, 1280x720, HUD on, %d runs x "
-      "%d frames per case\n",
-      runs, frames);
+      "%d frames per case; load average %s at the start\n",
+      runs, frames, LoadAverage().c_str());
   std::printf("%-9s %-28s %-10s %-28s\n", "vehicles", "frame p50 / p99 ms (no cap)", "fps",
               "latency p50 / p99 ms (60 Hz)");
   const int domain_base = 150 + getpid() % 40;
@@ -141,6 +165,7 @@ int main(int argc, char** argv) {
             Spawn({VDYN_SERVER_BINARY, "--domain", std::to_string(domain), "--world", "facility",
                    "--vehicle-ids", ids, "--duration", "600"},
                   tmp + "/server.log");
+        Track(1, server);
         const std::string stats = tmp + "/stats.txt";
         std::remove(stats.c_str());
         const pid_t viewer = Spawn(
@@ -148,9 +173,12 @@ int main(int argc, char** argv) {
              "chase", "--width", "1280", "--height", "720", "--fps", capped ? "60" : "0",
              "--frames", std::to_string(frames), "--wait", "60", "--stats-out", stats},
             tmp + "/viewer.log");
+        Track(2, viewer);
         const int code = WaitPid(viewer);
+        Track(2, -1);
         kill(server, SIGINT);
         WaitPid(server);
+        Track(1, -1);
         const auto kv = ReadStats(stats);
         if (code != 0 || kv.empty() || Num(kv, "vehicles") < vehicles) {
           std::fprintf(stderr, "viewer_bench: run failed (exit %d, %g vehicles seen); see %s\n",
@@ -173,7 +201,10 @@ int main(int argc, char** argv) {
                 fp50 > 0 ? 1000.0 / fp50 : 0.0, Median(l50), Median(l99));
     std::fflush(stdout);
   }
-  std::printf("renderer: %s (Mesa under Xvfb: software rendering on the CPU)\n", renderer.c_str());
+  std::printf(
+      "renderer: %s (Mesa under Xvfb: software rendering on the CPU); load average %s "
+      "at the end\n",
+      renderer.c_str(), LoadAverage().c_str());
   kill(xvfb, SIGTERM);
   WaitPid(xvfb);
   std::system(("rm -rf " + tmp).c_str());

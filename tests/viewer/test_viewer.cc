@@ -206,6 +206,59 @@ TEST_P(MapTest, EachVehicleIsDrawnWhereItIsTurnedAsItIs) {
 
 INSTANTIATE_TEST_SUITE_P(NorthUpOrTurned, MapTest, ::testing::Values(kPi / 2, 0.3));
 
+TEST_F(ViewerTest, VehiclesOfOtherServersAreDrawnOnlyWhenTheyShareTheTerrain) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  // Servers a and b run the same terrain (same terrain hash), c another one.
+  for (const char* server : {"a", "b", "c"}) {
+    pb::WorldDescription w = MakeWorld(server, kPi / 2, {1, 2, 3});
+    w.set_terrain_hash(std::string(server) == "c" ? 0x2222u : 0x1111u);
+    ASSERT_TRUE(pub.World(w));
+  }
+  ViewerOptions o = Options(domain);
+  o.follow = 1;
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  o.camera.map_half_height = 12;
+  Viewer v(o);
+  std::vector<pb::VehicleState> states;
+  const char* servers[] = {"a", "b", "c"};
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    TestVehicle t;
+    t.id = id;
+    t.server = servers[id - 1];
+    t.x = 6.0 * (id - 1);
+    for (auto& w : t.wheels) w.fp = 0;
+    states.push_back(MakeState(t));
+  }
+  // Vehicle 3 is never drawn: wait for 1 and 2, and for 3's state to have arrived.
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        for (const auto& s : states) pub.State(s);
+      },
+      [&] {
+        const auto* sv = v.session().vehicle(3);
+        return v.vehicle(1) != nullptr && v.vehicle(2) != nullptr && sv != nullptr &&
+               sv->states > 0 && v.stats().worlds_accepted == 3;
+      }));
+  v.Frame();
+  EXPECT_EQ(v.vehicle(3), nullptr);
+  const Image img = Keep(v.Screenshot());
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    const viewer::Rgb8 c = viewer::VehicleColour(id);
+    const auto p = MapPixel(6.0 * (id - 1), 0, 0, 0, kPi / 2, 12, kW, kH);
+    const Rect around{static_cast<int>(p[0]) - 40, static_cast<int>(p[1]) - 40,
+                      static_cast<int>(p[0]) + 40, static_cast<int>(p[1]) + 40};
+    const int n = FindColour(img, c.r, c.g, c.b, kTol, around).count;
+    if (id < 3) {
+      EXPECT_GT(n, 400) << "vehicle " << id << " not drawn";
+    } else {
+      EXPECT_EQ(n, 0) << "vehicle 3 (another terrain) drawn";
+    }
+  }
+}
+
 // --- arrows ----------------------------------------------------------------------------------
 
 // The tip of an arrow of `kind` on the map: the extreme pixel of its colour in the direction it
@@ -541,11 +594,11 @@ TEST(ViewerCulling, SpheresOutsideTheViewAreLeftOut) {
   const viewer::Mat4 vp = viewer::Perspective(viewer::Rad(60), 4.0 / 3.0, 0.2, 1000) *
                           viewer::LookAt({0, 0, 0}, {1, 0, 0}, {0, 0, 1});
   EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 0}, 1));
-  EXPECT_FALSE(viewer::InFrustum(vp, {-50, 0, 0}, 1));     // behind
-  EXPECT_FALSE(viewer::InFrustum(vp, {50, 60, 0}, 1));     // far to the left (half-width 38 m)
-  EXPECT_TRUE(viewer::InFrustum(vp, {50, 60, 0}, 25));     // ... unless it reaches into view
-  EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));    // beyond the far plane
-  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));      // just under the top (28.9 m)
+  EXPECT_FALSE(viewer::InFrustum(vp, {-50, 0, 0}, 1));   // behind
+  EXPECT_FALSE(viewer::InFrustum(vp, {50, 60, 0}, 1));   // far to the left (half-width 38 m)
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 60, 0}, 25));   // ... unless it reaches into view
+  EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));  // beyond the far plane
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));    // just under the top (28.9 m)
   EXPECT_FALSE(viewer::InFrustum(vp, {50, 0, 31}, 1));
 }
 

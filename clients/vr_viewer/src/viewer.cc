@@ -573,12 +573,24 @@ bool Viewer::Frame() {
   }
 
   // --- scene ---
+  // The vehicles of the drawn world: those of its server, and those of other servers on the same
+  // terrain (several servers of a lab on one world); another world's vehicles would float.
   m.views.clear();
   for (const auto& [id, g] : m.good) {
-    if (!server.empty() && g.state.server_id() != server) continue;
+    const std::string& owner = g.state.server_id();
+    if (!server.empty() && owner != server) {
+      const AcceptedWorld* theirs = m.WorldOf(owner);
+      if (world == nullptr || theirs == nullptr || world->terrain_hash() == 0 ||
+          theirs->desc.terrain_hash() != world->terrain_hash()) {
+        continue;
+      }
+    }
     const auto* sv = m.session.vehicle(id);
     const pb::VehicleParams* params = sv != nullptr && sv->params ? &*sv->params : nullptr;
-    m.views.emplace(id, BuildVehicleView(g.state, GeometryFor(id, world, params)));
+    const AcceptedWorld* own_world = m.WorldOf(owner);
+    m.views.emplace(
+        id, BuildVehicleView(
+                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params)));
   }
   const VehicleView* followed = followed_ ? vehicle(*followed_) : nullptr;
   CameraScene cs;
