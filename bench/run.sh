@@ -32,5 +32,6 @@ run() {  # prints the command, then runs it
   run "$bin/batch_rtf" 5
   run "$bin/step_sweep"
   run "$bin/net_bench" 60 20
+  run "$bin/viewer_bench" 3 300
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"
 echo "results written to $out"
