@@ -3,12 +3,14 @@
 # session - the server on `facility` in real time (1 kHz), with the demo drive fed to it as live
 # driver input over DDS by vdyn-input, and a terminal line of speed, step rate and lateness. The
 # session is recorded to out/live.mcap (vdyn-recorder), then re-simulated and checked bit for bit.
+# With a display (DISPLAY or WAYLAND_DISPLAY set) vdyn-viewer opens on the live session
+# (VDYN_VIEWER=0 leaves it closed).
 #   scripts/demo.sh            the live session (about 45 s)
 #   scripts/demo.sh --batch    the same drive as a batch run, as fast as possible, to out/demo.csv
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
-./scripts/build.sh release vdyn-server vdyn-input vdyn-recorder
+./scripts/build.sh release vdyn-server vdyn-input vdyn-recorder vdyn-viewer
 bin=build/release
 if [ "${1:-}" = "--batch" ]; then
   shift
@@ -25,11 +27,21 @@ recorder=$!
 "$bin/server/vdyn-server" --domain "$domain" --world facility --duration 44 --status \
   --stats-out out/live-stats.txt &
 server=$!
-trap 'kill "$server" "$recorder" 2>/dev/null || true' EXIT
+viewer=""
+trap 'kill "$server" "$recorder" $viewer 2>/dev/null || true' EXIT
+if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${VDYN_VIEWER:-1}" != 0 ]; then
+  # The viewer joins the session (it gets the world at once: transient local) and follows
+  # vehicle 1 on the chase camera; its keys: F1.
+  "$bin/clients/vr_viewer/vdyn-viewer" --domain "$domain" --follow 1 --camera chase \
+    --stats-out out/viewer-stats.txt > out/viewer.log 2>&1 &
+  viewer=$!
+  echo "vdyn-viewer open on domain $domain (log in out/viewer.log)"
+fi
 "$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30
 wait "$server"
 kill -INT "$recorder"
 wait "$recorder"
+if [ -n "$viewer" ]; then kill -INT "$viewer" 2>/dev/null || true; wait "$viewer" || true; fi
 trap - EXIT
 echo "live session done; run summary in out/live-stats.txt; recording in out/live.mcap"
 "$rec" verify out/live.mcap
@@ -38,5 +50,6 @@ Next, with the recording:
   $rec info   out/live.mcap                      # channels, vehicles, world, gaps
   $rec export out/live.mcap --csv out/live.csv   # the columns of --batch --csv
   $rec plot   out/live.mcap                      # figures and out/live-plots/index.html
-  $rec play   out/live.mcap --domain 43          # a viewer on domain 43 shows it as a live drive
+  $rec play   out/live.mcap --domain 43          # the playback on DDS; to watch it (a display):
+  $bin/clients/vr_viewer/vdyn-viewer --domain 43
 EOF

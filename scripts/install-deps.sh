@@ -9,8 +9,9 @@ packages=(
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
   cyclonedds-dev cyclonedds-tools
-  libsdl2-dev xvfb xdotool \
+  libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
+  libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
 )
 # The recorder's independent-reader test also needs Node.js with npm (it installs @mcap/core from
 # the npm registry); these machines come with Node.js 20.

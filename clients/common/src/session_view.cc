@@ -43,7 +43,8 @@ bool SessionView::Wait(std::chrono::nanoseconds timeout) { return waitset_->Wait
 int SessionView::Poll() {
   int n = 0;
   if (world_) {
-    n += world_->Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+    n += world_->Take([&](const pb::WorldDescription& w, const transport::SampleInfo& info) {
+      if (on_world) on_world(w, info);
       worlds_[w.server_id()] = w;
       ++world_version_;
     });

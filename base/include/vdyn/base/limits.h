@@ -108,6 +108,17 @@ inline constexpr Range kWorldScale{0.0, 1e6, true, false, "terrain scale, m per 
 inline constexpr Range kHeightmapCell{0.0, 1e4, true, false, "height-map cell, m"};
 inline constexpr Range kHeightmapHeight{0.0, 1e5, true, false, "height-map height, m"};
 inline constexpr Range kStrength{0, 1e6, false, false, "ownership strength"};
+// The viewer (vdyn-viewer).
+inline constexpr Range kWindowPixels{64, 16384, false, false, "window size, pixels"};
+inline constexpr Range kFrames{0, 1e9, false, false, "frames"};
+inline constexpr Range kViewerFps{0, 1000, false, false, "frame rate cap, Hz (0: none)"};
+inline constexpr Range kSamples{0, 16, false, false, "multisampling, samples"};
+inline constexpr Range kArrowScale{0.001, 100, false, false, "arrow scale, m per kN"};
+inline constexpr Range kPaddleStepDeg{1, 180, false, false, "paddle step, deg"};
+inline constexpr Range kMapHalfHeight{1, 10000, false, false, "map half height, m"};
+inline constexpr Range kFovDeg{10, 150, false, false, "field of view, deg"};
+inline constexpr Range kCameraDistance{0.5, 5000, false, false, "camera distance, m"};
+inline constexpr Range kAngleDeg{-360, 360, false, false, "angle, deg"};
 
 // --- Recordings (vdyn-recorder) ---------------------------------------------------------------
 // A recorder's reader history per instance on keep-last topics (vdyn/state: one second of a

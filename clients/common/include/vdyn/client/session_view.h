@@ -53,6 +53,9 @@ class SessionView {
   std::function<void(const pb::VehicleState&, const transport::SampleInfo&)> on_state;
   // Called by Poll() for every driver input (Topics::inputs).
   std::function<void(const pb::DriverInput&, const transport::SampleInfo&)> on_input;
+  // Called by Poll() for every world description as it arrives, before it is stored (a viewer
+  // checks it and counts one it cannot draw).
+  std::function<void(const pb::WorldDescription&, const transport::SampleInfo&)> on_world;
 
   const std::map<std::uint32_t, Vehicle>& vehicles() const { return vehicles_; }
   const Vehicle* vehicle(std::uint32_t id) const;

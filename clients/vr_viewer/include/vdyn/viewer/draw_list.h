@@ -1,0 +1,97 @@
+// Triangles built on the CPU each frame for what moves: bodies, wheels, springs, force arrows,
+// landmarks. One vertex is a position (float, world frame), a normal (zero: drawn unlit, in its
+// exact colour - the arrows) and an RGBA colour. The renderer uploads a list in one buffer.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "vdyn/viewer/math.h"
+#include "vdyn/viewer/scene.h"
+
+namespace vdyn::viewer {
+
+struct Vertex {
+  float p[3];
+  float n[3];
+  std::uint8_t rgba[4];
+};
+static_assert(sizeof(Vertex) == 28);
+
+class DrawList {
+ public:
+  void Clear() { vertices_.clear(); }
+  const std::vector<Vertex>& vertices() const { return vertices_; }
+  std::size_t triangles() const { return vertices_.size() / 3; }
+
+  // A box [min, max] in the frame `pose` (lit).
+  void Box(const Pose& pose, const Vec3& min, const Vec3& max, Rgb8 c, std::uint8_t alpha = 255);
+  // A closed cylinder from a to b.
+  void Cylinder(const Vec3& a, const Vec3& b, double radius, Rgb8 c, bool lit, int segments = 12);
+  // A cone from its base centre to its tip.
+  void Cone(const Vec3& base, const Vec3& tip, double radius, Rgb8 c, bool lit, int segments = 12);
+  // An arrow from `from` to `to`: a shaft and a head (unlit). The head takes at most 35 % of the
+  // length; a shorter arrow than 2 radii is drawn as its head only.
+  void Arrow(const Vec3& from, const Vec3& to, double radius, Rgb8 c, int segments = 12);
+  void Triangle(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& n, Rgb8 col,
+                std::uint8_t alpha = 255);
+
+ private:
+  void Push(const Vec3& p, const Vec3& n, Rgb8 c, std::uint8_t alpha);
+  std::vector<Vertex> vertices_;
+};
+
+// How the arrows are drawn: length per newton, thickness, which kinds.
+struct ArrowStyle {
+  double metres_per_newton = 0.5e-3;  // 0.5 m per kN
+  double min_length_m = 0.05;         // shorter arrows are not drawn
+  bool show[kForceKinds] = {true, true, true, true, true, true};
+};
+
+// The lists of one frame: what is opaque, what is translucent (drawn after), and the force
+// arrows (drawn last, in full colour where seen and as a faint ghost where something hides them).
+struct FrameLists {
+  DrawList opaque, translucent, arrows;
+  void Clear() {
+    opaque.Clear();
+    translucent.Clear();
+    arrows.Clear();
+  }
+};
+
+// Appends a vehicle: the translucent lower body, the cabin (both left out with `body` false: the
+// driver's own car seen from its seat), the wheels at their spring positions and steering
+// angles, the springs A to wheel centre, and the force arrows. `radius_at(p)` gives an arrow's
+// shaft radius at a point (thicker far away, so an arrow stays a few pixels wide). `coarse`: fewer
+// facets, for a vehicle far from the eye.
+template <class RadiusAt>
+void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
+                   bool coarse, FrameLists& lists);
+
+// The radius of a sphere about T that holds the vehicle and its arrows (for culling).
+double BoundingRadius(const VehicleView& v, const ArrowStyle& style);
+
+// Where an arrow starts and ends for a style (shared by the renderer and tests).
+struct ArrowSpan {
+  Vec3 from, to;
+};
+ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style);
+
+// --- implementation of the template ---------------------------------------------------------
+
+void AppendVehicleBody(const VehicleView& v, bool body, bool coarse, FrameLists& lists);
+
+template <class RadiusAt>
+void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
+                   bool coarse, FrameLists& lists) {
+  AppendVehicleBody(v, body, coarse, lists);
+  for (const ForceArrow& a : v.arrows) {
+    if (!style.show[static_cast<int>(a.kind)]) continue;
+    if (Norm(a.force_W) * style.metres_per_newton < style.min_length_m) continue;
+    const ArrowSpan s = ArrowSpanOf(a, style);
+    lists.arrows.Arrow(s.from, s.to, radius_at(0.5 * (s.from + s.to)), ForceColour(a.kind),
+                       coarse ? 6 : 12);
+  }
+}
+
+}  // namespace vdyn::viewer

@@ -1,0 +1,110 @@
+// What the viewer draws of a vehicle, computed from its state message alone (no physics): the
+// body's pose, each wheel at its spring position and steering angle, and the force arrows of the
+// paper's Fig. 3 - per wheel at the contact point B the spring force Fp (along the terrain normal),
+// the drive force Fh and brake force Fb (along the wheel's heading in the ground plane) and the
+// side force Fy (across it), and at the body the aerodynamic drag and the wall force.
+//
+// The directions follow the model (docs/model.md): a wheel's heading is cos(gamma) X_B +
+// sin(gamma) Y_B projected on the ground plane (t_long), t_lat = n x t_long; Fb opposes the
+// wheel's rolling; drag is -Da X_B. The sum of a wheel's arrows (with rolling resistance) is the
+// wheel force f_w the server reports (tests check it against a live server).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "vdyn/state.pb.h"
+#include "vdyn/vehicle_params.pb.h"
+#include "vdyn/viewer/math.h"
+#include "vdyn/world.pb.h"
+
+namespace vdyn::viewer {
+
+inline constexpr int kWheels = 4;  // LF, RF, LR, RR
+
+enum class ForceKind { kSpring, kDrive, kBrake, kSide, kDrag, kWall };
+inline constexpr int kForceKinds = 6;
+
+struct Rgb8 {
+  std::uint8_t r = 0, g = 0, b = 0;
+};
+// The legend: spring green, drive blue, brake red, side yellow, drag magenta, wall orange. Arrows
+// are drawn unlit, in exactly these colours.
+Rgb8 ForceColour(ForceKind kind);
+std::string_view ForceLabel(ForceKind kind);  // "spring Fp"
+std::string_view WheelName(int wheel);        // "LF"
+
+// A vehicle's colour by id (a palette of eight that avoids the arrows' hues).
+Rgb8 VehicleColour(std::uint32_t vehicle_id);
+
+struct VehicleGeometry {
+  std::array<Vec3, kWheels> mount_B{};   // mount points A from T, body frame, m
+  std::array<double, kWheels> radius{};  // m
+  std::array<double, kWheels> free_length{};
+  double front = 2.2, rear = 2.5, half_width = 0.9;  // body box from T, m
+  enum class Source { kWorld, kParams, kDefault };
+  Source source = Source::kDefault;
+};
+// The vehicle's geometry from its server's world description, else from its parameters (the
+// transient-local topic), else a mid-size car's.
+VehicleGeometry GeometryFor(std::uint32_t vehicle_id, const pb::WorldDescription* world,
+                            const pb::VehicleParams* params);
+// Empty when the world's description of a vehicle is usable, else why not.
+std::string CheckGeometry(const pb::VehicleGeometry& g);
+
+struct WheelView {
+  Vec3 mount_W;    // A
+  Vec3 contact_W;  // B (the hanging wheel's bottom when in the air)
+  Vec3 centre_W;   // the wheel's centre: one radius from B towards A
+  Vec3 forward_W;  // the steered wheel's frame: forward, left (the axle), up
+  Vec3 left_W;
+  Vec3 up_W;
+  Vec3 n_W;       // terrain normal at B
+  Vec3 t_long_W;  // the wheel's heading in the ground plane
+  Vec3 t_lat_W;   // n x t_long
+  double radius = 0.3;
+  bool contact = false;
+};
+
+struct ForceArrow {
+  ForceKind kind = ForceKind::kSpring;
+  int wheel = -1;  // 0..3, or -1 for a force on the body
+  Vec3 anchor_W;   // where the force acts (B, or a point on the body)
+  Vec3 force_W;    // N
+  // Drawn ending at the anchor (drag: the air pushes on the nose) instead of starting there.
+  bool tip_at_anchor = false;
+};
+
+struct VehicleView {
+  std::uint32_t id = 0;
+  std::uint64_t step = 0;  // the state's step
+  Pose pose_WB;            // body frame at T
+  VehicleGeometry geometry;
+  std::array<WheelView, kWheels> wheels{};
+  std::vector<ForceArrow> arrows;  // every force, zero ones included (drawn when long enough)
+  double speed_kmh = 0;
+  // Heading of the body's X axis in the ground plane, rad from +X_W towards +Y_W.
+  double yaw = 0;
+  // Ground height under the vehicle (mean of the four B), m.
+  double ground_z = 0;
+};
+
+// Empty when a state can be drawn: four wheels, a usable quaternion, positions within 1e7 m;
+// else why not. (Non-finite numbers never get here: the transport drops them.)
+std::string CheckState(const pb::VehicleState& s);
+
+// The drawable view of a state that passed CheckState.
+VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g);
+
+// The body's parts as the renderer draws them, in the body frame (shared with tests): the lower
+// body (translucent) and the cabin (opaque) as boxes [min, max].
+struct BodyBoxes {
+  Vec3 lower_min, lower_max;
+  Vec3 cabin_min, cabin_max;
+};
+BodyBoxes BodyBoxesFor(const VehicleGeometry& g);
+
+}  // namespace vdyn::viewer

@@ -1,0 +1,114 @@
+// vdyn-viewer: what a person watching a session sees - the world from the server's description,
+// every vehicle of the followed vehicle's server with its wheels and force arrows, the cameras,
+// the HUD, the legend, the compass and the parameters panel - on the desktop (SDL2 + OpenGL 3.3)
+// and, with --xr, in an OpenXR headset. Live and playback look the same: both are the DDS topics.
+//
+// One Frame() = events, DDS samples taken (SessionView), the scene built, drawn (into an
+// offscreen target that the window shows and a screenshot reads; with a headset into both eyes
+// and the HUD quad), and timed. Bad input is refused and counted, never fatal: a world that cannot
+// be drawn (CheckWorld), a state that cannot (CheckState; non-finite ones the transport already
+// drops), a vehicle geometry that is malformed.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "vdyn/base/time.h"
+#include "vdyn/client/session_view.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/renderer.h"
+#include "vdyn/viewer/scene.h"
+
+namespace vdyn::viewer {
+
+struct ViewerOptions {
+  std::uint32_t domain = 0;
+  std::optional<std::uint32_t> follow;  // vehicle id; default: the lowest on the domain
+  CameraState camera;
+  ArrowStyle arrows;
+  int width = 1280, height = 720;
+  int samples = -1;     // multisampling of the scene; -1: 4, or 0 on a software renderer
+  double fps = 60;      // frame rate cap; 0: as fast as it draws
+  bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
+  bool hud = true;
+  // Headless: after `frames` frames (counted once the world and the followed vehicle are there,
+  // or once `wait_s` has passed), write `screenshot` (when set) and end. 0: run until closed.
+  std::uint64_t frames = 0;
+  std::string screenshot;
+  double wait_s = 10;
+  std::string stats_out;  // key-value lines at the end: frames, frame times, latency, refusals
+  bool playback = false;  // label the HUD PLAYBACK whatever the diagnostics say
+  // OpenXR: stereo in a headset; without a runtime, the desktop window with a clear message.
+  bool xr = false;
+  bool xr_seated = true;
+  std::string client_id;  // for control requests; default vdyn-viewer-<pid>
+};
+
+// Percentiles of a sample (nearest rank), for the stats and benchmarks.
+double Percentile(std::vector<double> v, double p);
+
+struct ViewerStats {
+  std::uint64_t frames = 0;          // frames drawn
+  std::uint64_t counted_frames = 0;  // frames counted towards --frames
+  std::uint64_t xr_frames = 0;       // frames submitted to an OpenXR runtime
+  std::uint64_t worlds_accepted = 0;
+  std::uint64_t worlds_refused = 0;
+  std::uint64_t states_refused = 0;  // failed CheckState (non-finite ones: transport drops)
+  std::uint64_t paddle_presses = 0;
+  std::string last_refusal;
+  std::vector<double> frame_ms;    // work per frame (events to presented), ms
+  std::vector<double> latency_ms;  // state's source stamp to the frame showing it, ms
+  std::string renderer;            // GL_RENDERER
+  std::string xr_status;           // "off", "runtime '...'", or why it fell back
+};
+
+class Viewer {
+ public:
+  // Opens the window (throws std::runtime_error without a display or GL 3.3) and joins the domain.
+  explicit Viewer(ViewerOptions options);
+  ~Viewer();
+  Viewer(const Viewer&) = delete;
+  Viewer& operator=(const Viewer&) = delete;
+
+  // One frame; false when the viewer should end (window closed, Esc, --frames done).
+  bool Frame();
+  // Frames until the end; the exit code (0; 1 when the screenshot or the stats cannot be written).
+  int Run();
+  // Writes the screenshot and the stats (as Run does at its end); the exit code.
+  int Finish();
+
+  // The last frame as drawn on the desktop (HUD included), rows top down.
+  Image Screenshot() const;
+  const ViewerStats& stats() const { return stats_; }
+  void WriteStats(const std::string& path) const;
+
+  CameraState& camera() { return options_.camera; }
+  ArrowStyle& arrows() { return options_.arrows; }
+  std::optional<std::uint32_t> followed() const { return followed_; }
+  void Follow(std::uint32_t vehicle_id) { options_.follow = vehicle_id; }
+  // True once the followed vehicle has a state and its server's world has been accepted.
+  bool ready() const;
+  bool xr_active() const;
+  // The newest drawable view of a vehicle (null before its first good state).
+  const VehicleView* vehicle(std::uint32_t id) const;
+  // The camera of the last desktop frame.
+  const CameraView& last_camera() const { return last_camera_; }
+  class ParamsEditor& params_editor();
+  client::SessionView& session();
+
+ private:
+  struct Impl;
+  ViewerOptions options_;
+  ViewerStats stats_;
+  std::optional<std::uint32_t> followed_;
+  CameraView last_camera_;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace vdyn::viewer

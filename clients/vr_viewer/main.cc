@@ -1,0 +1,132 @@
+// vdyn-viewer: watch a vdyn session - live, or a recording played back by `vdyn-recorder play` -
+// on the desktop or in an OpenXR headset (docs in clients/vr_viewer/README.md).
+// Exit codes: 0 done, 1 no display / OpenGL / transport failure or an unwritable output, 2 bad
+// command line.
+#include <csignal>
+#include <iostream>
+
+#include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
+
+#include "vdyn/cli/options.h"
+#include "vdyn/viewer/viewer.h"
+
+namespace {
+
+volatile std::sig_atomic_t g_stop = 0;
+extern "C" void OnSignal(int) {
+  g_stop = 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  namespace cli = vdyn::cli;
+  namespace limits = vdyn::limits;
+  using vdyn::viewer::Rad;
+  CLI::App app{
+      "vdyn-viewer: the world, the vehicles and their force arrows, live or played back, "
+      "on the desktop or in an OpenXR headset"};
+  vdyn::viewer::ViewerOptions o;
+  std::uint32_t follow = 0;
+  std::string camera = "chase";
+  double arrow_m_per_kn = o.arrows.metres_per_newton * 1000.0;
+  double paddle_step_deg = 45.0, fov_deg = 60.0;
+  double map_half_height = o.camera.map_half_height;
+  std::vector<double> orbit;
+  std::string xr_space = "seated";
+  bool no_hud = false;
+  app.add_option("--domain", o.domain, "DDS domain id")
+      ->check(cli::WholeInRange(limits::kDomainId))
+      ->capture_default_str();
+  app.add_option("--follow", follow, "Vehicle to follow (default: the lowest id on the domain)");
+  app.add_option("--camera", camera, "chase, driver, orbit, map or north")
+      ->check(CLI::IsMember({"chase", "driver", "orbit", "map", "north"}))
+      ->capture_default_str();
+  app.add_option("--orbit", orbit, "Orbit camera: yaw_deg,pitch_deg,distance_m (world frame)")
+      ->delimiter(',')
+      ->expected(3);
+  app.add_option("--map-span", map_half_height, "Map camera: metres from the centre to the top")
+      ->check(cli::InRange(limits::kMapHalfHeight))
+      ->capture_default_str();
+  app.add_option("--fov", fov_deg, "Vertical field of view of the desktop cameras, deg")
+      ->check(cli::InRange(limits::kFovDeg))
+      ->capture_default_str();
+  app.add_option("--arrow-scale", arrow_m_per_kn, "Force arrows: metres per kN")
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
+  app.add_option("--paddle-step", paddle_step_deg,
+                 "Turn of the geographic cameras per paddle press or Q/E, deg")
+      ->check(cli::InRange(limits::kPaddleStepDeg))
+      ->capture_default_str();
+  app.add_option("--width", o.width, "Window width, pixels")
+      ->check(cli::WholeInRange(limits::kWindowPixels))
+      ->capture_default_str();
+  app.add_option("--height", o.height, "Window height, pixels")
+      ->check(cli::WholeInRange(limits::kWindowPixels))
+      ->capture_default_str();
+  app.add_option("--msaa", o.samples,
+                 "Multisampling of the scene (0: off; default 4, off on a software renderer)")
+      ->check(cli::WholeInRange(limits::kSamples));
+  app.add_option("--fps", o.fps, "Frame rate cap, Hz (0: as fast as it draws)")
+      ->check(cli::InRange(limits::kViewerFps))
+      ->capture_default_str();
+  app.add_option("--frames", o.frames,
+                 "End after this many frames (counted once the world and the followed vehicle "
+                 "are there, or after --wait)")
+      ->check(cli::WholeInRange(limits::kFrames));
+  app.add_option("--screenshot", o.screenshot, "Write the last frame to this PNG file at the end");
+  app.add_option("--wait", o.wait_s,
+                 "Seconds to wait for the world and a vehicle before "
+                 "counting --frames anyway")
+      ->check(cli::InRange(limits::kWaitS))
+      ->capture_default_str();
+  app.add_option("--stats-out", o.stats_out,
+                 "Write frame times, latency and refusal counts here at the end");
+  app.add_flag("--hidden", o.hidden, "No window on the screen (drawing is offscreen anyway)");
+  app.add_flag("--no-hud", no_hud, "Start with the HUD hidden (H shows it)");
+  app.add_flag("--playback", o.playback, "Label the view PLAYBACK (a player's diagnostics do it)");
+  app.add_flag("--xr", o.xr, "Stereo in an OpenXR headset (desktop window when no runtime)");
+  app.add_option("--xr-space", xr_space,
+                 "seated: at the driver's seat; standing: on the ground beside the vehicle")
+      ->check(CLI::IsMember({"seated", "standing"}))
+      ->capture_default_str();
+  if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
+
+  if (app.count("--follow") > 0) o.follow = follow;
+  o.camera.mode = *vdyn::viewer::CameraFromName(camera);
+  o.camera.paddle_step = Rad(paddle_step_deg);
+  o.camera.fovy = Rad(fov_deg);
+  o.camera.map_half_height = map_half_height;
+  if (orbit.size() == 3) {
+    for (double v : orbit) {
+      if (!std::isfinite(v)) {
+        std::cerr << "vdyn-viewer: --orbit: numbers must be finite\n";
+        return 2;
+      }
+    }
+    if (const std::string why = limits::Check(limits::kCameraDistance, orbit[2]); !why.empty()) {
+      std::cerr << "vdyn-viewer: --orbit: " << why << "\n";
+      return 2;
+    }
+    o.camera.orbit_yaw = Rad(orbit[0]);
+    o.camera.orbit_pitch = Rad(std::clamp(orbit[1], -89.0, 89.0));
+    o.camera.orbit_distance = orbit[2];
+  }
+  o.arrows.metres_per_newton = arrow_m_per_kn / 1000.0;
+  o.xr_seated = xr_space == "seated";
+  o.hud = !no_hud;
+
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  try {
+    vdyn::viewer::Viewer viewer(o);
+    while (!g_stop && viewer.Frame()) {
+    }
+    if (g_stop) spdlog::info("vdyn-viewer: stopped by a signal");
+    return viewer.Finish();
+  } catch (const std::exception& e) {
+    std::cerr << "vdyn-viewer: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,913 @@
+#include "vdyn/viewer/viewer.h"
+
+#include <SDL.h>
+#include <epoxy/gl.h>
+#include <imgui.h>
+#include <imgui_impl_opengl3.h>
+#include <imgui_impl_sdl.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <stdexcept>
+
+#include "vdyn/input.pb.h"
+#include "vdyn/viewer/params_editor.h"
+#include "vdyn/viewer/world_mesh.h"
+#include "vdyn/viewer/xr_session.h"
+
+namespace vdyn::viewer {
+
+double Percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  const double rank = std::ceil(p / 100.0 * static_cast<double>(v.size()));
+  const auto i = static_cast<std::size_t>(std::clamp(rank, 1.0, static_cast<double>(v.size())));
+  return v[i - 1];
+}
+
+namespace {
+
+constexpr std::size_t kMaxSamples = 1'000'000;  // frame and latency samples kept
+
+ImU32 ImColour(Rgb8 c, int alpha = 255) {
+  return IM_COL32(c.r, c.g, c.b, alpha);
+}
+
+std::string FormatSeconds(std::int64_t ns) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3f s", static_cast<double>(ns) * 1e-9);
+  return b;
+}
+
+// A world that passed CheckWorld, with its extent.
+struct AcceptedWorld {
+  pb::WorldDescription desc;
+  Vec3 min_W, max_W;
+  std::uint64_t serial = 0;  // counts arrivals from its server
+};
+
+// The window's size in pixels (larger than its size in window units on a high-density screen):
+// the size of the desktop target, which ImGui draws into at its framebuffer scale.
+int DrawableWidth(SDL_Window* w) {
+  int x = 0, y = 0;
+  SDL_GL_GetDrawableSize(w, &x, &y);
+  return std::max(x, 1);
+}
+int DrawableHeight(SDL_Window* w) {
+  int x = 0, y = 0;
+  SDL_GL_GetDrawableSize(w, &x, &y);
+  return std::max(y, 1);
+}
+
+// A vehicle's newest drawable state.
+struct GoodState {
+  pb::VehicleState state;
+  std::int64_t source_timestamp_ns = 0;
+  std::uint64_t seen = 0;  // SessionView's count when it was taken
+  bool fresh = false;      // arrived since the last frame (its latency is measured)
+};
+
+}  // namespace
+
+struct Viewer::Impl {
+  Viewer& owner;
+  transport::Participant participant;
+  client::SessionView session;
+  std::unique_ptr<ParamsEditor> params;
+  SDL_Window* window = nullptr;
+  SDL_GLContext gl = nullptr;
+  bool imgui_ready = false;
+  std::unique_ptr<Renderer> renderer;
+  std::unique_ptr<RenderTarget> desktop;
+  std::unique_ptr<Headset> xr;
+  bool xr_ended = false;
+
+  // Worlds that passed CheckWorld, by server; the one whose terrain is on the GPU.
+  std::map<std::string, AcceptedWorld> worlds;
+  std::string uploaded_server;
+  std::uint64_t uploaded_serial = 0;
+  bool uploaded = false;
+
+  std::map<std::uint32_t, GoodState> good;
+  std::map<std::uint32_t, VehicleView> views;  // this frame's, for the followed server
+  std::map<std::pair<std::uint32_t, std::string>, std::uint32_t> buttons;  // by vehicle, source
+  FrameLists lists;
+
+  bool show_params = false, show_legend = true, show_help = false;
+  bool quit = false;
+  bool dragging = false;
+  base::MonoTime start = base::MonotonicNow();
+  base::MonoTime next_frame = base::MonotonicNow();
+  bool counting = false;
+  Image last_image;
+  bool have_image = false;
+
+  Impl(Viewer& v, const ViewerOptions& o)
+      : owner(v), participant(o.domain), session(participant, Topics()) {}
+
+  static client::SessionView::Topics Topics() {
+    client::SessionView::Topics t;
+    t.inputs = true;  // the paddle shifters turn the north camera
+    return t;
+  }
+
+  const AcceptedWorld* WorldOf(const std::string& server) const {
+    const auto it = worlds.find(server);
+    return it == worlds.end() ? nullptr : &it->second;
+  }
+
+  // The server whose world is drawn: the followed vehicle's, else the first with a world.
+  std::string CurrentServer() const {
+    if (owner.followed_) {
+      const auto it = good.find(*owner.followed_);
+      if (it != good.end()) return it->second.state.server_id();
+    }
+    return worlds.empty() ? std::string() : worlds.begin()->first;
+  }
+};
+
+Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
+  if (options_.client_id.empty()) options_.client_id = "vdyn-viewer-" + std::to_string(getpid());
+  impl_ = std::make_unique<Impl>(*this, options_);
+  Impl& m = *impl_;
+
+  m.session.on_world = [this](const pb::WorldDescription& w, const transport::SampleInfo&) {
+    Impl& im = *impl_;
+    const std::string why = CheckWorld(w);
+    if (!why.empty()) {
+      ++stats_.worlds_refused;
+      stats_.last_refusal = "world '" + w.name() + "' of server '" + w.server_id() + "': " + why;
+      im.session.drops().Count("world refused by the viewer", why);
+      spdlog::warn("vdyn-viewer: refused {}; keeping the world drawn before", stats_.last_refusal);
+      return;
+    }
+    ++stats_.worlds_accepted;
+    AcceptedWorld& a = im.worlds[w.server_id()];
+    a.desc = w;
+    ++a.serial;
+    constexpr double kBig = 1e300;
+    a.min_W = {kBig, kBig, kBig};
+    a.max_W = {-kBig, -kBig, -kBig};
+    std::size_t triangles = 0;
+    for (const pb::Mesh& mesh : w.meshes()) {
+      triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+      for (int i = 0; i + 2 < mesh.vertices_size(); i += 3) {
+        const Vec3 v{mesh.vertices(i), mesh.vertices(i + 1), mesh.vertices(i + 2)};
+        a.min_W = {std::min(a.min_W.x, v.x), std::min(a.min_W.y, v.y), std::min(a.min_W.z, v.z)};
+        a.max_W = {std::max(a.max_W.x, v.x), std::max(a.max_W.y, v.y), std::max(a.max_W.z, v.z)};
+      }
+    }
+    spdlog::info("vdyn-viewer: world '{}' of server '{}': {} meshes, {} triangles, {} landmarks",
+                 w.name(), w.server_id(), w.meshes_size(), triangles, w.landmarks_size());
+  };
+  m.session.on_state = [this](const pb::VehicleState& s, const transport::SampleInfo&) {
+    const std::string why = CheckState(s);
+    if (!why.empty()) {
+      ++stats_.states_refused;
+      stats_.last_refusal = why;
+      impl_->session.drops().Count("state refused by the viewer", why);
+    }
+  };
+  m.session.on_input = [this](const pb::DriverInput& in, const transport::SampleInfo&) {
+    Impl& im = *impl_;
+    std::uint32_t& prev = im.buttons[{in.vehicle_id(), in.source_id()}];
+    const std::uint32_t pressed = in.buttons() & ~prev;
+    prev = in.buttons();
+    // The paddles of the followed vehicle's driver (any vehicle's while none is followed).
+    if (followed_ && *followed_ != in.vehicle_id()) return;
+    int turn = 0;
+    if (pressed & pb::BUTTON_PADDLE_LEFT) ++turn;
+    if (pressed & pb::BUTTON_PADDLE_RIGHT) --turn;
+    if (turn != 0) {
+      TurnGeographic(options_.camera, turn);
+      ++stats_.paddle_presses;
+      spdlog::info("vdyn-viewer: paddle {} from '{}': geographic camera at {:.0f} deg from north",
+                   turn > 0 ? "left" : "right", in.source_id(), Deg(options_.camera.geo_turn));
+    }
+  };
+
+  // Window and OpenGL 3.3 core.
+  SDL_SetHint(SDL_HINT_VIDEO_X11_FORCE_EGL, "0");  // GLX: OpenXR's Xlib binding needs it
+  if (SDL_Init(SDL_INIT_VIDEO | SDL_INIT_EVENTS) != 0) {
+    throw std::runtime_error(std::string("no display (SDL: ") + SDL_GetError() +
+                             "); run it on a desktop, or headless under Xvfb (xvfb-run -s "
+                             "'-screen 0 1280x720x24' vdyn-viewer ...)");
+  }
+  SDL_GL_SetAttribute(SDL_GL_CONTEXT_MAJOR_VERSION, 3);
+  SDL_GL_SetAttribute(SDL_GL_CONTEXT_MINOR_VERSION, 3);
+  SDL_GL_SetAttribute(SDL_GL_CONTEXT_PROFILE_MASK, SDL_GL_CONTEXT_PROFILE_CORE);
+  SDL_GL_SetAttribute(SDL_GL_DOUBLEBUFFER, 1);
+  SDL_GL_SetAttribute(SDL_GL_DEPTH_SIZE, 0);  // the scene has its own depth buffer
+  Uint32 flags = SDL_WINDOW_OPENGL;
+  if (!options_.xr) flags |= SDL_WINDOW_RESIZABLE;
+  if (options_.hidden) flags |= SDL_WINDOW_HIDDEN;
+  m.window = SDL_CreateWindow("vdyn-viewer", SDL_WINDOWPOS_CENTERED, SDL_WINDOWPOS_CENTERED,
+                              options_.width, options_.height, flags);
+  if (m.window == nullptr) {
+    const std::string e = SDL_GetError();
+    SDL_Quit();
+    throw std::runtime_error("cannot open a window: " + e);
+  }
+  m.gl = SDL_GL_CreateContext(m.window);
+  if (m.gl == nullptr) {
+    const std::string e = SDL_GetError();
+    SDL_DestroyWindow(m.window);
+    SDL_Quit();
+    throw std::runtime_error("no OpenGL 3.3 core context: " + e);
+  }
+  SDL_GL_MakeCurrent(m.window, m.gl);
+  if (std::string(SDL_GetCurrentVideoDriver()) == "offscreen" && !options_.hidden) {
+    spdlog::warn(
+        "vdyn-viewer: no display (SDL fell back to its offscreen driver): drawing without "
+        "a window; --screenshot writes what is drawn. Run it on a desktop, or under Xvfb "
+        "(xvfb-run) for OpenXR");
+  }
+  SDL_GL_SetSwapInterval(0);  // the frame rate is paced here (--fps)
+  stats_.renderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+  spdlog::info("vdyn-viewer: OpenGL {} on {} (SDL video: {})",
+               reinterpret_cast<const char*>(glGetString(GL_VERSION)), stats_.renderer,
+               SDL_GetCurrentVideoDriver());
+
+  if (options_.samples < 0) {
+    // Multisampling doubles the frame time of a software renderer: off there unless asked for.
+    const bool software = stats_.renderer.find("llvmpipe") != std::string::npos ||
+                          stats_.renderer.find("softpipe") != std::string::npos;
+    options_.samples = software ? 0 : 4;
+  }
+  m.renderer = std::make_unique<Renderer>();
+  m.desktop = std::make_unique<RenderTarget>();
+  m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+
+  IMGUI_CHECKVERSION();
+  ImGui::CreateContext();
+  ImGuiIO& io = ImGui::GetIO();
+  io.IniFilename = nullptr;  // no imgui.ini in the working folder
+  ImGui::StyleColorsDark();
+  ImGui::GetStyle().WindowRounding = 4;
+  ImGui::GetStyle().Alpha = 0.95f;
+  ImGui_ImplSDL2_InitForOpenGL(m.window, m.gl);
+  ImGui_ImplOpenGL3_Init("#version 330 core");
+  m.imgui_ready = true;
+
+  m.params = std::make_unique<ParamsEditor>(m.participant, options_.client_id);
+
+  stats_.xr_status = "off";
+  if (options_.xr) {
+    XrOptions xo;
+    xo.seated = options_.xr_seated;
+    xo.hud = options_.hud;
+    xo.hud_width = options_.width;
+    xo.hud_height = options_.height;
+    xo.samples = options_.samples;
+    try {
+      m.xr = std::make_unique<Headset>(xo);
+      stats_.xr_status = "runtime '" + m.xr->runtime_name() + "'";
+    } catch (const XrError& e) {
+      stats_.xr_status = std::string("desktop fallback: ") + e.what();
+      spdlog::warn("vdyn-viewer: {}; showing the desktop window instead", e.what());
+    }
+  }
+}
+
+Viewer::~Viewer() {
+  Impl& m = *impl_;
+  if (m.xr) {
+    // Leave the headset the way the runtime expects: request, then follow its events.
+    try {
+      m.xr->RequestExit();
+      const auto deadline = base::MonotonicNow() + base::Seconds(5);
+      while (m.xr->PollEvents() && base::MonotonicNow() < deadline) {
+        if (m.xr->running()) {
+          m.xr->EmptyFrame();  // frames go on, with nothing to show, until the runtime stops
+        } else {
+          SDL_Delay(5);
+        }
+      }
+    } catch (const std::exception& e) {
+      spdlog::warn("vdyn-viewer: OpenXR at exit: {}", e.what());
+    }
+    m.xr.reset();
+  }
+  m.params.reset();
+  if (m.imgui_ready) {
+    ImGui_ImplOpenGL3_Shutdown();
+    ImGui_ImplSDL2_Shutdown();
+    ImGui::DestroyContext();
+  }
+  m.renderer.reset();
+  m.desktop.reset();  // GL objects go before their context
+  if (m.gl != nullptr) SDL_GL_DeleteContext(m.gl);
+  if (m.window != nullptr) SDL_DestroyWindow(m.window);
+  SDL_Quit();
+}
+
+bool Viewer::xr_active() const {
+  return impl_->xr != nullptr && !impl_->xr_ended;
+}
+ParamsEditor& Viewer::params_editor() {
+  return *impl_->params;
+}
+client::SessionView& Viewer::session() {
+  return impl_->session;
+}
+
+const VehicleView* Viewer::vehicle(std::uint32_t id) const {
+  const auto it = impl_->views.find(id);
+  return it == impl_->views.end() ? nullptr : &it->second;
+}
+
+bool Viewer::ready() const {
+  if (!followed_) return false;
+  const auto it = impl_->good.find(*followed_);
+  return it != impl_->good.end() && impl_->WorldOf(it->second.state.server_id()) != nullptr;
+}
+
+Image Viewer::Screenshot() const {
+  return impl_->have_image ? impl_->last_image : impl_->desktop->Read();
+}
+
+void Viewer::WriteStats(const std::string& path) const {
+  std::ofstream out(path);
+  const auto& s = stats_;
+  double mean = 0;
+  for (double f : s.frame_ms) mean += f / static_cast<double>(s.frame_ms.size());
+  out << "frames " << s.frames << "\n"
+      << "xr_frames " << s.xr_frames << "\n"
+      << "frame_ms_mean " << mean << "\n"
+      << "frame_ms_p50 " << Percentile(s.frame_ms, 50) << "\n"
+      << "frame_ms_p99 " << Percentile(s.frame_ms, 99) << "\n"
+      << "latency_samples " << s.latency_ms.size() << "\n"
+      << "latency_ms_p50 " << Percentile(s.latency_ms, 50) << "\n"
+      << "latency_ms_p99 " << Percentile(s.latency_ms, 99) << "\n"
+      << "worlds_accepted " << s.worlds_accepted << "\n"
+      << "worlds_refused " << s.worlds_refused << "\n"
+      << "states_refused " << s.states_refused << "\n"
+      << "paddle_presses " << s.paddle_presses << "\n"
+      << "vehicles " << impl_->good.size() << "\n"
+      << "geo_turn_deg " << Deg(options_.camera.geo_turn) << "\n"
+      << "drops_total " << impl_->session.drops().Total() << "\n";
+  for (const auto& [kind, n] : impl_->session.drops().Snapshot()) {
+    std::string k = kind;
+    std::replace(k.begin(), k.end(), ' ', '_');
+    out << "drop." << k << " " << n << "\n";
+  }
+  out << "renderer " << s.renderer << "\n"
+      << "xr " << s.xr_status << "\n";
+}
+
+int Viewer::Run() {
+  while (Frame()) {
+  }
+  return Finish();
+}
+
+int Viewer::Finish() {
+  int code = 0;
+  if (!options_.screenshot.empty()) {
+    if (WritePng(options_.screenshot, Screenshot())) {
+      spdlog::info("vdyn-viewer: screenshot written to {}", options_.screenshot);
+    } else {
+      spdlog::error("vdyn-viewer: cannot write the screenshot {}", options_.screenshot);
+      code = 1;
+    }
+  }
+  if (!options_.stats_out.empty()) {
+    WriteStats(options_.stats_out);
+    if (!std::ifstream(options_.stats_out)) {
+      spdlog::error("vdyn-viewer: cannot write {}", options_.stats_out);
+      code = 1;
+    }
+  }
+  return code;
+}
+
+namespace {
+
+// Screen position (pixels, y down) of a world point, or false behind the camera.
+bool Project(const CameraView& cam, int w, int h, const Vec3& p, ImVec2& out) {
+  double clip_w = 0;
+  const Vec3 c = (cam.proj * cam.view).TransformPoint(p, &clip_w);
+  if (clip_w <= 1e-6) return false;
+  const double x = c.x / clip_w, y = c.y / clip_w;
+  if (std::abs(x) > 1.2 || std::abs(y) > 1.2) return false;
+  out = ImVec2(static_cast<float>((x * 0.5 + 0.5) * w), static_cast<float>((0.5 - y * 0.5) * h));
+  return true;
+}
+
+// The compass: a dial at the top right; the red needle points where north is, the letters turn
+// with it. Drawn into the HUD so it shows in the headset too.
+void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle,
+                 double heading_deg) {
+  dl->AddCircleFilled(centre, radius, IM_COL32(20, 24, 32, 200), 48);
+  dl->AddCircle(centre, radius, IM_COL32(230, 230, 230, 255), 48, 2.0f);
+  auto dir = [&](double a) {  // counter-clockwise from up, screen y down
+    return ImVec2(static_cast<float>(-std::sin(a)), static_cast<float>(-std::cos(a)));
+  };
+  const char* letters[] = {"N", "W", "S", "E"};
+  for (int i = 0; i < 4; ++i) {
+    const ImVec2 d = dir(north_angle + i * kPi / 2);
+    const ImVec2 p(centre.x + d.x * radius * 0.78f - 4, centre.y + d.y * radius * 0.78f - 7);
+    dl->AddText(p, i == 0 ? IM_COL32(255, 90, 90, 255) : IM_COL32(220, 220, 220, 255), letters[i]);
+  }
+  const ImVec2 n = dir(north_angle), side = ImVec2(-n.y, n.x);
+  const float len = radius * 0.55f, half = radius * 0.13f;
+  const ImVec2 tip(centre.x + n.x * len, centre.y + n.y * len);
+  const ImVec2 tail(centre.x - n.x * len, centre.y - n.y * len);
+  const ImVec2 l(centre.x + side.x * half, centre.y + side.y * half);
+  const ImVec2 r(centre.x - side.x * half, centre.y - side.y * half);
+  dl->AddTriangleFilled(l, tip, r, IM_COL32(235, 40, 40, 255));
+  dl->AddTriangleFilled(r, tail, l, IM_COL32(235, 235, 235, 255));
+  char b[32];
+  std::snprintf(b, sizeof b, "view %03.0f deg", heading_deg);
+  dl->AddText(ImVec2(centre.x - 34, centre.y + radius + 4), IM_COL32(235, 235, 235, 255), b);
+}
+
+}  // namespace
+
+bool Viewer::Frame() {
+  Impl& m = *impl_;
+  const base::MonoTime t0 = base::MonotonicNow();
+  ImGuiIO& io = ImGui::GetIO();
+
+  // --- events ---
+  SDL_Event ev;
+  while (SDL_PollEvent(&ev)) {
+    ImGui_ImplSDL2_ProcessEvent(&ev);
+    switch (ev.type) {
+      case SDL_QUIT:
+        m.quit = true;
+        break;
+      case SDL_WINDOWEVENT:
+        if (ev.window.event == SDL_WINDOWEVENT_CLOSE) m.quit = true;
+        if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !options_.xr) {
+          options_.width = std::max(ev.window.data1, 64);
+          options_.height = std::max(ev.window.data2, 64);
+          m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+        }
+        break;
+      case SDL_KEYDOWN: {
+        if (io.WantCaptureKeyboard) break;
+        const SDL_Keycode k = ev.key.keysym.sym;
+        CameraState& c = options_.camera;
+        if (k == SDLK_ESCAPE) m.quit = true;
+        if (k >= SDLK_1 && k <= SDLK_5) c.mode = static_cast<CameraMode>(k - SDLK_1);
+        if (k == SDLK_c)
+          c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
+        if (k == SDLK_q) TurnGeographic(c, +1);
+        if (k == SDLK_e) TurnGeographic(c, -1);
+        if (k == SDLK_n) c.geo_turn = 0;
+        if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS)
+          options_.arrows.metres_per_newton *= 1.25;
+        if (k == SDLK_MINUS || k == SDLK_KP_MINUS) options_.arrows.metres_per_newton /= 1.25;
+        if (k == SDLK_h) options_.hud = !options_.hud;
+        if (k == SDLK_p) m.show_params = !m.show_params;
+        if (k == SDLK_l) m.show_legend = !m.show_legend;
+        if (k == SDLK_F1) m.show_help = !m.show_help;
+        if (k == SDLK_TAB && !m.good.empty()) {
+          // Next (Shift: previous) vehicle of the domain.
+          std::vector<std::uint32_t> ids;
+          for (const auto& [id, g] : m.good) ids.push_back(id);
+          auto it = followed_ ? std::find(ids.begin(), ids.end(), *followed_) : ids.end();
+          std::size_t i = it == ids.end() ? 0 : static_cast<std::size_t>(it - ids.begin());
+          i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size()
+                                               : (i + 1) % ids.size();
+          options_.follow = ids[i];
+        }
+        if (k == SDLK_F12) {
+          const std::string path =
+              "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
+          if (WritePng(path, Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
+        }
+        break;
+      }
+      case SDL_MOUSEBUTTONDOWN:
+        if (!io.WantCaptureMouse) m.dragging = true;
+        break;
+      case SDL_MOUSEBUTTONUP:
+        m.dragging = false;
+        break;
+      case SDL_MOUSEMOTION:
+        if (m.dragging && !io.WantCaptureMouse) {
+          CameraState& c = options_.camera;
+          if (c.mode != CameraMode::kOrbit && c.mode != CameraMode::kMap) {
+            // Dragging starts orbiting from where the camera is.
+            const VehicleView* f = followed_ ? vehicle(*followed_) : nullptr;
+            const Vec3 d = last_camera_.eye_W - (f != nullptr ? f->pose_WB.t : Vec3{});
+            c.orbit_yaw = std::atan2(d.y, d.x);
+            c.orbit_distance = std::clamp(Norm(d), 1.0, 2000.0);
+            c.orbit_pitch = std::clamp(
+                std::asin(std::clamp(d.z / std::max(Norm(d), 1e-9), -1.0, 1.0)), Rad(-5), Rad(89));
+            c.mode = CameraMode::kOrbit;
+          }
+          if (c.mode == CameraMode::kOrbit) {
+            c.orbit_yaw -= ev.motion.xrel * 0.006;
+            c.orbit_pitch = std::clamp(c.orbit_pitch + ev.motion.yrel * 0.006, Rad(-5), Rad(89));
+          }
+        }
+        break;
+      case SDL_MOUSEWHEEL:
+        if (!io.WantCaptureMouse) {
+          CameraState& c = options_.camera;
+          const double f = std::pow(0.9, ev.wheel.y);
+          switch (c.mode) {
+            case CameraMode::kMap:
+              c.map_half_height = std::clamp(c.map_half_height * f, 2.0, 5000.0);
+              break;
+            case CameraMode::kChase:
+              c.chase_distance = std::clamp(c.chase_distance * f, 2.0, 200.0);
+              break;
+            case CameraMode::kNorth:
+              c.north_distance = std::clamp(c.north_distance * f, 2.0, 500.0);
+              break;
+            default:
+              c.orbit_distance = std::clamp(c.orbit_distance * f, 1.0, 2000.0);
+              break;
+          }
+        }
+        break;
+      default:
+        break;
+    }
+  }
+
+  // --- DDS ---
+  m.session.Poll();
+  for (const auto& [id, v] : m.session.vehicles()) {
+    if (v.states == 0) continue;
+    GoodState& g = m.good[id];
+    if (g.seen == v.states) continue;
+    g.seen = v.states;
+    if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
+    g.state = v.state;
+    g.source_timestamp_ns = v.source_timestamp_ns;
+    g.fresh = true;
+  }
+  for (auto it = m.good.begin(); it != m.good.end();) {  // vehicles seen only with bad states
+    it = it->second.state.wheels_size() == 0 ? m.good.erase(it) : std::next(it);
+  }
+  // The followed vehicle: the chosen one when present, else the lowest id.
+  followed_.reset();
+  if (options_.follow && m.good.count(*options_.follow)) {
+    followed_ = options_.follow;
+  } else if (!m.good.empty()) {
+    followed_ = m.good.begin()->first;
+  }
+  const std::string server = m.CurrentServer();
+  const AcceptedWorld* accepted = m.WorldOf(server);
+  const pb::WorldDescription* world = accepted != nullptr ? &accepted->desc : nullptr;
+  // The followed server's terrain on the GPU.
+  if (accepted != nullptr) {
+    const std::uint64_t serial = accepted->serial;
+    if (!m.uploaded || m.uploaded_server != server || m.uploaded_serial != serial) {
+      m.renderer->SetTerrain(TerrainFromWorld(*world));
+      m.uploaded = true;
+      m.uploaded_server = server;
+      m.uploaded_serial = serial;
+    }
+  } else if (m.uploaded) {
+    m.renderer->ClearTerrain();
+    m.uploaded = false;
+  }
+
+  // --- scene ---
+  // The vehicles of the drawn world: those of its server, and those of other servers on the same
+  // terrain (several servers of a lab on one world); another world's vehicles would float.
+  m.views.clear();
+  for (const auto& [id, g] : m.good) {
+    const std::string& owner = g.state.server_id();
+    if (!server.empty() && owner != server) {
+      const AcceptedWorld* theirs = m.WorldOf(owner);
+      if (world == nullptr || theirs == nullptr || world->terrain_hash() == 0 ||
+          theirs->desc.terrain_hash() != world->terrain_hash()) {
+        continue;
+      }
+    }
+    const auto* sv = m.session.vehicle(id);
+    const pb::VehicleParams* params = sv != nullptr && sv->params ? &*sv->params : nullptr;
+    const AcceptedWorld* own_world = m.WorldOf(owner);
+    m.views.emplace(
+        id, BuildVehicleView(
+                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params)));
+  }
+  const VehicleView* followed = followed_ ? vehicle(*followed_) : nullptr;
+  CameraScene cs;
+  cs.followed = followed;
+  if (accepted != nullptr) {
+    cs.north_yaw = world->north_yaw();
+    const double span =
+        std::max(accepted->max_W.x - accepted->min_W.x, accepted->max_W.y - accepted->min_W.y);
+    cs.top_z = accepted->max_W.z;
+    cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
+    cs.fallback_target_W = world->has_spawn() ? Vec3{world->spawn().x(), world->spawn().y(), 0}
+                                              : 0.5 * (accepted->min_W + accepted->max_W);
+  }
+  const CameraView cam =
+      ComputeCamera(options_.camera, cs, m.desktop->width(), m.desktop->height());
+  last_camera_ = cam;
+
+  // `inside`: the followed vehicle seen from its own seat (its body is left out).
+  // Vehicles out of sight are left out; far ones get fewer facets.
+  auto build_lists = [&](const Mat4& view_proj, const Vec3& eye, bool ortho,
+                         double metres_per_pixel, double fovy, int height_px, bool inside) {
+    m.lists.Clear();
+    // Arrows at least ~3 px thick wherever they are.
+    auto radius_at = [&](const Vec3& p) {
+      const double mpp = ortho
+                             ? metres_per_pixel
+                             : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
+      return std::max(0.03, 1.6 * mpp);
+    };
+    for (const auto& [id, v] : m.views) {
+      if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, options_.arrows))) continue;
+      const bool own = inside && followed_ && id == *followed_;
+      const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
+      AppendVehicle(v, options_.arrows, radius_at, !own, px_per_m < 40.0, m.lists);
+    }
+    if (world != nullptr) {
+      // Landmarks: a small marker on the ground (their names are labels on the desktop).
+      for (const pb::Landmark& l : world->landmarks()) {
+        const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
+        const double r = std::max(0.2, 2.0 * radius_at(p));
+        m.lists.opaque.Cone(p, p + Vec3{0, 0, 2 * r}, r, {255, 120, 40}, true, 10);
+      }
+    }
+  };
+
+  // --- HUD (ImGui) ---
+  ImGui_ImplOpenGL3_NewFrame();
+  ImGui_ImplSDL2_NewFrame();
+  ImGui::NewFrame();
+  const double heading_deg = std::fmod(Deg(cs.north_yaw - cam.heading) + 720.0, 360.0);
+  const double north_angle = CompassNorthAngle(cs.north_yaw, cam.heading);
+  if (options_.hud) {
+    const auto* gs = followed_ ? &m.good.at(*followed_) : nullptr;
+    ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowBgAlpha(0.7f);
+    ImGui::Begin("vdyn-viewer", nullptr,
+                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+    std::string mode = options_.playback ? "PLAYBACK" : "LIVE";
+    std::string server_mode;
+    if (const auto d = m.session.diagnostics().find(server); d != m.session.diagnostics().end()) {
+      server_mode = d->second.mode();
+      if (server_mode == "playback") mode = "PLAYBACK";
+    }
+    ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
+                       mode.c_str());
+    ImGui::SameLine();
+    ImGui::Text("server '%s'%s%s  world '%s'", server.c_str(), server_mode.empty() ? "" : " ",
+                server_mode.c_str(), world != nullptr ? world->name().c_str() : "(waiting)");
+    if (gs != nullptr) {
+      const pb::VehicleState& s = gs->state;
+      ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), m.good.size());
+      ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
+                  FormatSeconds(s.sim_time_ns()).c_str(),
+                  static_cast<unsigned long long>(s.step()));
+      const std::string& src = s.input().source_id();
+      ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
+      ImGui::SameLine();
+      if (s.control().watchdog_safe_state()) {
+        ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "WATCHDOG: safe state (no live input)");
+      } else {
+        ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
+      }
+      const double age_ms =
+          static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
+      ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
+                  Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
+    } else {
+      ImGui::Text("no vehicle on domain %u yet", options_.domain);
+    }
+    const double frame_ms = stats_.frame_ms.empty() ? 0.0 : stats_.frame_ms.back();
+    ImGui::Text("camera %s (1-5, C)   frame %.1f ms",
+                std::string(CameraName(options_.camera.mode)).c_str(), frame_ms);
+    if (m.xr)
+      ImGui::Text("OpenXR: %s, %s", m.xr->runtime_name().c_str(), m.xr->state_name().c_str());
+    const std::uint64_t drops = m.session.drops().Total();
+    if (drops > 0) {
+      ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
+                         static_cast<unsigned long long>(drops));
+      if (ImGui::IsItemHovered()) {
+        ImGui::BeginTooltip();
+        for (const auto& [kind, n] : m.session.drops().Snapshot())
+          ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
+        if (!stats_.last_refusal.empty())
+          ImGui::TextWrapped("last: %s", stats_.last_refusal.c_str());
+        ImGui::EndTooltip();
+      }
+    }
+    ImGui::End();
+
+    if (m.show_legend) {
+      ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(options_.height) - 210),
+                              ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowBgAlpha(0.7f);
+      ImGui::Begin("forces", &m.show_legend,
+                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+      for (int k = 0; k < kForceKinds; ++k) {
+        const auto kind = static_cast<ForceKind>(k);
+        const Rgb8 c = ForceColour(kind);
+        const ImVec2 p = ImGui::GetCursorScreenPos();
+        ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
+                                                  ImColour(c));
+        ImGui::Dummy(ImVec2(26, 14));
+        ImGui::SameLine();
+        ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &options_.arrows.show[k]);
+      }
+      float kn = static_cast<float>(options_.arrows.metres_per_newton * 1000.0);
+      ImGui::SetNextItemWidth(140);
+      if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
+                             ImGuiSliderFlags_Logarithmic)) {
+        options_.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
+      }
+      ImGui::End();
+    }
+    if (m.show_params && followed_) {
+      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) - 430, 160),
+                              ImGuiCond_FirstUseEver);
+      ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
+      ImGui::Begin("parameters", &m.show_params);
+      const auto* sv = m.session.vehicle(*followed_);
+      ImGui::Text("vehicle %u (P to close)", *followed_);
+      m.params->Draw(*followed_, server, sv != nullptr && sv->params ? &*sv->params : nullptr);
+      ImGui::End();
+    }
+    if (m.show_help) {
+      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) * 0.5f - 200, 80),
+                              ImGuiCond_FirstUseEver);
+      ImGui::Begin("keys", &m.show_help, ImGuiWindowFlags_AlwaysAutoResize);
+      ImGui::TextUnformatted(
+          "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
+          "Q/E  turn the geographic cameras left/right    N  back to north\n"
+          "     (the wheel's paddle shifters do the same)\n"
+          "Tab  next vehicle (Shift: previous)\n"
+          "+/-  arrow scale     L legend   P parameters   H HUD\n"
+          "drag orbit   wheel zoom   F12 screenshot   Esc quit");
+      ImGui::End();
+    }
+    // Compass, landmark and vehicle labels.
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    DrawCompass(fg, ImVec2(static_cast<float>(options_.width) - 75, 75), 55, north_angle,
+                heading_deg);
+    if (!xr_active()) {
+      if (world != nullptr) {
+        for (const pb::Landmark& l : world->landmarks()) {
+          ImVec2 p;
+          const Vec3 at{l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0};
+          // Names of the landmarks near the camera (far ones would pile up on the horizon).
+          if (!cam.orthographic && Norm(at - cam.eye_W) > 150.0) continue;
+          if (Project(cam, options_.width, options_.height, at, p)) {
+            fg->AddText(ImVec2(p.x - 20, p.y - 14), IM_COL32(255, 255, 255, 220), l.name().c_str());
+          }
+        }
+      }
+      for (const auto& [id, v] : m.views) {
+        ImVec2 p;
+        if (Project(cam, options_.width, options_.height, v.pose_WB * Vec3{0, 0, 1.6}, p)) {
+          const std::string label = "#" + std::to_string(id);
+          fg->AddText(ImVec2(p.x - 8, p.y - 14), ImColour(VehicleColour(id)), label.c_str());
+        }
+      }
+    }
+  } else {
+    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(options_.width) - 75, 75),
+                55, north_angle, heading_deg);
+  }
+  ImGui::Render();
+
+  // --- draw ---
+  bool xr_drawn = false;
+  if (m.xr && !m.xr_ended) {
+    try {
+      if (!m.xr->PollEvents()) {
+        // The headset session is over (the person left through the runtime): so is the viewer.
+        m.xr_ended = true;
+        spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
+        m.quit = true;
+      } else if (m.xr->running()) {
+        // The reference space's origin in the world (docs in xr_session.h).
+        Pose world_from_space;
+        if (followed != nullptr) {
+          if (options_.xr_seated) {
+            const Pose& b = followed->pose_WB;
+            world_from_space = {XrAxesIn(b.R), b * options_.camera.seat_B};
+          } else {
+            const Mat3 yaw = RotationZ(followed->yaw);
+            // On the ground 6 m to the vehicle's left, facing it (looking along -Y of its yaw).
+            const Vec3 place = followed->pose_WB.t + yaw * Vec3{0, 6, 0};
+            double z = followed->ground_z;
+            if (m.xr->standing_on_local()) z += 1.6;
+            world_from_space = {XrAxesIn(RotationZ(followed->yaw - kPi / 2)),
+                                {place.x, place.y, z}};
+          }
+        }
+        m.xr->Frame(
+            world_from_space, 0.05, cs.far_m,
+            [&](const XrEye& eye) {
+              build_lists(eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
+                          options_.xr_seated);
+              eye.target->BeginScene();
+              Renderer::View rv{eye.view, eye.proj, eye.eye_W};
+              m.renderer->Draw(rv, m.lists);
+              eye.target->Resolve();
+            },
+            [&](RenderTarget& hud) {
+              glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
+              glViewport(0, 0, hud.width(), hud.height());
+              glClearColor(0, 0, 0, 0);
+              glClear(GL_COLOR_BUFFER_BIT);
+              ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+            });
+        ++stats_.xr_frames;
+        xr_drawn = true;
+      }
+    } catch (const XrError& e) {
+      spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
+      stats_.xr_status = std::string("failed: ") + e.what();
+      m.xr_ended = true;
+    }
+  }
+  RenderTarget& desktop = *m.desktop;
+  if (xr_drawn) {
+    // The window mirrors the left eye, with the HUD.
+    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
+    glViewport(0, 0, desktop.width(), desktop.height());
+    glClearColor(0, 0, 0, 1);
+    glClear(GL_COLOR_BUFFER_BIT);
+    const RenderTarget& mirror = m.xr->mirror();
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, mirror.resolve_framebuffer());
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, desktop.resolve_framebuffer());
+    const double s = std::min(static_cast<double>(options_.width) / mirror.width(),
+                              static_cast<double>(options_.height) / mirror.height());
+    const int w = static_cast<int>(mirror.width() * s), h = static_cast<int>(mirror.height() * s);
+    const int x0 = (options_.width - w) / 2, y0 = (options_.height - h) / 2;
+    glBlitFramebuffer(0, 0, mirror.width(), mirror.height(), x0, y0, x0 + w, y0 + h,
+                      GL_COLOR_BUFFER_BIT, GL_LINEAR);
+    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
+  } else {
+    build_lists(cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
+                desktop.height(), options_.camera.mode == CameraMode::kDriver);
+    desktop.BeginScene();
+    Renderer::View rv{cam.view, cam.proj, cam.eye_W};
+    rv.haze = !cam.orthographic;
+    m.renderer->Draw(rv, m.lists);
+    desktop.Resolve();
+  }
+  ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+  int ww = 0, wh = 0;
+  SDL_GL_GetDrawableSize(m.window, &ww, &wh);
+  Renderer::PresentToWindow(desktop, ww, wh);
+  SDL_GL_SwapWindow(m.window);
+  glFinish();
+
+  // --- timing ---
+  const base::WallTime shown = base::WallNow();
+  for (auto& [id, g] : m.good) {
+    if (!g.fresh) continue;
+    g.fresh = false;
+    if (m.views.count(id) == 0 || g.source_timestamp_ns <= 0) continue;
+    if (stats_.latency_ms.size() < kMaxSamples) {
+      stats_.latency_ms.push_back(static_cast<double>(shown.ns - g.source_timestamp_ns) * 1e-6);
+    }
+  }
+  ++stats_.frames;
+  const base::MonoTime t1 = base::MonotonicNow();
+  if (stats_.frame_ms.size() < kMaxSamples) stats_.frame_ms.push_back((t1 - t0).millis());
+
+  // --- headless end ---
+  if (!m.counting) {
+    const bool waited = (t1 - m.start).seconds() >= options_.wait_s;
+    if (ready() || waited) {
+      if (!ready() && options_.frames > 0) {
+        spdlog::warn("vdyn-viewer: no {} after {:.0f} s; drawing what there is",
+                     world == nullptr ? "world" : "vehicle", options_.wait_s);
+      }
+      m.counting = true;
+    }
+  }
+  // With a headset, only frames it was given count.
+  const bool xr_pending = m.xr != nullptr && !m.xr_ended;
+  if (m.counting && (!xr_pending || xr_drawn)) ++stats_.counted_frames;
+  if (options_.frames > 0 && stats_.counted_frames >= options_.frames) {
+    if (!m.have_image) {
+      m.last_image = desktop.Read();
+      m.have_image = true;
+    }
+    m.quit = true;
+  }
+  if (m.quit) return false;
+
+  // --- pacing ---
+  if (options_.fps > 0) {
+    const base::Nanos period{static_cast<std::int64_t>(1e9 / options_.fps)};
+    m.next_frame = m.next_frame + period;
+    const base::MonoTime now = base::MonotonicNow();
+    if (m.next_frame < now) m.next_frame = now;  // late: no burst to catch up
+    base::SleepUntil(m.next_frame);
+  }
+  return true;
+}
+
+}  // namespace vdyn::viewer

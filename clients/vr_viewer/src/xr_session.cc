@@ -1,0 +1,527 @@
+#include "vdyn/viewer/xr_session.h"
+
+#include <array>
+#include <cstring>
+#include <vector>
+
+#include <spdlog/spdlog.h>
+
+// X11 and GLX last: their macros (None, Status, Bool...) must not reach other headers.
+#include <epoxy/gl.h>
+#include <epoxy/glx.h>
+#define XR_USE_PLATFORM_XLIB
+#define XR_USE_GRAPHICS_API_OPENGL
+#include <openxr/openxr.h>
+#include <openxr/openxr_platform.h>
+
+namespace vdyn::viewer {
+
+Mat3 XrAxesIn(const Mat3& f) {
+  Mat3 r;
+  r.c[0] = -f.c[1];
+  r.c[1] = f.c[2];
+  r.c[2] = -f.c[0];
+  return r;
+}
+
+namespace {
+
+// A zeroed OpenXR structure of its type.
+template <class T>
+T XrStruct(XrStructureType type) {
+  T v{};
+  v.type = type;
+  return v;
+}
+
+constexpr std::int64_t kGlRgba8 = 0x8058;        // GL_RGBA8
+constexpr std::int64_t kGlSrgb8Alpha8 = 0x8C43;  // GL_SRGB8_ALPHA8
+
+std::string ResultName(XrInstance instance, XrResult r) {
+  char buf[XR_MAX_RESULT_STRING_SIZE] = {};
+  if (instance != XR_NULL_HANDLE && xrResultToString(instance, r, buf) == XR_SUCCESS) {
+    return std::string(buf) + " (" + std::to_string(r) + ")";
+  }
+  switch (r) {
+    case XR_ERROR_RUNTIME_UNAVAILABLE:
+      return "XR_ERROR_RUNTIME_UNAVAILABLE (-51)";
+    case XR_ERROR_RUNTIME_FAILURE:
+      return "XR_ERROR_RUNTIME_FAILURE (-2)";
+    case XR_ERROR_EXTENSION_NOT_PRESENT:
+      return "XR_ERROR_EXTENSION_NOT_PRESENT (-9)";
+    case XR_ERROR_FORM_FACTOR_UNAVAILABLE:
+      return "XR_ERROR_FORM_FACTOR_UNAVAILABLE (-35)";
+    default:
+      return "XrResult " + std::to_string(r);
+  }
+}
+
+Pose PoseOf(const XrPosef& p) {
+  return {RotationFromQuat(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z),
+          {p.position.x, p.position.y, p.position.z}};
+}
+
+const char* StateName(XrSessionState s) {
+  switch (s) {
+    case XR_SESSION_STATE_IDLE:
+      return "idle";
+    case XR_SESSION_STATE_READY:
+      return "ready";
+    case XR_SESSION_STATE_SYNCHRONIZED:
+      return "synchronized";
+    case XR_SESSION_STATE_VISIBLE:
+      return "visible";
+    case XR_SESSION_STATE_FOCUSED:
+      return "focused";
+    case XR_SESSION_STATE_STOPPING:
+      return "stopping";
+    case XR_SESSION_STATE_LOSS_PENDING:
+      return "loss pending";
+    case XR_SESSION_STATE_EXITING:
+      return "exiting";
+    default:
+      return "unknown";
+  }
+}
+
+struct Swapchain {
+  XrSwapchain handle = XR_NULL_HANDLE;
+  int width = 0, height = 0;
+  std::vector<XrSwapchainImageOpenGLKHR> images;
+  RenderTarget target;
+};
+
+}  // namespace
+
+struct Headset::Impl {
+  XrOptions options;
+  XrInstance instance = XR_NULL_HANDLE;
+  XrSystemId system = XR_NULL_SYSTEM_ID;
+  XrSession session = XR_NULL_HANDLE;
+  XrSpace space = XR_NULL_HANDLE;
+  XrSpace view_space = XR_NULL_HANDLE;
+  XrSessionState state = XR_SESSION_STATE_UNKNOWN;
+  bool running = false;
+  bool ended = false;
+  bool exit_requested = false;
+  bool standing_on_local = false;
+  std::string runtime;
+  std::int64_t format = kGlRgba8;
+  std::array<Swapchain, 2> eyes;
+  Swapchain hud;
+  std::array<XrViewConfigurationView, 2> config_views{};
+  std::uint64_t frames = 0;
+  RenderTarget mirror;
+
+  void Check(XrResult r, const char* what) const {
+    if (XR_FAILED(r)) throw XrError(std::string("OpenXR ") + what + ": " + ResultName(instance, r));
+  }
+
+  void CreateSwapchain(Swapchain& s, int width, int height, std::uint32_t samples,
+                       int render_samples) {
+    auto ci = XrStruct<XrSwapchainCreateInfo>(XR_TYPE_SWAPCHAIN_CREATE_INFO);
+    ci.usageFlags = XR_SWAPCHAIN_USAGE_COLOR_ATTACHMENT_BIT | XR_SWAPCHAIN_USAGE_SAMPLED_BIT;
+    ci.format = format;
+    ci.sampleCount = samples;
+    ci.width = static_cast<std::uint32_t>(width);
+    ci.height = static_cast<std::uint32_t>(height);
+    ci.faceCount = 1;
+    ci.arraySize = 1;
+    ci.mipCount = 1;
+    Check(xrCreateSwapchain(session, &ci, &s.handle), "xrCreateSwapchain");
+    std::uint32_t n = 0;
+    Check(xrEnumerateSwapchainImages(s.handle, 0, &n, nullptr), "xrEnumerateSwapchainImages");
+    s.images.assign(n, XrStruct<XrSwapchainImageOpenGLKHR>(XR_TYPE_SWAPCHAIN_IMAGE_OPENGL_KHR));
+    Check(xrEnumerateSwapchainImages(
+              s.handle, n, &n, reinterpret_cast<XrSwapchainImageBaseHeader*>(s.images.data())),
+          "xrEnumerateSwapchainImages");
+    s.width = width;
+    s.height = height;
+    s.target.Resize(width, height, render_samples, true);
+  }
+
+  // Acquires and waits for an image of `s` and points its target at it.
+  void Acquire(Swapchain& s) {
+    std::uint32_t index = 0;
+    auto ai = XrStruct<XrSwapchainImageAcquireInfo>(XR_TYPE_SWAPCHAIN_IMAGE_ACQUIRE_INFO);
+    Check(xrAcquireSwapchainImage(s.handle, &ai, &index), "xrAcquireSwapchainImage");
+    auto wi = XrStruct<XrSwapchainImageWaitInfo>(XR_TYPE_SWAPCHAIN_IMAGE_WAIT_INFO);
+    wi.timeout = 1'000'000'000;  // 1 s
+    Check(xrWaitSwapchainImage(s.handle, &wi), "xrWaitSwapchainImage");
+    if (index >= s.images.size())
+      throw XrError("OpenXR runtime gave a swapchain image index past the end");
+    s.target.SetExternalColour(s.images[index].image);
+  }
+
+  void Release(Swapchain& s) {
+    auto ri = XrStruct<XrSwapchainImageReleaseInfo>(XR_TYPE_SWAPCHAIN_IMAGE_RELEASE_INFO);
+    Check(xrReleaseSwapchainImage(s.handle, &ri), "xrReleaseSwapchainImage");
+  }
+
+  void Destroy() {
+    for (Swapchain& s : eyes) {
+      if (s.handle != XR_NULL_HANDLE) xrDestroySwapchain(s.handle);
+      s.handle = XR_NULL_HANDLE;
+    }
+    if (hud.handle != XR_NULL_HANDLE) xrDestroySwapchain(hud.handle);
+    hud.handle = XR_NULL_HANDLE;
+    if (space != XR_NULL_HANDLE) xrDestroySpace(space);
+    if (view_space != XR_NULL_HANDLE) xrDestroySpace(view_space);
+    space = view_space = XR_NULL_HANDLE;
+    if (session != XR_NULL_HANDLE) xrDestroySession(session);
+    session = XR_NULL_HANDLE;
+    if (instance != XR_NULL_HANDLE) xrDestroyInstance(instance);
+    instance = XR_NULL_HANDLE;
+  }
+};
+
+Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
+  Impl& x = *impl_;
+  x.options = options;
+  try {
+    // The runtime must offer OpenGL.
+    std::uint32_t n = 0;
+    XrResult r = xrEnumerateInstanceExtensionProperties(nullptr, 0, &n, nullptr);
+    if (XR_FAILED(r)) {
+      throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
+                    "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
+    }
+    std::vector<XrExtensionProperties> exts(
+        n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
+    x.Check(xrEnumerateInstanceExtensionProperties(nullptr, n, &n, exts.data()),
+            "xrEnumerateInstanceExtensionProperties");
+    bool has_gl = false;
+    for (const auto& e : exts)
+      has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
+    if (!has_gl) throw XrError("the OpenXR runtime does not offer XR_KHR_opengl_enable");
+
+    auto ici = XrStruct<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
+    std::strncpy(ici.applicationInfo.applicationName, "vdyn-viewer",
+                 XR_MAX_APPLICATION_NAME_SIZE - 1);
+    ici.applicationInfo.applicationVersion = 1;
+    std::strncpy(ici.applicationInfo.engineName, "vdyn", XR_MAX_ENGINE_NAME_SIZE - 1);
+    ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
+    const char* enabled[] = {XR_KHR_OPENGL_ENABLE_EXTENSION_NAME};
+    ici.enabledExtensionCount = 1;
+    ici.enabledExtensionNames = enabled;
+    r = xrCreateInstance(&ici, &x.instance);
+    if (XR_FAILED(r)) {
+      throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
+                    "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
+    }
+    auto ip = XrStruct<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
+    x.Check(xrGetInstanceProperties(x.instance, &ip), "xrGetInstanceProperties");
+    x.runtime = ip.runtimeName;
+
+    auto sgi = XrStruct<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+    sgi.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+    r = xrGetSystem(x.instance, &sgi, &x.system);
+    if (XR_FAILED(r)) {
+      throw XrError("OpenXR runtime '" + x.runtime + "' has no headset (" +
+                    ResultName(x.instance, r) + "): is one connected?");
+    }
+
+    // The runtime's OpenGL requirements, which must be asked before the session is created.
+    PFN_xrGetOpenGLGraphicsRequirementsKHR get_reqs = nullptr;
+    x.Check(xrGetInstanceProcAddr(x.instance, "xrGetOpenGLGraphicsRequirementsKHR",
+                                  reinterpret_cast<PFN_xrVoidFunction*>(&get_reqs)),
+            "xrGetInstanceProcAddr(xrGetOpenGLGraphicsRequirementsKHR)");
+    auto reqs = XrStruct<XrGraphicsRequirementsOpenGLKHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_OPENGL_KHR);
+    x.Check(get_reqs(x.instance, x.system, &reqs), "xrGetOpenGLGraphicsRequirementsKHR");
+    const int gl_version = epoxy_gl_version();  // e.g. 45
+    const XrVersion have = XR_MAKE_VERSION(gl_version / 10, gl_version % 10, 0);
+    if (have < reqs.minApiVersionSupported) {
+      throw XrError("OpenXR runtime needs OpenGL " +
+                    std::to_string(XR_VERSION_MAJOR(reqs.minApiVersionSupported)) + "." +
+                    std::to_string(XR_VERSION_MINOR(reqs.minApiVersionSupported)) +
+                    ", this context has " + std::to_string(gl_version / 10) + "." +
+                    std::to_string(gl_version % 10));
+    }
+
+    // The Xlib binding of the current GLX context.
+    auto binding =
+        XrStruct<XrGraphicsBindingOpenGLXlibKHR>(XR_TYPE_GRAPHICS_BINDING_OPENGL_XLIB_KHR);
+    binding.xDisplay = glXGetCurrentDisplay();
+    binding.glxContext = glXGetCurrentContext();
+    binding.glxDrawable = glXGetCurrentDrawable();
+    if (binding.xDisplay == nullptr || binding.glxContext == nullptr) {
+      throw XrError("no current GLX context for OpenXR (the window does not use GLX)");
+    }
+    int fb_id = 0;
+    glXQueryContext(binding.xDisplay, binding.glxContext, GLX_FBCONFIG_ID, &fb_id);
+    const int attribs[] = {GLX_FBCONFIG_ID, fb_id, 0};
+    int count = 0;
+    GLXFBConfig* configs =
+        glXChooseFBConfig(binding.xDisplay, DefaultScreen(binding.xDisplay), attribs, &count);
+    if (configs != nullptr && count > 0) {
+      binding.glxFBConfig = configs[0];
+      if (XVisualInfo* vi = glXGetVisualFromFBConfig(binding.xDisplay, configs[0])) {
+        binding.visualid = static_cast<std::uint32_t>(vi->visualid);
+        XFree(vi);
+      }
+    }
+    if (configs != nullptr) XFree(configs);
+
+    auto sci = XrStruct<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+    sci.next = &binding;
+    sci.systemId = x.system;
+    x.Check(xrCreateSession(x.instance, &sci, &x.session), "xrCreateSession");
+
+    // Reference spaces.
+    std::uint32_t ns = 0;
+    x.Check(xrEnumerateReferenceSpaces(x.session, 0, &ns, nullptr), "xrEnumerateReferenceSpaces");
+    std::vector<XrReferenceSpaceType> spaces(ns);
+    x.Check(xrEnumerateReferenceSpaces(x.session, ns, &ns, spaces.data()),
+            "xrEnumerateReferenceSpaces");
+    XrReferenceSpaceType type = XR_REFERENCE_SPACE_TYPE_LOCAL;
+    if (!options.seated) {
+      bool stage = false;
+      for (auto s : spaces) stage |= s == XR_REFERENCE_SPACE_TYPE_STAGE;
+      if (stage) {
+        type = XR_REFERENCE_SPACE_TYPE_STAGE;
+      } else {
+        x.standing_on_local = true;
+      }
+    }
+    auto rci = XrStruct<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+    rci.referenceSpaceType = type;
+    rci.poseInReferenceSpace.orientation.w = 1;
+    x.Check(xrCreateReferenceSpace(x.session, &rci, &x.space), "xrCreateReferenceSpace");
+    rci.referenceSpaceType = XR_REFERENCE_SPACE_TYPE_VIEW;
+    x.Check(xrCreateReferenceSpace(x.session, &rci, &x.view_space), "xrCreateReferenceSpace(VIEW)");
+
+    // Stereo views and their swapchains.
+    std::uint32_t nv = 0;
+    x.Check(xrEnumerateViewConfigurationViews(
+                x.instance, x.system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &nv, nullptr),
+            "xrEnumerateViewConfigurationViews");
+    if (nv != 2)
+      throw XrError("OpenXR runtime offers " + std::to_string(nv) + " stereo views, not 2");
+    x.config_views.fill(XrStruct<XrViewConfigurationView>(XR_TYPE_VIEW_CONFIGURATION_VIEW));
+    x.Check(xrEnumerateViewConfigurationViews(x.instance, x.system,
+                                              XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 2, &nv,
+                                              x.config_views.data()),
+            "xrEnumerateViewConfigurationViews");
+    std::uint32_t nf = 0;
+    x.Check(xrEnumerateSwapchainFormats(x.session, 0, &nf, nullptr), "xrEnumerateSwapchainFormats");
+    std::vector<std::int64_t> formats(nf);
+    x.Check(xrEnumerateSwapchainFormats(x.session, nf, &nf, formats.data()),
+            "xrEnumerateSwapchainFormats");
+    bool found = false;
+    for (std::int64_t want : {kGlRgba8, kGlSrgb8Alpha8}) {
+      for (std::int64_t f : formats) {
+        if (f == want && !found) {
+          x.format = f;
+          found = true;
+        }
+      }
+    }
+    if (!found)
+      throw XrError("OpenXR runtime offers neither GL_RGBA8 nor GL_SRGB8_ALPHA8 swapchains");
+    for (int e = 0; e < 2; ++e) {
+      const auto& cv = x.config_views[static_cast<std::size_t>(e)];
+      x.CreateSwapchain(x.eyes[static_cast<std::size_t>(e)],
+                        static_cast<int>(cv.recommendedImageRectWidth),
+                        static_cast<int>(cv.recommendedImageRectHeight), 1, options.samples);
+    }
+    if (options.hud) x.CreateSwapchain(x.hud, options.hud_width, options.hud_height, 1, 0);
+    x.mirror.Resize(x.eyes[0].width, x.eyes[0].height, 0);
+    spdlog::info("OpenXR: runtime '{}', {}x{} per eye, {} space{}", x.runtime, x.eyes[0].width,
+                 x.eyes[0].height, options.seated ? "seated (LOCAL)" : "standing",
+                 x.standing_on_local ? " on LOCAL (the runtime has no STAGE)" : "");
+  } catch (...) {
+    x.Destroy();
+    throw;
+  }
+}
+
+Headset::~Headset() {
+  if (impl_->running && impl_->session != XR_NULL_HANDLE) xrEndSession(impl_->session);
+  impl_->Destroy();
+}
+
+bool Headset::PollEvents() {
+  Impl& x = *impl_;
+  if (x.ended) return false;
+  for (int i = 0; i < 64; ++i) {  // bounded: the rest waits for the next frame
+    auto ev = XrStruct<XrEventDataBuffer>(XR_TYPE_EVENT_DATA_BUFFER);
+    const XrResult r = xrPollEvent(x.instance, &ev);
+    if (r == XR_EVENT_UNAVAILABLE) break;
+    x.Check(r, "xrPollEvent");
+    switch (ev.type) {
+      case XR_TYPE_EVENT_DATA_SESSION_STATE_CHANGED: {
+        const auto& e = *reinterpret_cast<const XrEventDataSessionStateChanged*>(&ev);
+        x.state = e.state;
+        spdlog::info("OpenXR: session {}", StateName(e.state));
+        if (e.state == XR_SESSION_STATE_READY) {
+          auto bi = XrStruct<XrSessionBeginInfo>(XR_TYPE_SESSION_BEGIN_INFO);
+          bi.primaryViewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+          x.Check(xrBeginSession(x.session, &bi), "xrBeginSession");
+          x.running = true;
+        } else if (e.state == XR_SESSION_STATE_STOPPING) {
+          x.Check(xrEndSession(x.session), "xrEndSession");
+          x.running = false;
+        } else if (e.state == XR_SESSION_STATE_EXITING ||
+                   e.state == XR_SESSION_STATE_LOSS_PENDING) {
+          x.running = false;
+          x.ended = true;
+        }
+        break;
+      }
+      case XR_TYPE_EVENT_DATA_INSTANCE_LOSS_PENDING:
+        spdlog::warn("OpenXR: instance loss pending; leaving the headset");
+        x.running = false;
+        x.ended = true;
+        break;
+      default:
+        break;
+    }
+  }
+  return !x.ended;
+}
+
+bool Headset::running() const {
+  return impl_->running;
+}
+
+bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
+                    const std::function<void(const XrEye&)>& draw_eye,
+                    const std::function<void(RenderTarget&)>& draw_hud) {
+  Impl& x = *impl_;
+  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
+  auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
+  x.Check(xrWaitFrame(x.session, &wi, &fs), "xrWaitFrame");
+  auto bi = XrStruct<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
+  x.Check(xrBeginFrame(x.session, &bi), "xrBeginFrame");
+
+  std::array<XrCompositionLayerProjectionView, 2> pviews{};
+  auto projection = XrStruct<XrCompositionLayerProjection>(XR_TYPE_COMPOSITION_LAYER_PROJECTION);
+  auto quad = XrStruct<XrCompositionLayerQuad>(XR_TYPE_COMPOSITION_LAYER_QUAD);
+  std::vector<const XrCompositionLayerBaseHeader*> layers;
+  bool drawn = false;
+  if (fs.shouldRender) {
+    auto li = XrStruct<XrViewLocateInfo>(XR_TYPE_VIEW_LOCATE_INFO);
+    li.viewConfigurationType = XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO;
+    li.displayTime = fs.predictedDisplayTime;
+    li.space = x.space;
+    auto vs = XrStruct<XrViewState>(XR_TYPE_VIEW_STATE);
+    std::array<XrView, 2> views{XrStruct<XrView>(XR_TYPE_VIEW), XrStruct<XrView>(XR_TYPE_VIEW)};
+    std::uint32_t nv = 0;
+    x.Check(xrLocateViews(x.session, &li, &vs, 2, &nv, views.data()), "xrLocateViews");
+    const bool tracked = (vs.viewStateFlags & XR_VIEW_STATE_POSITION_VALID_BIT) != 0 &&
+                         (vs.viewStateFlags & XR_VIEW_STATE_ORIENTATION_VALID_BIT) != 0;
+    if (nv == 2 && tracked) {
+      for (int e = 0; e < 2; ++e) {
+        const auto ei = static_cast<std::size_t>(e);
+        Swapchain& sc = x.eyes[ei];
+        x.Acquire(sc);
+        const Pose world_from_eye = world_from_space * PoseOf(views[ei].pose);
+        XrEye eye;
+        eye.index = e;
+        eye.view = FromPose(world_from_eye.Inverse());
+        const XrFovf& f = views[ei].fov;
+        eye.proj = PerspectiveFov(f.angleLeft, f.angleRight, f.angleUp, f.angleDown, near_m, far_m);
+        eye.eye_W = world_from_eye.t;
+        eye.target = &sc.target;
+        draw_eye(eye);
+        if (e == 0) {
+          // The desktop window mirrors the left eye.
+          glBindFramebuffer(GL_READ_FRAMEBUFFER, sc.target.resolve_framebuffer());
+          glBindFramebuffer(GL_DRAW_FRAMEBUFFER, x.mirror.resolve_framebuffer());
+          glBlitFramebuffer(0, 0, sc.width, sc.height, 0, 0, sc.width, sc.height,
+                            GL_COLOR_BUFFER_BIT, GL_NEAREST);
+          glBindFramebuffer(GL_FRAMEBUFFER, 0);
+        }
+        x.Release(sc);
+        auto& pv = pviews[ei];
+        pv.type = XR_TYPE_COMPOSITION_LAYER_PROJECTION_VIEW;
+        pv.pose = views[ei].pose;
+        pv.fov = views[ei].fov;
+        pv.subImage.swapchain = sc.handle;
+        pv.subImage.imageRect.offset = {0, 0};
+        pv.subImage.imageRect.extent = {sc.width, sc.height};
+        pv.subImage.imageArrayIndex = 0;
+      }
+      projection.space = x.space;
+      projection.viewCount = 2;
+      projection.views = pviews.data();
+      layers.push_back(reinterpret_cast<const XrCompositionLayerBaseHeader*>(&projection));
+      if (x.options.hud && draw_hud) {
+        x.Acquire(x.hud);
+        draw_hud(x.hud.target);
+        x.Release(x.hud);
+        quad.layerFlags = XR_COMPOSITION_LAYER_BLEND_TEXTURE_SOURCE_ALPHA_BIT;
+        quad.space = x.view_space;
+        quad.eyeVisibility = XR_EYE_VISIBILITY_BOTH;
+        quad.subImage.swapchain = x.hud.handle;
+        quad.subImage.imageRect.extent = {x.hud.width, x.hud.height};
+        quad.pose.orientation.w = 1;
+        quad.pose.position = {0.0f, -0.25f, static_cast<float>(-x.options.hud_distance_m)};
+        quad.size.width = static_cast<float>(x.options.hud_width_m);
+        quad.size.height =
+            static_cast<float>(x.options.hud_width_m * x.hud.height / std::max(x.hud.width, 1));
+        layers.push_back(reinterpret_cast<const XrCompositionLayerBaseHeader*>(&quad));
+      }
+      drawn = true;
+    }
+  }
+  auto ei = XrStruct<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+  ei.displayTime = fs.predictedDisplayTime;
+  ei.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+  ei.layerCount = static_cast<std::uint32_t>(layers.size());
+  ei.layers = layers.data();
+  x.Check(xrEndFrame(x.session, &ei), "xrEndFrame");
+  ++x.frames;
+  return drawn;
+}
+
+void Headset::EmptyFrame() {
+  Impl& x = *impl_;
+  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
+  auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
+  x.Check(xrWaitFrame(x.session, &wi, &fs), "xrWaitFrame");
+  auto bi = XrStruct<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
+  x.Check(xrBeginFrame(x.session, &bi), "xrBeginFrame");
+  auto ei = XrStruct<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
+  ei.displayTime = fs.predictedDisplayTime;
+  ei.environmentBlendMode = XR_ENVIRONMENT_BLEND_MODE_OPAQUE;
+  x.Check(xrEndFrame(x.session, &ei), "xrEndFrame");
+}
+
+void Headset::RequestExit() {
+  Impl& x = *impl_;
+  if (x.exit_requested || x.ended) return;
+  x.exit_requested = true;
+  if (x.running) {
+    x.Check(xrRequestExitSession(x.session), "xrRequestExitSession");
+  } else {
+    x.ended = true;  // never began: nothing to end
+  }
+}
+
+bool Headset::exit_requested() const {
+  return impl_->exit_requested;
+}
+std::string Headset::runtime_name() const {
+  return impl_->runtime;
+}
+std::string Headset::state_name() const {
+  return StateName(impl_->state);
+}
+int Headset::eye_width() const {
+  return impl_->eyes[0].width;
+}
+int Headset::eye_height() const {
+  return impl_->eyes[0].height;
+}
+std::uint64_t Headset::frames_submitted() const {
+  return impl_->frames;
+}
+const RenderTarget& Headset::mirror() const {
+  return impl_->mirror;
+}
+bool Headset::standing_on_local() const {
+  return impl_->standing_on_local;
+}
+
+}  // namespace vdyn::viewer

@@ -1,0 +1,606 @@
+// vdyn-viewer in-process: a test publisher writes worlds, states and driver inputs on a fresh
+// loopback domain, the viewer draws frames into its offscreen target under a private Xvfb
+// (Mesa's llvmpipe), and the screenshots are checked by what they must show - computed here in
+// closed form from the published poses and forces, not compared with stored images.
+#include <gtest/gtest.h>
+
+#include <SDL.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <functional>
+#include <memory>
+
+#include "../process.h"
+#include "../test_support.h"
+#include "vdyn/base/time.h"
+#include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/params_editor.h"
+#include "vdyn/viewer/viewer.h"
+#include "viewer_support.h"
+
+namespace vdyn::testing {
+namespace {
+
+using viewer::CameraMode;
+using viewer::ForceColour;
+using viewer::ForceKind;
+using viewer::Image;
+using viewer::kPi;
+using viewer::Viewer;
+using viewer::ViewerOptions;
+
+constexpr int kW = 640, kH = 480;
+constexpr int kTol = 12;  // per channel: arrows are unlit, in the legend's exact colours
+
+class ViewerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    xvfb_ = new Xvfb(1280, 800);
+    setenv("DISPLAY", xvfb_->display().c_str(), 1);
+    UseLoopbackDds();
+  }
+  static void TearDownTestSuite() {
+    delete xvfb_;
+    xvfb_ = nullptr;
+  }
+
+  static ViewerOptions Options(std::uint32_t domain) {
+    ViewerOptions o;
+    o.domain = domain;
+    o.hidden = true;
+    o.fps = 0;
+    o.samples = 0;
+    o.width = kW;
+    o.height = kH;
+    o.wait_s = 60;
+    return o;
+  }
+
+  // Frames until `done` (publishing before each one), at most 60 s; false on timeout.
+  static bool FramesUntil(Viewer& v, const std::function<void()>& publish,
+                          const std::function<bool()>& done) {
+    const auto deadline = base::MonotonicNow() + base::Seconds(60);
+    while (base::MonotonicNow() < deadline) {
+      if (publish) publish();
+      if (!v.Frame()) return false;
+      if (done()) return true;
+    }
+    return false;
+  }
+
+  // Publishes the states until the viewer draws each at its step; returns the screenshot.
+  static Image Show(Viewer& v, TestPublisher& pub, const std::vector<pb::VehicleState>& states) {
+    const bool shown = FramesUntil(
+        v,
+        [&] {
+          for (const auto& s : states) pub.State(s);
+        },
+        [&] {
+          for (const auto& s : states) {
+            const viewer::VehicleView* view = v.vehicle(s.vehicle_id());
+            if (view == nullptr || view->step != s.step()) return false;
+          }
+          return true;
+        });
+    EXPECT_TRUE(shown) << "the viewer did not draw the published states within 60 s";
+    return Keep(v.Screenshot());
+  }
+
+  // With VDYN_VIEWER_TEST_PNGS=DIR set, every screenshot checked is also written there (to look
+  // at them), named after the test.
+  static Image Keep(Image img) {
+    static int n = 0;
+    if (const char* dir = std::getenv("VDYN_VIEWER_TEST_PNGS")) {
+      const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+      std::string name = std::string(info->test_suite_name()) + "." + info->name();
+      for (char& c : name) {
+        if (c == '/') c = '_';
+      }
+      viewer::WritePng(std::string(dir) + "/" + name + "-" + std::to_string(++n) + ".png", img);
+    }
+    return img;
+  }
+
+  static Xvfb* xvfb_;
+};
+Xvfb* ViewerTest::xvfb_ = nullptr;
+
+// A pixel back on the ground, from the map's closed form (inverse of MapPixel), in the body frame
+// of a vehicle at (x, y, yaw).
+std::array<double, 2> PixelInBody(double px, double py, double cx, double cy, double up_yaw,
+                                  double half_height, double x, double y, double yaw) {
+  const double ppm = kH / (2.0 * half_height);
+  const double right = (px - 0.5 * kW) / ppm, up = (0.5 * kH - py) / ppm;
+  const double wx = cx + up * std::cos(up_yaw) + right * std::sin(up_yaw);
+  const double wy = cy + up * std::sin(up_yaw) - right * std::cos(up_yaw);
+  const double dx = wx - x, dy = wy - y;
+  return {dx * std::cos(yaw) + dy * std::sin(yaw), -dx * std::sin(yaw) + dy * std::cos(yaw)};
+}
+
+// Orientation of a blob's pixels (the principal axis of their second moments), rad, in image
+// axes (x right, y down).
+double BlobAxis(const Image& img, viewer::Rgb8 c, Rect r) {
+  const Blob b = FindColour(img, c.r, c.g, c.b, kTol, r);
+  double sxx = 0, syy = 0, sxy = 0;
+  for (int y = r.y0; y < std::min(r.y1, img.height); ++y) {
+    for (int x = r.x0; x < std::min(r.x1, img.width); ++x) {
+      const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * img.width + x) * 4;
+      if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol || std::abs(p[2] - c.b) > kTol)
+        continue;
+      const double dx = x + 0.5 - b.cx, dy = y + 0.5 - b.cy;
+      sxx += dx * dx;
+      syy += dy * dy;
+      sxy += dx * dy;
+    }
+  }
+  return 0.5 * std::atan2(2 * sxy, sxx - syy);
+}
+
+// --- the vehicles where they are -------------------------------------------------------------
+
+class MapTest : public ViewerTest, public ::testing::WithParamInterface<double> {};
+
+TEST_P(MapTest, EachVehicleIsDrawnWhereItIsTurnedAsItIs) {
+  const double north_yaw = GetParam();
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", north_yaw, {1, 2})));
+  ViewerOptions o = Options(domain);
+  o.follow = 1;
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  o.camera.map_half_height = 12;
+  Viewer v(o);
+  TestVehicle a, b;
+  a.id = 1;
+  a.x = 10;
+  a.y = 2;
+  a.yaw = 0.5;
+  b.id = 2;
+  b.x = 16;
+  b.y = -3;
+  b.yaw = -0.4;
+  for (TestVehicle* t : {&a, &b}) {
+    for (auto& w : t->wheels) w.fp = 0;  // no arrows: only the bodies
+  }
+  const Image img = Show(v, pub, {MakeState(a), MakeState(b)});
+  ASSERT_EQ(v.stats().worlds_accepted, 1u);
+
+  for (const TestVehicle* t : {&a, &b}) {
+    SCOPED_TRACE("vehicle " + std::to_string(t->id));
+    const viewer::Rgb8 c = viewer::VehicleColour(t->id);
+    // The roof is drawn in the vehicle's colour; every pixel of it lies inside the body box
+    // published in the world (front, rear, half width), placed at the vehicle's pose.
+    const auto centre = MapPixel(t->x, t->y, a.x, a.y, north_yaw, 12, kW, kH);
+    const Rect around{static_cast<int>(centre[0]) - 80, static_cast<int>(centre[1]) - 80,
+                      static_cast<int>(centre[0]) + 80, static_cast<int>(centre[1]) + 80};
+    const Blob roof = FindColour(img, c.r, c.g, c.b, kTol, around);
+    EXPECT_GT(roof.count, 400) << "vehicle not drawn near pixel (" << centre[0] << ", " << centre[1]
+                               << ")";
+    int outside = 0;
+    for (int y = around.y0; y < around.y1; ++y) {
+      for (int x = around.x0; x < around.x1; ++x) {
+        if (x < 0 || y < 0 || x >= kW || y >= kH) continue;
+        const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+        if (std::abs(p[0] - c.r) > kTol || std::abs(p[1] - c.g) > kTol ||
+            std::abs(p[2] - c.b) > kTol)
+          continue;
+        const auto body =
+            PixelInBody(x + 0.5, y + 0.5, a.x, a.y, north_yaw, 12, t->x, t->y, t->yaw);
+        const double tol = 2.0 * 24.0 / kH;  // two pixels, in metres
+        if (body[0] > TestCar::kFront + tol || body[0] < -TestCar::kRear - tol ||
+            std::abs(body[1]) > TestCar::kHalfWidth + tol) {
+          ++outside;
+        }
+      }
+    }
+    EXPECT_EQ(outside, 0) << "pixels of the vehicle's colour outside its body box";
+    // The roof is longer than wide: its long axis is the vehicle's heading on the screen.
+    const double axis = BlobAxis(img, c, around);
+    const double expected = -(t->yaw - north_yaw + kPi / 2);  // screen x right, y down
+    EXPECT_NEAR(std::remainder(axis - expected, kPi), 0.0, 0.1)
+        << "roof axis " << axis << " rad on screen, expected " << expected;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(NorthUpOrTurned, MapTest, ::testing::Values(kPi / 2, 0.3));
+
+TEST_F(ViewerTest, VehiclesOfOtherServersAreDrawnOnlyWhenTheyShareTheTerrain) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  // Servers a and b run the same terrain (same terrain hash), c another one.
+  for (const char* server : {"a", "b", "c"}) {
+    pb::WorldDescription w = MakeWorld(server, kPi / 2, {1, 2, 3});
+    w.set_terrain_hash(std::string(server) == "c" ? 0x2222u : 0x1111u);
+    ASSERT_TRUE(pub.World(w));
+  }
+  ViewerOptions o = Options(domain);
+  o.follow = 1;
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  o.camera.map_half_height = 12;
+  Viewer v(o);
+  std::vector<pb::VehicleState> states;
+  const char* servers[] = {"a", "b", "c"};
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    TestVehicle t;
+    t.id = id;
+    t.server = servers[id - 1];
+    t.x = 6.0 * (id - 1);
+    for (auto& w : t.wheels) w.fp = 0;
+    states.push_back(MakeState(t));
+  }
+  // Vehicle 3 is never drawn: wait for 1 and 2, and for 3's state to have arrived.
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        for (const auto& s : states) pub.State(s);
+      },
+      [&] {
+        const auto* sv = v.session().vehicle(3);
+        return v.vehicle(1) != nullptr && v.vehicle(2) != nullptr && sv != nullptr &&
+               sv->states > 0 && v.stats().worlds_accepted == 3;
+      }));
+  v.Frame();
+  EXPECT_EQ(v.vehicle(3), nullptr);
+  const Image img = Keep(v.Screenshot());
+  for (std::uint32_t id = 1; id <= 3; ++id) {
+    const viewer::Rgb8 c = viewer::VehicleColour(id);
+    const auto p = MapPixel(6.0 * (id - 1), 0, 0, 0, kPi / 2, 12, kW, kH);
+    const Rect around{static_cast<int>(p[0]) - 40, static_cast<int>(p[1]) - 40,
+                      static_cast<int>(p[0]) + 40, static_cast<int>(p[1]) + 40};
+    const int n = FindColour(img, c.r, c.g, c.b, kTol, around).count;
+    if (id < 3) {
+      EXPECT_GT(n, 400) << "vehicle " << id << " not drawn";
+    } else {
+      EXPECT_EQ(n, 0) << "vehicle 3 (another terrain) drawn";
+    }
+  }
+}
+
+// --- arrows ----------------------------------------------------------------------------------
+
+// The tip of an arrow of `kind` on the map: the extreme pixel of its colour in the direction it
+// points (right, left, up or down on the screen).
+int TipAlong(const Image& img, ForceKind kind, char direction, Rect r) {
+  const viewer::Rgb8 c = ForceColour(kind);
+  const Blob b = FindColour(img, c.r, c.g, c.b, kTol, r);
+  EXPECT_GT(b.count, 20) << viewer::ForceLabel(kind) << " arrow not found";
+  switch (direction) {
+    case 'r':
+      return b.max_x + 1;
+    case 'l':
+      return b.min_x;
+    case 'u':
+      return b.min_y;
+    default:
+      return b.max_y + 1;
+  }
+}
+
+// Which way an arrow in a band points: its head (the widest cross-section of its colour, 2.2
+// times the shaft) lies towards that end of its span: 'r', 'l', 'u' or 'd'.
+char HeadEnd(const Image& img, viewer::Rgb8 c, Rect band, bool horizontal) {
+  const Blob b = FindColour(img, c.r, c.g, c.b, kTol, band);
+  int best = 0, at = 0;
+  const int from = horizontal ? b.min_x : b.min_y, to = horizontal ? b.max_x : b.max_y;
+  for (int i = from; i <= to; ++i) {
+    const Rect slice =
+        horizontal ? Rect{i, band.y0, i + 1, band.y1} : Rect{band.x0, i, band.x1, i + 1};
+    const int n = FindColour(img, c.r, c.g, c.b, kTol, slice).count;
+    if (n > best) {
+      best = n;
+      at = i;
+    }
+  }
+  const bool high = at - from > to - at;
+  return horizontal ? (high ? 'r' : 'l') : (high ? 'd' : 'u');
+}
+
+TEST_F(ViewerTest, EachArrowPointsTheForcesWayInItsColourAndGrowsWithIt) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  const double hh = 8.0;
+  o.camera.map_half_height = hh;
+  Viewer v(o);
+  const double scale = v.arrows().metres_per_newton;
+  ASSERT_GT(scale, 0);
+
+  auto run = [&](double f, std::uint64_t step) {
+    TestVehicle t;
+    t.step = step;
+    t.speed = 5;  // rolling forward: the brake force points backwards
+    for (auto& w : t.wheels) w.fp = 0;
+    t.wheels[0].fh = f;     // LF drive: forwards (+X, east: right on a north-up map)
+    t.wheels[0].fy = f;     // LF side, positive left (+Y, north: up)
+    t.wheels[3].fb = f;     // RR brake: against the rolling (-X: left)
+    t.da = f;               // drag: against +X, ending at the nose
+    t.f_wall = {0, -f, 0};  // wall: -Y (down), from above the roof
+    const Image img = Show(v, pub, {MakeState(t)});
+    auto px = [&](double x, double y) { return MapPixel(x, y, 0, 0, kPi / 2, hh, kW, kH); };
+    const double len = f * scale;
+    struct Check {
+      ForceKind kind;
+      char dir;               // the far end of its span from the anchor
+      char head;              // where it points
+      double expected;        // pixel of that far end
+      double base_x, base_y;  // the arrow's line
+    };
+    const auto lf = px(TestCar::kB, TestCar::kBl), rr = px(-TestCar::kC, -TestCar::kBp);
+    const auto nose = px(TestCar::kFront, 0), roof = px(0, 0);
+    const Check checks[] = {
+        {ForceKind::kDrive, 'r', 'r', px(TestCar::kB + len, 0)[0], lf[0], lf[1]},
+        {ForceKind::kSide, 'u', 'u', px(0, TestCar::kBl + len)[1], lf[0], lf[1]},
+        {ForceKind::kBrake, 'l', 'l', px(-TestCar::kC - len, 0)[0], rr[0], rr[1]},
+        // Drag ends at the nose, pointing back at it: its tail is ahead of the car.
+        {ForceKind::kDrag, 'r', 'l', px(TestCar::kFront + len, 0)[0], nose[0], nose[1]},
+        {ForceKind::kWall, 'd', 'd', px(0, -len)[1], roof[0], roof[1]},
+    };
+    std::map<ForceKind, int> tips;
+    for (const Check& c : checks) {
+      SCOPED_TRACE(std::string(viewer::ForceLabel(c.kind)) + ", " + std::to_string(f) + " N");
+      // Search a band along the arrow's line only (several arrows share the picture).
+      Rect band;
+      if (c.dir == 'r' || c.dir == 'l') {
+        band = {0, static_cast<int>(c.base_y) - 6, kW - 160, static_cast<int>(c.base_y) + 7};
+      } else {
+        band = {static_cast<int>(c.base_x) - 6, 0, static_cast<int>(c.base_x) + 7, kH};
+      }
+      const int tip = TipAlong(img, c.kind, c.dir, band);
+      EXPECT_NEAR(tip, c.expected, 3.0) << "tip at pixel " << tip << ", expected " << c.expected;
+      const bool horizontal = c.dir == 'r' || c.dir == 'l';
+      EXPECT_EQ(HeadEnd(img, ForceColour(c.kind), band, horizontal), c.head)
+          << "points the wrong way";
+      // On the force's line: the colour's centroid across the band.
+      const viewer::Rgb8 col = ForceColour(c.kind);
+      const Blob b = FindColour(img, col.r, col.g, col.b, kTol, band);
+      if (c.dir == 'r' || c.dir == 'l') {
+        EXPECT_NEAR(b.cy, c.base_y, 2.0);
+      } else {
+        EXPECT_NEAR(b.cx, c.base_x, 2.0);
+      }
+      tips[c.kind] = tip;
+    }
+    return tips;
+  };
+  const auto small = run(2500, 10);
+  const auto large = run(5000, 20);
+  // Twice the force, twice the arrow: the tip moves by the first length again.
+  const double ppm = kH / (2 * hh);
+  EXPECT_NEAR(large.at(ForceKind::kDrive) - small.at(ForceKind::kDrive), 2500 * scale * ppm, 3);
+  EXPECT_NEAR(small.at(ForceKind::kSide) - large.at(ForceKind::kSide), 2500 * scale * ppm, 3);
+}
+
+TEST_F(ViewerTest, SpringArrowPointsUpFromTheContactPointInASideView) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.hud = false;
+  o.camera.mode = CameraMode::kOrbit;
+  o.camera.orbit_yaw = kPi / 2;  // looking from the vehicle's left (+Y) towards it
+  o.camera.orbit_pitch = 0;
+  o.camera.orbit_distance = 10;
+  Viewer v(o);
+  const double scale = v.arrows().metres_per_newton;
+  const double fovy = o.camera.fovy;
+  // The pinhole of that camera: at T + (0, 10, 0) looking along -Y, +Z up; screen right is -X.
+  auto pixel = [&](double x, double y, double z) {
+    const double ex = 0, ey = 10, ez = TestCar::kHeight;  // the orbit looks at T
+    const double xc = -(x - ex), yc = z - ez, depth = -(y - ey);
+    const double f = 0.5 * kH / std::tan(0.5 * fovy);
+    return std::array<double, 2>{0.5 * kW + f * xc / depth, 0.5 * kH - f * yc / depth};
+  };
+  std::map<double, int> tops;
+  for (double fp : {2500.0, 5000.0}) {
+    TestVehicle t;
+    t.step = fp == 2500.0 ? 5 : 6;
+    for (auto& w : t.wheels) w.fp = 400;  // the other wheels: short arrows, below the LF tip
+    t.wheels[0].fp = fp;
+    const Image img = Show(v, pub, {MakeState(t)});
+    const auto base = pixel(TestCar::kB, TestCar::kBl, TestCar::kGround);
+    const auto tip = pixel(TestCar::kB, TestCar::kBl, TestCar::kGround + fp * scale);
+    const viewer::Rgb8 g = ForceColour(ForceKind::kSpring);
+    const Rect column{static_cast<int>(base[0]) - 6, 0, static_cast<int>(base[0]) + 7, kH};
+    const Blob b = FindColour(img, g.r, g.g, g.b, kTol, column);
+    ASSERT_GT(b.count, 20) << "no spring arrow above the LF contact point";
+    EXPECT_NEAR(b.min_y, tip[1], 3.0) << "spring arrow of " << fp << " N";
+    EXPECT_NEAR(b.cx, base[0], 2.0);
+    EXPECT_LT(b.min_y, base[1]);  // upwards from B
+    tops[fp] = b.min_y;
+  }
+  // Twice the force, twice as tall (perspective at one depth: linear in height).
+  const auto b0 = pixel(TestCar::kB, TestCar::kBl, TestCar::kGround);
+  EXPECT_NEAR(b0[1] - tops[5000.0], 2.0 * (b0[1] - tops[2500.0]), 4.0);
+}
+
+// --- the compass and the paddles -------------------------------------------------------------
+
+// The needle's angle, counter-clockwise from up, from the red needle's centroid about the dial.
+double NeedleAngle(const Image& img) {
+  const double cx = kW - 75, cy = 75;
+  const Blob b = FindColour(img, 235, 40, 40, kTol, {kW - 140, 10, kW - 10, 140});
+  EXPECT_GT(b.count, 30) << "no compass needle";
+  return std::atan2(-(b.cx - cx), -(b.cy - cy));
+}
+
+TEST_F(ViewerTest, PaddlePressesAndKeysTurnTheNorthCameraAndItsCompass) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.camera.mode = CameraMode::kNorth;
+  Viewer v(o);
+  TestVehicle t;
+  Image img = Show(v, pub, {MakeState(t)});
+  EXPECT_NEAR(NeedleAngle(img), 0.0, 0.09) << "north camera: north straight ahead";
+
+  // The driver's rig: nothing pressed, then the right paddle.
+  auto input_seen = [&](std::uint64_t n) {
+    return FramesUntil(v, {}, [&] {
+      const auto* sv = v.session().vehicle(1);
+      return sv != nullptr && sv->input && sv->input->sequence() >= n;
+    });
+  };
+  ASSERT_TRUE(pub.Input(1, 0));
+  ASSERT_TRUE(input_seen(1));
+  EXPECT_EQ(v.stats().paddle_presses, 0u);
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_RIGHT));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().paddle_presses == 1; }));
+  img = Keep(v.Screenshot());
+  // The view turned clockwise by one step (45 deg): north is now 45 deg to the left.
+  EXPECT_NEAR(NeedleAngle(img), viewer::Rad(45), 0.09);
+  // Holding the paddle is one press, not one per message.
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_RIGHT));
+  ASSERT_TRUE(input_seen(3));
+  for (int i = 0; i < 3; ++i) v.Frame();
+  EXPECT_EQ(v.stats().paddle_presses, 1u);
+
+  // Q turns the view back counter-clockwise (the key path of the same turn).
+  SDL_Event key{};
+  key.type = SDL_KEYDOWN;
+  key.key.keysym.sym = SDLK_q;
+  SDL_PushEvent(&key);
+  v.Frame();
+  v.Frame();
+  EXPECT_NEAR(NeedleAngle(Keep(v.Screenshot())), 0.0, 0.09);
+  // Release, then the left paddle: counter-clockwise, north to the right.
+  ASSERT_TRUE(pub.Input(1, 0));
+  ASSERT_TRUE(input_seen(4));
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_LEFT));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().paddle_presses == 2; }));
+  EXPECT_NEAR(NeedleAngle(Keep(v.Screenshot())), viewer::Rad(-45), 0.09);
+}
+
+// --- bad input -------------------------------------------------------------------------------
+
+TEST_F(ViewerTest, MalformedWorldsAndStatesAreRefusedCountedAndTheViewGoesOn) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  o.camera.map_half_height = 12;
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;
+  Image img = Show(v, pub, {MakeState(t)});
+  const viewer::Rgb8 road = viewer::LookOf(pb::SURFACE_ROAD).colour;
+  const Rect road_band{0, kH / 2 + 40, kW - 160, kH / 2 + 70};  // 2..3.5 m south of the car
+  ASSERT_GT(FindColour(img, road.r, road.g, road.b, 6, road_band).count, 5000) << "no road";
+
+  ExpectLogs expected;
+  // A mesh whose index points past its vertices, then one with a stray coordinate.
+  pb::WorldDescription bad = MakeWorld("test", kPi / 2);
+  bad.mutable_meshes(1)->set_indices(2, 99);
+  ASSERT_TRUE(pub.World(bad));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().worlds_refused == 1; }));
+  EXPECT_NE(v.stats().last_refusal.find("points past the last of 4 vertices"), std::string::npos)
+      << v.stats().last_refusal;
+  bad = MakeWorld("test", kPi / 2);
+  bad.mutable_meshes(0)->add_vertices(1.0);
+  ASSERT_TRUE(pub.World(bad));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().worlds_refused == 2; }));
+  EXPECT_NE(v.stats().last_refusal.find("not a multiple of 3"), std::string::npos);
+  EXPECT_EQ(v.stats().worlds_accepted, 1u);
+
+  // A state with a NaN (the transport drops and counts it) and one with three wheels (the
+  // viewer refuses and counts it); the vehicle stays where its last good state put it.
+  TestVehicle moved = t;
+  moved.x = 5;
+  moved.step = 2;
+  pb::VehicleState nan_state = MakeState(moved);
+  nan_state.mutable_wheels(0)->set_fh(std::nan(""));
+  pb::VehicleState three = MakeState(moved);
+  three.mutable_wheels()->RemoveLast();
+  // (One kind at a time: the state topic keeps only the newest sample of a vehicle.)
+  ASSERT_TRUE(FramesUntil(
+      v, [&] { pub.State(nan_state); },
+      [&] { return v.session().drops().Of("non-finite value on vdyn/state") > 0; }));
+  ASSERT_TRUE(FramesUntil(
+      v, [&] { pub.State(three); }, [&] { return v.stats().states_refused > 0; }));
+  ASSERT_NE(v.vehicle(1), nullptr);
+  EXPECT_EQ(v.vehicle(1)->step, 1u);
+  EXPECT_DOUBLE_EQ(v.vehicle(1)->pose_WB.t.x, 0.0);
+  EXPECT_NE(v.stats().last_refusal.find("3 wheels, expected 4"), std::string::npos);
+
+  // It keeps drawing: the old world (road) and the next good state.
+  img = Show(v, pub, {MakeState(moved)});
+  EXPECT_GT(FindColour(img, road.r, road.g, road.b, 6, road_band).count, 5000);
+  EXPECT_DOUBLE_EQ(v.vehicle(1)->pose_WB.t.x, 5.0);
+  EXPECT_GE(expected.count(), 2);
+}
+
+TEST_F(ViewerTest, AWorldArrivingWithNoVehicleIsDrawnAroundItsSpawn) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  pb::WorldDescription w = MakeWorld("test", kPi / 2, {});
+  w.mutable_spawn()->set_x(0);
+  w.mutable_spawn()->set_y(0);
+  ASSERT_TRUE(pub.World(w));
+  ViewerOptions o = Options(domain);
+  o.hud = false;
+  o.camera.mode = CameraMode::kMap;
+  o.camera.map_half_height = 12;
+  Viewer v(o);
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().worlds_accepted == 1; }));
+  v.Frame();
+  const Image img = Keep(v.Screenshot());
+  const viewer::Rgb8 road = viewer::LookOf(pb::SURFACE_ROAD).colour;
+  // The road (8 m wide along X through the spawn) across the middle of the map, ground beside.
+  const Blob r =
+      FindColour(img, road.r, road.g, road.b, 6, {0, kH / 2 - 70, kW - 160, kH / 2 + 70});
+  EXPECT_GT(r.count, 100 * 100);
+  EXPECT_NEAR(r.cy, kH / 2.0, 3.0);
+  EXPECT_EQ(FindColour(img, road.r, road.g, road.b, 6, {0, 0, kW - 160, kH / 2 - 100}).count, 0);
+}
+
+// --- the parameters panel --------------------------------------------------------------------
+
+TEST(ParamsEditorChanges, OnlyTheChangedFieldsAreSent) {
+  pb::VehicleParams current;
+  current.set_mass(1500);
+  current.set_mu(0.9);
+  current.mutable_lf()->set_radius(0.32);
+  current.mutable_rf()->set_radius(0.32);
+  pb::VehicleParams edited = current;
+  EXPECT_EQ(viewer::ParamsEditor::Changes(current, edited).ByteSizeLong(), 0u);
+  edited.set_mass(1600);
+  edited.mutable_rf()->set_radius(0.33);
+  const pb::VehicleParams c = viewer::ParamsEditor::Changes(current, edited);
+  EXPECT_TRUE(c.has_mass());
+  EXPECT_EQ(c.mass(), 1600);
+  EXPECT_FALSE(c.has_mu());
+  EXPECT_FALSE(c.has_lf());
+  ASSERT_TRUE(c.has_rf());
+  EXPECT_EQ(c.rf().radius(), 0.33);
+}
+
+}  // namespace
+}  // namespace vdyn::testing
+
+namespace vdyn::testing {
+namespace {
+
+TEST(ViewerCulling, SpheresOutsideTheViewAreLeftOut) {
+  using viewer::Vec3;
+  // A camera at the origin looking along +X, 60 deg tall, 4:3, seeing 0.2 .. 1000 m.
+  const viewer::Mat4 vp = viewer::Perspective(viewer::Rad(60), 4.0 / 3.0, 0.2, 1000) *
+                          viewer::LookAt({0, 0, 0}, {1, 0, 0}, {0, 0, 1});
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 0}, 1));
+  EXPECT_FALSE(viewer::InFrustum(vp, {-50, 0, 0}, 1));   // behind
+  EXPECT_FALSE(viewer::InFrustum(vp, {50, 60, 0}, 1));   // far to the left (half-width 38 m)
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 60, 0}, 25));   // ... unless it reaches into view
+  EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));  // beyond the far plane
+  EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));    // just under the top (28.9 m)
+  EXPECT_FALSE(viewer::InFrustum(vp, {50, 0, 31}, 1));
+}
+
+}  // namespace
+}  // namespace vdyn::testing
