@@ -12,6 +12,7 @@ packages=(
   libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
   libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
+  clang libclang-rt-14-dev
 )
 # The recorder's independent-reader test also needs Node.js with npm (it installs @mcap/core from
 # the npm registry); these machines come with Node.js 20.
