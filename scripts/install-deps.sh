@@ -16,10 +16,11 @@ build_packages=(
 )
 
 # The shared libraries the vdyn programs load (what the -dev packages above bring for them), and
-# openssl for scripts/lab-pki.sh. docker/Dockerfile checks with ldd that nothing is missing.
+# openssl for scripts/lab-pki.sh; libgl1 and Mesa for the viewer (libepoxy and SDL load OpenGL at run
+# time, which ldd cannot see). docker/Dockerfile checks with ldd that nothing else is missing.
 runtime_packages=(
   libembree3-3 libassimp5 libprotobuf32 libspdlog1.10 libfmt9 libddsc0debian
-  libsdl2-2.0-0 libepoxy0 libopenxr-loader1 libx11-6 libgl1-mesa-dri
+  libsdl2-2.0-0 libepoxy0 libopenxr-loader1 libx11-6 libgl1 libgl1-mesa-dri
   libzstd1 liblz4-1 zlib1g openssl ca-certificates
 )
 
