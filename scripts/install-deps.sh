@@ -21,7 +21,7 @@ build_packages=(
 runtime_packages=(
   libembree3-3 libassimp5 libprotobuf32 libspdlog1.10 libfmt9 libddsc0debian
   libsdl2-2.0-0 libepoxy0 libopenxr-loader1 libx11-6 libgl1 libgl1-mesa-dri
-  libzstd1 liblz4-1 zlib1g openssl ca-certificates
+  libstb0 libzstd1 liblz4-1 zlib1g openssl ca-certificates
 )
 
 case "${1:-}" in
