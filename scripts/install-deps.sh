@@ -1,21 +1,39 @@
 #!/usr/bin/env bash
 # Installs every build and test dependency of vdyn on Debian 12, from Debian's own packages.
 # Idempotent: packages already present are skipped by apt. Run as root (or through sudo).
+#   scripts/install-deps.sh             everything to build and test
+#   scripts/install-deps.sh --runtime   only what the built programs need to run (the container
+#                                       image's last stage, docker/Dockerfile)
 set -euo pipefail
 
-packages=(
+build_packages=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   libeigen3-dev libembree-dev libprotobuf-dev protobuf-compiler
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
   cyclonedds-dev cyclonedds-tools
-  libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri
+  libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri openssl
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
   libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
   clang libclang-rt-14-dev
 )
 # The recorder's independent-reader test also needs Node.js with npm (it installs @mcap/core from
 # the npm registry); these machines come with Node.js 20.
+
+# The shared libraries the vdyn programs load (what the -dev packages above bring for them), and
+# openssl for scripts/lab-pki.sh, gnuplot for `vdyn-recorder plot`; libgl1 and Mesa for the viewer (libepoxy and SDL load OpenGL at run
+# time, which ldd cannot see). docker/Dockerfile checks with ldd that nothing else is missing.
+runtime_packages=(
+  libembree3-3 libassimp5 libprotobuf32 libspdlog1.10 libfmt9 libddsc0debian
+  libsdl2-2.0-0 libepoxy0 libopenxr-loader1 libx11-6 libgl1 libgl1-mesa-dri
+  libstb0 libzstd1 liblz4-1 zlib1g openssl ca-certificates gnuplot-nox
+)
+
+case "${1:-}" in
+  "") packages=("${build_packages[@]}") ;;
+  --runtime) packages=("${runtime_packages[@]}") ;;
+  *) echo "usage: $0 [--runtime]" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${packages[@]}"; do

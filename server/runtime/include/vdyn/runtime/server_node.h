@@ -33,6 +33,7 @@
 #include "vdyn/runtime/session.h"
 #include "vdyn/runtime/state_outbox.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/security_log.h"
 #include "vdyn/world.pb.h"
 
 namespace vdyn {
@@ -137,6 +138,9 @@ class ServerNode {
   std::shared_ptr<const World> world_;
   ServerOptions options_;
   transport::DropCounters drops_{/*deferred=*/true};
+  // What DDS Security refuses (Cyclone only logs it), counted in drops_: installed before the
+  // participant exists and removed after it has gone.
+  transport::SecurityLog security_log_{drops_};
   transport::Participant participant_;
   std::unique_ptr<StateOutbox> states_;
   std::vector<std::unique_ptr<transport::RawWriter>> writers_;  // by TopicId
