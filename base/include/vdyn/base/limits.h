@@ -108,5 +108,11 @@ inline constexpr Range kWorldScale{0.0, 1e6, true, false, "terrain scale, m per 
 inline constexpr Range kHeightmapCell{0.0, 1e4, true, false, "height-map cell, m"};
 inline constexpr Range kHeightmapHeight{0.0, 1e5, true, false, "height-map height, m"};
 inline constexpr Range kStrength{0, 1e6, false, false, "ownership strength"};
+// vdyn-telemetry: packet rates (LFS itself sends at most 100 per second; a motion platform may
+// take more, and states come at 1 kHz), the age after which a state is too old to send, and the
+// optional packet ID (LFS's "OutSim ID"/"OutGauge ID": not zero when present).
+inline constexpr Range kTelemetryRateHz{1.0, 1000.0, false, false, "telemetry packet rate, Hz"};
+inline constexpr Range kStaleMs{10.0, 60000.0, false, false, "stale-state limit, ms"};
+inline constexpr Range kTelemetryId{1.0, 2147483647.0, false, false, "telemetry packet ID"};
 
 }  // namespace vdyn::limits
