@@ -27,6 +27,7 @@
 #include "test_support.h"
 #include "vdyn/telemetry/convert.h"
 #include "vdyn/telemetry/packets.h"
+#include "vdyn/telemetry/udp.h"
 #include "vdyn/transport/dds.h"
 
 namespace vdyn {
@@ -356,6 +357,42 @@ class UdpSocket {
   int fd_ = -1;
   std::uint16_t port_ = 0;
 };
+
+TEST(TelemetryUdp, DestinationsAreCheckedAndEverySendIsCounted) {
+  std::string error;
+  const auto local = ResolveEndpoint("localhost:4444", error);
+  ASSERT_TRUE(local.has_value()) << error;
+  EXPECT_EQ(ntohl(local->addr.sin_addr.s_addr), INADDR_LOOPBACK);
+  EXPECT_EQ(ntohs(local->addr.sin_port), 4444);
+  EXPECT_FALSE(ResolveEndpoint("10.0.0.300:4444", error).has_value());
+  EXPECT_THAT(error, HasSubstr("'10.0.0.300' is not an IPv4 address"));
+  EXPECT_FALSE(ResolveEndpoint(":4444", error).has_value());
+  EXPECT_THAT(error, HasSubstr("no host"));
+
+  UdpSocket a, b;
+  std::string e1, e2;
+  UdpSender sender({*ResolveEndpoint(a.address(), e1), *ResolveEndpoint(b.address(), e2)});
+  const std::vector<std::uint8_t> datagram(92, 0x5a);
+  EXPECT_EQ(sender.Send(datagram), 2);
+  EXPECT_EQ(sender.sent(), 2u);
+  EXPECT_EQ(sender.errors(), 0u);
+  const auto deadline = std::chrono::steady_clock::now() + 10s;
+  while ((a.packets.empty() || b.packets.empty()) && std::chrono::steady_clock::now() < deadline) {
+    a.Drain();
+    b.Drain();
+    std::this_thread::sleep_for(1ms);  // loopback delivers at once; bounded by the deadline
+  }
+  ASSERT_EQ(a.packets.size(), 1u);
+  EXPECT_EQ(a.packets[0].bytes, datagram);
+  ASSERT_EQ(b.packets.size(), 1u);
+  // A datagram the network refuses (larger than UDP allows) is an error per destination, counted
+  // and described, and nothing stops.
+  EXPECT_EQ(sender.Send(std::vector<std::uint8_t>(70000, 0)), 0);
+  EXPECT_EQ(sender.errors(), 2u);
+  EXPECT_THAT(sender.last_error(), HasSubstr(b.address()));
+  EXPECT_EQ(sender.Send(datagram), 2);
+  EXPECT_EQ(sender.sent(), 4u);
+}
 
 std::string TelemetryBinary() { return VDYN_TELEMETRY_BINARY; }
 
