@@ -11,6 +11,7 @@
 #include <iostream>
 #include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <CLI/CLI.hpp>
@@ -104,6 +105,7 @@ int main(int argc, char** argv) {
     vdyn::telemetry::Bridge bridge(participant, cfg);
     std::atomic<bool> stop{false};
     const vdyn::base::MonoTime start = vdyn::base::MonotonicNow();
+    const vdyn::base::Nanos cpu0 = vdyn::base::ProcessCpuTime();
     std::thread watch([&] {
       // Turns a signal or the end of --duration into the bridge's stop flag.
       while (!g_stop && (duration_s <= 0 ||
@@ -120,7 +122,10 @@ int main(int argc, char** argv) {
                no_status ? vdyn::base::Nanos{0} : vdyn::base::Seconds(1));
     g_stop = true;
     watch.join();
-    std::printf("%s\n", bridge.Summary().c_str());
+    const double wall = (vdyn::base::MonotonicNow() - start).seconds();
+    const double cpu = (vdyn::base::ProcessCpuTime() - cpu0).seconds();
+    std::printf("%s\n  process CPU %.1f %% of one core over %.1f s\n", bridge.Summary().c_str(),
+                wall > 0 ? 100.0 * cpu / wall : 0.0, wall);
   } catch (const std::exception& e) {
     std::cerr << "vdyn-telemetry: " << e.what() << "\n";
     return 1;
