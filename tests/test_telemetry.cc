@@ -97,8 +97,8 @@ TEST(TelemetryPackets, OutSimMatchesThePublishedLayoutByteForByte) {
 
   std::vector<std::uint8_t> want(68, 0);
   PutU32(want, os::kTime, 0x01020304);
-  const float floats[] = {0.5f, -1.25f, 2.0f, 1.5f, -0.25f, 0.125f, 9.5f, -3.0f, 0.75f,
-                          20.0f, -0.5f, 0.0625f};
+  const float floats[] = {0.5f, -1.25f, 2.0f,  1.5f,  -0.25f, 0.125f,
+                          9.5f, -3.0f,  0.75f, 20.0f, -0.5f,  0.0625f};
   for (int i = 0; i < 12; ++i) PutF32(want, os::kAngVel + 4 * i, floats[i]);
   PutU32(want, os::kPos + 0, 65536);
   PutU32(want, os::kPos + 4, static_cast<std::uint32_t>(-131072));
@@ -139,7 +139,7 @@ TEST(TelemetryPackets, OutGaugeMatchesThePublishedLayoutByteForByte) {
   std::vector<std::uint8_t> want(96, 0);
   PutU32(want, og::kTime, 123456);
   std::memcpy(&want[og::kCar], "beam", 4);
-  want[og::kFlags] = 0x00;      // OG_KM 16384 | OG_BAR 32768 = 0xc000, low byte first
+  want[og::kFlags] = 0x00;  // OG_KM 16384 | OG_BAR 32768 = 0xc000, low byte first
   want[og::kFlags + 1] = 0xc0;
   want[og::kGear] = 4;
   want[og::kPlid] = 3;
@@ -215,8 +215,8 @@ TEST(TelemetryFrames, PitchAndRollFollowTheCarsAxes) {
   EXPECT_NEAR(p.heading, 0.4 - kPi / 2, 1e-6);
   // With heading, then pitch, then roll: forward.z = sin(P), right.z = -sin(R) cos(P).
   const pb::Quat q = QuatZyx(0.4, -0.1, 0.2);
-  const double fz = 2 * (q.x() * q.z() - q.w() * q.y());          // R_WB (1,0,0), z
-  const double left_z = 2 * (q.y() * q.z() + q.w() * q.x());      // R_WB (0,1,0), z
+  const double fz = 2 * (q.x() * q.z() - q.w() * q.y());      // R_WB (1,0,0), z
+  const double left_z = 2 * (q.y() * q.z() + q.w() * q.x());  // R_WB (0,1,0), z
   EXPECT_NEAR(std::sin(p.pitch), fz, 1e-6);
   EXPECT_NEAR(-std::sin(p.roll) * std::cos(p.pitch), -left_z, 1e-6);
 }
@@ -285,8 +285,8 @@ TEST(TelemetryGauge, GearsSpeedPedalsAndLights) {
   EXPECT_EQ(p.flags, kOgKm | kOgBar);
   EXPECT_EQ(std::string(p.car, 4), "VDYN");
   EXPECT_STREQ(p.display1, "full auto");
-  const std::uint32_t all = Bit(kDlShift) | Bit(kDlHandbrake) | Bit(kDlTc) | Bit(kDlAbs) |
-                            Bit(kDlNeutral);
+  const std::uint32_t all =
+      Bit(kDlShift) | Bit(kDlHandbrake) | Bit(kDlTc) | Bit(kDlAbs) | Bit(kDlNeutral);
   EXPECT_EQ(p.dash_lights, all);
   // Handbrake up, neutral, past the shift point, ABS working on one wheel; TC on and idle.
   EXPECT_EQ(p.show_lights, all & ~Bit(kDlTc));
@@ -347,7 +347,8 @@ class UdpSocket {
     for (;;) {
       const ssize_t r = recv(fd_, buf, sizeof buf, 0);
       if (r < 0) return n;
-      packets.push_back({std::vector<std::uint8_t>(buf, buf + r), std::chrono::steady_clock::now()});
+      packets.push_back(
+          {std::vector<std::uint8_t>(buf, buf + r), std::chrono::steady_clock::now()});
       ++n;
     }
   }
@@ -394,7 +395,9 @@ TEST(TelemetryUdp, DestinationsAreCheckedAndEverySendIsCounted) {
   EXPECT_EQ(sender.sent(), 4u);
 }
 
-std::string TelemetryBinary() { return VDYN_TELEMETRY_BINARY; }
+std::string TelemetryBinary() {
+  return VDYN_TELEMETRY_BINARY;
+}
 
 class TelemetryNet : public ::testing::Test {
  protected:
@@ -416,15 +419,15 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
   UdpSocket sim, gauge, gauge2, sim_id, gauge_id;
   constexpr double kSimHz = 50, kGaugeHz = 25;
   // Bridge 1: no IDs, two dashboards (one by host name). Bridge 2: both IDs.
-  auto bridge = Start({TelemetryBinary(), "--domain", std::to_string(domain_), "--outsim",
-                       sim.address(), "--outgauge", gauge.address(), "--outgauge",
-                       "localhost:" + std::to_string(gauge2.port()), "--outsim-hz", "50",
-                       "--outgauge-hz", "25", "--stale-ms", "400"},
-                      "telemetry.log");
-  auto bridge_ids = Start({TelemetryBinary(), "--domain", std::to_string(domain_), "--outsim",
-                           sim_id.address(), "--outsim-id", "7", "--outgauge", gauge_id.address(),
-                           "--outgauge-id", "9", "--no-status"},
-                          "telemetry_ids.log");
+  auto bridge = Start(
+      {TelemetryBinary(), "--domain", std::to_string(domain_), "--outsim", sim.address(),
+       "--outgauge", gauge.address(), "--outgauge", "localhost:" + std::to_string(gauge2.port()),
+       "--outsim-hz", "50", "--outgauge-hz", "25", "--stale-ms", "400"},
+      "telemetry.log");
+  auto bridge_ids = Start(
+      {TelemetryBinary(), "--domain", std::to_string(domain_), "--outsim", sim_id.address(),
+       "--outsim-id", "7", "--outgauge", gauge_id.address(), "--outgauge-id", "9", "--no-status"},
+      "telemetry_ids.log");
   auto drain = [&] {
     for (UdpSocket* s : {&sim, &gauge, &gauge2, &sim_id, &gauge_id}) s->Drain();
   };
@@ -503,9 +506,10 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
   // state (1000 a second) and not starved.
   const double sim_rate = static_cast<double>(sim.packets.size() - sim_before) / window_s;
   const double gauge_rate = static_cast<double>(gauge.packets.size() - gauge_before) / window_s;
-  std::printf("  telemetry: OutSim %.1f packets/s (asked %.0f), OutGauge %.1f/s (asked %.0f) over "
-              "%.1f s of driving\n",
-              sim_rate, kSimHz, gauge_rate, kGaugeHz, window_s);
+  std::printf(
+      "  telemetry: OutSim %.1f packets/s (asked %.0f), OutGauge %.1f/s (asked %.0f) over "
+      "%.1f s of driving\n",
+      sim_rate, kSimHz, gauge_rate, kGaugeHz, window_s);
   EXPECT_GT(sim_rate, 0.3 * kSimHz);
   EXPECT_LT(sim_rate, 1.2 * kSimHz + 2.0 / window_s);
   EXPECT_GT(gauge_rate, 0.3 * kGaugeHz);
@@ -548,8 +552,8 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
     // Physics, in the packet's own terms: the car speeds up along its forward axis under
     // throttle and slows under the brakes; it squats (nose up) under throttle and dives under
     // the brakes.
-    const double a_fwd = GetF32(b, os::kAccel + 0) * -std::sin(h) +
-                         GetF32(b, os::kAccel + 4) * std::cos(h);
+    const double a_fwd =
+        GetF32(b, os::kAccel + 0) * -std::sin(h) + GetF32(b, os::kAccel + 4) * std::cos(h);
     const double speed = std::hypot(GetF32(b, os::kVel + 0), GetF32(b, os::kVel + 4));
     if (s.control().throttle() == 1.0 && speed > 1.0) {
       accel_fwd += a_fwd > 0.5;

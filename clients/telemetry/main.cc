@@ -25,7 +25,9 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
-extern "C" void OnSignal(int) { g_stop.store(true); }
+extern "C" void OnSignal(int) {
+  g_stop.store(true);
+}
 
 }  // namespace
 
@@ -108,18 +110,19 @@ int main(int argc, char** argv) {
     const vdyn::base::Nanos cpu0 = vdyn::base::ProcessCpuTime();
     std::thread watch([&] {
       // Turns a signal or the end of --duration into the bridge's stop flag.
-      while (!g_stop && (duration_s <= 0 ||
-                         (vdyn::base::MonotonicNow() - start).seconds() < duration_s)) {
+      while (!g_stop &&
+             (duration_s <= 0 || (vdyn::base::MonotonicNow() - start).seconds() < duration_s)) {
         vdyn::base::SleepUntil(vdyn::base::MonotonicNow() + vdyn::base::Milliseconds(20));
       }
       stop = true;
     });
-    bridge.Run(stop,
-               [](const std::string& line) {
-                 std::printf("%s\n", line.c_str());
-                 std::fflush(stdout);
-               },
-               no_status ? vdyn::base::Nanos{0} : vdyn::base::Seconds(1));
+    bridge.Run(
+        stop,
+        [](const std::string& line) {
+          std::printf("%s\n", line.c_str());
+          std::fflush(stdout);
+        },
+        no_status ? vdyn::base::Nanos{0} : vdyn::base::Seconds(1));
     g_stop = true;
     watch.join();
     const double wall = (vdyn::base::MonotonicNow() - start).seconds();

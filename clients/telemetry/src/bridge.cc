@@ -13,8 +13,8 @@ namespace {
 client::SessionView::Topics StateAndParams() {
   client::SessionView::Topics t;
   t.states = true;
-  t.params = true;       // which dash lights the car has
-  t.world = false;       // worlds can be large and say nothing a dashboard shows
+  t.params = true;  // which dash lights the car has
+  t.world = false;  // worlds can be large and say nothing a dashboard shows
   t.diagnostics = false;
   return t;
 }
@@ -72,8 +72,8 @@ void Bridge::StreamLoop(Stream& stream, bool outsim) {
   }
 }
 
-void Bridge::Run(const std::atomic<bool>& stop,
-                 const std::function<void(const std::string&)>& say, base::Nanos status_period) {
+void Bridge::Run(const std::atomic<bool>& stop, const std::function<void(const std::string&)>& say,
+                 base::Nanos status_period) {
   auto describe = [&](const Stream& s, std::int32_t id, std::size_t size) {
     if (!s.sender) return std::string();
     return fmt::format("{} {:.4g} Hz, {} bytes{}, to {}", s.name, s.hz,
@@ -100,8 +100,8 @@ void Bridge::Run(const std::atomic<bool>& stop,
     const base::MonoTime now = base::MonotonicNow();
     // Parameters change rarely (a request replaces them): taken when they first come and then
     // once a second, not with every state.
-    const bool params_due = v != nullptr && v->params &&
-                            (!latest_.params || now - params_taken >= base::Seconds(1));
+    const bool params_due =
+        v != nullptr && v->params && (!latest_.params || now - params_taken >= base::Seconds(1));
     if (v != nullptr && (v->states != seen || params_due)) {
       std::lock_guard<std::mutex> lock(mu_);
       if (v->states != seen) {
@@ -129,8 +129,9 @@ void Bridge::Run(const std::atomic<bool>& stop,
       ever = true;
     } else if (!now_fresh && fresh) {
       ++pauses_;
-      say(fmt::format("vdyn-telemetry: vehicle {}: no state for {:.3g} s (stale limit): sending paused",
-                      config_.vehicle_id, stale_s));
+      say(fmt::format(
+          "vdyn-telemetry: vehicle {}: no state for {:.3g} s (stale limit): sending paused",
+          config_.vehicle_id, stale_s));
     }
     fresh = now_fresh;
     if (status_period.ns > 0 && now - last_status_ >= status_period) say(StatusLine());
@@ -153,8 +154,12 @@ Bridge::StreamCounters Bridge::Counters(const Stream& s) const {
   return c;
 }
 
-Bridge::StreamCounters Bridge::outsim() const { return Counters(outsim_); }
-Bridge::StreamCounters Bridge::outgauge() const { return Counters(outgauge_); }
+Bridge::StreamCounters Bridge::outsim() const {
+  return Counters(outsim_);
+}
+Bridge::StreamCounters Bridge::outgauge() const {
+  return Counters(outgauge_);
+}
 
 std::string Bridge::StatusLine() {
   const base::MonoTime now = base::MonotonicNow();
@@ -180,7 +185,8 @@ std::string Bridge::StatusLine() {
     if (!s->sender) continue;
     const StreamCounters c = Counters(*s);
     const double per_dest = static_cast<double>(s->sender->destinations().size());
-    const double rate = dt > 0 ? static_cast<double>(c.sent - s->sent_at_status) / dt / per_dest : 0;
+    const double rate =
+        dt > 0 ? static_cast<double>(c.sent - s->sent_at_status) / dt / per_dest : 0;
     s->sent_at_status = c.sent;
     line += fmt::format(" | {} {:.0f}/s to {}: {} sent, {} errors", s->name, rate,
                         s->sender->destinations().size(), c.sent, c.errors);
@@ -190,14 +196,16 @@ std::string Bridge::StatusLine() {
 }
 
 std::string Bridge::Summary() const {
-  std::string out = fmt::format("vdyn-telemetry: vehicle {}: {} states taken, {} pauses (stale states)",
-                                config_.vehicle_id, states_.load(), pauses_.load());
+  std::string out =
+      fmt::format("vdyn-telemetry: vehicle {}: {} states taken, {} pauses (stale states)",
+                  config_.vehicle_id, states_.load(), pauses_.load());
   for (const Stream* s : {&outsim_, &outgauge_}) {
     if (!s->sender) continue;
     const StreamCounters c = Counters(*s);
-    out += fmt::format("\n  {}: {} ticks at {:.4g} Hz, {} sent, {} send errors, {} ticks held (no "
-                       "fresh state), {} ticks skipped (this machine was busy)",
-                       s->name, c.ticks, s->hz, c.sent, c.errors, c.held, c.skipped);
+    out += fmt::format(
+        "\n  {}: {} ticks at {:.4g} Hz, {} sent, {} send errors, {} ticks held (no "
+        "fresh state), {} ticks skipped (this machine was busy)",
+        s->name, c.ticks, s->hz, c.sent, c.errors, c.held, c.skipped);
   }
   return out;
 }

@@ -33,7 +33,9 @@ float F(double v) {
   return static_cast<float>(v);
 }
 
-float Unit(double v) { return F(std::clamp(std::isfinite(v) ? v : 0.0, 0.0, 1.0)); }
+float Unit(double v) {
+  return F(std::clamp(std::isfinite(v) ? v : 0.0, 0.0, 1.0));
+}
 
 }  // namespace
 

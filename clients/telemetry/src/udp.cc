@@ -20,7 +20,8 @@ std::optional<Endpoint> ResolveEndpoint(const std::string& text, std::string& er
   if (colon == std::string::npos) return fail("expected HOST:PORT");
   const std::string host = text.substr(0, colon), port = text.substr(colon + 1);
   if (host.empty()) return fail("no host");
-  if (port.empty() || port.size() > 5 || port.find_first_not_of("0123456789") != std::string::npos) {
+  if (port.empty() || port.size() > 5 ||
+      port.find_first_not_of("0123456789") != std::string::npos) {
     return fail("'" + port + "' is not a port number (1 to 65535)");
   }
   const long port_n = std::stol(port);
@@ -51,7 +52,8 @@ std::optional<Endpoint> ResolveEndpoint(const std::string& text, std::string& er
 
 UdpSender::UdpSender(std::vector<Endpoint> destinations) : destinations_(std::move(destinations)) {
   fd_ = socket(AF_INET, SOCK_DGRAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-  if (fd_ < 0) throw std::runtime_error(std::string("cannot open a UDP socket: ") + strerror(errno));
+  if (fd_ < 0)
+    throw std::runtime_error(std::string("cannot open a UDP socket: ") + strerror(errno));
   // Broadcast addresses (a dashboard on every host of a lab's subnet) need SO_BROADCAST.
   const int one = 1;
   setsockopt(fd_, SOL_SOCKET, SO_BROADCAST, &one, sizeof one);

@@ -19,38 +19,38 @@ static_assert(std::endian::native == std::endian::little,
 
 #pragma pack(push, 1)
 struct OutSimPack {
-  std::uint32_t time_ms = 0;  // Time: ms, to check order
+  std::uint32_t time_ms = 0;                          // Time: ms, to check order
   float ang_vel_x = 0, ang_vel_y = 0, ang_vel_z = 0;  // AngVel: rad/s, world axes
   float heading = 0;  // rad, anticlockwise from above (Z); 0 = forward along world +Y
   float pitch = 0;    // rad, anticlockwise from the right (X): nose up positive
   float roll = 0;     // rad, anticlockwise from the front (Y): right side down positive
-  float accel_x = 0, accel_y = 0, accel_z = 0;  // Accel: m/s^2, world axes
-  float vel_x = 0, vel_y = 0, vel_z = 0;        // Vel: m/s, world axes
+  float accel_x = 0, accel_y = 0, accel_z = 0;   // Accel: m/s^2, world axes
+  float vel_x = 0, vel_y = 0, vel_z = 0;         // Vel: m/s, world axes
   std::int32_t pos_x = 0, pos_y = 0, pos_z = 0;  // Pos: 1 m = 65536, world axes
-  std::int32_t id = 0;  // only on the wire when an ID is configured
+  std::int32_t id = 0;                           // only on the wire when an ID is configured
 };
 
 struct OutGaugePack {
-  std::uint32_t time_ms = 0;  // Time: ms
-  char car[4] = {};           // Car name
-  std::uint16_t flags = 0;    // OG_x
-  std::uint8_t gear = 0;      // reverse 0, neutral 1, first 2, ...
-  std::uint8_t plid = 0;      // unique id of the viewed player (0 = none)
-  float speed = 0;            // m/s
-  float rpm = 0;              // rpm
-  float turbo = 0;            // bar
-  float eng_temp = 0;         // C
-  float fuel = 0;             // 0 to 1
-  float oil_pressure = 0;     // bar
-  float oil_temp = 0;         // C
+  std::uint32_t time_ms = 0;      // Time: ms
+  char car[4] = {};               // Car name
+  std::uint16_t flags = 0;        // OG_x
+  std::uint8_t gear = 0;          // reverse 0, neutral 1, first 2, ...
+  std::uint8_t plid = 0;          // unique id of the viewed player (0 = none)
+  float speed = 0;                // m/s
+  float rpm = 0;                  // rpm
+  float turbo = 0;                // bar
+  float eng_temp = 0;             // C
+  float fuel = 0;                 // 0 to 1
+  float oil_pressure = 0;         // bar
+  float oil_temp = 0;             // C
   std::uint32_t dash_lights = 0;  // DL_x bits: lights the car has
   std::uint32_t show_lights = 0;  // DL_x bits: lights switched on
-  float throttle = 0;  // 0 to 1
-  float brake = 0;     // 0 to 1
-  float clutch = 0;    // 0 to 1
-  char display1[16] = {};  // usually fuel
-  char display2[16] = {};  // usually settings
-  std::int32_t id = 0;     // only on the wire when an ID is configured
+  float throttle = 0;             // 0 to 1
+  float brake = 0;                // 0 to 1
+  float clutch = 0;               // 0 to 1
+  char display1[16] = {};         // usually fuel
+  char display2[16] = {};         // usually settings
+  std::int32_t id = 0;            // only on the wire when an ID is configured
 };
 #pragma pack(pop)
 
@@ -69,25 +69,25 @@ static_assert(offsetof(OutGaugePack, flags) == 8 && offsetof(OutGaugePack, gear)
               offsetof(OutGaugePack, display2) == 76 && offsetof(OutGaugePack, id) == 92);
 
 // OG_x: bits of OutGaugePack::flags.
-inline constexpr std::uint16_t kOgShift = 1;      // key
-inline constexpr std::uint16_t kOgCtrl = 2;       // key
-inline constexpr std::uint16_t kOgTurbo = 8192;   // show the turbo gauge
-inline constexpr std::uint16_t kOgKm = 16384;     // the user prefers km (else miles)
-inline constexpr std::uint16_t kOgBar = 32768;    // the user prefers bar (else psi)
+inline constexpr std::uint16_t kOgShift = 1;     // key
+inline constexpr std::uint16_t kOgCtrl = 2;      // key
+inline constexpr std::uint16_t kOgTurbo = 8192;  // show the turbo gauge
+inline constexpr std::uint16_t kOgKm = 16384;    // the user prefers km (else miles)
+inline constexpr std::uint16_t kOgBar = 32768;   // the user prefers bar (else psi)
 
 // DL_x: bit numbers of OutGaugePack::dash_lights and show_lights.
 enum DashLight : std::uint32_t {
-  kDlShift = 0,      // shift light
+  kDlShift = 0,  // shift light
   kDlFullBeam = 1,
   kDlHandbrake = 2,
   kDlPitSpeed = 3,
-  kDlTc = 4,         // traction control active or switched off
+  kDlTc = 4,  // traction control active or switched off
   kDlSignalL = 5,
   kDlSignalR = 6,
   kDlSignalAny = 7,
   kDlOilWarn = 8,
   kDlBattery = 9,
-  kDlAbs = 10,       // ABS active or switched off
+  kDlAbs = 10,  // ABS active or switched off
   kDlEngine = 11,
   kDlFogRear = 12,
   kDlFogFront = 13,
@@ -96,7 +96,9 @@ enum DashLight : std::uint32_t {
   kDlSidelights = 16,
   kDlNeutral = 17,
 };
-constexpr std::uint32_t Bit(DashLight l) { return 1u << l; }
+constexpr std::uint32_t Bit(DashLight l) {
+  return 1u << l;
+}
 
 // OutGauge gears.
 inline constexpr std::uint8_t kGaugeGearReverse = 0;
