@@ -132,4 +132,11 @@ inline constexpr Range kSplitS{1.0, 1e7, false, false, "split duration, s"};
 inline constexpr Range kChunkKb{1.0, 65536.0, false, false, "chunk size, KiB"};
 inline constexpr Range kRecordingTimeS{0.0, 1e9, false, false, "time from the recording's start, s"};
 
+// vdyn-telemetry: packet rates (LFS itself sends at most 100 per second; a motion platform may
+// take more, and states come at 1 kHz), the age after which a state is too old to send, and the
+// optional packet ID (LFS's "OutSim ID"/"OutGauge ID": not zero when present).
+inline constexpr Range kTelemetryRateHz{1.0, 1000.0, false, false, "telemetry packet rate, Hz"};
+inline constexpr Range kStaleMs{10.0, 60000.0, false, false, "stale-state limit, ms"};
+inline constexpr Range kTelemetryId{1.0, 2147483647.0, false, false, "telemetry packet ID"};
+
 }  // namespace vdyn::limits
