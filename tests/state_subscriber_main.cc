@@ -1,21 +1,46 @@
 // A state subscriber in a process of its own (tests): reads vdyn/state on a domain until it has
 // seen `count` samples or `seconds` passed, then prints how many it read. A writer whose readers
 // live in other processes takes the network path, as the server's does.
+//
+// With --print it also prints one line per state as it takes it, for scripts that watch a session
+// (tests/lab/multihost.sh):
+//   RECV_NS VEHICLE STEP SOURCE_ID SEQUENCE SAFE SPEED_KMH
+// RECV_NS is CLOCK_REALTIME when the sample was taken (comparable with `date +%s%N` in every
+// network namespace of the machine); SOURCE_ID and SEQUENCE name the input the step applied
+// ("-" for no source, blanks as "_"); SAFE is 1 when the input watchdog's safe state replaced the driver's input.
+#include <time.h>
+
+#include <cctype>
 #include <chrono>
+#include <string>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 
+namespace {
+
+long long RealtimeNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<long long>(ts.tv_sec) * 1'000'000'000LL + ts.tv_nsec;
+}
+
+}  // namespace
+
 int main(int argc, char** argv) {
-  if (argc < 4) {
-    std::fprintf(stderr, "usage: %s DOMAIN COUNT SECONDS\n", argv[0]);
+  if (argc < 4 || (argc == 5 && std::strcmp(argv[4], "--print") != 0) || argc > 5) {
+    std::fprintf(stderr, "usage: %s DOMAIN COUNT SECONDS [--print]\n", argv[0]);
     return 2;
   }
   const auto domain = static_cast<std::uint32_t>(std::atoi(argv[1]));
   const long want = std::atol(argv[2]);
   const auto seconds = std::chrono::seconds(std::atol(argv[3]));
+  const bool print = argc == 5;
+  // Line-buffered: a script reading the file sees each state as soon as it is taken.
+  if (print) std::setvbuf(stdout, nullptr, _IOLBF, 0);
   vdyn::transport::Participant p(domain);
   vdyn::transport::DropCounters drops;
   vdyn::transport::Reader<vdyn::pb::VehicleState> states(p, vdyn::transport::TopicId::kState, &drops);
@@ -23,7 +48,15 @@ int main(int argc, char** argv) {
   const auto end = std::chrono::steady_clock::now() + seconds;
   while (n < want && std::chrono::steady_clock::now() < end) {
     states.Wait(std::chrono::milliseconds(100));
-    n += states.Take([](const vdyn::pb::VehicleState&, const vdyn::transport::SampleInfo&) {});
+    n += states.Take([print](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+      if (!print) return;
+      std::string source = s.input().source_id();
+      for (char& c : source) c = std::isspace(static_cast<unsigned char>(c)) != 0 ? '_' : c;  // one column
+      std::printf("%lld %u %llu %s %llu %d %.3f\n", RealtimeNs(), s.vehicle_id(),
+                  static_cast<unsigned long long>(s.step()), source.empty() ? "-" : source.c_str(),
+                  static_cast<unsigned long long>(s.input().sequence()),
+                  s.control().watchdog_safe_state() ? 1 : 0, s.speed_kmh());
+    });
   }
   std::printf("received %ld\n", n);
   return 0;
