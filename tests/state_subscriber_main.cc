@@ -4,10 +4,13 @@
 //
 // With --print it also prints one line per state as it takes it, for scripts that watch a session
 // (tests/lab/multihost.sh):
-//   RECV_NS VEHICLE STEP SOURCE_ID SEQUENCE SAFE SPEED_KMH
-// RECV_NS is CLOCK_REALTIME when the sample was taken (comparable with `date +%s%N` in every
-// network namespace of the machine); SOURCE_ID and SEQUENCE name the input the step applied
-// ("-" for no source, blanks as "_"); SAFE is 1 when the input watchdog's safe state replaced the driver's input.
+//   TAKE_NS PUBLISH_NS VEHICLE STEP SOURCE_ID SEQUENCE SAFE SPEED_KMH
+// TAKE_NS is CLOCK_REALTIME when this process took the sample, PUBLISH_NS the server's wall clock
+// when it wrote it (the DDS source timestamp): both comparable with `date +%s%N` in every network
+// namespace of the machine. SOURCE_ID and SEQUENCE name the input the step applied ("-" for no
+// source, blanks as "_"); SAFE is 1 when the input watchdog's safe state replaced the driver's
+// input. It then reads with the recorder's QoS (a second of states kept per vehicle), so a
+// process the machine's load holds up a moment still prints every state that arrived.
 #include <time.h>
 
 #include <cctype>
@@ -19,6 +22,7 @@
 
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/topics.h"
 
 namespace {
 
@@ -43,16 +47,19 @@ int main(int argc, char** argv) {
   if (print) std::setvbuf(stdout, nullptr, _IOLBF, 0);
   vdyn::transport::Participant p(domain);
   vdyn::transport::DropCounters drops;
-  vdyn::transport::Reader<vdyn::pb::VehicleState> states(p, vdyn::transport::TopicId::kState, &drops);
+  vdyn::transport::Reader<vdyn::pb::VehicleState> states(
+      p, vdyn::transport::TopicId::kState, &drops,
+      print ? vdyn::transport::ReaderRole::kRecorder : vdyn::transport::ReaderRole::kDefault);
   long n = 0;
   const auto end = std::chrono::steady_clock::now() + seconds;
   while (n < want && std::chrono::steady_clock::now() < end) {
     states.Wait(std::chrono::milliseconds(100));
-    n += states.Take([print](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+    n += states.Take([print](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
       if (!print) return;
       std::string source = s.input().source_id();
       for (char& c : source) c = std::isspace(static_cast<unsigned char>(c)) != 0 ? '_' : c;  // one column
-      std::printf("%lld %u %llu %s %llu %d %.3f\n", RealtimeNs(), s.vehicle_id(),
+      std::printf("%lld %lld %u %llu %s %llu %d %.3f\n", RealtimeNs(),
+                  static_cast<long long>(info.source_timestamp_ns), s.vehicle_id(),
                   static_cast<unsigned long long>(s.step()), source.empty() ? "-" : source.c_str(),
                   static_cast<unsigned long long>(s.input().sequence()),
                   s.control().watchdog_safe_state() ? 1 : 0, s.speed_kmh());
