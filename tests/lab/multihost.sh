@@ -206,16 +206,15 @@ start_backup() {
   run_on "$NS_C" backup "$INPUT" --domain "$DOMAIN" --source-id backup --strength 5 --wait 120 \
     play "$WORK/backup.csv" --clock wall
 }
-start_primary 1
+# The backup first: driving alone, it shows the server hears host C before any cut; then the
+# primary, stronger, takes the vehicle, and states reach host B across the switch.
 start_backup
-
-# The state stream reaches host A, the primary drives, and states reach host B across the switch.
-wait_line "$OBS_A" 0 'src == "primary"' 120 >/dev/null || die "the primary rig never drove (host A's observer: $(tail -n 2 "$OBS_A"))"
+wait_line "$OBS_A" 0 'src == "backup"' 120 >/dev/null || die "the backup rig never drove (host A's observer: $(tail -n 2 "$OBS_A"))"
+FROM=$(size_of "$OBS_A")
+start_primary 1
+wait_line "$OBS_A" "$FROM" 'src == "primary"' 120 >/dev/null || die "the primary rig never drove (host A's observer: $(tail -n 2 "$OBS_A"))"
 wait_line "$OBS_B" 0 'src == "primary"' 60 >/dev/null || die "states never reached host B"
 kill -0 "$SERVER_PID" 2>/dev/null || die "the server stopped: $(tail -n 5 "$WORK/server.log")"
-# The backup is connected too: its participant is discovered by the server (nothing else to see
-# while the primary, stronger, drives). Give discovery its bounded time through the recorder's
-# view of host C's input: the recorder records every topic, inputs included.
 echo "multihost: the primary drives; the backup waits on host C"
 
 if [[ $WANT_VIEWER -eq 1 ]]; then
