@@ -15,10 +15,10 @@
 
 #include <cctype>
 #include <chrono>
-#include <string>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <string>
 
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
@@ -54,10 +54,12 @@ int main(int argc, char** argv) {
   const auto end = std::chrono::steady_clock::now() + seconds;
   while (n < want && std::chrono::steady_clock::now() < end) {
     states.Wait(std::chrono::milliseconds(100));
-    n += states.Take([print](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
+    n += states.Take([print](const vdyn::pb::VehicleState& s,
+                             const vdyn::transport::SampleInfo& info) {
       if (!print) return;
       std::string source = s.input().source_id();
-      for (char& c : source) c = std::isspace(static_cast<unsigned char>(c)) != 0 ? '_' : c;  // one column
+      for (char& c : source)
+        c = std::isspace(static_cast<unsigned char>(c)) != 0 ? '_' : c;  // one column
       std::printf("%lld %lld %u %llu %s %llu %d %.3f\n", RealtimeNs(),
                   static_cast<long long>(info.source_timestamp_ns), s.vehicle_id(),
                   static_cast<unsigned long long>(s.step()), source.empty() ? "-" : source.c_str(),
