@@ -11,7 +11,7 @@ build_packages=(
   libeigen3-dev libembree-dev libprotobuf-dev protobuf-compiler
   libspdlog-dev libfmt-dev libcli11-dev libassimp-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev libbullet-dev
-  cyclonedds-dev cyclonedds-tools
+  cyclonedds-dev cyclonedds-tools iproute2
   libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri openssl
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
   libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
