@@ -257,7 +257,8 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
       return "an uncompressed chunk of " + std::to_string(in.size()) + " bytes claims " +
              std::to_string(uncompressed_size);
     }
-    std::memcpy(out.data(), in.data(), in.size());
+    // An empty chunk has no bytes to copy (and memcpy must not see its null pointers).
+    if (!in.empty()) std::memcpy(out.data(), in.data(), in.size());
     return {};
   }
   if (compression == "zstd") {

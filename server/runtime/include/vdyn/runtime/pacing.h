@@ -27,7 +27,7 @@ class LatenessWindow {
   std::uint64_t count() const { return count_; }
   // p in [0, 100]; 0 for an empty window.
   double Percentile(double p);
-  double Max() const { return max_; }
+  double Max() const { return static_cast<double>(max_); }
   void Clear() {
     n_ = 0;
     count_ = 0;
