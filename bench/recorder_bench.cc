@@ -3,7 +3,7 @@
 //   record   1, 8 and 64 vehicles at 1 kHz (vdyn-server --vehicle-ids, world flat) for SECONDS:
 //            the recorder's CPU per simulated minute (all its threads, from wait4's rusage), the
 //            bytes it wrote per simulated minute, and what it lost or dropped. Peer, same run: a
-//            plain subscriber that takes and decodes every state and writes nothing.
+//            plain subscriber that takes and decodes every state and writes nothing, in a session of its own.
 //   export   the 1-vehicle recording to CSV, as a multiple of real time; peer: the batch run of
 //            the same simulated time writing the same CSV (vdyn-server --batch --csv).
 //   verify   the same recording re-simulated and checked, as a multiple of real time; peer: the
@@ -156,20 +156,28 @@ int main(int argc, char** argv) {
         if (v > 1) ids += ',';
         ids += std::to_string(v);
       }
+      // The same session twice, one after the other: once recorded, once read by the peer (on two
+      // vCPUs the two together would share the cores the server leaves).
+      auto run_server = [&]() {
+        const Child srv = Spawn({server, "--domain", std::to_string(domain), "--world", "flat", "--vehicle-ids",
+                                 ids, "--duration", std::to_string(seconds), "--no-status"},
+                                dir / "server.log");
+        if (Wait(srv).code != 0) {
+          std::fprintf(stderr, "server failed:\n%s\n", Slurp(dir / "server.log").c_str());
+          std::exit(1);
+        }
+      };
       const Child rec = Spawn({recorder, "record", file.string(), "--domain", std::to_string(domain), "--no-status"},
                               dir / "rec.log");
-      const Child sub = Spawn({argv[0], "--subscribe", std::to_string(domain), std::to_string(seconds + 4)},
-                              dir / "sub.log");
-      std::this_thread::sleep_for(std::chrono::seconds(1));  // both joined before the server starts
-      const Child srv = Spawn({server, "--domain", std::to_string(domain), "--world", "flat", "--vehicle-ids", ids,
-                               "--duration", std::to_string(seconds), "--no-status"},
-                              dir / "server.log");
-      if (Wait(srv).code != 0) {
-        std::fprintf(stderr, "server failed:\n%s\n", Slurp(dir / "server.log").c_str());
-        return 1;
-      }
+      std::this_thread::sleep_for(std::chrono::seconds(1));  // joined before the server starts
+      run_server();
       kill(rec.pid, SIGINT);
       const Ended re = Wait(rec);
+      ++domain;
+      const Child sub = Spawn({argv[0], "--subscribe", std::to_string(domain), std::to_string(seconds + 4)},
+                              dir / "sub.log");
+      std::this_thread::sleep_for(std::chrono::seconds(1));
+      run_server();
       const Ended se = Wait(sub);
       const std::string log = Slurp(dir / "rec.log");
       std::smatch m;
