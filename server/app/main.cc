@@ -20,7 +20,7 @@
 
 #include "vdyn/cli/options.h"
 
-#include "progress.h"
+#include "vdyn/base/progress.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
 #include "vdyn/bridge/world_files.h"
@@ -136,7 +136,7 @@ int RunBatchMode(const Options& o) {
   std::unique_ptr<vdyn::CsvWriter> csv;
   if (!o.csv.empty()) csv = std::make_unique<vdyn::CsvWriter>(o.csv);
 
-  vdyn::ProgressBar bar(o.demo ? "demo drive" : "batch");
+  vdyn::base::ProgressBar bar(o.demo ? "demo drive" : "batch");
   vdyn::BatchOptions bo;
   bo.duration = duration;
   bo.csv_every = o.csv_every;

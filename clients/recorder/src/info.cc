@@ -1,6 +1,5 @@
 // `vdyn-recorder info FILE`: what a recording holds - channels, counts, time range, vehicles,
 // world, gaps - and whether it re-simulates (decided from its events and world, without physics).
-#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -15,28 +14,6 @@
 namespace vdyn::recorder {
 
 using transport::TopicId;
-
-Progress::Progress(std::string label)
-    : label_(std::move(label)), enabled_(isatty(STDERR_FILENO) == 1) {}
-Progress::~Progress() { Finish(); }
-void Progress::Update(double fraction) {
-  if (!enabled_) return;
-  const int percent = std::clamp(static_cast<int>(fraction * 100.0), 0, 100);
-  if (percent == last_percent_) return;
-  last_percent_ = percent;
-  constexpr int kWidth = 40;
-  const int filled = percent * kWidth / 100;
-  std::fprintf(stderr, "\r%s [%.*s%*s] %3d%%", label_.c_str(), filled,
-               "########################################", kWidth - filled, "", percent);
-  std::fflush(stderr);
-}
-void Progress::Finish() {
-  if (!enabled_ || last_percent_ < 0) return;
-  std::fprintf(stderr, "\r\033[K");
-  std::fflush(stderr);
-  last_percent_ = -1;
-  enabled_ = false;
-}
 
 namespace {
 

@@ -10,23 +10,17 @@
 #include <ostream>
 #include <set>
 #include <string>
+#include <utility>
 
+#include "vdyn/base/progress.h"
 #include "vdyn/recorder/mcap.h"
 
 namespace vdyn::recorder {
 
-// A one-line progress bar on an interactive terminal (stderr); silent otherwise.
-class Progress {
+// The commands' progress bar (base::ProgressBar) clears its line when done.
+class Progress : public base::ProgressBar {
  public:
-  explicit Progress(std::string label);
-  ~Progress();
-  void Update(double fraction);
-  void Finish();
-
- private:
-  std::string label_;
-  bool enabled_;
-  int last_percent_ = -1;
+  explicit Progress(std::string label) : base::ProgressBar(std::move(label), AtFinish::kClearLine) {}
 };
 
 // --- info -----------------------------------------------------------------------------------------

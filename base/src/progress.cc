@@ -1,16 +1,19 @@
-#include "progress.h"
+#include "vdyn/base/progress.h"
 
 #include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <utility>
 
-namespace vdyn {
+namespace vdyn::base {
 
-ProgressBar::ProgressBar(std::string label)
-    : label_(std::move(label)), enabled_(isatty(STDERR_FILENO) == 1) {}
+ProgressBar::ProgressBar(std::string label, AtFinish at_finish)
+    : label_(std::move(label)), at_finish_(at_finish), enabled_(isatty(STDERR_FILENO) == 1) {}
 
-ProgressBar::~ProgressBar() { Finish(); }
+ProgressBar::~ProgressBar() {
+  Finish();
+}
 
 void ProgressBar::Update(double fraction) {
   if (!enabled_) return;
@@ -26,9 +29,10 @@ void ProgressBar::Update(double fraction) {
 
 void ProgressBar::Finish() {
   if (!enabled_ || last_percent_ < 0) return;
-  std::fprintf(stderr, "\n");
+  std::fputs(at_finish_ == AtFinish::kKeepLine ? "\n" : "\r\033[K", stderr);
+  std::fflush(stderr);
   last_percent_ = -1;
   enabled_ = false;
 }
 
-}  // namespace vdyn
+}  // namespace vdyn::base
