@@ -192,6 +192,7 @@ TEST(NoAllocation, TheServerLoopBodyAllocatesNothingWithAnInputChangingEveryStep
       in.set_sequence(static_cast<std::uint64_t>(step));
       session.OfferInput(in, nullptr);
       session.Step(sink);
+      outbox.Send();
     }
   };
   // Paced like the server (a step a millisecond on average), so the outbox never fills up.

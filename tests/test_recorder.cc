@@ -19,6 +19,7 @@
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
@@ -648,6 +649,34 @@ TEST_F(RecorderTest, BadFilesAreRefusedWithFileOffsetAndReason) {
   auto [ucode, usage] = Run({"play", (dir_ / "photo.mcap").string(), "--rate", "0"});
   EXPECT_EQ(ucode, 2);
   EXPECT_THAT(usage, HasSubstr("playback rate must be in [0.01, 1000]"));
+}
+
+// The server numbers its events across every vehicle while a take hands them over vehicle by
+// vehicle: out of order, with nothing lost. Only what never arrives is missing.
+TEST(SequenceGaps, CountsOnlyWhatNeverArrivesWhateverTheOrder) {
+  recorder::SequenceGaps g;
+  // Events 1..12 of three vehicles, numbered round robin, taken vehicle by vehicle.
+  for (std::uint64_t v = 0; v < 3; ++v) {
+    for (std::uint64_t k = 0; k < 4; ++k) g.Add(1 + v + 3 * k);
+  }
+  EXPECT_EQ(g.missing(), 0u);
+  // 13 and 15 arrive, 14 does not (yet).
+  g.Add(15);
+  g.Add(13);
+  EXPECT_EQ(g.missing(), 1u);
+  g.Add(14);  // late, not lost
+  EXPECT_EQ(g.missing(), 0u);
+  // A hole that stays.
+  g.Add(20);
+  EXPECT_EQ(g.missing(), 4u);  // 16..19
+  // The first ones seen need not be the lowest.
+  recorder::SequenceGaps h;
+  h.Add(7);
+  h.Add(5);
+  EXPECT_EQ(h.missing(), 1u);  // 6
+  h.Add(6);
+  EXPECT_EQ(h.missing(), 0u);
+  EXPECT_EQ(recorder::SequenceGaps().missing(), 0u);
 }
 
 }  // namespace

@@ -179,7 +179,7 @@ int main(int argc, char** argv) {
       ro.split_s = split_s;
       ro.status_line = show_status;
       ro.status_tty = tty;
-      transport::Participant participant(domain);
+      transport::Participant participant(domain, limits::kRecorderReceiveBufferBytes);
       recorder::Capture capture(participant, ro);
       spdlog::info("vdyn-recorder: recording domain {} to {}{}", domain, ro.out.string(),
                    ro.duration_s > 0 ? " for " + std::to_string(ro.duration_s) + " s" : "; Ctrl-C ends");

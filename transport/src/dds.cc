@@ -1,6 +1,8 @@
 #include "vdyn/transport/dds.h"
 
 #include <algorithm>
+#include <atomic>
+#include <cstdlib>
 #include <cstring>
 
 #include "vdyn/base/text.h"
@@ -41,8 +43,33 @@ Participant::Participant(std::uint32_t domain_id) : domain_id_(domain_id) {
   }
 }
 
+Participant::Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes)
+    : domain_id_(domain_id) {
+  // Ours first, then the user's configuration, so that the user's settings win.
+  std::string config = "<Internal><SocketReceiveBufferSize min=\"default\" max=\"" +
+                       std::to_string(receive_buffer_bytes) + "B\"/></Internal>";
+  if (const char* uri = std::getenv("CYCLONEDDS_URI"); uri != nullptr && *uri != '\0') {
+    config += ",";
+    config += uri;
+  }
+  // Fails when the domain exists in this process already (another participant made it): then
+  // this one joins it as it is.
+  const dds_entity_t d = dds_create_domain(domain_id, config.c_str());
+  if (d > 0) domain_ = d;
+  participant_ = dds_create_participant(domain_id, nullptr, nullptr);
+  if (participant_ < 0) {
+    const dds_entity_t rc = participant_;
+    participant_ = 0;
+    if (domain_ > 0) dds_delete(domain_);
+    throw TransportError(DdsError("cannot create the DDS participant on domain " +
+                                      std::to_string(domain_id),
+                                  rc));
+  }
+}
+
 Participant::~Participant() {
   if (participant_ > 0) dds_delete(participant_);  // deletes every child entity too
+  if (domain_ > 0) dds_delete(domain_);
 }
 
 dds_entity_t Participant::Topic(TopicId id) {
@@ -61,8 +88,21 @@ dds_entity_t Participant::Topic(TopicId id) {
   return t;
 }
 
-RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength)
-    : id_(id) {
+namespace {
+// Set once a kBatched writer exists in this process (before batching is switched on, so no kEach
+// write is left waiting in a packet).
+std::atomic<bool> g_batching{false};
+}  // namespace
+
+RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength,
+                     Sending sending)
+    : id_(id), sending_(sending) {
+  if (sending == Sending::kBatched) {
+    g_batching.store(true);
+    // Every domain of the process, existing writers included; a writer created afterwards in
+    // these domains starts batched (the setting is read at creation).
+    dds_write_set_batch(true);
+  }
   dds_qos_t* q = WriterQos(id, ownership_strength);
   writer_ = dds_create_writer(participant.handle(), participant.Topic(id), q, nullptr);
   dds_delete_qos(q);
@@ -106,11 +146,16 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
   env.payload._buffer = const_cast<std::uint8_t*>(payload.data());
   env.payload._release = false;
   const dds_return_t rc = dds_write(writer_, &env);
+  if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) dds_write_flush(writer_);
   if (rc != DDS_RETCODE_OK) {
     last_error_ = DdsError(std::string("dds_write on ") + s.name, rc);
     return false;
   }
   return true;
+}
+
+void RawWriter::Flush() {
+  if (sending_ == Sending::kBatched) dds_write_flush(writer_);
 }
 
 std::uint64_t RawWriter::InstanceHandle() const {

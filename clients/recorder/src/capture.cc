@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <cstdio>
 #include <exception>
@@ -31,6 +32,22 @@ std::uint64_t CaptureSummary::total_dropped() const {
   std::uint64_t n = 0;
   for (const auto& [t, c] : topics) n += c.dropped;
   return n;
+}
+
+void SequenceGaps::Add(std::uint64_t seq) {
+  if (seen_ == 0) {
+    low_ = high_ = seq;
+  } else {
+    low_ = std::min(low_, seq);
+    high_ = std::max(high_, seq);
+  }
+  ++seen_;
+}
+
+std::uint64_t SequenceGaps::missing() const {
+  if (seen_ == 0) return 0;
+  const std::uint64_t span = high_ - low_ + 1;
+  return span > seen_ ? span - seen_ : 0;
 }
 
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
@@ -109,7 +126,7 @@ struct Capture::Impl {
 
   // Gap detection (taker only).
   std::unordered_map<std::uint32_t, std::uint64_t> last_step;
-  std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, std::uint64_t> last_sequence;
+  std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
 
   // Writer side.
   struct File {
@@ -175,11 +192,10 @@ struct Capture::Impl {
       const std::uint64_t seq = sequence.value_or(0);
       const auto id = std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key,
                                       s.info.publication_handle);
-      auto [it, fresh] = last_sequence.try_emplace(id, seq);
-      if (!fresh) {
-        if (seq > it->second + 1) c.lost += seq - it->second - 1;
-        it->second = seq;
-      }
+      SequenceGaps& g = sequences[id];
+      const std::uint64_t before = g.missing();
+      g.Add(seq);
+      c.lost = c.lost + g.missing() - before;  // goes down when a late one fills a hole
     }
     std::lock_guard<std::mutex> lock(mu);
     const std::size_t in_use = pending.bytes.size() + writer_bytes;

@@ -46,7 +46,10 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
-  states_ = std::make_unique<StateOutbox>(participant_, drops_);
+  // 64 steps of every vehicle it starts with (at least 512 frames): the writer thread may stall
+  // for tens of ms while a session starts (discovery, the world, every vehicle's parameters).
+  states_ = std::make_unique<StateOutbox>(
+      participant_, drops_, std::max<std::size_t>(512, 64 * options_.vehicle_ids.size()));
   state_sink_ = [this](std::uint32_t id, const pb::VehicleState& s) { states_->Push(id, s); };
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
@@ -153,6 +156,7 @@ bool ServerNode::Boundary() {
 
 void ServerNode::StepOnce() {
   session_->Step(state_sink_);
+  states_->Send();
   if (session_->paused() && session_->pending_steps() > 0) {
     session_->ConsumePendingStep();
     if (!deferred_step_replies_.empty() && deferred_step_replies_.front().remaining > 0) {

@@ -4,7 +4,7 @@ namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
                          std::size_t frames)
-    : writer_(participant, transport::TopicId::kState), drops_(drops), frames_(frames) {
+    : writer_(participant, transport::TopicId::kState, 0, transport::Sending::kBatched), drops_(drops), frames_(frames) {
   drop_full_ = drops_.Register("state queue full, state not sent");
   drop_large_ = drops_.Register("state larger than a frame, not sent");
   drop_write_ = drops_.Register("write failed on vdyn/state");
@@ -33,9 +33,10 @@ bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
   s.SerializeWithCachedSizesToArray(f->bytes.data());
   frames_.Commit();
   pushed_.fetch_add(1, std::memory_order_relaxed);
-  bell_.Ring();
   return true;
 }
+
+void StateOutbox::Send() { bell_.Ring(); }
 
 bool StateOutbox::Drain(base::Nanos timeout) {
   const base::MonoTime end = base::MonotonicNow() + timeout;
@@ -50,15 +51,20 @@ bool StateOutbox::Drain(base::Nanos timeout) {
 void StateOutbox::WriterLoop() {
   while (true) {
     const std::uint32_t token = bell_.Token();
+    std::uint64_t written = 0;
     while (Frame* f = frames_.Front()) {
       if (writer_.WriteBytes(f->key, {f->bytes.data(), f->size})) {
-        written_.fetch_add(1, std::memory_order_relaxed);
+        ++written;
       } else {
         failures_.fetch_add(1, std::memory_order_relaxed);
         drops_.Count(drop_write_, writer_.last_error());
       }
       frames_.Pop();
     }
+    // Whatever the loop handed over so far goes out together: one step's states of many
+    // vehicles share datagrams (a frame the loop commits meanwhile waits for the next round).
+    writer_.Flush();
+    written_.fetch_add(written, std::memory_order_relaxed);
     if (stop_.load()) return;
     bell_.Wait(token, base::Milliseconds(200));
   }

@@ -125,6 +125,10 @@ inline constexpr Range kAngleDeg{-360, 360, false, false, "angle, deg"};
 // vehicle at 1 kHz), so a recorder that takes a little late loses nothing; bounded, so one that
 // stops taking cannot grow without end.
 inline constexpr int kRecorderHistoryDepth = 1000;
+// The receive buffer a recorder asks of its sockets: a session's start (the world, every vehicle's
+// parameters and events, discovery) arrives in a burst on top of the states; 64 vehicles at 1 kHz
+// are ~95 MB/s, so the default 1 MiB is ~10 ms of them. The kernel caps it at net.core.rmem_max.
+inline constexpr std::size_t kRecorderReceiveBufferBytes = 16u << 20;
 inline constexpr Range kRecorderQueueMb{1.0, 65536.0, false, false, "recorder queue, MiB"};
 inline constexpr Range kPlaybackRate{0.01, 1000.0, false, false, "playback rate"};
 inline constexpr Range kSplitMb{1.0, 1e7, false, false, "split size, MiB"};

@@ -52,6 +52,12 @@ Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
 class Participant {
  public:
   explicit Participant(std::uint32_t domain_id);
+  // With the sockets' receive buffer asked to be `receive_buffer_bytes` (the kernel caps it at
+  // net.core.rmem_max; Cyclone DDS asks for 1 MiB by default): a process that takes a burst of
+  // traffic it must not lose, such as a recorder. Set through the domain's configuration, so it
+  // applies when this participant creates the domain in this process (the first on that domain
+  // id); CYCLONEDDS_URI still has the last word.
+  Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes);
   ~Participant();
   Participant(const Participant&) = delete;
   Participant& operator=(const Participant&) = delete;
@@ -61,6 +67,7 @@ class Participant {
   std::uint32_t domain_id() const { return domain_id_; }
 
  private:
+  dds_entity_t domain_ = 0;  // when this participant created the domain itself
   dds_entity_t participant_ = 0;
   std::uint32_t domain_id_ = 0;
   dds_entity_t topics_[8] = {};
@@ -68,9 +75,18 @@ class Participant {
 
 // Writes protobuf messages on one topic. Serialises into a buffer it keeps between writes (no
 // allocation once the buffer has grown to the message's size).
+// How a writer's samples go out. kEach: every write is its own datagram, sent before Write()
+// returns. kBatched: writes gather in the writer's packet (several samples per datagram, up to
+// Cyclone's message size) until Flush() or until the packet is full; for a burst of samples
+// written together, e.g. every vehicle's state of one step. Cyclone DDS 0.10 switches batching
+// on for the whole process (dds_write_set_batch), so once a kBatched writer exists every kEach
+// writer flushes after each write itself and keeps its behaviour.
+enum class Sending { kEach, kBatched };
+
 class RawWriter {
  public:
-  RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength = 0);
+  RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength = 0,
+            Sending sending = Sending::kEach);
   ~RawWriter();
   RawWriter(const RawWriter&) = delete;
   RawWriter& operator=(const RawWriter&) = delete;
@@ -80,6 +96,8 @@ class RawWriter {
   bool Write(std::uint32_t key, const google::protobuf::Message& msg);
   // Writes an already serialised payload of the topic's type as it is (a recording played back).
   bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  // Sends what a kBatched writer has gathered (nothing to do for kEach).
+  void Flush();
   // Number of readers matched right now (0 when the status cannot be read; last_error() says).
   std::uint32_t MatchedReaders();
   const std::string& last_error() const { return last_error_; }
@@ -90,6 +108,7 @@ class RawWriter {
 
  private:
   TopicId id_;
+  Sending sending_ = Sending::kEach;
   dds_entity_t writer_ = 0;
   std::string buffer_;
   std::string last_error_;

@@ -88,6 +88,20 @@ class Capture {
   std::atomic<bool> ready_{false};
 };
 
+// The sequence numbers one writer has sent (an event's, an input's) and how many of them never
+// arrived. They may arrive out of order: a writer numbers its samples across every vehicle while
+// a take returns them vehicle by vehicle. Missing = the span from the lowest to the highest seen,
+// less those seen; a late one fills its hole again. (A writer does not repeat a number; were it
+// to, the count would only go down, never below zero.)
+class SequenceGaps {
+ public:
+  void Add(std::uint64_t seq);
+  std::uint64_t missing() const;
+
+ private:
+  std::uint64_t low_ = 0, high_ = 0, seen_ = 0;
+};
+
 // The file of part `index` when splitting: "run.mcap" -> "run-000.mcap".
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index);
 

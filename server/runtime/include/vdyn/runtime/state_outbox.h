@@ -1,7 +1,7 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
 // serialised sample, an instance lookup), so the loop serialises each state into a preallocated
 // frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
-// effort, keep last 1). The loop neither allocates nor blocks; a full queue drops the state and
+// effort, keep last 1), batched: a step's states leave together. The loop neither allocates nor blocks; a full queue drops the state and
 // counts it.
 #pragma once
 
@@ -26,9 +26,13 @@ class StateOutbox {
   StateOutbox(const StateOutbox&) = delete;
   StateOutbox& operator=(const StateOutbox&) = delete;
 
-  // Loop thread: serialises `s` into a free frame and hands it to the writer. False (and
-  // counted) when the queue is full or the state is larger than a frame.
+  // Loop thread: serialises `s` into a free frame for the writer. False (and counted) when the
+  // queue is full or the state is larger than a frame.
   bool Push(std::uint32_t key, const pb::VehicleState& s);
+  // Loop thread, after a step's pushes: wakes the writer, which writes every frame pushed so far
+  // and then sends them together (several states per datagram; one sendmsg per datagram and
+  // reader, not per state).
+  void Send();
   // Waits until every frame handed over has been written (or `timeout`); true when drained.
   bool Drain(base::Nanos timeout);
 
