@@ -144,6 +144,8 @@ TEST(SpscQueue, TwoThreadsPassEveryItemInOrder) {
 #include "vdyn/control.pb.h"
 #include "vdyn/messages/checks.h"
 #include "vdyn/state.pb.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/world.pb.h"
 
 namespace vdyn {
 namespace {
@@ -170,6 +172,80 @@ TEST(Messages, EveryFieldIsCheckedNestedAndRepeated) {
   EXPECT_EQ(messages::MaxStringBytes("reason"), limits::kMaxReasonBytes);
   EXPECT_EQ(messages::MaxStringBytes("server_id"), limits::kMaxIdBytes);
   EXPECT_EQ(messages::MaxStringBytes("name"), limits::kMaxNameBytes);
+}
+
+// The check on the serialised bytes agrees with the reflective one: clean means clean, and
+// anything to report is left to CheckMessage (which names the field).
+TEST(Messages, TheWireCheckPassesCleanMessagesAndLeavesEveryProblemToTheReflectiveOne) {
+  auto bytes = [](const google::protobuf::Message& m) {
+    const std::string s = m.SerializeAsString();
+    return std::vector<std::uint8_t>(s.begin(), s.end());
+  };
+  auto clean = [&](const google::protobuf::Message& m) {
+    const auto b = bytes(m);
+    return messages::WireClean(*m.GetDescriptor(), b);
+  };
+  pb::VehicleState s;
+  s.set_vehicle_id(3);
+  s.set_step(12345);
+  for (int i = 0; i < 4; ++i) {
+    pb::WheelState* w = s.add_wheels();
+    w->set_fp(1000.0 + i);
+    w->mutable_f_w()->set_y(-2.5 * i);
+  }
+  s.mutable_input()->set_source_id(std::string(limits::kMaxIdBytes, 'x'));
+  EXPECT_TRUE(clean(s));
+  s.mutable_wheels(2)->mutable_f_w()->set_y(std::nan(""));
+  EXPECT_FALSE(clean(s));
+  EXPECT_EQ(messages::CheckMessage(s).field, "wheels[2].f_w.y");
+  s.mutable_wheels(2)->mutable_f_w()->set_y(0.5);
+  s.mutable_input()->set_source_id(std::string(limits::kMaxIdBytes + 1, 'x'));
+  EXPECT_FALSE(clean(s));
+  s.mutable_input()->set_source_id("rig");
+  EXPECT_TRUE(clean(s));
+
+  // Packed repeated doubles: every value is looked at.
+  pb::Mesh mesh;
+  for (int i = 0; i < 300; ++i) mesh.add_vertices(0.25 * i);
+  EXPECT_TRUE(clean(mesh));
+  mesh.set_vertices(299, -std::numeric_limits<double>::infinity());
+  EXPECT_FALSE(clean(mesh));
+  EXPECT_EQ(messages::CheckMessage(mesh).field, "vertices[299]");
+  // Unpacked occurrences of a repeated double (a parser accepts both).
+  std::vector<std::uint8_t> unpacked;
+  for (double v : {1.0, std::nan("")}) {
+    unpacked.push_back((3 << 3) | 1);
+    std::uint64_t u;
+    std::memcpy(&u, &v, 8);
+    for (int k = 0; k < 8; ++k) unpacked.push_back(static_cast<std::uint8_t>(u >> (8 * k)));
+  }
+  EXPECT_FALSE(messages::WireClean(*pb::Mesh::descriptor(), unpacked));
+
+  // A bad value that a later occurrence of the field replaces: not sure on the wire, clean once
+  // parsed, and DecodeEnvelope takes it.
+  pb::VehicleState bad;
+  bad.set_steering_torque(std::nan(""));
+  pb::VehicleState good;
+  good.set_steering_torque(2.0);
+  std::vector<std::uint8_t> both = bytes(bad);
+  const auto tail = bytes(good);
+  both.insert(both.end(), tail.begin(), tail.end());
+  EXPECT_FALSE(messages::WireClean(*pb::VehicleState::descriptor(), both));
+  pb::VehicleState parsed;
+  EXPECT_EQ(transport::DecodeEnvelope(transport::TopicId::kState, "vdyn.pb.VehicleState", both, parsed).outcome,
+            transport::Decoded::Outcome::kOk);
+  EXPECT_EQ(parsed.steering_torque(), 2.0);
+  // And one it does not replace is refused with the field's name.
+  std::vector<std::uint8_t> nan_last = tail;
+  const auto b = bytes(bad);
+  nan_last.insert(nan_last.end(), b.begin(), b.end());
+  const transport::Decoded d =
+      transport::DecodeEnvelope(transport::TopicId::kState, "vdyn.pb.VehicleState", nan_last, parsed);
+  EXPECT_EQ(d.outcome, transport::Decoded::Outcome::kNonFinite);
+  EXPECT_EQ(d.field, "steering_torque");
+  // Not protobuf: not sure.
+  const std::vector<std::uint8_t> junk = {0xff, 0xff, 0xff};
+  EXPECT_FALSE(messages::WireClean(*pb::VehicleState::descriptor(), junk));
 }
 
 }  // namespace

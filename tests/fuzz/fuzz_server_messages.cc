@@ -2,7 +2,8 @@
 // vdyn/input or vdyn/control, through the reader's checks (transport), the receiver's checks
 // (input ranges), and into a session (runtime): inputs offered and requests applied at step
 // boundaries, then steps. The first byte picks the topic and the type name's validity; a state
-// that leaves its bounds aborts.
+// that leaves its bounds aborts, and so does a payload the wire check passes that the reflective
+// check refuses.
 #include <cstdint>
 #include <cstdlib>
 #include <memory>
@@ -11,6 +12,7 @@
 #include "vdyn/bridge/params.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/input.pb.h"
+#include "vdyn/messages/checks.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/transport/dds.h"
 
@@ -38,6 +40,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const bool wrong_type = (data[0] & 2) != 0;
   const std::span<const std::uint8_t> payload(data + 1, size - 1);
   vdyn::Session& session = TheSession();
+  // The wire check's promise: whatever it passes, the reflective check passes once parsed.
+  {
+    vdyn::pb::ControlRequest r;
+    vdyn::pb::DriverInput in;
+    google::protobuf::Message& m = control ? static_cast<google::protobuf::Message&>(r) : in;
+    if (m.ParseFromArray(payload.data(), static_cast<int>(payload.size())) &&
+        vdyn::messages::WireClean(*m.GetDescriptor(), payload) &&
+        vdyn::messages::CheckMessage(m).problem != vdyn::messages::Problem::kNone) {
+      std::abort();
+    }
+  }
   if (control) {
     vdyn::pb::ControlRequest r;
     const Decoded d = vdyn::transport::DecodeEnvelope(

@@ -25,7 +25,8 @@ Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
     d.outcome = Decoded::Outcome::kOversized;
   } else if (!into.ParseFromArray(payload.data(), static_cast<int>(payload.size()))) {
     d.outcome = Decoded::Outcome::kMalformed;
-  } else {
+  } else if (!messages::WireClean(*into.GetDescriptor(), payload)) {
+    // Something to report (or not sure): the reflective pass decides and names the field.
     const messages::Finding f = messages::CheckMessage(into);
     if (f.problem == messages::Problem::kNonFinite) d.outcome = Decoded::Outcome::kNonFinite;
     if (f.problem == messages::Problem::kStringTooLong) d.outcome = Decoded::Outcome::kLongString;

@@ -25,6 +25,7 @@
 
 #include <google/protobuf/descriptor.h>
 
+#include "vdyn/messages/wire.h"
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/transport/topics.h"
 
@@ -83,22 +84,7 @@ std::string FormatBytes(double bytes);
 // Wall-clock ns since the epoch as "2026-01-02 03:04:05.678 UTC".
 std::string FormatUtc(std::uint64_t ns);
 
-// Top-level fields of a protobuf payload without parsing it into a message (the recorder reads
-// a state's step and a event's sequence at 64 kHz this way).
-namespace wire {
-struct Field {
-  std::uint32_t number = 0;
-  int type = 0;              // 0 varint, 1 fixed64, 2 length-delimited, 5 fixed32
-  std::uint64_t value = 0;   // varint, fixed64 or fixed32
-  std::span<const std::uint8_t> bytes;  // length-delimited
-};
-// Calls fn for each top-level field until fn returns false; false when the bytes are not a
-// well-formed sequence of fields (a truncated varint, a length past the end, a bad wire type).
-bool ForEachField(std::span<const std::uint8_t> payload,
-                  const std::function<bool(const Field&)>& fn);
-// The first occurrence of a varint or fixed field, or a length-delimited field's bytes.
-std::optional<std::uint64_t> Number(std::span<const std::uint8_t> payload, std::uint32_t field);
-std::optional<std::string_view> Bytes(std::span<const std::uint8_t> payload, std::uint32_t field);
-}  // namespace wire
+// The protobuf wire format, read without parsing (vdyn/messages/wire.h).
+namespace wire = messages::wire;
 
 }  // namespace vdyn::recorder
