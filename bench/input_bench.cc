@@ -15,11 +15,7 @@
 // Usage: input_bench [seconds=30] [--breakdown]
 //   --breakdown also splits the rig thread's CPU into writing, taking states and the rest (it reads
 //   the thread's CPU clock around each part, a system call each: the totals grow a little).
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/stat.h>
-#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -28,15 +24,14 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <mutex>
 #include <numbers>
-#include <sstream>
 #include <string>
 #include <vector>
 
 #include <fmt/format.h>
 
+#include "child.h"
 #include "vdyn/base/time.h"
 #include "vdyn/client/loop.h"
 #include "vdyn/state.pb.h"
@@ -47,52 +42,14 @@
 #include "vdyn/wheel_input/latency.h"
 #include "vdyn/wheel_input/rig.h"
 
-extern char** environ;
 
 namespace {
 
 namespace wi = vdyn::wheel_input;
 using vdyn::base::MonotonicNow;
-
-pid_t Spawn(std::vector<std::string> argv, const std::string& log) {
-  std::vector<char*> args;
-  for (auto& a : argv) args.push_back(a.data());
-  args.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  pid_t pid = -1;
-  if (posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ) != 0) {
-    std::fprintf(stderr, "cannot start %s\n", args[0]);
-    std::exit(1);
-  }
-  posix_spawn_file_actions_destroy(&fa);
-  return pid;
-}
-
-int WaitPid(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-// utime + stime of a process, seconds.
-double ProcessCpuSeconds(pid_t pid) {
-  std::ifstream in(fmt::format("/proc/{}/stat", pid));
-  std::string s;
-  std::getline(in, s);
-  const auto close = s.rfind(')');
-  if (close == std::string::npos) return 0.0;
-  std::istringstream rest(s.substr(close + 2));
-  std::string field;
-  double utime = 0, stime = 0;
-  for (int i = 3; i <= 15 && rest >> field; ++i) {
-    if (i == 14) utime = std::stod(field);
-    if (i == 15) stime = std::stod(field);
-  }
-  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
+using vdyn::bench::ProcessCpuSeconds;
+using vdyn::bench::Spawn;
+using vdyn::bench::WaitPid;
 
 double ThreadCpuSeconds() {
   timespec t{};
@@ -106,29 +63,6 @@ int SleepLoop(double seconds) {
   const auto end = MonotonicNow() + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
   while (MonotonicNow() < end) loop.Wait();
   return 0;
-}
-
-// An Xvfb display for the keyboard client, or -1.
-int StartXvfb(pid_t& pid, const std::string& tmp) {
-  struct stat st {};
-  if (stat("/usr/bin/Xvfb", &st) != 0) return -1;
-  for (int i = 0; i < 100; ++i) {
-    const int n = 600 + static_cast<int>((getpid() + i) % 300);
-    if (stat(fmt::format("/tmp/.X{}-lock", n).c_str(), &st) == 0) continue;
-    pid = Spawn(
-        {"/usr/bin/Xvfb", fmt::format(":{}", n), "-screen", "0", "800x600x24", "-nolisten", "tcp"},
-        tmp + "-xvfb.log");
-    const std::string socket = fmt::format("/tmp/.X11-unix/X{}", n);
-    for (int k = 0; k < 500; ++k) {
-      if (stat(socket.c_str(), &st) == 0) return n;
-      int status = 0;
-      if (waitpid(pid, &status, WNOHANG) == pid) break;
-      vdyn::base::SleepUntil(MonotonicNow() + vdyn::base::Milliseconds(20));
-    }
-    kill(pid, SIGKILL);
-    WaitPid(pid);
-  }
-  return -1;
 }
 
 // Decorators that add up the rig thread's CPU time spent writing inputs and taking states.
@@ -194,11 +128,9 @@ int main(int argc, char** argv) {
   const pid_t server = Spawn({VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status",
                               "--duration", std::to_string(seconds + warmup + 4)},
                              tmp + "-server.log");
-  pid_t xvfb = -1;
-  const int display = StartXvfb(xvfb, tmp);
+  const pid_t xvfb = vdyn::bench::StartXvfb(tmp + "-xvfb.log", "800x600x24");
   pid_t keyboard = -1;
-  if (display >= 0) {
-    setenv("DISPLAY", fmt::format(":{}", display).c_str(), 1);
+  if (xvfb > 0) {
     keyboard = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "20", "--source-id", "kbd",
                       "--wait", "30", "keyboard", "--duration", total},
                      tmp + "-keyboard.log");

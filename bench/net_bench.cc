@@ -10,10 +10,7 @@
 //    its round trip / 2 is the one-way peer figure.
 //
 // Usage: net_bench [seconds=60] [ddsperf_seconds=20]
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -24,70 +21,25 @@
 #include <fstream>
 #include <map>
 #include <mutex>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "child.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/base/time.h"
 #include "vdyn/runtime/pacing.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/state.pb.h"
 
-extern char** environ;
 
 namespace {
 
 using vdyn::transport::TopicId;
-
-pid_t Spawn(std::vector<std::string> argv, const std::string& log) {
-  std::vector<char*> args;
-  for (auto& a : argv) args.push_back(a.data());
-  args.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  pid_t pid = -1;
-  if (posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ) != 0) {
-    std::fprintf(stderr, "cannot start %s\n", args[0]);
-    std::exit(1);
-  }
-  posix_spawn_file_actions_destroy(&fa);
-  return pid;
-}
-
-int WaitPid(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-// utime + stime of a process, seconds.
-double ProcessCpuSeconds(pid_t pid) {
-  std::ifstream in("/proc/" + std::to_string(pid) + "/stat");
-  std::string s;
-  std::getline(in, s);
-  const auto close = s.rfind(')');
-  if (close == std::string::npos) return 0.0;
-  std::istringstream rest(s.substr(close + 2));
-  std::string field;
-  double utime = 0, stime = 0;
-  for (int i = 3; i <= 15 && rest >> field; ++i) {
-    if (i == 14) utime = std::stod(field);
-    if (i == 15) stime = std::stod(field);
-  }
-  return (utime + stime) / static_cast<double>(sysconf(_SC_CLK_TCK));
-}
-
-std::map<std::string, std::string> ReadStats(const std::string& path) {
-  std::map<std::string, std::string> out;
-  std::ifstream in(path);
-  std::string k, v;
-  while (in >> k && std::getline(in, v)) out[k] = v.substr(v.find_first_not_of(' '));
-  return out;
-}
+using vdyn::bench::ProcessCpuSeconds;
+using vdyn::bench::ReadStats;
+using vdyn::bench::Spawn;
+using vdyn::bench::WaitPid;
 
 // Subscriber child: takes every state for `seconds`, prints how many it got.
 int Subscriber(std::uint32_t domain, double seconds) {

@@ -10,11 +10,7 @@
 //            batch run of the same time without output.
 // Medians of REPS runs. Usage: recorder_bench [SECONDS=30] [REPS=3]
 //                              recorder_bench --subscribe DOMAIN SECONDS   (the peer subscriber)
-#include <fcntl.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -22,81 +18,31 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <regex>
-#include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "child.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 
-extern char** environ;
 
 namespace {
 
-struct Child {
-  pid_t pid = -1;
-  std::filesystem::path log;
-};
-
-Child Spawn(const std::vector<std::string>& args, const std::filesystem::path& log) {
-  std::vector<std::string> a = args;
-  std::vector<char*> argv;
-  for (std::string& s : a) argv.push_back(s.data());
-  argv.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  Child c;
-  c.log = log;
-  if (posix_spawn(&c.pid, argv[0], &fa, nullptr, argv.data(), environ) != 0) {
-    std::fprintf(stderr, "cannot start %s\n", argv[0]);
-    std::exit(1);
-  }
-  posix_spawn_file_actions_destroy(&fa);
-  return c;
-}
-
-struct Ended {
-  int code = -1;
-  double cpu_s = 0;
-};
-
-Ended Wait(const Child& c) {
-  int status = 0;
-  rusage ru{};
-  while (wait4(c.pid, &status, 0, &ru) < 0) {
-  }
-  Ended e;
-  e.code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  e.cpu_s = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
-            static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) * 1e-6;
-  return e;
-}
-
-std::string Slurp(const std::filesystem::path& p) {
-  std::ifstream in(p);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-double Median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0.0 : v[v.size() / 2];
-}
+using vdyn::bench::Median;
+using vdyn::bench::Slurp;
+using vdyn::bench::Spawn;
+using vdyn::bench::WaitPid;
 
 // Wall seconds of a command run to its end (exits on failure).
 double Timed(const std::vector<std::string>& args, const std::filesystem::path& log) {
   const auto t0 = std::chrono::steady_clock::now();
-  const Ended e = Wait(Spawn(args, log));
+  const int code = WaitPid(Spawn(args, log));
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  if (e.code != 0) {
-    std::fprintf(stderr, "%s failed (%d):\n%s\n", args[0].c_str(), e.code, Slurp(log).c_str());
+  if (code != 0) {
+    std::fprintf(stderr, "%s failed (%d):\n%s\n", args[0].c_str(), code, Slurp(log).c_str());
     std::exit(1);
   }
   return s;
@@ -159,37 +105,38 @@ int main(int argc, char** argv) {
       // The same session twice, one after the other: once recorded, once read by the peer (on two
       // vCPUs the two together would share the cores the server leaves).
       auto run_server = [&]() {
-        const Child srv = Spawn({server, "--domain", std::to_string(domain), "--world", "flat", "--vehicle-ids",
+        const pid_t srv = Spawn({server, "--domain", std::to_string(domain), "--world", "flat", "--vehicle-ids",
                                  ids, "--duration", std::to_string(seconds), "--no-status"},
                                 dir / "server.log");
-        if (Wait(srv).code != 0) {
+        if (WaitPid(srv) != 0) {
           std::fprintf(stderr, "server failed:\n%s\n", Slurp(dir / "server.log").c_str());
           std::exit(1);
         }
       };
-      const Child rec = Spawn({recorder, "record", file.string(), "--domain", std::to_string(domain), "--no-status"},
+      const pid_t rec = Spawn({recorder, "record", file.string(), "--domain", std::to_string(domain), "--no-status"},
                               dir / "rec.log");
       std::this_thread::sleep_for(std::chrono::seconds(1));  // joined before the server starts
       run_server();
-      kill(rec.pid, SIGINT);
-      const Ended re = Wait(rec);
+      kill(rec, SIGINT);
+      double rec_cpu = 0, sub_cpu = 0;
+      const int rec_code = WaitPid(rec, &rec_cpu);
       ++domain;
-      const Child sub = Spawn({argv[0], "--subscribe", std::to_string(domain), std::to_string(seconds + 4)},
+      const pid_t sub = Spawn({argv[0], "--subscribe", std::to_string(domain), std::to_string(seconds + 4)},
                               dir / "sub.log");
       std::this_thread::sleep_for(std::chrono::seconds(1));
       run_server();
-      const Ended se = Wait(sub);
+      WaitPid(sub, &sub_cpu);
       const std::string log = Slurp(dir / "rec.log");
       std::smatch m;
-      if (re.code != 0 || !std::regex_search(log, m, std::regex("lost ([0-9]+), dropped ([0-9]+); CPU [0-9.]+ s \\(([0-9.]+)%"))) {
-        std::fprintf(stderr, "recorder failed (%d):\n%s\n", re.code, log.c_str());
+      if (rec_code != 0 || !std::regex_search(log, m, std::regex("lost ([0-9]+), dropped ([0-9]+); CPU [0-9.]+ s \\(([0-9.]+)%"))) {
+        std::fprintf(stderr, "recorder failed (%d):\n%s\n", rec_code, log.c_str());
         return 1;
       }
       losses += std::stoull(m[1]) + std::stoull(m[2]);
-      cpu.push_back(re.cpu_s / sim_min);
+      cpu.push_back(rec_cpu / sim_min);
       core.push_back(std::stod(m[3]));
       bytes.push_back(static_cast<double>(std::filesystem::file_size(file)) / sim_min);
-      peer.push_back(se.cpu_s / sim_min);
+      peer.push_back(sub_cpu / sim_min);
       if (n == 1 && r == reps - 1) {
         one_vehicle = file;
       } else {

@@ -10,11 +10,7 @@
 // p99 are printed.
 //
 // Usage: viewer_bench [runs=3] [frames=600]
-#include <fcntl.h>
-#include <poll.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -26,7 +22,7 @@
 #include <string>
 #include <vector>
 
-extern char** environ;
+#include "child.h"
 
 namespace {
 
@@ -42,77 +38,11 @@ void Track(int slot, pid_t pid) {
   g_children[slot] = pid;
 }
 
-// Starts argv with its output in `log`; `to_fd3` becomes the child's fd 3 (after `close_fd`,
-// which may be 3 itself, is closed in the child).
-pid_t Spawn(std::vector<std::string> argv, const std::string& log, int to_fd3 = -1,
-            int close_fd = -1) {
-  std::vector<char*> args;
-  for (auto& a : argv) args.push_back(a.data());
-  args.push_back(nullptr);
-  posix_spawn_file_actions_t fa;
-  posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addopen(&fa, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-  posix_spawn_file_actions_adddup2(&fa, 1, 2);
-  if (close_fd >= 0) posix_spawn_file_actions_addclose(&fa, close_fd);
-  if (to_fd3 >= 0) posix_spawn_file_actions_adddup2(&fa, to_fd3, 3);
-  pid_t pid = -1;
-  if (posix_spawn(&pid, args[0], &fa, nullptr, args.data(), environ) != 0) {
-    std::fprintf(stderr, "viewer_bench: cannot start %s\n", args[0]);
-    std::exit(1);
-  }
-  posix_spawn_file_actions_destroy(&fa);
-  return pid;
-}
+using vdyn::bench::Median;
+using vdyn::bench::ReadStats;
+using vdyn::bench::Spawn;
+using vdyn::bench::WaitPid;
 
-int WaitPid(pid_t pid) {
-  int status = 0;
-  waitpid(pid, &status, 0);
-  return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-}
-
-// Starts Xvfb on a free display (-displayfd) and sets DISPLAY; returns its pid.
-pid_t StartXvfb(const std::string& log) {
-  int fds[2];
-  if (pipe(fds) != 0) std::exit(1);
-  const pid_t pid = Spawn({"/usr/bin/Xvfb", "-displayfd", "3", "-screen", "0", "1920x1080x24",
-                           "-nolisten", "tcp", "-noreset"},
-                          log, fds[1], fds[0]);
-  close(fds[1]);
-  std::string number;
-  pollfd p{fds[0], POLLIN, 0};
-  for (int i = 0; i < 200 && number.find('\n') == std::string::npos; ++i) {
-    if (poll(&p, 1, 100) <= 0) continue;
-    char buf[16];
-    const ssize_t n = read(fds[0], buf, sizeof buf);
-    if (n <= 0) break;
-    number.append(buf, static_cast<std::size_t>(n));
-  }
-  close(fds[0]);
-  while (!number.empty() && number.back() == '\n') number.pop_back();
-  if (number.empty()) {
-    std::fprintf(stderr, "viewer_bench: Xvfb did not start (install xvfb); see %s\n", log.c_str());
-    std::exit(1);
-  }
-  setenv("DISPLAY", (":" + number).c_str(), 1);
-  return pid;
-}
-
-std::map<std::string, std::string> ReadStats(const std::string& path) {
-  std::map<std::string, std::string> out;
-  std::ifstream in(path);
-  std::string line;
-  while (std::getline(in, line)) {
-    const auto sp = line.find(' ');
-    if (sp != std::string::npos) out[line.substr(0, sp)] = line.substr(sp + 1);
-  }
-  return out;
-}
-
-double Median(std::vector<double> v) {
-  if (v.empty()) return 0.0;
-  std::sort(v.begin(), v.end());
-  return v[v.size() / 2];
-}
 
 // The 1-minute load average (other work on a shared machine slows a CPU renderer down).
 std::string LoadAverage() {
@@ -140,7 +70,11 @@ int main(int argc, char** argv) {
   std::system(("mkdir -p " + tmp).c_str());
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
-  const pid_t xvfb = StartXvfb(tmp + "/xvfb.log");
+  const pid_t xvfb = vdyn::bench::StartXvfb(tmp + "/xvfb.log", "1920x1080x24");
+  if (xvfb < 0) {
+    std::fprintf(stderr, "viewer_bench: Xvfb did not start (install xvfb); see %s/xvfb.log\n", tmp.c_str());
+    return 1;
+  }
   Track(0, xvfb);
   std::string renderer;
   std::printf(

@@ -651,6 +651,59 @@ TEST_F(RecorderTest, BadFilesAreRefusedWithFileOffsetAndReason) {
   EXPECT_THAT(usage, HasSubstr("playback rate must be in [0.01, 1000]"));
 }
 
+// A long hole is states that never arrived unless the vehicle was spawned or restored in it: then
+// it is a jump. (A rule by length alone called a network cut over 5 s a jump.)
+TEST_F(RecorderTest, InfoTellsALongCutFromARestoreByTheSessionsEvents) {
+  const auto file = dir_ / "holes.mcap";
+  {
+    mcap::Writer w(file, {});
+    auto channel = [&](TopicId t, std::uint32_t key) {
+      const auto* d = recorder::PayloadDescriptor(t);
+      const std::uint16_t sc = w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
+      return w.AddChannel(sc, recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
+    };
+    const std::uint16_t s1 = channel(TopicId::kState, 1), s2 = channel(TopicId::kState, 2),
+                        ev = channel(TopicId::kEvents, 2);
+    auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
+      const std::string b = m.SerializeAsString();
+      w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+    };
+    auto state = [&](std::uint16_t ch, std::uint32_t id, std::uint64_t step, std::uint64_t t) {
+      pb::VehicleState st;
+      st.set_vehicle_id(id);
+      st.set_server_id("s");
+      st.set_step(step);
+      st.set_step_ns(1'000'000);
+      put(ch, t, st);
+    };
+    const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
+    std::uint64_t t = t0;
+    // Vehicle 1: steps 0..999, a 10 s cut (nothing arrives), 11000..11999, a 3-step loss.
+    // Vehicle 2: steps 0..999, restored to step 20000 (a Spawned event there), 20000..20999.
+    for (std::uint64_t k = 0; k < 1000; ++k, t += 1'000'000) {
+      state(s1, 1, k, t);
+      state(s2, 2, k, t);
+    }
+    pb::SessionEvent e;
+    e.set_vehicle_id(2);
+    e.set_server_id("s");
+    e.set_step(20000);
+    e.set_sequence(1);
+    e.mutable_spawned()->set_step_ns(1'000'000);
+    put(ev, t, e);
+    for (std::uint64_t k = 0; k < 1000; ++k, t += 1'000'000) {
+      if (k < 500 || k > 502) state(s1, 1, 11000 + k, t);
+      state(s2, 2, 20000 + k, t);
+    }
+    w.Close();
+  }
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  EXPECT_THAT(info, HasSubstr("1         steps 0..11999 (0.000 .. 12.000 s of simulation), 1997 states, 10003 missing\n"));
+  EXPECT_THAT(info, HasSubstr("2         steps 0..20999 (0.000 .. 21.000 s of simulation), 2000 states, 0 missing (1 jumps: restarts or restores)"));
+  EXPECT_THAT(info, HasSubstr("vehicle 1: 10003 states missing (largest gap 10000 steps, from step 1000)"));
+}
+
 // The server numbers its events across every vehicle while a take hands them over vehicle by
 // vehicle: out of order, with nothing lost. Only what never arrives is missing.
 TEST(SequenceGaps, CountsOnlyWhatNeverArrivesWhateverTheOrder) {
