@@ -204,6 +204,51 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
   ASSERT_TRUE(until_source("primary", 20s)) << source;
 }
 
+// With a watchdog shorter than the DDS lease the ownership lease follows the watchdog (three
+// quarters of it): a primary that dies hands the vehicle to the live backup with no braking in
+// between. (A watchdog of 150 ms here, lease 112.5 ms: 37.5 ms to spare for a loaded machine;
+// with the fixed 200 ms lease of before, the vehicle braked from 150 ms to 200 ms.)
+TEST_F(Net, ABackupTakesOverBeforeTheWatchdogBrakes) {
+  auto server = StartServer({"--watchdog-ms", "150"});
+  const auto primary_csv = dir_ / "primary.csv", backup_csv = dir_ / "backup.csv";
+  testing::WriteFile(primary_csv, "t_s,steer_deg,throttle,brake\n0,0,0.5,0\n600,0,0.5,0\n");
+  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
+  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
+                            "backup", "--strength", "5"}, "backup.log");
+  auto primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
+                             "primary", "--strength", "20"}, "primary.log");
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::string source;
+  bool watching = false, braked = false;
+  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
+  auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
+    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
+      source = s.input().source_id();
+      if (source == "primary" && s.input().sequence() != last_sequence) {
+        last_sequence = s.input().sequence();
+        step_of_last_new_sample = s.step();
+      }
+      if (watching && s.control().watchdog_safe_state()) braked = true;
+      if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
+    }, [&] { return source == want; });
+  };
+  ASSERT_TRUE(until_source("primary", 20s)) << source << "\n" << server->Log();
+  first_backup_step = 0;
+  watching = true;
+  primary->Signal(SIGKILL);
+  primary->Wait(5s);
+  ASSERT_TRUE(until_source("backup", 10s)) << source;
+  const std::uint64_t failover_ms = first_backup_step - step_of_last_new_sample;
+  std::printf("  failover with a 150 ms watchdog: the backup drives %llu ms (simulated) after the "
+              "primary's last sample (lease 112.5 ms); safe state in between: %s\n",
+              static_cast<unsigned long long>(failover_ms), braked ? "yes" : "no");
+  EXPECT_FALSE(braked) << "the vehicle braked in the watchdog's safe state before the backup drove";
+  EXPECT_LT(failover_ms, 150u);  // before the watchdog
+  EXPECT_GE(failover_ms, 56u);   // not at once: half the lease (a loaded server counts fewer steps)
+}
+
 TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
   auto server = StartServer({});
   transport::Participant p(domain_);

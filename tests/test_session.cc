@@ -525,6 +525,30 @@ TEST(InputArbiter, TheStrongestLiveValidSourceDrives) {
   EXPECT_TRUE(a.Knows(primary));
 }
 
+// The lease is DDS's liveliness lease (200 ms) unless the watchdog would brake first: then three
+// quarters of the watchdog, so a live backup drives before the safe state.
+TEST(InputArbiter, TheLeaseEndsBeforeTheWatchdogBrakes) {
+  EXPECT_EQ(OwnershipLease(base::Milliseconds(100)).ns, base::Milliseconds(75).ns);
+  EXPECT_EQ(OwnershipLease(base::Milliseconds(200)).ns, base::Milliseconds(150).ns);
+  EXPECT_EQ(OwnershipLease(base::Milliseconds(1000)).ns, base::Milliseconds(200).ns);
+  EXPECT_EQ(OwnershipLease(base::Milliseconds(20)).ns, base::Milliseconds(15).ns);
+  EXPECT_EQ(OwnershipLease(base::Milliseconds(4)).ns, base::Milliseconds(10).ns);  // the floor
+  // With the default watchdog: the primary's last sample at t = 0, the backup sending every ms;
+  // at 75 ms the backup drives, 25 ms before the watchdog.
+  InputArbiter a(OwnershipLease(base::Milliseconds(100)));
+  pb::DriverInput in;
+  in.set_vehicle_id(1);
+  in.set_source_id("primary");
+  const base::MonoTime t0{1'000'000'000};
+  ASSERT_TRUE(a.Offer(in, 1, 20, t0));
+  in.set_source_id("backup");
+  std::int64_t took_over_ms = -1;
+  for (int ms = 1; ms <= 100 && took_over_ms < 0; ++ms) {
+    if (a.Offer(in, 2, 5, t0 + base::Milliseconds(ms))) took_over_ms = ms;
+  }
+  EXPECT_EQ(took_over_ms, 76);  // the first sample after the lease of 75 ms
+}
+
 TEST(InputArbiter, EqualStrengthsKeepTheCurrentOwner) {
   InputArbiter a(base::Milliseconds(200));
   const base::MonoTime t{5'000'000'000};

@@ -233,7 +233,8 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->capture_default_str();
   app.add_option("--watchdog-ms", o.watchdog_ms,
-                 "Without live input for this long a vehicle brakes to a safe state")
+                 "Without live input for this long a vehicle brakes to a safe state (a live backup "
+                 "source takes over after 3/4 of it, or 200 ms when that is shorter)")
       ->check(vdyn::cli::InRange(vdyn::limits::kWatchdogMs))
       ->capture_default_str();
   app.add_option("--lockstep-timeout", o.lockstep_timeout_s,

@@ -244,9 +244,10 @@ T_HEAL1=$(now_ns)
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_CUT1" primary 'src == "backup"')"
 CUT_BACKUP_MS=$((EV - ANCHOR))
 figure "cut -> backup driving: $CUT_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_CUT1" "$RECV") ms after the cut)"
-# The watchdog (100 ms) is shorter than the lease (200 ms): the vehicle brakes in its safe state
-# from 100 ms after the primary's last sample until the backup, live all along, gets the lease.
-# Before the backup, every step applies the primary's last input or the safe state, nothing else.
+# The lease follows the watchdog (75 ms for its 100 ms): the backup, live all along, drives before
+# the watchdog would brake. Should the server's receiver run late (a loaded machine), the safe
+# state may come first for a few steps: reported, not an error. Before the backup, every step
+# applies the primary's last input or the safe state, nothing else.
 read -r SAFE1 ANCHOR1 _ <<<"$(after_event "$OBS_A" "$T_CUT1" primary 'safe == 1 || src == "backup"')"
 OTHER=$(awk -v a="$T_CUT1" -v s="$EV" "$FIELDS"' ok && pub > a && step < s && src != "primary" && !(src == "watchdog" && safe == 1)' "$OBS_A" | wc -l)
 [[ $OTHER -eq 0 ]] || die "$OTHER steps applied neither the primary's input nor the safe state before the backup"
@@ -254,6 +255,8 @@ if [[ $SAFE1 -lt $EV ]]; then
   CUT_SAFE1_MS=$((SAFE1 - ANCHOR1))
   figure "  meanwhile: safe state from $CUT_SAFE1_MS ms simulated after the primary's last sample until the backup drove"
   in_range "$CUT_SAFE1_MS" 100 1000 || die "cut -> safe state $CUT_SAFE1_MS ms, expected 100..1000 (watchdog 100 ms)"
+else
+  figure "  meanwhile: no safe state (the backup drove before the watchdog)"
 fi
 
 echo "multihost: 2. heal host B's link"
@@ -349,7 +352,8 @@ GAPLINE=$(grep -E '^  vehicle 1: [0-9]+ states missing \(largest gap [0-9]+ step
   die "info lists no missing states for vehicle 1"
 read -r MISSING LARGEST GAP_AT <<<"$(sed -E 's/.*: ([0-9]+) states missing \(largest gap ([0-9]+) steps, from step ([0-9]+)\).*/\1 \2 \3/' <<<"$GAPLINE")"
 figure "recorder (host B): $MISSING states missing, largest gap $LARGEST steps from step $GAP_AT (cuts at steps ~$GAP1_FROM..$GAP1_TO and ~$GAP2_FROM..$GAP2_TO)"
-# Each cut lasts at least a lease (200 ms) and never past the heal plus host B's first state.
+# The cut without a backup lasts at least until the safe state (100 ms), and no cut lasts past
+# its heal plus host B's first state.
 [[ $LARGEST -ge 100 ]] || die "the largest gap ($LARGEST steps) is shorter than a cut"
 in_range "$GAP_AT" $((GAP1_FROM - 50)) "$GAP1_TO" || in_range "$GAP_AT" $((GAP2_FROM - 50)) "$GAP2_TO" ||
   die "the largest gap (from step $GAP_AT) is in neither cut"
@@ -374,8 +378,8 @@ wait "$SERVER_PID" || die "the server did not stop cleanly (exit $?): $(tail -n 
 # ---------------------------------------------------------------------------------------------
 # Bounds that hold on a loaded 2-core machine (the lease and the watchdog count in the server's
 # steps or its wall clock; a lagging server loop shifts them, never halves or decuples them).
-in_range "$CUT_BACKUP_MS" 100 2000 || die "cut -> backup $CUT_BACKUP_MS ms, expected 100..2000 (lease 200 ms)"
-in_range "$DEATH_BACKUP_MS" 100 2000 || die "death -> backup $DEATH_BACKUP_MS ms, expected 100..2000 (lease 200 ms)"
+in_range "$CUT_BACKUP_MS" 37 2000 || die "cut -> backup $CUT_BACKUP_MS ms, expected 37..2000 (lease 75 ms)"
+in_range "$DEATH_BACKUP_MS" 37 2000 || die "death -> backup $DEATH_BACKUP_MS ms, expected 37..2000 (lease 75 ms)"
 in_range "$CUT_SAFE_MS" 100 1000 || die "cut -> safe state $CUT_SAFE_MS ms, expected 100..1000 (watchdog 100 ms)"
 for v in "$HEAL_PRIMARY_MS" "$HEAL_FLOW_MS" "$HEAL2_PRIMARY_MS" "$HEAL2_FLOW_MS"; do
   in_range "$v" 0 30000 || die "a heal took $v ms to show (expected under 30 s)"

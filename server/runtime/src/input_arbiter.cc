@@ -4,6 +4,14 @@
 
 namespace vdyn {
 
+base::Nanos OwnershipLease(base::Nanos watchdog) {
+  const base::Nanos liveliness = base::Milliseconds(200);
+  // Never under 10 ms: samples 1 ms apart, late by a few, must not pass the vehicle back and forth.
+  const base::Nanos floor = base::Milliseconds(10);
+  const base::Nanos before_watchdog{std::max(watchdog.ns / 4 * 3, floor.ns)};
+  return before_watchdog.ns < liveliness.ns ? before_watchdog : liveliness;
+}
+
 bool InputArbiter::Live(const Source& s, base::MonoTime now) const {
   return s.last_valid.ns >= 0 && now - s.last_valid <= lease_;
 }

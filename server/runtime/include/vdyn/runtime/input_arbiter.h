@@ -2,7 +2,9 @@
 //
 // vdyn/input is read with shared ownership, so the server sees every source (a primary rig, a
 // backup device, a player) and decides itself: a source is live while its last *valid* sample is
-// younger than the lease (200 ms); among live sources the strongest (its writer's ownership
+// younger than the lease (OwnershipLease: 200 ms, or less than the watchdog when that is
+// shorter, so a live backup drives before the vehicle would brake for want of input); among
+// live sources the strongest (its writer's ownership
 // strength, then the current owner on a tie) drives. A source whose samples are refused - a NaN,
 // a value out of range, a malformed payload - stops refreshing its liveness and loses the vehicle
 // to a valid backup within the lease; the diagnostics name it and say why (issue: a live rig
@@ -20,6 +22,13 @@
 #include "vdyn/input.pb.h"
 
 namespace vdyn {
+
+// The lease for a server whose input watchdog is `watchdog`: the DDS liveliness lease of
+// vdyn/input (200 ms), or three quarters of the watchdog when that is shorter (75 ms for the
+// default 100 ms), so that a live backup takes the vehicle over before the watchdog's safe state
+// would brake it, with a quarter of the watchdog to spare for a late receiver thread. Never
+// under 10 ms (1 kHz samples a little late must not pass the vehicle back and forth).
+base::Nanos OwnershipLease(base::Nanos watchdog);
 
 class InputArbiter {
  public:
