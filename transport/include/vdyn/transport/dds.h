@@ -73,8 +73,6 @@ class Participant {
   dds_entity_t topics_[8] = {};
 };
 
-// Writes protobuf messages on one topic. Serialises into a buffer it keeps between writes (no
-// allocation once the buffer has grown to the message's size).
 // How a writer's samples go out. kEach: every write is its own datagram, sent before Write()
 // returns. kBatched: writes gather in the writer's packet (several samples per datagram, up to
 // Cyclone's message size) until Flush() or until the packet is full; for a burst of samples
@@ -83,6 +81,8 @@ class Participant {
 // writer flushes after each write itself and keeps its behaviour.
 enum class Sending { kEach, kBatched };
 
+// Writes protobuf messages on one topic. Serialises into a buffer it keeps between writes (no
+// allocation once the buffer has grown to the message's size).
 class RawWriter {
  public:
   RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength = 0,
