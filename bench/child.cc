@@ -74,9 +74,9 @@ pid_t StartXvfb(const std::filesystem::path& log, const std::string& screen) {
   if (stat("/usr/bin/Xvfb", &st) != 0) return -1;
   int fds[2];
   if (pipe(fds) != 0) return -1;
-  const pid_t pid = Spawn({"/usr/bin/Xvfb", "-displayfd", "3", "-screen", "0", screen,
-                           "-nolisten", "tcp", "-noreset"},
-                          log, fds[1], fds[0]);
+  const pid_t pid = Spawn(
+      {"/usr/bin/Xvfb", "-displayfd", "3", "-screen", "0", screen, "-nolisten", "tcp", "-noreset"},
+      log, fds[1], fds[0]);
   close(fds[1]);
   std::string number;
   pollfd p{fds[0], POLLIN, 0};

@@ -63,7 +63,8 @@ Finding Check(const gp::Message& msg, bool strings) {
         break;
       case gp::FieldDescriptor::CPPTYPE_MESSAGE:
         for (int i = 0; i < n; ++i) {
-          const gp::Message& m = repeated ? r->GetRepeatedMessage(msg, f, i) : r->GetMessage(msg, f);
+          const gp::Message& m =
+              repeated ? r->GetRepeatedMessage(msg, f, i) : r->GetMessage(msg, f);
           Finding inner = Check(m, strings);
           if (inner.problem != Problem::kNone) {
             inner.field = FieldPath(f->name(), repeated ? i : -1, inner.field);
@@ -83,7 +84,7 @@ struct Plan {
   enum class Kind : std::uint8_t { kIgnore, kDouble, kFloat, kString, kMessage };
   struct Entry {
     Kind kind = Kind::kIgnore;
-    std::uint32_t max_bytes = 0;  // kString
+    std::uint32_t max_bytes = 0;    // kString
     const Plan* message = nullptr;  // kMessage
   };
   std::vector<Entry> by_number;  // index: field number
@@ -208,7 +209,8 @@ Plans& AllPlans() {
 }  // namespace
 
 bool WireClean(const gp::Descriptor& type, std::span<const std::uint8_t> bytes) {
-  static_assert(std::endian::native == std::endian::little, "the wire's fixed-width values are little-endian");
+  static_assert(std::endian::native == std::endian::little,
+                "the wire's fixed-width values are little-endian");
   const Plan* plan = AllPlans().Get(type);
   return plan != nullptr && Clean(*plan, bytes, 0);
 }
@@ -219,7 +221,9 @@ std::size_t MaxStringBytes(const std::string& name) {
   return limits::kMaxNameBytes;
 }
 
-Finding CheckMessage(const gp::Message& msg) { return Check(msg, true); }
+Finding CheckMessage(const gp::Message& msg) {
+  return Check(msg, true);
+}
 
 bool AllFinite(const gp::Message& msg, std::string* where) {
   const Finding f = Check(msg, false);

@@ -147,7 +147,9 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
   env.payload._buffer = const_cast<std::uint8_t*>(payload.data());
   env.payload._release = false;
   const dds_return_t rc = dds_write(writer_, &env);
-  if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) dds_write_flush(writer_);
+  if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) {
+    dds_write_flush(writer_);
+  }
   if (rc != DDS_RETCODE_OK) {
     last_error_ = DdsError(std::string("dds_write on ") + s.name, rc);
     return false;

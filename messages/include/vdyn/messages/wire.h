@@ -13,8 +13,8 @@ namespace vdyn::messages::wire {
 
 struct Field {
   std::uint32_t number = 0;
-  int type = 0;              // 0 varint, 1 fixed64, 2 length-delimited, 5 fixed32
-  std::uint64_t value = 0;   // varint, fixed64 or fixed32
+  int type = 0;                         // 0 varint, 1 fixed64, 2 length-delimited, 5 fixed32
+  std::uint64_t value = 0;              // varint, fixed64 or fixed32
   std::span<const std::uint8_t> bytes;  // length-delimited
 };
 
@@ -37,7 +37,9 @@ bool ForEachField(std::span<const std::uint8_t> p, F&& fn) {
   auto fixed = [&](int n, std::uint64_t& out) {
     if (p.size() - i < static_cast<std::size_t>(n)) return false;
     out = 0;
-    for (int k = 0; k < n; ++k) out |= static_cast<std::uint64_t>(p[i + static_cast<std::size_t>(k)]) << (8 * k);
+    for (int k = 0; k < n; ++k) {
+      out |= static_cast<std::uint64_t>(p[i + static_cast<std::size_t>(k)]) << (8 * k);
+    }
     i += static_cast<std::size_t>(n);
     return true;
   };

@@ -173,7 +173,8 @@ class ServerNode {
   std::vector<DeferredReply> deferred_step_replies_;
 
   // Receiver's: input arbitration and what other servers run; copies for the publisher.
-  InputArbiter arbiter_{OwnershipLease(base::Nanos{static_cast<std::int64_t>(options_.session.watchdog_s * 1e9)})};
+  InputArbiter arbiter_{
+      OwnershipLease(base::Nanos{static_cast<std::int64_t>(options_.session.watchdog_s * 1e9)})};
   std::mutex sources_mu_;
   std::vector<InputArbiter::Source> sources_copy_;
   struct OtherVehicle {

@@ -1,8 +1,8 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
 // serialised sample, an instance lookup), so the loop serialises each state into a preallocated
 // frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
-// effort, keep last 1), batched: a step's states leave together. The loop neither allocates nor blocks; a full queue drops the state and
-// counts it.
+// effort, keep last 1), batched: a step's states leave together. The loop neither allocates nor
+// blocks; a full queue drops the state and counts it.
 #pragma once
 
 #include <array>
