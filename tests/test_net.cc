@@ -56,8 +56,37 @@ class Net : public ::testing::Test {
     return std::make_unique<Process>(argv, dir_ / log);
   }
 
+  // A rig driving vehicle 1 at a constant throttle for 600 s of wall-clock time as `source`.
+  std::unique_ptr<Process> StartRig(const std::string& source, const std::string& throttle,
+                                    int strength, const std::string& log = "") {
+    const auto csv = dir_ / (source + ".csv");
+    testing::WriteFile(csv, "t_s,steer_deg,throttle,brake\n0,0," + throttle + ",0\n600,0," +
+                                throttle + ",0\n");
+    return StartInput({"--maneuver", csv.string(), "--clock", "wall", "--source-id", source,
+                       "--strength", std::to_string(strength)},
+                      log.empty() ? source + ".log" : log);
+  }
+
   std::uint32_t domain_ = 0;
   testing::TempDir dir_;
+};
+
+// Who drives, as the states say: the step of the primary's last new sample, the first step the
+// backup drove, and whether the safe state showed once `watching`.
+struct Handover {
+  std::string source;
+  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
+  bool watching = false, braked = false;
+  void See(const pb::VehicleState& s) {
+    source = s.input().source_id();
+    if (source == "primary" && s.input().sequence() != last_sequence) {
+      last_sequence = s.input().sequence();
+      step_of_last_new_sample = s.step();
+    }
+    if (watching && s.control().watchdog_safe_state()) braked = true;
+    if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
+  }
+  std::uint64_t failover_ms() const { return first_backup_step - step_of_last_new_sample; }
 };
 
 // Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
@@ -158,38 +187,27 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
 
 TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
   auto server = StartServer({"--watchdog-ms", "1000"});
-  const auto primary_csv = dir_ / "primary.csv", backup_csv = dir_ / "backup.csv";
-  testing::WriteFile(primary_csv, "t_s,steer_deg,throttle,brake\n0,0,0.5,0\n600,0,0.5,0\n");
-  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
-  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
-                            "backup", "--strength", "5"}, "backup.log");
-  auto primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
-                             "primary", "--strength", "20"}, "primary.log");
+  auto backup = StartRig("backup", "0.2", 5);
+  auto primary = StartRig("primary", "0.5", 20);
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
-  std::string source;
-  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
+  Handover h;
   auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
     return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
-      source = s.input().source_id();
-      if (source == "primary" && s.input().sequence() != last_sequence) {
-        last_sequence = s.input().sequence();
-        step_of_last_new_sample = s.step();
-      }
-      if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
-      if (source == want) {
+      h.See(s);
+      if (h.source == want) {
         EXPECT_DOUBLE_EQ(s.input().throttle(), want == "primary" ? 0.5 : 0.2);
       }
-    }, [&] { return source == want; });
+    }, [&] { return h.source == want; });
   };
-  ASSERT_TRUE(until_source("primary", 20s)) << source << "\n" << server->Log();
+  ASSERT_TRUE(until_source("primary", 20s)) << h.source << "\n" << server->Log();
   // The primary rig dies without a goodbye: its input stops and after the lease the backup drives.
-  first_backup_step = 0;
+  h.first_backup_step = 0;
   primary->Signal(SIGKILL);
   primary->Wait(5s);
-  ASSERT_TRUE(until_source("backup", 10s)) << source;
-  const std::uint64_t failover_ms = first_backup_step - step_of_last_new_sample;
+  ASSERT_TRUE(until_source("backup", 10s)) << h.source;
+  const std::uint64_t failover_ms = h.failover_ms();
   std::printf("  failover: the backup drives %llu ms (simulated) after the primary's last sample "
               "(lease 200 ms)\n",
               static_cast<unsigned long long>(failover_ms));
@@ -199,9 +217,8 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
   EXPECT_GE(failover_ms, 100u);
   EXPECT_LE(failover_ms, 1000u);
   // It comes back and takes over again.
-  primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
-                        "primary", "--strength", "20"}, "primary2.log");
-  ASSERT_TRUE(until_source("primary", 20s)) << source;
+  primary = StartRig("primary", "0.5", 20, "primary2.log");
+  ASSERT_TRUE(until_source("primary", 20s)) << h.source;
 }
 
 // With a watchdog shorter than the DDS lease the ownership lease follows the watchdog (three
@@ -210,41 +227,27 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
 // with the fixed 200 ms lease of before, the vehicle braked from 150 ms to 200 ms.)
 TEST_F(Net, ABackupTakesOverBeforeTheWatchdogBrakes) {
   auto server = StartServer({"--watchdog-ms", "150"});
-  const auto primary_csv = dir_ / "primary.csv", backup_csv = dir_ / "backup.csv";
-  testing::WriteFile(primary_csv, "t_s,steer_deg,throttle,brake\n0,0,0.5,0\n600,0,0.5,0\n");
-  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
-  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
-                            "backup", "--strength", "5"}, "backup.log");
-  auto primary = StartInput({"--maneuver", primary_csv.string(), "--clock", "wall", "--source-id",
-                             "primary", "--strength", "20"}, "primary.log");
+  auto backup = StartRig("backup", "0.2", 5);
+  auto primary = StartRig("primary", "0.5", 20);
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
-  std::string source;
-  bool watching = false, braked = false;
-  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
+  Handover h;
   auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
-    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
-      source = s.input().source_id();
-      if (source == "primary" && s.input().sequence() != last_sequence) {
-        last_sequence = s.input().sequence();
-        step_of_last_new_sample = s.step();
-      }
-      if (watching && s.control().watchdog_safe_state()) braked = true;
-      if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
-    }, [&] { return source == want; });
+    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) { h.See(s); },
+                                       [&] { return h.source == want; });
   };
-  ASSERT_TRUE(until_source("primary", 20s)) << source << "\n" << server->Log();
-  first_backup_step = 0;
-  watching = true;
+  ASSERT_TRUE(until_source("primary", 20s)) << h.source << "\n" << server->Log();
+  h.first_backup_step = 0;
+  h.watching = true;
   primary->Signal(SIGKILL);
   primary->Wait(5s);
-  ASSERT_TRUE(until_source("backup", 10s)) << source;
-  const std::uint64_t failover_ms = first_backup_step - step_of_last_new_sample;
+  ASSERT_TRUE(until_source("backup", 10s)) << h.source;
+  const std::uint64_t failover_ms = h.failover_ms();
   std::printf("  failover with a 150 ms watchdog: the backup drives %llu ms (simulated) after the "
               "primary's last sample (lease 112.5 ms); safe state in between: %s\n",
-              static_cast<unsigned long long>(failover_ms), braked ? "yes" : "no");
-  EXPECT_FALSE(braked) << "the vehicle braked in the watchdog's safe state before the backup drove";
+              static_cast<unsigned long long>(failover_ms), h.braked ? "yes" : "no");
+  EXPECT_FALSE(h.braked) << "the vehicle braked in the watchdog's safe state before the backup drove";
   EXPECT_LT(failover_ms, 150u);  // before the watchdog
   EXPECT_GE(failover_ms, 56u);   // not at once: half the lease (a loaded server counts fewer steps)
 }
@@ -407,10 +410,7 @@ TEST_F(Net, StepRepliesAreAnsweredEachAtItsOwnStepsOrCancelled) {
 
 TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   auto server = StartServer({"--watchdog-ms", "2000"});
-  const auto backup_csv = dir_ / "backup.csv";
-  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
-  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
-                            "backup", "--strength", "5"}, "backup.log");
+  auto backup = StartRig("backup", "0.2", 5);
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Writer<pb::DriverInput> primary(p, TopicId::kInput, 20);
@@ -612,10 +612,7 @@ TEST_F(Net, ASecondServerWithAVehicleOrAnIdInUseIsRefused) {
 // diagnostics name it and say why.
 TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   auto server = StartServer({"--watchdog-ms", "2000"});
-  const auto backup_csv = dir_ / "backup.csv";
-  testing::WriteFile(backup_csv, "t_s,steer_deg,throttle,brake\n0,0,0.2,0\n600,0,0.2,0\n");
-  auto backup = StartInput({"--maneuver", backup_csv.string(), "--clock", "wall", "--source-id",
-                            "backup", "--strength", "5"}, "backup.log");
+  auto backup = StartRig("backup", "0.2", 5);
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Writer<pb::DriverInput> primary(p, TopicId::kInput, 20);

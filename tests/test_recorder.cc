@@ -358,20 +358,27 @@ TEST_F(RecorderTest, ExportMatchesABatchRunOfTheSameDriveColumnForColumn) {
 
 // --- play ----------------------------------------------------------------------------------------
 
+// Recordings written here: a channel as the recorder names it, and a message on it (log time =
+// publish time).
+std::uint16_t AddChannel(mcap::Writer& w, TopicId t, std::uint32_t key) {
+  const auto* d = recorder::PayloadDescriptor(t);
+  const std::uint16_t s = w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
+  return w.AddChannel(s, recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
+}
+void Put(mcap::Writer& w, std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
+  const std::string b = m.SerializeAsString();
+  w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+}
+
 // A recording written here: a small world, parameters, and 3000 states (and a driver input with
 // each) exactly 1 ms apart in log time.
 void WriteRecording(const std::filesystem::path& path) {
   mcap::Writer w(path, {});
-  auto channel = [&](TopicId t, std::uint32_t key) {
-    const auto* d = recorder::PayloadDescriptor(t);
-    const std::uint16_t s = w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
-    return w.AddChannel(s, recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
-  };
+  auto channel = [&](TopicId t, std::uint32_t key) { return AddChannel(w, t, key); };
   const std::uint16_t world = channel(TopicId::kWorld, 77), params = channel(TopicId::kParams, 1),
                       state = channel(TopicId::kState, 1), input = channel(TopicId::kInput, 1);
   auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
-    const std::string b = m.SerializeAsString();
-    w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+    Put(w, ch, t, m);
   };
   const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
   pb::WorldDescription wd;
@@ -657,16 +664,10 @@ TEST_F(RecorderTest, InfoTellsALongCutFromARestoreByTheSessionsEvents) {
   const auto file = dir_ / "holes.mcap";
   {
     mcap::Writer w(file, {});
-    auto channel = [&](TopicId t, std::uint32_t key) {
-      const auto* d = recorder::PayloadDescriptor(t);
-      const std::uint16_t sc = w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
-      return w.AddChannel(sc, recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
-    };
-    const std::uint16_t s1 = channel(TopicId::kState, 1), s2 = channel(TopicId::kState, 2),
-                        ev = channel(TopicId::kEvents, 2);
+    const std::uint16_t s1 = AddChannel(w, TopicId::kState, 1), s2 = AddChannel(w, TopicId::kState, 2),
+                        ev = AddChannel(w, TopicId::kEvents, 2);
     auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
-      const std::string b = m.SerializeAsString();
-      w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+      Put(w, ch, t, m);
     };
     auto state = [&](std::uint16_t ch, std::uint32_t id, std::uint64_t step, std::uint64_t t) {
       pb::VehicleState st;
