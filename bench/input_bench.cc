@@ -9,8 +9,9 @@
 //    update, same machine);
 //  - CPU: the rig loop's own thread, and whole processes over the same seconds: `vdyn-input
 //    keyboard` with its window on an Xvfb display (when Xvfb is installed), `vdyn-input play demo`
-//    at 1 kHz (the maneuver player) and a bare 1 kHz sleep loop (the floor of any 1 kHz process on
-//    this machine) as peers.
+//    at 1 kHz (the maneuver player), and two floors as peers: a bare 1 kHz sleep loop (any 1 kHz
+//    process on this machine) and a bare 1 kHz input writer (a process that does nothing but the
+//    issue's publishing: one DriverInput written on DDS a millisecond, no state read, no SDL).
 //
 // Usage: input_bench [seconds=30] [--breakdown]
 //   --breakdown also splits the rig thread's CPU into writing, taking states and the rest (it reads
@@ -33,6 +34,7 @@
 
 #include "child.h"
 #include "vdyn/base/time.h"
+#include "vdyn/client/driver_input.h"
 #include "vdyn/client/loop.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
@@ -63,6 +65,26 @@ int SleepLoop(double seconds) {
   const auto end = MonotonicNow() + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
   while (MonotonicNow() < end) loop.Wait();
   return 0;
+}
+
+// The floor of the publishing the issue asks for: one input written on vdyn/input every
+// millisecond (vehicle 1, the weakest strength so it never drives), nothing read, no SDL.
+int WriterLoop(double seconds, std::uint32_t domain) {
+  vdyn::transport::Participant participant(domain);
+  vdyn::client::InputPublisher writer(participant, 1, "floor-writer", 1);
+  vdyn::pb::DriverInput msg;
+  msg.set_steer_mode(vdyn::pb::STEER_ROAD_WHEEL);
+  vdyn::client::FixedRateLoop loop(vdyn::base::Milliseconds(1));
+  const auto end = MonotonicNow() + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
+  std::uint64_t failed = 0;
+  while (MonotonicNow() < end) {
+    loop.Wait();
+    if (!writer.Publish(msg)) ++failed;
+  }
+  std::printf("floor writer: %llu written, %llu failed\n",
+              static_cast<unsigned long long>(writer.sent()),
+              static_cast<unsigned long long>(failed));
+  return failed == 0 ? 0 : 1;
 }
 
 // Decorators that add up the rig thread's CPU time spent writing inputs and taking states.
@@ -110,6 +132,9 @@ class TimedFeed : public wi::VehicleFeed {
 
 int main(int argc, char** argv) {
   if (argc >= 3 && std::string(argv[1]) == "--sleep-loop") return SleepLoop(std::atof(argv[2]));
+  if (argc >= 4 && std::string(argv[1]) == "--writer-loop") {
+    return WriterLoop(std::atof(argv[2]), static_cast<std::uint32_t>(std::atoi(argv[3])));
+  }
   const double seconds = argc > 1 ? std::atof(argv[1]) : 30.0;
   const bool breakdown = argc > 2 && std::string(argv[2]) == "--breakdown";
   if (std::getenv("CYCLONEDDS_URI") == nullptr) {
@@ -139,6 +164,7 @@ int main(int argc, char** argv) {
                               "play", "demo", "--clock", "wall", "--loop"},
                              tmp + "-player.log");
   const pid_t floor = Spawn({argv[0], "--sleep-loop", total}, tmp + "-floor.log");
+  const pid_t writer = Spawn({argv[0], "--writer-loop", total, dom}, tmp + "-writer.log");
 
   // The rig in this process: a virtual G29, DDS, a recording force-feedback device.
   wi::SdlContext sdl(false);
@@ -209,7 +235,7 @@ int main(int argc, char** argv) {
       measure_from + vdyn::base::Nanos{static_cast<std::int64_t>(seconds * 1e9)};
   vdyn::client::FixedRateLoop clock(vdyn::base::Milliseconds(1), t0);
   bool started = false;
-  double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, self0 = 0, tick_cpu = 0;
+  double thread0 = 0, kb0 = 0, play0 = 0, floor0 = 0, writer0 = 0, self0 = 0, tick_cpu = 0;
   std::uint64_t haptic_before = 0;
   while (true) {
     const auto tick = clock.Wait();
@@ -231,6 +257,7 @@ int main(int argc, char** argv) {
       if (keyboard > 0) kb0 = ProcessCpuSeconds(keyboard);
       play0 = ProcessCpuSeconds(player);
       floor0 = ProcessCpuSeconds(floor);
+      writer0 = ProcessCpuSeconds(writer);
       haptic_before = haptic ? haptic->calls.size() : 0;
     }
     if (started && breakdown) {
@@ -246,6 +273,7 @@ int main(int argc, char** argv) {
   const double kb_cpu = keyboard > 0 ? ProcessCpuSeconds(keyboard) - kb0 : 0;
   const double play_cpu = ProcessCpuSeconds(player) - play0;
   const double floor_cpu = ProcessCpuSeconds(floor) - floor0;
+  const double writer_cpu = ProcessCpuSeconds(writer) - writer0;
   {
     std::lock_guard<std::mutex> lock(mu);
     measuring = false;
@@ -257,6 +285,7 @@ int main(int argc, char** argv) {
     WaitPid(keyboard);
   }
   WaitPid(floor);
+  const int writer_code = WaitPid(writer);
   const int server_code = WaitPid(server);
   if (xvfb > 0) {
     kill(xvfb, SIGTERM);
@@ -309,6 +338,10 @@ int main(int argc, char** argv) {
               100.0 * play_cpu / seconds);
   std::printf("  peer: a bare 1 kHz sleep loop (whole process): %.2f %%\n",
               100.0 * floor_cpu / seconds);
+  std::printf(
+      "  peer: a bare 1 kHz input writer (one DDS write a millisecond, nothing else; whole "
+      "process, exit %d): %.2f %%\n",
+      writer_code, 100.0 * writer_cpu / seconds);
   std::printf("drops seen by the subscriber: %llu; rig ticks skipped: %llu\n",
               static_cast<unsigned long long>(drops.Total()),
               static_cast<unsigned long long>(clock.skipped_total()));
