@@ -44,7 +44,6 @@
 #include "vdyn/wheel_input/latency.h"
 #include "vdyn/wheel_input/rig.h"
 
-
 namespace {
 
 namespace wi = vdyn::wheel_input;
