@@ -705,6 +705,139 @@ TEST_F(RecorderTest, InfoTellsALongCutFromARestoreByTheSessionsEvents) {
   EXPECT_THAT(info, HasSubstr("vehicle 1: 10003 states missing (largest gap 10000 steps, from step 1000)"));
 }
 
+// Live, the recorder counts the states that never reached it the way `info` does afterwards: a
+// hole however long (a 6 s cut) is lost states, a hole around the vehicle's Spawned event (a
+// restore to a later step) is a jump. The test is the server here: it writes the states and the
+// event itself, with the holes on purpose.
+TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecording) {
+  const auto file = dir_ / "holes_live.mcap";
+  auto recorder = Recorder(
+      {"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  transport::Participant p(domain_);
+  transport::Writer<pb::VehicleState> states(p, TopicId::kState);
+  transport::Writer<pb::SessionEvent> events(p, TopicId::kEvents);
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  auto hears = [&] {
+    const std::string log = recorder->Log();
+    return log.find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
+           log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos;
+  };
+  while (!hears() && recorder->running() && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(20ms);
+  ASSERT_TRUE(hears()) << recorder->Log();
+  auto put = [&](std::uint32_t id, std::uint64_t from, std::uint64_t to) {
+    for (std::uint64_t k = from; k <= to; ++k) {
+      pb::VehicleState st;
+      st.set_vehicle_id(id);
+      st.set_server_id("fake");
+      st.set_step(k);
+      st.set_step_ns(1'000'000);
+      ASSERT_TRUE(states.Write(id, st)) << states.last_error();
+      std::this_thread::sleep_for(200us);  // a paced writer, not a burst into a best-effort topic
+    }
+  };
+  std::uint64_t sequence = 0;
+  auto event = [&](std::uint32_t id, std::uint64_t step, bool spawned) {
+    pb::SessionEvent e;
+    e.set_vehicle_id(id);
+    e.set_server_id("fake");
+    e.set_step(step);
+    e.set_sequence(++sequence);
+    if (spawned) {
+      e.mutable_spawned()->set_step_ns(1'000'000);
+    } else {
+      e.mutable_removed();
+    }
+    ASSERT_TRUE(events.Write(id, e)) << events.last_error();
+  };
+  // Vehicle 1: steps 0..99, a 6 s cut, 6000..6099. Vehicle 2: 0..99, restored to step 3000.
+  put(1, 0, 99);
+  put(2, 0, 99);
+  event(2, 3000, true);
+  put(1, 6000, 6099);
+  put(2, 3000, 3099);
+  // The vehicles go away: a reliable event after the states; once it is recorded, so (in practice)
+  // are they.
+  event(1, 6100, false);
+  const auto until = std::chrono::steady_clock::now() + 60s;
+  while (recorder->Log().find("| events 2") == std::string::npos &&
+         std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(20ms);
+  }
+  Stop(*recorder);
+
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  const auto states1 =
+      NumberAfter(info, "1         steps 0..6099 (0.000 .. 6.100 s of simulation), ");
+  const auto states2 =
+      NumberAfter(info, "2         steps 0..3099 (0.000 .. 3.100 s of simulation), ");
+  ASSERT_TRUE(states1 && states2) << info;
+  // What never arrived: vehicle 1's span less what it recorded (the cut's 5900 at least); vehicle
+  // 2's restore is no loss, only its states that best effort did not bring (normally none).
+  const std::uint64_t missing1 = 6100 - *states1, missing2 = 200 - *states2;
+  EXPECT_GE(missing1, 5900u);
+  EXPECT_THAT(info, HasSubstr(std::to_string(*states1) + " states, " + std::to_string(missing1) +
+                              " missing\n"));
+  EXPECT_THAT(info, HasSubstr(std::to_string(*states2) + " states, " + std::to_string(missing2) +
+                              " missing (1 jumps"));
+  // The recorder's own count, made while recording, says the same.
+  EXPECT_EQ(NumberAfter(info, "the recorder counted "), missing1 + missing2) << info;
+  EXPECT_THAT(info, HasSubstr("lost on vdyn/state")) << info;
+}
+
+// The ledger of one vehicle's steps, in both orders of a hole and its event.
+TEST(StepGaps, AHoleIsLostUnlessAVehiclesSpawnLiesInItWhicheverArrivesFirst) {
+  recorder::StepGaps g;
+  for (std::uint64_t k = 0; k < 10; ++k) g.State(k);
+  EXPECT_EQ(g.missing(), 0u);
+  g.State(20);  // 10..19 missing
+  EXPECT_EQ(g.missing(), 10u);
+  EXPECT_EQ(g.largest(), 10u);
+  EXPECT_EQ(g.largest_from(), 10u);
+  g.State(30000);  // a cut of 29979 steps, no spawn (yet)
+  EXPECT_EQ(g.missing(), 10u + 29979u);
+  EXPECT_EQ(g.largest(), 29979u);
+  g.Spawned(30000);  // its event comes after the states: the hole was a jump
+  EXPECT_EQ(g.missing(), 10u);
+  EXPECT_EQ(g.jumps(), 1u);
+  EXPECT_EQ(g.largest(), 10u);
+  g.Spawned(50000);  // the event first, then the states that jump to it
+  g.State(50000);
+  EXPECT_EQ(g.missing(), 10u);
+  EXPECT_EQ(g.jumps(), 2u);
+  // Neither a spawn past the next hole nor the one at the state seen just before it excuses it:
+  // 50001..50009 never arrived.
+  g.Spawned(50500);
+  g.State(50010);
+  EXPECT_EQ(g.missing(), 10u + 9u);
+  g.State(100);  // back in time: a restore to an earlier step, or a restarted server
+  EXPECT_EQ(g.jumps(), 3u);
+  EXPECT_EQ(g.missing(), 19u);
+
+  // Without the events, only a hole's length tells.
+  recorder::StepGaps blind(false);
+  blind.State(0);
+  blind.State(4000);
+  blind.State(20000);
+  EXPECT_EQ(blind.missing(), 3999u);
+  EXPECT_EQ(blind.jumps(), 1u);
+
+  // Memory is bounded: past kKept holes the oldest are forgotten, their count and the largest stay.
+  recorder::StepGaps many;
+  std::uint64_t step = 0;
+  many.State(step);
+  step += 101;  // a hole of 100 first: the largest
+  many.State(step);
+  for (std::size_t i = 0; i < 2 * recorder::StepGaps::kKept; ++i) {
+    step += 2;
+    many.State(step);
+  }
+  EXPECT_EQ(many.missing(), 100u + 2 * recorder::StepGaps::kKept);
+  EXPECT_EQ(many.largest(), 100u);
+  EXPECT_EQ(many.largest_from(), 1u);
+}
+
 // The server numbers its events across every vehicle while a take hands them over vehicle by
 // vehicle: out of order, with nothing lost. Only what never arrives is missing.
 TEST(SequenceGaps, CountsOnlyWhatNeverArrivesWhateverTheOrder) {

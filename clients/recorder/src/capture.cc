@@ -50,6 +50,64 @@ std::uint64_t SequenceGaps::missing() const {
   return span > seen_ ? span - seen_ : 0;
 }
 
+void StepGaps::State(std::uint64_t step) {
+  if (!any_) {
+    any_ = true;
+    last_ = step;
+    return;
+  }
+  if (step <= last_) {
+    ++jumps_;  // back in time
+  } else if (step > last_ + 1) {
+    Hole h{last_ + 1, step - 1, false};
+    const auto it = spawns_.lower_bound(h.from);
+    h.jump = spawns_known_ ? it != spawns_.end() && *it <= h.to + 1 : h.size() > kGuessedJump;
+    if (h.jump) {
+      ++jumps_;
+    } else {
+      missing_ += h.size();
+    }
+    if (holes_.size() == kKept) {
+      const Hole& old = holes_.front();
+      if (!old.jump && (evicted_largest_.jump || old.size() > evicted_largest_.size())) {
+        evicted_largest_ = old;
+      }
+      holes_.pop_front();
+    }
+    holes_.push_back(h);
+  }
+  last_ = step;
+}
+
+void StepGaps::Spawned(std::uint64_t step) {
+  spawns_.insert(step);
+  if (spawns_.size() > kKept) spawns_.erase(spawns_.begin());
+  for (Hole& h : holes_) {
+    if (h.jump || !h.Holds(step)) continue;
+    h.jump = true;
+    missing_ -= h.size();
+    ++jumps_;
+  }
+}
+
+const StepGaps::Hole* StepGaps::Largest() const {
+  const Hole* best = evicted_largest_.jump ? nullptr : &evicted_largest_;
+  for (const Hole& h : holes_) {
+    if (!h.jump && (best == nullptr || h.size() > best->size())) best = &h;
+  }
+  return best;
+}
+
+std::uint64_t StepGaps::largest() const {
+  const Hole* h = Largest();
+  return h != nullptr ? h->size() : 0;
+}
+
+std::uint64_t StepGaps::largest_from() const {
+  const Hole* h = Largest();
+  return h != nullptr ? h->from : 0;
+}
+
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
   char suffix[16];
   std::snprintf(suffix, sizeof suffix, "-%03d", index);
@@ -59,9 +117,6 @@ std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
 }
 
 namespace {
-
-// A gap of more than this many steps is a jump (a restart or a restore), not lost states.
-constexpr std::uint64_t kMaxStepGap = 5000;
 
 struct Entry {
   TopicId topic;
@@ -125,7 +180,7 @@ struct Capture::Impl {
   std::map<TopicId, TopicCounts> counts;
 
   // Gap detection (taker only).
-  std::unordered_map<std::uint32_t, std::uint64_t> last_step;
+  std::unordered_map<std::uint32_t, StepGaps> step_gaps;  // of each vehicle's states
   std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
 
   // Writer side.
@@ -169,9 +224,16 @@ struct Capture::Impl {
       return;  // filtered out (events are kept for every vehicle: their sequence shows loss)
     }
     std::optional<std::uint64_t> step, sequence;
+    std::uint64_t event_vehicle = 0;
+    bool spawned = false;
     const bool framed = wire::ForEachField(s.payload, [&](const wire::Field& f) {
       if (topic == TopicId::kState && f.number == 3 && f.type == 0) step = f.value;
-      if (topic == TopicId::kEvents && f.number == 4 && f.type == 0) sequence = f.value;
+      if (topic == TopicId::kEvents && f.type == 0) {
+        if (f.number == 1) event_vehicle = f.value;
+        if (f.number == 3) step = f.value;
+        if (f.number == 4) sequence = f.value;
+      }
+      if (topic == TopicId::kEvents && f.number == 10 && f.type == 2) spawned = true;
       if (topic == TopicId::kInput && f.number == 3 && f.type == 0) sequence = f.value;
       return true;
     });
@@ -182,13 +244,20 @@ struct Capture::Impl {
     }
     // Gaps: samples that never reached the recorder.
     if (topic == TopicId::kState) {
-      const std::uint64_t st = step.value_or(0);  // proto3 leaves 0 out
-      auto [it, fresh] = last_step.try_emplace(key, st);
-      if (!fresh) {
-        if (st > it->second + 1 && st - it->second - 1 <= kMaxStepGap) c.lost += st - it->second - 1;
-        it->second = st;
-      }
-    } else if (topic == TopicId::kEvents || topic == TopicId::kInput) {
+      StepGaps& g = step_gaps.try_emplace(key, Wanted(TopicId::kEvents)).first->second;
+      const std::uint64_t before = g.missing();
+      g.State(step.value_or(0));  // proto3 leaves 0 out
+      c.lost = c.lost + g.missing() - before;
+    }
+    if (spawned && event_vehicle <= UINT32_MAX &&
+        (o.vehicles.empty() || o.vehicles.count(static_cast<std::uint32_t>(event_vehicle)) > 0)) {
+      // A spawn, reset or restore: a hole in that vehicle's steps around it is a jump.
+      StepGaps& g = step_gaps.try_emplace(static_cast<std::uint32_t>(event_vehicle)).first->second;
+      const std::uint64_t before = g.missing();
+      g.Spawned(step.value_or(0));
+      counts[TopicId::kState].lost -= before - g.missing();
+    }
+    if (topic == TopicId::kEvents || topic == TopicId::kInput) {
       const std::uint64_t seq = sequence.value_or(0);
       const auto id = std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key,
                                       s.info.publication_handle);

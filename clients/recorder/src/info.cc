@@ -6,6 +6,7 @@
 #include <map>
 #include <set>
 
+#include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
@@ -21,47 +22,12 @@ struct ChannelStats {
   std::uint64_t messages = 0, bytes = 0, first = 0, last = 0;
 };
 
-// A forward step gap: states from..to never recorded (or a jump, when the vehicle was spawned or
-// restored at a step in it).
-struct StepGap {
-  std::uint64_t from = 0, to = 0;
-};
-
-// Gaps kept per vehicle to classify at the end; past this many, a gap over kJumpSteps counts as a
-// jump without looking (a broken recording cannot make info's memory grow without bound).
-constexpr std::size_t kMaxKeptGaps = 1'000'000;
-constexpr std::uint64_t kJumpSteps = 5000;
-
 struct VehicleStats {
   std::uint64_t states = 0;
-  std::uint64_t first_step = 0, last_step = 0, max_step = 0;
-  std::uint64_t missing = 0, largest_gap = 0, gap_at = 0, jumps = 0;
+  std::uint64_t first_step = 0, max_step = 0;
   bool any = false;
   std::int64_t step_ns = 0;
-  std::vector<StepGap> gaps;
-
-  void Missing(const StepGap& g) {
-    const std::uint64_t n = g.to - g.from + 1;
-    missing += n;
-    if (n > largest_gap) {
-      largest_gap = n;
-      gap_at = g.from;
-    }
-  }
-  // At the end, with the steps of the vehicle's every Spawned event (spawn, reset, teleport,
-  // restore) known: a gap with one at a step in it (or just around it) is a jump, the others are
-  // states that never reached the recorder.
-  void Classify(const std::set<std::uint64_t>& spawn_steps) {
-    for (const StepGap& g : gaps) {
-      const auto it = spawn_steps.lower_bound(g.from > 0 ? g.from - 1 : 0);
-      if (it != spawn_steps.end() && *it <= g.to + 1) {
-        ++jumps;
-      } else {
-        Missing(g);
-      }
-    }
-    gaps.clear();
-  }
+  StepGaps gaps;
 };
 
 struct ServerEvents {
@@ -84,7 +50,22 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   mcap::Reader reader(path);
   std::map<std::string, ChannelStats> channels;
   std::map<std::uint32_t, VehicleStats> vehicles;
-  std::map<std::uint32_t, std::set<std::uint64_t>> spawn_steps;  // of each vehicle's Spawned events
+  // A spawn, reset or restore tells a jump from lost states; a recording without the events
+  // (when its summary says so) has only the length of a hole to go by.
+  bool events_recorded = true;
+  if (const auto summary = reader.ReadSummary()) {
+    events_recorded = false;
+    for (const mcap::Channel& c : summary->channels) {
+      events_recorded |= c.topic.rfind(transport::Spec(TopicId::kEvents).name, 0) == 0;
+    }
+  }
+  auto Vehicle = [&](std::uint32_t id) -> VehicleStats& {
+    auto it = vehicles.find(id);
+    if (it == vehicles.end()) {
+      it = vehicles.emplace(id, VehicleStats{.gaps = StepGaps(events_recorded)}).first;
+    }
+    return it->second;
+  };
   std::map<std::string, ServerEvents> servers;
   std::map<std::string, pb::WorldDescription> worlds;  // by server id (meshes dropped)
   std::vector<mcap::Metadata> meta;
@@ -106,24 +87,13 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     c.last = m.log_time;
     if (m.topic == TopicId::kState) {
       const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
-      VehicleStats& vs = vehicles[m.key];
+      VehicleStats& vs = Vehicle(m.key);
       if (!vs.any) {
         vs.any = true;
         vs.first_step = step;
         vs.step_ns = static_cast<std::int64_t>(wire::Number(m.data, 5).value_or(0));
-      } else if (step > vs.last_step + 1) {
-        const StepGap g{vs.last_step + 1, step - 1};
-        if (vs.gaps.size() < kMaxKeptGaps) {
-          vs.gaps.push_back(g);
-        } else if (g.to - g.from + 1 > kJumpSteps) {
-          ++vs.jumps;
-        } else {
-          vs.Missing(g);
-        }
-      } else if (step <= vs.last_step) {
-        ++vs.jumps;  // back in time: a restore to an earlier step, or a restarted server
       }
-      vs.last_step = step;
+      vs.gaps.State(step);
       vs.max_step = std::max(vs.max_step, step);
       ++vs.states;
     } else if (m.topic == TopicId::kEvents) {
@@ -138,7 +108,7 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       s.any = true;
       s.last = std::max(s.last, e.sequence());
       ++s.count;
-      if (e.has_spawned()) spawn_steps[e.vehicle_id()].insert(e.step());
+      if (e.has_spawned()) Vehicle(e.vehicle_id()).gaps.Spawned(e.step());
       if (e.has_spawned() || e.has_checkpoint()) {
         s.terrain_hashes.insert(e.has_spawned() ? e.spawned().terrain_hash() : e.checkpoint().terrain_hash());
         s.start_step.try_emplace(e.vehicle_id(), e.step());
@@ -158,7 +128,6 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     }
   };
   const mcap::ScanResult scan = ScanRecording(reader, v);
-  for (auto& [id, vs] : vehicles) vs.Classify(spawn_steps[id]);
   for (const mcap::ChunkIndex& c : reader.Chunks()) {
     ++compression_chunks[c.compression.empty() ? "none" : c.compression];
     packed += c.compressed_size;
@@ -201,11 +170,16 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   out << "vehicles    " << (vehicles.empty() ? "no states recorded" : "") << "\n";
   for (const auto& [id, vs] : vehicles) {
     const double h = static_cast<double>(vs.step_ns) * 1e-9;
-    std::snprintf(line, sizeof line, "  %-9u steps %llu..%llu (%.3f .. %.3f s of simulation), %llu states, %llu missing%s\n", id,
-                  static_cast<unsigned long long>(vs.first_step), static_cast<unsigned long long>(vs.max_step),
-                  static_cast<double>(vs.first_step) * h, static_cast<double>(vs.max_step + 1) * h,
-                  static_cast<unsigned long long>(vs.states), static_cast<unsigned long long>(vs.missing),
-                  vs.jumps ? (" (" + std::to_string(vs.jumps) + " jumps: restarts or restores)").c_str() : "");
+    std::snprintf(
+        line, sizeof line,
+        "  %-9u steps %llu..%llu (%.3f .. %.3f s of simulation), %llu states, %llu missing%s\n", id,
+        static_cast<unsigned long long>(vs.first_step),
+        static_cast<unsigned long long>(vs.max_step), static_cast<double>(vs.first_step) * h,
+        static_cast<double>(vs.max_step + 1) * h, static_cast<unsigned long long>(vs.states),
+        static_cast<unsigned long long>(vs.gaps.missing()),
+        vs.gaps.jumps()
+            ? (" (" + std::to_string(vs.gaps.jumps()) + " jumps: restarts or restores)").c_str()
+            : "");
     out << line;
   }
   out << "channels\n";
@@ -220,10 +194,10 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   // Gaps: states and events that never reached the recorder, and what it counted itself.
   std::string gaps;
   for (const auto& [id, vs] : vehicles) {
-    if (vs.missing == 0) continue;
-    gaps += "\n  vehicle " + std::to_string(id) + ": " + std::to_string(vs.missing) +
-            " states missing (largest gap " + std::to_string(vs.largest_gap) + " steps, from step " +
-            std::to_string(vs.gap_at) + ")";
+    if (vs.gaps.missing() == 0) continue;
+    gaps += "\n  vehicle " + std::to_string(id) + ": " + std::to_string(vs.gaps.missing()) +
+            " states missing (largest gap " + std::to_string(vs.gaps.largest()) +
+            " steps, from step " + std::to_string(vs.gaps.largest_from()) + ")";
   }
   for (const auto& [server, s] : servers) {
     if (s.missing == 0) continue;

@@ -15,6 +15,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <deque>
 #include <filesystem>
 #include <map>
 #include <mutex>
@@ -100,6 +101,51 @@ class SequenceGaps {
 
  private:
   std::uint64_t low_ = 0, high_ = 0, seen_ = 0;
+};
+
+// One vehicle's states that never arrived, told apart from jumps. A forward hole in the steps is
+// missing states unless a Spawned event of the vehicle (spawn, reset, teleport, restore) took
+// effect at a step in it or at the step just after it (the first state of the new course); a
+// step back (a restore to an earlier step, a
+// restarted server) is a jump. States and events travel on different topics, so the event may
+// come before or after the states around its hole: a hole counts as missing when it is seen and
+// becomes a jump when its event arrives. The newest kKept holes and spawn steps are kept for that
+// (older holes stay as they were classified): memory is bounded whatever a recording holds.
+// Without the events (a recording of some topics only) there is nothing to tell by: a hole longer
+// than kGuessedJump steps is then taken for a jump.
+class StepGaps {
+ public:
+  static constexpr std::size_t kKept = 4096;
+  static constexpr std::uint64_t kGuessedJump = 5000;
+
+  explicit StepGaps(bool spawns_known = true) : spawns_known_(spawns_known) {}
+
+  void State(std::uint64_t step);
+  void Spawned(std::uint64_t step);
+  std::uint64_t missing() const { return missing_; }
+  std::uint64_t jumps() const { return jumps_; }
+  // The largest hole counted as missing (0 when none) and its first step.
+  std::uint64_t largest() const;
+  std::uint64_t largest_from() const;
+
+ private:
+  struct Hole {
+    std::uint64_t from = 0, to = 0;
+    bool jump = false;
+    std::uint64_t size() const { return to - from + 1; }
+    bool Holds(std::uint64_t spawn_step) const {
+      return spawn_step >= from && spawn_step <= to + 1;
+    }
+  };
+  const Hole* Largest() const;
+
+  bool spawns_known_;
+  bool any_ = false;
+  std::uint64_t last_ = 0;
+  std::uint64_t missing_ = 0, jumps_ = 0;
+  std::deque<Hole> holes_;            // the newest kKept, oldest first
+  std::set<std::uint64_t> spawns_;    // the highest kKept steps
+  Hole evicted_largest_{0, 0, true};  // the largest missing hole no longer kept (jump: none)
 };
 
 // The file of part `index` when splitting: "run.mcap" -> "run-000.mcap".
