@@ -255,7 +255,7 @@ struct Capture::Impl {
       StepGaps& g = step_gaps.try_emplace(static_cast<std::uint32_t>(event_vehicle)).first->second;
       const std::uint64_t before = g.missing();
       g.Spawned(step.value_or(0));
-      counts[TopicId::kState].lost -= before - g.missing();
+      if (g.missing() != before) counts[TopicId::kState].lost -= before - g.missing();
     }
     if (topic == TopicId::kEvents || topic == TopicId::kInput) {
       const std::uint64_t seq = sequence.value_or(0);
