@@ -716,15 +716,19 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
   transport::Participant p(domain_);
   transport::Writer<pb::VehicleState> states(p, TopicId::kState);
   transport::Writer<pb::SessionEvent> events(p, TopicId::kEvents);
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
-  auto hears = [&] {
+  // Both ends matched (the recorder's readers to these writers and back), or the first states of
+  // a best-effort topic may go nowhere.
+  auto matched = [&] {
     const std::string log = recorder->Log();
     return log.find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
-           log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos;
+           log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos &&
+           states.MatchedReaders() >= 1 && events.MatchedReaders() >= 1;
   };
-  while (!hears() && recorder->running() && std::chrono::steady_clock::now() < deadline)
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (!matched() && recorder->running() && std::chrono::steady_clock::now() < deadline) {
     std::this_thread::sleep_for(20ms);
-  ASSERT_TRUE(hears()) << recorder->Log();
+  }
+  ASSERT_TRUE(matched()) << recorder->Log();
   auto put = [&](std::uint32_t id, std::uint64_t from, std::uint64_t to) {
     for (std::uint64_t k = from; k <= to; ++k) {
       pb::VehicleState st;
@@ -750,20 +754,27 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
     }
     ASSERT_TRUE(events.Write(id, e)) << events.last_error();
   };
-  // Vehicle 1: steps 0..99, a 6 s cut, 6000..6099. Vehicle 2: 0..99, restored to step 3000.
+  // Vehicle 1: steps 0..99, a 6 s cut, 6000..6099. Vehicle 2: 0..99, restored to step 3000 (its
+  // event before the states). Vehicle 3: 0..99, restored to step 4000 (its event after them).
   put(1, 0, 99);
   put(2, 0, 99);
+  put(3, 0, 99);
   event(2, 3000, true);
   put(1, 6000, 6099);
   put(2, 3000, 3099);
-  // The vehicles go away: a reliable event after the states; once it is recorded, so (in practice)
-  // are they.
+  put(3, 4000, 4099);
+  event(3, 4000, true);
+  // A vehicle goes away: a reliable event after the states; once it is recorded, so (in
+  // practice) are they.
   event(1, 6100, false);
+  auto recorded_all_events = [&] {
+    return recorder->Log().find("| events 3") != std::string::npos;
+  };
   const auto until = std::chrono::steady_clock::now() + 60s;
-  while (recorder->Log().find("| events 2") == std::string::npos &&
-         std::chrono::steady_clock::now() < until) {
+  while (!recorded_all_events() && std::chrono::steady_clock::now() < until) {
     std::this_thread::sleep_for(20ms);
   }
+  ASSERT_TRUE(recorded_all_events()) << recorder->Log();
   Stop(*recorder);
 
   auto [code, info] = Run({"info", file.string()});
@@ -772,17 +783,23 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
       NumberAfter(info, "1         steps 0..6099 (0.000 .. 6.100 s of simulation), ");
   const auto states2 =
       NumberAfter(info, "2         steps 0..3099 (0.000 .. 3.100 s of simulation), ");
-  ASSERT_TRUE(states1 && states2) << info;
-  // What never arrived: vehicle 1's span less what it recorded (the cut's 5900 at least); vehicle
-  // 2's restore is no loss, only its states that best effort did not bring (normally none).
-  const std::uint64_t missing1 = 6100 - *states1, missing2 = 200 - *states2;
+  const auto states3 =
+      NumberAfter(info, "3         steps 0..4099 (0.000 .. 4.100 s of simulation), ");
+  ASSERT_TRUE(states1 && states2 && states3) << info;
+  // What never arrived: vehicle 1's span less what it recorded (the cut's 5900 at least); the
+  // restores are no loss, only the states best effort did not bring (normally none).
+  const std::uint64_t missing1 = 6100 - *states1, missing2 = 200 - *states2,
+                      missing3 = 200 - *states3;
   EXPECT_GE(missing1, 5900u);
   EXPECT_THAT(info, HasSubstr(std::to_string(*states1) + " states, " + std::to_string(missing1) +
                               " missing\n"));
   EXPECT_THAT(info, HasSubstr(std::to_string(*states2) + " states, " + std::to_string(missing2) +
                               " missing (1 jumps"));
-  // The recorder's own count, made while recording, says the same.
-  EXPECT_EQ(NumberAfter(info, "the recorder counted "), missing1 + missing2) << info;
+  EXPECT_THAT(info, HasSubstr(std::to_string(*states3) + " states, " + std::to_string(missing3) +
+                              " missing (1 jumps"));
+  // The recorder's own count, made while recording, says the same (it took vehicle 3's hole
+  // back when the event came after it).
+  EXPECT_EQ(NumberAfter(info, "the recorder counted "), missing1 + missing2 + missing3) << info;
   EXPECT_THAT(info, HasSubstr("lost on vdyn/state")) << info;
 }
 
@@ -823,6 +840,25 @@ TEST(StepGaps, AHoleIsLostUnlessAVehiclesSpawnLiesInItWhicheverArrivesFirst) {
   EXPECT_EQ(blind.missing(), 3999u);
   EXPECT_EQ(blind.jumps(), 1u);
 
+  // A step back starts a new course: the holes before it are settled, and a spawn of the new
+  // course does not excuse them.
+  recorder::StepGaps course;
+  course.State(0);
+  course.State(1000);  // 1..999 missing
+  course.State(10);    // a restarted server
+  course.Spawned(500);
+  EXPECT_EQ(course.missing(), 999u);
+  EXPECT_EQ(course.jumps(), 1u);
+  // Spawns are forgotten oldest first, not highest first: after many at high steps, a new one at
+  // a low step still excuses its hole.
+  recorder::StepGaps fifo;
+  fifo.State(0);
+  for (std::uint64_t k = 0; k < recorder::StepGaps::kKept; ++k) fifo.Spawned(1'000'000 + k);
+  fifo.Spawned(50);
+  fifo.State(50);
+  EXPECT_EQ(fifo.missing(), 0u);
+  EXPECT_EQ(fifo.jumps(), 1u);
+
   // Memory is bounded: past kKept holes the oldest are forgotten, their count and the largest stay.
   recorder::StepGaps many;
   std::uint64_t step = 0;
@@ -836,6 +872,16 @@ TEST(StepGaps, AHoleIsLostUnlessAVehiclesSpawnLiesInItWhicheverArrivesFirst) {
   EXPECT_EQ(many.missing(), 100u + 2 * recorder::StepGaps::kKept);
   EXPECT_EQ(many.largest(), 100u);
   EXPECT_EQ(many.largest_from(), 1u);
+  // A forgotten hole stays lost when its spawn comes after all.
+  many.Spawned(50);
+  EXPECT_EQ(many.missing(), 100u + 2 * recorder::StepGaps::kKept);
+  // A kept hole larger than the forgotten largest, then taken back: the forgotten one is the
+  // largest again.
+  many.State(step + 501);  // step+1 .. step+500
+  EXPECT_EQ(many.largest(), 500u);
+  many.Spawned(step + 501);
+  EXPECT_EQ(many.largest(), 100u);
+  EXPECT_EQ(many.missing(), 100u + 2 * recorder::StepGaps::kKept);
 }
 
 // The server numbers its events across every vehicle while a take hands them over vehicle by

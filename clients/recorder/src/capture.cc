@@ -57,7 +57,8 @@ void StepGaps::State(std::uint64_t step) {
     return;
   }
   if (step <= last_) {
-    ++jumps_;  // back in time
+    ++jumps_;  // back in time: a new course
+    CloseCourse(step);
   } else if (step > last_ + 1) {
     Hole h{last_ + 1, step - 1, false};
     const auto it = spawns_.lower_bound(h.from);
@@ -67,21 +68,24 @@ void StepGaps::State(std::uint64_t step) {
     } else {
       missing_ += h.size();
     }
-    if (holes_.size() == kKept) {
-      const Hole& old = holes_.front();
-      if (!old.jump && (evicted_largest_.jump || old.size() > evicted_largest_.size())) {
-        evicted_largest_ = old;
-      }
-      holes_.pop_front();
+    if (holes_.size() < kKept) {
+      holes_.push_back(h);
+    } else {
+      Forget(holes_[oldest_hole_]);
+      holes_[oldest_hole_] = h;
+      oldest_hole_ = (oldest_hole_ + 1) % kKept;
     }
-    holes_.push_back(h);
   }
   last_ = step;
 }
 
 void StepGaps::Spawned(std::uint64_t step) {
   spawns_.insert(step);
-  if (spawns_.size() > kKept) spawns_.erase(spawns_.begin());
+  spawn_order_.push_back(step);
+  if (spawn_order_.size() > kKept) {
+    spawns_.erase(spawns_.find(spawn_order_.front()));
+    spawn_order_.pop_front();
+  }
   for (Hole& h : holes_) {
     if (h.jump || !h.Holds(step)) continue;
     h.jump = true;
@@ -90,8 +94,25 @@ void StepGaps::Spawned(std::uint64_t step) {
   }
 }
 
+void StepGaps::Forget(const Hole& h) {
+  if (!h.jump && (forgotten_largest_.jump || h.size() > forgotten_largest_.size())) {
+    forgotten_largest_ = h;
+  }
+}
+
+// The course before a step back is over: its holes stay as classified, and the spawns past the
+// new step belong to it (a later hole of the new course at those steps is not theirs).
+void StepGaps::CloseCourse(std::uint64_t step) {
+  for (const Hole& h : holes_) Forget(h);
+  holes_.clear();
+  oldest_hole_ = 0;
+  if (spawns_.upper_bound(step) == spawns_.end()) return;
+  spawns_.erase(spawns_.upper_bound(step), spawns_.end());
+  std::erase_if(spawn_order_, [&](std::uint64_t s) { return s > step; });
+}
+
 const StepGaps::Hole* StepGaps::Largest() const {
-  const Hole* best = evicted_largest_.jump ? nullptr : &evicted_largest_;
+  const Hole* best = forgotten_largest_.jump ? nullptr : &forgotten_largest_;
   for (const Hole& h : holes_) {
     if (!h.jump && (best == nullptr || h.size() > best->size())) best = &h;
   }
@@ -117,6 +138,10 @@ std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
 }
 
 namespace {
+
+// Vehicles whose step gaps are counted (a recording of a domain with several servers has a few
+// hundred at most; past this, a writer inventing vehicle ids would only grow the ledgers).
+constexpr std::size_t kMaxTrackedVehicles = 4096;
 
 struct Entry {
   TopicId topic;
@@ -181,6 +206,7 @@ struct Capture::Impl {
 
   // Gap detection (taker only).
   std::unordered_map<std::uint32_t, StepGaps> step_gaps;  // of each vehicle's states
+  std::uint64_t untracked_vehicles = 0;
   std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
 
   // Writer side.
@@ -244,18 +270,19 @@ struct Capture::Impl {
     }
     // Gaps: samples that never reached the recorder.
     if (topic == TopicId::kState) {
-      StepGaps& g = step_gaps.try_emplace(key, Wanted(TopicId::kEvents)).first->second;
-      const std::uint64_t before = g.missing();
-      g.State(step.value_or(0));  // proto3 leaves 0 out
-      c.lost = c.lost + g.missing() - before;
-    }
-    if (spawned && event_vehicle <= UINT32_MAX &&
-        (o.vehicles.empty() || o.vehicles.count(static_cast<std::uint32_t>(event_vehicle)) > 0)) {
-      // A spawn, reset or restore: a hole in that vehicle's steps around it is a jump.
-      StepGaps& g = step_gaps.try_emplace(static_cast<std::uint32_t>(event_vehicle)).first->second;
-      const std::uint64_t before = g.missing();
-      g.Spawned(step.value_or(0));
-      if (g.missing() != before) counts[TopicId::kState].lost -= before - g.missing();
+      auto it = step_gaps.find(key);
+      if (it == step_gaps.end() && step_gaps.size() < kMaxTrackedVehicles) {
+        it = step_gaps.try_emplace(key, Wanted(TopicId::kEvents)).first;
+      }
+      if (it != step_gaps.end()) {
+        const std::uint64_t before = it->second.missing();
+        it->second.State(step.value_or(0));  // proto3 leaves 0 out
+        c.lost = c.lost + it->second.missing() - before;
+      } else if (untracked_vehicles++ == 0) {
+        spdlog::warn(
+            "vdyn-recorder: states of more than {} vehicles: the others' gaps are not counted",
+            kMaxTrackedVehicles);
+      }
     }
     if (topic == TopicId::kEvents || topic == TopicId::kInput) {
       const std::uint64_t seq = sequence.value_or(0);
@@ -266,19 +293,33 @@ struct Capture::Impl {
       g.Add(seq);
       c.lost = c.lost + g.missing() - before;  // goes down when a late one fills a hole
     }
-    std::lock_guard<std::mutex> lock(mu);
-    const std::size_t in_use = pending.bytes.size() + writer_bytes;
-    if (in_use + s.payload.size() > o.queue_bytes) {
-      ++c.dropped;
-      return;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      const std::size_t in_use = pending.bytes.size() + writer_bytes;
+      if (in_use + s.payload.size() > o.queue_bytes) {
+        ++c.dropped;
+        return;
+      }
+      pending.entries.push_back(
+          {topic, key, now,
+           static_cast<std::uint64_t>(std::max<std::int64_t>(0, s.info.source_timestamp_ns)),
+           pending.bytes.size(), static_cast<std::uint32_t>(s.payload.size())});
+      pending.bytes.insert(pending.bytes.end(), s.payload.begin(), s.payload.end());
+      peak = std::max(peak, in_use + s.payload.size());
     }
-    pending.entries.push_back({topic, key, now,
-                               static_cast<std::uint64_t>(std::max<std::int64_t>(0, s.info.source_timestamp_ns)),
-                               pending.bytes.size(), static_cast<std::uint32_t>(s.payload.size())});
-    pending.bytes.insert(pending.bytes.end(), s.payload.begin(), s.payload.end());
-    peak = std::max(peak, in_use + s.payload.size());
     ++c.messages;
     c.bytes += s.payload.size();
+    // A spawn, reset or restore of a vehicle whose states are counted (and which is in the file,
+    // so info sees it too): a hole in its steps around it is a jump, not lost states.
+    if (spawned && event_vehicle <= UINT32_MAX) {
+      const auto it = step_gaps.find(static_cast<std::uint32_t>(event_vehicle));
+      if (it != step_gaps.end()) {
+        const std::uint64_t before = it->second.missing();
+        it->second.Spawned(step.value_or(0));
+        if (it->second.missing() != before)
+          counts[TopicId::kState].lost -= before - it->second.missing();
+      }
+    }
   }
 
   std::string StatusLine(double elapsed_s, std::uint64_t file_bytes, double fill) const {

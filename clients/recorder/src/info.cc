@@ -50,10 +50,19 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   mcap::Reader reader(path);
   std::map<std::string, ChannelStats> channels;
   std::map<std::uint32_t, VehicleStats> vehicles;
-  // A spawn, reset or restore tells a jump from lost states; a recording without the events
-  // (when its summary says so) has only the length of a hole to go by.
+  // A spawn, reset or restore tells a jump from lost states. A recording made without the events
+  // (`record --topics`, as its metadata says; for a file of another writer, as its summary's
+  // channels say) has only the length of a hole to go by, as the recorder had.
   bool events_recorded = true;
-  if (const auto summary = reader.ReadSummary()) {
+  bool told = false;
+  for (const mcap::Metadata& m : ReadMetadata(reader)) {
+    const auto topics = m.values.find("topics");
+    if (m.name != "vdyn.recording" || topics == m.values.end()) continue;
+    events_recorded =
+        topics->second.find(transport::Spec(TopicId::kEvents).name) != std::string::npos;
+    told = true;
+  }
+  if (const auto summary = told ? std::nullopt : reader.ReadSummary()) {
     events_recorded = false;
     for (const mcap::Channel& c : summary->channels) {
       events_recorded |= c.topic.rfind(transport::Spec(TopicId::kEvents).name, 0) == 0;
@@ -108,7 +117,11 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       s.any = true;
       s.last = std::max(s.last, e.sequence());
       ++s.count;
-      if (e.has_spawned()) Vehicle(e.vehicle_id()).gaps.Spawned(e.step());
+      if (e.has_spawned()) {
+        // Only a vehicle with states has steps to tell about (its first state starts them).
+        if (const auto it = vehicles.find(e.vehicle_id()); it != vehicles.end())
+          it->second.gaps.Spawned(e.step());
+      }
       if (e.has_spawned() || e.has_checkpoint()) {
         s.terrain_hashes.insert(e.has_spawned() ? e.spawned().terrain_hash() : e.checkpoint().terrain_hash());
         s.start_step.try_emplace(e.vehicle_id(), e.step());

@@ -106,11 +106,11 @@ class SequenceGaps {
 // One vehicle's states that never arrived, told apart from jumps. A forward hole in the steps is
 // missing states unless a Spawned event of the vehicle (spawn, reset, teleport, restore) took
 // effect at a step in it or at the step just after it (the first state of the new course); a
-// step back (a restore to an earlier step, a
-// restarted server) is a jump. States and events travel on different topics, so the event may
-// come before or after the states around its hole: a hole counts as missing when it is seen and
+// step back (a restore to an earlier step, a restarted server) is a jump, and closes the holes
+// of the course before it. States and events travel on different topics, so the event may come
+// before or after the states around its hole: a hole counts as missing when it is seen and
 // becomes a jump when its event arrives. The newest kKept holes and spawn steps are kept for that
-// (older holes stay as they were classified): memory is bounded whatever a recording holds.
+// (an older hole stays as it was classified), so a vehicle's ledger never holds more than that.
 // Without the events (a recording of some topics only) there is nothing to tell by: a hole longer
 // than kGuessedJump steps is then taken for a jump.
 class StepGaps {
@@ -138,14 +138,19 @@ class StepGaps {
     }
   };
   const Hole* Largest() const;
+  void Forget(
+      const Hole& h);  // a hole leaves the kept ones: its count stays, it may be the largest
+  void CloseCourse(std::uint64_t step);
 
   bool spawns_known_;
   bool any_ = false;
   std::uint64_t last_ = 0;
   std::uint64_t missing_ = 0, jumps_ = 0;
-  std::deque<Hole> holes_;            // the newest kKept, oldest first
-  std::set<std::uint64_t> spawns_;    // the highest kKept steps
-  Hole evicted_largest_{0, 0, true};  // the largest missing hole no longer kept (jump: none)
+  std::vector<Hole> holes_;  // a ring of the newest kKept (allocated at the first hole)
+  std::size_t oldest_hole_ = 0;
+  std::multiset<std::uint64_t> spawns_;    // the newest kKept spawn steps, for lookup...
+  std::deque<std::uint64_t> spawn_order_;  // ...and in their order of arrival, to forget the oldest
+  Hole forgotten_largest_{0, 0, true};     // the largest missing hole no longer kept (jump: none)
 };
 
 // The file of part `index` when splitting: "run.mcap" -> "run-000.mcap".
