@@ -149,7 +149,10 @@ class RecorderTest : public ::testing::Test {
       step.mutable_step()->set_steps(1);
       *step.mutable_step()->mutable_input() = input(k);
       reply = control.Call(step, 60s);
-      ASSERT_TRUE(reply && reply->accepted()) << "step " << k << ": " << control.last_error();
+      ASSERT_TRUE(reply && reply->accepted())
+          << "step " << k << ": " << control.last_error() << "\nserver:\n"
+          << server->Log() << "\nrecorder:\n"
+          << recorder->Log();
     }
     server->Signal(SIGTERM);
     ASSERT_TRUE(server->Wait(60s).has_value());

@@ -285,17 +285,19 @@ bool Waitset::Wait(std::chrono::nanoseconds timeout) {
   return n > 0;
 }
 
-std::vector<std::uint64_t> RawReader::MatchedWriterHandles() {
+bool RawReader::MatchedWriterHandles(std::vector<std::uint64_t>& out) {
+  out.clear();
   std::vector<dds_instance_handle_t> handles(64);
   while (true) {
     const dds_return_t n =
         dds_get_matched_publications(reader_, handles.data(), handles.size());
     if (n < 0) {
       last_error_ = DdsError("dds_get_matched_publications", n);
-      return {};
+      return false;
     }
     if (static_cast<std::size_t>(n) <= handles.size()) {
-      return std::vector<std::uint64_t>(handles.begin(), handles.begin() + n);
+      out.assign(handles.begin(), handles.begin() + n);
+      return true;
     }
     handles.resize(static_cast<std::size_t>(n));
   }

@@ -417,7 +417,7 @@ void ServerNode::ReceiverLoop() {
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
   std::unique_ptr<pb::ControlRequest> spent;
   std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
-  std::map<std::uint64_t, bool> control_writers;     // control writers that sent requests
+  std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
   base::MonoTime next_housekeeping = base::MonotonicNow();
 
   // Inputs the reader refused (malformed, non-finite, ...): their source is blamed.
@@ -511,7 +511,7 @@ void ServerNode::ReceiverLoop() {
               return;
             }
           }
-          control_writers[info.publication_handle] = true;
+          control_writers[info.publication_handle] = 0;
           Request req{std::make_unique<pb::ControlRequest>(r), info.publication_handle};
           if (!requests_.TryPush(std::move(req))) {
             drops_.Count(drop_requests_full_);
@@ -526,12 +526,17 @@ void ServerNode::ReceiverLoop() {
 
     if (now >= next_housekeeping) {
       next_housekeeping = now + base::Milliseconds(200);
-      // Clients whose control writer has gone: their pending steps are dropped.
-      if (!control_writers.empty()) {
-        const std::vector<std::uint64_t> live = control_reader_.MatchedWriterHandles();
+      // Clients whose control writer has gone: their pending steps are dropped. Gone means
+      // missing from the matched writers at two checks in a row (a query that fails tells
+      // nothing): a client waiting for a reply is never dropped on one odd answer.
+      std::vector<std::uint64_t> live;
+      if (!control_writers.empty() && control_reader_.MatchedWriterHandles(live)) {
         for (auto it = control_writers.begin(); it != control_writers.end();) {
-          if (std::find(live.begin(), live.end(), it->first) == live.end() &&
-              gone_clients_.TryPush(std::uint64_t{it->first})) {
+          const bool present = std::find(live.begin(), live.end(), it->first) != live.end();
+          it->second = present ? 0 : it->second + 1;
+          if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
+            spdlog::info("server '{}': a control client is gone; its pending steps are dropped",
+                         me);
             it = control_writers.erase(it);
             handed = true;
           } else {
@@ -541,12 +546,12 @@ void ServerNode::ReceiverLoop() {
         if (handed) loop_bell_.Ring();
       }
       // Input writers that have gone are forgotten.
-      const std::vector<std::uint64_t> inputs_live = input_reader_.MatchedWriterHandles();
-      arbiter_.Forget(inputs_live);
-      for (auto it = strengths.begin(); it != strengths.end();) {
-        it = std::find(inputs_live.begin(), inputs_live.end(), it->first) == inputs_live.end()
-                 ? strengths.erase(it)
-                 : std::next(it);
+      if (input_reader_.MatchedWriterHandles(live)) {
+        arbiter_.Forget(live);
+        for (auto it = strengths.begin(); it != strengths.end();) {
+          it = std::find(live.begin(), live.end(), it->first) == live.end() ? strengths.erase(it)
+                                                                            : std::next(it);
+        }
       }
       std::vector<InputArbiter::Source> copy = arbiter_.Snapshot(now);
       std::lock_guard<std::mutex> lock(sources_mu_);
@@ -585,8 +590,10 @@ std::string ServerNode::FindClash() {
   };
   const std::uint64_t own[] = {writers_[static_cast<int>(TopicId::kWorld)]->InstanceHandle(),
                               writers_[static_cast<int>(TopicId::kDiagnostics)]->InstanceHandle()};
+  std::vector<std::uint64_t> handles;
   auto foreign = [&](transport::RawReader& r) {
-    for (std::uint64_t h : r.MatchedWriterHandles()) {
+    if (!r.MatchedWriterHandles(handles)) return false;
+    for (std::uint64_t h : handles) {
       if (h != own[0] && h != own[1]) return true;
     }
     return false;
@@ -640,6 +647,11 @@ bool ServerNode::PublishOne(TopicId topic, std::uint32_t key, const google::prot
     const std::int64_t deadline = publisher_deadline_ns_.load(std::memory_order_relaxed);
     if (now >= give_up || (deadline != 0 && now.ns >= deadline)) {
       drops_.Count(std::string("write failed on ") + transport::Spec(topic).name, w.last_error());
+      if (topic == TopicId::kControlReply) {
+        // A client is waiting for it: say so where a person looks.
+        spdlog::warn("server '{}': a reply could not be written: {}", options_.session.server_id,
+                     w.last_error());
+      }
       return false;
     }
   }

@@ -145,8 +145,9 @@ class RawReader {
   // to another thread). Take from inside fn, and then from nowhere else: Take is not reentrant.
   void OnDataAvailable(std::function<void()> fn);
   std::uint32_t MatchedWriters();
-  // The instance handles of the writers matched right now (empty on error; last_error() says).
-  std::vector<std::uint64_t> MatchedWriterHandles();
+  // The instance handles of the writers matched right now into `out`; false on error (then
+  // last_error() says, and `out` is empty: not "no writers").
+  bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
   // The ownership strength a matched writer declared in its QoS (0 when it declared none or is
   // not matched).
   std::int32_t WriterStrength(std::uint64_t publication_handle);
