@@ -31,6 +31,37 @@ using namespace std::chrono_literals;
 using testing::Process;
 using transport::TopicId;
 
+// Who drives, as the states say: the step of the primary's last new sample, the first step the
+// backup drove, and whether the safe state showed once `watching`.
+struct Handover {
+  std::string source;
+  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
+  bool watching = false, braked = false;
+  void See(const pb::VehicleState& s) {
+    source = s.input().source_id();
+    if (source == "primary" && s.input().sequence() != last_sequence) {
+      last_sequence = s.input().sequence();
+      step_of_last_new_sample = s.step();
+    }
+    if (watching && s.control().watchdog_safe_state()) braked = true;
+    if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
+  }
+  std::uint64_t failover_ms() const { return first_backup_step - step_of_last_new_sample; }
+};
+
+// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
+template <class M>
+bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout,
+               const std::function<void(const M&)>& on, const std::function<bool()>& done) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() >= deadline) return false;
+    reader.Wait(50ms);
+    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
+  }
+  return true;
+}
+
 class Net : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -67,40 +98,40 @@ class Net : public ::testing::Test {
                       log.empty() ? source + ".log" : log);
   }
 
+  // A server with `watchdog_ms`, a backup rig (throttle 0.2, strength 5) and a primary (0.5,
+  // strength 20) on vehicle 1, and a subscriber that follows who drives.
+  struct Failover {
+    std::unique_ptr<Process> server, backup, primary;
+    std::unique_ptr<transport::Participant> p;
+    transport::DropCounters drops;
+    std::unique_ptr<transport::Reader<pb::VehicleState>> states;
+    Handover h;
+    // Reads states until `want` drives, handing each to `on` as well.
+    bool UntilSource(const std::string& want, std::chrono::milliseconds timeout,
+                     const std::function<void(const pb::VehicleState&)>& on = nullptr) {
+      return ReadUntil<pb::VehicleState>(
+          *states, timeout,
+          [&](const pb::VehicleState& s) {
+            h.See(s);
+            if (on) on(s);
+          },
+          [&] { return h.source == want; });
+    }
+  };
+  std::unique_ptr<Failover> StartFailover(const std::string& watchdog_ms) {
+    auto f = std::make_unique<Failover>();
+    f->server = StartServer({"--watchdog-ms", watchdog_ms});
+    f->backup = StartRig("backup", "0.2", 5);
+    f->primary = StartRig("primary", "0.5", 20);
+    f->p = std::make_unique<transport::Participant>(domain_);
+    f->states =
+        std::make_unique<transport::Reader<pb::VehicleState>>(*f->p, TopicId::kState, &f->drops);
+    return f;
+  }
+
   std::uint32_t domain_ = 0;
   testing::TempDir dir_;
 };
-
-// Who drives, as the states say: the step of the primary's last new sample, the first step the
-// backup drove, and whether the safe state showed once `watching`.
-struct Handover {
-  std::string source;
-  std::uint64_t last_sequence = 0, step_of_last_new_sample = 0, first_backup_step = 0;
-  bool watching = false, braked = false;
-  void See(const pb::VehicleState& s) {
-    source = s.input().source_id();
-    if (source == "primary" && s.input().sequence() != last_sequence) {
-      last_sequence = s.input().sequence();
-      step_of_last_new_sample = s.step();
-    }
-    if (watching && s.control().watchdog_safe_state()) braked = true;
-    if (source == "backup" && first_backup_step == 0) first_backup_step = s.step();
-  }
-  std::uint64_t failover_ms() const { return first_backup_step - step_of_last_new_sample; }
-};
-
-// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
-template <class M>
-bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout,
-               const std::function<void(const M&)>& on, const std::function<bool()>& done) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!done()) {
-    if (std::chrono::steady_clock::now() >= deadline) return false;
-    reader.Wait(50ms);
-    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
-  }
-  return true;
-}
 
 pb::DriverInput Input(std::uint32_t vehicle, double throttle, const std::string& source) {
   pb::DriverInput in;
@@ -186,26 +217,20 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
 }
 
 TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
-  auto server = StartServer({"--watchdog-ms", "1000"});
-  auto backup = StartRig("backup", "0.2", 5);
-  auto primary = StartRig("primary", "0.5", 20);
-  transport::Participant p(domain_);
-  transport::DropCounters drops;
-  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
-  Handover h;
+  auto f = StartFailover("1000");
+  Handover& h = f->h;
   auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
-    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) {
-      h.See(s);
+    return f->UntilSource(want, t, [&](const pb::VehicleState& s) {
       if (h.source == want) {
         EXPECT_DOUBLE_EQ(s.input().throttle(), want == "primary" ? 0.5 : 0.2);
       }
-    }, [&] { return h.source == want; });
+    });
   };
-  ASSERT_TRUE(until_source("primary", 20s)) << h.source << "\n" << server->Log();
+  ASSERT_TRUE(until_source("primary", 20s)) << h.source << "\n" << f->server->Log();
   // The primary rig dies without a goodbye: its input stops and after the lease the backup drives.
   h.first_backup_step = 0;
-  primary->Signal(SIGKILL);
-  primary->Wait(5s);
+  f->primary->Signal(SIGKILL);
+  f->primary->Wait(5s);
   ASSERT_TRUE(until_source("backup", 10s)) << h.source;
   const std::uint64_t failover_ms = h.failover_ms();
   std::printf("  failover: the backup drives %llu ms (simulated) after the primary's last sample "
@@ -217,7 +242,7 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
   EXPECT_GE(failover_ms, 100u);
   EXPECT_LE(failover_ms, 1000u);
   // It comes back and takes over again.
-  primary = StartRig("primary", "0.5", 20, "primary2.log");
+  f->primary = StartRig("primary", "0.5", 20, "primary2.log");
   ASSERT_TRUE(until_source("primary", 20s)) << h.source;
 }
 
@@ -226,23 +251,14 @@ TEST_F(Net, OwnershipPassesFromPrimaryToBackupAndBack) {
 // between. (A watchdog of 150 ms here, lease 112.5 ms: 37.5 ms to spare for a loaded machine;
 // with the fixed 200 ms lease of before, the vehicle braked from 150 ms to 200 ms.)
 TEST_F(Net, ABackupTakesOverBeforeTheWatchdogBrakes) {
-  auto server = StartServer({"--watchdog-ms", "150"});
-  auto backup = StartRig("backup", "0.2", 5);
-  auto primary = StartRig("primary", "0.5", 20);
-  transport::Participant p(domain_);
-  transport::DropCounters drops;
-  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
-  Handover h;
-  auto until_source = [&](const std::string& want, std::chrono::milliseconds t) {
-    return ReadUntil<pb::VehicleState>(states, t, [&](const auto& s) { h.See(s); },
-                                       [&] { return h.source == want; });
-  };
-  ASSERT_TRUE(until_source("primary", 20s)) << h.source << "\n" << server->Log();
+  auto f = StartFailover("150");
+  Handover& h = f->h;
+  ASSERT_TRUE(f->UntilSource("primary", 20s)) << h.source << "\n" << f->server->Log();
   h.first_backup_step = 0;
   h.watching = true;
-  primary->Signal(SIGKILL);
-  primary->Wait(5s);
-  ASSERT_TRUE(until_source("backup", 10s)) << h.source;
+  f->primary->Signal(SIGKILL);
+  f->primary->Wait(5s);
+  ASSERT_TRUE(f->UntilSource("backup", 10s)) << h.source;
   const std::uint64_t failover_ms = h.failover_ms();
   std::printf("  failover with a 150 ms watchdog: the backup drives %llu ms (simulated) after the "
               "primary's last sample (lease 112.5 ms); safe state in between: %s\n",
