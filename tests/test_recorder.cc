@@ -806,6 +806,52 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
   EXPECT_THAT(info, HasSubstr("lost on vdyn/state")) << info;
 }
 
+// A writer inventing vehicle ids cannot grow the recorder's gap ledgers without bound: past 4096
+// vehicles it says so, stops counting their gaps, and still records every state.
+TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordingTheRest) {
+  const auto file = dir_ / "many.mcap";
+  auto recorder = Recorder(
+      {"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  transport::Participant p(domain_);
+  transport::Writer<pb::VehicleState> states(p, TopicId::kState);
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  auto matched = [&] {
+    return recorder->Log().find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
+           states.MatchedReaders() >= 1;
+  };
+  while (!matched() && recorder->running() && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_TRUE(matched()) << recorder->Log();
+  const std::uint32_t vehicles = 4100;
+  for (std::uint32_t id = 1; id <= vehicles; ++id) {
+    pb::VehicleState st;
+    st.set_vehicle_id(id);
+    st.set_server_id("fake");
+    st.set_step(1);
+    ASSERT_TRUE(states.Write(id, st)) << states.last_error();
+    std::this_thread::sleep_for(100us);  // paced: a best-effort topic
+  }
+  auto warned = [&] {
+    return recorder->Log().find("states of more than 4096 vehicles") != std::string::npos;
+  };
+  const auto until = std::chrono::steady_clock::now() + 60s;
+  while (!warned() && recorder->running() && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_TRUE(warned()) << recorder->Log();
+  Stop(*recorder);
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  // The states past the cap are in the file all the same (the warning came from one of them).
+  std::size_t recorded = 0;
+  for (std::size_t at = info.find(" steps 1..1 "); at != std::string::npos;
+       at = info.find(" steps 1..1 ", at + 1)) {
+    ++recorded;
+  }
+  EXPECT_GT(recorded, 4096u) << info.substr(0, 2000);
+}
+
 // The ledger of one vehicle's steps, in both orders of a hole and its event.
 TEST(StepGaps, AHoleIsLostUnlessAVehiclesSpawnLiesInItWhicheverArrivesFirst) {
   recorder::StepGaps g;
