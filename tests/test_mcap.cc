@@ -333,5 +333,70 @@ TEST(McapBadFiles, AFlippedBitIsACrcMismatchAndRecoverDropsOnlyThatChunk) {
   }
 }
 
+// A chunk whose size field claims far more than its records hold (a corrupted field, or a file
+// made to exhaust a reader's memory) is refused with the sizes, and the reader never allocates
+// what the chunk claims: its buffer follows what the decompressor yields.
+TEST(McapBadFiles, AChunkThatClaimsMoreThanItHoldsIsRefusedWithoutAllocatingTheClaim) {
+  testing::TempDir dir;
+  constexpr std::uint64_t kClaim = 900ull << 20;  // under the reader's 1 GiB limit
+  struct Case {
+    mc::Compression compression;
+    const char* name;
+    const char* reason;
+  };
+  for (const Case& c : {Case{mc::Compression::kZstd, "zstd", "zstd: the frames hold"},
+                        Case{mc::Compression::kLz4, "lz4", "lz4 gave"},
+                        Case{mc::Compression::kNone, "none", "an uncompressed chunk of"}}) {
+    SCOPED_TRACE(c.name);
+    const auto path = dir / (std::string(c.name) + ".mcap");
+    WriteStates(path, 2000, c.compression, 16 * 1024);
+    const std::vector<mc::ChunkIndex> chunks = mc::Reader(path).Chunks();
+    ASSERT_GT(chunks.size(), 2u);
+    ASSERT_EQ(chunks[1].compression, c.compression == mc::Compression::kNone ? "" : c.name);
+    std::vector<std::uint8_t> b = ReadBytes(path);
+    // Chunk record: opcode (1), length (8), message start and end times (8 + 8), then the
+    // uncompressed size (8), little-endian.
+    const std::size_t at = chunks[1].chunk_start_offset + 1 + 8 + 16;
+    ASSERT_EQ(Le64(b, at), chunks[1].uncompressed_size);
+    for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(kClaim >> (8 * i));
+    const auto bad = dir / (std::string(c.name) + "-claims.mcap");
+    WriteBytes(bad, b);
+    // The chunk's own read (what `export` and `verify` use through the chunk index).
+    mc::Reader r(bad);
+    std::vector<std::uint8_t> scratch;
+    try {
+      r.ReadChunk(chunks[1], [](const mc::Message&) {}, scratch);
+      FAIL() << "a chunk claiming " << kClaim << " bytes was read";
+    } catch (const mc::McapError& e) {
+      EXPECT_EQ(e.offset(), chunks[1].chunk_start_offset);
+      EXPECT_THAT(e.reason(), HasSubstr(c.reason));
+      EXPECT_THAT(e.reason(), HasSubstr("claims " + std::to_string(kClaim)));
+    }
+    EXPECT_LT(scratch.capacity(), std::size_t{16} << 20) << "the reader allocated what the chunk claims";
+    // A scan refuses the file at that chunk; a lenient one skips only it.
+    try {
+      ReadAll(bad);
+      FAIL() << "a chunk claiming " << kClaim << " bytes was scanned";
+    } catch (const mc::McapError& e) {
+      EXPECT_EQ(e.offset(), chunks[1].chunk_start_offset);
+    }
+    mc::ScanResult res;
+    ReadAll(bad, &res, /*lenient=*/true);
+    EXPECT_EQ(res.chunks_skipped, 1u);
+  }
+  // Beyond the limit, refused before any decompression.
+  std::vector<std::uint8_t> b = ReadBytes(dir / "zstd.mcap");
+  const std::vector<mc::ChunkIndex> chunks = mc::Reader(dir / "zstd.mcap").Chunks();
+  const std::size_t at = chunks[0].chunk_start_offset + 1 + 8 + 16;
+  for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>((3ull << 30) >> (8 * i));
+  WriteBytes(dir / "huge.mcap", b);
+  try {
+    ReadAll(dir / "huge.mcap");
+    FAIL() << "a chunk claiming 3 GiB was read";
+  } catch (const mc::McapError& e) {
+    EXPECT_THAT(e.reason(), HasSubstr("more than this reader accepts"));
+  }
+}
+
 }  // namespace
 }  // namespace vdyn

@@ -17,9 +17,9 @@
 namespace vdyn::mcap {
 namespace {
 
-// The largest chunk we agree to decompress: a corrupted size field must not make us allocate
-// without bound.
-constexpr std::uint64_t kMaxUncompressedChunk = 1ull << 31;
+// The largest chunk we agree to decompress (writers close chunks at a few MiB): a corrupted size
+// field or a decompression bomb must not make us allocate without bound.
+constexpr std::uint64_t kMaxUncompressedChunk = 1ull << 30;
 constexpr std::uint64_t kFooterContent = 8 + 8 + 4;
 constexpr std::uint64_t kFooterRecord = 1 + 8 + kFooterContent;
 
@@ -244,32 +244,94 @@ Metadata ParseMetadata(std::span<const std::uint8_t> c) {
   return m;
 }
 
+// Makes room in `out` past `used` for more decompressed bytes: doubles (from 64 KiB), never past
+// `claimed`. The buffer follows the bytes a decompressor really produces, so a chunk that claims
+// gigabytes but holds a few broken bytes costs a few bytes, not a gigabyte of zeroes.
+// False when `out` already holds `claimed` bytes.
+bool GrowDecompressed(std::vector<std::uint8_t>& out, std::size_t used, std::uint64_t claimed) {
+  if (used >= claimed) return false;
+  constexpr std::size_t kFirst = std::size_t{64} << 10;
+  std::size_t size = std::max<std::size_t>(kFirst, used * 2);
+  if (size > claimed) size = static_cast<std::size_t>(claimed);
+  if (out.size() < size) out.resize(size);
+  return true;
+}
+
+// What zstd frames' headers state their content sums to: ZSTD_CONTENTSIZE_UNKNOWN when a frame
+// does not say, ZSTD_CONTENTSIZE_ERROR when the bytes are not whole zstd frames.
+unsigned long long ZstdStatedSize(std::span<const std::uint8_t> in) {
+  unsigned long long total = 0;
+  bool known = true;
+  std::size_t at = 0;
+  while (at < in.size()) {
+    const unsigned long long n = ZSTD_getFrameContentSize(in.data() + at, in.size() - at);
+    const std::size_t frame = ZSTD_findFrameCompressedSize(in.data() + at, in.size() - at);
+    if (n == ZSTD_CONTENTSIZE_ERROR || ZSTD_isError(frame) || frame == 0) return ZSTD_CONTENTSIZE_ERROR;
+    if (n == ZSTD_CONTENTSIZE_UNKNOWN) {
+      known = false;
+    } else {
+      // Saturates just past what any chunk may claim (total <= limit + 1: no overflow).
+      total = n > kMaxUncompressedChunk ? kMaxUncompressedChunk + 1
+                                        : std::min<unsigned long long>(total + n, kMaxUncompressedChunk + 1);
+    }
+    at += frame;
+  }
+  if (in.empty()) return ZSTD_CONTENTSIZE_ERROR;
+  return known ? total : ZSTD_CONTENTSIZE_UNKNOWN;
+}
+
 // Decompresses a chunk's records into `out` (exactly uncompressed_size bytes) or says why not.
 std::string Decompress(const std::string& compression, std::span<const std::uint8_t> in,
                        std::uint64_t uncompressed_size, std::vector<std::uint8_t>& out) {
   if (uncompressed_size > kMaxUncompressedChunk) {
     return "a chunk claims " + std::to_string(uncompressed_size) +
-           " uncompressed bytes, more than this reader accepts";
+           " uncompressed bytes, more than this reader accepts (" +
+           std::to_string(kMaxUncompressedChunk) + ")";
   }
-  out.resize(static_cast<std::size_t>(uncompressed_size));
+  const auto claims = [uncompressed_size](const char* codec, std::size_t got) {
+    return std::string(codec) + " gave " + (got > uncompressed_size ? "more than " : "") +
+           std::to_string(got) + " bytes, the chunk claims " + std::to_string(uncompressed_size);
+  };
   if (compression.empty()) {
     if (in.size() != uncompressed_size) {
       return "an uncompressed chunk of " + std::to_string(in.size()) + " bytes claims " +
              std::to_string(uncompressed_size);
     }
+    out.resize(in.size());
     // An empty chunk has no bytes to copy (and memcpy must not see its null pointers).
     if (!in.empty()) std::memcpy(out.data(), in.data(), in.size());
     return {};
   }
   if (compression == "zstd") {
-    thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> ctx(ZSTD_createDCtx(),
-                                                                          &ZSTD_freeDCtx);
-    const std::size_t n = ZSTD_decompressDCtx(ctx.get(), out.data(), out.size(), in.data(), in.size());
-    if (ZSTD_isError(n)) return std::string("zstd: ") + ZSTD_getErrorName(n);
-    if (n != uncompressed_size) {
-      return "zstd gave " + std::to_string(n) + " bytes, the chunk claims " +
+    // The frame headers may state their content sizes: a mismatch is refused before any work.
+    const unsigned long long stated = ZstdStatedSize(in);
+    if (stated == ZSTD_CONTENTSIZE_ERROR) return "zstd: the chunk's records are not zstd frames";
+    if (stated != ZSTD_CONTENTSIZE_UNKNOWN && stated != uncompressed_size) {
+      return "zstd: the frames hold " + std::to_string(stated) + " bytes, the chunk claims " +
              std::to_string(uncompressed_size);
     }
+    thread_local std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> ctx(ZSTD_createDCtx(),
+                                                                          &ZSTD_freeDCtx);
+    ZSTD_DCtx_reset(ctx.get(), ZSTD_reset_session_only);
+    ZSTD_inBuffer src{in.data(), in.size(), 0};
+    std::size_t used = 0;
+    std::uint8_t probe = 0;  // once `out` holds all it claims: one byte more tells whether it goes on
+    out.clear();
+    while (true) {
+      const bool full = used == out.size() && !GrowDecompressed(out, used, uncompressed_size);
+      ZSTD_outBuffer dst = full ? ZSTD_outBuffer{&probe, 1, 0} : ZSTD_outBuffer{out.data(), out.size(), used};
+      const std::size_t src_before = src.pos, dst_before = dst.pos;
+      const std::size_t left = ZSTD_decompressStream(ctx.get(), &dst, &src);
+      if (ZSTD_isError(left)) return std::string("zstd: ") + ZSTD_getErrorName(left);
+      if (full && dst.pos > 0) return claims("zstd", used + 1);
+      if (!full) used = dst.pos;
+      if (left == 0 && src.pos == src.size) break;  // the last frame is complete
+      if (src.pos == src_before && dst.pos == dst_before) {
+        return "zstd: the frame ends early";
+      }
+    }
+    if (used != uncompressed_size) return claims("zstd", used);
+    out.resize(used);
     return {};
   }
   if (compression == "lz4") {
@@ -279,7 +341,23 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
     }
     std::size_t in_pos = 0, out_pos = 0;
     std::string why;
+    out.clear();
     while (true) {
+      if (out_pos == out.size() && !GrowDecompressed(out, out_pos, uncompressed_size)) {
+        // Full: the frame must end here. One more byte of room tells whether it would go on.
+        std::uint8_t probe = 0;
+        std::size_t src = in.size() - in_pos, dst = 1;
+        const std::size_t hint = LZ4F_decompress(dctx, &probe, &dst, in.data() + in_pos, &src, nullptr);
+        if (LZ4F_isError(hint)) {
+          why = std::string("lz4: ") + LZ4F_getErrorName(hint);
+        } else if (dst > 0) {
+          why = claims("lz4", out_pos + 1);
+        } else if (hint != 0) {
+          why = claims("lz4", out_pos);  // the frame is not complete
+        }
+        in_pos += src;
+        break;
+      }
       std::size_t src = in.size() - in_pos, dst = out.size() - out_pos;
       const std::size_t hint =
           LZ4F_decompress(dctx, out.data() + out_pos, &dst, in.data() + in_pos, &src, nullptr);
@@ -297,10 +375,8 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
     }
     LZ4F_freeDecompressionContext(dctx);
     if (!why.empty()) return why;
-    if (out_pos != uncompressed_size) {
-      return "lz4 gave " + std::to_string(out_pos) + " bytes, the chunk claims " +
-             std::to_string(uncompressed_size);
-    }
+    if (out_pos != uncompressed_size) return claims("lz4", out_pos);
+    out.resize(out_pos);
     return {};
   }
   return "unknown compression '" + compression + "'";
