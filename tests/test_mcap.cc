@@ -38,6 +38,13 @@ std::uint64_t Le64(const std::vector<std::uint8_t>& b, std::size_t at) {
   return v;
 }
 
+// Where a chunk record keeps its uncompressed size: opcode (1), length (8), message start and
+// end times (8 + 8), then the size (8), little-endian.
+std::size_t UncompressedSizeAt(const mc::ChunkIndex& chunk) { return chunk.chunk_start_offset + 1 + 8 + 16; }
+void PutLe64(std::vector<std::uint8_t>& b, std::size_t at, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(v >> (8 * i));
+}
+
 pb::VehicleState StateAt(std::uint64_t step) {
   pb::VehicleState s;
   s.set_vehicle_id(1);
@@ -354,11 +361,8 @@ TEST(McapBadFiles, AChunkThatClaimsMoreThanItHoldsIsRefusedWithoutAllocatingTheC
     ASSERT_GT(chunks.size(), 2u);
     ASSERT_EQ(chunks[1].compression, c.compression == mc::Compression::kNone ? "" : c.name);
     std::vector<std::uint8_t> b = ReadBytes(path);
-    // Chunk record: opcode (1), length (8), message start and end times (8 + 8), then the
-    // uncompressed size (8), little-endian.
-    const std::size_t at = chunks[1].chunk_start_offset + 1 + 8 + 16;
-    ASSERT_EQ(Le64(b, at), chunks[1].uncompressed_size);
-    for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(kClaim >> (8 * i));
+    ASSERT_EQ(Le64(b, UncompressedSizeAt(chunks[1])), chunks[1].uncompressed_size);
+    PutLe64(b, UncompressedSizeAt(chunks[1]), kClaim);
     const auto bad = dir / (std::string(c.name) + "-claims.mcap");
     WriteBytes(bad, b);
     // The chunk's own read (what `export` and `verify` use through the chunk index).
@@ -387,8 +391,7 @@ TEST(McapBadFiles, AChunkThatClaimsMoreThanItHoldsIsRefusedWithoutAllocatingTheC
   // Beyond the limit, refused before any decompression.
   std::vector<std::uint8_t> b = ReadBytes(dir / "zstd.mcap");
   const std::vector<mc::ChunkIndex> chunks = mc::Reader(dir / "zstd.mcap").Chunks();
-  const std::size_t at = chunks[0].chunk_start_offset + 1 + 8 + 16;
-  for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>((3ull << 30) >> (8 * i));
+  PutLe64(b, UncompressedSizeAt(chunks[0]), 3ull << 30);
   WriteBytes(dir / "huge.mcap", b);
   try {
     ReadAll(dir / "huge.mcap");

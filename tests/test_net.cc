@@ -16,6 +16,7 @@
 #include "vdyn/transport/control_client.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/transport/dds.h"
+#include "dds_wait.h"
 #include "process.h"
 #include "vdyn/replay/resim.h"
 #include "test_support.h"
@@ -49,18 +50,7 @@ struct Handover {
   std::uint64_t failover_ms() const { return first_backup_step - step_of_last_new_sample; }
 };
 
-// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
-template <class M>
-bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout,
-               const std::function<void(const M&)>& on, const std::function<bool()>& done) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!done()) {
-    if (std::chrono::steady_clock::now() >= deadline) return false;
-    reader.Wait(50ms);
-    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
-  }
-  return true;
-}
+using testing::ReadUntil;
 
 class Net : public ::testing::Test {
  protected:

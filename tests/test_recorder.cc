@@ -9,6 +9,7 @@
 #include <cctype>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <sstream>
 #include <thread>
@@ -105,20 +106,25 @@ class RecorderTest : public ::testing::Test {
     const auto code = p->Wait(timeout);
     return {code.value_or(-1), p->Log()};
   }
+  // Waits (bounded) until `done` says so while `recorder` runs; false on the timeout or its end.
+  static bool WaitWhileRunning(Process& recorder, const std::function<bool()>& done,
+                               std::chrono::seconds timeout = 60s) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (!done()) {
+      if (std::chrono::steady_clock::now() >= deadline || !recorder.running()) return done();
+      std::this_thread::sleep_for(20ms);
+    }
+    return true;
+  }
   // Waits (bounded) until a recorder's log says it hears the server's states and events and has
   // its world: from then on it takes everything the server publishes.
   static bool WaitForWorld(Process& recorder, std::chrono::seconds timeout = 60s) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (std::chrono::steady_clock::now() < deadline && recorder.running()) {
+    return WaitWhileRunning(recorder, [&recorder] {
       const std::string log = recorder.Log();
-      if (log.find("recording world") != std::string::npos &&
-          log.find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
-          log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos) {
-        return true;
-      }
-      std::this_thread::sleep_for(20ms);
-    }
-    return false;
+      return log.find("recording world") != std::string::npos &&
+             log.find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
+             log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos;
+    }, timeout);
   }
   // Stops a recorder as a person does (SIGINT) and waits for it to close its file.
   static void Stop(Process& recorder) {
@@ -727,11 +733,7 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
            log.find("hearing 1 writer(s) on vdyn/events") != std::string::npos &&
            states.MatchedReaders() >= 1 && events.MatchedReaders() >= 1;
   };
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (!matched() && recorder->running() && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(20ms);
-  }
-  ASSERT_TRUE(matched()) << recorder->Log();
+  ASSERT_TRUE(WaitWhileRunning(*recorder, matched)) << recorder->Log();
   auto put = [&](std::uint32_t id, std::uint64_t from, std::uint64_t to) {
     for (std::uint64_t k = from; k <= to; ++k) {
       pb::VehicleState st;
@@ -773,11 +775,7 @@ TEST_F(RecorderTest, TheRecorderCountsALongCutAsLostAndARestoreAsAJumpWhileRecor
   auto recorded_all_events = [&] {
     return recorder->Log().find("| events 3") != std::string::npos;
   };
-  const auto until = std::chrono::steady_clock::now() + 60s;
-  while (!recorded_all_events() && std::chrono::steady_clock::now() < until) {
-    std::this_thread::sleep_for(20ms);
-  }
-  ASSERT_TRUE(recorded_all_events()) << recorder->Log();
+  ASSERT_TRUE(WaitWhileRunning(*recorder, recorded_all_events)) << recorder->Log();
   Stop(*recorder);
 
   auto [code, info] = Run({"info", file.string()});
@@ -814,15 +812,11 @@ TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordi
       {"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
   transport::Participant p(domain_);
   transport::Writer<pb::VehicleState> states(p, TopicId::kState);
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
   auto matched = [&] {
     return recorder->Log().find("hearing 1 writer(s) on vdyn/state") != std::string::npos &&
            states.MatchedReaders() >= 1;
   };
-  while (!matched() && recorder->running() && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(20ms);
-  }
-  ASSERT_TRUE(matched()) << recorder->Log();
+  ASSERT_TRUE(WaitWhileRunning(*recorder, matched)) << recorder->Log();
   const std::uint32_t vehicles = 4100;
   for (std::uint32_t id = 1; id <= vehicles; ++id) {
     pb::VehicleState st;
@@ -835,11 +829,7 @@ TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordi
   auto warned = [&] {
     return recorder->Log().find("states of more than 4096 vehicles") != std::string::npos;
   };
-  const auto until = std::chrono::steady_clock::now() + 60s;
-  while (!warned() && recorder->running() && std::chrono::steady_clock::now() < until) {
-    std::this_thread::sleep_for(20ms);
-  }
-  ASSERT_TRUE(warned()) << recorder->Log();
+  ASSERT_TRUE(WaitWhileRunning(*recorder, warned)) << recorder->Log();
   Stop(*recorder);
   auto [code, info] = Run({"info", file.string()});
   ASSERT_EQ(code, 0) << info;

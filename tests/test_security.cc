@@ -14,6 +14,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
 #include "vdyn/diagnostics.pb.h"
@@ -64,17 +65,7 @@ long Count(const std::string& log, const std::string& prefix) {
   return f ? std::atol(f->c_str()) : -1;
 }
 
-// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
-template <class M, class On, class Done>
-bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout, On on, Done done) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!done()) {
-    if (std::chrono::steady_clock::now() >= deadline) return false;
-    reader.Wait(50ms);
-    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
-  }
-  return true;
-}
+using testing::ReadUntil;
 
 class Security : public ::testing::Test {
  protected:

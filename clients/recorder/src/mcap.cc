@@ -260,6 +260,7 @@ bool GrowDecompressed(std::vector<std::uint8_t>& out, std::size_t used, std::uin
 // What zstd frames' headers state their content sums to: ZSTD_CONTENTSIZE_UNKNOWN when a frame
 // does not say, ZSTD_CONTENTSIZE_ERROR when the bytes are not whole zstd frames.
 unsigned long long ZstdStatedSize(std::span<const std::uint8_t> in) {
+  if (in.empty()) return ZSTD_CONTENTSIZE_ERROR;
   unsigned long long total = 0;
   bool known = true;
   std::size_t at = 0;
@@ -276,7 +277,6 @@ unsigned long long ZstdStatedSize(std::span<const std::uint8_t> in) {
     }
     at += frame;
   }
-  if (in.empty()) return ZSTD_CONTENTSIZE_ERROR;
   return known ? total : ZSTD_CONTENTSIZE_UNKNOWN;
 }
 
@@ -288,9 +288,10 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
            " uncompressed bytes, more than this reader accepts (" +
            std::to_string(kMaxUncompressedChunk) + ")";
   }
-  const auto claims = [uncompressed_size](const char* codec, std::size_t got) {
-    return std::string(codec) + " gave " + (got > uncompressed_size ? "more than " : "") +
-           std::to_string(got) + " bytes, the chunk claims " + std::to_string(uncompressed_size);
+  const auto gave = [uncompressed_size](const char* codec, std::size_t got) {
+    return std::string(codec) + " gave " +
+           (got > uncompressed_size ? "more than " + std::to_string(uncompressed_size) : std::to_string(got)) +
+           " bytes, the chunk claims " + std::to_string(uncompressed_size);
   };
   if (compression.empty()) {
     if (in.size() != uncompressed_size) {
@@ -323,14 +324,14 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
       const std::size_t src_before = src.pos, dst_before = dst.pos;
       const std::size_t left = ZSTD_decompressStream(ctx.get(), &dst, &src);
       if (ZSTD_isError(left)) return std::string("zstd: ") + ZSTD_getErrorName(left);
-      if (full && dst.pos > 0) return claims("zstd", used + 1);
+      if (full && dst.pos > 0) return gave("zstd", used + 1);
       if (!full) used = dst.pos;
       if (left == 0 && src.pos == src.size) break;  // the last frame is complete
       if (src.pos == src_before && dst.pos == dst_before) {
         return "zstd: the frame ends early";
       }
     }
-    if (used != uncompressed_size) return claims("zstd", used);
+    if (used != uncompressed_size) return gave("zstd", used);
     out.resize(used);
     return {};
   }
@@ -340,29 +341,20 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
       return "lz4: cannot create a decompression context";
     }
     std::size_t in_pos = 0, out_pos = 0;
+    std::uint8_t probe = 0;  // once `out` holds all it claims: one byte more tells whether it goes on
     std::string why;
     out.clear();
     while (true) {
-      if (out_pos == out.size() && !GrowDecompressed(out, out_pos, uncompressed_size)) {
-        // Full: the frame must end here. One more byte of room tells whether it would go on.
-        std::uint8_t probe = 0;
-        std::size_t src = in.size() - in_pos, dst = 1;
-        const std::size_t hint = LZ4F_decompress(dctx, &probe, &dst, in.data() + in_pos, &src, nullptr);
-        if (LZ4F_isError(hint)) {
-          why = std::string("lz4: ") + LZ4F_getErrorName(hint);
-        } else if (dst > 0) {
-          why = claims("lz4", out_pos + 1);
-        } else if (hint != 0) {
-          why = claims("lz4", out_pos);  // the frame is not complete
-        }
-        in_pos += src;
-        break;
-      }
-      std::size_t src = in.size() - in_pos, dst = out.size() - out_pos;
-      const std::size_t hint =
-          LZ4F_decompress(dctx, out.data() + out_pos, &dst, in.data() + in_pos, &src, nullptr);
+      const bool full = out_pos == out.size() && !GrowDecompressed(out, out_pos, uncompressed_size);
+      std::size_t src = in.size() - in_pos, dst = full ? 1 : out.size() - out_pos;
+      const std::size_t hint = LZ4F_decompress(dctx, full ? &probe : out.data() + out_pos, &dst,
+                                               in.data() + in_pos, &src, nullptr);
       if (LZ4F_isError(hint)) {
         why = std::string("lz4: ") + LZ4F_getErrorName(hint);
+        break;
+      }
+      if (full && dst > 0) {
+        why = gave("lz4", out_pos + 1);
         break;
       }
       in_pos += src;
@@ -375,7 +367,7 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
     }
     LZ4F_freeDecompressionContext(dctx);
     if (!why.empty()) return why;
-    if (out_pos != uncompressed_size) return claims("lz4", out_pos);
+    if (out_pos != uncompressed_size) return gave("lz4", out_pos);
     out.resize(out_pos);
     return {};
   }
