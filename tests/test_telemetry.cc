@@ -61,7 +61,7 @@ double GetF32(const std::vector<std::uint8_t>& b, std::size_t at) {
 // OutSimPack (InSim.txt): unsigned Time; Vector AngVel; float Heading, Pitch, Roll; Vector Accel;
 // Vector Vel; Vec Pos (3 ints); [int ID]. Vector = 3 floats, Vec = 3 ints, 4 bytes each.
 namespace os {
-constexpr std::size_t kTime = 0, kAngVel = 4, kHeading = 16, kPitch = 20, kRoll = 24, kAccel = 28,
+[[maybe_unused]] constexpr std::size_t kTime = 0, kAngVel = 4, kHeading = 16, kPitch = 20, kRoll = 24, kAccel = 28,
                       kVel = 40, kPos = 52, kId = 64;
 }
 // OutGaugePack: unsigned Time; char Car[4]; word Flags; byte Gear; byte PLID; float Speed, RPM,
