@@ -19,6 +19,7 @@
 #include "vdyn/physics/world.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/transport/control_client.h"
@@ -484,6 +485,12 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
 }
 
 int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
+  std::filesystem::path new_file = o.out;
+  if (new_file.empty()) {
+    new_file = o.file;
+    new_file.replace_filename(o.file.stem().string() + "-takeover" + o.file.extension().string());
+  }
+  CheckNotAnInput(new_file, {o.file});  // before anything happens on the network
   const BranchPoint bp = FindBranchPoint(o.file, o.at_s, o.vehicle);
   out << "branch point: " << bp.label << " on world '" << bp.world_name << "'"
       << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << std::endl;
@@ -515,11 +522,8 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
   }
   // Record first, so the new recording holds the restore's events.
   RecordOptions ro;
-  ro.out = o.out;
-  if (ro.out.empty()) {
-    ro.out = o.file;
-    ro.out.replace_filename(o.file.stem().string() + "-takeover" + o.file.extension().string());
-  }
+  ro.out = new_file;
+  ro.writer.inputs = {o.file};  // never over the recording it continues
   ro.branched_from = bp.label;
   ro.command_line = o.command_line;
   ro.duration_s = o.duration_s;
