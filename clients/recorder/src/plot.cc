@@ -16,11 +16,11 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
-#include <iterator>
 #include <limits>
 #include <map>
 #include <optional>
 #include <set>
+#include <sstream>
 
 #include "vdyn/io/csv.h"
 #include "vdyn/recorder/commands.h"
@@ -215,8 +215,9 @@ int RunGnuplot(const std::string& gnuplot, const fs::path& folder, std::ostream&
   int status = 0;
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
-  std::ifstream in(log);
-  const std::string said((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ostringstream text;
+  if (std::ifstream in(log); in && in.peek() != std::ifstream::traits_type::eof()) text << in.rdbuf();
+  const std::string said = text.str();
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     out << "vdyn-recorder plot: gnuplot failed on plot.gp:\n" << said << "\n";
     return 1;
