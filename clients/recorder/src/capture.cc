@@ -129,6 +129,24 @@ std::uint64_t StepGaps::largest_from() const {
   return h != nullptr ? h->from : 0;
 }
 
+std::string ReceiveBufferAdvice(std::uint64_t rmem_max_bytes) {
+  if (rmem_max_bytes == 0 || rmem_max_bytes >= kBurstReceiveBytes) return {};
+  return "the kernel caps a socket's receive buffer at " + std::to_string(rmem_max_bytes) +
+         " bytes (net.core.rmem_max): a server's world description (2 MB), sent in one burst when "
+         "the recorder joins or the server starts, overflows it and the kernel drops the states "
+         "that arrive meanwhile (a few, lost at the start); raise it first: "
+         "sudo sysctl -w net.core.rmem_max=16777216";
+}
+
+std::uint64_t KernelReceiveBufferMax() {
+  std::FILE* f = std::fopen("/proc/sys/net/core/rmem_max", "r");
+  if (f == nullptr) return 0;
+  unsigned long long v = 0;
+  if (std::fscanf(f, "%llu", &v) != 1) v = 0;
+  std::fclose(f);
+  return v;
+}
+
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
   char suffix[16];
   std::snprintf(suffix, sizeof suffix, "-%03d", index);
@@ -379,6 +397,7 @@ struct Capture::Impl {
     for (std::uint32_t v : o.vehicles) vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
     m["vehicles"] = vehicles.empty() ? "all" : vehicles;
     m["compression"] = std::string(mcap::CompressionName(o.writer.compression));
+    m["rmem_max"] = std::to_string(KernelReceiveBufferMax());  // see ReceiveBufferAdvice
     if (!o.branched_from.empty()) m["branched_from"] = o.branched_from;
     if (part > 0) {
       m["part"] = std::to_string(part);
@@ -553,6 +572,9 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
                                           participant, s.id, &impl_->drops,
                                           transport::ReaderRole::kRecorder));
     impl_->counts[s.id];
+  }
+  if (const std::string advice = ReceiveBufferAdvice(KernelReceiveBufferMax()); !advice.empty()) {
+    spdlog::warn("vdyn-recorder: {}", advice);
   }
   ready_ = true;
 }
