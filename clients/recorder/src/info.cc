@@ -38,8 +38,8 @@ struct VehicleStats {
 };
 
 struct ServerEvents {
-  std::uint64_t count = 0, first = 0, last = 0, gaps = 0, missing = 0;
-  bool any = false;
+  std::set<std::uint64_t> sequences;  // each event once (they arrive vehicle by vehicle)
+  std::uint64_t count = 0, first = 0, last = 0, gaps = 0, missing = 0;  // from `sequences`
   std::set<std::uint64_t> terrain_hashes;
   std::map<std::uint32_t, std::uint64_t> start_step;  // vehicle -> first spawn or checkpoint
   std::map<std::uint32_t, std::string> branched_from;
@@ -57,7 +57,8 @@ void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first
   auto secs = [first](const std::string& ns) {
     const std::uint64_t v = std::strtoull(ns.c_str(), nullptr, 10);
     char b[32];
-    std::snprintf(b, sizeof b, "%.3f", v >= first ? static_cast<double>(v - first) * 1e-9 : 0.0);
+    // Signed: a lost chunk may lie before the first message kept.
+    std::snprintf(b, sizeof b, "%.3f", (static_cast<double>(v) - static_cast<double>(first)) * 1e-9);
     return std::string(b);
   };
   // "a-b,c-d" (ns) as "0.250 .. 0.500 s, ..."
@@ -203,21 +204,14 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       ++vs.states;
     } else if (m.topic == TopicId::kEvents) {
       pb::SessionEvent e;
-      // A server's event names it, is numbered from 1 and is keyed by its vehicle.
+      // A server's event names it and is keyed by its vehicle.
       if (!e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size())) ||
-          e.server_id().empty() || e.sequence() == 0 || e.vehicle_id() != m.key) {
+          e.server_id().empty() || e.vehicle_id() != m.key) {
         ++c.malformed;
         return;
       }
       ServerEvents& s = servers[e.server_id()];
-      if (s.any && e.sequence() > s.last + 1) {
-        ++s.gaps;
-        s.missing += e.sequence() - s.last - 1;
-      }
-      if (!s.any) s.first = e.sequence();
-      s.any = true;
-      s.last = std::max(s.last, e.sequence());
-      ++s.count;
+      s.sequences.insert(e.sequence());
       if (e.has_spawned()) {
         // Only a vehicle with states has steps to tell about (its first state starts them).
         if (const auto it = vehicles.find(e.vehicle_id()); it != vehicles.end())
@@ -245,6 +239,19 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     }
   };
   const mcap::ScanResult scan = ScanRecording(reader, v);
+  for (auto& [id, s] : servers) {
+    s.count = s.sequences.size();
+    s.first = *s.sequences.begin();
+    s.last = *s.sequences.rbegin();
+    std::uint64_t prev = s.first;
+    for (const std::uint64_t q : s.sequences) {
+      if (q > prev + 1) {
+        ++s.gaps;
+        s.missing += q - prev - 1;
+      }
+      prev = q;
+    }
+  }
   for (const mcap::ChunkIndex& c : reader.Chunks()) {
     ++compression_chunks[c.compression.empty() ? "none" : c.compression];
     packed += c.compressed_size;
@@ -393,6 +400,7 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
          : !named.empty() ? "no session events: " + named + " holds another type (not a vdyn channel)"
                           : "no session events recorded (vdyn/events)";
   }
+  std::string partly;  // what verify cannot cover: it re-simulates around it
   for (const auto& [server, s] : servers) {
     if (!no.empty()) break;
     const auto w = worlds.find(server);
@@ -401,7 +409,8 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     } else if (s.terrain_hashes.size() > 1 || (s.terrain_hashes.size() == 1 && *s.terrain_hashes.begin() != w->second.terrain_hash())) {
       no = "the events name another terrain than the recorded world";
     } else if (s.gaps > 0) {
-      no = std::to_string(s.missing) + " events of server '" + server + "' are missing";
+      partly += "; " + std::to_string(s.missing) + " events of server '" + server + "' are missing (" +
+                std::to_string(s.gaps) + " gaps)";
     }
   }
   std::string starts;
@@ -416,7 +425,16 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       starts += (starts.empty() ? "" : ", ") + std::string("vehicle ") + std::to_string(id) + " from step " + std::to_string(*start);
     }
   }
-  out << "re-simulates " << (no.empty() ? "yes: " + (starts.empty() ? std::string("no states to check") : starts) + " (`vdyn-recorder verify` checks every state hash)" : "no: " + no) << "\n";
+  if (!no.empty()) {
+    out << "re-simulates no: " << no << "\n";
+  } else if (!partly.empty()) {
+    out << "re-simulates in parts: " << (starts.empty() ? std::string("no states to check") : starts) << partly
+        << ": `vdyn-recorder verify` re-simulates up to each gap and again from the next checkpoint "
+           "after it, and says which steps it could not verify\n";
+  } else {
+    out << "re-simulates yes: " << (starts.empty() ? std::string("no states to check") : starts)
+        << " (`vdyn-recorder verify` checks every state hash)\n";
+  }
   return 0;
 }
 

@@ -246,7 +246,8 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
   }
   auto at = [&](std::uint64_t ns) {
     char b[32];
-    std::snprintf(b, sizeof b, "%.3f s", ns >= first_log ? static_cast<double>(ns - first_log) * 1e-9 : 0.0);
+    // Signed: a lost chunk may lie before the first message kept.
+    std::snprintf(b, sizeof b, "%.3f s", (static_cast<double>(ns) - static_cast<double>(first_log)) * 1e-9);
     return std::string(b);
   };
   out << o.file.string() << ": recovered " << kept << " messages in " << r.chunks << " chunks";
