@@ -51,7 +51,8 @@ void CheckNotAnInput(const fs::path& dest, const std::vector<fs::path>& inputs) 
   }
   for (const fs::path& in : inputs) {
     if (SameFile(dest, in)) {
-      const bool spelled = dest.lexically_normal() == in.lexically_normal();
+      const bool spelled =
+          fs::absolute(dest).lexically_normal() == fs::absolute(in).lexically_normal();
       throw OutputError("the output " + dest.string() + " is the input " +
                         (spelled ? std::string("itself")
                                  : in.string() + " (the same file under another name)") +

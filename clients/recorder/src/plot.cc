@@ -76,11 +76,11 @@ std::optional<std::array<double, 4>> WorldBounds(const pb::WorldDescription& w) 
   return any ? std::optional(b) : std::nullopt;
 }
 
-// A top-down map of the world's meshes from (x0, y0), nx by ny square cells: each cell holds the
-// surface kind (road, ground, ramp...) of the highest surface above its centre, kNoSurface where
-// there is none; rasterised triangle by triangle.
-std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double y0, double cell,
-                               int nx, int ny) {
+// A top-down map of the world's meshes from (x0, y0), nx by ny cells of cx by cy metres: each
+// cell holds the surface kind (road, ground, ramp...) of the highest surface above its centre,
+// kNoSurface where there is none; rasterised triangle by triangle.
+std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double y0, double cx_m,
+                               double cy_m, int nx, int ny) {
   const std::size_t n = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
   std::vector<double> z(n, std::numeric_limits<double>::quiet_NaN());
   std::vector<double> kind(n, kNoSurface);
@@ -95,14 +95,14 @@ std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double 
       const double cx = V(ic, 0), cy = V(ic, 1), cz = V(ic, 2);
       const double det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy);
       if (!(std::abs(det) >= 1e-12)) continue;  // vertical, degenerate or not finite: no top
-      const int i0 = std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cell)));
-      const int i1 = std::min(nx - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cell)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cell)));
-      const int j1 = std::min(ny - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cell)));
+      const int i0 = std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cx_m)));
+      const int i1 = std::min(nx - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cx_m)));
+      const int j0 = std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cy_m)));
+      const int j1 = std::min(ny - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cy_m)));
       for (int j = j0; j <= j1; ++j) {
-        const double py = y0 + (j + 0.5) * cell;
+        const double py = y0 + (j + 0.5) * cy_m;
         for (int i = i0; i <= i1; ++i) {
-          const double px = x0 + (i + 0.5) * cell;
+          const double px = x0 + (i + 0.5) * cx_m;
           const double l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det;
           const double l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det;
           const double l3 = 1.0 - l1 - l2;
@@ -429,7 +429,7 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   // The map: the trajectory's bounds with a margin, within the world's surfaces (no empty band
   // where the world ends), square cells.
   const bool map = have_xy && world.has_value();
-  double mx0 = 0, my0 = 0, cell = 1;
+  double mx0 = 0, my0 = 0, cell_x = 1, cell_y = 1;
   int nx = 0, ny = 0;
   if (map) {
     const double margin = std::max(20.0, 0.1 * std::max(x_hi - x_lo, y_hi - y_lo));
@@ -445,19 +445,23 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
         y1 = std::min(y1, (*b)[3]);
       }
     }
-    cell = std::max({x1 - x0, y1 - y0, 1.0}) / kMapCells;
-    nx = std::clamp(static_cast<int>(std::ceil((x1 - x0) / cell)), 2, kMapCells);
-    ny = std::clamp(static_cast<int>(std::ceil((y1 - y0) / cell)), 2, kMapCells);
+    // kMapCells along the longer side, as many on the other as keep the cells nearly square; the
+    // cells tile the area exactly (no row half outside the world).
+    const double longer = std::max({x1 - x0, y1 - y0, 1.0});
+    nx = std::clamp(static_cast<int>(std::lround(kMapCells * (x1 - x0) / longer)), 2, kMapCells);
+    ny = std::clamp(static_cast<int>(std::lround(kMapCells * (y1 - y0) / longer)), 2, kMapCells);
+    cell_x = std::max(x1 - x0, 1e-3) / nx;
+    cell_y = std::max(y1 - y0, 1e-3) / ny;
     mx0 = x0;
     my0 = y0;
-    const std::vector<double> kind = SurfaceMap(*world, mx0, my0, cell, nx, ny);
+    const std::vector<double> kind = SurfaceMap(*world, mx0, my0, cell_x, cell_y, nx, ny);
     std::ofstream mf(work.path() / "map.dat");
     // gnuplot's "nonuniform matrix": first row the x of each column, then y and the row's values.
     mf << nx;
-    for (int i = 0; i < nx; ++i) mf << " " << mx0 + (i + 0.5) * cell;
+    for (int i = 0; i < nx; ++i) mf << " " << mx0 + (i + 0.5) * cell_x;
     mf << "\n";
     for (int j = 0; j < ny; ++j) {
-      mf << my0 + (j + 0.5) * cell;
+      mf << my0 + (j + 0.5) * cell_y;
       for (int i = 0; i < nx; ++i) {
         mf << " " << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) + static_cast<std::size_t>(i)];
       }
@@ -517,7 +521,7 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   }
   if (map) {
     // As wide as the page, as tall as the map's shape needs (the plot area is about 740 px wide).
-    const double aspect = static_cast<double>(ny) / static_cast<double>(nx);
+    const double aspect = (ny * cell_y) / (nx * cell_x);
     const int height = std::clamp(static_cast<int>(740 * aspect) + 180, 360, 1100);
     gp << "set terminal " << terminal(1000, height) << "\nset output 'trajectory." << ext << "'\n";
     gp << "set title \"Trajectory of vehicle " << vehicle << " over world '" << Escape(world->name())
@@ -532,8 +536,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     }
     gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5 << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
           "'rough' 3, 'ramp' 4, 'barrier' 5, 'prop' 6, 'no surface' 7)\nunset cblabel\n";
-    gp << "set xrange [" << mx0 << ":" << mx0 + nx * cell << "]\nset yrange [" << my0 << ":"
-       << my0 + ny * cell << "]\n";
+    gp << "set xrange [" << mx0 << ":" << mx0 + nx * cell_x << "]\nset yrange [" << my0 << ":"
+       << my0 + ny * cell_y << "]\n";
     gp << "plot 'map.dat' nonuniform matrix with image notitle, "
        << "'states.dat' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
        << " with lines lw 2.5 lc rgb '#c1121f' title 'trajectory', "
@@ -580,7 +584,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
   html.close();
   outputs.push_back("index.html");
-  // Into place, each checked against the recording first.
+  // Into place, all checked against the recording first (none moves when one may not).
+  for (const std::string& f : outputs) CheckNotAnInput(dir / f, {o.file});
   for (const std::string& f : outputs) MoveInto(work.path() / f, dir / f, {o.file});
   out << made.size() << " figures (" << o.format << ") and index.html in " << dir.string() << "\n";
   return 0;

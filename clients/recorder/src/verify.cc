@@ -567,7 +567,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     }
   }
   std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps", r.compared);
-  out << o.file.string() << ": " << line << " (" << ranges << ")";
+  out << o.file.string() << ": " << (r.unverified > 0 ? "PARTLY verified: " : "") << line << " ("
+      << ranges << ")";
   if (r.not_resimulated > 0) out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
   std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n", r.sim_seconds,
                 r.wall_seconds, r.wall_seconds > 0 ? r.sim_seconds / r.wall_seconds : 0.0);
