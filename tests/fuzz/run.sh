@@ -16,7 +16,7 @@ flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DVDYN_SANITIZE=ON -DVDYN_FUZZ=ON -DVDY
        -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++)
 if command -v ccache >/dev/null 2>&1; then flags+=(-DCMAKE_CXX_COMPILER_LAUNCHER=ccache); fi
 cmake -S . -B "$dir" -G Ninja "${flags[@]}" >/dev/null
-targets=(maneuver vehicle_params world_file world_description server_messages mcap)
+targets=(maneuver vehicle_params world_file world_description server_messages mcap recover_verify)
 cmake --build "$dir" --parallel "$(nproc)" --target "${targets[@]/#/fuzz_}"
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:allocator_may_return_null=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
