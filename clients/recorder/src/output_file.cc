@@ -14,7 +14,9 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string Errno() { return std::strerror(errno); }
+std::string Errno() {
+  return std::strerror(errno);
+}
 
 // A name for the temporary file beside `target`: "run.partial-Xy12Ab.csv" (the extension kept,
 // so a tool that goes by it still recognises a file left by a crash).
@@ -39,7 +41,8 @@ void SyncFolder(const fs::path& file) {
 }  // namespace
 
 bool SameFile(const fs::path& a, const fs::path& b) {
-  struct stat sa {}, sb {};
+  struct stat sa {
+  }, sb{};
   if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) return false;
   return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
 }
@@ -53,10 +56,10 @@ void CheckNotAnInput(const fs::path& dest, const std::vector<fs::path>& inputs) 
     if (SameFile(dest, in)) {
       const bool spelled =
           fs::absolute(dest).lexically_normal() == fs::absolute(in).lexically_normal();
-      throw OutputError("the output " + dest.string() + " is the input " +
-                        (spelled ? std::string("itself")
-                                 : in.string() + " (the same file under another name)") +
-                        ": it would be destroyed; choose another output file (nothing was written)");
+      throw OutputError(
+          "the output " + dest.string() + " is the input " +
+          (spelled ? std::string("itself") : in.string() + " (the same file under another name)") +
+          ": it would be destroyed; choose another output file (nothing was written)");
     }
   }
 }
@@ -95,7 +98,9 @@ OutputFile::OutputFile(fs::path dest, std::vector<fs::path> inputs)
   if (fd_ < 0) throw OutputError(dest_.string() + ": no free temporary name beside it");
 }
 
-OutputFile::~OutputFile() { Abandon(); }
+OutputFile::~OutputFile() {
+  Abandon();
+}
 
 int OutputFile::Release() {
   const int fd = fd_;

@@ -55,10 +55,14 @@ class Ranges {
 
 const char* DataCrcText(mcap::ScanResult::DataCrc c) {
   switch (c) {
-    case mcap::ScanResult::DataCrc::kMatched: return "matched";
-    case mcap::ScanResult::DataCrc::kAbsent: return "absent";
-    case mcap::ScanResult::DataCrc::kMismatched: return "mismatched";
-    case mcap::ScanResult::DataCrc::kNotReached: return "not reached";
+    case mcap::ScanResult::DataCrc::kMatched:
+      return "matched";
+    case mcap::ScanResult::DataCrc::kAbsent:
+      return "absent";
+    case mcap::ScanResult::DataCrc::kMismatched:
+      return "mismatched";
+    case mcap::ScanResult::DataCrc::kNotReached:
+      return "not reached";
   }
   return "";
 }
@@ -120,7 +124,8 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     if (c.schema_id == 0) return 0;
     if (const auto it = schema_ids.find(c.schema_id); it != schema_ids.end()) return it->second;
     const mcap::Schema* s = nullptr;
-    if (const auto it = source_schemas.find(c.schema_id); it != source_schemas.end()) s = &it->second;
+    if (const auto it = source_schemas.find(c.schema_id); it != source_schemas.end())
+      s = &it->second;
     if (s == nullptr && (s = summary_schema(c.schema_id)) != nullptr) {
       notes.push_back("schema " + std::to_string(c.schema_id) + " ('" + s->name +
                       "') from the summary: its record in the data section is damaged");
@@ -147,7 +152,8 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
   mcap::Visitor v;
   v.on_schema = [&](const mcap::Schema& s) {
     source_schemas.try_emplace(s.id, s);
-    if (schema_ids.count(s.id) == 0) schema_ids[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
+    if (schema_ids.count(s.id) == 0)
+      schema_ids[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
   };
   v.on_channel = [&](const mcap::Channel& c) {
     if (channel_ids.count(c.id) == 0) add_channel(c);
@@ -171,7 +177,8 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     }
     const bool no_crc = m.unchecked && !data_crc_holds;
     writer.SetChunkCrc(!no_crc);
-    writer.WriteMessage(channel_ids.at(m.channel_id), m.sequence, m.log_time, m.publish_time, m.data);
+    writer.WriteMessage(channel_ids.at(m.channel_id), m.sequence, m.log_time, m.publish_time,
+                        m.data);
     if (first_log == 0 || m.log_time < first_log) first_log = m.log_time;
     if (no_crc) {
       ++unchecked;
@@ -180,9 +187,13 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     last_unchecked = no_crc;
     ++kept;
   };
-  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) { writer.WriteMetadata(m.name, m.values); };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+    writer.WriteMetadata(m.name, m.values);
+  };
   Progress progress("recover");
-  v.on_progress = [&](std::uint64_t at) { progress.Update(static_cast<double>(at) / static_cast<double>(reader.size())); };
+  v.on_progress = [&](std::uint64_t at) {
+    progress.Update(static_cast<double>(at) / static_cast<double>(reader.size()));
+  };
   const mcap::ScanResult r = reader.Scan(v, /*lenient=*/true);
   progress.Finish();
 
@@ -247,13 +258,15 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
   auto at = [&](std::uint64_t ns) {
     char b[32];
     // Signed: a lost chunk may lie before the first message kept.
-    std::snprintf(b, sizeof b, "%.3f s", (static_cast<double>(ns) - static_cast<double>(first_log)) * 1e-9);
+    std::snprintf(b, sizeof b, "%.3f s",
+                  (static_cast<double>(ns) - static_cast<double>(first_log)) * 1e-9);
     return std::string(b);
   };
   out << o.file.string() << ": recovered " << kept << " messages in " << r.chunks << " chunks";
   if (r.chunks_skipped > 0) out << "; " << r.chunks_skipped << " damaged chunks dropped";
   if (r.chunks_duplicated > 0) out << "; " << r.chunks_duplicated << " copies of a chunk dropped";
-  if (r.records_skipped > 0) out << "; " << r.records_skipped << " damaged records or runs of bytes skipped";
+  if (r.records_skipped > 0)
+    out << "; " << r.records_skipped << " damaged records or runs of bytes skipped";
   if (!closed) out << " (the file was not closed: no data end record)";
   out << "\n";
   if (!r.damage.empty()) out << "  damage found (" << r.damage.size() << "):\n";
@@ -264,19 +277,26 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     out << ": " << d.what;
     if (d.messages > 0) out << "; " << d.messages << " messages";
     if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
-      out << " (log time " << at(d.chunk->message_start_time) << " .. " << at(d.chunk->message_end_time) << ")";
+      out << " (log time " << at(d.chunk->message_start_time) << " .. "
+          << at(d.chunk->message_end_time) << ")";
     }
     out << "\n";
   }
-  if (r.damage.size() > 20) out << "    ... " << (r.damage.size() - 20) << " more (in the copy's metadata)\n";
+  if (r.damage.size() > 20)
+    out << "    ... " << (r.damage.size() - 20) << " more (in the copy's metadata)\n";
   for (const std::string& n : notes) out << "  " << n << "\n";
   if (summary_state != "read" && summary_state != "absent") {
-    out << "  the source's summary is " << summary_state << ": not used; the copy's is rebuilt from the data section\n";
+    out << "  the source's summary is " << summary_state
+        << ": not used; the copy's is rebuilt from the data section\n";
   }
   if (unchecked > 0) {
     out << "  unchecked: " << unchecked << " messages lie in chunks without a CRC and the source's "
-        << "data-section CRC " << (r.data_crc == mcap::ScanResult::DataCrc::kMismatched ? "does not match" : "is " + std::string(DataCrcText(r.data_crc)))
-        << ": nothing can tell whether they are intact; the copy keeps them in chunks without a CRC "
+        << "data-section CRC "
+        << (r.data_crc == mcap::ScanResult::DataCrc::kMismatched
+                ? "does not match"
+                : "is " + std::string(DataCrcText(r.data_crc)))
+        << ": nothing can tell whether they are intact; the copy keeps them in chunks without a "
+           "CRC "
            "and says so (`vdyn-recorder info`)\n";
   }
   out << "written, closed and indexed: " << dest.string() << "\n";

@@ -1,5 +1,5 @@
-// The files vdyn-recorder writes (recordings, recovered copies, CSV, figures): never over one of the
-// command's inputs, and never in place.
+// The files vdyn-recorder writes (recordings, recovered copies, CSV, figures): never over one of
+// the command's inputs, and never in place.
 //
 //   - An output that is the same file as an input - by device and inode, so whatever the spelling:
 //     `./run.mcap`, an absolute path, a symlink, a hard link - is refused before anything is
