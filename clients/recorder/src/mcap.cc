@@ -929,12 +929,16 @@ std::optional<std::uint64_t> Reader::NextRecord(std::uint64_t from) const {
     const std::uint8_t op = data_[p];
     if (op == 0 || op > kDataEnd || op == kHeader) continue;
     Frame f;
-    if (!FrameAt(data_, size_, p, f).empty() || !ContentReads(op, f.content)) continue;
-    // The frame after it must be whole too (or the file ends there, or the closing magic).
+    if (!FrameAt(data_, size_, p, f).empty()) continue;
+    // The frame after it must be whole too (or the file ends there, or the closing magic), and
+    // its own content must read (checked last: the costlier test).
     const std::uint64_t next = f.end();
-    if (next == size_ || (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0)) return p;
     Frame g;
-    if (FrameAt(data_, size_, next, g).empty() && g.op <= kDataEnd && g.op != kHeader) return p;
+    const bool followed = next == size_ ||
+                          (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0) ||
+                          (FrameAt(data_, size_, next, g).empty() && g.op != 0 && g.op <= kDataEnd &&
+                           g.op != kHeader);
+    if (followed && ContentReads(op, f.content)) return p;
   }
   return std::nullopt;
 }

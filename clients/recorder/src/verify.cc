@@ -494,6 +494,12 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   with.on_progress = [&bar](double f) { bar.Update(f); };
   const VerifyResult r = Verify(with);
   bar.Finish();
+  // A recovered file says what its source lost and what no CRC checked: said here too, never
+  // a bit-exact claim on its own.
+  const std::vector<std::string> recovered = IntegrityNotes(ReadMetadata(mcap::Reader(o.file)), {}, 0, "");
+  auto notes = [&] {
+    for (const std::string& n : recovered) out << "  " << n << "\n";
+  };
   char line[256];
   if (!r.resimulated) {
     out << o.file.string() << ": cannot re-simulate: " << r.cannot << "\n";
@@ -545,6 +551,7 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     out << "  " << d.matched_before << " steps of vehicle " << d.vehicle << " matched bit for bit before it; "
         << r.mismatched << " of " << r.compared << " compared steps differ\n";
     unverified();
+    notes();
     return 1;
   }
   if (r.compared == 0) {
@@ -552,6 +559,7 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     out << (r.unverified > 0 ? "" : "\n");
     if (r.unverified > 0) out << " that the recording kept whole\n";
     unverified();
+    notes();
     return 1;
   }
   std::string ranges;
@@ -591,6 +599,7 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
         << "hashes matched and every field was compared with the re-simulation"
         << (r.damaged > 0 ? "" : " (all equal)") << "\n";
   }
+  notes();
   return r.ok() ? 0 : 1;
 }
 
