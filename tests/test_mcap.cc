@@ -828,7 +828,7 @@ TEST(McapInfo, GarbageUnderOurTopicNamesIsNeitherStatesNorEvents) {
     EXPECT_THAT(info, ::testing::Not(HasSubstr("states missing"))) << info;
     EXPECT_THAT(info, HasSubstr("no states recorded")) << info;
     if (our_schema) {
-      EXPECT_THAT(info, HasSubstr("vdyn/events/1                     20 msgs")) << info;
+      EXPECT_THAT(info, HasSubstr("vdyn/events/1                         20 msgs")) << info;
       EXPECT_THAT(info, HasSubstr("vdyn/events/1: 20 of 20 messages do not parse as the topic's type")) << info;
       EXPECT_THAT(info, HasSubstr("re-simulates no: the 20 messages on vdyn/events do not parse as session events")) << info;
     } else {
@@ -863,8 +863,8 @@ TEST(McapInfo, RatesArePrintedOnlyForStreams) {
     w.Close();
   }
   const std::string info = Info(path);
-  EXPECT_THAT(info, HasSubstr("vdyn/state/1                    3000 msgs    1000.0 Hz")) << info;
-  EXPECT_THAT(info, HasSubstr("vdyn/control_reply/1               2 msgs         -    ")) << info;
+  EXPECT_THAT(info, HasSubstr("vdyn/state/1                        3000 msgs    1000.0 Hz")) << info;
+  EXPECT_THAT(info, HasSubstr("vdyn/control_reply/1                   2 msgs         -    ")) << info;
   EXPECT_THAT(info, ::testing::Not(HasSubstr("76.9 Hz"))) << info;
 }
 

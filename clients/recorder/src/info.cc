@@ -332,7 +332,7 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       std::snprintf(rate, sizeof rate, "%9.1f Hz", static_cast<double>(c.messages - 1) /
                                                        (static_cast<double>(c.last - c.first) * 1e-9));
     }
-    std::snprintf(line, sizeof line, "  %-26s %9llu msgs %s %10s   %8.3f .. %8.3f s", name.c_str(),
+    std::snprintf(line, sizeof line, "  %-30s %9llu msgs %s %10s   %8.3f .. %8.3f s", name.c_str(),
                   static_cast<unsigned long long>(c.messages), rate,
                   FormatBytes(static_cast<double>(c.bytes)).c_str(), t(c.first), t(c.last));
     out << line;
