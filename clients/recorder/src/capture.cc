@@ -411,13 +411,10 @@ struct Capture::Impl {
     }
   }
 
-  // A world or parameters message is written twice more, each time in a chunk of its own: right
-  // after the chunk that holds it, and when the file closes. Any one chunk can then be lost (a
-  // damaged file, `recover`) and the world the recording ran on is still in it.
-  void WriteRepeats(bool all) {
-    if (all) {
-      for (const auto& [id, l] : latched) file.repeats_due.insert(id);
-    }
+  // A world or parameters message is written once more, in a chunk of its own right after the
+  // chunk that holds it (a world is a megabyte on disk: one copy, not one a minute). Any one chunk
+  // can then be lost (a damaged file, `recover`) and the world the recording ran on is still in it.
+  void WriteRepeats() {
     if (file.repeats_due.empty()) return;
     file.w->Flush();
     for (const auto& id : file.repeats_due) {
@@ -449,7 +446,7 @@ struct Capture::Impl {
 
   void CloseFile(const std::string& reason) {
     if (!file.w) return;
-    WriteRepeats(/*all=*/true);
+    WriteRepeats();
     mcap::StringMap m;
     const std::uint64_t now = LogNow();
     m["ended_utc"] = FormatUtc(now);
@@ -547,7 +544,7 @@ struct Capture::Impl {
                        std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
           ++file.own_messages;
         }
-        WriteRepeats(/*all=*/false);
+        WriteRepeats();
         file.w->FlushIfOlder(LogNow());
         disk_bytes = bytes_closed + file.w->bytes_written();
         {
