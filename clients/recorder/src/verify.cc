@@ -141,7 +141,7 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
       }
       case FD::CPPTYPE_FLOAT: {
         const float x = ra->GetFloat(a, f), y = rb->GetFloat(b, f);
-        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(x), num(y)});
+        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(static_cast<double>(x)), num(static_cast<double>(y))});
         break;
       }
       case FD::CPPTYPE_BOOL:
