@@ -679,6 +679,11 @@ TEST(McapRecover, SkipsADamagedRecordResynchronisesAndKeepsTheRest) {
   std::vector<std::uint8_t> scratch;
   mc::Reader(path).ReadChunk(l.chunks[3], [&](const mc::Message&) { ++in_chunk; }, scratch);
   EXPECT_EQ(got.size(), w.payloads.size() - in_chunk);
+  // The copy's info says what was lost, and when.
+  const std::string info = Info(dir / "length-recovered.mcap");
+  EXPECT_THAT(info, HasSubstr("recovered   from length.mcap"));
+  EXPECT_THAT(info, HasSubstr(std::to_string(in_chunk) + " states missing"));
+  EXPECT_THAT(info, HasSubstr("bytes to the next valid record"));
 }
 
 // Writes `path` again with the data end's CRC set to the CRC of every byte before it (a writer
