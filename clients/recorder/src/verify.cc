@@ -363,8 +363,8 @@ VerifyResult Verify(const VerifyOptions& o) {
     const std::uint64_t hash = wire::Number(m.data, 21).value_or(0);
     auto it = runs.find(m.key);
     if (it == runs.end() || it->second.segments.empty()) {
-      ++res.not_resimulated;
-      if (it != runs.end()) res.Unverified(m.key, step, it->second.error);
+      ++res.not_resimulated;  // no spawn or checkpoint of this vehicle at all
+      if (it != runs.end()) res.Unverified(m.key, step, it->second.error, false);
       return;
     }
     VehicleRun& run = it->second;
