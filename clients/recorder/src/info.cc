@@ -181,17 +181,12 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     if (m.topic == TopicId::kState) {
       // The fields the gaps need, and a check that the payload is a state of this vehicle: a
       // foreign writer's garbage under our names must not become steps.
-      std::uint64_t step = 0, step_ns = 0, id = 0;
-      const bool framed = wire::ForEachField(m.data, [&](const wire::Field& f) {
-        if (f.type == 0 && f.number == 1) id = f.value;
-        if (f.type == 0 && f.number == 3) step = f.value;
-        if (f.type == 0 && f.number == 5) step_ns = f.value;
-        return true;
-      });
-      if (!framed || id != m.key) {
+      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+      if (!fields) {
         ++c.malformed;
         return;
       }
+      const std::uint64_t step = fields->step, step_ns = fields->step_ns;
       unchecked_states += m.unchecked ? 1 : 0;
       VehicleStats& vs = Vehicle(m.key);
       if (!vs.any) {

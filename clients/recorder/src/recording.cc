@@ -151,6 +151,20 @@ mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisito
   return reader.Scan(mv);
 }
 
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload, std::uint32_t key) {
+  StateFields f;
+  std::uint64_t id = 0;
+  const bool framed = wire::ForEachField(payload, [&](const wire::Field& w) {
+    if (w.type == 0 && w.number == 1) id = w.value;
+    if (w.type == 0 && w.number == 3) f.step = w.value;
+    if (w.type == 0 && w.number == 5) f.step_ns = w.value;
+    if (w.type == 1 && w.number == 21) f.state_hash = w.value;
+    return true;
+  });
+  if (!framed || id != key) return std::nullopt;
+  return f;
+}
+
 mcap::ScanResult CheckWholeFile(const mcap::Reader& reader, const std::string& label) {
   Progress progress(label);
   mcap::Visitor v;

@@ -202,6 +202,10 @@ struct Segment {
 
 // One vehicle's replay: streams forward as states arrive, keeps recent hashes for states that
 // arrive a little out of order; restarts at a checkpoint after a hole in the events.
+// How far past a vehicle's last event its states may be re-simulated (a minute at 1 kHz; the
+// server sends a checkpoint each second).
+constexpr std::uint64_t kAheadSteps = 60'000;
+
 struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
   std::string server;
@@ -213,6 +217,7 @@ struct VehicleRun {
       std::vector<std::pair<std::uint64_t, std::uint64_t>>(kRing, {~0ull, 0});
   std::uint64_t matched = 0;
   std::int64_t step_ns = 0;
+  std::uint64_t last_event_step = 0;
   std::string error;
 
   void AddSegment(std::size_t first_event) {
@@ -325,6 +330,7 @@ VerifyResult Verify(const VerifyOptions& o) {
       run.world = world;
       run.terrain_hash = hash;
       run.events.push_back(&e);
+      run.last_event_step = std::max(run.last_event_step, LastActionStep(e));
       if (e.has_spawned()) run.step_ns = e.spawned().step_ns();
       if (e.has_checkpoint()) run.step_ns = e.checkpoint().step_ns();
     }
@@ -359,8 +365,13 @@ VerifyResult Verify(const VerifyOptions& o) {
   v.on_progress = progress(0.1, 1.0);
   v.on_message = [&](const RecordedMessage& m) {
     if (o.vehicle && m.key != *o.vehicle) return;
-    const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
-    const std::uint64_t hash = wire::Number(m.data, 21).value_or(0);
+    const std::optional<StateFields> read = ReadStateFields(m.data, m.key);
+    if (!read) {
+      ++res.malformed;  // not a state of this vehicle: no step to place it at
+      return;
+    }
+    const std::uint64_t step = read->step;
+    const std::uint64_t hash = read->state_hash;
     auto it = runs.find(m.key);
     if (it == runs.end() || it->second.segments.empty()) {
       ++res.not_resimulated;  // no spawn or checkpoint of this vehicle at all
@@ -377,6 +388,13 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
     if (seg->lost) {
       res.Unverified(m.key, step, seg->why);
+      return;
+    }
+    if (step > run.last_event_step + kAheadSteps) {
+      // Far beyond every event of the vehicle (a checkpoint comes each second): not a step to
+      // simulate towards (a damaged step would cost hours).
+      res.Unverified(m.key, step, "beyond the vehicle's last recorded event (step " +
+                                      std::to_string(run.last_event_step) + "): not re-simulated");
       return;
     }
     bool fresh_step = false;
@@ -599,6 +617,10 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
         << "hashes matched and every field was compared with the re-simulation"
         << (r.damaged > 0 ? "" : " (all equal)") << "\n";
   }
+  if (r.malformed > 0) {
+    out << "  NOT verified: " << r.malformed << " recorded state messages do not read as states of "
+        << "their vehicle (damaged or foreign payloads)\n";
+  }
   notes();
   return r.ok() ? 0 : 1;
 }
@@ -624,8 +646,10 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
       if (step) return;
       if (!chosen) chosen = m.key;
       if (m.key != *chosen) return;
-      const std::uint64_t s = wire::Number(m.data, 3).value_or(0);
-      const std::uint64_t h = wire::Number(m.data, 21).value_or(0);
+      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+      if (!fields) return;  // not a state of this vehicle
+      const std::uint64_t s = fields->step;
+      const std::uint64_t h = fields->state_hash;
       if (m.log_time >= at) {
         step = s;
         if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s) hash_before = it->second.second;

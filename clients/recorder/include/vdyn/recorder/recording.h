@@ -88,6 +88,16 @@ struct RecordingVisitor {
 };
 mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisitor& visitor);
 
+// The fields of a recorded state that gaps and re-simulation go by, read without parsing; nullopt
+// when the payload is not protobuf framing or names another vehicle than its channel's key (a
+// damaged or foreign payload must never become a step).
+struct StateFields {
+  std::uint64_t step = 0;
+  std::uint64_t step_ns = 0;
+  std::uint64_t state_hash = 0;
+};
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload, std::uint32_t key);
+
 // Refuses (mcap::McapError) what `info` refuses: reads the whole file strictly, every CRC.
 // For commands that otherwise read only parts of it (play).
 mcap::ScanResult CheckWholeFile(const mcap::Reader& reader, const std::string& label);

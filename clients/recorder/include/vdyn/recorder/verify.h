@@ -65,6 +65,7 @@ struct VerifyResult {
   std::uint64_t mismatched = 0;
   std::uint64_t not_resimulated = 0;  // states before a vehicle's first spawn or checkpoint
   std::uint64_t unverified = 0;       // states a loss of events kept from being verified
+  std::uint64_t malformed = 0;        // state messages that do not read as this vehicle's states
   std::vector<std::string> holes;     // the events lost, per server
   struct Range {
     std::uint64_t first = 0, last = 0, count = 0;
@@ -81,7 +82,8 @@ struct VerifyResult {
   double wall_seconds = 0;
   // Every recorded state after a spawn or checkpoint re-simulated bit for bit, and none damaged.
   bool ok() const {
-    return resimulated && mismatched == 0 && compared > 0 && unverified == 0 && damaged == 0;
+    return resimulated && mismatched == 0 && compared > 0 && unverified == 0 && damaged == 0 &&
+           malformed == 0;
   }
   void Verified(std::uint32_t vehicle, std::uint64_t step);
   // `counts`: a state that should have been verified (not one before the vehicle's start).
