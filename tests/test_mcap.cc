@@ -14,13 +14,13 @@
 #include <google/protobuf/dynamic_message.h>
 #include <gtest/gtest.h>
 
+#include "test_support.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/state.pb.h"
-#include "test_support.h"
 
 namespace vdyn {
 namespace {
@@ -410,8 +410,8 @@ TEST(McapBadFiles, AChunkThatClaimsMoreThanItHoldsIsRefusedWithoutAllocatingTheC
   }
 }
 
-
-// --- outputs: never over an input, never in place ---------------------------------------------------
+// --- outputs: never over an input, never in place
+// ---------------------------------------------------
 
 namespace fs = std::filesystem;
 
@@ -431,9 +431,12 @@ TEST(RecorderOutputs, AnOutputThatIsAnInputIsRefusedWhateverItsSpelling) {
   fs::create_directories(dir / "sub");
   fs::create_symlink(path, dir / "link.mcap");
   fs::create_hard_link(path, dir / "hard.mcap");
-  const std::vector<fs::path> spellings = {path, dir.path() / "." / "run.mcap",
+  const std::vector<fs::path> spellings = {path,
+                                           dir.path() / "." / "run.mcap",
                                            dir.path() / "sub" / ".." / "run.mcap",
-                                           fs::relative(path), dir / "link.mcap", dir / "hard.mcap"};
+                                           fs::relative(path),
+                                           dir / "link.mcap",
+                                           dir / "hard.mcap"};
   const std::set<std::string> names = Names(dir.path());
   for (const fs::path& same : spellings) {
     SCOPED_TRACE(same.string());
@@ -533,10 +536,12 @@ TEST(RecorderOutputs, AnOutputTakesItsNameOnlyWhenWhole) {
     w.Close();
     EXPECT_NE(ReadBytes(dir / "old.mcap"), old);
   }
-  EXPECT_EQ(Names(dir.path()), (std::set<std::string>{"out.csv", "real", "alias.csv", "new.mcap", "old.mcap"}));
+  EXPECT_EQ(Names(dir.path()),
+            (std::set<std::string>{"out.csv", "real", "alias.csv", "new.mcap", "old.mcap"}));
 }
 
-// --- recover: what is damaged, and only that ----------------------------------------------------------
+// --- recover: what is damaged, and only that
+// ----------------------------------------------------------
 
 std::pair<int, std::string> Recover(const fs::path& in, const fs::path& out) {
   std::ostringstream log;
@@ -591,7 +596,8 @@ TEST(McapRecover, DoesNotDependOnTheSummaryOrTheFooter) {
   {
     // The third chunk, with its message indexes, written twice in a row.
     const auto from = whole.begin() + static_cast<std::ptrdiff_t>(l.chunks[2].chunk_start_offset);
-    const auto to = from + static_cast<std::ptrdiff_t>(l.chunks[2].chunk_length + l.chunks[2].message_index_length);
+    const auto to = from + static_cast<std::ptrdiff_t>(l.chunks[2].chunk_length +
+                                                       l.chunks[2].message_index_length);
     std::vector<std::uint8_t>& b = cases.back().bytes;
     b.assign(whole.begin(), to);
     b.insert(b.end(), from, to);
@@ -607,7 +613,8 @@ TEST(McapRecover, DoesNotDependOnTheSummaryOrTheFooter) {
     EXPECT_THAT(log, HasSubstr(c.says));
     EXPECT_THAT(log, ::testing::Not(HasSubstr("damaged chunks dropped")));
     mc::ScanResult res;
-    const std::vector<std::string> got = ReadAll(dir / (std::string(c.name) + "-recovered.mcap"), &res);
+    const std::vector<std::string> got =
+        ReadAll(dir / (std::string(c.name) + "-recovered.mcap"), &res);
     EXPECT_TRUE(res.complete);
     EXPECT_EQ(got, w.payloads);
   }
@@ -639,8 +646,9 @@ TEST(McapRecover, SkipsADamagedRecordResynchronisesAndKeepsTheRest) {
   };
   const std::vector<Case> cases = {
       {"header", record[0] + 9 + 4 + 2, "a malformed header record"},  // the library's length
-      {"schema", record[1] + 9 + 2 + 2, "a malformed schema record"},   // the name's length
-      {"schema-no-summary", record[1] + 9 + 2 + 2, "rebuilt from this build's descriptor of vdyn.pb.VehicleState", true},
+      {"schema", record[1] + 9 + 2 + 2, "a malformed schema record"},  // the name's length
+      {"schema-no-summary", record[1] + 9 + 2 + 2,
+       "rebuilt from this build's descriptor of vdyn.pb.VehicleState", true},
       {"metadata", record[3] + 9 + 2, "a malformed metadata record"},  // the name's length
   };
   for (const Case& c : cases) {
@@ -663,7 +671,10 @@ TEST(McapRecover, SkipsADamagedRecordResynchronisesAndKeepsTheRest) {
     const std::string info = Info(out);
     EXPECT_THAT(info, HasSubstr("vdyn/state/1")) << info;
     EXPECT_THAT(info, HasSubstr("3000 states, 0 missing")) << info;
-    EXPECT_THAT(info, HasSubstr("damaged   offset " + std::to_string(c.name == "header" ? record[0] : c.name == "metadata" ? record[3] : record[1])))
+    EXPECT_THAT(info,
+                HasSubstr("damaged   offset " + std::to_string(c.name == "header"     ? record[0]
+                                                               : c.name == "metadata" ? record[3]
+                                                                                      : record[1])))
         << info;
   }
   // A bit flipped in a chunk's record length: the scan resynchronises on the next valid record;
@@ -677,7 +688,8 @@ TEST(McapRecover, SkipsADamagedRecordResynchronisesAndKeepsTheRest) {
   const std::vector<std::string> got = ReadAll(dir / "length-recovered.mcap");
   std::uint64_t in_chunk = 0;
   std::vector<std::uint8_t> scratch;
-  mc::Reader(path).ReadChunk(l.chunks[3], [&](const mc::Message&) { ++in_chunk; }, scratch);
+  mc::Reader(path).ReadChunk(
+      l.chunks[3], [&](const mc::Message&) { ++in_chunk; }, scratch);
   EXPECT_EQ(got.size(), w.payloads.size() - in_chunk);
   // The copy's info says what was lost, and when.
   const std::string info = Info(dir / "length-recovered.mcap");
@@ -692,14 +704,16 @@ void SetDataCrc(const fs::path& path) {
   std::vector<std::uint8_t> b = ReadBytes(path);
   const Layout l = LayoutOf(path);
   const std::uint32_t crc = mc::Crc32(0, std::span<const std::uint8_t>(b.data(), l.data_end));
-  for (int i = 0; i < 4; ++i) b[l.data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+  for (int i = 0; i < 4; ++i)
+    b[l.data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
   WriteBytes(path, b);
 }
 
 // A chunk whose own CRC is 0 with one flipped byte: the data section's CRC catches it, so every
 // command refuses the file. Recover cannot tell which chunk holds the flip: it keeps every chunk,
 // but unchecked - CRC 0 again and no data-section CRC in the copy (which would vouch for them) -
-// and says so, and so does `info` of the copy; recovering the copy again does not launder it either.
+// and says so, and so does `info` of the copy; recovering the copy again does not launder it
+// either.
 TEST(McapRecover, NeverLaundersWhatNoCrcChecked) {
   testing::TempDir dir;
   const fs::path path = dir / "nocrc.mcap";
@@ -710,7 +724,8 @@ TEST(McapRecover, NeverLaundersWhatNoCrcChecked) {
   EXPECT_EQ(ReadAll(path, &res), w.payloads);
   EXPECT_EQ(res.data_crc, mc::ScanResult::DataCrc::kMatched);
   EXPECT_EQ(res.chunks_unchecked, res.chunks);
-  EXPECT_THAT(Info(path), HasSubstr("carry no CRC of their own; the data section's CRC covers them (checked)"));
+  EXPECT_THAT(Info(path),
+              HasSubstr("carry no CRC of their own; the data section's CRC covers them (checked)"));
   auto [code, log] = Recover(path, dir / "clean-recovered.mcap");
   ASSERT_EQ(code, 0) << log;
   ReadAll(dir / "clean-recovered.mcap", &res);
@@ -777,10 +792,12 @@ TEST(McapInfo, DescribesAForeignFileWithOnlyAFooter) {
   const fs::path path = dir / "camera.mcap";
   {
     mc::Writer w(path, {});
-    const std::uint16_t s = w.AddSchema("sensor_msgs/msg/Image", "ros2msg", "uint32 height\nuint32 width\n");
+    const std::uint16_t s =
+        w.AddSchema("sensor_msgs/msg/Image", "ros2msg", "uint32 height\nuint32 width\n");
     const std::uint16_t ch = w.AddChannel(s, "/camera/image", "cdr", {});
     const std::vector<std::uint8_t> frame(300, 7);
-    for (std::uint64_t i = 0; i < 5000; ++i) w.WriteMessage(ch, 0, 1'000'000'000 + i * 33'000'000, 0, frame);
+    for (std::uint64_t i = 0; i < 5000; ++i)
+      w.WriteMessage(ch, 0, 1'000'000'000 + i * 33'000'000, 0, frame);
     w.Close();
   }
   DropSummary(path);
@@ -792,7 +809,9 @@ TEST(McapInfo, DescribesAForeignFileWithOnlyAFooter) {
   EXPECT_THAT(info, HasSubstr("closed without a summary"));
   EXPECT_THAT(info, ::testing::Not(HasSubstr("closed with index and summary")));
   EXPECT_THAT(info, HasSubstr("/camera/image #1"));
-  EXPECT_THAT(info, HasSubstr("not a vdyn channel: schema 'sensor_msgs/msg/Image' (ros2msg), messages cdr"));
+  EXPECT_THAT(
+      info,
+      HasSubstr("not a vdyn channel: schema 'sensor_msgs/msg/Image' (ros2msg), messages cdr"));
   const auto [code, log] = Recover(path, dir / "camera-recovered.mcap");
   EXPECT_EQ(code, 0);
   EXPECT_THAT(log, HasSubstr("(5000 messages)"));
@@ -816,8 +835,9 @@ TEST(McapInfo, GarbageUnderOurTopicNamesIsNeitherStatesNorEvents) {
       mc::Writer w(path, {});
       auto channel = [&](transport::TopicId t) {
         const auto* d = recorder::PayloadDescriptor(t);
-        const std::uint16_t s = our_schema ? w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))
-                                           : w.AddSchema(d->full_name(), "jsonschema", "{}");
+        const std::uint16_t s =
+            our_schema ? w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))
+                       : w.AddSchema(d->full_name(), "jsonschema", "{}");
         return w.AddChannel(s, recorder::ChannelTopic(t, 1), our_schema ? "protobuf" : "json",
                             recorder::ChannelMetadata(t, 1));
       };
@@ -834,12 +854,24 @@ TEST(McapInfo, GarbageUnderOurTopicNamesIsNeitherStatesNorEvents) {
     EXPECT_THAT(info, HasSubstr("no states recorded")) << info;
     if (our_schema) {
       EXPECT_THAT(info, HasSubstr("vdyn/events/1                         20 msgs")) << info;
-      EXPECT_THAT(info, HasSubstr("vdyn/events/1: 20 of 20 messages do not parse as the topic's type")) << info;
-      EXPECT_THAT(info, HasSubstr("re-simulates no: the 20 messages on vdyn/events do not parse as session events")) << info;
+      EXPECT_THAT(info,
+                  HasSubstr("vdyn/events/1: 20 of 20 messages do not parse as the topic's type"))
+          << info;
+      EXPECT_THAT(
+          info,
+          HasSubstr(
+              "re-simulates no: the 20 messages on vdyn/events do not parse as session events"))
+          << info;
     } else {
       EXPECT_THAT(info, HasSubstr("40 messages, 40 of them not vdyn messages")) << info;
-      EXPECT_THAT(info, HasSubstr("not a vdyn channel: schema 'vdyn.pb.SessionEvent' (jsonschema), messages json")) << info;
-      EXPECT_THAT(info, HasSubstr("re-simulates no: no session events: vdyn/events/1 holds another type")) << info;
+      EXPECT_THAT(
+          info,
+          HasSubstr(
+              "not a vdyn channel: schema 'vdyn.pb.SessionEvent' (jsonschema), messages json"))
+          << info;
+      EXPECT_THAT(info,
+                  HasSubstr("re-simulates no: no session events: vdyn/events/1 holds another type"))
+          << info;
     }
   }
 }
@@ -853,14 +885,16 @@ TEST(McapInfo, RatesArePrintedOnlyForStreams) {
     auto channel = [&](transport::TopicId t, std::uint32_t key) {
       const auto* d = recorder::PayloadDescriptor(t);
       return w.AddChannel(w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d)),
-                          recorder::ChannelTopic(t, key), "protobuf", recorder::ChannelMetadata(t, key));
+                          recorder::ChannelTopic(t, key), "protobuf",
+                          recorder::ChannelMetadata(t, key));
     };
     const std::uint16_t states = channel(transport::TopicId::kState, 1);
     const std::uint16_t replies = channel(transport::TopicId::kControlReply, 1);
     const std::uint64_t t0 = 1'700'000'000'000'000'000ull;
     for (std::uint64_t k = 0; k < 3000; ++k) {
       const std::string b = StateAt(k).SerializeAsString();
-      w.WriteMessage(states, 0, t0 + k * 1'000'000, 0, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+      w.WriteMessage(states, 0, t0 + k * 1'000'000, 0,
+                     {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
     }
     const std::vector<std::uint8_t> reply = {0x08, 0x01};
     w.WriteMessage(replies, 0, t0 + 100'000'000, 0, reply);
@@ -868,8 +902,10 @@ TEST(McapInfo, RatesArePrintedOnlyForStreams) {
     w.Close();
   }
   const std::string info = Info(path);
-  EXPECT_THAT(info, HasSubstr("vdyn/state/1                        3000 msgs    1000.0 Hz")) << info;
-  EXPECT_THAT(info, HasSubstr("vdyn/control_reply/1                   2 msgs         -    ")) << info;
+  EXPECT_THAT(info, HasSubstr("vdyn/state/1                        3000 msgs    1000.0 Hz"))
+      << info;
+  EXPECT_THAT(info, HasSubstr("vdyn/control_reply/1                   2 msgs         -    "))
+      << info;
   EXPECT_THAT(info, ::testing::Not(HasSubstr("76.9 Hz"))) << info;
 }
 

@@ -5,8 +5,8 @@
 // bit for bit; a recorder that cannot keep up counting what it dropped; bad files refused.
 #include <signal.h>
 
-#include <chrono>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -844,7 +844,8 @@ TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordi
   EXPECT_GT(recorded, 4096u) << info.substr(0, 2000);
 }
 
-// --- damaged recordings: verify, play, outputs ----------------------------------------------------
+// --- damaged recordings: verify, play, outputs
+// ----------------------------------------------------
 
 std::vector<std::uint8_t> Bytes(const std::filesystem::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -855,7 +856,8 @@ void PutBytes(const std::filesystem::path& p, const std::vector<std::uint8_t>& b
   out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
 }
 // One bit flipped in the middle of a chunk's records: its CRC (or decompression) fails.
-void DamageChunk(const std::filesystem::path& in, const std::filesystem::path& out, const mcap::ChunkIndex& c) {
+void DamageChunk(const std::filesystem::path& in, const std::filesystem::path& out,
+                 const mcap::ChunkIndex& c) {
   std::vector<std::uint8_t> b = Bytes(in);
   b[c.chunk_start_offset + c.chunk_length / 2] ^= 0x40;
   PutBytes(out, b);
@@ -863,7 +865,8 @@ void DamageChunk(const std::filesystem::path& in, const std::filesystem::path& o
 
 // Copies a recording record by record (chunks with or without CRCs), letting `edit` change a
 // payload on its way (by its channel's topic, e.g. "vdyn/state/1").
-void CopyRecording(const std::filesystem::path& in, const std::filesystem::path& out, bool chunk_crc,
+void CopyRecording(const std::filesystem::path& in, const std::filesystem::path& out,
+                   bool chunk_crc,
                    const std::function<void(const std::string&, std::string&)>& edit = {}) {
   mcap::Reader reader(in);
   mcap::Writer writer(out, {});
@@ -871,12 +874,17 @@ void CopyRecording(const std::filesystem::path& in, const std::filesystem::path&
   std::map<std::uint16_t, std::uint16_t> schemas, channels;
   std::map<std::uint16_t, std::string> topics;
   mcap::Visitor v;
-  v.on_schema = [&](const mcap::Schema& s) { schemas[s.id] = writer.AddSchema(s.name, s.encoding, s.data); };
+  v.on_schema = [&](const mcap::Schema& s) {
+    schemas[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
+  };
   v.on_channel = [&](const mcap::Channel& c) {
-    channels[c.id] = writer.AddChannel(schemas.at(c.schema_id), c.topic, c.message_encoding, c.metadata);
+    channels[c.id] =
+        writer.AddChannel(schemas.at(c.schema_id), c.topic, c.message_encoding, c.metadata);
     topics[c.id] = c.topic;
   };
-  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) { writer.WriteMetadata(m.name, m.values); };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+    writer.WriteMetadata(m.name, m.values);
+  };
   v.on_message = [&](const mcap::Message& m, std::uint64_t) {
     std::string data(reinterpret_cast<const char*>(m.data.data()), m.data.size());
     if (edit) edit(topics[m.channel_id], data);
@@ -942,10 +950,12 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   }
   ASSERT_NE(lost, nullptr) << "no chunk of input batches between steps 1100 and 1800";
   std::uint64_t last_lost = 0, restart = 0;
-  for (const pb::SessionEvent& e : lost->events) last_lost = std::max<std::uint64_t>(last_lost, e.sequence());
+  for (const pb::SessionEvent& e : lost->events)
+    last_lost = std::max<std::uint64_t>(last_lost, e.sequence());
   for (const ChunkContents& c : chunks) {
     for (const pb::SessionEvent& e : c.events) {
-      if (e.has_checkpoint() && e.sequence() > last_lost && (restart == 0 || e.step() < restart)) restart = e.step();
+      if (e.has_checkpoint() && e.sequence() > last_lost && (restart == 0 || e.step() < restart))
+        restart = e.step();
     }
   }
   ASSERT_GT(restart, 1100u);
@@ -957,7 +967,8 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   EXPECT_EQ(code, 1) << verified;  // not everything could be verified
   EXPECT_THAT(verified, HasSubstr("NOT verified")) << verified;
   EXPECT_THAT(verified, HasSubstr("events of server 'vdyn' were lost")) << verified;
-  EXPECT_THAT(verified, HasSubstr("re-simulated again from the checkpoint at step " + std::to_string(restart)))
+  EXPECT_THAT(verified, HasSubstr("re-simulated again from the checkpoint at step " +
+                                  std::to_string(restart)))
       << verified;
   EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
   // Verified: the steps before the hole and every step from the restart to the end.
@@ -967,7 +978,8 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   EXPECT_GE(*compared, 1000 + (2500 - restart) - 20) << verified;
 
   // The chunk with the world: its copies (in chunks of their own) keep the recording whole.
-  const auto world = std::find_if(chunks.begin(), chunks.end(), [](const ChunkContents& c) { return c.world; });
+  const auto world =
+      std::find_if(chunks.begin(), chunks.end(), [](const ChunkContents& c) { return c.world; });
   ASSERT_NE(world, chunks.end());
   DamageChunk(file, dir_ / "noworld.mcap", world->chunk);
   std::tie(code, verified) = Run({"recover", (dir_ / "noworld.mcap").string()});
@@ -985,14 +997,15 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   EXPECT_EQ(code, 0) << verified;
   EXPECT_THAT(verified, HasSubstr("come from chunks without a CRC")) << verified;
   EXPECT_THAT(verified, HasSubstr("(all equal)")) << verified;
-  CopyRecording(file, dir_ / "nocrc-damaged.mcap", false, [](const std::string& topic, std::string& data) {
-    if (topic != "vdyn/state/1") return;
-    pb::VehicleState s;
-    ASSERT_TRUE(s.ParseFromString(data));
-    if (s.step() != 1500) return;
-    s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);  // the hash stays as it was
-    data = s.SerializeAsString();
-  });
+  CopyRecording(file, dir_ / "nocrc-damaged.mcap", false,
+                [](const std::string& topic, std::string& data) {
+                  if (topic != "vdyn/state/1") return;
+                  pb::VehicleState s;
+                  ASSERT_TRUE(s.ParseFromString(data));
+                  if (s.step() != 1500) return;
+                  s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);  // the hash stays as it was
+                  data = s.SerializeAsString();
+                });
   std::tie(code, verified) = Run({"verify", (dir_ / "nocrc-damaged.mcap").string()});
   EXPECT_EQ(code, 1) << verified;
   EXPECT_THAT(verified, HasSubstr("DAMAGED: 1 recorded states")) << verified;
@@ -1010,10 +1023,13 @@ TEST_F(RecorderTest, PlayRefusesWhatInfoRefuses) {
   std::vector<std::uint8_t> b = Bytes(dir_ / "nocrc.mcap");
   const std::size_t footer = b.size() - 8 - 29;
   std::uint64_t summary_start = 0;
-  for (int i = 0; i < 8; ++i) summary_start |= static_cast<std::uint64_t>(b[footer + 9 + static_cast<std::size_t>(i)]) << (8 * i);
+  for (int i = 0; i < 8; ++i)
+    summary_start |= static_cast<std::uint64_t>(b[footer + 9 + static_cast<std::size_t>(i)])
+                     << (8 * i);
   const std::size_t data_end = summary_start - 13;
   const std::uint32_t crc = mcap::Crc32(0, std::span<const std::uint8_t>(b.data(), data_end));
-  for (int i = 0; i < 4; ++i) b[data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+  for (int i = 0; i < 4; ++i)
+    b[data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
   PutBytes(dir_ / "covered.mcap", b);
   auto [code, out] = Run({"info", (dir_ / "covered.mcap").string()});
   ASSERT_EQ(code, 0) << out;
@@ -1022,8 +1038,8 @@ TEST_F(RecorderTest, PlayRefusesWhatInfoRefuses) {
   std::tie(code, out) = Run({"info", (dir_ / "flipped.mcap").string()});
   EXPECT_EQ(code, 2) << out;
   EXPECT_THAT(out, HasSubstr("data section CRC mismatch"));
-  std::tie(code, out) = Run({"play", (dir_ / "flipped.mcap").string(), "--domain", std::to_string(domain_),
-                             "--no-keys", "--no-status"});
+  std::tie(code, out) = Run({"play", (dir_ / "flipped.mcap").string(), "--domain",
+                             std::to_string(domain_), "--no-keys", "--no-status"});
   EXPECT_EQ(code, 2) << out;
   EXPECT_THAT(out, HasSubstr("data section CRC mismatch"));
   EXPECT_THAT(out, ::testing::Not(HasSubstr("playing")));
@@ -1040,7 +1056,8 @@ TEST_F(RecorderTest, NoCommandWritesOverItsInput) {
   const std::string rec = testing::RecorderBinary();
   auto in_dir = [&](const std::string& command) {
     const std::string log = "sh" + std::to_string(runs_++) + ".log";
-    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && exec " + command}, dir_ / log);
+    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && exec " + command},
+              dir_ / log);
     const auto code = p.Wait(120s);
     return std::make_pair(code.value_or(-1), p.Log());
   };
@@ -1074,21 +1091,24 @@ TEST_F(RecorderTest, NoCommandWritesOverItsInput) {
   EXPECT_EQ(code, 2) << out;
   EXPECT_THAT(out, HasSubstr("the same file under another name"));
   EXPECT_EQ(Bytes(file), before);
-  EXPECT_FALSE(std::filesystem::exists(dir_ / "plots" / "index.html")) << "some figures were moved in";
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "plots" / "index.html"))
+      << "some figures were moved in";
 }
 
 // A recording for the figures: a straight drive along a long, narrow road, no steering, no
 // pedals, and one brake force of 0.3 N at one step (numerical noise, not braking).
 void WriteRoadDrive(const std::filesystem::path& path) {
   mcap::Writer w(path, {});
-  const std::uint16_t world = AddChannel(w, TopicId::kWorld, 77), state = AddChannel(w, TopicId::kState, 1);
+  const std::uint16_t world = AddChannel(w, TopicId::kWorld, 77),
+                      state = AddChannel(w, TopicId::kState, 1);
   const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
   pb::WorldDescription wd;
   wd.set_server_id("recorded");
   wd.set_name("road");
   auto* mesh = wd.add_meshes();
   mesh->set_kind(pb::SURFACE_ROAD);
-  for (double v : {-200.0, -5.0, 0.0, 200.0, -5.0, 0.0, 200.0, 5.0, 0.0, -200.0, 5.0, 0.0}) mesh->add_vertices(v);
+  for (double v : {-200.0, -5.0, 0.0, 200.0, -5.0, 0.0, 200.0, 5.0, 0.0, -200.0, 5.0, 0.0})
+    mesh->add_vertices(v);
   for (std::uint32_t i : {0u, 1u, 2u, 0u, 2u, 3u}) mesh->add_indices(i);
   Put(w, world, t0, wd);
   for (std::uint64_t k = 0; k < 3000; ++k) {
@@ -1110,7 +1130,8 @@ void WriteRoadDrive(const std::filesystem::path& path) {
 }
 
 // The y range gnuplot is told to draw the figure `name` with (its first panel).
-std::optional<std::pair<double, double>> YRange(const std::string& script, const std::string& name) {
+std::optional<std::pair<double, double>> YRange(const std::string& script,
+                                                const std::string& name) {
   const std::size_t at = script.find("set output '" + name + ".png'");
   if (at == std::string::npos) return std::nullopt;
   const std::size_t r = script.find("set yrange [", at);
@@ -1139,7 +1160,8 @@ TEST_F(RecorderTest, PlotWorksWithRelativePathsAndDrawsWhatMatters) {
   std::tie(code, out) = in_dir("exec " + rec + " plot out/live.mcap --out relplots");
   ASSERT_EQ(code, 0) << out;
   const std::filesystem::path plots = dir_ / "relplots";
-  for (const std::string f : {"index.html", "speed.png", "controls.png", "brake_forces.png", "trajectory.png"}) {
+  for (const std::string f :
+       {"index.html", "speed.png", "controls.png", "brake_forces.png", "trajectory.png"}) {
     EXPECT_TRUE(std::filesystem::exists(plots / f)) << f;
   }
   // Nothing else is left there (no scratch folder, no log).

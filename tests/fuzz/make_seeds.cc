@@ -1,16 +1,16 @@
 // Writes the seed corpora of the fuzz targets (tests/fuzz/corpus/<target>/): run it once after a
 // format changes and commit what it writes. Usage: fuzz_make_seeds CORPUS_DIR
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <filesystem>
-#include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <memory>
-#include <vector>
-#include <utility>
+#include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
@@ -70,12 +70,14 @@ void WriteDrive(const fs::path& path, bool chunk_crc) {
   const std::uint16_t world_ch = channel(TopicId::kWorld, 0x5eed);
   const std::uint16_t events_ch = channel(TopicId::kEvents, 1);
   const std::uint16_t state_ch = channel(TopicId::kState, 1);
-  w.WriteMetadata("vdyn.recording", {{"format", rec::kFormatVersion}, {"topics", "vdyn/state,vdyn/events,vdyn/world"}});
+  w.WriteMetadata("vdyn.recording", {{"format", rec::kFormatVersion},
+                                     {"topics", "vdyn/state,vdyn/events,vdyn/world"}});
   const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
   std::uint32_t sequence_per_channel = 0;
   auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
     const std::string b = m.SerializeAsString();
-    w.WriteMessage(ch, sequence_per_channel++, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+    w.WriteMessage(ch, sequence_per_channel++, t, t,
+                   {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
   };
   put(world_ch, t0, description);
   std::uint64_t event_sequence = 0;  // numbered as they are sent
@@ -108,7 +110,8 @@ void WriteDrive(const fs::path& path, bool chunk_crc) {
     in.steer = 0.08 * std::sin(0.03 * static_cast<double>(k));
     sim.SetInput(in);
     if (batch.input_batch().samples_size() == 0) batch = event(k);
-    vdyn::ToInputSample(in, static_cast<std::int64_t>(k), *batch.mutable_input_batch()->add_samples());
+    vdyn::ToInputSample(in, static_cast<std::int64_t>(k),
+                        *batch.mutable_input_batch()->add_samples());
     if (sim.Step() != vdyn::StepStatus::kOk) std::abort();
     const vdyn::StepRecord& r = sim.last_step();
     vdyn::pb::DriverInput msg;
@@ -116,8 +119,8 @@ void WriteDrive(const fs::path& path, bool chunk_crc) {
     msg.set_source_id("seed-rig");
     vdyn::ToProto(in, msg);
     vdyn::pb::VehicleState state;
-    vdyn::FillVehicleState(1, "seed", step_ns, static_cast<std::int64_t>(k) * step_ns, r, msg, false,
-                           r.derived.steering_torque, state);
+    vdyn::FillVehicleState(1, "seed", step_ns, static_cast<std::int64_t>(k) * step_ns, r, msg,
+                           false, r.derived.steering_torque, state);
     put(state_ch, t, state);
     const std::uint64_t next = k + 1;
     if (next % 10 == 0) {

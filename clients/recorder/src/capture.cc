@@ -375,9 +375,10 @@ struct Capture::Impl {
     file.w = std::make_unique<mcap::Writer>(PartPath(), o.writer);
     files.push_back(PartPath());
     if (file.w->writing_to() != PartPath()) {
-      spdlog::info("vdyn-recorder: {} exists: it is replaced when this recording closes (until "
-                   "then the recording is {})",
-                   PartPath().string(), file.w->writing_to().string());
+      spdlog::info(
+          "vdyn-recorder: {} exists: it is replaced when this recording closes (until "
+          "then the recording is {})",
+          PartPath().string(), file.w->writing_to().string());
     }
     mcap::StringMap m;
     m["format"] = kFormatVersion;
@@ -423,13 +424,14 @@ struct Capture::Impl {
       auto ch = file.repeat_channels.find(id);
       if (ch == file.repeat_channels.end()) {
         ch = file.repeat_channels
-                 .emplace(id, file.w->AddChannel(Schema(id.first), ChannelTopic(id.first, id.second),
-                                                 "protobuf", RepeatChannelMetadata(id.first, id.second)))
+                 .emplace(
+                     id, file.w->AddChannel(Schema(id.first), ChannelTopic(id.first, id.second),
+                                            "protobuf", RepeatChannelMetadata(id.first, id.second)))
                  .first;
       }
-      file.w->WriteMessage(ch->second, file.sequence[ch->second]++, file.last_log,
-                           l->second.publish_time,
-                           std::span<const std::uint8_t>(l->second.data.data(), l->second.data.size()));
+      file.w->WriteMessage(
+          ch->second, file.sequence[ch->second]++, file.last_log, l->second.publish_time,
+          std::span<const std::uint8_t>(l->second.data.data(), l->second.data.size()));
     }
     file.w->Flush();
     file.repeats_due.clear();
@@ -439,7 +441,10 @@ struct Capture::Impl {
     auto sc = file.schemas.find(topic);
     if (sc == file.schemas.end()) {
       const auto* d = PayloadDescriptor(topic);
-      sc = file.schemas.emplace(topic, file.w->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))).first;
+      sc =
+          file.schemas
+              .emplace(topic, file.w->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d)))
+              .first;
     }
     return sc->second;
   }
@@ -499,8 +504,8 @@ struct Capture::Impl {
                     std::uint64_t publish_time, std::span<const std::uint8_t> data) {
     auto ch = file.channels.find({topic, key});
     if (ch == file.channels.end()) {
-      const std::uint16_t id = file.w->AddChannel(Schema(topic), ChannelTopic(topic, key), "protobuf",
-                                                  ChannelMetadata(topic, key));
+      const std::uint16_t id = file.w->AddChannel(Schema(topic), ChannelTopic(topic, key),
+                                                  "protobuf", ChannelMetadata(topic, key));
       ch = file.channels.emplace(std::make_pair(topic, key), id).first;
     }
     if (file.first_log == 0) file.first_log = log_time;

@@ -67,7 +67,7 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
   std::map<std::uint32_t, std::unique_ptr<CsvWriter>> writers;
   for (std::uint32_t id : chosen) {
     auto& f = files[id] = std::make_unique<OutputFile>(o.each ? VehiclePath(o.csv, id) : o.csv,
-                                                        std::vector<std::filesystem::path>{o.file});
+                                                       std::vector<std::filesystem::path>{o.file});
     ::close(f->Release());  // the CSV writer opens the temporary file itself
     writers[id] = std::make_unique<CsvWriter>(f->temp());
   }

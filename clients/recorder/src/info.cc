@@ -53,12 +53,14 @@ std::string Hex(std::uint64_t v) {
 
 // A recovered file's "vdyn.recovered" metadata, as a person reads it: where it came from, what
 // was left out and when, what no CRC vouches for.
-void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first, std::ostream& out) {
+void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first,
+                    std::ostream& out) {
   auto secs = [first](const std::string& ns) {
     const std::uint64_t v = std::strtoull(ns.c_str(), nullptr, 10);
     char b[32];
     // Signed: a lost chunk may lie before the first message kept.
-    std::snprintf(b, sizeof b, "%.3f", (static_cast<double>(v) - static_cast<double>(first)) * 1e-9);
+    std::snprintf(b, sizeof b, "%.3f",
+                  (static_cast<double>(v) - static_cast<double>(first)) * 1e-9);
     return std::string(b);
   };
   // "a-b,c-d" (ns) as "0.250 .. 0.500 s, ..."
@@ -71,7 +73,8 @@ void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first
       const std::string r = text.substr(at, end - at);
       const std::size_t dash = r.find('-');
       if (dash != std::string::npos) {
-        o += (o.empty() ? "" : ", ") + secs(r.substr(0, dash)) + " .. " + secs(r.substr(dash + 1)) + " s";
+        o += (o.empty() ? "" : ", ") + secs(r.substr(0, dash)) + " .. " + secs(r.substr(dash + 1)) +
+             " s";
       }
       at = end + 1;
     }
@@ -83,8 +86,8 @@ void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first
       const auto it = m.values.find(k);
       return it == m.values.end() ? std::string() : it->second;
     };
-    out << "recovered   from " << get("from") << " (" << get("file_size") << " bytes): "
-        << (get("closed") == "no" ? "it was not closed" : "it was closed")
+    out << "recovered   from " << get("from") << " (" << get("file_size")
+        << " bytes): " << (get("closed") == "no" ? "it was not closed" : "it was closed")
         << "; its data-section CRC " << (get("data_crc").empty() ? "?" : get("data_crc"))
         << "; its summary " << (get("summary").empty() ? "?" : get("summary")) << "\n";
     for (const auto& [k, v] : m.values) {
@@ -98,11 +101,13 @@ void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first
     }
     const std::string unchecked = get("unchecked_messages");
     if (!unchecked.empty() && unchecked != "0") {
-      out << "  UNCHECKED " << unchecked << " messages had no CRC that held in the source (log time "
+      out << "  UNCHECKED " << unchecked
+          << " messages had no CRC that held in the source (log time "
           << ranges(get("unchecked_log_ns"))
           << "): kept in chunks without a CRC; nothing tells whether they are intact\n";
     }
-    if (get("damage.000").empty() && (lost.empty() || lost == "0") && (unchecked.empty() || unchecked == "0")) {
+    if (get("damage.000").empty() && (lost.empty() || lost == "0") &&
+        (unchecked.empty() || unchecked == "0")) {
       out << "  nothing was left out\n";
     }
   }
@@ -159,9 +164,10 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     if (cs.messages == 0) {
       cs.first = m.log_time;
       cs.note = "not a vdyn channel: " +
-                (schema == nullptr ? std::string("no schema")
-                                   : "schema '" + schema->name + "' (" +
-                                         (schema->encoding.empty() ? "no encoding" : schema->encoding) + ")") +
+                (schema == nullptr
+                     ? std::string("no schema")
+                     : "schema '" + schema->name + "' (" +
+                           (schema->encoding.empty() ? "no encoding" : schema->encoding) + ")") +
                 ", messages " + (c.message_encoding.empty() ? "unencoded" : c.message_encoding);
     }
     ++cs.messages;
@@ -258,13 +264,16 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   auto t = [&](std::uint64_t ns) { return first == 0 ? 0.0 : static_cast<double>(ns - first) * 1e-9; };
   std::string comp;
   for (const auto& [name, n] : compression_chunks) comp += (comp.empty() ? "" : ", ") + std::to_string(n) + " " + name;
-  const std::string foreign =
-      foreign_messages == 0 ? std::string()
-                            : ", " + std::to_string(foreign_messages) + " of them not vdyn messages";
-  std::snprintf(line, sizeof line, "file        %s (%s; %llu messages%s; chunks: %s; %.0f%% of the raw size)\n",
-                path.string().c_str(), FormatBytes(static_cast<double>(reader.size())).c_str(),
-                static_cast<unsigned long long>(messages), foreign.c_str(), comp.empty() ? "none" : comp.c_str(),
-                unpacked > 0 ? 100.0 * static_cast<double>(packed) / static_cast<double>(unpacked) : 100.0);
+  const std::string foreign = foreign_messages == 0 ? std::string()
+                                                    : ", " + std::to_string(foreign_messages) +
+                                                          " of them not vdyn messages";
+  std::snprintf(
+      line, sizeof line,
+      "file        %s (%s; %llu messages%s; chunks: %s; %.0f%% of the raw size)\n",
+      path.string().c_str(), FormatBytes(static_cast<double>(reader.size())).c_str(),
+      static_cast<unsigned long long>(messages), foreign.c_str(),
+      comp.empty() ? "none" : comp.c_str(),
+      unpacked > 0 ? 100.0 * static_cast<double>(packed) / static_cast<double>(unpacked) : 100.0);
   out << line;
   const std::string library = reader.header_library();
   out << "written by  " << (library.empty() ? "(not named in its header)" : library)
@@ -279,8 +288,9 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     out << "integrity   " << scan.chunks_unchecked << " of " << scan.chunks
         << " chunks carry no CRC of their own; the data section's CRC covers them (checked)\n";
   } else {
-    out << "integrity   UNCHECKED: " << scan.chunks_unchecked << " of " << scan.chunks << " chunks ("
-        << scan.messages_unchecked << " messages) carry no CRC and the data section has none: "
+    out << "integrity   UNCHECKED: " << scan.chunks_unchecked << " of " << scan.chunks
+        << " chunks (" << scan.messages_unchecked
+        << " messages) carry no CRC and the data section has none: "
         << "nothing checked their bytes\n";
   }
   for (const mcap::Metadata& m : meta) {
@@ -324,8 +334,9 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   for (const auto& [name, c] : channels) {
     char rate[32] = "        -   ";
     if (RateMeaningful(c)) {
-      std::snprintf(rate, sizeof rate, "%9.1f Hz", static_cast<double>(c.messages - 1) /
-                                                       (static_cast<double>(c.last - c.first) * 1e-9));
+      std::snprintf(
+          rate, sizeof rate, "%9.1f Hz",
+          static_cast<double>(c.messages - 1) / (static_cast<double>(c.last - c.first) * 1e-9));
     }
     std::snprintf(line, sizeof line, "  %-30s %9llu msgs %s %10s   %8.3f .. %8.3f s", name.c_str(),
                   static_cast<unsigned long long>(c.messages), rate,
@@ -357,7 +368,8 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   }
   for (const auto& [name, c] : channels) {
     if (c.malformed == 0) continue;
-    gaps += "\n  " + name + ": " + std::to_string(c.malformed) + " of " + std::to_string(c.messages) +
+    gaps += "\n  " + name + ": " + std::to_string(c.malformed) + " of " +
+            std::to_string(c.messages) +
             " messages do not parse as the topic's type: left out of the counts above";
   }
   out << "gaps" << (gaps.empty() ? "        none" : gaps) << "\n";
@@ -390,10 +402,11 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     }
   }
   if (servers.empty()) {
-    no = event_messages > 0
-             ? "the " + std::to_string(bad_events) + " messages on vdyn/events do not parse as session events"
-         : !named.empty() ? "no session events: " + named + " holds another type (not a vdyn channel)"
-                          : "no session events recorded (vdyn/events)";
+    no = event_messages > 0 ? "the " + std::to_string(bad_events) +
+                                  " messages on vdyn/events do not parse as session events"
+         : !named.empty()
+             ? "no session events: " + named + " holds another type (not a vdyn channel)"
+             : "no session events recorded (vdyn/events)";
   }
   std::string partly;  // what verify cannot cover: it re-simulates around it
   for (const auto& [server, s] : servers) {
@@ -404,8 +417,8 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     } else if (s.terrain_hashes.size() > 1 || (s.terrain_hashes.size() == 1 && *s.terrain_hashes.begin() != w->second.terrain_hash())) {
       no = "the events name another terrain than the recorded world";
     } else if (s.gaps > 0) {
-      partly += "; " + std::to_string(s.missing) + " events of server '" + server + "' are missing (" +
-                std::to_string(s.gaps) + " gaps)";
+      partly += "; " + std::to_string(s.missing) + " events of server '" + server +
+                "' are missing (" + std::to_string(s.gaps) + " gaps)";
     }
   }
   std::string starts;
@@ -423,8 +436,10 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   if (!no.empty()) {
     out << "re-simulates no: " << no << "\n";
   } else if (!partly.empty()) {
-    out << "re-simulates in parts: " << (starts.empty() ? std::string("no states to check") : starts) << partly
-        << ": `vdyn-recorder verify` re-simulates up to each gap and again from the next checkpoint "
+    out << "re-simulates in parts: "
+        << (starts.empty() ? std::string("no states to check") : starts) << partly
+        << ": `vdyn-recorder verify` re-simulates up to each gap and again from the next "
+           "checkpoint "
            "after it, and says which steps it could not verify\n";
   } else {
     out << "re-simulates yes: " << (starts.empty() ? std::string("no states to check") : starts)

@@ -493,7 +493,9 @@ Writer::~Writer() {
   }
 }
 
-std::filesystem::path Writer::writing_to() const { return out_ ? out_->temp() : path_; }
+std::filesystem::path Writer::writing_to() const {
+  return out_ ? out_->temp() : path_;
+}
 
 void Writer::SetChunkCrc(bool on) {
   if (on == chunk_crc_) return;
@@ -865,9 +867,13 @@ std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t 
 bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
   try {
     switch (op) {
-      case kSchema: return ParseSchema(c).id != 0;
-      case kChannel: ParseChannel(c); return true;
-      case kMessage: return c.size() >= 22;
+      case kSchema:
+        return ParseSchema(c).id != 0;
+      case kChannel:
+        ParseChannel(c);
+        return true;
+      case kMessage:
+        return c.size() >= 22;
       case kChunk: {
         const ChunkHeader h = ParseChunk(c);
         return (h.index.compression.empty() || h.index.compression == "zstd" ||
@@ -897,11 +903,18 @@ bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
         r.U32("crc");
         return r.done();
       }
-      case kDataEnd: return c.size() == 4;
-      case kFooter: return c.size() == kFooterContent;
-      case kStatistics: ParseStatistics(c); return true;
-      case kChunkIndex: ParseChunkIndex(c); return true;
-      case kSummaryOffset: return c.size() == 17;
+      case kDataEnd:
+        return c.size() == 4;
+      case kFooter:
+        return c.size() == kFooterContent;
+      case kStatistics:
+        ParseStatistics(c);
+        return true;
+      case kChunkIndex:
+        ParseChunkIndex(c);
+        return true;
+      case kSummaryOffset:
+        return c.size() == 17;
       case kMetadataIndex: {
         Cursor r(c);
         r.U64("offset");
@@ -909,7 +922,8 @@ bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
         r.Str("name");
         return r.done();
       }
-      default: return false;  // a header only comes first; unknown and private: no telling
+      default:
+        return false;  // a header only comes first; unknown and private: no telling
     }
   } catch (const Malformed&) {
     return false;
@@ -936,8 +950,8 @@ std::optional<std::uint64_t> Reader::NextRecord(std::uint64_t from) const {
     Frame g;
     const bool followed = next == size_ ||
                           (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0) ||
-                          (FrameAt(data_, size_, next, g).empty() && g.op != 0 && g.op <= kDataEnd &&
-                           g.op != kHeader);
+                          (FrameAt(data_, size_, next, g).empty() && g.op != 0 &&
+                           g.op <= kDataEnd && g.op != kHeader);
     if (followed && ContentReads(op, f.content)) return p;
   }
   return std::nullopt;
@@ -949,7 +963,8 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
   std::vector<std::uint8_t> scratch;
   std::vector<std::pair<std::uint64_t, std::uint64_t>> inner;  // a chunk's messages: offset, end
   // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
-  std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t> seen;
+  std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t>
+      seen;
   std::uint64_t pos = 8;
   std::uint64_t last_progress = 0;
   res.good_until = 8;
@@ -993,7 +1008,8 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     }
     return {};
   };
-  auto deliver_inner = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at, bool unchecked) {
+  auto deliver_inner = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at,
+                           bool unchecked) {
     for (const auto& [p, end] : inner) {
       Frame f;
       FrameAt(recs.data(), recs.size(), p, f);
@@ -1050,9 +1066,10 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     }
     if (lenient && SummaryOnly(f.op)) {
       // The data end record is missing or damaged: the summary starts here.
-      damaged(pos, 0, std::string("a ") + OpName(f.op) +
-                          " record of the summary before any data end record: the data end "
-                          "record is damaged or missing; the data section ends here");
+      damaged(pos, 0,
+              std::string("a ") + OpName(f.op) +
+                  " record of the summary before any data end record: the data end "
+                  "record is damaged or missing; the data section ends here");
       return res;
     }
     if (f.op != kMessageIndex) lost_chunk = kNone;
@@ -1082,7 +1099,8 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
           const Channel c = ParseChannel(f.content);
           if (c.schema_id != 0 && !schema_known[c.schema_id]) {
             const std::string why = "channel " + std::to_string(c.id) + " names schema " +
-                                    std::to_string(c.schema_id) + ", which no schema record defines";
+                                    std::to_string(c.schema_id) +
+                                    ", which no schema record defines";
             if (!lenient) Fail(pos, why);
             damaged(pos, 0, why);
           }
@@ -1168,15 +1186,18 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
             res.data_crc = ScanResult::DataCrc::kAbsent;
             break;
           }
-          const std::uint32_t crc = Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos)));
-          res.data_crc = stored == crc ? ScanResult::DataCrc::kMatched : ScanResult::DataCrc::kMismatched;
+          const std::uint32_t crc =
+              Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos)));
+          res.data_crc =
+              stored == crc ? ScanResult::DataCrc::kMatched : ScanResult::DataCrc::kMismatched;
           if (stored != crc) {
             problem(pos, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
                              Hex32(crc) + "): the file is corrupted");
-            res.damage.push_back({pos, 0, "data section CRC mismatch (stored " + Hex32(stored) +
-                                              ", computed " + Hex32(crc) +
-                                              "): some byte before it is damaged; what no chunk CRC "
-                                              "checks is unchecked",
+            res.damage.push_back({pos, 0,
+                                  "data section CRC mismatch (stored " + Hex32(stored) +
+                                      ", computed " + Hex32(crc) +
+                                      "): some byte before it is damaged; what no chunk CRC "
+                                      "checks is unchecked",
                                   std::nullopt, 0});
           }
           break;

@@ -142,7 +142,8 @@ bool Player::Load() {
   const mcap::ScanResult check = CheckWholeFile(reader_, "check");
   if (check.chunks_unchecked > 0 && check.data_crc != mcap::ScanResult::DataCrc::kMatched) {
     out_ << "vdyn-recorder play: " << o_.file.string() << ": " << check.messages_unchecked
-         << " messages lie in chunks without a CRC: nothing checked their bytes (vdyn-recorder info)\n";
+         << " messages lie in chunks without a CRC: nothing checked their bytes (vdyn-recorder "
+            "info)\n";
   }
   const auto summary = reader_.ReadSummary();
   if (!summary || !summary->statistics) {

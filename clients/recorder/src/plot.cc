@@ -95,10 +95,14 @@ std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double 
       const double cx = V(ic, 0), cy = V(ic, 1), cz = V(ic, 2);
       const double det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy);
       if (!(std::abs(det) >= 1e-12)) continue;  // vertical, degenerate or not finite: no top
-      const int i0 = std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cx_m)));
-      const int i1 = std::min(nx - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cx_m)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cy_m)));
-      const int j1 = std::min(ny - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cy_m)));
+      const int i0 =
+          std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cx_m)));
+      const int i1 =
+          std::min(nx - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cx_m)));
+      const int j0 =
+          std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cy_m)));
+      const int j1 =
+          std::min(ny - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cy_m)));
       for (int j = j0; j <= j1; ++j) {
         const double py = y0 + (j + 0.5) * cy_m;
         for (int i = i0; i <= i1; ++i) {
@@ -108,7 +112,8 @@ std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double 
           const double l3 = 1.0 - l1 - l2;
           if (l1 < 0 || l2 < 0 || l3 < 0) continue;
           const double h = l1 * az + l2 * bz + l3 * cz;
-          const std::size_t at = static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) + static_cast<std::size_t>(i);
+          const std::size_t at = static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
+                                 static_cast<std::size_t>(i);
           if (std::isnan(z[at]) || h > z[at]) {
             z[at] = h;
             kind[at] = static_cast<double>(std::clamp<int>(m.kind(), 0, kNoSurface - 1));
@@ -147,7 +152,8 @@ class ScratchFolder {
   explicit ScratchFolder(const fs::path& parent) {
     std::string tmpl = (fs::absolute(parent) / ".plot-partial-XXXXXX").string();
     if (::mkdtemp(tmpl.data()) == nullptr) {
-      throw OutputError(parent.string() + ": cannot create a scratch folder in it: " + std::strerror(errno));
+      throw OutputError(parent.string() +
+                        ": cannot create a scratch folder in it: " + std::strerror(errno));
     }
     path_ = tmpl;
   }
@@ -165,14 +171,16 @@ class ScratchFolder {
 
 // `name` found on PATH (or a path itself), else empty.
 std::string FindProgram(const std::string& name) {
-  if (name.find('/') != std::string::npos) return ::access(name.c_str(), X_OK) == 0 ? name : std::string();
+  if (name.find('/') != std::string::npos)
+    return ::access(name.c_str(), X_OK) == 0 ? name : std::string();
   const char* path = std::getenv("PATH");
   std::string dirs = path != nullptr ? path : "/usr/bin:/bin";
   std::size_t at = 0;
   while (at <= dirs.size()) {
     std::size_t end = dirs.find(':', at);
     if (end == std::string::npos) end = dirs.size();
-    const std::string candidate = (end > at ? dirs.substr(at, end - at) : std::string(".")) + "/" + name;
+    const std::string candidate =
+        (end > at ? dirs.substr(at, end - at) : std::string(".")) + "/" + name;
     if (::access(candidate.c_str(), X_OK) == 0) return candidate;
     at = end + 1;
   }
@@ -192,7 +200,8 @@ int RunGnuplot(const std::string& gnuplot, const fs::path& folder, std::ostream&
   const fs::path log = folder / "gnuplot.log";
   const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (log_fd < 0) {
-    out << "vdyn-recorder plot: cannot create " << log.string() << ": " << std::strerror(errno) << "\n";
+    out << "vdyn-recorder plot: cannot create " << log.string() << ": " << std::strerror(errno)
+        << "\n";
     return 1;
   }
   std::vector<std::string> args = {program, "plot.gp"};
@@ -216,7 +225,8 @@ int RunGnuplot(const std::string& gnuplot, const fs::path& folder, std::ostream&
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
   std::ostringstream text;
-  if (std::ifstream in(log); in && in.peek() != std::ifstream::traits_type::eof()) text << in.rdbuf();
+  if (std::ifstream in(log); in && in.peek() != std::ifstream::traits_type::eof())
+    text << in.rdbuf();
   const std::string said = text.str();
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
     out << "vdyn-recorder plot: gnuplot failed on plot.gp:\n" << said << "\n";
@@ -267,12 +277,14 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   }
   std::error_code ec;
   if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) {
-    out << "vdyn-recorder plot: " << dir.string() << " is a file, not a folder: give --out a folder\n";
+    out << "vdyn-recorder plot: " << dir.string()
+        << " is a file, not a folder: give --out a folder\n";
     return 2;
   }
   fs::create_directories(dir, ec);
   if (ec) {
-    out << "vdyn-recorder plot: cannot create the folder " << dir.string() << ": " << ec.message() << "\n";
+    out << "vdyn-recorder plot: cannot create the folder " << dir.string() << ": " << ec.message()
+        << "\n";
     return 1;
   }
   // Vehicle and the size of its state channel (for decimation), from the summary.
@@ -312,17 +324,28 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     return lines;
   };
   std::vector<Figure> figures = {
-      {"speed", "Speed", {{"km/h", {{"speed_kmh", "speed"}, {"cruise_set_kmh", "cruise set speed"}}, 10}}},
-      {"acceleration", "Acceleration of T, body axes (kinematic)",
-       {{"m/s^2", {{"ax_mps2", "a_x (forward)"}, {"ay_mps2", "a_y (left)"}, {"az_mps2", "a_z (up)"}}, 2}}},
+      {"speed",
+       "Speed",
+       {{"km/h", {{"speed_kmh", "speed"}, {"cruise_set_kmh", "cruise set speed"}}, 10}}},
+      {"acceleration",
+       "Acceleration of T, body axes (kinematic)",
+       {{"m/s^2",
+         {{"ax_mps2", "a_x (forward)"}, {"ay_mps2", "a_y (left)"}, {"az_mps2", "a_z (up)"}},
+         2}}},
       {"spring_forces", "Spring (normal) force per wheel", {{"N", per_wheel("Fp"), 200, true}}},
       {"drive_forces", "Drive force per wheel", {{"N", per_wheel("Fh"), 200}}},
       {"brake_forces", "Brake force per wheel", {{"N", per_wheel("Fb"), 200, true}}},
       {"side_forces", "Side force per wheel (positive left)", {{"N", per_wheel("Fy"), 200}}},
       // The pedals on panels of their own, 0..1 with a margin: a pedal at rest is a visible line.
-      {"controls", "Steering and pedals",
+      {"controls",
+       "Steering and pedals",
        {{"steering, rad", {{"steer_in_rad", "steer input"}}, 0.05},
-        {"throttle, 0..1", {{"throttle_in", "input"}, {"throttle", "applied"}}, 1, true, -0.05, 1.05},
+        {"throttle, 0..1",
+         {{"throttle_in", "input"}, {"throttle", "applied"}},
+         1,
+         true,
+         -0.05,
+         1.05},
         {"brake, 0..1", {{"brake_in", "input"}, {"brake", "applied"}}, 1, true, -0.05, 1.05}}},
   };
   std::vector<int> data_cols;  // CSV column index of each data-file column
@@ -346,8 +369,10 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     for (Panel& p : f.panels) {
       std::vector<std::pair<std::string, std::string>> kept;
       for (auto& [c, legend] : p.lines) {
-        if (use(c)) kept.push_back({c, legend});
-        else skipped.push_back(c);
+        if (use(c))
+          kept.push_back({c, legend});
+        else
+          skipped.push_back(c);
       }
       p.lines = kept;
     }
@@ -463,7 +488,9 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     for (int j = 0; j < ny; ++j) {
       mf << my0 + (j + 0.5) * cell_y;
       for (int i = 0; i < nx; ++i) {
-        mf << " " << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) + static_cast<std::size_t>(i)];
+        mf << " "
+           << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
+                   static_cast<std::size_t>(i)];
       }
       mf << "\n";
     }
@@ -473,8 +500,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   // The gnuplot script: one terminal per figure.
   const std::string ext = o.format;
   auto terminal = [&](int width, int height) {
-    return std::string(o.format == "png" ? "pngcairo" : "svg") + " size " + std::to_string(width) + "," +
-           std::to_string(height) + (o.format == "png" ? "" : " dynamic") + " font 'sans,10'";
+    return std::string(o.format == "png" ? "pngcairo" : "svg") + " size " + std::to_string(width) +
+           "," + std::to_string(height) + (o.format == "png" ? "" : " dynamic") + " font 'sans,10'";
   };
   std::ofstream gp(work.path() / "plot.gp");
   gp << "# Written by vdyn-recorder plot from " << o.file.filename().string() << "; run: gnuplot plot.gp\n";
@@ -509,9 +536,9 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
         const auto& [c, legend] = p.lines[i];
         // Dashed: the right wheels, and an input under what was applied.
         const bool dashed = legend == "RF" || legend == "RR" || legend == "input";
-        gp << (i ? ", " : "") << "'states.dat' using " << data_col_of["t_s"] << ":" << data_col_of[c]
-           << " with lines lw " << (legend == "input" ? 2.5 : 1.5) << " dt " << (dashed ? 2 : 1)
-           << " title \"" << Escape(legend) << "\"";
+        gp << (i ? ", " : "") << "'states.dat' using " << data_col_of["t_s"] << ":"
+           << data_col_of[c] << " with lines lw " << (legend == "input" ? 2.5 : 1.5) << " dt "
+           << (dashed ? 2 : 1) << " title \"" << Escape(legend) << "\"";
       }
       gp << "\n";
     }
@@ -530,11 +557,13 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     // Surface kinds (world.proto's SurfaceKind), one colour each, and the cells without one.
     // A step palette: each kind one flat colour over [k - 0.5, k + 0.5].
     gp << "set palette defined (";
-    const char* colours[] = {"#74a57f", "#9a9a9a", "#e07a1f", "#8d6e63", "#e9c46a", "#c1121f", "#7b2cbf", "#f4f4f4"};
+    const char* colours[] = {"#74a57f", "#9a9a9a", "#e07a1f", "#8d6e63",
+                             "#e9c46a", "#c1121f", "#7b2cbf", "#f4f4f4"};
     for (int k = 0; k <= kNoSurface; ++k) {
       gp << (k ? ", " : "") << k - 0.5 << " '" << colours[k] << "', " << k + 0.5 << " '" << colours[k] << "'";
     }
-    gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5 << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
+    gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5
+       << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
           "'rough' 3, 'ramp' 4, 'barrier' 5, 'prop' 6, 'no surface' 7)\nunset cblabel\n";
     gp << "set xrange [" << mx0 << ":" << mx0 + nx * cell_x << "]\nset yrange [" << my0 << ":"
        << my0 + ny * cell_y << "]\n";

@@ -91,8 +91,8 @@ std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c, const mcap::
   if (schema != nullptr) {
     // Our names on another type or encoding are not ours.
     const auto* d = PayloadDescriptor(spec->id);
-    if (c.message_encoding != "protobuf" || schema->encoding != "protobuf" ||
-        d == nullptr || schema->name != d->full_name()) {
+    if (c.message_encoding != "protobuf" || schema->encoding != "protobuf" || d == nullptr ||
+        schema->name != d->full_name()) {
       return std::nullopt;
     }
   }
@@ -139,7 +139,8 @@ mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisito
     }
     if (!v.on_message) return;
     if (v.wants && !v.wants(info->topic)) return;
-    v.on_message({info->topic, info->key, m.log_time, m.publish_time, m.data, info->repeat, m.unchecked});
+    v.on_message(
+        {info->topic, info->key, m.log_time, m.publish_time, m.data, info->repeat, m.unchecked});
   };
   mv.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
     if (v.on_metadata) v.on_metadata(m);
@@ -151,7 +152,8 @@ mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisito
   return reader.Scan(mv);
 }
 
-std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload, std::uint32_t key) {
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload,
+                                           std::uint32_t key) {
   StateFields f;
   std::uint64_t id = 0;
   const bool framed = wire::ForEachField(payload, [&](const wire::Field& w) {

@@ -80,9 +80,10 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
     std::stable_sort(s.events.begin(), s.events.end(),
                      [](const auto& a, const auto& b) { return a.sequence() < b.sequence(); });
     // The same event twice (a copy in a split part or a recovered file) is one event.
-    s.events.erase(std::unique(s.events.begin(), s.events.end(),
-                               [](const auto& a, const auto& b) { return a.sequence() == b.sequence(); }),
-                   s.events.end());
+    s.events.erase(
+        std::unique(s.events.begin(), s.events.end(),
+                    [](const auto& a, const auto& b) { return a.sequence() == b.sequence(); }),
+        s.events.end());
     for (std::size_t i = 1; i < s.events.size(); ++i) {
       const std::uint64_t a = s.events[i - 1].sequence(), b = s.events[i].sequence();
       if (b > a + 1) s.holes.push_back({a, b});
@@ -141,7 +142,8 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
       }
       case FD::CPPTYPE_FLOAT: {
         const float x = ra->GetFloat(a, f), y = rb->GetFloat(b, f);
-        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(static_cast<double>(x)), num(static_cast<double>(y))});
+        if (std::memcmp(&x, &y, sizeof x) != 0)
+          out.push_back({name, num(static_cast<double>(x)), num(static_cast<double>(y))});
         break;
       }
       case FD::CPPTYPE_BOOL:
@@ -212,7 +214,7 @@ struct VehicleRun {
   std::shared_ptr<const World> world;
   std::uint64_t terrain_hash = 0;
   std::vector<const pb::SessionEvent*> events;  // by sequence
-  std::vector<Segment> segments;                 // by start step
+  std::vector<Segment> segments;                // by start step
   std::vector<std::pair<std::uint64_t, std::uint64_t>> ring =
       std::vector<std::pair<std::uint64_t, std::uint64_t>>(kRing, {~0ull, 0});
   std::uint64_t matched = 0;
@@ -228,7 +230,9 @@ struct VehicleRun {
 
   // Cuts the replay into segments at the server's holes.
   void Plan(const std::vector<Hole>& holes) {
-    auto starts = [&](std::size_t i) { return events[i]->has_spawned() || events[i]->has_checkpoint(); };
+    auto starts = [&](std::size_t i) {
+      return events[i]->has_spawned() || events[i]->has_checkpoint();
+    };
     std::size_t first = 0;
     while (first < events.size() && !starts(first)) ++first;
     if (first == events.size()) return;
@@ -393,18 +397,22 @@ VerifyResult Verify(const VerifyOptions& o) {
     if (step > run.last_event_step + kAheadSteps) {
       // Far beyond every event of the vehicle (a checkpoint comes each second): not a step to
       // simulate towards (a damaged step would cost hours).
-      res.Unverified(m.key, step, "beyond the vehicle's last recorded event (step " +
-                                      std::to_string(run.last_event_step) + "): not re-simulated");
+      res.Unverified(m.key, step,
+                     "beyond the vehicle's last recorded event (step " +
+                         std::to_string(run.last_event_step) + "): not re-simulated");
       return;
     }
     bool fresh_step = false;
     if (step + 1 > seg->replayed_to) {
       const double h = static_cast<double>(run.step_ns) * 1e-9;
       std::string why;
-      if (!seg->replayer->Run(step + 1, [&](std::uint64_t s, std::uint64_t hh) {
-            run.ring[s % VehicleRun::kRing] = {s, hh};
-            res.sim_seconds += h;
-          }, &why)) {
+      if (!seg->replayer->Run(
+              step + 1,
+              [&](std::uint64_t s, std::uint64_t hh) {
+                run.ring[s % VehicleRun::kRing] = {s, hh};
+                res.sim_seconds += h;
+              },
+              &why)) {
         seg->Lose(step, "the re-simulation stopped: " + why);
         res.Unverified(m.key, step, seg->why);
         return;
@@ -430,9 +438,9 @@ VerifyResult Verify(const VerifyOptions& o) {
     if (compare_next && compare_next->first == m.key && compare_next->second == step) {
       compare_next.reset();
       std::string why;
-      if (auto fresh = run.Fresh(m.key, seg->first_event, &why); fresh && fresh->Run(step + 1, {}, &why) &&
-                                                                 fresh->simulator() &&
-                                                                 recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+      if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
+          fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+          recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
         Diff(recorded, Resimulated(*fresh, recorded), "", res.first->next_fields);
       }
     }
@@ -443,7 +451,8 @@ VerifyResult Verify(const VerifyOptions& o) {
         // message. Compare them all with the re-simulation (it just ran this very step).
         ++res.unchecked;
         const Simulator* sim = seg->replayer->simulator();
-        if (fresh_step && sim != nullptr && static_cast<std::uint64_t>(sim->last_step().step) == step &&
+        if (fresh_step && sim != nullptr &&
+            static_cast<std::uint64_t>(sim->last_step().step) == step &&
             recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
           std::vector<FieldDiff> fields;
           Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
@@ -465,9 +474,9 @@ VerifyResult Verify(const VerifyOptions& o) {
     d.resimulated_hash = slot.second;
     d.matched_before = run.matched;
     std::string why;
-    if (auto fresh = run.Fresh(m.key, seg->first_event, &why); fresh && fresh->Run(step + 1, {}, &why) &&
-                                                               fresh->simulator() &&
-                                                               recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+    if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
+        fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+        recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
       Diff(recorded, Resimulated(*fresh, recorded), "", d.fields);
       // Causes first: the input and controls applied over the step, then what they moved.
       std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
@@ -514,7 +523,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   bar.Finish();
   // A recovered file says what its source lost and what no CRC checked: said here too, never
   // a bit-exact claim on its own.
-  const std::vector<std::string> recovered = IntegrityNotes(ReadMetadata(mcap::Reader(o.file)), {}, 0, "");
+  const std::vector<std::string> recovered =
+      IntegrityNotes(ReadMetadata(mcap::Reader(o.file)), {}, 0, "");
   auto notes = [&] {
     for (const std::string& n : recovered) out << "  " << n << "\n";
   };
@@ -544,8 +554,9 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     if (r.unverified == 0) out << "  steps:\n";
     for (const auto& [id, rs] : r.runs) {
       for (const StepRun& run : rs) {
-        out << "    vehicle " << id << ", steps " << run.first << ".." << run.last << " (" << run.count
-            << " states): " << (run.why.empty() ? "verified bit for bit" : run.why) << "\n";
+        out << "    vehicle " << id << ", steps " << run.first << ".." << run.last << " ("
+            << run.count << " states): " << (run.why.empty() ? "verified bit for bit" : run.why)
+            << "\n";
       }
     }
   };
@@ -553,8 +564,9 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     const Divergence& d = *r.first;
     std::snprintf(line, sizeof line, "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)",
                   d.vehicle, d.step, d.t);
-    out << o.file.string() << ": " << line << ": the state hash after the step was " << Hex(d.recorded_hash)
-        << " in the recording, " << Hex(d.resimulated_hash) << " re-simulated\n";
+    out << o.file.string() << ": " << line << ": the state hash after the step was "
+        << Hex(d.recorded_hash) << " in the recording, " << Hex(d.resimulated_hash)
+        << " re-simulated\n";
     out << "  state fields that differ at that step (recorded, re-simulated):\n";
     if (print(d.fields) == 0) {
       out << "    none: the step started from the same state with the same input; the state after it\n"
@@ -573,7 +585,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     return 1;
   }
   if (r.compared == 0) {
-    out << o.file.string() << ": nothing compared: no recorded state falls after a spawn or checkpoint";
+    out << o.file.string()
+        << ": nothing compared: no recorded state falls after a spawn or checkpoint";
     out << (r.unverified > 0 ? "" : "\n");
     if (r.unverified > 0) out << " that the recording kept whole\n";
     unverified();
@@ -585,11 +598,13 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     std::string verified;
     for (const StepRun& run : rs) {
       if (run.why.empty()) {
-        verified += (verified.empty() ? "" : ", ") + std::to_string(run.first) + ".." + std::to_string(run.last);
+        verified += (verified.empty() ? "" : ", ") + std::to_string(run.first) + ".." +
+                    std::to_string(run.last);
       }
     }
     if (!verified.empty()) {
-      ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": steps " + verified;
+      ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) +
+                ": steps " + verified;
     }
   }
   std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps", r.compared);
@@ -601,8 +616,10 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   out << line;
   if (r.damaged > 0) {
     const Damaged& d = *r.first_damaged;
-    out << "  DAMAGED: " << r.damaged << " recorded states match their re-simulation's hash but not "
-        << "their other fields: their bytes were changed where no CRC covered them; the first, vehicle "
+    out << "  DAMAGED: " << r.damaged
+        << " recorded states match their re-simulation's hash but not "
+        << "their other fields: their bytes were changed where no CRC covered them; the first, "
+           "vehicle "
         << d.vehicle << " at step " << d.step << " (recorded, re-simulated):\n";
     print(d.fields);
   }
@@ -679,7 +696,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   if (server == nullptr) throw std::runtime_error("no session events of vehicle " + std::to_string(*chosen) + " were recorded");
   if (std::string why = CheckServer(server_id, *server); !why.empty()) throw std::runtime_error(why);
   if (!server->holes.empty()) {
-    throw std::runtime_error("events of server '" + server_id + "' were lost: " + server->holes.front().Text() +
+    throw std::runtime_error("events of server '" + server_id +
+                             "' were lost: " + server->holes.front().Text() +
                              ": the exact state of a moment cannot be rebuilt across them");
   }
   std::shared_ptr<const World> world = WorldFromDescription(*server->world);

@@ -246,13 +246,18 @@ struct ScanResult {
   std::uint64_t problem_offset = 0;
   std::uint64_t messages = 0;
   std::uint32_t chunks = 0;
-  std::uint32_t chunks_skipped = 0;     // lenient: chunks dropped for a bad CRC, compression...
-  std::uint32_t chunks_duplicated = 0;  // lenient: exact copies of an earlier chunk, dropped
-  std::uint32_t records_skipped = 0;    // lenient: other damaged records, and runs of bytes
-  std::uint32_t chunks_unchecked = 0;   // chunks whose CRC is 0
-  std::uint64_t messages_unchecked = 0; // messages delivered with Message::unchecked
+  std::uint32_t chunks_skipped = 0;      // lenient: chunks dropped for a bad CRC, compression...
+  std::uint32_t chunks_duplicated = 0;   // lenient: exact copies of an earlier chunk, dropped
+  std::uint32_t records_skipped = 0;     // lenient: other damaged records, and runs of bytes
+  std::uint32_t chunks_unchecked = 0;    // chunks whose CRC is 0
+  std::uint64_t messages_unchecked = 0;  // messages delivered with Message::unchecked
   // The data end record's CRC of every byte before it.
-  enum class DataCrc { kNotReached, kAbsent, kMatched, kMismatched } data_crc = DataCrc::kNotReached;
+  enum class DataCrc {
+    kNotReached,
+    kAbsent,
+    kMatched,
+    kMismatched
+  } data_crc = DataCrc::kNotReached;
   std::optional<Statistics> statistics;  // from the summary
   std::vector<Damage> damage;            // lenient: everything left out, in file order
 };

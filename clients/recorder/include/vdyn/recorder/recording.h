@@ -96,7 +96,8 @@ struct StateFields {
   std::uint64_t step_ns = 0;
   std::uint64_t state_hash = 0;
 };
-std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload, std::uint32_t key);
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload,
+                                           std::uint32_t key);
 
 // Refuses (mcap::McapError) what `info` refuses: reads the whole file strictly, every CRC.
 // For commands that otherwise read only parts of it (play).
