@@ -1011,6 +1011,9 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   EXPECT_THAT(verified, HasSubstr("DAMAGED: 1 recorded states")) << verified;
   EXPECT_THAT(verified, HasSubstr("vehicle 1 at step 1500")) << verified;
   EXPECT_THAT(verified, HasSubstr("wheels[2].fp")) << verified;
+  // Listed as damaged, never among the steps verified bit for bit.
+  EXPECT_THAT(verified, HasSubstr("steps 1500..1500 (1 states): DAMAGED")) << verified;
+  EXPECT_THAT(verified, HasSubstr("steps 1501..")) << verified;
 }
 
 // `info` refuses a file whose data-section CRC fails (a byte flipped in a chunk without a CRC of

@@ -2,7 +2,8 @@
 // recover.cc, verify.cc), not only the reader. Any bytes, as a file: recover either refuses it
 // (McapError: not MCAP at all) or writes a copy that is a valid, closed MCAP file - a strict scan
 // of it passes, `info` describes it - and `verify` of the copy re-simulates what it can and
-// accounts for every state it saw; never a crash, never a read outside the file.
+// accounts for every state it saw, listing as verified only states that matched and are intact;
+// never a crash, never a read outside the file.
 #include <unistd.h>
 
 #include <cstdint>
@@ -78,6 +79,22 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     vo.file = out;
     const rec::VerifyResult r = rec::Verify(vo);
     if (r.resimulated && r.compared + r.unverified + r.not_resimulated > states) std::abort();
+    // The stretches it lists as verified hold exactly the states that matched and are intact:
+    // never one that differs from its re-simulation or is damaged.
+    std::uint64_t listed = 0;
+    for (const auto& [vehicle, runs] : r.runs) {
+      for (const rec::StepRun& run : runs) listed += run.why.empty() ? run.count : 0;
+    }
+    if (listed != r.compared - r.mismatched - r.damaged) {
+      std::fprintf(stderr,
+                   "verify lists %llu states as verified, %llu compared, %llu differ, "
+                   "%llu damaged\n",
+                   static_cast<unsigned long long>(listed),
+                   static_cast<unsigned long long>(r.compared),
+                   static_cast<unsigned long long>(r.mismatched),
+                   static_cast<unsigned long long>(r.damaged));
+      std::abort();
+    }
   } catch (const mcap::McapError& e) {
     std::fprintf(stderr, "verify refused the recovered copy: %s\n", e.what());
     std::abort();

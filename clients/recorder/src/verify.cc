@@ -208,6 +208,11 @@ struct Segment {
 // server sends a checkpoint each second).
 constexpr std::uint64_t kAheadSteps = 60'000;
 
+// How the list of stretches names compared states that are not verified.
+constexpr const char* kDivergedWhy = "DIFFER from the re-simulation (their state hashes)";
+constexpr const char* kDamagedWhy =
+    "DAMAGED: the hashes match, other fields of the recorded messages do not";
+
 struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
   std::string server;
@@ -433,7 +438,6 @@ VerifyResult Verify(const VerifyOptions& o) {
       res.Unverified(m.key, step, seg->why);
       return;
     }
-    res.Verified(m.key, step);
     ++res.compared;
     if (compare_next && compare_next->first == m.key && compare_next->second == step) {
       compare_next.reset();
@@ -446,6 +450,7 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
     if (slot.second == hash) {
       ++run.matched;
+      bool damaged = false;
       if (m.unchecked) {
         // No CRC vouched for these bytes: the hash covers the state, not every field of the
         // message. Compare them all with the re-simulation (it just ran this very step).
@@ -457,14 +462,21 @@ VerifyResult Verify(const VerifyOptions& o) {
           std::vector<FieldDiff> fields;
           Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
           if (!fields.empty()) {
+            damaged = true;
             ++res.damaged;
             if (!res.first_damaged) res.first_damaged = Damaged{m.key, step, fields};
           }
         }
       }
+      if (damaged) {
+        res.Unverified(m.key, step, kDamagedWhy, false);
+      } else {
+        res.Verified(m.key, step);
+      }
       return;
     }
     ++res.mismatched;
+    res.Unverified(m.key, step, kDivergedWhy, false);
     if (res.first) return;
     Divergence d;
     d.vehicle = m.key;
@@ -549,7 +561,15 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   };
   // What could not be verified, per vehicle: the stretches and why.
   auto unverified = [&] {
-    if (r.unverified == 0 && r.not_resimulated == 0) return;
+    if (r.malformed > 0) {
+      out << "  NOT verified: " << r.malformed << " recorded state messages do not read as states "
+          << "of their vehicle (damaged or foreign payloads)\n";
+    }
+    bool all_verified = true;
+    for (const auto& [id, rs] : r.runs) {
+      for (const StepRun& run : rs) all_verified = all_verified && run.why.empty();
+    }
+    if (all_verified) return;
     if (r.unverified > 0) out << "  NOT verified: " << r.unverified << " recorded states\n";
     if (r.unverified == 0) out << "  steps:\n";
     for (const auto& [id, rs] : r.runs) {
@@ -607,7 +627,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
                 ": steps " + verified;
     }
   }
-  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps", r.compared);
+  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
+                r.compared - r.damaged);  // as the stretches listed
   out << o.file.string() << ": " << (r.unverified > 0 ? "PARTLY verified: " : "") << line << " ("
       << ranges << ")";
   if (r.not_resimulated > 0) out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
@@ -633,10 +654,6 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     out << "  " << r.unchecked << " of the compared states come from chunks without a CRC: their "
         << "hashes matched and every field was compared with the re-simulation"
         << (r.damaged > 0 ? "" : " (all equal)") << "\n";
-  }
-  if (r.malformed > 0) {
-    out << "  NOT verified: " << r.malformed << " recorded state messages do not read as states of "
-        << "their vehicle (damaged or foreign payloads)\n";
   }
   notes();
   return r.ok() ? 0 : 1;

@@ -86,7 +86,8 @@ struct VerifyResult {
            malformed == 0;
   }
   void Verified(std::uint32_t vehicle, std::uint64_t step);
-  // `counts`: a state that should have been verified (not one before the vehicle's start).
+  // A stretch with a reason. `counts`: a state a loss kept from being verified (`unverified`);
+  // false: one before the vehicle's start, or one compared that differs or is damaged.
   void Unverified(std::uint32_t vehicle, std::uint64_t step, const std::string& why,
                   bool counts = true);
 };
