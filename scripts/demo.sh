@@ -21,6 +21,12 @@ export CYCLONEDDS_URI="${CYCLONEDDS_URI:-<General><Interfaces><NetworkInterface 
 domain="${VDYN_DOMAIN:-42}"
 rec="$bin/clients/recorder/vdyn-recorder"
 mkdir -p out
+# The recorder's socket needs room for the world description the server sends in one burst (2 MB):
+# Debian caps a socket's receive buffer at 208 KiB (net.core.rmem_max), and the kernel then drops
+# a few states at the start of the recording. As root (a fresh machine), raise the cap.
+if [ "$(id -u)" = 0 ] && [ "$(cat /proc/sys/net/core/rmem_max 2>/dev/null || echo 0)" -lt 16777216 ]; then
+  sysctl -qw net.core.rmem_max=16777216 || echo "demo.sh: cannot raise net.core.rmem_max (a container?)" >&2
+fi
 # The recorder first, so it has the whole session: every topic, raw, into MCAP.
 "$rec" record out/live.mcap --domain "$domain" --no-status &
 recorder=$!

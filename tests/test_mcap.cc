@@ -2,8 +2,11 @@
 // data end, summary, footer), every message back in order, compression, the schema as a
 // FileDescriptorSet that decodes a payload by itself, and bad files - truncated at every kind of
 // place, corrupted, empty, foreign - refused with the file, offset and reason; recover salvages.
+#include <unistd.h>
+
 #include <fstream>
 #include <random>
+#include <set>
 #include <sstream>
 
 #include <gmock/gmock.h>
@@ -11,11 +14,13 @@
 #include <google/protobuf/dynamic_message.h>
 #include <gtest/gtest.h>
 
+#include "test_support.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/mcap.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
+#include "vdyn/session.pb.h"
 #include "vdyn/state.pb.h"
-#include "test_support.h"
 
 namespace vdyn {
 namespace {
@@ -64,13 +69,15 @@ struct Written {
   std::vector<std::uint64_t> times;
 };
 
-// A file of `n` state messages at 1 kHz of log time, written with the given compression.
+// A file of `n` state messages at 1 kHz of log time, written with the given compression (and
+// chunk CRCs unless `chunk_crc` is false).
 Written WriteStates(const std::filesystem::path& path, int n, mc::Compression c,
-                    std::size_t chunk_bytes = 64 * 1024) {
+                    std::size_t chunk_bytes = 64 * 1024, bool chunk_crc = true) {
   mc::WriterOptions o;
   o.compression = c;
   o.chunk_bytes = chunk_bytes;
   mc::Writer w(path, o);
+  w.SetChunkCrc(chunk_crc);
   const auto* d = pb::VehicleState::descriptor();
   const std::uint16_t schema = w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d));
   const std::uint16_t ch = w.AddChannel(schema, "vdyn/state/1", "protobuf",
@@ -319,6 +326,7 @@ TEST(McapBadFiles, AFlippedBitIsACrcMismatchAndRecoverDropsOnlyThatChunk) {
   ro.file = dir / "flipped.mcap";
   ASSERT_EQ(recorder::RunRecover(ro, log), 0);
   EXPECT_THAT(log.str(), HasSubstr("1 damaged chunks dropped"));
+  EXPECT_THAT(log.str(), HasSubstr("messages (log time"));
   mc::ScanResult res;
   const std::vector<std::string> got = ReadAll(dir / "flipped-recovered.mcap", &res);
   EXPECT_TRUE(res.complete);
@@ -327,6 +335,7 @@ TEST(McapBadFiles, AFlippedBitIsACrcMismatchAndRecoverDropsOnlyThatChunk) {
   r.ReadChunk(chunks[2], [&](const mc::Message&) { ++in_chunk; }, scratch);
   EXPECT_EQ(got.size(), w.payloads.size() - in_chunk);
 
+  EXPECT_THAT(log.str(), HasSubstr("chunk CRC mismatch"));
   // A flipped bit in the summary: the footer's CRC catches it.
   std::vector<std::uint8_t> s = ReadBytes(path);
   const std::size_t footer = s.size() - 8 - 29;
@@ -399,6 +408,505 @@ TEST(McapBadFiles, AChunkThatClaimsMoreThanItHoldsIsRefusedWithoutAllocatingTheC
   } catch (const mc::McapError& e) {
     EXPECT_THAT(e.reason(), HasSubstr("more than this reader accepts"));
   }
+}
+
+// --- outputs: never over an input, never in place
+// ---------------------------------------------------
+
+namespace fs = std::filesystem;
+
+std::set<std::string> Names(const fs::path& dir) {
+  std::set<std::string> out;
+  for (const auto& e : fs::directory_iterator(dir)) out.insert(e.path().filename().string());
+  return out;
+}
+
+// `export run.mcap --csv run.mcap` used to truncate the recording it was reading (a bus error and
+// a file of 0 bytes). Every spelling of the same file is refused before anything is written.
+TEST(RecorderOutputs, AnOutputThatIsAnInputIsRefusedWhateverItsSpelling) {
+  testing::TempDir dir;
+  const fs::path path = dir / "run.mcap";
+  WriteStates(path, 2000, mc::Compression::kZstd);
+  const std::vector<std::uint8_t> before = ReadBytes(path);
+  fs::create_directories(dir / "sub");
+  fs::create_symlink(path, dir / "link.mcap");
+  fs::create_hard_link(path, dir / "hard.mcap");
+  const std::vector<fs::path> spellings = {path,
+                                           dir.path() / "." / "run.mcap",
+                                           dir.path() / "sub" / ".." / "run.mcap",
+                                           fs::relative(path),
+                                           dir / "link.mcap",
+                                           dir / "hard.mcap"};
+  const std::set<std::string> names = Names(dir.path());
+  for (const fs::path& same : spellings) {
+    SCOPED_TRACE(same.string());
+    std::ostringstream log;
+    recorder::ExportOptions eo;
+    eo.file = path;
+    eo.csv = same;
+    try {
+      recorder::RunExport(eo, log);
+      ADD_FAILURE() << "export wrote over its input";
+    } catch (const recorder::OutputError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("is the input"));
+      EXPECT_THAT(e.what(), HasSubstr("nothing was written"));
+    }
+    recorder::RecoverOptions ro;
+    ro.file = same;
+    ro.out = path;
+    EXPECT_THROW(recorder::RunRecover(ro, log), recorder::OutputError);
+    ro.file = path;
+    ro.out = same;
+    EXPECT_THROW(recorder::RunRecover(ro, log), recorder::OutputError);
+    mc::WriterOptions wo;
+    wo.inputs = {path};
+    EXPECT_THROW(mc::Writer(same, wo), recorder::OutputError);
+    wo.live = true;
+    EXPECT_THROW(mc::Writer(same, wo), recorder::OutputError);
+    EXPECT_EQ(ReadBytes(path), before);
+    EXPECT_EQ(Names(dir.path()), names) << "a file was left behind";
+  }
+  // Another output is fine, and lands where it was asked to.
+  recorder::ExportOptions eo;
+  eo.file = path;
+  eo.csv = dir / "run.csv";
+  std::ostringstream log;
+  EXPECT_EQ(recorder::RunExport(eo, log), 0) << log.str();
+  EXPECT_THAT(testing::ReadFile(dir / "run.csv"), HasSubstr("t_s,step,"));
+}
+
+// An output is written beside its destination and renamed when whole: an error (or a crash)
+// leaves the destination as it was and no half file under its name.
+TEST(RecorderOutputs, AnOutputTakesItsNameOnlyWhenWhole) {
+  testing::TempDir dir;
+  const fs::path dest = dir / "out.csv";
+  testing::WriteFile(dest, "yesterday's export\n");
+  {
+    recorder::OutputFile f(dest, {});
+    ASSERT_EQ(f.temp().parent_path(), dest.parent_path());
+    ASSERT_EQ(::write(f.fd(), "half", 4), 4);
+    EXPECT_EQ(testing::ReadFile(dest), "yesterday's export\n");
+    EXPECT_TRUE(fs::exists(f.temp()));
+  }  // not committed: an error happened
+  EXPECT_EQ(testing::ReadFile(dest), "yesterday's export\n");
+  EXPECT_EQ(Names(dir.path()), std::set<std::string>{"out.csv"});
+  {
+    recorder::OutputFile f(dest, {});
+    ASSERT_EQ(::write(f.fd(), "whole\n", 6), 6);
+    f.Commit();
+  }
+  EXPECT_EQ(testing::ReadFile(dest), "whole\n");
+  EXPECT_EQ(Names(dir.path()), std::set<std::string>{"out.csv"});
+  // A symlink keeps pointing where it did; its target gets the new file.
+  fs::create_directories(dir / "real");
+  testing::WriteFile(dir / "real" / "data.csv", "old\n");
+  fs::create_symlink(fs::path("real") / "data.csv", dir / "alias.csv");
+  {
+    recorder::OutputFile f(dir / "alias.csv", {});
+    ASSERT_EQ(::write(f.fd(), "new\n", 4), 4);
+    f.Commit();
+  }
+  EXPECT_TRUE(fs::is_symlink(dir / "alias.csv"));
+  EXPECT_EQ(testing::ReadFile(dir / "real" / "data.csv"), "new\n");
+
+  // A recording abandoned by an error leaves nothing under its name.
+  try {
+    mc::Writer w(dir / "rec.mcap", {});
+    w.WriteMetadata("x", {{"a", "b"}});
+    throw std::runtime_error("the work failed");
+  } catch (const std::runtime_error&) {
+  }
+  EXPECT_FALSE(fs::exists(dir / "rec.mcap"));
+  // A live recording of a new file is under its name from its first byte (a killed recorder
+  // leaves it for recover); one over an existing file replaces it only when it closes.
+  mc::WriterOptions live;
+  live.live = true;
+  {
+    mc::Writer w(dir / "new.mcap", live);
+    EXPECT_EQ(w.writing_to(), dir / "new.mcap");
+    EXPECT_TRUE(fs::exists(dir / "new.mcap"));
+  }
+  WriteStates(dir / "old.mcap", 50, mc::Compression::kZstd);
+  const std::vector<std::uint8_t> old = ReadBytes(dir / "old.mcap");
+  {
+    mc::Writer w(dir / "old.mcap", live);
+    EXPECT_NE(w.writing_to(), dir / "old.mcap");
+    w.Flush();
+    EXPECT_EQ(ReadBytes(dir / "old.mcap"), old);
+    w.Close();
+    EXPECT_NE(ReadBytes(dir / "old.mcap"), old);
+  }
+  EXPECT_EQ(Names(dir.path()),
+            (std::set<std::string>{"out.csv", "real", "alias.csv", "new.mcap", "old.mcap"}));
+}
+
+// --- recover: what is damaged, and only that
+// ----------------------------------------------------------
+
+std::pair<int, std::string> Recover(const fs::path& in, const fs::path& out) {
+  std::ostringstream log;
+  recorder::RecoverOptions ro;
+  ro.file = in;
+  ro.out = out;
+  const int code = recorder::RunRecover(ro, log);
+  return {code, log.str()};
+}
+
+std::string Info(const fs::path& file) {
+  std::ostringstream out;
+  recorder::RunInfo(file, out);
+  return out.str();
+}
+
+struct Layout {
+  std::uint64_t footer = 0, summary_start = 0, data_end = 0;
+  std::vector<mc::ChunkIndex> chunks;
+};
+Layout LayoutOf(const fs::path& path) {
+  const std::vector<std::uint8_t> b = ReadBytes(path);
+  Layout l;
+  l.footer = b.size() - 8 - 29;
+  l.summary_start = Le64(b, l.footer + 9);
+  l.data_end = l.summary_start - 13;
+  l.chunks = mc::Reader(path).Chunks();
+  return l;
+}
+
+// One flipped bit in the summary or in the footer's summary offset, or a chunk written twice:
+// the file is refused (its summary or data-section CRC), but every chunk is intact, and recover,
+// which reads the data section only, keeps every message, once.
+TEST(McapRecover, DoesNotDependOnTheSummaryOrTheFooter) {
+  testing::TempDir dir;
+  const fs::path path = dir / "a.mcap";
+  const Written w = WriteStates(path, 3000, mc::Compression::kNone, 16 * 1024);
+  const std::vector<std::uint8_t> whole = ReadBytes(path);
+  const Layout l = LayoutOf(path);
+  ASSERT_GT(l.chunks.size(), 4u);
+  struct Case {
+    const char* name;
+    std::vector<std::uint8_t> bytes;
+    const char* says;
+  };
+  std::vector<Case> cases;
+  cases.push_back({"summary", whole, "summary is damaged"});
+  cases.back().bytes[(l.summary_start + l.footer) / 2] ^= 0x01;
+  cases.push_back({"footer", whole, "summary is damaged"});
+  cases.back().bytes[l.footer + 9] ^= 0x04;  // the summary's offset
+  cases.push_back({"duplicate", {}, "an exact copy of the chunk at offset"});
+  {
+    // The third chunk, with its message indexes, written twice in a row.
+    const auto from = whole.begin() + static_cast<std::ptrdiff_t>(l.chunks[2].chunk_start_offset);
+    const auto to = from + static_cast<std::ptrdiff_t>(l.chunks[2].chunk_length +
+                                                       l.chunks[2].message_index_length);
+    std::vector<std::uint8_t>& b = cases.back().bytes;
+    b.assign(whole.begin(), to);
+    b.insert(b.end(), from, to);
+    b.insert(b.end(), to, whole.end());
+  }
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    const fs::path bad = dir / (std::string(c.name) + ".mcap");
+    WriteBytes(bad, c.bytes);
+    EXPECT_THROW(ReadAll(bad), mc::McapError) << "the damaged file was accepted";
+    const auto [code, log] = Recover(bad, dir / (std::string(c.name) + "-recovered.mcap"));
+    ASSERT_EQ(code, 0) << log;
+    EXPECT_THAT(log, HasSubstr(c.says));
+    EXPECT_THAT(log, ::testing::Not(HasSubstr("damaged chunks dropped")));
+    mc::ScanResult res;
+    const std::vector<std::string> got =
+        ReadAll(dir / (std::string(c.name) + "-recovered.mcap"), &res);
+    EXPECT_TRUE(res.complete);
+    EXPECT_EQ(got, w.payloads);
+  }
+}
+
+// One flipped bit in a string's length inside the header, the first schema or the first metadata
+// record leaves its record's frame whole: recover leaves out that record, says so, and keeps every
+// message (a lost schema comes back from the summary's copy, or - the summary gone too - from this
+// build's descriptor of the topic's type). A damaged record length: recover resynchronises on
+// the next valid record and loses only what lay in between.
+TEST(McapRecover, SkipsADamagedRecordResynchronisesAndKeepsTheRest) {
+  testing::TempDir dir;
+  const fs::path path = dir / "a.mcap";
+  const Written w = WriteStates(path, 3000, mc::Compression::kZstd, 16 * 1024);
+  const std::vector<std::uint8_t> whole = ReadBytes(path);
+  const Layout l = LayoutOf(path);
+  // Magic, then the header, the schema, the channel and the metadata, each opcode + length.
+  std::vector<std::uint64_t> record = {8};
+  for (int i = 0; i < 4; ++i) record.push_back(record.back() + 9 + Le64(whole, record.back() + 1));
+  ASSERT_EQ(whole[record[0]], mc::kHeader);
+  ASSERT_EQ(whole[record[1]], mc::kSchema);
+  ASSERT_EQ(whole[record[2]], mc::kChannel);
+  ASSERT_EQ(whole[record[3]], mc::kMetadata);
+  struct Case {
+    std::string name;
+    std::size_t at;  // the byte whose bit 7 flips: the third byte of a length (+ 8 MiB)
+    const char* says;
+    bool cut_summary = false;
+  };
+  const std::vector<Case> cases = {
+      {"header", record[0] + 9 + 4 + 2, "a malformed header record"},  // the library's length
+      {"schema", record[1] + 9 + 2 + 2, "a malformed schema record"},  // the name's length
+      {"schema-no-summary", record[1] + 9 + 2 + 2,
+       "rebuilt from this build's descriptor of vdyn.pb.VehicleState", true},
+      {"metadata", record[3] + 9 + 2, "a malformed metadata record"},  // the name's length
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::vector<std::uint8_t> b = whole;
+    b[c.at] ^= 0x80;
+    if (c.cut_summary) b.resize(l.data_end);  // killed before it closed: no summary to help
+    const fs::path bad = dir / (c.name + ".mcap");
+    WriteBytes(bad, b);
+    EXPECT_THROW(ReadAll(bad), mc::McapError);
+    const fs::path out = dir / (c.name + "-recovered.mcap");
+    const auto [code, log] = Recover(bad, out);
+    ASSERT_EQ(code, 0) << log;
+    EXPECT_THAT(log, HasSubstr(c.says)) << log;
+    EXPECT_THAT(log, HasSubstr("skipped")) << log;
+    mc::ScanResult res;
+    EXPECT_EQ(ReadAll(out, &res), w.payloads) << log;
+    EXPECT_TRUE(res.complete);
+    // The copy's states are still vdyn states (its schema is the type's, whatever happened).
+    const std::string info = Info(out);
+    EXPECT_THAT(info, HasSubstr("vdyn/state/1")) << info;
+    EXPECT_THAT(info, HasSubstr("3000 states, 0 missing")) << info;
+    EXPECT_THAT(info,
+                HasSubstr("damaged   offset " + std::to_string(c.name == "header"     ? record[0]
+                                                               : c.name == "metadata" ? record[3]
+                                                                                      : record[1])))
+        << info;
+  }
+  // A bit flipped in a chunk's record length: the scan resynchronises on the next valid record;
+  // only that chunk is lost.
+  std::vector<std::uint8_t> b = whole;
+  b[l.chunks[3].chunk_start_offset + 1 + 2] ^= 0x80;
+  WriteBytes(dir / "length.mcap", b);
+  const auto [code, log] = Recover(dir / "length.mcap", dir / "length-recovered.mcap");
+  ASSERT_EQ(code, 0) << log;
+  EXPECT_THAT(log, HasSubstr("bytes to the next valid record"));
+  const std::vector<std::string> got = ReadAll(dir / "length-recovered.mcap");
+  std::uint64_t in_chunk = 0;
+  std::vector<std::uint8_t> scratch;
+  mc::Reader(path).ReadChunk(
+      l.chunks[3], [&](const mc::Message&) { ++in_chunk; }, scratch);
+  EXPECT_EQ(got.size(), w.payloads.size() - in_chunk);
+  // The copy's info says what was lost, and when.
+  const std::string info = Info(dir / "length-recovered.mcap");
+  EXPECT_THAT(info, HasSubstr("recovered   from length.mcap"));
+  EXPECT_THAT(info, HasSubstr(std::to_string(in_chunk) + " states missing"));
+  EXPECT_THAT(info, HasSubstr("bytes to the next valid record"));
+}
+
+// Writes `path` again with the data end's CRC set to the CRC of every byte before it (a writer
+// that computes that one but leaves its chunks' CRCs at 0, as the spec allows).
+void SetDataCrc(const fs::path& path) {
+  std::vector<std::uint8_t> b = ReadBytes(path);
+  const Layout l = LayoutOf(path);
+  const std::uint32_t crc = mc::Crc32(0, std::span<const std::uint8_t>(b.data(), l.data_end));
+  for (int i = 0; i < 4; ++i)
+    b[l.data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+  WriteBytes(path, b);
+}
+
+// A chunk whose own CRC is 0 with one flipped byte: the data section's CRC catches it, so every
+// command refuses the file. Recover cannot tell which chunk holds the flip: it keeps every chunk,
+// but unchecked - CRC 0 again and no data-section CRC in the copy (which would vouch for them) -
+// and says so, and so does `info` of the copy; recovering the copy again does not launder it
+// either.
+TEST(McapRecover, NeverLaundersWhatNoCrcChecked) {
+  testing::TempDir dir;
+  const fs::path path = dir / "nocrc.mcap";
+  const Written w = WriteStates(path, 3000, mc::Compression::kNone, 16 * 1024, /*chunk_crc=*/false);
+  SetDataCrc(path);
+  // Untouched, the data section's CRC covers the chunks: checked.
+  mc::ScanResult res;
+  EXPECT_EQ(ReadAll(path, &res), w.payloads);
+  EXPECT_EQ(res.data_crc, mc::ScanResult::DataCrc::kMatched);
+  EXPECT_EQ(res.chunks_unchecked, res.chunks);
+  EXPECT_THAT(Info(path),
+              HasSubstr("carry no CRC of their own; the data section's CRC covers them (checked)"));
+  auto [code, log] = Recover(path, dir / "clean-recovered.mcap");
+  ASSERT_EQ(code, 0) << log;
+  ReadAll(dir / "clean-recovered.mcap", &res);
+  EXPECT_EQ(res.chunks_unchecked, 0u) << "the data section's CRC vouched for these chunks";
+  EXPECT_EQ(res.data_crc, mc::ScanResult::DataCrc::kMatched);
+
+  // One byte of a state's payload flips in the third chunk.
+  const Layout l = LayoutOf(path);
+  std::vector<std::uint8_t> b = ReadBytes(path);
+  b[l.chunks[2].chunk_start_offset + l.chunks[2].chunk_length / 2] ^= 0x10;
+  const fs::path bad = dir / "flipped.mcap";
+  WriteBytes(bad, b);
+  try {
+    ReadAll(bad);
+    FAIL() << "a damaged file was accepted";
+  } catch (const mc::McapError& e) {
+    EXPECT_THAT(e.reason(), HasSubstr("data section CRC mismatch"));
+  }
+  std::tie(code, log) = Recover(bad, dir / "flipped-recovered.mcap");
+  ASSERT_EQ(code, 0) << log;
+  EXPECT_THAT(log, HasSubstr("unchecked: 3000 messages"));
+  std::vector<std::string> got = ReadAll(dir / "flipped-recovered.mcap", &res);
+  EXPECT_EQ(got.size(), w.payloads.size());
+  EXPECT_EQ(res.chunks_unchecked, res.chunks) << "a chunk got a CRC nothing had checked";
+  EXPECT_EQ(res.data_crc, mc::ScanResult::DataCrc::kAbsent);
+  const std::string info = Info(dir / "flipped-recovered.mcap");
+  EXPECT_THAT(info, HasSubstr("integrity   UNCHECKED"));
+  EXPECT_THAT(info, HasSubstr("recovered   from flipped.mcap"));
+  EXPECT_THAT(info, HasSubstr("its data-section CRC mismatched"));
+  EXPECT_THAT(info, HasSubstr("UNCHECKED 3000 messages"));
+  // Recovered again: still unchecked.
+  std::tie(code, log) = Recover(dir / "flipped-recovered.mcap", dir / "again.mcap");
+  ASSERT_EQ(code, 0) << log;
+  ReadAll(dir / "again.mcap", &res);
+  EXPECT_EQ(res.chunks_unchecked, res.chunks);
+  EXPECT_EQ(res.data_crc, mc::ScanResult::DataCrc::kAbsent);
+  // export says what it cannot vouch for.
+  std::ostringstream exported;
+  recorder::ExportOptions eo;
+  eo.file = dir / "again.mcap";
+  eo.csv = dir / "again.csv";
+  ASSERT_EQ(recorder::RunExport(eo, exported), 0) << exported.str();
+  EXPECT_THAT(exported.str(), HasSubstr("3000 rows come from chunks without a CRC"));
+  EXPECT_THAT(exported.str(), HasSubstr("had no CRC that held when it was recovered"));
+}
+
+// --- info of foreign content ---------------------------------------------------------------------
+
+// `path` without its summary: the data section, then a footer that points at no summary (as
+// another tool may write it).
+void DropSummary(const fs::path& path) {
+  std::vector<std::uint8_t> b = ReadBytes(path);
+  const Layout l = LayoutOf(path);
+  b.resize(l.summary_start);
+  b.push_back(mc::kFooter);
+  for (int i = 0; i < 8; ++i) b.push_back(i == 0 ? 20 : 0);
+  for (int i = 0; i < 20; ++i) b.push_back(0);
+  b.insert(b.end(), mc::kMagic, mc::kMagic + 8);
+  WriteBytes(path, b);
+}
+
+TEST(McapInfo, DescribesAForeignFileWithOnlyAFooter) {
+  testing::TempDir dir;
+  const fs::path path = dir / "camera.mcap";
+  {
+    mc::Writer w(path, {});
+    const std::uint16_t s =
+        w.AddSchema("sensor_msgs/msg/Image", "ros2msg", "uint32 height\nuint32 width\n");
+    const std::uint16_t ch = w.AddChannel(s, "/camera/image", "cdr", {});
+    const std::vector<std::uint8_t> frame(300, 7);
+    for (std::uint64_t i = 0; i < 5000; ++i)
+      w.WriteMessage(ch, 0, 1'000'000'000 + i * 33'000'000, 0, frame);
+    w.Close();
+  }
+  DropSummary(path);
+  mc::ScanResult res;
+  EXPECT_EQ(ReadAll(path, &res).size(), 5000u);
+  EXPECT_FALSE(res.summary);
+  const std::string info = Info(path);
+  EXPECT_THAT(info, HasSubstr("5000 messages, 5000 of them not vdyn messages"));
+  EXPECT_THAT(info, HasSubstr("closed without a summary"));
+  EXPECT_THAT(info, ::testing::Not(HasSubstr("closed with index and summary")));
+  EXPECT_THAT(info, HasSubstr("/camera/image #1"));
+  EXPECT_THAT(
+      info,
+      HasSubstr("not a vdyn channel: schema 'sensor_msgs/msg/Image' (ros2msg), messages cdr"));
+  const auto [code, log] = Recover(path, dir / "camera-recovered.mcap");
+  EXPECT_EQ(code, 0);
+  EXPECT_THAT(log, HasSubstr("(5000 messages)"));
+}
+
+// Our topic names (and metadata) on channels that do not hold our messages: another schema
+// encoding, or our schema with payloads that are not states and events. Neither becomes steps
+// ("16517206055757184913 states missing") or hides that events were recorded.
+TEST(McapInfo, GarbageUnderOurTopicNamesIsNeitherStatesNorEvents) {
+  testing::TempDir dir;
+  std::mt19937_64 rng(11);
+  auto garbage = [&] {
+    std::vector<std::uint8_t> b(40);
+    for (auto& x : b) x = static_cast<std::uint8_t>(rng());
+    return b;
+  };
+  for (const bool our_schema : {false, true}) {
+    SCOPED_TRACE(our_schema ? "our schema" : "a foreign schema");
+    const fs::path path = dir / (our_schema ? "ours.mcap" : "foreign.mcap");
+    {
+      mc::Writer w(path, {});
+      auto channel = [&](transport::TopicId t) {
+        const auto* d = recorder::PayloadDescriptor(t);
+        const std::uint16_t s =
+            our_schema ? w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))
+                       : w.AddSchema(d->full_name(), "jsonschema", "{}");
+        return w.AddChannel(s, recorder::ChannelTopic(t, 1), our_schema ? "protobuf" : "json",
+                            recorder::ChannelMetadata(t, 1));
+      };
+      const std::uint16_t states = channel(transport::TopicId::kState);
+      const std::uint16_t events = channel(transport::TopicId::kEvents);
+      for (std::uint64_t i = 0; i < 20; ++i) {
+        w.WriteMessage(states, 0, 1'000'000'000 + i * 1'000'000, 0, garbage());
+        w.WriteMessage(events, 0, 1'000'000'000 + i * 1'000'000, 0, garbage());
+      }
+      w.Close();
+    }
+    const std::string info = Info(path);
+    EXPECT_THAT(info, ::testing::Not(HasSubstr("states missing"))) << info;
+    EXPECT_THAT(info, HasSubstr("no states recorded")) << info;
+    if (our_schema) {
+      EXPECT_THAT(info, HasSubstr("vdyn/events/1                         20 msgs")) << info;
+      EXPECT_THAT(info,
+                  HasSubstr("vdyn/events/1: 20 of 20 messages do not parse as the topic's type"))
+          << info;
+      EXPECT_THAT(
+          info,
+          HasSubstr(
+              "re-simulates no: the 20 messages on vdyn/events do not parse as session events"))
+          << info;
+    } else {
+      EXPECT_THAT(info, HasSubstr("40 messages, 40 of them not vdyn messages")) << info;
+      EXPECT_THAT(
+          info,
+          HasSubstr(
+              "not a vdyn channel: schema 'vdyn.pb.SessionEvent' (jsonschema), messages json"))
+          << info;
+      EXPECT_THAT(info,
+                  HasSubstr("re-simulates no: no session events: vdyn/events/1 holds another type"))
+          << info;
+    }
+  }
+}
+
+// A sparse channel has no rate worth printing: "2 msgs 76.9 Hz" said nothing true.
+TEST(McapInfo, RatesArePrintedOnlyForStreams) {
+  testing::TempDir dir;
+  const fs::path path = dir / "rates.mcap";
+  {
+    mc::Writer w(path, {});
+    auto channel = [&](transport::TopicId t, std::uint32_t key) {
+      const auto* d = recorder::PayloadDescriptor(t);
+      return w.AddChannel(w.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d)),
+                          recorder::ChannelTopic(t, key), "protobuf",
+                          recorder::ChannelMetadata(t, key));
+    };
+    const std::uint16_t states = channel(transport::TopicId::kState, 1);
+    const std::uint16_t replies = channel(transport::TopicId::kControlReply, 1);
+    const std::uint64_t t0 = 1'700'000'000'000'000'000ull;
+    for (std::uint64_t k = 0; k < 3000; ++k) {
+      const std::string b = StateAt(k).SerializeAsString();
+      w.WriteMessage(states, 0, t0 + k * 1'000'000, 0,
+                     {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+    }
+    const std::vector<std::uint8_t> reply = {0x08, 0x01};
+    w.WriteMessage(replies, 0, t0 + 100'000'000, 0, reply);
+    w.WriteMessage(replies, 1, t0 + 113'000'000, 0, reply);
+    w.Close();
+  }
+  const std::string info = Info(path);
+  EXPECT_THAT(info, HasSubstr("vdyn/state/1                        3000 msgs    1000.0 Hz"))
+      << info;
+  EXPECT_THAT(info, HasSubstr("vdyn/control_reply/1                   2 msgs         -    "))
+      << info;
+  EXPECT_THAT(info, ::testing::Not(HasSubstr("76.9 Hz"))) << info;
 }
 
 }  // namespace

@@ -5,12 +5,14 @@
 // bit for bit; a recorder that cannot keep up counting what it dropped; bad files refused.
 #include <signal.h>
 
-#include <chrono>
 #include <cctype>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <functional>
+#include <iterator>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -840,6 +842,385 @@ TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordi
     ++recorded;
   }
   EXPECT_GT(recorded, 4096u) << info.substr(0, 2000);
+}
+
+// --- damaged recordings: verify, play, outputs
+// ----------------------------------------------------
+
+std::vector<std::uint8_t> Bytes(const std::filesystem::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), {}};
+}
+void PutBytes(const std::filesystem::path& p, const std::vector<std::uint8_t>& b) {
+  std::ofstream out(p, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(b.data()), static_cast<std::streamsize>(b.size()));
+}
+// One bit flipped in the middle of a chunk's records: its CRC (or decompression) fails.
+void DamageChunk(const std::filesystem::path& in, const std::filesystem::path& out,
+                 const mcap::ChunkIndex& c) {
+  std::vector<std::uint8_t> b = Bytes(in);
+  b[c.chunk_start_offset + c.chunk_length / 2] ^= 0x40;
+  PutBytes(out, b);
+}
+
+// Copies a recording record by record (chunks with or without CRCs), letting `edit` change a
+// payload on its way (by its channel's topic, e.g. "vdyn/state/1").
+void CopyRecording(const std::filesystem::path& in, const std::filesystem::path& out,
+                   bool chunk_crc,
+                   const std::function<void(const std::string&, std::string&)>& edit = {}) {
+  mcap::Reader reader(in);
+  mcap::Writer writer(out, {});
+  writer.SetChunkCrc(chunk_crc);
+  std::map<std::uint16_t, std::uint16_t> schemas, channels;
+  std::map<std::uint16_t, std::string> topics;
+  mcap::Visitor v;
+  v.on_schema = [&](const mcap::Schema& s) {
+    schemas[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
+  };
+  v.on_channel = [&](const mcap::Channel& c) {
+    channels[c.id] =
+        writer.AddChannel(schemas.at(c.schema_id), c.topic, c.message_encoding, c.metadata);
+    topics[c.id] = c.topic;
+  };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+    writer.WriteMetadata(m.name, m.values);
+  };
+  v.on_message = [&](const mcap::Message& m, std::uint64_t) {
+    std::string data(reinterpret_cast<const char*>(m.data.data()), m.data.size());
+    if (edit) edit(topics[m.channel_id], data);
+    writer.WriteMessage(channels.at(m.channel_id), m.sequence, m.log_time, m.publish_time,
+                        {reinterpret_cast<const std::uint8_t*>(data.data()), data.size()});
+  };
+  reader.Scan(v);
+  writer.Close();
+}
+
+// What each chunk of a recording holds: session events, and whether a world (the first channel's,
+// not a copy).
+struct ChunkContents {
+  mcap::ChunkIndex chunk;
+  std::vector<pb::SessionEvent> events;
+  bool world = false;
+};
+std::vector<ChunkContents> Contents(const std::filesystem::path& file) {
+  mcap::Reader reader(file);
+  std::vector<ChunkContents> out;
+  std::map<std::uint16_t, std::optional<recorder::ChannelInfo>> channels;
+  mcap::Visitor v;
+  v.on_channel = [&](const mcap::Channel& c) { channels[c.id] = recorder::ParseChannelInfo(c); };
+  v.on_chunk = [&](const mcap::ChunkIndex& c) {
+    out.push_back({c, {}, false});
+    return true;
+  };
+  v.on_message = [&](const mcap::Message& m, std::uint64_t) {
+    const auto& info = channels[m.channel_id];
+    if (!info || out.empty()) return;
+    if (info->topic == TopicId::kWorld && !info->repeat) out.back().world = true;
+    if (info->topic == TopicId::kEvents) {
+      pb::SessionEvent e;
+      ASSERT_TRUE(e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size())));
+      out.back().events.push_back(e);
+    }
+  };
+  reader.Scan(v);
+  return out;
+}
+
+// A lost chunk used to stop verify altogether ("cannot re-simulate: 1 events missing") and, when
+// it held the world, take the world with it. Now the replay restarts at the next checkpoint after
+// the hole, verify reports the steps it verified and those it could not (and why), and the world
+// comes from its copies.
+TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorldSurvives) {
+  const auto file = dir_ / "a.mcap";
+  LockstepSession(domain_, file, 2500, InputAt);
+  if (HasFatalFailure()) return;
+  auto [code, verified] = Run({"verify", file.string()});
+  ASSERT_EQ(code, 0) << verified;
+  const std::vector<ChunkContents> chunks = Contents(file);
+  // A chunk in the middle with an input batch of the varying drive (and no checkpoint), and the
+  // first checkpoint the server sent after the events it holds: where the replay must restart.
+  const ChunkContents* lost = nullptr;
+  for (const ChunkContents& c : chunks) {
+    bool batch = false, checkpoint = false;
+    for (const pb::SessionEvent& e : c.events) {
+      batch |= e.has_input_batch() && e.step() > 1100 && e.step() < 1800;
+      checkpoint |= e.has_checkpoint();
+    }
+    if (batch && !checkpoint && lost == nullptr) lost = &c;
+  }
+  ASSERT_NE(lost, nullptr) << "no chunk of input batches between steps 1100 and 1800";
+  std::uint64_t last_lost = 0, restart = 0;
+  for (const pb::SessionEvent& e : lost->events)
+    last_lost = std::max<std::uint64_t>(last_lost, e.sequence());
+  for (const ChunkContents& c : chunks) {
+    for (const pb::SessionEvent& e : c.events) {
+      if (e.has_checkpoint() && e.sequence() > last_lost && (restart == 0 || e.step() < restart))
+        restart = e.step();
+    }
+  }
+  ASSERT_GT(restart, 1100u);
+  ASSERT_LT(restart, 2500u);
+  DamageChunk(file, dir_ / "hole.mcap", lost->chunk);
+  std::tie(code, verified) = Run({"recover", (dir_ / "hole.mcap").string()});
+  ASSERT_EQ(code, 0) << verified;
+  std::tie(code, verified) = Run({"verify", (dir_ / "hole-recovered.mcap").string()});
+  EXPECT_EQ(code, 1) << verified;  // not everything could be verified
+  EXPECT_THAT(verified, HasSubstr("NOT verified")) << verified;
+  EXPECT_THAT(verified, HasSubstr("events of server 'vdyn' were lost")) << verified;
+  EXPECT_THAT(verified, HasSubstr("re-simulated again from the checkpoint at step " +
+                                  std::to_string(restart)))
+      << verified;
+  EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
+  // Verified: the steps before the hole and every step from the restart to the end.
+  EXPECT_THAT(verified, HasSubstr(", " + std::to_string(restart) + "..2499)")) << verified;
+  const auto compared = NumberAfter(verified, "bit-exact over ");
+  ASSERT_TRUE(compared.has_value()) << verified;
+  EXPECT_GE(*compared, 1000 + (2500 - restart) - 20) << verified;
+
+  // The chunk with the world: its copies (in chunks of their own) keep the recording whole.
+  const auto world =
+      std::find_if(chunks.begin(), chunks.end(), [](const ChunkContents& c) { return c.world; });
+  ASSERT_NE(world, chunks.end());
+  DamageChunk(file, dir_ / "noworld.mcap", world->chunk);
+  std::tie(code, verified) = Run({"recover", (dir_ / "noworld.mcap").string()});
+  ASSERT_EQ(code, 0) << verified;
+  auto [icode, info] = Run({"info", (dir_ / "noworld-recovered.mcap").string()});
+  EXPECT_THAT(info, HasSubstr("world       'facility' of server 'vdyn'")) << info;
+  std::tie(code, verified) = Run({"verify", (dir_ / "noworld-recovered.mcap").string()});
+  EXPECT_THAT(verified, HasSubstr("bit-exact over")) << verified;
+  EXPECT_THAT(verified, ::testing::Not(HasSubstr("no world description"))) << verified;
+
+  // No CRC covers a state's bytes (chunks without one): a changed field under its matching hash
+  // is found by comparing every field with the re-simulation; an untouched copy passes.
+  CopyRecording(file, dir_ / "nocrc.mcap", /*chunk_crc=*/false);
+  std::tie(code, verified) = Run({"verify", (dir_ / "nocrc.mcap").string()});
+  EXPECT_EQ(code, 0) << verified;
+  EXPECT_THAT(verified, HasSubstr("come from chunks without a CRC")) << verified;
+  EXPECT_THAT(verified, HasSubstr("(all equal)")) << verified;
+  CopyRecording(file, dir_ / "nocrc-damaged.mcap", false,
+                [](const std::string& topic, std::string& data) {
+                  if (topic != "vdyn/state/1") return;
+                  pb::VehicleState s;
+                  ASSERT_TRUE(s.ParseFromString(data));
+                  if (s.step() != 1500) return;
+                  s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);  // the hash stays as it was
+                  data = s.SerializeAsString();
+                });
+  std::tie(code, verified) = Run({"verify", (dir_ / "nocrc-damaged.mcap").string()});
+  EXPECT_EQ(code, 1) << verified;
+  EXPECT_THAT(verified, HasSubstr("DAMAGED: 1 recorded states")) << verified;
+  EXPECT_THAT(verified, HasSubstr("vehicle 1 at step 1500")) << verified;
+  EXPECT_THAT(verified, HasSubstr("wheels[2].fp")) << verified;
+  // Listed as damaged, never among the steps verified bit for bit.
+  EXPECT_THAT(verified, HasSubstr("steps 1500..1500 (1 states): DAMAGED")) << verified;
+  EXPECT_THAT(verified, HasSubstr("steps 1501..")) << verified;
+}
+
+// `info` refuses a file whose data-section CRC fails (a byte flipped in a chunk without a CRC of
+// its own); `play` used to stream it all the same.
+TEST_F(RecorderTest, PlayRefusesWhatInfoRefuses) {
+  const auto good = dir_ / "synthetic.mcap";
+  WriteRecording(good);
+  CopyRecording(good, dir_ / "nocrc.mcap", /*chunk_crc=*/false);
+  // The data section's CRC, as a writer that computes that one but no chunk CRCs writes it.
+  std::vector<std::uint8_t> b = Bytes(dir_ / "nocrc.mcap");
+  const std::size_t footer = b.size() - 8 - 29;
+  std::uint64_t summary_start = 0;
+  for (int i = 0; i < 8; ++i)
+    summary_start |= static_cast<std::uint64_t>(b[footer + 9 + static_cast<std::size_t>(i)])
+                     << (8 * i);
+  const std::size_t data_end = summary_start - 13;
+  const std::uint32_t crc = mcap::Crc32(0, std::span<const std::uint8_t>(b.data(), data_end));
+  for (int i = 0; i < 4; ++i)
+    b[data_end + 9 + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+  PutBytes(dir_ / "covered.mcap", b);
+  auto [code, out] = Run({"info", (dir_ / "covered.mcap").string()});
+  ASSERT_EQ(code, 0) << out;
+  const mcap::ChunkIndex chunk = mcap::Reader(dir_ / "covered.mcap").Chunks().at(1);
+  DamageChunk(dir_ / "covered.mcap", dir_ / "flipped.mcap", chunk);
+  std::tie(code, out) = Run({"info", (dir_ / "flipped.mcap").string()});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("data section CRC mismatch"));
+  std::tie(code, out) = Run({"play", (dir_ / "flipped.mcap").string(), "--domain",
+                             std::to_string(domain_), "--no-keys", "--no-status"});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("data section CRC mismatch"));
+  EXPECT_THAT(out, ::testing::Not(HasSubstr("playing")));
+}
+
+// `export run.mcap --csv run.mcap` ended in a bus error with the recording at 0 bytes. No command
+// writes over its input, whatever the spelling, and each says so with exit code 2.
+TEST_F(RecorderTest, NoCommandWritesOverItsInput) {
+  const auto file = dir_ / "run.mcap";
+  WriteRecording(file);
+  const std::vector<std::uint8_t> before = Bytes(file);
+  std::filesystem::create_symlink(file, dir_ / "link.mcap");
+  std::filesystem::create_hard_link(file, dir_ / "hard.mcap");
+  const std::string rec = testing::RecorderBinary();
+  auto in_dir = [&](const std::string& command) {
+    const std::string log = "sh" + std::to_string(runs_++) + ".log";
+    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && exec " + command},
+              dir_ / log);
+    const auto code = p.Wait(120s);
+    return std::make_pair(code.value_or(-1), p.Log());
+  };
+  const std::vector<std::pair<std::string, std::string>> attempts = {
+      {"export run.mcap --csv run.mcap", "is the input itself"},
+      {"export run.mcap --csv ./run.mcap", "is the input itself"},
+      {"export run.mcap --csv " + file.string(), "is the input itself"},
+      {"export run.mcap --csv link.mcap", "the same file under another name"},
+      {"export run.mcap --csv hard.mcap", "the same file under another name"},
+      {"export run.mcap --each --csv run.mcap", ""},  // run-v1.mcap: another file, allowed
+      {"recover run.mcap -o ./run.mcap", "is the input itself"},
+      {"recover run.mcap -o link.mcap", "the same file under another name"},
+      {"takeover run.mcap --at 1 --out hard.mcap --wait 1", "the same file under another name"},
+  };
+  for (const auto& [args, says] : attempts) {
+    SCOPED_TRACE(args);
+    const auto [code, out] = in_dir(rec + " " + args);
+    if (says.empty()) {
+      EXPECT_EQ(code, 0) << out;
+    } else {
+      EXPECT_EQ(code, 2) << out;
+      EXPECT_THAT(out, HasSubstr(says));
+      EXPECT_THAT(out, HasSubstr("nothing was written"));
+    }
+    ASSERT_EQ(Bytes(file), before) << "the recording changed";
+  }
+  // A recording's name in the plot folder: the figures do not take its place.
+  std::filesystem::create_directories(dir_ / "plots");
+  std::filesystem::create_hard_link(file, dir_ / "plots" / "speed.png");
+  const auto [code, out] = in_dir(rec + " plot run.mcap --out plots");
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("the same file under another name"));
+  EXPECT_EQ(Bytes(file), before);
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "plots" / "index.html"))
+      << "some figures were moved in";
+}
+
+// A recording for the figures: a straight drive along a long, narrow road, no steering, no
+// pedals, and one brake force of 0.3 N at one step (numerical noise, not braking).
+void WriteRoadDrive(const std::filesystem::path& path) {
+  mcap::Writer w(path, {});
+  const std::uint16_t world = AddChannel(w, TopicId::kWorld, 77),
+                      state = AddChannel(w, TopicId::kState, 1);
+  const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
+  pb::WorldDescription wd;
+  wd.set_server_id("recorded");
+  wd.set_name("road");
+  auto* mesh = wd.add_meshes();
+  mesh->set_kind(pb::SURFACE_ROAD);
+  for (double v : {-200.0, -5.0, 0.0, 200.0, -5.0, 0.0, 200.0, 5.0, 0.0, -200.0, 5.0, 0.0})
+    mesh->add_vertices(v);
+  for (std::uint32_t i : {0u, 1u, 2u, 0u, 2u, 3u}) mesh->add_indices(i);
+  Put(w, world, t0, wd);
+  for (std::uint64_t k = 0; k < 3000; ++k) {
+    pb::VehicleState s;
+    s.set_vehicle_id(1);
+    s.set_server_id("recorded");
+    s.set_step(k);
+    s.set_step_ns(1'000'000);
+    s.mutable_p_wt_w()->set_x(-150.0 + 0.1 * static_cast<double>(k));
+    s.set_speed_kmh(360.0);
+    for (int i = 0; i < 4; ++i) {
+      auto* wh = s.add_wheels();
+      wh->set_fp(3500);
+      wh->set_fb(k == 1500 && i == 0 ? 0.3 : 0.0);
+    }
+    Put(w, state, t0 + 1'000'000 + k * 1'000'000, s);
+  }
+  w.Close();
+}
+
+// The y range gnuplot is told to draw the figure `name` with (its first panel).
+std::optional<std::pair<double, double>> YRange(const std::string& script,
+                                                const std::string& name) {
+  const std::size_t at = script.find("set output '" + name + ".png'");
+  if (at == std::string::npos) return std::nullopt;
+  const std::size_t r = script.find("set yrange [", at);
+  if (r == std::string::npos) return std::nullopt;
+  double lo = 0, hi = 0;
+  if (std::sscanf(script.c_str() + r, "set yrange [%lf:%lf]", &lo, &hi) != 2) return std::nullopt;
+  return std::make_pair(lo, hi);
+}
+
+// `plot out/live.mcap` failed for every relative path, blaming gnuplot; the figures left parts
+// blank, hid pedals at rest on the axis and magnified noise into data.
+TEST_F(RecorderTest, PlotWorksWithRelativePathsAndDrawsWhatMatters) {
+  std::filesystem::create_directories(dir_ / "out");
+  WriteRoadDrive(dir_ / "out" / "live.mcap");
+  const std::string rec = testing::RecorderBinary();
+  auto in_dir = [&](const std::string& command) {
+    const std::string log = "sh" + std::to_string(runs_++) + ".log";
+    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && " + command}, dir_ / log);
+    const auto code = p.Wait(120s);
+    return std::make_pair(code.value_or(-1), p.Log());
+  };
+  auto [code, out] = in_dir("exec " + rec + " plot out/live.mcap");
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_TRUE(std::filesystem::exists(dir_ / "out" / "live-plots" / "trajectory.png")) << out;
+  EXPECT_THAT(out, ::testing::Not(HasSubstr("gnuplot said"))) << out;  // not a warning
+  std::tie(code, out) = in_dir("exec " + rec + " plot out/live.mcap --out relplots");
+  ASSERT_EQ(code, 0) << out;
+  const std::filesystem::path plots = dir_ / "relplots";
+  for (const std::string f :
+       {"index.html", "speed.png", "controls.png", "brake_forces.png", "trajectory.png"}) {
+    EXPECT_TRUE(std::filesystem::exists(plots / f)) << f;
+  }
+  // Nothing else is left there (no scratch folder, no log).
+  for (const auto& e : std::filesystem::directory_iterator(plots)) {
+    EXPECT_NE(e.path().filename().string()[0], '.') << e.path();
+  }
+  // The map covers the world where the car drove: every cell is road (no empty band beyond the
+  // world's edge, no missing values for gnuplot to complain about).
+  std::ifstream map(plots / "map.dat");
+  std::string row;
+  std::getline(map, row);  // the x of each column
+  std::size_t cells = 0, road = 0;
+  while (std::getline(map, row)) {
+    std::istringstream values(row);
+    double y = 0, kind = 0;
+    values >> y;
+    while (values >> kind) {
+      ++cells;
+      road += kind == 1.0 ? 1 : 0;
+    }
+  }
+  EXPECT_GT(cells, 1000u);
+  EXPECT_EQ(road, cells) << "cells without the road (no surface, or missing)";
+  // Pedals at rest stay in sight (their 0 above the axis); a 0.3 N ripple is not blown up.
+  const std::string script = testing::ReadFile(plots / "plot.gp");
+  std::size_t pedals = 0;
+  for (std::size_t at = script.find("set yrange [-0.05:1.05]"); at != std::string::npos;
+       at = script.find("set yrange [-0.05:1.05]", at + 1)) {
+    ++pedals;
+  }
+  EXPECT_EQ(pedals, 2u) << script;
+  const auto brake = YRange(script, "brake_forces");
+  ASSERT_TRUE(brake.has_value()) << script;
+  EXPECT_LT(brake->first, 0.0);
+  EXPECT_GE(brake->second - brake->first, 100.0) << "a 0.3 N ripple fills the figure";
+  const auto steer = YRange(script, "controls");
+  ASSERT_TRUE(steer.has_value()) << script;
+  EXPECT_LT(steer->first, 0.0) << "steering at 0 sits on the axis";
+  EXPECT_GT(steer->second, 0.0);
+
+  // Errors name their cause: a folder that is a file; gnuplot not on PATH.
+  testing::WriteFile(dir_ / "notes.txt", "x");
+  std::tie(code, out) = in_dir("exec " + rec + " plot out/live.mcap --out notes.txt");
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("notes.txt is a file, not a folder"));
+  std::tie(code, out) = in_dir("PATH=/nonexistent exec " + rec + " plot out/live.mcap --out p2");
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("cannot run 'gnuplot': not found on PATH"));
+}
+
+TEST(ReceiveBuffer, ADefaultKernelCapIsExplainedWithTheFix) {
+  const std::string advice = recorder::ReceiveBufferAdvice(212992);
+  EXPECT_THAT(advice, HasSubstr("212992 bytes (net.core.rmem_max)"));
+  EXPECT_THAT(advice, HasSubstr("sysctl -w net.core.rmem_max="));
+  EXPECT_EQ(recorder::ReceiveBufferAdvice(16u << 20), "");
+  EXPECT_EQ(recorder::ReceiveBufferAdvice(0), "");  // unknown: nothing to say
 }
 
 // The ledger of one vehicle's steps, in both orders of a hole and its event.

@@ -14,6 +14,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
 #include "vdyn/transport/dds.h"
@@ -227,6 +228,9 @@ int main(int argc, char** argv) {
     }
     if (recov->parsed()) return recorder::RunRecover(co, std::cout);
   } catch (const mcap::McapError& e) {
+    std::cerr << "vdyn-recorder: " << e.what() << "\n";
+    return 2;
+  } catch (const recorder::OutputError& e) {  // an output that is an input, or a folder
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;
   } catch (const transport::TransportError& e) {

@@ -1,19 +1,28 @@
 // Writes the seed corpora of the fuzz targets (tests/fuzz/corpus/<target>/): run it once after a
 // format changes and commit what it writes. Usage: fuzz_make_seeds CORPUS_DIR
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <utility>
+#include <memory>
+#include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "vdyn/bridge/convert.h"
+#include "vdyn/bridge/params.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/io/vehicle_params.h"
+#include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
 #include "vdyn/recorder/mcap.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/session.pb.h"
 #include "vdyn/state.pb.h"
 
 namespace fs = std::filesystem;
@@ -23,6 +32,115 @@ void Write(const fs::path& dir, const std::string& name, const std::string& byte
   fs::create_directories(dir);
   std::ofstream(dir / name, std::ios::binary) << bytes;
 }
+
+std::string ReadAll(const fs::path& p) {
+  std::ostringstream bytes;
+  bytes << std::ifstream(p, std::ios::binary).rdbuf();
+  return bytes.str();
+}
+
+// A small recording of a real drive, as the recorder writes one: a ground quad, one vehicle
+// spawned and driven for 60 steps by an input that changes every step (input batches every 10
+// steps, a checkpoint every 20), every state with its hash - what `vdyn-recorder verify`
+// re-simulates bit for bit. Chunks of 16 KiB, with or without CRCs.
+void WriteDrive(const fs::path& path, bool chunk_crc) {
+  namespace rec = vdyn::recorder;
+  using vdyn::transport::TopicId;
+  vdyn::TriangleMesh ground;
+  ground.name = "ground";
+  ground.AddQuad({-60, -60, 0}, {60, -60, 0}, {60, 60, 0}, {-60, 60, 0});
+  std::shared_ptr<const vdyn::World> world = vdyn::WorldFromMesh(std::move(ground), vdyn::Pose2{});
+  const std::int64_t step_ns = 1'000'000;
+  const vdyn::pb::WorldDescription description = vdyn::DescribeWorld(*world, "seed", step_ns);
+  const std::uint64_t terrain_hash = vdyn::TerrainHash(world->terrain);
+  const vdyn::pb::VehicleParams params = vdyn::DefaultVehicleParams();
+  vdyn::SimConfig config;
+  config.step_ns = step_ns;
+  vdyn::Simulator sim(world, vdyn::ParamsFromProto(params), config);
+
+  vdyn::mcap::WriterOptions options;
+  options.chunk_bytes = 16 * 1024;
+  vdyn::mcap::Writer w(path, options);
+  w.SetChunkCrc(chunk_crc);
+  auto channel = [&](TopicId t, std::uint32_t key) {
+    const auto* d = rec::PayloadDescriptor(t);
+    return w.AddChannel(w.AddSchema(d->full_name(), "protobuf", rec::FileDescriptorSetOf(d)),
+                        rec::ChannelTopic(t, key), "protobuf", rec::ChannelMetadata(t, key));
+  };
+  const std::uint16_t world_ch = channel(TopicId::kWorld, 0x5eed);
+  const std::uint16_t events_ch = channel(TopicId::kEvents, 1);
+  const std::uint16_t state_ch = channel(TopicId::kState, 1);
+  w.WriteMetadata("vdyn.recording", {{"format", rec::kFormatVersion},
+                                     {"topics", "vdyn/state,vdyn/events,vdyn/world"}});
+  const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
+  std::uint32_t sequence_per_channel = 0;
+  auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
+    const std::string b = m.SerializeAsString();
+    w.WriteMessage(ch, sequence_per_channel++, t, t,
+                   {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+  };
+  put(world_ch, t0, description);
+  std::uint64_t event_sequence = 0;  // numbered as they are sent
+  auto event = [&](std::uint64_t step) {
+    vdyn::pb::SessionEvent e;
+    e.set_vehicle_id(1);
+    e.set_server_id("seed");
+    e.set_step(step);
+    return e;
+  };
+  auto send = [&](vdyn::pb::SessionEvent& e, std::uint64_t t) {
+    e.set_sequence(event_sequence++);
+    put(events_ch, t, e);
+  };
+  {
+    vdyn::pb::SessionEvent e = event(0);
+    auto* s = e.mutable_spawned();
+    *s->mutable_state() = vdyn::ToExactState(sim.state());
+    *s->mutable_params() = params;
+    s->set_world_name(world->name);
+    s->set_terrain_hash(terrain_hash);
+    s->set_step_ns(step_ns);
+    send(e, t0 + 1);
+  }
+  vdyn::pb::SessionEvent batch;
+  for (std::uint64_t k = 0; k < 60; ++k) {
+    const std::uint64_t t = t0 + (k + 1) * 1'000'000;
+    vdyn::DriverInput in;
+    in.throttle = 0.4 + 0.3 * std::sin(0.05 * static_cast<double>(k));
+    in.steer = 0.08 * std::sin(0.03 * static_cast<double>(k));
+    sim.SetInput(in);
+    if (batch.input_batch().samples_size() == 0) batch = event(k);
+    vdyn::ToInputSample(in, static_cast<std::int64_t>(k),
+                        *batch.mutable_input_batch()->add_samples());
+    if (sim.Step() != vdyn::StepStatus::kOk) std::abort();
+    const vdyn::StepRecord& r = sim.last_step();
+    vdyn::pb::DriverInput msg;
+    msg.set_vehicle_id(1);
+    msg.set_source_id("seed-rig");
+    vdyn::ToProto(in, msg);
+    vdyn::pb::VehicleState state;
+    vdyn::FillVehicleState(1, "seed", step_ns, static_cast<std::int64_t>(k) * step_ns, r, msg,
+                           false, r.derived.steering_torque, state);
+    put(state_ch, t, state);
+    const std::uint64_t next = k + 1;
+    if (next % 10 == 0) {
+      send(batch, t + 100);
+      batch.Clear();
+    }
+    if (next % 20 == 0) {
+      vdyn::pb::SessionEvent e = event(next);
+      auto* c = e.mutable_checkpoint();
+      *c->mutable_state() = vdyn::ToExactState(sim.state());
+      *c->mutable_params() = params;
+      vdyn::ToInputSample(sim.input(), static_cast<std::int64_t>(next), *c->mutable_input());
+      c->set_terrain_hash(terrain_hash);
+      c->set_step_ns(step_ns);
+      send(e, t + 200);
+    }
+  }
+  w.Close();
+}
+
 std::string Tagged(char tag, const std::string& bytes) { return std::string(1, tag) + bytes; }
 }  // namespace
 
@@ -136,6 +254,29 @@ int main(int argc, char** argv) {
   fs::copy_file(root / "mcap" / "zstd.mcap", root / "mcap" / "truncated.mcap",
                 fs::copy_options::overwrite_existing);
   fs::resize_file(root / "mcap" / "truncated.mcap", fs::file_size(root / "mcap" / "zstd.mcap") * 2 / 3);
+  // Drives for recover and verify: whole, without CRCs, and damaged as files get damaged.
+  {
+    const fs::path dir = root / "recover_verify";
+    fs::create_directories(dir);
+    WriteDrive(dir / "drive.mcap", true);
+    WriteDrive(dir / "drive-nocrc.mcap", false);
+    const std::string whole = ReadAll(dir / "drive.mcap");
+    std::vector<vdyn::mcap::ChunkIndex> chunks = vdyn::mcap::Reader(dir / "drive.mcap").Chunks();
+    if (chunks.size() < 4) std::abort();
+    const vdyn::mcap::ChunkIndex& mid = chunks[chunks.size() / 2];
+    std::string b = whole;
+    b[mid.chunk_start_offset + mid.chunk_length / 2] ^= 0x40;  // a chunk's CRC fails
+    Write(dir, "drive-lost-chunk.mcap", b);
+    Write(dir, "drive-killed.mcap", whole.substr(0, whole.size() * 3 / 5));  // no summary
+    b = whole;  // a chunk and its message indexes written twice
+    const std::size_t at = mid.chunk_start_offset, n = mid.chunk_length + mid.message_index_length;
+    b.insert(at + n, whole.substr(at, n));
+    Write(dir, "drive-duplicate.mcap", b);
+    b = ReadAll(dir / "drive-nocrc.mcap");  // a flipped byte that no chunk CRC checks
+    b[chunks[1].chunk_start_offset + chunks[1].chunk_length / 2] ^= 0x10;
+    fs::remove(dir / "drive-nocrc.mcap");
+    Write(dir, "drive-nocrc-flipped.mcap", b);
+  }
   std::printf("seeds written under %s\n", root.c_str());
   return 0;
 }

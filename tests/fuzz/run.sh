@@ -12,7 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 seconds="${1:-10}"
 seed="${VDYN_FUZZ_SEED:-1}"
-targets=(maneuver vehicle_params world_file world_description server_messages mcap)
+targets=(maneuver vehicle_params world_file world_description server_messages mcap recover_verify)
 dir=build/asan
 ./scripts/build.sh asan "${targets[@]/%/_libfuzzer}" >/dev/null
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:allocator_may_return_null=1"

@@ -38,8 +38,19 @@ for p in "${pids[@]:0:4}"; do wait "$p"; done
 kill -9 "$killed"
 wait "$killed" 2>/dev/null || true
 "$rec" recover "$out/killed.mcap" -o "$out/recovered.mcap"
-files=("$out/zstd.mcap" "$out/lz4.mcap" "$out/none.mcap" "$out"/split-*.mcap "$out/recovered.mcap")
+# A recording with a byte changed in its middle (a chunk's CRC fails), recovered.
+cp "$out/zstd.mcap" "$out/damaged.mcap"
+at=$(($(stat -c %s "$out/damaged.mcap") / 2))
+byte=$(od -An -tu1 -j "$at" -N1 "$out/damaged.mcap" | tr -d ' ')
+printf "$(printf '\\%03o' $((byte ^ 64)))" | dd of="$out/damaged.mcap" bs=1 seek="$at" conv=notrunc status=none
+"$rec" recover "$out/damaged.mcap" -o "$out/damaged-recovered.mcap"
+files=("$out/zstd.mcap" "$out/lz4.mcap" "$out/none.mcap" "$out"/split-*.mcap "$out/recovered.mcap"
+       "$out/damaged-recovered.mcap")
 node "$work/read_mcap.js" "${files[@]}" | tee "$out/read.json"
 # Every file was read (the script stops at the first problem), with states in it.
 test "$(grep -c '"vdyn.pb.VehicleState"\|\.vdyn\.pb\.VehicleState' "$out/read.json")" -eq "${#files[@]}"
-echo "independent reader: ${#files[@]} recordings read and decoded"
+# A drive whose chunks carry no CRC, with a byte changed: recovered, its chunks stay without a CRC
+# and the copy has no data-section CRC (it would vouch for them) - which MCAP allows.
+"$rec" recover "$src/../fuzz/corpus/recover_verify/drive-nocrc-flipped.mcap" -o "$out/unchecked.mcap"
+NO_DATA_CRC_EXPECTED=1 node "$work/read_mcap.js" "$out/unchecked.mcap" | tee -a "$out/read.json"
+echo "independent reader: $((${#files[@]} + 1)) recordings read and decoded"

@@ -129,6 +129,24 @@ std::uint64_t StepGaps::largest_from() const {
   return h != nullptr ? h->from : 0;
 }
 
+std::string ReceiveBufferAdvice(std::uint64_t rmem_max_bytes) {
+  if (rmem_max_bytes == 0 || rmem_max_bytes >= kBurstReceiveBytes) return {};
+  return "the kernel caps a socket's receive buffer at " + std::to_string(rmem_max_bytes) +
+         " bytes (net.core.rmem_max): a server's world description (2 MB), sent in one burst when "
+         "the recorder joins or the server starts, overflows it and the kernel drops the states "
+         "that arrive meanwhile (a few, lost at the start); raise it first: "
+         "sudo sysctl -w net.core.rmem_max=16777216";
+}
+
+std::uint64_t KernelReceiveBufferMax() {
+  std::FILE* f = std::fopen("/proc/sys/net/core/rmem_max", "r");
+  if (f == nullptr) return 0;
+  unsigned long long v = 0;
+  if (std::fscanf(f, "%llu", &v) != 1) v = 0;
+  std::fclose(f);
+  return v;
+}
+
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index) {
   char suffix[16];
   std::snprintf(suffix, sizeof suffix, "-%03d", index);
@@ -213,6 +231,10 @@ struct Capture::Impl {
   struct File {
     std::unique_ptr<mcap::Writer> w;
     std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> channels;
+    // The copies of worlds and parameters (RepeatChannelMetadata), and which are due.
+    std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> repeat_channels;
+    std::set<std::pair<TopicId, std::uint32_t>> repeats_due;
+    std::uint64_t last_log = 0;
     std::map<TopicId, std::uint16_t> schemas;
     std::map<std::uint16_t, std::uint32_t> sequence;
     std::uint64_t first_log = 0;
@@ -230,7 +252,9 @@ struct Capture::Impl {
   };
   std::map<std::pair<TopicId, std::uint32_t>, Latched> latched;
 
-  Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {}
+  Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {
+    o.writer.live = true;  // a killed recorder leaves its file for `recover`
+  }
 
   std::uint64_t LogNow() const {
     return static_cast<std::uint64_t>((wall0 + (base::MonotonicNow() - mono0)).ns);
@@ -350,6 +374,12 @@ struct Capture::Impl {
     file = File{};
     file.w = std::make_unique<mcap::Writer>(PartPath(), o.writer);
     files.push_back(PartPath());
+    if (file.w->writing_to() != PartPath()) {
+      spdlog::info(
+          "vdyn-recorder: {} exists: it is replaced when this recording closes (until "
+          "then the recording is {})",
+          PartPath().string(), file.w->writing_to().string());
+    }
     mcap::StringMap m;
     m["format"] = kFormatVersion;
     m["recorder_version"] = kRecorderVersion;
@@ -368,6 +398,7 @@ struct Capture::Impl {
     for (std::uint32_t v : o.vehicles) vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
     m["vehicles"] = vehicles.empty() ? "all" : vehicles;
     m["compression"] = std::string(mcap::CompressionName(o.writer.compression));
+    m["rmem_max"] = std::to_string(KernelReceiveBufferMax());  // see ReceiveBufferAdvice
     if (!o.branched_from.empty()) m["branched_from"] = o.branched_from;
     if (part > 0) {
       m["part"] = std::to_string(part);
@@ -381,8 +412,46 @@ struct Capture::Impl {
     }
   }
 
+  // A world or parameters message is written once more, in a chunk of its own right after the
+  // chunk that holds it (a world is a megabyte on disk: one copy, not one a minute). Any one chunk
+  // can then be lost (a damaged file, `recover`) and the world the recording ran on is still in it.
+  void WriteRepeats() {
+    if (file.repeats_due.empty()) return;
+    file.w->Flush();
+    for (const auto& id : file.repeats_due) {
+      const auto l = latched.find(id);
+      if (l == latched.end()) continue;
+      auto ch = file.repeat_channels.find(id);
+      if (ch == file.repeat_channels.end()) {
+        ch = file.repeat_channels
+                 .emplace(
+                     id, file.w->AddChannel(Schema(id.first), ChannelTopic(id.first, id.second),
+                                            "protobuf", RepeatChannelMetadata(id.first, id.second)))
+                 .first;
+      }
+      file.w->WriteMessage(
+          ch->second, file.sequence[ch->second]++, file.last_log, l->second.publish_time,
+          std::span<const std::uint8_t>(l->second.data.data(), l->second.data.size()));
+    }
+    file.w->Flush();
+    file.repeats_due.clear();
+  }
+
+  std::uint16_t Schema(TopicId topic) {
+    auto sc = file.schemas.find(topic);
+    if (sc == file.schemas.end()) {
+      const auto* d = PayloadDescriptor(topic);
+      sc =
+          file.schemas
+              .emplace(topic, file.w->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d)))
+              .first;
+    }
+    return sc->second;
+  }
+
   void CloseFile(const std::string& reason) {
     if (!file.w) return;
+    WriteRepeats();
     mcap::StringMap m;
     const std::uint64_t now = LogNow();
     m["ended_utc"] = FormatUtc(now);
@@ -435,22 +504,19 @@ struct Capture::Impl {
                     std::uint64_t publish_time, std::span<const std::uint8_t> data) {
     auto ch = file.channels.find({topic, key});
     if (ch == file.channels.end()) {
-      auto sc = file.schemas.find(topic);
-      if (sc == file.schemas.end()) {
-        const auto* d = PayloadDescriptor(topic);
-        sc = file.schemas.emplace(topic, file.w->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))).first;
-      }
-      const std::uint16_t id = file.w->AddChannel(sc->second, ChannelTopic(topic, key), "protobuf",
-                                                  ChannelMetadata(topic, key));
+      const std::uint16_t id = file.w->AddChannel(Schema(topic), ChannelTopic(topic, key),
+                                                  "protobuf", ChannelMetadata(topic, key));
       ch = file.channels.emplace(std::make_pair(topic, key), id).first;
     }
     if (file.first_log == 0) file.first_log = log_time;
+    file.last_log = std::max(file.last_log, log_time);
     file.w->WriteMessage(ch->second, file.sequence[ch->second]++, log_time, publish_time, data);
     if (topic == TopicId::kWorld || topic == TopicId::kParams) {
       Metadata(topic, key, data);
       Latched& l = latched[{topic, key}];
       l.publish_time = publish_time;
       l.data.assign(data.begin(), data.end());
+      file.repeats_due.insert({topic, key});
     }
   }
 
@@ -483,6 +549,7 @@ struct Capture::Impl {
                        std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
           ++file.own_messages;
         }
+        WriteRepeats();
         file.w->FlushIfOlder(LogNow());
         disk_bytes = bytes_closed + file.w->bytes_written();
         {
@@ -507,6 +574,9 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
                                           participant, s.id, &impl_->drops,
                                           transport::ReaderRole::kRecorder));
     impl_->counts[s.id];
+  }
+  if (const std::string advice = ReceiveBufferAdvice(KernelReceiveBufferMax()); !advice.empty()) {
+    spdlog::warn("vdyn-recorder: {}", advice);
   }
   ready_ = true;
 }

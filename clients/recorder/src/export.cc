@@ -1,12 +1,15 @@
 // `vdyn-recorder export FILE --csv OUT.csv`: the recorded states as the batch CSV (io's
 // CsvWriter over VehicleState: the same columns, units and order as `vdyn-server --batch --csv`,
 // so one analysis script reads both).
+#include <unistd.h>
+
 #include <map>
 #include <memory>
 #include <set>
 
 #include "vdyn/io/csv.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/state.pb.h"
 
@@ -27,9 +30,8 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
   // The vehicles first (from the summary's channels when there is one: no second full scan).
   std::set<std::uint32_t> vehicles;
   if (auto s = reader.ReadSummary()) {
-    for (const mcap::Channel& c : s->channels) {
-      const auto info = ParseChannelInfo(c);
-      if (info && info->topic == transport::TopicId::kState) vehicles.insert(info->key);
+    for (const auto& [id, info] : VdynChannels(*s)) {
+      if (info.topic == transport::TopicId::kState) vehicles.insert(info.key);
     }
   } else {
     RecordingVisitor v;
@@ -60,20 +62,27 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
         << ": choose one with --vehicle ID, or --each for a file per vehicle\n";
     return 2;
   }
+  // Each CSV is written beside its name and renamed when whole; never over the recording.
+  std::map<std::uint32_t, std::unique_ptr<OutputFile>> files;
   std::map<std::uint32_t, std::unique_ptr<CsvWriter>> writers;
   for (std::uint32_t id : chosen) {
-    writers[id] = std::make_unique<CsvWriter>(o.each ? VehiclePath(o.csv, id) : o.csv);
+    auto& f = files[id] = std::make_unique<OutputFile>(o.each ? VehiclePath(o.csv, id) : o.csv,
+                                                       std::vector<std::filesystem::path>{o.file});
+    ::close(f->Release());  // the CSV writer opens the temporary file itself
+    writers[id] = std::make_unique<CsvWriter>(f->temp());
   }
   const std::uint64_t start = FirstLogTime(reader);
   const auto from = start + static_cast<std::uint64_t>(o.from_s * 1e9);
   const auto to = o.to_s ? start + static_cast<std::uint64_t>(*o.to_s * 1e9) : ~0ull;
   const auto every = static_cast<std::uint64_t>(std::max(1, o.every));
   pb::VehicleState state;
-  std::uint64_t malformed = 0;
+  std::uint64_t malformed = 0, unchecked = 0;
+  std::vector<mcap::Metadata> meta;
   Progress progress("export");
   RecordingVisitor v;
   v.wants = [](transport::TopicId t) { return t == transport::TopicId::kState; };
   v.on_progress = [&](double f) { progress.Update(f); };
+  v.on_metadata = [&](const mcap::Metadata& m) { meta.push_back(m); };
   v.on_message = [&](const RecordedMessage& m) {
     if (m.log_time < from || m.log_time > to) return;
     const auto w = writers.find(m.key);
@@ -85,13 +94,23 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
       return;
     }
     w->second->WriteRow(state);
+    unchecked += m.unchecked ? 1 : 0;
   };
-  ScanRecording(reader, v);
+  const mcap::ScanResult scan = ScanRecording(reader, v);
   progress.Finish();
   for (auto& [id, w] : writers) {
-    w->Close();
+    try {
+      w->Close();
+    } catch (const std::runtime_error& e) {
+      throw OutputError(files[id]->dest().string() + ": " + e.what());
+    }
+    files[id]->Commit();
     out << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
-        << " columns -> " << (o.each ? VehiclePath(o.csv, id) : o.csv).string() << "\n";
+        << " columns -> " << files[id]->dest().string() << "\n";
+  }
+  // No more integrity than the recording has.
+  for (const std::string& line : IntegrityNotes(meta, scan, unchecked, "rows")) {
+    out << "vdyn-recorder export: " << line << "\n";
   }
   if (malformed > 0) {
     out << "vdyn-recorder export: " << malformed << " state messages did not parse and were skipped\n";

@@ -20,7 +20,14 @@ namespace {
 
 struct ChannelStats {
   std::uint64_t messages = 0, bytes = 0, first = 0, last = 0;
+  std::uint64_t malformed = 0;  // vdyn payloads that do not parse as the topic's type
+  std::string note;             // a foreign channel: what it is
 };
+
+// A rate is worth printing for a stream, not for a few messages: at least 10 over a second.
+bool RateMeaningful(const ChannelStats& c) {
+  return c.messages >= 10 && c.last - c.first >= 1'000'000'000ull;
+}
 
 struct VehicleStats {
   std::uint64_t states = 0;
@@ -31,8 +38,8 @@ struct VehicleStats {
 };
 
 struct ServerEvents {
-  std::uint64_t count = 0, first = 0, last = 0, gaps = 0, missing = 0;
-  bool any = false;
+  std::set<std::uint64_t> sequences;  // each event once (they arrive vehicle by vehicle)
+  std::uint64_t count = 0, first = 0, last = 0, gaps = 0, missing = 0;  // from `sequences`
   std::set<std::uint64_t> terrain_hashes;
   std::map<std::uint32_t, std::uint64_t> start_step;  // vehicle -> first spawn or checkpoint
   std::map<std::uint32_t, std::string> branched_from;
@@ -42,6 +49,68 @@ std::string Hex(std::uint64_t v) {
   char b[24];
   std::snprintf(b, sizeof b, "%016llx", static_cast<unsigned long long>(v));
   return b;
+}
+
+// A recovered file's "vdyn.recovered" metadata, as a person reads it: where it came from, what
+// was left out and when, what no CRC vouches for.
+void PrintRecovered(const std::vector<mcap::Metadata>& meta, std::uint64_t first,
+                    std::ostream& out) {
+  auto secs = [first](const std::string& ns) {
+    const std::uint64_t v = std::strtoull(ns.c_str(), nullptr, 10);
+    char b[32];
+    // Signed: a lost chunk may lie before the first message kept.
+    std::snprintf(b, sizeof b, "%.3f",
+                  (static_cast<double>(v) - static_cast<double>(first)) * 1e-9);
+    return std::string(b);
+  };
+  // "a-b,c-d" (ns) as "0.250 .. 0.500 s, ..."
+  auto ranges = [&](const std::string& text) {
+    std::string o;
+    std::size_t at = 0;
+    while (at < text.size()) {
+      std::size_t end = text.find(',', at);
+      if (end == std::string::npos) end = text.size();
+      const std::string r = text.substr(at, end - at);
+      const std::size_t dash = r.find('-');
+      if (dash != std::string::npos) {
+        o += (o.empty() ? "" : ", ") + secs(r.substr(0, dash)) + " .. " + secs(r.substr(dash + 1)) +
+             " s";
+      }
+      at = end + 1;
+    }
+    return o;
+  };
+  for (const mcap::Metadata& m : meta) {
+    if (m.name != "vdyn.recovered") continue;
+    auto get = [&](const char* k) {
+      const auto it = m.values.find(k);
+      return it == m.values.end() ? std::string() : it->second;
+    };
+    out << "recovered   from " << get("from") << " (" << get("file_size")
+        << " bytes): " << (get("closed") == "no" ? "it was not closed" : "it was closed")
+        << "; its data-section CRC " << (get("data_crc").empty() ? "?" : get("data_crc"))
+        << "; its summary " << (get("summary").empty() ? "?" : get("summary")) << "\n";
+    for (const auto& [k, v] : m.values) {
+      if (k.rfind("damage.", 0) == 0) out << "  damaged   " << v << "\n";
+      if (k.rfind("note.", 0) == 0) out << "  note      " << v << "\n";
+    }
+    const std::string lost = get("messages_lost"), lost_at = get("lost_log_ns");
+    if (!lost.empty() && lost != "0") {
+      out << "  lost      " << lost << " messages known lost"
+          << (lost_at.empty() ? "" : ", log time " + ranges(lost_at)) << "\n";
+    }
+    const std::string unchecked = get("unchecked_messages");
+    if (!unchecked.empty() && unchecked != "0") {
+      out << "  UNCHECKED " << unchecked
+          << " messages had no CRC that held in the source (log time "
+          << ranges(get("unchecked_log_ns"))
+          << "): kept in chunks without a CRC; nothing tells whether they are intact\n";
+    }
+    if (get("damage.000").empty() && (lost.empty() || lost == "0") &&
+        (unchecked.empty() || unchecked == "0")) {
+      out << "  nothing was left out\n";
+    }
+  }
 }
 
 }  // namespace
@@ -85,38 +154,65 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   RecordingVisitor v;
   v.on_progress = [&](double f) { progress.Update(f); };
   v.on_metadata = [&](const mcap::Metadata& m) { meta.push_back(m); };
+  std::uint64_t foreign_messages = 0;
+  v.on_foreign = [&](const mcap::Channel& c, const mcap::Schema* schema, const mcap::Message& m) {
+    ++messages;
+    ++foreign_messages;
+    if (first == 0 || m.log_time < first) first = m.log_time;
+    last = std::max(last, m.log_time);
+    ChannelStats& cs = channels[c.topic + " #" + std::to_string(c.id)];
+    if (cs.messages == 0) {
+      cs.first = m.log_time;
+      cs.note = "not a vdyn channel: " +
+                (schema == nullptr
+                     ? std::string("no schema")
+                     : "schema '" + schema->name + "' (" +
+                           (schema->encoding.empty() ? "no encoding" : schema->encoding) + ")") +
+                ", messages " + (c.message_encoding.empty() ? "unencoded" : c.message_encoding);
+    }
+    ++cs.messages;
+    cs.bytes += m.data.size();
+    cs.last = std::max(cs.last, m.log_time);
+  };
+  std::uint64_t unchecked_states = 0;
   v.on_message = [&](const RecordedMessage& m) {
     ++messages;
     if (first == 0 || m.log_time < first) first = m.log_time;
     last = std::max(last, m.log_time);
-    ChannelStats& c = channels[ChannelTopic(m.topic, m.key)];
+    ChannelStats& c = channels[ChannelTopic(m.topic, m.key) + (m.repeat ? " (copies)" : "")];
     if (c.messages == 0) c.first = m.log_time;
     ++c.messages;
     c.bytes += m.data.size();
-    c.last = m.log_time;
+    c.last = std::max(c.last, m.log_time);
     if (m.topic == TopicId::kState) {
-      const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
+      // The fields the gaps need, and a check that the payload is a state of this vehicle: a
+      // foreign writer's garbage under our names must not become steps.
+      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+      if (!fields) {
+        ++c.malformed;
+        return;
+      }
+      const std::uint64_t step = fields->step, step_ns = fields->step_ns;
+      unchecked_states += m.unchecked ? 1 : 0;
       VehicleStats& vs = Vehicle(m.key);
       if (!vs.any) {
         vs.any = true;
         vs.first_step = step;
-        vs.step_ns = static_cast<std::int64_t>(wire::Number(m.data, 5).value_or(0));
+        vs.step_ns = static_cast<std::int64_t>(step_ns);
       }
       vs.gaps.State(step);
       vs.max_step = std::max(vs.max_step, step);
       ++vs.states;
     } else if (m.topic == TopicId::kEvents) {
       pb::SessionEvent e;
-      if (!e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
-      ServerEvents& s = servers[e.server_id()];
-      if (s.any && e.sequence() > s.last + 1) {
-        ++s.gaps;
-        s.missing += e.sequence() - s.last - 1;
+      // A server's event names it and is keyed by its vehicle.
+      if (!e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size())) ||
+          e.server_id().empty() || e.vehicle_id() != m.key) {
+        ++c.malformed;
+        return;
       }
-      if (!s.any) s.first = e.sequence();
-      s.any = true;
-      s.last = std::max(s.last, e.sequence());
-      ++s.count;
+      ServerEvents& s = servers[e.server_id()];
+      s.sequences.insert(e.sequence());
       if (e.has_spawned()) {
         // Only a vehicle with states has steps to tell about (its first state starts them).
         if (const auto it = vehicles.find(e.vehicle_id()); it != vehicles.end())
@@ -131,7 +227,10 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       }
     } else if (m.topic == TopicId::kWorld) {
       pb::WorldDescription w;
-      if (!w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
+      if (!w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        ++c.malformed;
+        return;
+      }
       std::size_t triangles = 0;
       for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
       w.mutable_landmarks()->Clear();
@@ -141,6 +240,19 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     }
   };
   const mcap::ScanResult scan = ScanRecording(reader, v);
+  for (auto& [id, s] : servers) {
+    s.count = s.sequences.size();
+    s.first = *s.sequences.begin();
+    s.last = *s.sequences.rbegin();
+    std::uint64_t prev = s.first;
+    for (const std::uint64_t q : s.sequences) {
+      if (q > prev + 1) {
+        ++s.gaps;
+        s.missing += q - prev - 1;
+      }
+      prev = q;
+    }
+  }
   for (const mcap::ChunkIndex& c : reader.Chunks()) {
     ++compression_chunks[c.compression.empty() ? "none" : c.compression];
     packed += c.compressed_size;
@@ -152,12 +264,35 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   auto t = [&](std::uint64_t ns) { return first == 0 ? 0.0 : static_cast<double>(ns - first) * 1e-9; };
   std::string comp;
   for (const auto& [name, n] : compression_chunks) comp += (comp.empty() ? "" : ", ") + std::to_string(n) + " " + name;
-  std::snprintf(line, sizeof line, "file        %s (%s; %llu messages; chunks: %s; %.0f%% of the raw size)\n",
-                path.string().c_str(), FormatBytes(static_cast<double>(reader.size())).c_str(),
-                static_cast<unsigned long long>(messages), comp.empty() ? "none" : comp.c_str(),
-                unpacked > 0 ? 100.0 * static_cast<double>(packed) / static_cast<double>(unpacked) : 100.0);
+  const std::string foreign = foreign_messages == 0 ? std::string()
+                                                    : ", " + std::to_string(foreign_messages) +
+                                                          " of them not vdyn messages";
+  std::snprintf(
+      line, sizeof line,
+      "file        %s (%s; %llu messages%s; chunks: %s; %.0f%% of the raw size)\n",
+      path.string().c_str(), FormatBytes(static_cast<double>(reader.size())).c_str(),
+      static_cast<unsigned long long>(messages), foreign.c_str(),
+      comp.empty() ? "none" : comp.c_str(),
+      unpacked > 0 ? 100.0 * static_cast<double>(packed) / static_cast<double>(unpacked) : 100.0);
   out << line;
-  out << "written by  " << reader.header_library() << (scan.complete ? ", closed with index and summary\n" : "\n");
+  const std::string library = reader.header_library();
+  out << "written by  " << (library.empty() ? "(not named in its header)" : library)
+      << (scan.summary ? ", closed with index and summary\n"
+                       : ", closed without a summary (no index: every reader must scan it)\n");
+  // What the CRCs cover: a chunk whose CRC is 0 is checked only by the data section's CRC.
+  const bool data_crc = scan.data_crc == mcap::ScanResult::DataCrc::kMatched;
+  if (scan.chunks_unchecked == 0) {
+    out << "integrity   every chunk's CRC checked"
+        << (data_crc ? ", and the data section's\n" : "; the data section has no CRC\n");
+  } else if (data_crc) {
+    out << "integrity   " << scan.chunks_unchecked << " of " << scan.chunks
+        << " chunks carry no CRC of their own; the data section's CRC covers them (checked)\n";
+  } else {
+    out << "integrity   UNCHECKED: " << scan.chunks_unchecked << " of " << scan.chunks
+        << " chunks (" << scan.messages_unchecked
+        << " messages) carry no CRC and the data section has none: "
+        << "nothing checked their bytes\n";
+  }
   for (const mcap::Metadata& m : meta) {
     if (m.name == "vdyn.recording") {
       auto get = [&](const char* k) { auto it = m.values.find(k); return it == m.values.end() ? std::string() : it->second; };
@@ -197,12 +332,19 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   }
   out << "channels\n";
   for (const auto& [name, c] : channels) {
-    const double span = static_cast<double>(c.last - c.first) * 1e-9;
-    std::snprintf(line, sizeof line, "  %-26s %9llu msgs %9.1f Hz %10s   %8.3f .. %8.3f s\n", name.c_str(),
-                  static_cast<unsigned long long>(c.messages),
-                  span > 0 ? static_cast<double>(c.messages - 1) / span : 0.0,
+    char rate[32] = "        -   ";
+    if (RateMeaningful(c)) {
+      std::snprintf(
+          rate, sizeof rate, "%9.1f Hz",
+          static_cast<double>(c.messages - 1) / (static_cast<double>(c.last - c.first) * 1e-9));
+    }
+    std::snprintf(line, sizeof line, "  %-30s %9llu msgs %s %10s   %8.3f .. %8.3f s", name.c_str(),
+                  static_cast<unsigned long long>(c.messages), rate,
                   FormatBytes(static_cast<double>(c.bytes)).c_str(), t(c.first), t(c.last));
     out << line;
+    if (c.malformed > 0) out << "  (" << c.malformed << " do not parse as the topic's type)";
+    if (!c.note.empty()) out << "  (" << c.note << ")";
+    out << "\n";
   }
   // Gaps: states and events that never reached the recorder, and what it counted itself.
   std::string gaps;
@@ -224,7 +366,17 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       if (loss && val != "0") gaps += "\n  the recorder counted " + val + " " + k.substr(k.rfind('.') + 1) + " on " + k.substr(0, k.rfind('.'));
     }
   }
+  for (const auto& [name, c] : channels) {
+    if (c.malformed == 0) continue;
+    gaps += "\n  " + name + ": " + std::to_string(c.malformed) + " of " +
+            std::to_string(c.messages) +
+            " messages do not parse as the topic's type: left out of the counts above";
+  }
   out << "gaps" << (gaps.empty() ? "        none" : gaps) << "\n";
+  PrintRecovered(meta, first, out);
+  for (const std::string& note : IntegrityNotes({}, scan, unchecked_states, "states")) {
+    out << "            " << note << "\n";
+  }
   for (const auto& [server, s] : servers) {
     std::snprintf(line, sizeof line, "events      server '%s': %llu events, sequence %llu..%llu%s\n", server.c_str(),
                   static_cast<unsigned long long>(s.count), static_cast<unsigned long long>(s.first),
@@ -236,7 +388,27 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
   }
   // Re-simulation: the world it ran on, a start for each vehicle, no lost event.
   std::string no;
-  if (servers.empty()) no = "no session events recorded (vdyn/events)";
+  std::uint64_t event_messages = 0, bad_events = 0;
+  for (const auto& [name, c] : channels) {
+    if (c.note.empty() && name.rfind(transport::Spec(TopicId::kEvents).name, 0) == 0) {
+      event_messages += c.messages;
+      bad_events += c.malformed;
+    }
+  }
+  std::string named;  // channels named like our events that hold something else
+  for (const auto& [name, c] : channels) {
+    if (!c.note.empty() && name.rfind(transport::Spec(TopicId::kEvents).name, 0) == 0) {
+      named += (named.empty() ? "" : ", ") + name.substr(0, name.find(" #"));
+    }
+  }
+  if (servers.empty()) {
+    no = event_messages > 0 ? "the " + std::to_string(bad_events) +
+                                  " messages on vdyn/events do not parse as session events"
+         : !named.empty()
+             ? "no session events: " + named + " holds another type (not a vdyn channel)"
+             : "no session events recorded (vdyn/events)";
+  }
+  std::string partly;  // what verify cannot cover: it re-simulates around it
   for (const auto& [server, s] : servers) {
     if (!no.empty()) break;
     const auto w = worlds.find(server);
@@ -245,7 +417,8 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
     } else if (s.terrain_hashes.size() > 1 || (s.terrain_hashes.size() == 1 && *s.terrain_hashes.begin() != w->second.terrain_hash())) {
       no = "the events name another terrain than the recorded world";
     } else if (s.gaps > 0) {
-      no = std::to_string(s.missing) + " events of server '" + server + "' are missing";
+      partly += "; " + std::to_string(s.missing) + " events of server '" + server +
+                "' are missing (" + std::to_string(s.gaps) + " gaps)";
     }
   }
   std::string starts;
@@ -260,7 +433,18 @@ int RunInfo(const std::filesystem::path& path, std::ostream& out) {
       starts += (starts.empty() ? "" : ", ") + std::string("vehicle ") + std::to_string(id) + " from step " + std::to_string(*start);
     }
   }
-  out << "re-simulates " << (no.empty() ? "yes: " + (starts.empty() ? std::string("no states to check") : starts) + " (`vdyn-recorder verify` checks every state hash)" : "no: " + no) << "\n";
+  if (!no.empty()) {
+    out << "re-simulates no: " << no << "\n";
+  } else if (!partly.empty()) {
+    out << "re-simulates in parts: "
+        << (starts.empty() ? std::string("no states to check") : starts) << partly
+        << ": `vdyn-recorder verify` re-simulates up to each gap and again from the next "
+           "checkpoint "
+           "after it, and says which steps it could not verify\n";
+  } else {
+    out << "re-simulates yes: " << (starts.empty() ? std::string("no states to check") : starts)
+        << " (`vdyn-recorder verify` checks every state hash)\n";
+  }
   return 0;
 }
 

@@ -8,11 +8,16 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <exception>
 #include <limits>
+#include <map>
+#include <tuple>
 
 #include <lz4frame.h>
 #include <zlib.h>
 #include <zstd.h>
+
+#include "vdyn/recorder/output_file.h"
 
 namespace vdyn::mcap {
 namespace {
@@ -442,10 +447,20 @@ struct Writer::Codec {
 
 Writer::Writer(const std::filesystem::path& path, WriterOptions options)
     : path_(path), options_(std::move(options)), codec_(std::make_unique<Codec>()) {
-  std::error_code ec;
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
-  fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd_ < 0) throw McapError(path, 0, std::string("cannot create the file: ") + std::strerror(errno));
+  recorder::CheckNotAnInput(path, options_.inputs);
+  if (options_.live) {
+    // A new file, written where it will stay (O_EXCL: never over one that appeared meanwhile).
+    std::error_code ec;
+    if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
+    fd_ = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+    if (fd_ < 0 && errno != EEXIST) {
+      throw McapError(path, 0, std::string("cannot create the file: ") + std::strerror(errno));
+    }
+  }
+  if (fd_ < 0) {
+    out_ = std::make_unique<recorder::OutputFile>(path, options_.inputs);
+    fd_ = out_->fd();
+  }
   std::string head(reinterpret_cast<const char*>(kMagic), sizeof kMagic);
   const std::size_t at = OpenRecord(head, kHeader);
   PutStr(head, options_.profile);
@@ -456,12 +471,36 @@ Writer::Writer(const std::filesystem::path& path, WriterOptions options)
 }
 
 Writer::~Writer() {
+  if (!closed_ && out_ && !options_.live && std::uncaught_exceptions() > 0) {
+    out_->Abandon();  // an error is unwinding: the destination stays as it was
+    fd_ = -1;
+    return;
+  }
   try {
     Close();
   } catch (const std::exception&) {
     // Reported by an explicit Close(); a destructor cannot.
   }
-  if (fd_ >= 0) ::close(fd_);
+  if (out_) {
+    // Not renamed (Close failed): a live recording keeps its bytes under the temporary name.
+    if (options_.live) {
+      out_->Keep();
+    } else {
+      out_->Abandon();
+    }
+  } else if (fd_ >= 0) {
+    ::close(fd_);
+  }
+}
+
+std::filesystem::path Writer::writing_to() const {
+  return out_ ? out_->temp() : path_;
+}
+
+void Writer::SetChunkCrc(bool on) {
+  if (on == chunk_crc_) return;
+  CloseChunk();
+  chunk_crc_ = on;
 }
 
 void Writer::Append(const std::string& bytes) {
@@ -569,7 +608,8 @@ void Writer::CloseChunk() {
   PutU64(rec, chunk_start_);
   PutU64(rec, chunk_end_);
   PutU64(rec, chunk_.size());
-  PutU32(rec, Crc32(0, chunk_));
+  PutU32(rec, chunk_crc_ ? Crc32(0, chunk_) : 0);
+  any_unchecked_ = any_unchecked_ || !chunk_crc_;
   PutStr(rec, compression);
   PutU64(rec, packed.size());
   rec.append(packed);
@@ -612,7 +652,9 @@ void Writer::Close() {
   CloseChunk();
   std::string end;
   std::size_t at = OpenRecord(end, kDataEnd);
-  PutU32(end, data_crc_);  // every byte before this record
+  // Every byte before this record; none when a chunk went without a CRC (the data section's
+  // would vouch for bytes nobody could check).
+  PutU32(end, any_unchecked_ ? 0 : data_crc_);
   CloseRecord(end, at);
   Append(end);
 
@@ -709,6 +751,16 @@ void Writer::Close() {
   PutU32(sum, Crc32(0, sum));  // from the summary's start through summary_offset_start
   sum.append(reinterpret_cast<const char*>(kMagic), sizeof kMagic);
   Append(sum);
+  if (out_) {
+    fd_ = -1;  // the output file closes it
+    try {
+      out_->Commit();
+    } catch (const recorder::OutputError& e) {
+      throw McapError(path_, offset_, e.what());
+    }
+    out_.reset();
+    return;
+  }
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) {
@@ -810,57 +862,177 @@ std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t 
   return {};
 }
 
+// Whether a record's content reads as its opcode says, for resynchronising on it: every field
+// within the record, nothing left over where the format leaves nothing over.
+bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
+  try {
+    switch (op) {
+      case kSchema:
+        return ParseSchema(c).id != 0;
+      case kChannel:
+        ParseChannel(c);
+        return true;
+      case kMessage:
+        return c.size() >= 22;
+      case kChunk: {
+        const ChunkHeader h = ParseChunk(c);
+        return (h.index.compression.empty() || h.index.compression == "zstd" ||
+                h.index.compression == "lz4") &&
+               h.records.data() + h.records.size() == c.data() + c.size();
+      }
+      case kMessageIndex: {
+        Cursor r(c);
+        r.U16("channel_id");
+        const std::uint32_t n = r.U32("records");
+        return n % 16 == 0 && r.Take(n, "records").size() == n && r.done();
+      }
+      case kMetadata: {
+        Cursor r(c);
+        r.Str("name");
+        r.Map("metadata");
+        return r.done();
+      }
+      case kAttachment: {
+        Cursor r(c);
+        r.U64("log_time");
+        r.U64("create_time");
+        r.Str("name");
+        r.Str("media_type");
+        const std::uint64_t n = r.U64("data");
+        r.Take(n, "data");
+        r.U32("crc");
+        return r.done();
+      }
+      case kDataEnd:
+        return c.size() == 4;
+      case kFooter:
+        return c.size() == kFooterContent;
+      case kStatistics:
+        ParseStatistics(c);
+        return true;
+      case kChunkIndex:
+        ParseChunkIndex(c);
+        return true;
+      case kSummaryOffset:
+        return c.size() == 17;
+      case kMetadataIndex: {
+        Cursor r(c);
+        r.U64("offset");
+        r.U64("length");
+        r.Str("name");
+        return r.done();
+      }
+      default:
+        return false;  // a header only comes first; unknown and private: no telling
+    }
+  } catch (const Malformed&) {
+    return false;
+  }
+}
+
+// Records of the summary section: met in the data section, they say its data end was lost.
+bool SummaryOnly(std::uint8_t op) {
+  return op == kStatistics || op == kChunkIndex || op == kSummaryOffset || op == kMetadataIndex ||
+         op == kAttachmentIndex || op == kFooter;
+}
+
 }  // namespace
+
+std::optional<std::uint64_t> Reader::NextRecord(std::uint64_t from) const {
+  for (std::uint64_t p = from; p + 9 <= size_; ++p) {
+    const std::uint8_t op = data_[p];
+    if (op == 0 || op > kDataEnd || op == kHeader) continue;
+    Frame f;
+    if (!FrameAt(data_, size_, p, f).empty()) continue;
+    // The frame after it must be whole too (or the file ends there, or the closing magic), and
+    // its own content must read (checked last: the costlier test).
+    const std::uint64_t next = f.end();
+    Frame g;
+    const bool followed = next == size_ ||
+                          (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0) ||
+                          (FrameAt(data_, size_, next, g).empty() && g.op != 0 &&
+                           g.op <= kDataEnd && g.op != kHeader);
+    if (followed && ContentReads(op, f.content)) return p;
+  }
+  return std::nullopt;
+}
 
 ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
   ScanResult res;
   std::vector<bool> schema_known(65536, false), channel_known(65536, false);
   std::vector<std::uint8_t> scratch;
-  std::uint32_t crc = Crc32(0, std::span<const std::uint8_t>(data_, 8));
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> inner;  // a chunk's messages: offset, end
+  // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
+  std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t>
+      seen;
   std::uint64_t pos = 8;
   std::uint64_t last_progress = 0;
   res.good_until = 8;
-  // Strict: throw. Lenient: record the problem and stop (return true).
+  // Strict: throw. Lenient: record the problem (the caller decides whether to go on).
   auto problem = [&](std::uint64_t at, const std::string& why) {
     if (!lenient) Fail(at, why);
-    res.problem = why;
-    res.problem_offset = at;
-    return true;
+    if (res.problem.empty()) {
+      res.problem = why;
+      res.problem_offset = at;
+    }
   };
-  auto inner_records = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at) -> std::string {
-    std::uint64_t p = 0;
-    while (p < recs.size()) {
+  auto damaged = [&](std::uint64_t at, std::uint64_t length, const std::string& why) -> Damage& {
+    problem(at, why);
+    res.damage.push_back({at, length, why, std::nullopt, 0});
+    return res.damage.back();
+  };
+  // A chunk's records: checked first (framing, ids), delivered only when all are good.
+  auto inner_records = [&](std::span<const std::uint8_t> recs) -> std::string {
+    inner.clear();
+    for (std::uint64_t p = 0; p < recs.size();) {
       Frame f;
       const std::string why = FrameAt(recs.data(), recs.size(), p, f);
-      if (!why.empty()) return "inside the chunk at offset " + std::to_string(chunk_at) + ", byte " + std::to_string(p) + ": " + why;
+      if (!why.empty()) return "inside the chunk, byte " + std::to_string(p) + ": " + why;
       try {
         if (f.op == kSchema) {
-          const Schema s = ParseSchema(f.content);
-          if (s.id == 0) return "a schema with id 0 inside a chunk";
-          schema_known[s.id] = true;
-          if (v.on_schema) v.on_schema(s);
+          if (ParseSchema(f.content).id == 0) return "a schema with id 0 inside a chunk";
         } else if (f.op == kChannel) {
-          const Channel c = ParseChannel(f.content);
-          if (c.schema_id != 0 && !schema_known[c.schema_id]) {
-            return "channel " + std::to_string(c.id) + " names schema " + std::to_string(c.schema_id) + ", which no schema record defines";
-          }
-          channel_known[c.id] = true;
-          if (v.on_channel) v.on_channel(c);
+          ParseChannel(f.content);
         } else if (f.op == kMessage) {
           const Message m = ParseMessage(f.content);
-          if (!channel_known[m.channel_id]) {
-            return "a message on channel " + std::to_string(m.channel_id) + ", which no channel record defines";
+          if (!channel_known[m.channel_id] && !lenient) {
+            return "a message on channel " + std::to_string(m.channel_id) +
+                   ", which no channel record defines";
           }
-          ++res.messages;
-          if (v.on_message) v.on_message(m, chunk_at);
         }
       } catch (const Malformed& e) {
-        return std::string("inside the chunk at offset ") + std::to_string(chunk_at) + ": a malformed " + OpName(f.op) + " record: " + e.what;
+        return std::string("inside the chunk: a malformed ") + OpName(f.op) + " record: " + e.what;
       }
+      inner.emplace_back(p, f.end());
       p = f.end();
     }
     return {};
   };
+  auto deliver_inner = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at,
+                           bool unchecked) {
+    for (const auto& [p, end] : inner) {
+      Frame f;
+      FrameAt(recs.data(), recs.size(), p, f);
+      if (f.op == kSchema) {
+        const Schema s = ParseSchema(f.content);
+        schema_known[s.id] = true;
+        if (v.on_schema) v.on_schema(s);
+      } else if (f.op == kChannel) {
+        const Channel c = ParseChannel(f.content);
+        channel_known[c.id] = true;
+        if (v.on_channel) v.on_channel(c);
+      } else if (f.op == kMessage) {
+        Message m = ParseMessage(f.content);
+        m.unchecked = unchecked;
+        ++res.messages;
+        if (unchecked) ++res.messages_unchecked;
+        if (v.on_message) v.on_message(m, chunk_at);
+      }
+    }
+  };
+  // Damage to a chunk: the message indexes right after it say how many messages it held.
+  constexpr std::size_t kNone = ~std::size_t{0};
+  std::size_t lost_chunk = kNone;  // its entry in res.damage
   bool data_end = false;
   while (!data_end) {
     if (v.on_progress && pos - last_progress > (16u << 20)) {
@@ -874,19 +1046,41 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     }
     Frame f;
     if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) {
-      problem(pos, why);
-      return res;
+      if (!lenient) Fail(pos, why);
+      // A damaged opcode or length, or the end of a file cut short: the next valid record.
+      const std::optional<std::uint64_t> next = NextRecord(pos + 1);
+      if (!next) {
+        damaged(pos, size_ - pos, why);
+        return res;
+      }
+      damaged(pos, *next - pos,
+              why + "; skipped " + std::to_string(*next - pos) + " bytes to the next valid record");
+      ++res.records_skipped;
+      lost_chunk = kNone;
+      pos = *next;
+      continue;
     }
     if (pos == 8 && f.op != kHeader) {
       problem(pos, std::string("the first record is a ") + OpName(f.op) + " record, not the header");
+      res.damage.push_back({pos, 0, res.problem, std::nullopt, 0});
+    }
+    if (lenient && SummaryOnly(f.op)) {
+      // The data end record is missing or damaged: the summary starts here.
+      damaged(pos, 0,
+              std::string("a ") + OpName(f.op) +
+                  " record of the summary before any data end record: the data end "
+                  "record is damaged or missing; the data section ends here");
       return res;
     }
+    if (f.op != kMessageIndex) lost_chunk = kNone;
     try {
       switch (f.op) {
         case kHeader:
           if (pos != 8) {
-            problem(pos, "a second header record");
-            return res;
+            if (!lenient) Fail(pos, "a second header record");
+            damaged(pos, f.end() - pos, "a second header record (skipped)");
+            ++res.records_skipped;
+            break;
           }
           {
             Cursor r(f.content);
@@ -896,10 +1090,7 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
           break;
         case kSchema: {
           const Schema s = ParseSchema(f.content);
-          if (s.id == 0) {
-            problem(pos, "a schema with id 0");
-            return res;
-          }
+          if (s.id == 0) throw Malformed{"a schema with id 0"};
           schema_known[s.id] = true;
           if (v.on_schema) v.on_schema(s);
           break;
@@ -907,20 +1098,26 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
         case kChannel: {
           const Channel c = ParseChannel(f.content);
           if (c.schema_id != 0 && !schema_known[c.schema_id]) {
-            problem(pos, "channel " + std::to_string(c.id) + " names schema " + std::to_string(c.schema_id) + ", which no schema record defines");
-            return res;
+            const std::string why = "channel " + std::to_string(c.id) + " names schema " +
+                                    std::to_string(c.schema_id) +
+                                    ", which no schema record defines";
+            if (!lenient) Fail(pos, why);
+            damaged(pos, 0, why);
           }
           channel_known[c.id] = true;
           if (v.on_channel) v.on_channel(c);
           break;
         }
         case kMessage: {
-          const Message m = ParseMessage(f.content);
+          Message m = ParseMessage(f.content);
           if (!channel_known[m.channel_id]) {
-            problem(pos, "a message on channel " + std::to_string(m.channel_id) + ", which no channel record defines");
-            return res;
+            const std::string why = "a message on channel " + std::to_string(m.channel_id) +
+                                    ", which no channel record defines";
+            if (!lenient) Fail(pos, why);
           }
+          m.unchecked = true;  // only the data section's CRC covers it
           ++res.messages;
+          ++res.messages_unchecked;
           if (v.on_message) v.on_message(m, pos);
           break;
         }
@@ -928,6 +1125,24 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
           ChunkHeader h = ParseChunk(f.content);
           h.index.chunk_start_offset = pos;
           h.index.chunk_length = f.end() - pos;
+          h.index.uncompressed_crc = h.crc;
+          if (lenient) {
+            const auto key = std::make_tuple(h.crc, h.index.uncompressed_size,
+                                             h.index.message_start_time, h.records.size());
+            const auto [it, fresh] = seen.try_emplace(key, pos);
+            if (!fresh) {
+              Frame first;
+              FrameAt(data_, size_, it->second, first);
+              if (first.content.size() == f.content.size() &&
+                  std::memcmp(first.content.data(), f.content.data(), f.content.size()) == 0) {
+                damaged(pos, f.end() - pos,
+                        "an exact copy of the chunk at offset " + std::to_string(it->second) +
+                            " (dropped: its messages are kept once)");
+                ++res.chunks_duplicated;
+                break;
+              }
+            }
+          }
           if (v.on_chunk && !v.on_chunk(h.index)) break;
           std::string why = Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch);
           if (why.empty() && h.crc != 0) {
@@ -937,20 +1152,27 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
                     "): the file is corrupted";
             }
           }
-          if (why.empty()) why = inner_records(scratch, pos);
+          if (why.empty()) why = inner_records(scratch);
           if (!why.empty()) {
             if (!lenient) Fail(pos, why);
             // The chunk's frame is whole: drop the chunk, keep going.
             ++res.chunks_skipped;
-            if (res.problem.empty()) {
-              res.problem = why;
-              res.problem_offset = pos;
-            }
+            damaged(pos, f.end() - pos, why + " (chunk dropped)").chunk = h.index;
+            lost_chunk = res.damage.size() - 1;
             break;
           }
+          deliver_inner(scratch, pos, h.crc == 0);
+          if (h.crc == 0) ++res.chunks_unchecked;
           ++res.chunks;
           break;
         }
+        case kMessageIndex:
+          if (lost_chunk != kNone) {
+            Cursor r(f.content);
+            r.U16("channel_id");
+            res.damage[lost_chunk].messages += r.U32("records") / 16;
+          }
+          break;
         case kMetadata: {
           const Metadata m = ParseMetadata(f.content);
           if (v.on_metadata) v.on_metadata(m, pos);
@@ -959,30 +1181,55 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
         case kDataEnd: {
           Cursor r(f.content);
           const std::uint32_t stored = r.U32("data_section_crc");
-          if (stored != 0 && stored != crc) {
+          data_end = true;
+          if (stored == 0) {
+            res.data_crc = ScanResult::DataCrc::kAbsent;
+            break;
+          }
+          const std::uint32_t crc =
+              Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos)));
+          res.data_crc =
+              stored == crc ? ScanResult::DataCrc::kMatched : ScanResult::DataCrc::kMismatched;
+          if (stored != crc) {
             problem(pos, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
                              Hex32(crc) + "): the file is corrupted");
-            return res;
+            res.damage.push_back({pos, 0,
+                                  "data section CRC mismatch (stored " + Hex32(stored) +
+                                      ", computed " + Hex32(crc) +
+                                      "): some byte before it is damaged; what no chunk CRC "
+                                      "checks is unchecked",
+                                  std::nullopt, 0});
           }
-          data_end = true;
           break;
         }
         case kFooter:
           problem(pos, "a footer before the data end record");
           return res;
         default:
-          break;  // message indexes, attachments, private records: nothing to check here
+          break;  // attachments, private records: nothing to check here
       }
     } catch (const Malformed& e) {
-      problem(pos, std::string("a malformed ") + OpName(f.op) + " record: " + e.what);
-      return res;
+      const std::string why = std::string("a malformed ") + OpName(f.op) + " record: " + e.what;
+      if (!lenient) Fail(pos, why);
+      // The frame is whole, a field inside it is not: leave the record out. When its length was
+      // the damaged field, the next record is not where it says: resynchronise.
+      std::uint64_t next = f.end();
+      Frame g;
+      const bool next_whole = next == size_ || (FrameAt(data_, size_, next, g).empty() &&
+                                                ContentReads(g.op, g.content));
+      if (!next_whole) next = NextRecord(pos + 1).value_or(size_);
+      damaged(pos, next - pos, why + " (skipped " + std::to_string(next - pos) + " bytes)");
+      ++res.records_skipped;
+      lost_chunk = kNone;
+      pos = next;
+      continue;
     }
-    crc = Crc32(crc, std::span<const std::uint8_t>(data_ + pos, static_cast<std::size_t>(f.end() - pos)));
     pos = f.end();
     res.good_until = pos;
   }
   // The footer at the end of the file (and the magic after it), whose CRC covers the summary;
-  // then the summary's records between the data end and the footer.
+  // then the summary's records between the data end and the footer. A lenient scan needs none
+  // of it (the caller rebuilds the summary), and only says what it found.
   const std::uint64_t summary_pos = pos;
   if (size_ - pos < kFooterRecord + 8) {
     problem(pos, "truncated: the file ends after the data end record, before its footer");
@@ -999,6 +1246,7 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     const std::uint64_t summary_start = r.U64("summary_start");
     r.U64("summary_offset_start");
     const std::uint32_t stored = r.U32("summary_crc");
+    res.summary = summary_start != 0;
     if (stored != 0) {
       const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
       if (got != stored) {
@@ -1028,7 +1276,7 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     }
     pos = f.end();
   }
-  res.complete = true;
+  res.complete = res.problem.empty();
   if (v.on_progress) v.on_progress(size_);
   return res;
 }
@@ -1107,7 +1355,9 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
     }
     if (r.op == kMessage) {
       try {
-        on_message(ParseMessage(r.content));
+        Message m = ParseMessage(r.content);
+        m.unchecked = h.crc == 0;
+        on_message(m);
       } catch (const Malformed& e) {
         Fail(pos, std::string("inside the chunk: a malformed message record: ") + e.what);
       }

@@ -67,6 +67,7 @@ struct PlayChannel {
   TopicId topic;
   std::uint32_t key;
   bool play = false;
+  bool repeat = false;  // copies of a world or parameters (RepeatChannelMetadata)
 };
 
 class Player {
@@ -80,7 +81,8 @@ class Player {
   void LoadChunk(std::size_t index);
   void Seek(std::uint64_t pos_ns);
   void PublishLatched(std::uint64_t pos_ns);
-  void Publish(const mcap::Message& m);
+  // `latched`: a world or parameters republished at a seek (a copy may stand in for them).
+  void Publish(const mcap::Message& m, bool latched = false);
   void Step(int n);
   void HandleKeys(const std::string& keys, bool& quit);
   void HandleRequests();
@@ -135,6 +137,14 @@ class Player {
 };
 
 bool Player::Load() {
+  // What `info` refuses, play refuses too (a damaged file: `recover` first); what no CRC checked
+  // plays, and says so.
+  const mcap::ScanResult check = CheckWholeFile(reader_, "check");
+  if (check.chunks_unchecked > 0 && check.data_crc != mcap::ScanResult::DataCrc::kMatched) {
+    out_ << "vdyn-recorder play: " << o_.file.string() << ": " << check.messages_unchecked
+         << " messages lie in chunks without a CRC: nothing checked their bytes (vdyn-recorder "
+            "info)\n";
+  }
   const auto summary = reader_.ReadSummary();
   if (!summary || !summary->statistics) {
     out_ << "vdyn-recorder play: " << o_.file.string()
@@ -148,14 +158,13 @@ bool Player::Load() {
   first_ = summary->statistics->message_start_time;
   last_ = summary->statistics->message_end_time;
   std::set<std::uint32_t> vehicles;
-  for (const mcap::Channel& c : summary->channels) {
-    const auto info = ParseChannelInfo(c);
-    if (!info) continue;
-    PlayChannel pc{info->topic, info->key, false};
-    pc.play = o_.topics.count(transport::Spec(info->topic).name) != 0 &&
-              (!o_.vehicle || ServerKeyed(info->topic) || info->key == *o_.vehicle);
-    if (pc.play && info->topic == TopicId::kState) vehicles.insert(info->key);
-    channels_[c.id] = pc;
+  for (const auto& [id, info] : VdynChannels(*summary)) {
+    // Copies of the world and parameters serve when the first is lost; they are not replayed.
+    PlayChannel pc{info.topic, info.key, false, info.repeat};
+    pc.play = o_.topics.count(transport::Spec(info.topic).name) != 0 &&
+              (!o_.vehicle || ServerKeyed(info.topic) || info.key == *o_.vehicle);
+    if (pc.play && info.topic == TopicId::kState) vehicles.insert(info.key);
+    channels_[id] = pc;
   }
   if (vehicles.empty()) {
     out_ << "vdyn-recorder play: no vehicle states to play in " << o_.file.string() << "\n";
@@ -212,24 +221,26 @@ void Player::Seek(std::uint64_t pos) {
 }
 
 void Player::PublishLatched(std::uint64_t pos) {
-  // The newest world and parameters of each channel as of pos (the first ones when none yet).
-  std::map<std::uint16_t, const Latched*> newest;
+  // The newest world and parameters of each topic and key as of pos (the first ones when none
+  // yet); a copy (repeat channel) counts as the message it copies.
+  std::map<std::pair<TopicId, std::uint32_t>, const Latched*> newest;
   for (const Latched& l : latched_) {
-    auto& n = newest[l.channel];
-    if (n == nullptr || l.t <= pos) n = &l;
+    const PlayChannel& c = channels_.at(l.channel);
+    auto& n = newest[{c.topic, c.key}];
+    if (n == nullptr || (l.t <= pos && (l.t > n->t || n->t > pos))) n = &l;
   }
-  for (const auto& [ch, l] : newest) {
+  for (const auto& [id, l] : newest) {
     mcap::Message m;
-    m.channel_id = ch;
+    m.channel_id = l->channel;
     m.log_time = first_ + l->t;
     m.data = l->data;
-    Publish(m);
+    Publish(m, /*latched=*/true);
   }
 }
 
-void Player::Publish(const mcap::Message& m) {
+void Player::Publish(const mcap::Message& m, bool latched) {
   const auto it = channels_.find(m.channel_id);
-  if (it == channels_.end() || !it->second.play) return;
+  if (it == channels_.end() || !it->second.play || (it->second.repeat && !latched)) return;
   auto& w = writers_[it->second.topic];
   if (!w) w = std::make_unique<transport::RawWriter>(*participant_, it->second.topic);
   if (!w->WriteBytes(it->second.key, m.data)) {

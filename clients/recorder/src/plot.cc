@@ -5,21 +5,26 @@
 // table (io/csv.h), so the figures follow the export and the batch CSV.
 #include <fcntl.h>
 #include <spawn.h>
+#include <stdlib.h>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <charconv>
-#include <optional>
 #include <cmath>
 #include <cstring>
 #include <fstream>
 #include <limits>
 #include <map>
+#include <optional>
 #include <set>
+#include <sstream>
 
 #include "vdyn/io/csv.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/world.pb.h"
@@ -32,24 +37,53 @@ using transport::TopicId;
 
 namespace {
 
-constexpr std::size_t kMaxRows = 20000;  // per figure: finer than any screen
-constexpr int kMapCells = 400;
+namespace fs = std::filesystem;
 
-struct Figure {
-  std::string file;      // without extension
-  std::string title;
+constexpr std::size_t kMaxRows = 20000;  // per figure: finer than any screen
+constexpr int kMapCells = 400;           // along the map's longer side
+constexpr int kNoSurface = 7;            // a map cell with no surface above it
+
+// One panel of a figure: its lines (CSV column, legend) on one y axis. The y range holds zero and
+// spans at least `min_span` (a drive without braking draws its brake forces flat at zero, not a
+// 0.3 N ripple magnified to fill the panel); `lo`/`hi` fix the ends they name (pedals 0..1).
+struct Panel {
   std::string ylabel;
-  std::vector<std::pair<std::string, std::string>> lines;  // column, legend
-  std::string y2label;   // lines whose legend starts with "y2:" go on the right axis
+  std::vector<std::pair<std::string, std::string>> lines;
+  double min_span = 1;
+  bool nonnegative = false;  // never below zero (a spring or brake force): grow the range upwards
+  double lo = std::numeric_limits<double>::quiet_NaN();
+  double hi = std::numeric_limits<double>::quiet_NaN();
 };
 
-// A top-down map of the world's meshes from (x0, y0), kMapCells square cells a side: each cell
-// holds the surface kind (road, ground, ramp...) of the highest surface above its centre, NaN
-// where there is none; rasterised triangle by triangle.
-std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double y0, double cell) {
-  const std::size_t n = static_cast<std::size_t>(kMapCells) * kMapCells;
+struct Figure {
+  std::string file;  // without extension
+  std::string title;
+  std::vector<Panel> panels;  // stacked, sharing the time axis
+};
+
+// The bounds of the world's surfaces in x and y (nullopt for a world without vertices).
+std::optional<std::array<double, 4>> WorldBounds(const pb::WorldDescription& w) {
+  std::array<double, 4> b = {1e300, -1e300, 1e300, -1e300};
+  bool any = false;
+  for (const pb::Mesh& m : w.meshes()) {
+    for (int i = 0; i + 2 < m.vertices_size(); i += 3) {
+      const double x = m.vertices(i), y = m.vertices(i + 1);
+      if (!std::isfinite(x) || !std::isfinite(y)) continue;
+      b = {std::min(b[0], x), std::max(b[1], x), std::min(b[2], y), std::max(b[3], y)};
+      any = true;
+    }
+  }
+  return any ? std::optional(b) : std::nullopt;
+}
+
+// A top-down map of the world's meshes from (x0, y0), nx by ny cells of cx by cy metres: each
+// cell holds the surface kind (road, ground, ramp...) of the highest surface above its centre,
+// kNoSurface where there is none; rasterised triangle by triangle.
+std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double y0, double cx_m,
+                               double cy_m, int nx, int ny) {
+  const std::size_t n = static_cast<std::size_t>(nx) * static_cast<std::size_t>(ny);
   std::vector<double> z(n, std::numeric_limits<double>::quiet_NaN());
-  std::vector<double> kind(n, std::numeric_limits<double>::quiet_NaN());
+  std::vector<double> kind(n, kNoSurface);
   for (const pb::Mesh& m : w.meshes()) {
     const int nv = m.vertices_size() / 3;
     for (int t = 0; t + 2 < m.indices_size(); t += 3) {
@@ -60,24 +94,29 @@ std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double 
       const double bx = V(ib, 0), by = V(ib, 1), bz = V(ib, 2);
       const double cx = V(ic, 0), cy = V(ic, 1), cz = V(ic, 2);
       const double det = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy);
-      if (std::abs(det) < 1e-12) continue;  // vertical or degenerate: no top
-      const int i0 = std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cell)));
-      const int i1 = std::min(kMapCells - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cell)));
-      const int j0 = std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cell)));
-      const int j1 = std::min(kMapCells - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cell)));
+      if (!(std::abs(det) >= 1e-12)) continue;  // vertical, degenerate or not finite: no top
+      const int i0 =
+          std::max(0, static_cast<int>(std::floor((std::min({ax, bx, cx}) - x0) / cx_m)));
+      const int i1 =
+          std::min(nx - 1, static_cast<int>(std::floor((std::max({ax, bx, cx}) - x0) / cx_m)));
+      const int j0 =
+          std::max(0, static_cast<int>(std::floor((std::min({ay, by, cy}) - y0) / cy_m)));
+      const int j1 =
+          std::min(ny - 1, static_cast<int>(std::floor((std::max({ay, by, cy}) - y0) / cy_m)));
       for (int j = j0; j <= j1; ++j) {
-        const double py = y0 + (j + 0.5) * cell;
+        const double py = y0 + (j + 0.5) * cy_m;
         for (int i = i0; i <= i1; ++i) {
-          const double px = x0 + (i + 0.5) * cell;
+          const double px = x0 + (i + 0.5) * cx_m;
           const double l1 = ((by - cy) * (px - cx) + (cx - bx) * (py - cy)) / det;
           const double l2 = ((cy - ay) * (px - cx) + (ax - cx) * (py - cy)) / det;
           const double l3 = 1.0 - l1 - l2;
           if (l1 < 0 || l2 < 0 || l3 < 0) continue;
           const double h = l1 * az + l2 * bz + l3 * cz;
-          double& cellz = z[static_cast<std::size_t>(j) * kMapCells + static_cast<std::size_t>(i)];
-          if (std::isnan(cellz) || h > cellz) {
-            cellz = h;
-            kind[static_cast<std::size_t>(j) * kMapCells + static_cast<std::size_t>(i)] = static_cast<double>(m.kind());
+          const std::size_t at = static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
+                                 static_cast<std::size_t>(i);
+          if (std::isnan(z[at]) || h > z[at]) {
+            z[at] = h;
+            kind[at] = static_cast<double>(std::clamp<int>(m.kind(), 0, kNoSurface - 1));
           }
         }
       }
@@ -106,33 +145,121 @@ std::string Html(const std::string& s) {
   return o;
 }
 
-int RunGnuplot(const std::string& gnuplot, const std::filesystem::path& script, std::ostream& out) {
-  std::vector<std::string> args = {gnuplot, script.filename().string()};
+// A scratch folder inside the output folder (so its files are renamed into place, never
+// copied), removed with whatever is left in it.
+class ScratchFolder {
+ public:
+  explicit ScratchFolder(const fs::path& parent) {
+    std::string tmpl = (fs::absolute(parent) / ".plot-partial-XXXXXX").string();
+    if (::mkdtemp(tmpl.data()) == nullptr) {
+      throw OutputError(parent.string() +
+                        ": cannot create a scratch folder in it: " + std::strerror(errno));
+    }
+    path_ = tmpl;
+  }
+  ~ScratchFolder() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  ScratchFolder(const ScratchFolder&) = delete;
+  ScratchFolder& operator=(const ScratchFolder&) = delete;
+  const fs::path& path() const { return path_; }
+
+ private:
+  fs::path path_;
+};
+
+// `name` found on PATH (or a path itself), else empty.
+std::string FindProgram(const std::string& name) {
+  if (name.find('/') != std::string::npos)
+    return ::access(name.c_str(), X_OK) == 0 ? name : std::string();
+  const char* path = std::getenv("PATH");
+  std::string dirs = path != nullptr ? path : "/usr/bin:/bin";
+  std::size_t at = 0;
+  while (at <= dirs.size()) {
+    std::size_t end = dirs.find(':', at);
+    if (end == std::string::npos) end = dirs.size();
+    const std::string candidate =
+        (end > at ? dirs.substr(at, end - at) : std::string(".")) + "/" + name;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate;
+    at = end + 1;
+  }
+  return {};
+}
+
+// Runs gnuplot on `folder`/plot.gp inside `folder` (an absolute path); its messages go to
+// `folder`/gnuplot.log. Every error names its own cause.
+int RunGnuplot(const std::string& gnuplot, const fs::path& folder, std::ostream& out) {
+  const std::string program = FindProgram(gnuplot);
+  if (program.empty()) {
+    out << "vdyn-recorder plot: cannot run '" << gnuplot << "': not found"
+        << (gnuplot.find('/') == std::string::npos ? " on PATH" : "")
+        << " (install gnuplot-nox: scripts/install-deps.sh)\n";
+    return 1;
+  }
+  const fs::path log = folder / "gnuplot.log";
+  const int log_fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (log_fd < 0) {
+    out << "vdyn-recorder plot: cannot create " << log.string() << ": " << std::strerror(errno)
+        << "\n";
+    return 1;
+  }
+  std::vector<std::string> args = {program, "plot.gp"};
   std::vector<char*> argv;
   for (std::string& a : args) argv.push_back(a.data());
   argv.push_back(nullptr);
   posix_spawn_file_actions_t fa;
   posix_spawn_file_actions_init(&fa);
-  posix_spawn_file_actions_addchdir_np(&fa, script.parent_path().c_str());
-  const std::string log = (script.parent_path() / "gnuplot.log").string();
-  posix_spawn_file_actions_addopen(&fa, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  posix_spawn_file_actions_adddup2(&fa, log_fd, 2);
+  posix_spawn_file_actions_addchdir_np(&fa, folder.c_str());
   pid_t pid = -1;
-  const int rc = posix_spawnp(&pid, gnuplot.c_str(), &fa, nullptr, argv.data(), environ);
+  const int rc = posix_spawn(&pid, program.c_str(), &fa, nullptr, argv.data(), environ);
   posix_spawn_file_actions_destroy(&fa);
+  ::close(log_fd);
   if (rc != 0) {
-    out << "vdyn-recorder plot: cannot run '" << gnuplot << "': " << std::strerror(rc)
-        << " (install gnuplot-nox: scripts/install-deps.sh)\n";
+    out << "vdyn-recorder plot: cannot start " << program << " in " << folder.string() << ": "
+        << std::strerror(rc) << "\n";
     return 1;
   }
   int status = 0;
   while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
   }
+  std::ostringstream text;
+  if (std::ifstream in(log); in && in.peek() != std::ifstream::traits_type::eof())
+    text << in.rdbuf();
+  const std::string said = text.str();
   if (!WIFEXITED(status) || WEXITSTATUS(status) != 0) {
-    std::ifstream in(log);
-    out << "vdyn-recorder plot: gnuplot failed on " << script.string() << ":\n" << in.rdbuf() << "\n";
+    out << "vdyn-recorder plot: gnuplot failed on plot.gp:\n" << said << "\n";
     return 1;
   }
+  // The figures are drawn; what gnuplot had to say about them is worth reading.
+  if (!said.empty()) out << "vdyn-recorder plot: gnuplot said:\n" << said;
   return 0;
+}
+
+// The y range of a panel: the data's, holding 0, at least min_span wide, a margin each side.
+std::pair<double, double> PanelRange(const Panel& p, double lo, double hi) {
+  if (!(lo <= hi)) lo = hi = 0;  // no finite value
+  lo = std::min(lo, 0.0);
+  hi = std::max(hi, 0.0);
+  if (hi - lo < p.min_span) {
+    const double grow = p.min_span - (hi - lo);
+    // Grow away from zero: a signal above it stays at the bottom, one below at the top; one
+    // that is zero throughout sits in the middle, unless it cannot go negative.
+    if (lo < 0 && hi <= 0) {
+      lo -= grow;
+    } else if (lo >= 0 && (hi > 0 || p.nonnegative)) {
+      hi += grow;
+    } else {
+      lo -= grow / 2;
+      hi += grow / 2;
+    }
+  }
+  // A margin each side: a line at the range's end (a force at rest at zero) stays in sight.
+  const double margin = 0.05 * (hi - lo);
+  lo = std::isnan(p.lo) ? lo - margin : std::min(p.lo, lo);
+  hi = std::isnan(p.hi) ? hi + margin : std::max(p.hi, hi);
+  return {lo, hi};
 }
 
 }  // namespace
@@ -143,20 +270,30 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     return 2;
   }
   mcap::Reader reader(o.file);
-  std::filesystem::path dir = o.out_dir;
+  fs::path dir = o.out_dir;
   if (dir.empty()) {
     dir = o.file;
     dir.replace_filename(o.file.stem().string() + "-plots");
   }
-  std::filesystem::create_directories(dir);
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) {
+    out << "vdyn-recorder plot: " << dir.string()
+        << " is a file, not a folder: give --out a folder\n";
+    return 2;
+  }
+  fs::create_directories(dir, ec);
+  if (ec) {
+    out << "vdyn-recorder plot: cannot create the folder " << dir.string() << ": " << ec.message()
+        << "\n";
+    return 1;
+  }
   // Vehicle and the size of its state channel (for decimation), from the summary.
   std::map<std::uint32_t, std::uint64_t> state_counts;
   if (auto s = reader.ReadSummary(); s && s->statistics) {
-    for (const mcap::Channel& c : s->channels) {
-      const auto info = ParseChannelInfo(c);
-      if (!info || info->topic != TopicId::kState) continue;
-      const auto n = s->statistics->channel_message_counts.find(c.id);
-      state_counts[info->key] += n == s->statistics->channel_message_counts.end() ? 0 : n->second;
+    for (const auto& [id, info] : VdynChannels(*s)) {
+      if (info.topic != TopicId::kState) continue;
+      const auto n = s->statistics->channel_message_counts.find(id);
+      state_counts[info.key] += n == s->statistics->channel_message_counts.end() ? 0 : n->second;
     }
   } else {
     out << "vdyn-recorder plot: " << o.file.string()
@@ -181,22 +318,36 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     return it == names.end() ? -1 : static_cast<int>(it - names.begin());
   };
   const std::vector<std::string> wheels = {"LF", "RF", "LR", "RR"};
-  std::vector<Figure> figures = {
-      {"speed", "Speed", "km/h", {{"speed_kmh", "speed"}, {"cruise_set_kmh", "cruise set speed"}}, ""},
-      {"acceleration", "Acceleration of T, body axes (kinematic)", "m/s^2",
-       {{"ax_mps2", "a_x (forward)"}, {"ay_mps2", "a_y (left)"}, {"az_mps2", "a_z (up)"}}, ""},
-      {"spring_forces", "Spring (normal) force per wheel", "N", {}, ""},
-      {"drive_forces", "Drive force per wheel", "N", {}, ""},
-      {"brake_forces", "Brake force per wheel", "N", {}, ""},
-      {"side_forces", "Side force per wheel (positive left)", "N", {}, ""},
-      {"controls", "Steering and pedals", "road-wheel angle, rad",
-       {{"steer_in_rad", "steer input"}, {"y2:throttle_in", "throttle input"}, {"y2:brake_in", "brake input"},
-        {"y2:throttle", "throttle applied"}, {"y2:brake", "brake applied"}}, "pedal, 0..1"},
+  auto per_wheel = [&](const char* prefix) {
+    std::vector<std::pair<std::string, std::string>> lines;
+    for (const std::string& w : wheels) lines.push_back({std::string(prefix) + "_" + w + "_N", w});
+    return lines;
   };
-  const char* prefixes[] = {"Fp", "Fh", "Fb", "Fy"};
-  for (int f = 0; f < 4; ++f) {
-    for (const std::string& w : wheels) figures[2 + static_cast<std::size_t>(f)].lines.push_back({std::string(prefixes[f]) + "_" + w + "_N", w});
-  }
+  std::vector<Figure> figures = {
+      {"speed",
+       "Speed",
+       {{"km/h", {{"speed_kmh", "speed"}, {"cruise_set_kmh", "cruise set speed"}}, 10}}},
+      {"acceleration",
+       "Acceleration of T, body axes (kinematic)",
+       {{"m/s^2",
+         {{"ax_mps2", "a_x (forward)"}, {"ay_mps2", "a_y (left)"}, {"az_mps2", "a_z (up)"}},
+         2}}},
+      {"spring_forces", "Spring (normal) force per wheel", {{"N", per_wheel("Fp"), 200, true}}},
+      {"drive_forces", "Drive force per wheel", {{"N", per_wheel("Fh"), 200}}},
+      {"brake_forces", "Brake force per wheel", {{"N", per_wheel("Fb"), 200, true}}},
+      {"side_forces", "Side force per wheel (positive left)", {{"N", per_wheel("Fy"), 200}}},
+      // The pedals on panels of their own, 0..1 with a margin: a pedal at rest is a visible line.
+      {"controls",
+       "Steering and pedals",
+       {{"steering, rad", {{"steer_in_rad", "steer input"}}, 0.05},
+        {"throttle, 0..1",
+         {{"throttle_in", "input"}, {"throttle", "applied"}},
+         1,
+         true,
+         -0.05,
+         1.05},
+        {"brake, 0..1", {{"brake_in", "input"}, {"brake", "applied"}}, 1, true, -0.05, 1.05}}},
+  };
   std::vector<int> data_cols;  // CSV column index of each data-file column
   std::map<std::string, int> data_col_of;
   auto use = [&](const std::string& n) {
@@ -215,25 +366,35 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     return 1;
   }
   for (Figure& f : figures) {
-    std::vector<std::pair<std::string, std::string>> kept;
-    for (auto& [c, legend] : f.lines) {
-      const std::string name = c.rfind("y2:", 0) == 0 ? c.substr(3) : c;
-      if (use(name)) kept.push_back({c, legend});
-      else skipped.push_back(name);
+    for (Panel& p : f.panels) {
+      std::vector<std::pair<std::string, std::string>> kept;
+      for (auto& [c, legend] : p.lines) {
+        if (use(c))
+          kept.push_back({c, legend});
+        else
+          skipped.push_back(c);
+      }
+      p.lines = kept;
     }
-    f.lines = kept;
+    std::erase_if(f.panels, [](const Panel& p) { return p.lines.empty(); });
   }
+
+  // Everything is made in a scratch folder inside the output folder and renamed into place once
+  // gnuplot has drawn it all: an error leaves the folder as it was, and no output replaces the
+  // recording (whatever it is called).
+  const ScratchFolder work(dir);
 
   // The data: every stride-th state of the vehicle in the time range.
   const std::uint64_t start = FirstLogTime(reader);
   const auto from = start + static_cast<std::uint64_t>(o.from_s * 1e9);
   const auto to = o.to_s ? start + static_cast<std::uint64_t>(*o.to_s * 1e9) : ~0ull;
-  std::ofstream data(dir / "states.dat");
+  std::ofstream data(work.path() / "states.dat");
   data << "#";
   for (int c : data_cols) data << " " << names[static_cast<std::size_t>(c)];
   data << "\n";
   pb::VehicleState state;
   std::vector<double> values;
+  std::vector<double> col_lo(data_cols.size(), 1e300), col_hi(data_cols.size(), -1e300);
   std::optional<pb::WorldDescription> world;
   std::uint64_t n = 0, rows = 0;
   double x_lo = 1e300, x_hi = -1e300, y_lo = 1e300, y_hi = -1e300, top_kmh = 0, distance = 0;
@@ -271,6 +432,10 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     CsvRowValues(state, values);
     for (std::size_t i = 0; i < data_cols.size(); ++i) {
       const double val = values[static_cast<std::size_t>(data_cols[i])];
+      if (std::isfinite(val)) {
+        col_lo[i] = std::min(col_lo[i], val);
+        col_hi[i] = std::max(col_hi[i], val);
+      }
       const auto r = std::to_chars(buf, buf + sizeof buf, val);
       data << (i ? " " : "") << std::string_view(buf, static_cast<std::size_t>(r.ptr - buf));
     }
@@ -284,76 +449,124 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     out << "vdyn-recorder plot: no states of vehicle " << vehicle << " in the time range\n";
     return 1;
   }
+  std::vector<std::string> outputs = {"states.dat", "plot.gp"};
 
-  // The map: the trajectory's bounds with a margin, square cells.
+  // The map: the trajectory's bounds with a margin, within the world's surfaces (no empty band
+  // where the world ends), square cells.
   const bool map = have_xy && world.has_value();
-  double mx0 = 0, my0 = 0, cell = 1;
+  double mx0 = 0, my0 = 0, cell_x = 1, cell_y = 1;
+  int nx = 0, ny = 0;
   if (map) {
-    const double span = std::max({x_hi - x_lo, y_hi - y_lo, 40.0}) * 1.3;
-    cell = span / kMapCells;
-    mx0 = 0.5 * (x_lo + x_hi) - 0.5 * span;
-    my0 = 0.5 * (y_lo + y_hi) - 0.5 * span;
-    const std::vector<double> z = SurfaceMap(*world, mx0, my0, cell);
-    std::ofstream mf(dir / "map.dat");
+    const double margin = std::max(20.0, 0.1 * std::max(x_hi - x_lo, y_hi - y_lo));
+    double x0 = x_lo - margin, x1 = x_hi + margin, y0 = y_lo - margin, y1 = y_hi + margin;
+    if (const auto b = WorldBounds(*world)) {
+      // Clipped to the surfaces, as long as the trajectory stays inside what is left.
+      if (std::max(x0, (*b)[0]) <= x_lo && std::min(x1, (*b)[1]) >= x_hi) {
+        x0 = std::max(x0, (*b)[0]);
+        x1 = std::min(x1, (*b)[1]);
+      }
+      if (std::max(y0, (*b)[2]) <= y_lo && std::min(y1, (*b)[3]) >= y_hi) {
+        y0 = std::max(y0, (*b)[2]);
+        y1 = std::min(y1, (*b)[3]);
+      }
+    }
+    // kMapCells along the longer side, as many on the other as keep the cells nearly square; the
+    // cells tile the area exactly (no row half outside the world).
+    const double longer = std::max({x1 - x0, y1 - y0, 1.0});
+    nx = std::clamp(static_cast<int>(std::lround(kMapCells * (x1 - x0) / longer)), 2, kMapCells);
+    ny = std::clamp(static_cast<int>(std::lround(kMapCells * (y1 - y0) / longer)), 2, kMapCells);
+    cell_x = std::max(x1 - x0, 1e-3) / nx;
+    cell_y = std::max(y1 - y0, 1e-3) / ny;
+    mx0 = x0;
+    my0 = y0;
+    const std::vector<double> kind = SurfaceMap(*world, mx0, my0, cell_x, cell_y, nx, ny);
+    std::ofstream mf(work.path() / "map.dat");
     // gnuplot's "nonuniform matrix": first row the x of each column, then y and the row's values.
-    mf << kMapCells;
-    for (int i = 0; i < kMapCells; ++i) mf << " " << mx0 + (i + 0.5) * cell;
+    mf << nx;
+    for (int i = 0; i < nx; ++i) mf << " " << mx0 + (i + 0.5) * cell_x;
     mf << "\n";
-    for (int j = 0; j < kMapCells; ++j) {
-      mf << my0 + (j + 0.5) * cell;
-      for (int i = 0; i < kMapCells; ++i) {
-        const double h = z[static_cast<std::size_t>(j) * kMapCells + static_cast<std::size_t>(i)];
-        mf << " ";
-        if (std::isnan(h)) mf << "NaN"; else mf << h;
+    for (int j = 0; j < ny; ++j) {
+      mf << my0 + (j + 0.5) * cell_y;
+      for (int i = 0; i < nx; ++i) {
+        mf << " "
+           << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
+                   static_cast<std::size_t>(i)];
       }
       mf << "\n";
     }
+    outputs.push_back("map.dat");
   }
 
   // The gnuplot script: one terminal per figure.
   const std::string ext = o.format;
-  const std::string term = o.format == "png" ? "pngcairo size 1200,480 font 'sans,10'" : "svg size 1200,480 dynamic font 'sans,10'";
-  std::ofstream gp(dir / "plot.gp");
+  auto terminal = [&](int width, int height) {
+    return std::string(o.format == "png" ? "pngcairo" : "svg") + " size " + std::to_string(width) +
+           "," + std::to_string(height) + (o.format == "png" ? "" : " dynamic") + " font 'sans,10'";
+  };
+  std::ofstream gp(work.path() / "plot.gp");
   gp << "# Written by vdyn-recorder plot from " << o.file.filename().string() << "; run: gnuplot plot.gp\n";
-  gp << "set terminal " << term << "\nset grid\nset key outside right top\nset xlabel 'time, s'\n";
-  gp << "set datafile missing 'NaN'\n";
+  gp << "set grid\nset key outside right top\n";
   std::vector<std::string> made;
   for (const Figure& f : figures) {
-    if (f.lines.empty()) continue;
+    if (f.panels.empty()) continue;
+    const int panels = static_cast<int>(f.panels.size());
+    gp << "set terminal " << terminal(1200, panels == 1 ? 480 : 200 + 220 * panels) << "\n";
     gp << "set output '" << f.file << "." << ext << "'\n";
-    gp << "set title \"" << Escape(f.title) << " (vehicle " << vehicle << ")\"\n";
-    gp << "set ylabel '" << f.ylabel << "'\n";
-    const bool y2 = !f.y2label.empty();
-    if (y2) gp << "set y2label '" << f.y2label << "'\nset y2tics\nset ytics nomirror\n";
-    gp << "plot ";
-    for (std::size_t i = 0; i < f.lines.size(); ++i) {
-      const bool right = f.lines[i].first.rfind("y2:", 0) == 0;
-      const std::string name = right ? f.lines[i].first.substr(3) : f.lines[i].first;
-      gp << (i ? ", " : "") << "'states.dat' using " << data_col_of["t_s"] << ":" << data_col_of[name]
-         << " with lines lw 1.5 dt " << (f.lines[i].second == "RF" || f.lines[i].second == "RR" ? 2 : 1)
-         << " title \"" << Escape(f.lines[i].second) << "\"" << (right ? " axes x1y2" : "");
+    const std::string title = Escape(f.title) + " (vehicle " + std::to_string(vehicle) + ")";
+    if (panels > 1) {
+      // The same margins on every panel, so their time axes line up whatever their legends.
+      gp << "set multiplot layout " << panels << ",1 title \"" << title << "\"\nunset title\n";
+      gp << "set lmargin 12\nset rmargin 18\n";
+    } else {
+      gp << "set title \"" << title << "\"\n";
     }
-    gp << "\n";
-    if (y2) gp << "unset y2label\nunset y2tics\nset ytics mirror\n";
+    for (int pi = 0; pi < panels; ++pi) {
+      const Panel& p = f.panels[static_cast<std::size_t>(pi)];
+      double lo = 1e300, hi = -1e300;
+      for (const auto& [c, legend] : p.lines) {
+        const std::size_t k = static_cast<std::size_t>(data_col_of[c] - 1);
+        lo = std::min(lo, col_lo[k]);
+        hi = std::max(hi, col_hi[k]);
+      }
+      const auto [ylo, yhi] = PanelRange(p, lo, hi);
+      gp << "set ylabel '" << p.ylabel << "'\nset yrange [" << ylo << ":" << yhi << "]\n";
+      gp << "set xlabel '" << (pi + 1 == panels ? "time, s" : "") << "'\n";
+      gp << "plot ";
+      for (std::size_t i = 0; i < p.lines.size(); ++i) {
+        const auto& [c, legend] = p.lines[i];
+        // Dashed: the right wheels, and an input under what was applied.
+        const bool dashed = legend == "RF" || legend == "RR" || legend == "input";
+        gp << (i ? ", " : "") << "'states.dat' using " << data_col_of["t_s"] << ":"
+           << data_col_of[c] << " with lines lw " << (legend == "input" ? 2.5 : 1.5) << " dt "
+           << (dashed ? 2 : 1) << " title \"" << Escape(legend) << "\"";
+      }
+      gp << "\n";
+    }
+    if (panels > 1) gp << "unset multiplot\nset lmargin -1\nset rmargin -1\n";
+    gp << "set autoscale y\n";
     made.push_back(f.file);
   }
   if (map) {
-    const std::string sq = o.format == "png" ? "pngcairo size 900,800 font 'sans,10'" : "svg size 900,800 dynamic font 'sans,10'";
-    gp << "set terminal " << sq << "\nset output 'trajectory." << ext << "'\n";
+    // As wide as the page, as tall as the map's shape needs (the plot area is about 740 px wide).
+    const double aspect = (ny * cell_y) / (nx * cell_x);
+    const int height = std::clamp(static_cast<int>(740 * aspect) + 180, 360, 1100);
+    gp << "set terminal " << terminal(1000, height) << "\nset output 'trajectory." << ext << "'\n";
     gp << "set title \"Trajectory of vehicle " << vehicle << " over world '" << Escape(world->name())
        << "'\"\n";
     gp << "set xlabel 'x, m'\nset ylabel 'y, m'\nset size ratio -1\nset key outside bottom center horizontal\n";
-    // Surface kinds (world.proto's SurfaceKind), one colour each.
+    // Surface kinds (world.proto's SurfaceKind), one colour each, and the cells without one.
     // A step palette: each kind one flat colour over [k - 0.5, k + 0.5].
     gp << "set palette defined (";
-    const char* colours[] = {"#74a57f", "#9a9a9a", "#e07a1f", "#8d6e63", "#e9c46a", "#c1121f", "#7b2cbf"};
-    for (int k = 0; k < 7; ++k) {
+    const char* colours[] = {"#74a57f", "#9a9a9a", "#e07a1f", "#8d6e63",
+                             "#e9c46a", "#c1121f", "#7b2cbf", "#f4f4f4"};
+    for (int k = 0; k <= kNoSurface; ++k) {
       gp << (k ? ", " : "") << k - 0.5 << " '" << colours[k] << "', " << k + 0.5 << " '" << colours[k] << "'";
     }
-    gp << ")\nset cbrange [-0.5:6.5]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, 'rough' 3, "
-          "'ramp' 4, 'barrier' 5, 'prop' 6)\nunset cblabel\n";
-    gp << "set xrange [" << mx0 << ":" << mx0 + kMapCells * cell << "]\nset yrange [" << my0 << ":"
-       << my0 + kMapCells * cell << "]\n";
+    gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5
+       << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
+          "'rough' 3, 'ramp' 4, 'barrier' 5, 'prop' 6, 'no surface' 7)\nunset cblabel\n";
+    gp << "set xrange [" << mx0 << ":" << mx0 + nx * cell_x << "]\nset yrange [" << my0 << ":"
+       << my0 + ny * cell_y << "]\n";
     gp << "plot 'map.dat' nonuniform matrix with image notitle, "
        << "'states.dat' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
        << " with lines lw 2.5 lc rgb '#c1121f' title 'trajectory', "
@@ -365,10 +578,11 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   }
   gp << "unset output\n";
   gp.close();
-  if (const int rc = RunGnuplot(o.gnuplot, dir / "plot.gp", out); rc != 0) return rc;
+  if (const int rc = RunGnuplot(o.gnuplot, work.path(), out); rc != 0) return rc;
+  for (const std::string& f : made) outputs.push_back(f + "." + ext);
 
   // One page that shows them all.
-  std::ofstream html(dir / "index.html");
+  std::ofstream html(work.path() / "index.html");
   html << "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>vdyn recording: "
        << Html(o.file.filename().string()) << "</title>\n<style>body{font-family:sans-serif;margin:2em;"
        << "max-width:1250px}img,object{width:100%;border:1px solid #ddd;margin:0.5em 0}"
@@ -398,6 +612,10 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   }
   html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
   html.close();
+  outputs.push_back("index.html");
+  // Into place, all checked against the recording first (none moves when one may not).
+  for (const std::string& f : outputs) CheckNotAnInput(dir / f, {o.file});
+  for (const std::string& f : outputs) MoveInto(work.path() / f, dir / f, {o.file});
   out << made.size() << " figures (" << o.format << ") and index.html in " << dir.string() << "\n";
   return 0;
 }

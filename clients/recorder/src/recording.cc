@@ -11,6 +11,7 @@
 #include "vdyn/control.pb.h"
 #include "vdyn/diagnostics.pb.h"
 #include "vdyn/input.pb.h"
+#include "vdyn/recorder/commands.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/vehicle_params.pb.h"
@@ -72,7 +73,13 @@ mcap::StringMap ChannelMetadata(TopicId topic, std::uint32_t key) {
   return m;
 }
 
-std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c) {
+mcap::StringMap RepeatChannelMetadata(TopicId topic, std::uint32_t key) {
+  mcap::StringMap m = ChannelMetadata(topic, key);
+  m["repeat_of"] = ChannelTopic(topic, key);
+  return m;
+}
+
+std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c, const mcap::Schema* schema) {
   const auto topic = c.metadata.find("dds_topic");
   const auto key = c.metadata.find("key");
   if (topic == c.metadata.end() || key == c.metadata.end()) return std::nullopt;
@@ -81,18 +88,59 @@ std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c) {
   char* end = nullptr;
   const unsigned long long k = std::strtoull(key->second.c_str(), &end, 10);
   if (key->second.empty() || *end != '\0' || k > 0xffffffffull) return std::nullopt;
-  return ChannelInfo{spec->id, static_cast<std::uint32_t>(k)};
+  if (schema != nullptr) {
+    // Our names on another type or encoding are not ours.
+    const auto* d = PayloadDescriptor(spec->id);
+    if (c.message_encoding != "protobuf" || schema->encoding != "protobuf" || d == nullptr ||
+        schema->name != d->full_name()) {
+      return std::nullopt;
+    }
+  }
+  return ChannelInfo{spec->id, static_cast<std::uint32_t>(k), c.metadata.count("repeat_of") != 0};
+}
+
+std::map<std::uint16_t, ChannelInfo> VdynChannels(const mcap::Reader::Summary& s) {
+  std::map<std::uint16_t, const mcap::Schema*> schemas;
+  for (const mcap::Schema& sc : s.schemas) schemas[sc.id] = &sc;
+  std::map<std::uint16_t, ChannelInfo> out;
+  for (const mcap::Channel& c : s.channels) {
+    const auto it = schemas.find(c.schema_id);
+    if (it == schemas.end()) continue;
+    if (const auto info = ParseChannelInfo(c, it->second)) out[c.id] = *info;
+  }
+  return out;
 }
 
 mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisitor& v) {
   std::vector<std::optional<ChannelInfo>> channels(65536);
+  std::vector<std::optional<mcap::Channel>> foreign(v.on_foreign ? 65536 : 0);
+  std::map<std::uint16_t, mcap::Schema> schemas;
   mcap::Visitor mv;
-  mv.on_channel = [&](const mcap::Channel& c) { channels[c.id] = ParseChannelInfo(c); };
+  mv.on_schema = [&](const mcap::Schema& s) { schemas[s.id] = s; };
+  mv.on_channel = [&](const mcap::Channel& c) {
+    const auto s = schemas.find(c.schema_id);
+    channels[c.id] = s == schemas.end() ? std::nullopt : ParseChannelInfo(c, &s->second);
+    if (v.on_foreign) {
+      if (channels[c.id]) {
+        foreign[c.id].reset();
+      } else {
+        foreign[c.id] = c;
+      }
+    }
+  };
   mv.on_message = [&](const mcap::Message& m, std::uint64_t) {
     const auto& info = channels[m.channel_id];
-    if (!info || !v.on_message) return;
+    if (!info) {
+      if (v.on_foreign && foreign[m.channel_id]) {
+        const auto s = schemas.find(foreign[m.channel_id]->schema_id);
+        v.on_foreign(*foreign[m.channel_id], s == schemas.end() ? nullptr : &s->second, m);
+      }
+      return;
+    }
+    if (!v.on_message) return;
     if (v.wants && !v.wants(info->topic)) return;
-    v.on_message({info->topic, info->key, m.log_time, m.publish_time, m.data});
+    v.on_message(
+        {info->topic, info->key, m.log_time, m.publish_time, m.data, info->repeat, m.unchecked});
   };
   mv.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
     if (v.on_metadata) v.on_metadata(m);
@@ -102,6 +150,64 @@ mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisito
     mv.on_progress = [&v, size](std::uint64_t at) { v.on_progress(static_cast<double>(at) / size); };
   }
   return reader.Scan(mv);
+}
+
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload,
+                                           std::uint32_t key) {
+  StateFields f;
+  std::uint64_t id = 0;
+  const bool framed = wire::ForEachField(payload, [&](const wire::Field& w) {
+    if (w.type == 0 && w.number == 1) id = w.value;
+    if (w.type == 0 && w.number == 3) f.step = w.value;
+    if (w.type == 0 && w.number == 5) f.step_ns = w.value;
+    if (w.type == 1 && w.number == 21) f.state_hash = w.value;
+    return true;
+  });
+  if (!framed || id != key) return std::nullopt;
+  return f;
+}
+
+mcap::ScanResult CheckWholeFile(const mcap::Reader& reader, const std::string& label) {
+  Progress progress(label);
+  mcap::Visitor v;
+  v.on_progress = [&](std::uint64_t at) {
+    progress.Update(static_cast<double>(at) / static_cast<double>(reader.size()));
+  };
+  mcap::ScanResult r = reader.Scan(v);
+  progress.Finish();
+  return r;
+}
+
+std::vector<std::string> IntegrityNotes(const std::vector<mcap::Metadata>& meta,
+                                        const mcap::ScanResult& scan, std::uint64_t unchecked,
+                                        const std::string& what) {
+  std::vector<std::string> out;
+  for (const mcap::Metadata& m : meta) {
+    if (m.name != "vdyn.recovered") continue;
+    auto get = [&](const char* k) {
+      const auto it = m.values.find(k);
+      return it == m.values.end() ? std::string("0") : it->second;
+    };
+    const std::string lost = get("messages_lost"), left = get("bytes_left_out");
+    const std::string no_crc = get("unchecked_messages");
+    std::size_t parts = 0;
+    for (const auto& [k, v] : m.values) parts += k.rfind("damage.", 0) == 0 ? 1 : 0;
+    if (parts > 0 || lost != "0") {
+      out.push_back("recovered from " + get("from") + ", which was damaged: " +
+                    std::to_string(parts) + " problems found, " + left + " bytes and " + lost +
+                    " messages known lost (`vdyn-recorder info` lists them)");
+    }
+    if (no_crc != "0") {
+      out.push_back(no_crc + " messages of " + get("from") +
+                    " had no CRC that held when it was recovered: they are unchecked");
+    }
+  }
+  if (unchecked > 0 && scan.data_crc != mcap::ScanResult::DataCrc::kMatched) {
+    out.push_back(std::to_string(unchecked) + " " + what +
+                  " come from chunks without a CRC, and no data-section CRC covers them: "
+                  "nothing checked their bytes");
+  }
+  return out;
 }
 
 std::vector<mcap::Metadata> ReadMetadata(const mcap::Reader& reader) {

@@ -19,6 +19,7 @@
 #include "vdyn/physics/world.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/transport/control_client.h"
@@ -35,12 +36,25 @@ std::string Hex(std::uint64_t v) {
   return b;
 }
 
-struct Server {
-  std::optional<pb::WorldDescription> world;
-  std::vector<pb::SessionEvent> events;
+// A run of a server's events that never reached the recording: the sequence numbers between
+// `before` and `after`.
+struct Hole {
+  std::uint64_t before = 0, after = 0;
+  std::string Text() const {
+    const std::uint64_t n = after - before - 1;
+    return std::to_string(n) + (n == 1 ? " event is" : " events are") + " missing (sequence " +
+           std::to_string(before + 1) + (n == 1 ? "" : ".." + std::to_string(after - 1)) + ")";
+  }
 };
 
-// Every server's world and events (the small part of a recording), in one pass.
+struct Server {
+  std::optional<pb::WorldDescription> world;
+  std::vector<pb::SessionEvent> events;  // by sequence, each once
+  std::vector<Hole> holes;
+};
+
+// Every server's world and events (the small part of a recording), in one pass. A world may come
+// from a copy (the first one's chunk lost).
 std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
                                             const std::function<void(double)>& progress) {
   std::map<std::string, Server> servers;
@@ -65,20 +79,23 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
   for (auto& [id, s] : servers) {
     std::stable_sort(s.events.begin(), s.events.end(),
                      [](const auto& a, const auto& b) { return a.sequence() < b.sequence(); });
+    // The same event twice (a copy in a split part or a recovered file) is one event.
+    s.events.erase(
+        std::unique(s.events.begin(), s.events.end(),
+                    [](const auto& a, const auto& b) { return a.sequence() == b.sequence(); }),
+        s.events.end());
+    for (std::size_t i = 1; i < s.events.size(); ++i) {
+      const std::uint64_t a = s.events[i - 1].sequence(), b = s.events[i].sequence();
+      if (b > a + 1) s.holes.push_back({a, b});
+    }
   }
   return servers;
 }
 
-// Why a server's events cannot be re-simulated, or empty.
+// Why a server's events cannot be re-simulated at all, or empty (a hole in its events stops only
+// the stretch it touches).
 std::string CheckServer(const std::string& id, const Server& s) {
   if (!s.world) return "no world description of server '" + id + "' was recorded (vdyn/world)";
-  for (std::size_t i = 1; i < s.events.size(); ++i) {
-    const std::uint64_t a = s.events[i - 1].sequence(), b = s.events[i].sequence();
-    if (b != a + 1 && b != a) {
-      return std::to_string(b - a - 1) + " events of server '" + id + "' are missing after sequence " +
-             std::to_string(a) + ": the recording lost them";
-    }
-  }
   return {};
 }
 
@@ -125,7 +142,8 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
       }
       case FD::CPPTYPE_FLOAT: {
         const float x = ra->GetFloat(a, f), y = rb->GetFloat(b, f);
-        if (std::memcmp(&x, &y, sizeof x) != 0) out.push_back({name, num(x), num(y)});
+        if (std::memcmp(&x, &y, sizeof x) != 0)
+          out.push_back({name, num(static_cast<double>(x)), num(static_cast<double>(y))});
         break;
       }
       case FD::CPPTYPE_BOOL:
@@ -159,26 +177,109 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
   }
 }
 
+// The step at which an event's last action takes effect (an input batch: its last sample's).
+std::uint64_t LastActionStep(const pb::SessionEvent& e) {
+  const auto& samples = e.input_batch().samples();
+  return e.has_input_batch() && !samples.empty() ? samples.rbegin()->step() : e.step();
+}
+
+// A stretch of one vehicle's replay: from a spawn or checkpoint to the next restart. When events
+// were lost after its start, its replay may lack them from `uncertain_from` on: a hash that
+// differs there is that loss, not a divergence, and the stretch is lost until the next one
+// starts (at the first checkpoint after the hole).
+struct Segment {
+  std::size_t first_event = 0;  // its spawn or checkpoint, in VehicleRun::events
+  std::uint64_t start_step = 0;
+  std::uint64_t uncertain_from = ~0ull;
+  std::string hole;  // what is missing, and where the replay goes on
+  std::unique_ptr<VehicleReplayer> replayer;
+  std::uint64_t replayed_to = 0;  // steps below this have been asked for
+  bool lost = false;
+  std::string why;
+  void Lose(std::uint64_t step, const std::string& reason) {
+    lost = true;
+    why = reason + " (not verified from step " + std::to_string(step) + ")";
+  }
+};
+
 // One vehicle's replay: streams forward as states arrive, keeps recent hashes for states that
-// arrive a little out of order.
+// arrive a little out of order; restarts at a checkpoint after a hole in the events.
+// How far past a vehicle's last event its states may be re-simulated (a minute at 1 kHz; the
+// server sends a checkpoint each second).
+constexpr std::uint64_t kAheadSteps = 60'000;
+
+// How the list of stretches names compared states that are not verified.
+constexpr const char* kDivergedWhy = "DIFFER from the re-simulation (their state hashes)";
+constexpr const char* kDamagedWhy =
+    "DAMAGED: the hashes match, other fields of the recorded messages do not";
+
 struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
   std::string server;
   std::shared_ptr<const World> world;
   std::uint64_t terrain_hash = 0;
-  std::vector<const pb::SessionEvent*> events;
-  std::unique_ptr<VehicleReplayer> replayer;
+  std::vector<const pb::SessionEvent*> events;  // by sequence
+  std::vector<Segment> segments;                // by start step
   std::vector<std::pair<std::uint64_t, std::uint64_t>> ring =
       std::vector<std::pair<std::uint64_t, std::uint64_t>>(kRing, {~0ull, 0});
-  std::uint64_t replayed_to = 0;  // steps below this have been asked for
   std::uint64_t matched = 0;
   std::int64_t step_ns = 0;
+  std::uint64_t last_event_step = 0;
   std::string error;
 
-  std::unique_ptr<VehicleReplayer> Fresh(std::uint32_t id, std::string* why) const {
+  void AddSegment(std::size_t first_event) {
+    segments.emplace_back();
+    segments.back().first_event = first_event;
+    segments.back().start_step = events[first_event]->step();
+  }
+
+  // Cuts the replay into segments at the server's holes.
+  void Plan(const std::vector<Hole>& holes) {
+    auto starts = [&](std::size_t i) {
+      return events[i]->has_spawned() || events[i]->has_checkpoint();
+    };
+    std::size_t first = 0;
+    while (first < events.size() && !starts(first)) ++first;
+    if (first == events.size()) return;
+    AddSegment(first);
+    for (const Hole& h : holes) {
+      Segment& seg = segments.back();
+      if (h.before < events[seg.first_event]->sequence()) continue;  // before it started
+      // The last action of this vehicle known before the hole: a lost event acts at or after it.
+      std::uint64_t from = seg.start_step;
+      std::size_t next = seg.first_event;
+      while (next < events.size() && events[next]->sequence() <= h.before) {
+        from = std::max(from, LastActionStep(*events[next]));
+        ++next;
+      }
+      while (next < events.size() && !starts(next)) ++next;
+      const bool restarts = next < events.size();
+      if (from < seg.uncertain_from) {
+        seg.uncertain_from = from;
+        seg.hole = "events of server '" + server + "' were lost: " + h.Text() + "; " +
+                   (restarts ? "re-simulated again from the checkpoint at step " +
+                                   std::to_string(events[next]->step())
+                             : "no checkpoint after them");
+      }
+      if (!restarts) break;
+      AddSegment(next);
+    }
+  }
+
+  Segment* SegmentAt(std::uint64_t step) {
+    Segment* found = nullptr;
+    for (Segment& s : segments) {
+      if (s.start_step <= step) found = &s;
+    }
+    return found;
+  }
+
+  // A replayer of the events from `first_event` on (a spawn or checkpoint).
+  std::unique_ptr<VehicleReplayer> Fresh(std::uint32_t id, std::size_t first_event,
+                                         std::string* why) const {
     auto r = std::make_unique<VehicleReplayer>(world, terrain_hash, id);
-    for (const pb::SessionEvent* e : events) {
-      if (!r->Add(*e, why)) return nullptr;
+    for (std::size_t i = first_event; i < events.size(); ++i) {
+      if (!r->Add(*events[i], why)) return nullptr;
     }
     return r;
   }
@@ -228,6 +329,9 @@ VerifyResult Verify(const VerifyOptions& o) {
       return res;
     }
     const std::uint64_t hash = TerrainHash(world->terrain);
+    for (const Hole& h : s.holes) {
+      res.holes.push_back("server '" + id + "': " + h.Text());
+    }
     for (const pb::SessionEvent& e : s.events) {
       if (o.vehicle && e.vehicle_id() != *o.vehicle) continue;
       VehicleRun& run = runs[e.vehicle_id()];
@@ -235,16 +339,32 @@ VerifyResult Verify(const VerifyOptions& o) {
       run.world = world;
       run.terrain_hash = hash;
       run.events.push_back(&e);
+      run.last_event_step = std::max(run.last_event_step, LastActionStep(e));
       if (e.has_spawned()) run.step_ns = e.spawned().step_ns();
       if (e.has_checkpoint()) run.step_ns = e.checkpoint().step_ns();
     }
   }
+  std::size_t startable = 0;
   for (auto& [id, run] : runs) {
-    run.replayer = run.Fresh(id, &run.error);
-    if (!run.replayer) {
+    run.Plan(servers.at(run.server).holes);
+    if (run.segments.empty()) {
+      run.error = "vehicle " + std::to_string(id) + ": no spawn or checkpoint event was recorded";
+      continue;
+    }
+    for (Segment& seg : run.segments) {
+      seg.replayer = run.Fresh(id, seg.first_event, &run.error);
+      if (!seg.replayer) break;
+    }
+    if (!run.error.empty()) {
       res.cannot = run.error;
       return res;
     }
+    ++startable;
+  }
+  if (startable == 0) {
+    res.cannot = runs.empty() ? "no session events of the chosen vehicle were recorded"
+                              : runs.begin()->second.error;
+    return res;
   }
   // Stream the states: replay each vehicle up to the step of its next state and compare.
   std::optional<std::pair<std::uint32_t, std::uint64_t>> compare_next;  // divergence: next state
@@ -254,49 +374,109 @@ VerifyResult Verify(const VerifyOptions& o) {
   v.on_progress = progress(0.1, 1.0);
   v.on_message = [&](const RecordedMessage& m) {
     if (o.vehicle && m.key != *o.vehicle) return;
-    const std::uint64_t step = wire::Number(m.data, 3).value_or(0);
-    const std::uint64_t hash = wire::Number(m.data, 21).value_or(0);
+    const std::optional<StateFields> read = ReadStateFields(m.data, m.key);
+    if (!read) {
+      ++res.malformed;  // not a state of this vehicle: no step to place it at
+      return;
+    }
+    const std::uint64_t step = read->step;
+    const std::uint64_t hash = read->state_hash;
     auto it = runs.find(m.key);
-    if (it == runs.end() || !it->second.error.empty()) {
-      ++res.not_resimulated;
+    if (it == runs.end() || it->second.segments.empty()) {
+      ++res.not_resimulated;  // no spawn or checkpoint of this vehicle at all
+      if (it != runs.end()) res.Unverified(m.key, step, it->second.error, false);
       return;
     }
     VehicleRun& run = it->second;
-    if (step + 1 > run.replayed_to) {
+    Segment* seg = run.SegmentAt(step);
+    if (seg == nullptr) {
+      // Before the vehicle's first spawn or checkpoint: a recorder that joined late (or lost it).
+      ++res.not_resimulated;
+      res.Unverified(m.key, step, "before its first spawn or checkpoint in the recording", false);
+      return;
+    }
+    if (seg->lost) {
+      res.Unverified(m.key, step, seg->why);
+      return;
+    }
+    if (step > run.last_event_step + kAheadSteps) {
+      // Far beyond every event of the vehicle (a checkpoint comes each second): not a step to
+      // simulate towards (a damaged step would cost hours).
+      res.Unverified(m.key, step,
+                     "beyond the vehicle's last recorded event (step " +
+                         std::to_string(run.last_event_step) + "): not re-simulated");
+      return;
+    }
+    bool fresh_step = false;
+    if (step + 1 > seg->replayed_to) {
       const double h = static_cast<double>(run.step_ns) * 1e-9;
-      if (!run.replayer->Run(step + 1, [&](std::uint64_t s, std::uint64_t hh) {
-            run.ring[s % VehicleRun::kRing] = {s, hh};
-            res.sim_seconds += h;
-          }, &run.error)) {
-        if (res.cannot.empty()) res.cannot = run.error;
+      std::string why;
+      if (!seg->replayer->Run(
+              step + 1,
+              [&](std::uint64_t s, std::uint64_t hh) {
+                run.ring[s % VehicleRun::kRing] = {s, hh};
+                res.sim_seconds += h;
+              },
+              &why)) {
+        seg->Lose(step, "the re-simulation stopped: " + why);
+        res.Unverified(m.key, step, seg->why);
         return;
       }
-      run.replayed_to = step + 1;
+      seg->replayed_to = step + 1;
+      fresh_step = true;
     }
     const auto& slot = run.ring[step % VehicleRun::kRing];
     if (slot.first != step) {
-      ++res.not_resimulated;  // before the vehicle's first spawn or checkpoint
+      ++res.not_resimulated;  // not re-simulated (a state older than the ring holds)
+      res.Unverified(m.key, step, "not re-simulated (it arrived too late in the file)", false);
       return;
     }
-    auto& range = res.vehicles[m.key];
-    if (range.count == 0) range.first = step;
-    range.first = std::min(range.first, step);
-    range.last = std::max(range.last, step);
-    ++range.count;
+    if (slot.second != hash && step >= seg->uncertain_from) {
+      // Events of this stretch are missing: the replay lacks them, it has not diverged. It goes
+      // on from the next checkpoint after the hole.
+      seg->Lose(step, seg->hole);
+      res.Unverified(m.key, step, seg->why);
+      return;
+    }
     ++res.compared;
     if (compare_next && compare_next->first == m.key && compare_next->second == step) {
       compare_next.reset();
       std::string why;
-      if (auto fresh = run.Fresh(m.key, &why); fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
-                                                recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+      if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
+          fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+          recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
         Diff(recorded, Resimulated(*fresh, recorded), "", res.first->next_fields);
       }
     }
     if (slot.second == hash) {
       ++run.matched;
+      bool damaged = false;
+      if (m.unchecked) {
+        // No CRC vouched for these bytes: the hash covers the state, not every field of the
+        // message. Compare them all with the re-simulation (it just ran this very step).
+        ++res.unchecked;
+        const Simulator* sim = seg->replayer->simulator();
+        if (fresh_step && sim != nullptr &&
+            static_cast<std::uint64_t>(sim->last_step().step) == step &&
+            recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+          std::vector<FieldDiff> fields;
+          Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
+          if (!fields.empty()) {
+            damaged = true;
+            ++res.damaged;
+            if (!res.first_damaged) res.first_damaged = Damaged{m.key, step, fields};
+          }
+        }
+      }
+      if (damaged) {
+        res.Unverified(m.key, step, kDamagedWhy, false);
+      } else {
+        res.Verified(m.key, step);
+      }
       return;
     }
     ++res.mismatched;
+    res.Unverified(m.key, step, kDivergedWhy, false);
     if (res.first) return;
     Divergence d;
     d.vehicle = m.key;
@@ -306,8 +486,9 @@ VerifyResult Verify(const VerifyOptions& o) {
     d.resimulated_hash = slot.second;
     d.matched_before = run.matched;
     std::string why;
-    if (auto fresh = run.Fresh(m.key, &why); fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
-                                              recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+    if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
+        fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
+        recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
       Diff(recorded, Resimulated(*fresh, recorded), "", d.fields);
       // Causes first: the input and controls applied over the step, then what they moved.
       std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
@@ -318,10 +499,32 @@ VerifyResult Verify(const VerifyOptions& o) {
     if (d.fields.size() <= 1) compare_next = std::make_pair(m.key, step + 1);
     res.first = std::move(d);
   };
-  ScanRecording(reader, v);
+  const mcap::ScanResult scan = ScanRecording(reader, v);
+  res.data_crc_checked = scan.data_crc == mcap::ScanResult::DataCrc::kMatched;
   res.resimulated = res.cannot.empty();
   res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   return res;
+}
+
+void VerifyResult::Verified(std::uint32_t vehicle, std::uint64_t step) {
+  auto& range = vehicles[vehicle];
+  if (range.count == 0) range.first = step;
+  range.first = std::min(range.first, step);
+  range.last = std::max(range.last, step);
+  ++range.count;
+  std::vector<StepRun>& r = runs[vehicle];
+  if (r.empty() || !r.back().why.empty()) r.push_back({step, step, 0, {}});
+  r.back().last = std::max(r.back().last, step);
+  ++r.back().count;
+}
+
+void VerifyResult::Unverified(std::uint32_t vehicle, std::uint64_t step, const std::string& why,
+                              bool counts) {
+  if (counts) ++unverified;
+  std::vector<StepRun>& r = runs[vehicle];
+  if (r.empty() || r.back().why != why) r.push_back({step, step, 0, why});
+  r.back().last = std::max(r.back().last, step);
+  ++r.back().count;
 }
 
 int RunVerify(const VerifyOptions& o, std::ostream& out) {
@@ -330,36 +533,60 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   with.on_progress = [&bar](double f) { bar.Update(f); };
   const VerifyResult r = Verify(with);
   bar.Finish();
+  // A recovered file says what its source lost and what no CRC checked: said here too, never
+  // a bit-exact claim on its own.
+  const std::vector<std::string> recovered =
+      IntegrityNotes(ReadMetadata(mcap::Reader(o.file)), {}, 0, "");
+  auto notes = [&] {
+    for (const std::string& n : recovered) out << "  " << n << "\n";
+  };
   char line[256];
   if (!r.resimulated) {
     out << o.file.string() << ": cannot re-simulate: " << r.cannot << "\n";
     return 1;
   }
-  std::string ranges;
-  for (const auto& [id, rg] : r.vehicles) {
-    ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": steps " +
-              std::to_string(rg.first) + ".." + std::to_string(rg.last);
-  }
+  auto print = [&](const std::vector<FieldDiff>& fields) {
+    std::size_t shown = 0;
+    for (const FieldDiff& f : fields) {
+      if (f.field == "state_hash") continue;
+      if (++shown > 12) {
+        out << "    ... " << (fields.size() - 12) << " more\n";
+        break;
+      }
+      std::snprintf(line, sizeof line, "    %-22s %-26s %s\n", f.field.c_str(), f.recorded.c_str(),
+                    f.resimulated.c_str());
+      out << line;
+    }
+    return shown;
+  };
+  // What could not be verified, per vehicle: the stretches and why.
+  auto unverified = [&] {
+    if (r.malformed > 0) {
+      out << "  NOT verified: " << r.malformed << " recorded state messages do not read as states "
+          << "of their vehicle (damaged or foreign payloads)\n";
+    }
+    bool all_verified = true;
+    for (const auto& [id, rs] : r.runs) {
+      for (const StepRun& run : rs) all_verified = all_verified && run.why.empty();
+    }
+    if (all_verified) return;
+    if (r.unverified > 0) out << "  NOT verified: " << r.unverified << " recorded states\n";
+    if (r.unverified == 0) out << "  steps:\n";
+    for (const auto& [id, rs] : r.runs) {
+      for (const StepRun& run : rs) {
+        out << "    vehicle " << id << ", steps " << run.first << ".." << run.last << " ("
+            << run.count << " states): " << (run.why.empty() ? "verified bit for bit" : run.why)
+            << "\n";
+      }
+    }
+  };
   if (r.first) {
     const Divergence& d = *r.first;
     std::snprintf(line, sizeof line, "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)",
                   d.vehicle, d.step, d.t);
-    out << o.file.string() << ": " << line << ": the state hash after the step was " << Hex(d.recorded_hash)
-        << " in the recording, " << Hex(d.resimulated_hash) << " re-simulated\n";
-    auto print = [&](const std::vector<FieldDiff>& fields) {
-      std::size_t shown = 0;
-      for (const FieldDiff& f : fields) {
-        if (f.field == "state_hash") continue;
-        if (++shown > 12) {
-          out << "    ... " << (fields.size() - 12) << " more\n";
-          break;
-        }
-        std::snprintf(line, sizeof line, "    %-22s %-26s %s\n", f.field.c_str(), f.recorded.c_str(),
-                      f.resimulated.c_str());
-        out << line;
-      }
-      return shown;
-    };
+    out << o.file.string() << ": " << line << ": the state hash after the step was "
+        << Hex(d.recorded_hash) << " in the recording, " << Hex(d.resimulated_hash)
+        << " re-simulated\n";
     out << "  state fields that differ at that step (recorded, re-simulated):\n";
     if (print(d.fields) == 0) {
       out << "    none: the step started from the same state with the same input; the state after it\n"
@@ -373,19 +600,63 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     }
     out << "  " << d.matched_before << " steps of vehicle " << d.vehicle << " matched bit for bit before it; "
         << r.mismatched << " of " << r.compared << " compared steps differ\n";
+    unverified();
+    notes();
     return 1;
   }
   if (r.compared == 0) {
-    out << o.file.string() << ": nothing compared: no recorded state falls after a spawn or checkpoint\n";
+    out << o.file.string()
+        << ": nothing compared: no recorded state falls after a spawn or checkpoint";
+    out << (r.unverified > 0 ? "" : "\n");
+    if (r.unverified > 0) out << " that the recording kept whole\n";
+    unverified();
+    notes();
     return 1;
   }
-  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps", r.compared);
-  out << o.file.string() << ": " << line << " (" << ranges << ")";
+  std::string ranges;
+  for (const auto& [id, rs] : r.runs) {
+    std::string verified;
+    for (const StepRun& run : rs) {
+      if (run.why.empty()) {
+        verified += (verified.empty() ? "" : ", ") + std::to_string(run.first) + ".." +
+                    std::to_string(run.last);
+      }
+    }
+    if (!verified.empty()) {
+      ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) +
+                ": steps " + verified;
+    }
+  }
+  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
+                r.compared - r.damaged);  // as the stretches listed
+  out << o.file.string() << ": " << (r.unverified > 0 ? "PARTLY verified: " : "") << line << " ("
+      << ranges << ")";
   if (r.not_resimulated > 0) out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
   std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n", r.sim_seconds,
                 r.wall_seconds, r.wall_seconds > 0 ? r.sim_seconds / r.wall_seconds : 0.0);
   out << line;
-  return 0;
+  if (r.damaged > 0) {
+    const Damaged& d = *r.first_damaged;
+    out << "  DAMAGED: " << r.damaged
+        << " recorded states match their re-simulation's hash but not "
+        << "their other fields: their bytes were changed where no CRC covered them; the first, "
+           "vehicle "
+        << d.vehicle << " at step " << d.step << " (recorded, re-simulated):\n";
+    print(d.fields);
+  }
+  if (!r.holes.empty()) {
+    out << "  events lost from the recording:";
+    for (const std::string& h : r.holes) out << " " << h << ";";
+    out << (r.unverified == 0 ? " every recorded state still matched its re-simulation\n" : "\n");
+  }
+  unverified();
+  if (r.unchecked > 0 && !r.data_crc_checked) {
+    out << "  " << r.unchecked << " of the compared states come from chunks without a CRC: their "
+        << "hashes matched and every field was compared with the re-simulation"
+        << (r.damaged > 0 ? "" : " (all equal)") << "\n";
+  }
+  notes();
+  return r.ok() ? 0 : 1;
 }
 
 // --- takeover -----------------------------------------------------------------------------------
@@ -409,8 +680,10 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
       if (step) return;
       if (!chosen) chosen = m.key;
       if (m.key != *chosen) return;
-      const std::uint64_t s = wire::Number(m.data, 3).value_or(0);
-      const std::uint64_t h = wire::Number(m.data, 21).value_or(0);
+      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+      if (!fields) return;  // not a state of this vehicle
+      const std::uint64_t s = fields->step;
+      const std::uint64_t h = fields->state_hash;
       if (m.log_time >= at) {
         step = s;
         if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s) hash_before = it->second.second;
@@ -439,6 +712,11 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   }
   if (server == nullptr) throw std::runtime_error("no session events of vehicle " + std::to_string(*chosen) + " were recorded");
   if (std::string why = CheckServer(server_id, *server); !why.empty()) throw std::runtime_error(why);
+  if (!server->holes.empty()) {
+    throw std::runtime_error("events of server '" + server_id +
+                             "' were lost: " + server->holes.front().Text() +
+                             ": the exact state of a moment cannot be rebuilt across them");
+  }
   std::shared_ptr<const World> world = WorldFromDescription(*server->world);
   const std::uint64_t terrain_hash = TerrainHash(world->terrain);
   VehicleReplayer replayer(world, terrain_hash, *chosen);
@@ -484,6 +762,12 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
 }
 
 int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
+  std::filesystem::path new_file = o.out;
+  if (new_file.empty()) {
+    new_file = o.file;
+    new_file.replace_filename(o.file.stem().string() + "-takeover" + o.file.extension().string());
+  }
+  CheckNotAnInput(new_file, {o.file});  // before anything happens on the network
   const BranchPoint bp = FindBranchPoint(o.file, o.at_s, o.vehicle);
   out << "branch point: " << bp.label << " on world '" << bp.world_name << "'"
       << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << std::endl;
@@ -515,11 +799,8 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
   }
   // Record first, so the new recording holds the restore's events.
   RecordOptions ro;
-  ro.out = o.out;
-  if (ro.out.empty()) {
-    ro.out = o.file;
-    ro.out.replace_filename(o.file.stem().string() + "-takeover" + o.file.extension().string());
-  }
+  ro.out = new_file;
+  ro.writer.inputs = {o.file};  // never over the recording it continues
   ro.branched_from = bp.label;
   ro.command_line = o.command_line;
   ro.duration_s = o.duration_s;

@@ -153,6 +153,16 @@ class StepGaps {
   Hole forgotten_largest_{0, 0, true};     // the largest missing hole no longer kept (jump: none)
 };
 
+// What a person should do about the kernel's cap on socket receive buffers (net.core.rmem_max),
+// or empty when it leaves room. A server sends its world description (2 MB for `facility`) in
+// one burst when a recorder joins, or when it starts while a recorder listens: a receive buffer
+// smaller than that overflows, and the kernel drops what arrives meanwhile - world fragments
+// (resent: reliable) and a few states (best effort: lost for good, "lost 2" at the start).
+inline constexpr std::uint64_t kBurstReceiveBytes = 4u << 20;
+std::string ReceiveBufferAdvice(std::uint64_t rmem_max_bytes);
+// net.core.rmem_max as /proc says (0 when it cannot be read).
+std::uint64_t KernelReceiveBufferMax();
+
 // The file of part `index` when splitting: "run.mcap" -> "run-000.mcap".
 std::filesystem::path SplitPath(const std::filesystem::path& out, int index);
 

@@ -22,6 +22,10 @@
 #include <string_view>
 #include <vector>
 
+namespace vdyn::recorder {
+class OutputFile;
+}
+
 namespace vdyn::mcap {
 
 inline constexpr std::uint8_t kMagic[8] = {0x89, 'M', 'C', 'A', 'P', 0x30, '\r', '\n'};
@@ -81,6 +85,10 @@ struct Message {
   std::uint64_t log_time = 0;      // ns
   std::uint64_t publish_time = 0;  // ns
   std::span<const std::uint8_t> data;
+  // No CRC of its own vouches for it: it lies in a chunk whose CRC is 0 ("not computed", which
+  // the spec allows) or outside any chunk. Only the data section's CRC can cover it (whether it
+  // did, a scan says at its end: ScanResult::data_crc).
+  bool unchecked = false;
 };
 
 struct Metadata {
@@ -98,6 +106,7 @@ struct ChunkIndex {
   std::string compression;
   std::uint64_t compressed_size = 0;
   std::uint64_t uncompressed_size = 0;
+  std::uint32_t uncompressed_crc = 0;  // from the chunk record itself (0: none); not in the summary
 };
 
 struct Statistics {
@@ -126,13 +135,23 @@ struct WriterOptions {
   std::uint64_t chunk_ns = 250'000'000;
   std::string profile;
   std::string library = "vdyn-recorder";
+  // Files the new one must never replace: the command's inputs (recorder::OutputFile).
+  std::vector<std::filesystem::path> inputs;
+  // A live recording: a new file is written under its own name from its first byte, so a killed
+  // recorder leaves it for `recover`. Otherwise (and when the file exists already, so it is not
+  // lost before the new one is whole) the writer writes beside it and renames it at Close().
+  bool live = false;
 };
 
 class Writer {
  public:
-  // Creates `path` (parent folders too) and writes the magic and the header. Throws McapError.
+  // Creates `path` (parent folders too), or a file beside it that Close() renames to it (see
+  // WriterOptions::live), and writes the magic and the header. Throws McapError, or
+  // recorder::OutputError for a path that is one of options.inputs.
   Writer(const std::filesystem::path& path, WriterOptions options);
-  ~Writer();  // closes (a destructor cannot report: call Close() to see errors)
+  // Closes (a destructor cannot report: call Close() to see errors). A file that is not live and
+  // is destroyed by an exception is abandoned: the destination stays as it was.
+  ~Writer();
   Writer(const Writer&) = delete;
   Writer& operator=(const Writer&) = delete;
 
@@ -158,6 +177,13 @@ class Writer {
   std::uint32_t chunks() const { return stats_.chunk_count; }
   std::uint64_t uncompressed_bytes() const { return uncompressed_total_; }
   const std::filesystem::path& path() const { return path_; }
+  // Where the bytes go until Close(): path(), or the temporary file beside it.
+  std::filesystem::path writing_to() const;
+  // Messages written from now on go into chunks without a CRC (0, "not checked", as the spec
+  // allows) until it is set back: `recover` keeps a source chunk that had none unchecked.
+  // A change closes the open chunk. A file with such a chunk gets no data-section CRC either
+  // (it would vouch for them).
+  void SetChunkCrc(bool on);
 
  private:
   void Append(const std::string& bytes);  // to the file, updating the data CRC
@@ -165,7 +191,10 @@ class Writer {
 
   std::filesystem::path path_;
   WriterOptions options_;
+  std::unique_ptr<recorder::OutputFile> out_;  // the file beside path_, when not written in place
   int fd_ = -1;
+  bool chunk_crc_ = true;
+  bool any_unchecked_ = false;
   bool closed_ = false;
   std::uint64_t offset_ = 0;
   std::uint32_t data_crc_ = 0;
@@ -198,15 +227,39 @@ struct Visitor {
   std::function<void(std::uint64_t)> on_progress;
 };
 
+// A part of a file a lenient scan could not use, and why.
+struct Damage {
+  std::uint64_t offset = 0;  // where it starts
+  std::uint64_t length = 0;  // bytes left out (0: nothing skipped, a remark)
+  std::string what;
+  // A dropped chunk: its place and log-time range (from its record, when its header reads) and
+  // the messages its message indexes list (0 when they are damaged too).
+  std::optional<ChunkIndex> chunk;
+  std::uint64_t messages = 0;
+};
+
 struct ScanResult {
   bool complete = false;          // reached the data end record and a valid summary and footer
+  bool summary = false;           // the footer points at a summary (a valid one when complete)
   std::uint64_t good_until = 0;   // offset just past the last whole, valid record
-  std::string problem;            // lenient scans: what stopped it (empty when complete)
+  std::string problem;            // lenient scans: the first problem (empty when none)
   std::uint64_t problem_offset = 0;
   std::uint64_t messages = 0;
   std::uint32_t chunks = 0;
-  std::uint32_t chunks_skipped = 0;  // lenient: chunks dropped for a bad CRC or compression
+  std::uint32_t chunks_skipped = 0;      // lenient: chunks dropped for a bad CRC, compression...
+  std::uint32_t chunks_duplicated = 0;   // lenient: exact copies of an earlier chunk, dropped
+  std::uint32_t records_skipped = 0;     // lenient: other damaged records, and runs of bytes
+  std::uint32_t chunks_unchecked = 0;    // chunks whose CRC is 0
+  std::uint64_t messages_unchecked = 0;  // messages delivered with Message::unchecked
+  // The data end record's CRC of every byte before it.
+  enum class DataCrc {
+    kNotReached,
+    kAbsent,
+    kMatched,
+    kMismatched
+  } data_crc = DataCrc::kNotReached;
   std::optional<Statistics> statistics;  // from the summary
+  std::vector<Damage> damage;            // lenient: everything left out, in file order
 };
 
 class Reader {
@@ -219,8 +272,13 @@ class Reader {
 
   // Walks every record of the data section in order, checking lengths, opcodes, CRCs and
   // decompression, then the summary and footer. Strict (the default): throws McapError at the
-  // first problem. Lenient: stops there and reports it in the result (a bad chunk whose framing
-  // is intact is skipped and counted, and the scan goes on).
+  // first problem. Lenient (`recover`): never relies on the summary or the footer, and leaves
+  // out only what is damaged, saying so in ScanResult::damage - a chunk that fails its CRC or
+  // decompression, a record whose fields do not read (its frame is whole: the scan goes on after
+  // it), a run of bytes without a readable record (a damaged length: the scan resynchronises on
+  // the next valid record, two valid frames in a row), an exact copy of an earlier chunk.
+  // Messages on a channel no readable record defines, and channels naming an unknown schema, are
+  // delivered all the same: the caller decides (their records may be the damaged ones).
   ScanResult Scan(const Visitor& visitor, bool lenient = false) const;
 
   // The summary when the file has a valid footer and summary (nullopt otherwise): channels,
@@ -248,6 +306,9 @@ class Reader {
 
  private:
   [[noreturn]] void Fail(std::uint64_t offset, const std::string& reason) const;
+  // Lenient scans: the offset of the next valid record at or after `from` (its frame and
+  // content read, and so does the frame after it), or nullopt.
+  std::optional<std::uint64_t> NextRecord(std::uint64_t from) const;
   std::filesystem::path path_;
   const std::uint8_t* data_ = nullptr;
   std::uint64_t size_ = 0;

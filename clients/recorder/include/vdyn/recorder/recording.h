@@ -44,14 +44,24 @@ const google::protobuf::Descriptor* PayloadDescriptor(transport::TopicId topic);
 bool ServerKeyed(transport::TopicId topic);
 std::string ChannelTopic(transport::TopicId topic, std::uint32_t key);
 mcap::StringMap ChannelMetadata(transport::TopicId topic, std::uint32_t key);
+// A second channel of a topic and key that holds copies of its world or parameters, written in
+// chunks of their own so that they survive the loss of any one chunk (docs/formats.md): the same
+// topic, metadata "repeat_of" naming the first channel.
+mcap::StringMap RepeatChannelMetadata(transport::TopicId topic, std::uint32_t key);
 
 // A channel of a vdyn recording, parsed back.
 struct ChannelInfo {
   transport::TopicId topic = transport::TopicId::kState;
   std::uint32_t key = 0;
+  bool repeat = false;  // copies of the world or parameters (RepeatChannelMetadata)
 };
-// nullopt for a channel that is not a vdyn topic (a file written by another tool).
-std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c);
+// nullopt for a channel that is not a vdyn topic (a file written by another tool): its metadata
+// names no vdyn topic and key, or (when `schema` is given) its schema or encodings are not the
+// protobuf type of that topic.
+std::optional<ChannelInfo> ParseChannelInfo(const mcap::Channel& c,
+                                            const mcap::Schema* schema = nullptr);
+// The vdyn channels of a summary, by id (schemas checked).
+std::map<std::uint16_t, ChannelInfo> VdynChannels(const mcap::Reader::Summary& s);
 
 struct RecordedMessage {
   transport::TopicId topic;
@@ -59,18 +69,46 @@ struct RecordedMessage {
   std::uint64_t log_time = 0;
   std::uint64_t publish_time = 0;
   std::span<const std::uint8_t> data;
+  bool repeat = false;     // a copy of a world or parameters (ChannelInfo::repeat)
+  bool unchecked = false;  // mcap::Message::unchecked
 };
 
 // Walks a recording in file order (strict: a bad file throws mcap::McapError). Messages of
-// channels that are not vdyn topics are skipped. `on_progress` gets the fraction of the file read.
+// channels that are not vdyn topics go to on_foreign (a file of another tool, or garbage under
+// our names). `on_progress` gets the fraction of the file read.
 struct RecordingVisitor {
   std::function<void(const RecordedMessage&)> on_message;
+  // `schema`: the channel's schema record (nullptr when it has none, or none was read).
+  std::function<void(const mcap::Channel&, const mcap::Schema* schema, const mcap::Message&)>
+      on_foreign;
   std::function<void(const mcap::Metadata&)> on_metadata;
   std::function<void(double)> on_progress;
   // Topics to decompress at all (chunks holding none of them are still checked).
   std::function<bool(transport::TopicId)> wants;
 };
 mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisitor& visitor);
+
+// The fields of a recorded state that gaps and re-simulation go by, read without parsing; nullopt
+// when the payload is not protobuf framing or names another vehicle than its channel's key (a
+// damaged or foreign payload must never become a step).
+struct StateFields {
+  std::uint64_t step = 0;
+  std::uint64_t step_ns = 0;
+  std::uint64_t state_hash = 0;
+};
+std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload,
+                                           std::uint32_t key);
+
+// Refuses (mcap::McapError) what `info` refuses: reads the whole file strictly, every CRC.
+// For commands that otherwise read only parts of it (play).
+mcap::ScanResult CheckWholeFile(const mcap::Reader& reader, const std::string& label);
+
+// What a reader of the file must not take for granted, one line each: a recovered file's losses
+// and unchecked messages (its "vdyn.recovered" metadata), and `unchecked` items (`what`: "states",
+// "rows") that came from chunks without a CRC which the data section's CRC did not cover either.
+std::vector<std::string> IntegrityNotes(const std::vector<mcap::Metadata>& meta,
+                                        const mcap::ScanResult& scan, std::uint64_t unchecked,
+                                        const std::string& what);
 
 // Every metadata record of the file, in order (a full scan; cheap next to the messages).
 std::vector<mcap::Metadata> ReadMetadata(const mcap::Reader& reader);

@@ -43,20 +43,53 @@ struct Divergence {
   std::uint64_t matched_before = 0;  // steps of this vehicle that matched before it
 };
 
+// Which recorded states of one vehicle were verified and which could not be, in step order:
+// runs of consecutive recorded states (`why` empty: verified; else the reason).
+struct StepRun {
+  std::uint64_t first = 0, last = 0, count = 0;
+  std::string why;
+};
+
+// A recorded state whose hash matches its re-simulation but whose other fields do not: its
+// bytes were damaged where no CRC covered them (a chunk without one).
+struct Damaged {
+  std::uint32_t vehicle = 0;
+  std::uint64_t step = 0;
+  std::vector<FieldDiff> fields;  // recorded, re-simulated
+};
+
 struct VerifyResult {
   bool resimulated = false;   // false: it could not be re-simulated (see cannot)
   std::string cannot;
   std::uint64_t compared = 0;        // recorded states whose hash was compared
   std::uint64_t mismatched = 0;
   std::uint64_t not_resimulated = 0;  // states before a vehicle's first spawn or checkpoint
+  std::uint64_t unverified = 0;       // states a loss of events kept from being verified
+  std::uint64_t malformed = 0;        // state messages that do not read as this vehicle's states
+  std::vector<std::string> holes;     // the events lost, per server
   struct Range {
     std::uint64_t first = 0, last = 0, count = 0;
   };
-  std::map<std::uint32_t, Range> vehicles;
+  std::map<std::uint32_t, Range> vehicles;  // the compared states
+  std::map<std::uint32_t, std::vector<StepRun>> runs;
   std::optional<Divergence> first;
+  // States from chunks without a CRC (Message::unchecked): compared field by field too.
+  std::uint64_t unchecked = 0;
+  std::uint64_t damaged = 0;
+  std::optional<Damaged> first_damaged;
+  bool data_crc_checked = false;  // the file's data-section CRC held (it covered them)
   double sim_seconds = 0;  // simulated time re-simulated
   double wall_seconds = 0;
-  bool ok() const { return resimulated && mismatched == 0 && compared > 0; }
+  // Every recorded state after a spawn or checkpoint re-simulated bit for bit, and none damaged.
+  bool ok() const {
+    return resimulated && mismatched == 0 && compared > 0 && unverified == 0 && damaged == 0 &&
+           malformed == 0;
+  }
+  void Verified(std::uint32_t vehicle, std::uint64_t step);
+  // A stretch with a reason. `counts`: a state a loss kept from being verified (`unverified`);
+  // false: one before the vehicle's start, or one compared that differs or is damaged.
+  void Unverified(std::uint32_t vehicle, std::uint64_t step, const std::string& why,
+                  bool counts = true);
 };
 
 struct VerifyOptions {
