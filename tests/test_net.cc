@@ -175,7 +175,7 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
     last = s;
     fast = s.v_wt_b().x() > 10.0;
   }, [&] {
-    input.Write(1, Input(1, 1.0, "test-rig"));
+    EXPECT_TRUE(input.Write(1, Input(1, 1.0, "test-rig"))) << input.last_error();
     return fast;
   })) << server->Log();
   EXPECT_EQ(last.input().source_id(), "test-rig");
@@ -426,7 +426,7 @@ TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
     source = s.input().source_id();
   }, [&] {
-    primary.Write(1, Input(1, 0.5, "primary"));
+    EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
     return source == "primary";
   })) << source << server->Log();
   // ...then its loop hangs: the writer is alive but silent. After the 200 ms lease the backup
@@ -537,7 +537,7 @@ TEST_F(Net, TwoServersShareADomainWithDistinctVehicles) {
   ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
     latest[s.vehicle_id()] = s;
   }, [&] {
-    input.Write(3, Input(3, 1.0, "rig-3"));
+    EXPECT_TRUE(input.Write(3, Input(3, 1.0, "rig-3"))) << input.last_error();
     return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) && latest.count(2);
   })) << a->Log() << b->Log();
   EXPECT_EQ(latest[1].server_id(), "lab-a");
@@ -614,6 +614,27 @@ TEST_F(Net, ASecondServerWithAVehicleOrAnIdInUseIsRefused) {
   EXPECT_TRUE(d->running());
 }
 
+// A wait that fails is counted with the reason, not dropped (issue 19). DDS refuses a negative
+// timeout: the one error a test can cause on demand.
+TEST_F(Net, AFailedWaitIsCountedNotDiscarded) {
+  testing::ExpectLogs logged;  // the drop counters log each kind once
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::Waitset waitset(p, &drops);
+  waitset.Attach(states);
+  EXPECT_FALSE(waitset.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_FALSE(waitset.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_EQ(waitset.errors(), 2u);
+  EXPECT_EQ(drops.Of("DDS error in a waitset"), 2u);
+  EXPECT_THAT(waitset.last_error(), HasSubstr("dds_waitset_wait: Bad Parameter"));
+  EXPECT_FALSE(states.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_EQ(drops.Of("DDS error on vdyn/state"), 1u);
+  EXPECT_FALSE(waitset.Wait(1ms));  // a good wait: no data, no error
+  EXPECT_EQ(waitset.errors(), 2u);
+  EXPECT_GE(logged.count(), 1);
+}
+
 // A live rig whose input is refused loses the vehicle to a valid backup within the lease, and the
 // diagnostics name it and say why.
 TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
@@ -630,7 +651,7 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
     source = s.input().source_id();
   }, [&] {
-    primary.Write(1, Input(1, 0.5, "primary"));
+    EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
     return source == "primary";
   })) << source << server->Log();
   // The primary goes on writing, but NaN steering: refused, it no longer counts as live.
@@ -641,7 +662,7 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
     source = s.input().source_id();
     safe = safe || s.control().watchdog_safe_state();
   }, [&] {
-    primary.Write(1, nan_input);
+    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
     return source == "backup";
   })) << source << server->Log();
   std::printf("  a primary sending NaN lost the vehicle to the backup after %.0f ms (wall clock)\n",
@@ -654,8 +675,8 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
     rig30_drove = rig30_drove || s.input().source_id() == "rig30";
   }, [&] {
-    strong.Write(1, wild);
-    primary.Write(1, nan_input);
+    EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
     return ++n > 100;
   }));
   EXPECT_FALSE(rig30_drove);
@@ -666,8 +687,8 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
       for (const auto& src : v.sources()) seen[src.source_id()] = src;
     }
   }, [&] {
-    strong.Write(1, wild);
-    primary.Write(1, nan_input);
+    EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
     return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
            seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
   })) << server->Log();

@@ -253,9 +253,10 @@ std::uint32_t RawReader::MatchedWriters() {
   return st.current_count;
 }
 
-Waitset::Waitset(Participant& participant) {
+Waitset::Waitset(Participant& participant, DropCounters* drops) : drops_(drops) {
   waitset_ = dds_create_waitset(participant.handle());
   if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset", waitset_));
+  if (drops_ != nullptr) drop_error_ = drops_->Register("DDS error in a waitset");
 }
 
 Waitset::~Waitset() {
@@ -280,6 +281,8 @@ bool Waitset::Wait(std::chrono::nanoseconds timeout) {
   const dds_return_t n = dds_waitset_wait(waitset_, triggered, 8, timeout.count());
   if (n < 0) {
     last_error_ = DdsError("dds_waitset_wait", n);
+    ++errors_;
+    if (drops_ != nullptr) drops_->Count(drop_error_, last_error_);
     return false;
   }
   return n > 0;

@@ -93,9 +93,9 @@ class RawWriter {
 
   // False when the message is not the topic's payload, cannot be serialised, is larger than the
   // topic allows, or DDS refused it (see last_error()).
-  bool Write(std::uint32_t key, const google::protobuf::Message& msg);
+  [[nodiscard]] bool Write(std::uint32_t key, const google::protobuf::Message& msg);
   // Writes an already serialised payload of the topic's type as it is (a recording played back).
-  bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
   // Sends what a kBatched writer has gathered (nothing to do for kEach).
   void Flush();
   // Number of readers matched right now (0 when the status cannot be read; last_error() says).
@@ -147,7 +147,7 @@ class RawReader {
   std::uint32_t MatchedWriters();
   // The instance handles of the writers matched right now into `out`; false on error (then
   // last_error() says, and `out` is empty: not "no writers").
-  bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
+  [[nodiscard]] bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
   // The ownership strength a matched writer declared in its QoS (0 when it declared none or is
   // not matched).
   std::int32_t WriterStrength(std::uint64_t publication_handle);
@@ -203,18 +203,24 @@ class RawReader {
 // Waits on several readers at once (one thread serving several topics).
 class Waitset {
  public:
-  explicit Waitset(Participant& participant);
+  // A failed wait is counted in `drops` ("DDS error in a waitset"), when given.
+  explicit Waitset(Participant& participant, DropCounters* drops = nullptr);
   ~Waitset();
   Waitset(const Waitset&) = delete;
   Waitset& operator=(const Waitset&) = delete;
   void Attach(RawReader& reader);
-  // Blocks until one of the readers has data or the timeout passes; true when one has.
+  // Blocks until one of the readers has data or the timeout passes; true when one has. An error
+  // is false, with last_error() set and counted.
   bool Wait(std::chrono::nanoseconds timeout);
   const std::string& last_error() const { return last_error_; }
+  std::uint64_t errors() const { return errors_; }
 
  private:
   dds_entity_t waitset_ = 0;
   std::vector<dds_entity_t> conditions_;
+  DropCounters* drops_ = nullptr;
+  int drop_error_ = -1;
+  std::uint64_t errors_ = 0;
   std::string last_error_;
 };
 
@@ -222,7 +228,7 @@ template <class M>
 class Writer : public RawWriter {
  public:
   using RawWriter::RawWriter;
-  bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
+  [[nodiscard]] bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
 };
 
 template <class M>
