@@ -10,6 +10,7 @@
 #include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
+#include "vdyn/runtime/claim.h"
 #include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
 #include "test_support.h"
@@ -535,6 +536,30 @@ pb::DriverInput From(const std::string& source) {
   in.set_vehicle_id(1);
   in.set_source_id(source);
   return in;
+}
+
+// A server's claim (claim.h) reads back as written; what is not a claim is not one; two claims
+// clash on the id or a vehicle in common.
+TEST(ServerClaim, ReadsBackAndClashesOnTheIdOrAVehicle) {
+  const ServerClaim a{"lab a", {1, 2, 4294967295u}, false};
+  const std::string text = a.Encode();
+  EXPECT_EQ(text, "vdyn-server/1 claiming vehicles=1,2,4294967295 id=lab a");
+  const std::optional<ServerClaim> back = ServerClaim::Decode(text);
+  ASSERT_TRUE(back.has_value());
+  EXPECT_EQ(back->server_id, "lab a");
+  EXPECT_EQ(back->vehicle_ids, a.vehicle_ids);
+  EXPECT_FALSE(back->running);
+  EXPECT_TRUE(ServerClaim::Decode(ServerClaim{"b", {}, true}.Encode())->running);
+  for (const char* other : {"", "vdyn-server/1 ", "vdyn-server/2 running vehicles=1 id=x",
+                            "vdyn-server/1 running vehicles=1,x id=y",
+                            "vdyn-server/1 running vehicles=4294967296 id=y",
+                            "vdyn-server/1 waiting vehicles=1 id=y", "some other program"}) {
+    EXPECT_FALSE(ServerClaim::Decode(other).has_value()) << other;
+  }
+  EXPECT_TRUE(a.Clashes({"lab b", {7, 2}, true}));
+  EXPECT_TRUE(a.Clashes({"lab a", {7}, true}));
+  EXPECT_FALSE(a.Clashes({"lab b", {7, 8}, false}));
+  EXPECT_FALSE(a.Clashes({"lab b", {}, false}));
 }
 
 // The strongest live valid source drives; refused input never counts as live.

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <set>
 #include <thread>
 
 #include <spdlog/spdlog.h>
@@ -35,7 +36,7 @@ constexpr std::size_t kEventsForSteps = 1024;
 ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options)
     : world_(std::move(world)),
       options_(std::move(options)),
-      participant_(options_.domain_id),
+      participant_(options_.domain_id, transport::ParticipantOptions{0, Claim(false).Encode()}),
       input_reader_(participant_, TopicId::kInput, &drops_),
       control_reader_(participant_, TopicId::kControl, &drops_) {
   writers_.resize(8);
@@ -60,6 +61,11 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_unanswered_room_ = drops_.Register("control request unanswered: no room to hand it on");
 
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
+  // From here on this server runs its vehicles: a server that starts later gives way to it.
+  if (!participant_.SetUserData(Claim(true).Encode())) {
+    spdlog::warn("server '{}': cannot announce that it runs its vehicles: {}",
+                 options_.session.server_id, participant_.last_error());
+  }
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
   // 64 steps of every vehicle it starts with (at least 512 frames): the writer thread may stall
@@ -705,16 +711,25 @@ void ServerNode::ReceiverLoop() {
   control_reader_.on_refused = nullptr;
 }
 
+ServerClaim ServerNode::Claim(bool running) const {
+  return {options_.session.server_id, options_.vehicle_ids, running};
+}
+
 std::string ServerNode::FindClash() {
-  // Listen for what other servers publish about themselves: their worlds (transient-local, at
-  // once), diagnostics (once a second) and states. With nobody else on the domain the wait ends
-  // after discovery (300 ms); once another server is seen, for up to discovery_s.
+  // Listen for other servers: their claims (their participants' USER_DATA, seen at discovery,
+  // before they publish anything: claim.h), worlds (transient-local, at once), diagnostics (once a
+  // second) and states. With nobody else on the domain the wait ends after discovery (300 ms);
+  // once another server is seen, for up to discovery_s.
   const std::string& me = options_.session.server_id;
+  const std::string domain = std::to_string(options_.domain_id);
+  const ServerClaim mine = Claim(false);
+  const transport::Guid own_guid = participant_.guid();
   transport::DropCounters drops;
+  transport::ParticipantReader peers(participant_);
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops);
   transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops);
   transport::Reader<pb::VehicleState> states(participant_, TopicId::kState, &drops);
-  transport::Waitset waitset(participant_, &drops_);  // an error is counted
+  transport::Waitset waitset(participant_, &drops_);
   waitset.Attach(worlds);
   waitset.Attach(diagnostics);
   waitset.Attach(states);
@@ -741,11 +756,64 @@ std::string ServerNode::FindClash() {
     }
     return false;
   };
+  // Other servers' claims that clash with ours, by participant; the ones this server wins against
+  // are named once in the log.
+  std::map<transport::Guid, ServerClaim> claims;
+  std::set<transport::Guid> told;
+  std::vector<transport::ParticipantReader::Peer> changes;
+  std::string lost;  // why this server gives way to a claim, when it does
+  auto first_common = [&](const ServerClaim& c) -> std::string {
+    for (std::uint32_t v : mine.vehicle_ids) {
+      if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
+        return std::to_string(v);
+      }
+    }
+    return {};
+  };
   while (true) {
+    changes.clear();
+    if (!peers.Take(changes)) drops_.Count("DDS error on the domain's participants", peers.last_error());
+    for (const auto& peer : changes) {
+      if (peer.guid == own_guid) continue;
+      const std::optional<ServerClaim> c = ServerClaim::Decode(peer.user_data);
+      if (peer.alive && c && mine.Clashes(*c)) {
+        claims[peer.guid] = *c;
+      } else {
+        claims.erase(peer.guid);
+      }
+    }
+    for (const auto& [guid, c] : claims) {
+      const std::string vehicle = first_common(c);
+      if (c.running) {
+        lost = c.server_id == me
+                   ? "another server with the id '" + me + "' runs on domain " + domain +
+                         ": give this one another --server-id, or another --domain"
+                   : "vehicle " + vehicle + " is already run by server '" + c.server_id +
+                         "' on domain " + domain +
+                         ": choose other --vehicle-ids, or another --domain";
+      } else if (guid < own_guid) {
+        lost = c.server_id == me
+                   ? "another server with the id '" + me + "' started at the same moment on "
+                         "domain " + domain + " and keeps the id (a tie goes to the lower "
+                         "participant GUID): give this one another --server-id, or another --domain"
+                   : "vehicle " + vehicle + " is claimed by server '" + c.server_id +
+                         "', started at the same moment on domain " + domain +
+                         "; that server keeps it (a tie goes to the lower participant GUID): "
+                         "choose other --vehicle-ids, or another --domain";
+      } else if (told.insert(guid).second) {
+        spdlog::info("server '{}': server '{}' started at the same moment and claims {}; this "
+                     "server keeps {} (a tie goes to the lower participant GUID)",
+                     me, c.server_id,
+                     c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
+                     c.server_id == me ? "it" : "the vehicle");
+      }
+      if (!lost.empty()) return lost;
+    }
     const base::MonoTime now = base::MonotonicNow();
-    const bool others = foreign(worlds) || foreign(diagnostics) || foreign(states);
+    const bool others =
+        !claims.empty() || foreign(worlds) || foreign(diagnostics) || foreign(states);
     if (now >= end || (!others && now >= quiet_end)) break;
-    waitset.Wait(std::chrono::milliseconds(20));
+    waitset.Wait(std::chrono::milliseconds(20));  // an error is counted in drops_
     worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
       for (const auto& v : w.vehicles()) note(w.server_id(), v.vehicle_id());
       if (w.server_id() == me) same_id = true;
@@ -763,7 +831,6 @@ std::string ServerNode::FindClash() {
     if (clash) break;
   }
   for (const auto& [vehicle, server] : taken) others_[vehicle] = {server, base::MonotonicNow()};
-  const std::string domain = std::to_string(options_.domain_id);
   if (same_id) {
     return "another server with the id '" + me + "' runs on domain " + domain +
            ": give this one another --server-id, or another --domain";

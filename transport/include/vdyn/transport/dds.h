@@ -4,6 +4,7 @@
 // reason; a failed write, take or wait is reported (last_error(), a drop counter), never ignored.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <algorithm>
@@ -48,16 +49,29 @@ struct Decoded {
 Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
                        std::span<const std::uint8_t> payload, google::protobuf::Message& into);
 
+// A participant's GUID as DDS gives it: unique on the network, the same seen from everywhere, and
+// ordered (std::array compares bytewise), so every process breaks a tie the same way.
+using Guid = std::array<std::uint8_t, 16>;
+
+struct ParticipantOptions {
+  // The sockets' receive buffer (0: Cyclone DDS's default, 1 MiB; the kernel caps it at
+  // net.core.rmem_max): for a process that takes a burst of traffic it must not lose, such as a
+  // recorder. Set through the domain's configuration, so it applies when this participant
+  // creates the domain in this process (the first on that domain id); CYCLONEDDS_URI still has
+  // the last word.
+  std::size_t receive_buffer_bytes = 0;
+  // Text in the participant's USER_DATA: every other participant on the domain sees it when it
+  // discovers this one, before any topic matches, and nothing records it (a server's claim on its
+  // vehicles; ParticipantReader reads it).
+  std::string user_data;
+};
+
 // A DDS domain participant and the vdyn topics created in it (once each).
 class Participant {
  public:
   explicit Participant(std::uint32_t domain_id);
-  // With the sockets' receive buffer asked to be `receive_buffer_bytes` (the kernel caps it at
-  // net.core.rmem_max; Cyclone DDS asks for 1 MiB by default): a process that takes a burst of
-  // traffic it must not lose, such as a recorder. Set through the domain's configuration, so it
-  // applies when this participant creates the domain in this process (the first on that domain
-  // id); CYCLONEDDS_URI still has the last word.
   Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes);
+  Participant(std::uint32_t domain_id, const ParticipantOptions& options);
   ~Participant();
   Participant(const Participant&) = delete;
   Participant& operator=(const Participant&) = delete;
@@ -65,12 +79,48 @@ class Participant {
   dds_entity_t handle() const { return participant_; }
   dds_entity_t Topic(TopicId id);
   std::uint32_t domain_id() const { return domain_id_; }
+  Guid guid() const { return guid_; }
+  // Replaces the USER_DATA text; discovery announces the change to every participant. False on
+  // error (last_error() says).
+  [[nodiscard]] bool SetUserData(std::string_view text);
+  const std::string& last_error() const { return last_error_; }
 
  private:
   dds_entity_t domain_ = 0;  // when this participant created the domain itself
   dds_entity_t participant_ = 0;
   std::uint32_t domain_id_ = 0;
+  Guid guid_{};
   dds_entity_t topics_[8] = {};
+  std::string last_error_;
+};
+
+// The participants on the domain as discovery sees them (DDS's built-in DCPSParticipant topic),
+// this process's own included, with their USER_DATA text.
+class ParticipantReader {
+ public:
+  explicit ParticipantReader(Participant& participant);
+  ~ParticipantReader();
+  ParticipantReader(const ParticipantReader&) = delete;
+  ParticipantReader& operator=(const ParticipantReader&) = delete;
+
+  struct Peer {
+    Guid guid{};
+    std::string user_data;
+    bool alive = true;  // false: it has gone (deleted, or its lease ran out)
+  };
+  // Appends every change since the last call to `out`, oldest first. False on a DDS error
+  // (last_error() says; what was taken before it is in `out`).
+  [[nodiscard]] bool Take(std::vector<Peer>& out);
+  // Blocks until a change is available or the timeout passes; true when one is. A DDS error is
+  // false, with last_error() set.
+  bool Wait(std::chrono::nanoseconds timeout);
+  const std::string& last_error() const { return last_error_; }
+
+ private:
+  dds_entity_t reader_ = 0;
+  dds_entity_t waitset_ = 0;
+  dds_entity_t condition_ = 0;
+  std::string last_error_;
 };
 
 // How a writer's samples go out. kEach: every write is its own datagram, sent before Write()

@@ -32,6 +32,7 @@
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/diagnostics.pb.h"
+#include "vdyn/runtime/claim.h"
 #include "vdyn/runtime/input_arbiter.h"
 #include "vdyn/runtime/pacing.h"
 #include "vdyn/runtime/request_planner.h"
@@ -135,8 +136,10 @@ class ServerNode {
   int RunLockstep(const std::atomic<bool>& stop);
   void WriteStats(base::MonoTime start, base::MonoTime end, base::Nanos start_cpu) const;
 
-  // Start: another server on the domain that runs one of our vehicles, or has our id.
+  // Start: another server on the domain that runs one of our vehicles, or has our id, or claims
+  // them at the same moment and wins the tie (claim.h). Empty when this server may run.
   std::string FindClash();
+  ServerClaim Claim(bool running) const;
   // Receiver thread.
   void ReceiverLoop();
   void Refuse(const pb::ControlRequest& r, const std::string& why);
