@@ -140,18 +140,17 @@ int main(int argc, char** argv) {
   for (int i = 0; i < runs; ++i) {
     for (const bool bursts : {false, true}) {
       Run r = RunOnce(server, domain, seconds, bursts, dir, i);
-      std::printf("  %-5s run %d: lateness p50 %6.1f p99 %6.1f p99.9 %7.1f max %8.1f us; "
-                  "requests held a boundary p50 %5.1f p99 %5.1f max %6.1f us (%.0f boundaries); "
-                  "%llu sent, %llu answered, %llu twice, %llu refused%s%s\n",
-                  bursts ? "burst" : "idle", i, r.stats["lateness_p50_us"],
-                  r.stats["lateness_p99_us"], r.stats["lateness_p999_us"],
-                  r.stats["lateness_max_us"], r.stats["request_boundary_p50_us"],
-                  r.stats["request_boundary_p99_us"], r.stats["request_boundary_max_us"],
-                  r.stats["request_boundaries"], static_cast<unsigned long long>(r.sent),
-                  static_cast<unsigned long long>(r.replies),
-                  static_cast<unsigned long long>(r.duplicates),
-                  static_cast<unsigned long long>(r.refused), r.refused ? ": " : "",
-                  r.first_refusal.c_str());
+      std::printf(
+          "  %-5s run %d: lateness p50 %6.1f p99 %6.1f p99.9 %7.1f max %8.1f us; "
+          "requests held a boundary p50 %5.1f p99 %5.1f max %6.1f us (%.0f boundaries); "
+          "%llu sent, %llu answered, %llu twice, %llu refused%s%s\n",
+          bursts ? "burst" : "idle", i, r.stats["lateness_p50_us"], r.stats["lateness_p99_us"],
+          r.stats["lateness_p999_us"], r.stats["lateness_max_us"],
+          r.stats["request_boundary_p50_us"], r.stats["request_boundary_p99_us"],
+          r.stats["request_boundary_max_us"], r.stats["request_boundaries"],
+          static_cast<unsigned long long>(r.sent), static_cast<unsigned long long>(r.replies),
+          static_cast<unsigned long long>(r.duplicates), static_cast<unsigned long long>(r.refused),
+          r.refused ? ": " : "", r.first_refusal.c_str());
       std::fflush(stdout);
       all[bursts].push_back(std::move(r));
     }

@@ -6,9 +6,9 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "test_support.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/io/maneuver.h"
-#include "test_support.h"
 
 namespace vdyn {
 namespace {

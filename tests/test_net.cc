@@ -9,12 +9,12 @@
 
 #include <chrono>
 #include <cmath>
-#include <functional>
+#include <cstdio>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <thread>
-#include <cstdio>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -181,13 +181,17 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   pb::VehicleState last;
   // Drive: throttle 1 written at ~100 Hz until the car goes faster than 10 m/s.
   bool fast = false;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    last = s;
-    fast = s.v_wt_b().x() > 10.0;
-  }, [&] {
-    EXPECT_TRUE(input.Write(1, Input(1, 1.0, "test-rig"))) << input.last_error();
-    return fast;
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s,
+      [&](const auto& s) {
+        last = s;
+        fast = s.v_wt_b().x() > 10.0;
+      },
+      [&] {
+        EXPECT_TRUE(input.Write(1, Input(1, 1.0, "test-rig"))) << input.last_error();
+        return fast;
+      }))
+      << server->Log();
   EXPECT_EQ(last.input().source_id(), "test-rig");
   EXPECT_DOUBLE_EQ(last.control().throttle(), 1.0);
   EXPECT_FALSE(last.control().watchdog_safe_state());
@@ -318,14 +322,19 @@ TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   std::map<std::string, std::uint64_t> counts;
   auto has = [&](const std::string& kind) { return counts.count(kind) != 0; };
-  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
-    counts.clear();
-    for (const auto& dc : d.drops()) counts[dc.kind()] = dc.count();
-  }, [&] {
-    return has("malformed payload on vdyn/input") && has("unknown type on vdyn/input") &&
-           has("non-finite value on vdyn/input") && has("out-of-range input on vdyn/input") &&
-           has("rejected control request") && has("unknown button bits on vdyn/input (ignored)");
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 10s,
+      [&](const auto& d) {
+        counts.clear();
+        for (const auto& dc : d.drops()) counts[dc.kind()] = dc.count();
+      },
+      [&] {
+        return has("malformed payload on vdyn/input") && has("unknown type on vdyn/input") &&
+               has("non-finite value on vdyn/input") && has("out-of-range input on vdyn/input") &&
+               has("rejected control request") &&
+               has("unknown button bits on vdyn/input (ignored)");
+      }))
+      << server->Log();
   EXPECT_THAT(server->Log(), HasSubstr("non-finite value on vdyn/input: steer"));
   EXPECT_THAT(server->Log(),
               HasSubstr("unknown button bits on vdyn/input (ignored): 'odd-buttons' on vehicle 14 "
@@ -440,12 +449,13 @@ TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   std::string source;
   // The primary drives while it writes...
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    source = s.input().source_id();
-  }, [&] {
-    EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
-    return source == "primary";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { source = s.input().source_id(); },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
+        return source == "primary";
+      }))
+      << source << server->Log();
   // ...then its loop hangs: the writer is alive but silent. After the 200 ms lease the backup
   // drives; the vehicle never falls back to the watchdog's safe state (2 s here).
   bool safe = false;
@@ -551,12 +561,14 @@ TEST_F(Net, TwoServersShareADomainWithDistinctVehicles) {
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   transport::Writer<pb::DriverInput> input(p, TopicId::kInput, 10);
   std::map<std::uint32_t, pb::VehicleState> latest;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    latest[s.vehicle_id()] = s;
-  }, [&] {
-    EXPECT_TRUE(input.Write(3, Input(3, 1.0, "rig-3"))) << input.last_error();
-    return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) && latest.count(2);
-  })) << a->Log() << b->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { latest[s.vehicle_id()] = s; },
+      [&] {
+        EXPECT_TRUE(input.Write(3, Input(3, 1.0, "rig-3"))) << input.last_error();
+        return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) &&
+               latest.count(2);
+      }))
+      << a->Log() << b->Log();
   EXPECT_EQ(latest[1].server_id(), "lab-a");
   EXPECT_EQ(latest[3].server_id(), "lab-b");
   EXPECT_LT(latest[1].v_wt_w().x(), 0.1);  // only vehicle 3 was driven
@@ -673,7 +685,7 @@ class StartGate {
   // argv run once the gate opens (exec'd in place: the process is the program itself).
   std::vector<std::string> Wrap(std::vector<std::string> argv) const {
     std::vector<std::string> out = {"/bin/sh", "-c", "flock -s \"$0\" true && exec \"$@\"",
-                                     path_.string()};
+                                    path_.string()};
     out.insert(out.end(), argv.begin(), argv.end());
     return out;
   }
@@ -735,8 +747,7 @@ TEST_F(Net, TwoServersStartedInOneInstantNeverBothRunAVehicle) {
       states.Wait(20ms);
       take();
     }
-    ASSERT_NE(a.running(), b.running()) << "both still run or both stopped\n"
-                                         << a.Log() << b.Log();
+    ASSERT_NE(a.running(), b.running()) << "both still run or both stopped\n" << a.Log() << b.Log();
     Process& loser = a.running() ? b : a;
     Process& winner = a.running() ? a : b;
     const std::string winner_id = a.running() ? id_a : id_b;
@@ -786,23 +797,28 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   std::string source;
   bool safe = false;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    source = s.input().source_id();
-  }, [&] {
-    EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
-    return source == "primary";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { source = s.input().source_id(); },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
+        return source == "primary";
+      }))
+      << source << server->Log();
   // The primary goes on writing, but NaN steering: refused, it no longer counts as live.
   pb::DriverInput nan_input = Input(1, 0.5, "primary");
   nan_input.set_steer(std::numeric_limits<double>::quiet_NaN());
   const auto t0 = std::chrono::steady_clock::now();
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
-    source = s.input().source_id();
-    safe = safe || s.control().watchdog_safe_state();
-  }, [&] {
-    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
-    return source == "backup";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 10s,
+      [&](const auto& s) {
+        source = s.input().source_id();
+        safe = safe || s.control().watchdog_safe_state();
+      },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return source == "backup";
+      }))
+      << source << server->Log();
   std::printf("  a primary sending NaN lost the vehicle to the backup after %.0f ms (wall clock)\n",
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   EXPECT_FALSE(safe);
@@ -810,26 +826,31 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   pb::DriverInput wild = Input(1, 5.0, "rig30");
   bool rig30_drove = false;
   int n = 0;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
-    rig30_drove = rig30_drove || s.input().source_id() == "rig30";
-  }, [&] {
-    EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
-    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
-    return ++n > 100;
-  }));
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 10s,
+      [&](const auto& s) { rig30_drove = rig30_drove || s.input().source_id() == "rig30"; },
+      [&] {
+        EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return ++n > 100;
+      }));
   EXPECT_FALSE(rig30_drove);
   // The diagnostics say who was refused, and why.
   std::map<std::string, pb::InputSourceDiagnostics> seen;
-  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
-    for (const auto& v : d.vehicles()) {
-      for (const auto& src : v.sources()) seen[src.source_id()] = src;
-    }
-  }, [&] {
-    EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
-    EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
-    return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
-           seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 10s,
+      [&](const auto& d) {
+        for (const auto& v : d.vehicles()) {
+          for (const auto& src : v.sources()) seen[src.source_id()] = src;
+        }
+      },
+      [&] {
+        EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
+               seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
+      }))
+      << server->Log();
   EXPECT_THAT(seen["primary"].last_refusal(), HasSubstr("non-finite value on vdyn/input: steer"));
   EXPECT_EQ(seen["primary"].strength(), 20);
   EXPECT_FALSE(seen["primary"].driving());
@@ -936,8 +957,8 @@ struct Burst {
     if (!got.emplace(reply.request_id(), reply).second) ++duplicates;
   }
   bool AllAnswered(std::size_t n, std::chrono::milliseconds timeout) {
-    return ReadUntil<pb::ControlReply>(replies, timeout, [&](const auto& r) { Note(r); },
-                                       [&] { return got.size() >= n; });
+    return ReadUntil<pb::ControlReply>(
+        replies, timeout, [&](const auto& r) { Note(r); }, [&] { return got.size() >= n; });
   }
 };
 
@@ -976,7 +997,8 @@ TEST_F(Net, EveryRequestOfABurstGetsExactlyOneReply) {
     burst.Send(r);
   }
   ASSERT_TRUE(burst.AllAnswered(kResets + kSpawns, 120s))
-      << burst.got.size() << " of " << kResets + kSpawns << " answered\n" << server->Log();
+      << burst.got.size() << " of " << kResets + kSpawns << " answered\n"
+      << server->Log();
   EXPECT_EQ(burst.duplicates, 0u);
   int resets_accepted = 0, spawned = 0, full = 0, off_ground = 0;
   for (const auto& [request_id, reply] : burst.got) {

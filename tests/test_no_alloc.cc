@@ -138,8 +138,7 @@ TEST(NoAllocation, StepsOnFacilityAllocateNothing) {
 // Requests of every kind, each answered: spawns (one where a removed vehicle lived), teleports,
 // a reset, new parameters, a restore of a new vehicle, a pause, steps while paused, a resume, a
 // removal. `round` keeps ids and poses apart between calls.
-void SendRequests(transport::ControlClient& control, int round,
-                  int* accepted, int* answered) {
+void SendRequests(transport::ControlClient& control, int round, int* accepted, int* answered) {
   auto call = [&](pb::ControlRequest r) {
     const auto reply = control.Call(std::move(r), std::chrono::seconds(20));
     *answered += reply.has_value();

@@ -7,13 +7,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "test_support.h"
 #include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/runtime/claim.h"
 #include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
-#include "test_support.h"
 
 namespace vdyn {
 namespace {
@@ -550,10 +550,10 @@ TEST(ServerClaim, ReadsBackAndClashesOnTheIdOrAVehicle) {
   EXPECT_EQ(back->vehicle_ids, a.vehicle_ids);
   EXPECT_FALSE(back->running);
   EXPECT_TRUE(ServerClaim::Decode(ServerClaim{"b", {}, true}.Encode())->running);
-  for (const char* other : {"", "vdyn-server/1 ", "vdyn-server/2 running vehicles=1 id=x",
-                            "vdyn-server/1 running vehicles=1,x id=y",
-                            "vdyn-server/1 running vehicles=4294967296 id=y",
-                            "vdyn-server/1 waiting vehicles=1 id=y", "some other program"}) {
+  for (const char* other :
+       {"", "vdyn-server/1 ", "vdyn-server/2 running vehicles=1 id=x",
+        "vdyn-server/1 running vehicles=1,x id=y", "vdyn-server/1 running vehicles=4294967296 id=y",
+        "vdyn-server/1 waiting vehicles=1 id=y", "some other program"}) {
     EXPECT_FALSE(ServerClaim::Decode(other).has_value()) << other;
   }
   EXPECT_TRUE(a.Clashes({"lab b", {7, 2}, true}));

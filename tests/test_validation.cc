@@ -22,8 +22,8 @@ namespace vdyn {
 namespace {
 
 using Eigen::Vector3d;
-using ::testing::HasSubstr;
 using testing::Drive;
+using ::testing::HasSubstr;
 using testing::SharedWorld;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
@@ -594,8 +594,8 @@ namespace vdyn {
 namespace {
 
 using Eigen::Vector3d;
-using ::testing::HasSubstr;
 using testing::Drive;
+using ::testing::HasSubstr;
 using testing::SharedWorld;
 
 // --- the edge of the physics: starts that cannot be, contacts that cannot blow up ---------------

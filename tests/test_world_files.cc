@@ -14,11 +14,11 @@
 namespace vdyn {
 namespace {
 
-using ::testing::HasSubstr;
-using testing::TempDir;
-using testing::ReadFile;
-using testing::WriteFile;
 using Eigen::Vector3d;
+using ::testing::HasSubstr;
+using testing::ReadFile;
+using testing::TempDir;
+using testing::WriteFile;
 
 // A 20 m x 10 m quad at height 3 in a Y-up file: x in [0, 20], "up" y = 3, z in [-10, 0].
 std::unique_ptr<aiScene> YUpQuadScene() {
@@ -128,23 +128,21 @@ TEST_P(BrokenWorldFiles, EndWithAMessageNamingFileAndReason) {
 
 INSTANTIATE_TEST_SUITE_P(
     Files, BrokenWorldFiles,
-    ::testing::Values(BrokenCase{"missing.obj", nullptr, "no such file"},
-                      BrokenCase{"empty.stl", "", "the file is empty"},
-                      BrokenCase{"garbage.fbx", "this is not an FBX file at all\n",
-                                 "cannot read the mesh"},
-                      BrokenCase{"garbage.gltf", "{ not json", "cannot read the mesh"},
-                      BrokenCase{"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
-                                 "no usable triangles"},
-                      BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
-                      BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"},
-                      // A PNM's maximum value is 1 to 65535: 0 would divide every height by 0.
-                      BrokenCase{"maxval0.pgm", "P5\n2 2\n0\n\x10\x20\x30\x40",
-                                 "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
-                      BrokenCase{"maxval0.ppm", "P6 2 2 0\n123456789012",
-                                 "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
-                      BrokenCase{"maxval70000.pgm",
-                                 "P5\n2 2\n70000\n\x10\x20\x30\x40\x10\x20\x30\x40",
-                                 "the maximum value is 70000: a PGM or PPM needs 1 to 65535"}));
+    ::testing::Values(
+        BrokenCase{"missing.obj", nullptr, "no such file"},
+        BrokenCase{"empty.stl", "", "the file is empty"},
+        BrokenCase{"garbage.fbx", "this is not an FBX file at all\n", "cannot read the mesh"},
+        BrokenCase{"garbage.gltf", "{ not json", "cannot read the mesh"},
+        BrokenCase{"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "no usable triangles"},
+        BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
+        BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"},
+        // A PNM's maximum value is 1 to 65535: 0 would divide every height by 0.
+        BrokenCase{"maxval0.pgm", "P5\n2 2\n0\n\x10\x20\x30\x40",
+                   "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
+        BrokenCase{"maxval0.ppm", "P6 2 2 0\n123456789012",
+                   "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
+        BrokenCase{"maxval70000.pgm", "P5\n2 2\n70000\n\x10\x20\x30\x40\x10\x20\x30\x40",
+                   "the maximum value is 70000: a PGM or PPM needs 1 to 65535"}));
 
 std::string Le(std::uint32_t v, int bytes) {
   std::string out;

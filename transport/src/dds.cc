@@ -35,8 +35,7 @@ Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
   return d;
 }
 
-Participant::Participant(std::uint32_t domain_id)
-    : Participant(domain_id, ParticipantOptions{}) {}
+Participant::Participant(std::uint32_t domain_id) : Participant(domain_id, ParticipantOptions{}) {}
 
 Participant::Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes)
     : Participant(domain_id, ParticipantOptions{receive_buffer_bytes, {}}) {}
@@ -99,10 +98,11 @@ bool Participant::SetUserData(std::string_view text) {
 }
 
 ParticipantReader::ParticipantReader(Participant& participant) {
-  reader_ = dds_create_reader(participant.handle(), DDS_BUILTIN_TOPIC_DCPSPARTICIPANT, nullptr,
-                              nullptr);
+  reader_ =
+      dds_create_reader(participant.handle(), DDS_BUILTIN_TOPIC_DCPSPARTICIPANT, nullptr, nullptr);
   if (reader_ < 0) {
-    throw TransportError(DdsError("cannot create a reader of the discovered participants", reader_));
+    throw TransportError(
+        DdsError("cannot create a reader of the discovered participants", reader_));
   }
   waitset_ = dds_create_waitset(participant.handle());
   if (waitset_ < 0) {
@@ -110,8 +110,7 @@ ParticipantReader::ParticipantReader(Participant& participant) {
     throw TransportError(DdsError("cannot create a waitset for the participants", waitset_));
   }
   condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
-  const dds_return_t rc =
-      condition_ < 0 ? condition_ : dds_waitset_attach(waitset_, condition_, 0);
+  const dds_return_t rc = condition_ < 0 ? condition_ : dds_waitset_attach(waitset_, condition_, 0);
   if (rc < 0) {
     dds_delete(waitset_);
     dds_delete(reader_);

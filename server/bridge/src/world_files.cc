@@ -116,7 +116,8 @@ std::vector<TriangleMesh> LoadMeshBytes(const std::string& bytes, const std::str
   ConfigureImporter(importer);
   const std::string hint = ext.empty() ? std::string() : ext.substr(1);
   const aiScene* scene = JoinIdenticalVertices(
-      importer, importer.ReadFileFromMemory(bytes.data(), bytes.size(), ImportFlags(), hint.c_str()));
+      importer,
+      importer.ReadFileFromMemory(bytes.data(), bytes.size(), ImportFlags(), hint.c_str()));
   return MeshesFromScene(scene, importer, name, o);
 }
 

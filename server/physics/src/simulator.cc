@@ -154,7 +154,9 @@ void AssertionFailure(const std::string& what) {
 
 std::atomic<InvariantHandler> g_invariant_handler{&AssertionFailure};
 
-void InvariantFailed(const std::string& what) { g_invariant_handler.load()(what); }
+void InvariantFailed(const std::string& what) {
+  g_invariant_handler.load()(what);
+}
 
 // Sets `why` to "wheel name = value is not a finite number" when v is not finite (and `why` is
 // still empty). Nothing is allocated unless it fails: the check runs every step.
@@ -199,10 +201,12 @@ std::string CheckStepInvariants(const StepRecord& r, const State& after) {
       why = buf;
     }
     const std::pair<const char*, double> scalars[] = {
-        {"Fp", o.Fp},   {"Fh", o.Fh},         {"Fb", o.Fb},
-        {"Fy", o.Fy},   {"Frr", o.Frr},       {"lS", o.lS},
-        {"lS_rate", o.lS_rate}, {"slip_angle", o.slip_angle}, {"omega", o.omega},
-        {"slip_ratio", o.slip_ratio}, {"Fx", o.Fx}, {"Mz", o.Mz}};
+        {"Fp", o.Fp},           {"Fh", o.Fh},
+        {"Fb", o.Fb},           {"Fy", o.Fy},
+        {"Frr", o.Frr},         {"lS", o.lS},
+        {"lS_rate", o.lS_rate}, {"slip_angle", o.slip_angle},
+        {"omega", o.omega},     {"slip_ratio", o.slip_ratio},
+        {"Fx", o.Fx},           {"Mz", o.Mz}};
     for (const auto& [name, v] : scalars) Finite(why, wheel, name, v);
     Finite(why, wheel, "F_W", o.F_W);
   }

@@ -11,13 +11,14 @@ namespace {
 
 using Op = PreparedRequest::Op;
 
-Pose2 FromProto(const pb::Pose2& p) { return {p.x(), p.y(), p.yaw()}; }
+Pose2 FromProto(const pb::Pose2& p) {
+  return {p.x(), p.y(), p.yaw()};
+}
 
 std::string CheckPose(const pb::Pose2& p, double speed) {
-  for (const std::string& why : {limits::Check(limits::kPoseXY, p.x()),
-                                 limits::Check(limits::kPoseXY, p.y()),
-                                 limits::Check(limits::kPoseYaw, p.yaw()),
-                                 limits::Check(limits::kSpawnSpeed, speed)}) {
+  for (const std::string& why :
+       {limits::Check(limits::kPoseXY, p.x()), limits::Check(limits::kPoseXY, p.y()),
+        limits::Check(limits::kPoseYaw, p.yaw()), limits::Check(limits::kSpawnSpeed, speed)}) {
     if (!why.empty()) return why;
   }
   return {};
@@ -57,8 +58,8 @@ RequestPlanner::Plan RequestPlanner::Prepare(std::shared_ptr<const pb::ControlRe
   p->vehicle_id = r.vehicle_id();
   const auto known = vehicles_.find(r.vehicle_id());
   if (known != vehicles_.end()) p->expected = known->second.params;
-  const std::string no_vehicle = "no vehicle " + std::to_string(r.vehicle_id()) + " on server '" +
-                                 config_.server_id + "'";
+  const std::string no_vehicle =
+      "no vehicle " + std::to_string(r.vehicle_id()) + " on server '" + config_.server_id + "'";
   std::string& why = plan.refusal;
   switch (r.command_case()) {
     case pb::ControlRequest::kPause:
@@ -169,8 +170,8 @@ std::string RequestPlanner::PlanSpawn(const pb::ControlRequest& r, PreparedReque
   const Pose2 pose = FromProto(r.spawn().pose());
   try {
     auto valid = std::make_shared<const ValidParams>(ParamsFromProto(*params));
-    p.vehicle = Node(NewVehicle(id, world_, config_, params, *valid, nullptr, pose,
-                                r.spawn().speed()));
+    p.vehicle =
+        Node(NewVehicle(id, world_, config_, params, *valid, nullptr, pose, r.spawn().speed()));
     vehicles_[id] = {params, valid, pose};
   } catch (const std::exception& e) {
     return e.what();

@@ -52,12 +52,12 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_rejected_ = drops_.Register("rejected control request");
   drop_step_input_ = drops_.Register("out-of-range input in a step request");
   drop_unknown_buttons_ = drops_.Register("unknown button bits on vdyn/input (ignored)");
-  drop_unanswered_gone_ =
-      drops_.Register("control request unanswered: its client went away before its steps were done");
+  drop_unanswered_gone_ = drops_.Register(
+      "control request unanswered: its client went away before its steps were done");
   drop_unanswered_write_ =
       drops_.Register("control request unanswered: the reply could not be written");
-  drop_unanswered_stopped_ =
-      drops_.Register("control request unanswered: the server stopped before the reply was written");
+  drop_unanswered_stopped_ = drops_.Register(
+      "control request unanswered: the server stopped before the reply was written");
   drop_unanswered_room_ = drops_.Register("control request unanswered: no room to hand it on");
 
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
@@ -447,7 +447,8 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
     r.mutable_pause();
     return r;
   }());
-  if (!paused.accepted()) throw std::logic_error("the session refused to pause: " + paused.reason());
+  if (!paused.accepted())
+    throw std::logic_error("the session refused to pause: " + paused.reason());
   window_start_ = base::MonotonicNow();
   window_start_cpu_ = base::ProcessCpuTime();
   base::MonoTime last_request = base::MonotonicNow();
@@ -521,7 +522,7 @@ void ServerNode::ReceiverLoop() {
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
   std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
   std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
-  int got = 0;  // requests taken in the last round
+  int got = 0;                                       // requests taken in the last round
   base::MonoTime next_housekeeping = base::MonotonicNow();
   // Every bit a Button names (vdyn/input.proto).
   std::uint32_t known_buttons = 0;
@@ -664,8 +665,7 @@ void ServerNode::ReceiverLoop() {
               }
             }
             control_writers[info.publication_handle] = 0;
-            Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle,
-                        {}};
+            Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
             if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
           },
           room);
@@ -772,7 +772,8 @@ std::string ServerNode::FindClash() {
   };
   while (true) {
     changes.clear();
-    if (!peers.Take(changes)) drops_.Count("DDS error on the domain's participants", peers.last_error());
+    if (!peers.Take(changes))
+      drops_.Count("DDS error on the domain's participants", peers.last_error());
     for (const auto& peer : changes) {
       if (peer.guid == own_guid) continue;
       const std::optional<ServerClaim> c = ServerClaim::Decode(peer.user_data);
@@ -793,19 +794,22 @@ std::string ServerNode::FindClash() {
                          ": choose other --vehicle-ids, or another --domain";
       } else if (guid < own_guid) {
         lost = c.server_id == me
-                   ? "another server with the id '" + me + "' started at the same moment on "
-                         "domain " + domain + " and keeps the id (a tie goes to the lower "
+                   ? "another server with the id '" + me +
+                         "' started at the same moment on "
+                         "domain " +
+                         domain +
+                         " and keeps the id (a tie goes to the lower "
                          "participant GUID): give this one another --server-id, or another --domain"
                    : "vehicle " + vehicle + " is claimed by server '" + c.server_id +
                          "', started at the same moment on domain " + domain +
                          "; that server keeps it (a tie goes to the lower participant GUID): "
                          "choose other --vehicle-ids, or another --domain";
       } else if (told.insert(guid).second) {
-        spdlog::info("server '{}': server '{}' started at the same moment and claims {}; this "
-                     "server keeps {} (a tie goes to the lower participant GUID)",
-                     me, c.server_id,
-                     c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
-                     c.server_id == me ? "it" : "the vehicle");
+        spdlog::info(
+            "server '{}': server '{}' started at the same moment and claims {}; this "
+            "server keeps {} (a tie goes to the lower participant GUID)",
+            me, c.server_id, c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
+            c.server_id == me ? "it" : "the vehicle");
       }
       if (!lost.empty()) return lost;
     }
@@ -1022,10 +1026,10 @@ void ServerNode::PublishOutcome(RequestOutcome& o, base::MonoTime now) {
     requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
     const std::string client = base::Quote(o.request->client_id(), 64);
     drops_.Count(drop_unanswered_gone_, "client '" + client + "'");
-    spdlog::warn("server '{}': client '{}' went away before the {} steps it asked for were done: "
-                 "the {} still to run are cancelled, and the simulation stays paused at {:.3f} s",
-                 me, client, o.request->step().steps(), o.n1,
-                 static_cast<double>(o.sim_time_ns) * 1e-9);
+    spdlog::warn(
+        "server '{}': client '{}' went away before the {} steps it asked for were done: "
+        "the {} still to run are cancelled, and the simulation stays paused at {:.3f} s",
+        me, client, o.request->step().steps(), o.n1, static_cast<double>(o.sim_time_ns) * 1e-9);
     o = RequestOutcome{};
     return;
   }
@@ -1070,9 +1074,10 @@ void ServerNode::PublisherLoop() {
       }
       const std::size_t left = outbox_.size() + events_.size() + replies;
       if (left > 0) {
-        spdlog::warn("server '{}': {} messages not sent by the shutdown deadline ({} of them "
-                     "replies)",
-                     server_id, left, replies);
+        spdlog::warn(
+            "server '{}': {} messages not sent by the shutdown deadline ({} of them "
+            "replies)",
+            server_id, left, replies);
       }
       break;
     }

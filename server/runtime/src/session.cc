@@ -91,8 +91,7 @@ pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& serve
 
 std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id) {
   using Why = RequestOutcome::Why;
-  const std::string vehicle =
-      "vehicle " + std::to_string(o.request ? o.request->vehicle_id() : 0);
+  const std::string vehicle = "vehicle " + std::to_string(o.request ? o.request->vehicle_id() : 0);
   switch (o.why) {
     case Why::kNone:
       return {};
@@ -140,9 +139,8 @@ pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) 
 
 SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
                           const SessionConfig& config,
-                          std::shared_ptr<const pb::VehicleParams> params,
-                          const ValidParams& valid, const State* exact, const Pose2& pose,
-                          double speed) {
+                          std::shared_ptr<const pb::VehicleParams> params, const ValidParams& valid,
+                          const State* exact, const Pose2& pose, double speed) {
   SimConfig sc;
   sc.step_ns = config.step_ns;
   SessionVehicle v;
@@ -155,8 +153,8 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
   // Grown once here: the stepping thread copies ids into these and fills the state message.
   v.live_input.mutable_source_id()->reserve(limits::kMaxIdBytes);
   v.applied_msg.mutable_source_id()->reserve(limits::kMaxIdBytes);
-  FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg,
-                   true, 0.0, v.state_msg);
+  FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg, true,
+                   0.0, v.state_msg);
   v.state_msg.mutable_input()->mutable_source_id()->reserve(limits::kMaxIdBytes);
   return v;
 }

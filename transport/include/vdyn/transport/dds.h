@@ -4,10 +4,10 @@
 // reason; a failed write, take or wait is reported (last_error(), a drop counter), never ignored.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
-#include <algorithm>
 #include <functional>
 #include <limits>
 #include <memory>

@@ -1,7 +1,7 @@
 // The networked server: a Session driven over DDS in real time or in lockstep.
 //
 //  receiver   takes driver inputs and control requests from DDS, decodes and checks them (sizes,
-//             finite numbers, ranges, keys); a request goes on to the request thread, refused or not
+//             finite numbers, ranges, keys); every request goes on to the request thread
 //  requests   makes each request ready (RequestPlanner: parameters validated and converted, a new
 //             vehicle built at rest, a teleport's state found), or refuses it with the reason
 //  loop       (SCHED_FIFO where permitted) at each step boundary: the inputs, at most 16 ready
@@ -121,7 +121,7 @@ class ServerNode {
   void Send(transport::TopicId topic, std::uint32_t key,
             std::unique_ptr<google::protobuf::Message> msg);
   void OnEvent(SessionEventRecord&& r);
-  bool Boundary();  // true when a control request was applied
+  bool Boundary();                  // true when a control request was applied
   void Answer(RequestOutcome&& o);  // room checked before
   void NoRoomToAnswer();            // counts a request that could not be handed on
   std::size_t OutcomeRoom() const { return outcomes_.capacity() - outcomes_.size(); }
@@ -194,7 +194,7 @@ class ServerNode {
   std::atomic<bool> requests_stop_{false};
   std::atomic<bool> publisher_stop_{false};
   std::atomic<std::int64_t> publisher_deadline_ns_{0};
-  std::atomic<std::int64_t> sim_time_ns_{0};  // the loop's, for answers given elsewhere
+  std::atomic<std::int64_t> sim_time_ns_{0};      // the loop's, for answers given elsewhere
   std::atomic<std::int64_t> last_request_ns_{0};  // when the receiver last took a request
   std::thread receiver_;
   std::thread requests_;
@@ -222,9 +222,8 @@ class ServerNode {
   std::map<std::uint32_t, OtherVehicle> others_;
 
   // Drop kinds counted on the loop thread (registered up front: counting allocates nothing).
-  int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1,
-      drop_inputs_full_ = -1, drop_key_mismatch_ = -1,
-      drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1,
+  int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1, drop_inputs_full_ = -1,
+      drop_key_mismatch_ = -1, drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1,
       drop_unknown_buttons_ = -1, drop_unanswered_gone_ = -1, drop_unanswered_write_ = -1,
       drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1;
 

@@ -93,16 +93,16 @@ struct SessionVehicle {
   std::shared_ptr<const pb::VehicleParams> params;  // complete, in effect
   Pose2 spawn_pose;
   double spawn_speed = 0;
-  pb::DriverInput live_input;        // the last live input received
+  pb::DriverInput live_input;  // the last live input received
   // A Restore request's exact input, applied in place of live_input until a live one arrives.
   bool input_restored = false;
   DriverInput restored_input;
   std::int64_t live_input_step = -1;  // vehicle step at which it was received (-1: none yet)
   bool safe_state = true;
-  DriverInput applied;               // physics fields of the input applied last step
+  DriverInput applied;  // physics fields of the input applied last step
   bool applied_valid = false;
-  pb::DriverInput applied_msg;       // the message form of what was applied
-  pb::VehicleState state_msg;        // reused for every step
+  pb::DriverInput applied_msg;  // the message form of what was applied
+  pb::VehicleState state_msg;   // reused for every step
   // Input changes not yet sent (an InputBatch event).
   std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
   int n_pending = 0;
@@ -115,9 +115,8 @@ using SessionVehicles = std::map<std::uint32_t, SessionVehicle>;
 // it cannot start at the pose.
 SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
                           const SessionConfig& config,
-                          std::shared_ptr<const pb::VehicleParams> params,
-                          const ValidParams& valid, const State* exact, const Pose2& pose,
-                          double speed);
+                          std::shared_ptr<const pb::VehicleParams> params, const ValidParams& valid,
+                          const State* exact, const Pose2& pose, double speed);
 
 // A control request made ready off the stepping thread (RequestPlanner::Prepare): checked, and
 // everything it needs built (a vehicle, parameters, a resting state, map nodes), so that applying
@@ -125,7 +124,14 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
 // thread knows and swaps. What the swap replaces is left in it, to be freed where it came from.
 struct PreparedRequest {
   enum class Op : std::uint8_t {
-    kPause, kResume, kStep, kMove /* reset, teleport */, kSpawn, kRemove, kSetParams, kRestore
+    kPause,
+    kResume,
+    kStep,
+    kMove /* reset, teleport */,
+    kSpawn,
+    kRemove,
+    kSetParams,
+    kRestore
   };
   Op op = Op::kPause;
   std::shared_ptr<const pb::ControlRequest> request;
@@ -133,15 +139,15 @@ struct PreparedRequest {
   // The vehicle's parameters as the planner knew them (nullptr: no such vehicle). Commit refuses
   // a request whose vehicle is not what it was planned for.
   std::shared_ptr<const pb::VehicleParams> expected;
-  std::uint32_t steps = 0;             // kStep
-  bool step_input = false;             // kStep: apply request->step().input() first
-  State state;                         // kMove: the new state (the vehicle's step is kept)
+  std::uint32_t steps = 0;  // kStep
+  bool step_input = false;  // kStep: apply request->step().input() first
+  State state;              // kMove: the new state (the vehicle's step is kept)
   std::shared_ptr<const pb::VehicleParams> params;  // kSetParams: new (after Commit: the old)
-  std::optional<ValidParams> valid;    // kSetParams: checked against the step
+  std::optional<ValidParams> valid;                 // kSetParams: checked against the step
   SessionVehicles::node_type vehicle;  // kSpawn, kRestore: new (after Commit: the replaced one)
   std::map<std::uint32_t, std::int64_t>::node_type retired;  // kRemove: a node for its step
-  bool applied = false;                // set by Commit: accepted (else refused)
-  std::uint64_t client = 0;            // the server's: the DDS writer it came from
+  bool applied = false;      // set by Commit: accepted (else refused)
+  std::uint64_t client = 0;  // the server's: the DDS writer it came from
 };
 
 // The answer to a request, as plain data: no allocation to make one (the publisher builds the
@@ -150,15 +156,15 @@ struct PreparedRequest {
 struct RequestOutcome {
   enum class Why : std::uint8_t {
     kNone,
-    kText,               // `text` says why
-    kExists,             // the vehicle exists already
-    kFull,               // n1: the most vehicles
-    kStepBehind,         // restore: n1 the vehicle's step, n2 the state's
-    kChanged,            // the vehicle changed between planning and applying
-    kCancelledByPause,   // a step request's steps were cancelled
+    kText,              // `text` says why
+    kExists,            // the vehicle exists already
+    kFull,              // n1: the most vehicles
+    kStepBehind,        // restore: n1 the vehicle's step, n2 the state's
+    kChanged,           // the vehicle changed between planning and applying
+    kCancelledByPause,  // a step request's steps were cancelled
     kCancelledByResume,
-    kClientGone,         // a step request's client left: n1 steps not run (no reply is sent)
-    kStopped,            // the server stopped before its steps were done
+    kClientGone,  // a step request's client left: n1 steps not run (no reply is sent)
+    kStopped,     // the server stopped before its steps were done
   };
   std::shared_ptr<const pb::ControlRequest> request;
   bool accepted = false;
@@ -248,8 +254,8 @@ class Session {
   void FlushInputs(Vehicle& v);
   // The outcome of an accepted request: the vehicle's step, and the ControlApplied event.
   RequestOutcome Accept(const std::shared_ptr<const pb::ControlRequest>& r);
-  RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r,
-                        RequestOutcome::Why why, std::int64_t n1 = 0, std::int64_t n2 = 0);
+  RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r, RequestOutcome::Why why,
+                        std::int64_t n1 = 0, std::int64_t n2 = 0);
   void LatchInput(Vehicle& v);
 
   std::shared_ptr<const World> world_;
