@@ -872,6 +872,7 @@ void ServerNode::RequestLoop() {
   const std::string stopping_why = "the server is stopping: the request was not applied";
   std::unique_ptr<PreparedRequest> spent;
   Incoming in;
+  base::MonoTime give_up{0};  // once stopping: the shutdown deadline
   while (true) {
     const std::uint32_t token = request_bell_.Token();
     bool did = false;
@@ -880,6 +881,18 @@ void ServerNode::RequestLoop() {
       did = true;
     }
     const bool stopping = requests_stop_.load();
+    if (stopping && give_up.ns == 0) {
+      give_up = base::MonotonicNow() +
+                base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+    }
+    if (stopping && base::MonotonicNow() >= give_up) {
+      // The publisher took no answer for the whole deadline: what is left is counted.
+      while (incoming_.TryPop(in)) {
+        requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+        drops_.Count(drop_unanswered_stopped_);
+      }
+      break;
+    }
     // A request is taken only when both its ways on have room; none while a restore has not
     // come back from the loop (its outcome decides what the vehicle is).
     while ((stopping || !planner_->waiting()) && answers_.size() < answers_.capacity() &&
