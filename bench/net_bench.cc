@@ -113,6 +113,7 @@ int main(int argc, char** argv) {
 
   // Input at 1 kHz from a thread of its own: the stamp is the monotonic time of the write.
   std::atomic<bool> stop{false};
+  std::atomic<std::uint64_t> input_write_failures{0};
   std::thread writer([&] {
     vdyn::pb::DriverInput msg;
     msg.set_vehicle_id(1);
@@ -126,7 +127,7 @@ int main(int argc, char** argv) {
       msg.set_sequence(++seq);
       msg.set_steer(0.05 * std::sin(static_cast<double>(seq) * 1e-3));  // the input really varies
       msg.set_stamp_ns(vdyn::base::MonotonicNow().ns);
-      input.Write(1, msg);
+      if (!input.Write(1, msg)) ++input_write_failures;
     }
   });
 
@@ -200,6 +201,10 @@ int main(int argc, char** argv) {
   std::printf("state one-way latency (%llu states, %zu B): p50 %.1f us, p99 %.1f us, max %.1f us\n",
               static_cast<unsigned long long>(received), state_bytes.load(),
               one_way.Percentile(50), one_way.Percentile(99), one_way.Max());
+  if (input_write_failures > 0) {
+    std::printf("input writes that failed: %llu\n",
+                static_cast<unsigned long long>(input_write_failures.load()));
+  }
   std::printf("input to first state applying it (%llu inputs): p50 %.1f us, p99 %.1f us, max %.1f us\n",
               static_cast<unsigned long long>(input_to_state.count()), input_to_state.Percentile(50),
               input_to_state.Percentile(99), input_to_state.Max());

@@ -33,6 +33,7 @@ run() {  # prints the command, then runs it
   run "$bin/step_sweep" --model full
   run "$bin/step_sweep" --model paper
   run "$bin/net_bench" 60 20
+  run "$bin/request_bench" 20 3
   run "$bin/input_bench" 30
   run "$bin/recorder_bench" 30 3
   run "$bin/viewer_bench" 3 300

@@ -69,12 +69,12 @@ int main(int argc, char** argv) {
   in.set_vehicle_id(1);
   in.set_source_id(source);
   in.set_throttle(0.3);
-  long received = 0, driven = 0;
+  long received = 0, driven = 0, write_failures = 0;
   std::uint32_t matched = 0;
   while (std::chrono::steady_clock::now() < end) {
     if (input) {
       in.set_sequence(in.sequence() + 1);
-      input->Write(1, in);
+      write_failures += !input->Write(1, in);
       matched = std::max(matched, input->MatchedReaders());
     }
     states.Wait(10ms);
@@ -83,7 +83,7 @@ int main(int argc, char** argv) {
       if (s.input().source_id() == source) ++driven;
     });
   }
-  if (input) std::printf("input matched readers %u\n", matched);
+  if (input) std::printf("input matched readers %u, writes failed %ld\n", matched, write_failures);
   std::printf("states received %ld\n", received);
   std::printf("states driven by %s %ld\n", source.c_str(), driven);
   std::fflush(stdout);

@@ -225,6 +225,23 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
 }
 
+// A server id goes into every message the server sends: empty, longer than an id may be (64
+// bytes, which every reader would refuse), or with control characters, it is refused.
+TEST(Cli, AServerIdThatCannotBeAnIdIsRefused) {
+  const Result empty = RunServer("--server-id '' --duration 1");
+  EXPECT_EQ(empty.exit_code, 2) << empty.output;
+  EXPECT_THAT(empty.output, HasSubstr("--server-id: the server id is empty"));
+  const Result blank = RunServer("--server-id ' ' --duration 1");
+  EXPECT_EQ(blank.exit_code, 2) << blank.output;
+  EXPECT_THAT(blank.output, HasSubstr("--server-id: the server id is empty"));
+  const Result longer = RunServer("--server-id " + std::string(65, 'x') + " --duration 1");
+  EXPECT_EQ(longer.exit_code, 2) << longer.output;
+  EXPECT_THAT(longer.output, HasSubstr("the server id is 65 bytes long; at most 64"));
+  const Result control = RunServer("--server-id \"$(printf 'lab\\ta')\" --duration 1");
+  EXPECT_EQ(control.exit_code, 2) << control.output;
+  EXPECT_THAT(control.output, HasSubstr("the server id holds a control character"));
+}
+
 TEST(Cli, DemoRunsAndSaysWhereTheCsvIs) {
   TempDir dir;
   const Result r = RunServer("--demo --csv " + (dir / "demo.csv").string());

@@ -782,11 +782,11 @@ TEST(FullModelProperties, ThePaperModelReadsAHandWheelAngleThroughTheSteeringRat
   in.steer_mode = SteerMode::kHandWheel;
   in.steer = 0.9;
   sim.SetInput(in);
-  sim.Step();
+  ASSERT_EQ(sim.Step(), StepStatus::kOk);
   EXPECT_DOUBLE_EQ(sim.last_step().control.gamma, 0.9 / p->steering_ratio);
   in.steer_mode = SteerMode::kHandsOff;
   sim.SetInput(in);
-  sim.Step();
+  ASSERT_EQ(sim.Step(), StepStatus::kOk);
   EXPECT_EQ(sim.last_step().control.gamma, 0.0);
 }
 

@@ -1,12 +1,14 @@
 // Maneuver CSV: parsing, interpolation, and refusal of malformed files with line and reason.
 #include <cmath>
+#include <filesystem>
 #include <numbers>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "vdyn/io/maneuver.h"
 #include "test_support.h"
+#include "vdyn/base/limits.h"
+#include "vdyn/io/maneuver.h"
 
 namespace vdyn {
 namespace {
@@ -93,6 +95,43 @@ TEST(Maneuver, MissingFileIsAClearError) {
   } catch (const ManeuverError& e) {
     EXPECT_THAT(e.what(), HasSubstr("/nonexistent/m.csv: no such maneuver file"));
   }
+}
+
+// A maneuver is bounded (vdyn/base/limits.h, docs/formats.md): a file larger than a maneuver may be
+// is refused before it is read, and the rows beyond the limit at the line where they start
+// (issue 20: ten million rows took 1.38 GB). The file is read line by line, not as a whole.
+TEST(Maneuver, AFileOrRowCountBeyondTheLimitIsRefused) {
+  testing::TempDir dir;
+  const auto big = dir / "big.csv";
+  {
+    testing::WriteFile(big, "t_s,steer_deg,throttle,brake\n0,0,0,0\n");
+    // Sparse: the size is all that is looked at.
+    std::filesystem::resize_file(big, limits::kMaxManeuverBytes + 1);
+  }
+  try {
+    Maneuver::Load(big);
+    FAIL() << "a file over the size limit was read";
+  } catch (const ManeuverError& e) {
+    EXPECT_THAT(e.what(), HasSubstr(big.string() + ": 67108865 bytes, more than a maneuver file "
+                                                   "may hold (67108864 bytes"));
+  }
+  std::string text = "t_s,steer_deg,throttle,brake\n";
+  text.reserve(limits::kMaxManeuverRows * 12);
+  for (std::size_t i = 0; i <= limits::kMaxManeuverRows; ++i) {
+    text += std::to_string(i) + ",0,0,0\n";
+  }
+  const auto rows = dir / "rows.csv";
+  testing::WriteFile(rows, text);
+  try {
+    Maneuver::Load(rows);
+    FAIL() << "more rows than the limit were read";
+  } catch (const ManeuverError& e) {
+    EXPECT_THAT(e.what(), HasSubstr(rows.string() + ":1000002: more than 1000000 rows"));
+  }
+  // At the limit: read.
+  text.resize(text.rfind(std::to_string(limits::kMaxManeuverRows) + ",0,0,0\n"));
+  testing::WriteFile(rows, text);
+  EXPECT_EQ(Maneuver::Load(rows).rows().size(), limits::kMaxManeuverRows);
 }
 
 }  // namespace

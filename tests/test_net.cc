@@ -1,14 +1,20 @@
 // The server and its clients as real processes over loopback DDS (issue: the simulation server
 // over DDS). Each test has its own domain id; Cyclone DDS is restricted to `lo`. Every wait is
 // on an event (DDS data, a child's exit) with a generous bound.
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/file.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <fstream>
 #include <functional>
 #include <map>
+#include <set>
 #include <thread>
-#include <cstdio>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -59,15 +65,19 @@ class Net : public ::testing::Test {
     domain_ = testing::FreshDomain();
   }
 
-  std::unique_ptr<Process> StartServer(const std::vector<std::string>& extra,
-                                       const std::string& log = "server.log") {
+  std::vector<std::string> ServerArgv(const std::vector<std::string>& extra) const {
     std::vector<std::string> argv = {testing::ServerBinary(), "--domain", std::to_string(domain_),
                                      "--no-status"};
     argv.insert(argv.end(), extra.begin(), extra.end());
     if (std::find(extra.begin(), extra.end(), "--world") == extra.end()) {
       argv.insert(argv.end(), {"--world", "flat"});
     }
-    return std::make_unique<Process>(argv, dir_ / log);
+    return argv;
+  }
+
+  std::unique_ptr<Process> StartServer(const std::vector<std::string>& extra,
+                                       const std::string& log = "server.log") {
+    return std::make_unique<Process>(ServerArgv(extra), dir_ / log);
   }
 
   std::unique_ptr<Process> StartInput(const std::vector<std::string>& extra,
@@ -171,13 +181,17 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   pb::VehicleState last;
   // Drive: throttle 1 written at ~100 Hz until the car goes faster than 10 m/s.
   bool fast = false;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    last = s;
-    fast = s.v_wt_b().x() > 10.0;
-  }, [&] {
-    input.Write(1, Input(1, 1.0, "test-rig"));
-    return fast;
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s,
+      [&](const auto& s) {
+        last = s;
+        fast = s.v_wt_b().x() > 10.0;
+      },
+      [&] {
+        EXPECT_TRUE(input.Write(1, Input(1, 1.0, "test-rig"))) << input.last_error();
+        return fast;
+      }))
+      << server->Log();
   EXPECT_EQ(last.input().source_id(), "test-rig");
   EXPECT_DOUBLE_EQ(last.control().throttle(), 1.0);
   EXPECT_FALSE(last.control().watchdog_safe_state());
@@ -288,6 +302,10 @@ TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
   nan_input.set_steer(std::numeric_limits<double>::quiet_NaN());
   write_raw(13, "vdyn.pb.DriverInput", nan_input.SerializeAsString());
   write_raw(1, "vdyn.pb.DriverInput", Input(1, 7.0, "bad").SerializeAsString());
+  // Button bits no button has: the input is taken, the unknown bits counted and named.
+  pb::DriverInput odd = Input(14, 0.1, "odd-buttons");
+  odd.set_buttons(pb::BUTTON_HORN | 0x10000u);
+  write_raw(14, "vdyn.pb.DriverInput", odd.SerializeAsString());
   // Invalid parameters: rejected with field and reason.
   pb::ControlRequest req;
   req.set_vehicle_id(1);
@@ -304,15 +322,23 @@ TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   std::map<std::string, std::uint64_t> counts;
   auto has = [&](const std::string& kind) { return counts.count(kind) != 0; };
-  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
-    counts.clear();
-    for (const auto& dc : d.drops()) counts[dc.kind()] = dc.count();
-  }, [&] {
-    return has("malformed payload on vdyn/input") && has("unknown type on vdyn/input") &&
-           has("non-finite value on vdyn/input") && has("out-of-range input on vdyn/input") &&
-           has("rejected control request");
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 10s,
+      [&](const auto& d) {
+        counts.clear();
+        for (const auto& dc : d.drops()) counts[dc.kind()] = dc.count();
+      },
+      [&] {
+        return has("malformed payload on vdyn/input") && has("unknown type on vdyn/input") &&
+               has("non-finite value on vdyn/input") && has("out-of-range input on vdyn/input") &&
+               has("rejected control request") &&
+               has("unknown button bits on vdyn/input (ignored)");
+      }))
+      << server->Log();
   EXPECT_THAT(server->Log(), HasSubstr("non-finite value on vdyn/input: steer"));
+  EXPECT_THAT(server->Log(),
+              HasSubstr("unknown button bits on vdyn/input (ignored): 'odd-buttons' on vehicle 14 "
+                        "set 0x10000"));
   EXPECT_TRUE(server->running());
   dds_delete(raw);
 }
@@ -423,12 +449,13 @@ TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   std::string source;
   // The primary drives while it writes...
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    source = s.input().source_id();
-  }, [&] {
-    primary.Write(1, Input(1, 0.5, "primary"));
-    return source == "primary";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { source = s.input().source_id(); },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
+        return source == "primary";
+      }))
+      << source << server->Log();
   // ...then its loop hangs: the writer is alive but silent. After the 200 ms lease the backup
   // drives; the vehicle never falls back to the watchdog's safe state (2 s here).
   bool safe = false;
@@ -534,12 +561,14 @@ TEST_F(Net, TwoServersShareADomainWithDistinctVehicles) {
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   transport::Writer<pb::DriverInput> input(p, TopicId::kInput, 10);
   std::map<std::uint32_t, pb::VehicleState> latest;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    latest[s.vehicle_id()] = s;
-  }, [&] {
-    input.Write(3, Input(3, 1.0, "rig-3"));
-    return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) && latest.count(2);
-  })) << a->Log() << b->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { latest[s.vehicle_id()] = s; },
+      [&] {
+        EXPECT_TRUE(input.Write(3, Input(3, 1.0, "rig-3"))) << input.last_error();
+        return latest.count(3) && latest[3].v_wt_b().x() > 5.0 && latest.count(1) &&
+               latest.count(2);
+      }))
+      << a->Log() << b->Log();
   EXPECT_EQ(latest[1].server_id(), "lab-a");
   EXPECT_EQ(latest[3].server_id(), "lab-b");
   EXPECT_LT(latest[1].v_wt_w().x(), 0.1);  // only vehicle 3 was driven
@@ -614,6 +643,147 @@ TEST_F(Net, ASecondServerWithAVehicleOrAnIdInUseIsRefused) {
   EXPECT_TRUE(d->running());
 }
 
+// A wait that fails is counted with the reason, not dropped (issue 19). DDS refuses a negative
+// timeout: the one error a test can cause on demand.
+TEST_F(Net, AFailedWaitIsCountedNotDiscarded) {
+  testing::ExpectLogs logged;  // the drop counters log each kind once
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::Waitset waitset(p, &drops);
+  waitset.Attach(states);
+  EXPECT_FALSE(waitset.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_FALSE(waitset.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_EQ(waitset.errors(), 2u);
+  EXPECT_EQ(drops.Of("DDS error in a waitset"), 2u);
+  EXPECT_THAT(waitset.last_error(), HasSubstr("dds_waitset_wait: Bad Parameter"));
+  EXPECT_FALSE(states.Wait(std::chrono::nanoseconds(-1)));
+  EXPECT_EQ(drops.Of("DDS error on vdyn/state"), 1u);
+  EXPECT_FALSE(waitset.Wait(1ms));  // a good wait: no data, no error
+  EXPECT_EQ(waitset.errors(), 2u);
+  EXPECT_GE(logged.count(), 1);
+}
+
+// Starts processes in one instant: each waits on a shared lock of a file this test holds
+// exclusively (flock(1)), and all go together when it lets go, once the kernel shows every one of
+// them waiting (/proc/locks).
+class StartGate {
+ public:
+  explicit StartGate(std::filesystem::path path) : path_(std::move(path)) {
+    fd_ = open(path_.c_str(), O_CREAT | O_RDWR | O_CLOEXEC, 0644);
+    EXPECT_GE(fd_, 0) << path_;
+    EXPECT_EQ(flock(fd_, LOCK_EX), 0);
+    struct stat st {};
+    fstat(fd_, &st);
+    inode_ = ':';  // "...:INODE " in /proc/locks (appended: GCC 12 warns on "literal" + string)
+    inode_ += std::to_string(st.st_ino);
+    inode_ += ' ';
+  }
+  ~StartGate() {
+    if (fd_ >= 0) close(fd_);
+  }
+  // argv run once the gate opens (exec'd in place: the process is the program itself).
+  std::vector<std::string> Wrap(std::vector<std::string> argv) const {
+    std::vector<std::string> out = {"/bin/sh", "-c", "flock -s \"$0\" true && exec \"$@\"",
+                                    path_.string()};
+    out.insert(out.end(), argv.begin(), argv.end());
+    return out;
+  }
+  // Lets every waiting process go once `n` wait; false when they did not within the timeout.
+  bool Open(int n, std::chrono::milliseconds timeout) {
+    const auto deadline = std::chrono::steady_clock::now() + timeout;
+    while (Waiting() < n) {
+      if (std::chrono::steady_clock::now() >= deadline) return false;
+      std::this_thread::sleep_for(2ms);  // polling the kernel's lock table, bounded
+    }
+    return flock(fd_, LOCK_UN) == 0;
+  }
+
+ private:
+  int Waiting() const {
+    std::ifstream locks("/proc/locks");
+    std::string line;
+    int n = 0;
+    while (std::getline(locks, line)) {
+      if (line.find("->") != std::string::npos && line.find(inode_) != std::string::npos) ++n;
+    }
+    return n;
+  }
+  std::filesystem::path path_;
+  int fd_ = -1;
+  std::string inode_;
+};
+
+// Two servers started in one instant with a vehicle (or the id) in common: exactly one runs it,
+// the other stops with the reason before it publishes anything, whichever way the tie goes
+// (issue 20: both ran vehicle 1 in 6 of 8 trials). Repeated: a race, tried several times.
+TEST_F(Net, TwoServersStartedInOneInstantNeverBothRunAVehicle) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  constexpr int kTrials = 5;
+  int ties = 0;
+  for (int trial = 0; trial < kTrials; ++trial) {
+    SCOPED_TRACE("trial " + std::to_string(trial));
+    // The last trial: the same server id, no vehicle in common.
+    const bool same_id = trial == kTrials - 1;
+    const std::string id_a = same_id ? "lab" : "lab-a", id_b = same_id ? "lab" : "lab-b";
+    StartGate gate(dir_ / ("gate" + std::to_string(trial)));
+    const std::string n = std::to_string(trial);
+    Process a(gate.Wrap(ServerArgv({"--server-id", id_a, "--vehicle-ids", "1,2"})),
+              dir_ / ("a" + n + ".log"));
+    Process b(gate.Wrap(ServerArgv({"--server-id", id_b, "--vehicle-ids", same_id ? "3" : "3,1"})),
+              dir_ / ("b" + n + ".log"));
+    ASSERT_TRUE(gate.Open(2, 20s)) << "the servers never reached the gate";
+    // Every state seen from here: which servers published which vehicles.
+    std::map<std::string, std::set<std::uint32_t>> published;
+    auto take = [&] {
+      states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
+        published[st.server_id()].insert(st.vehicle_id());
+      });
+    };
+    const auto deadline = std::chrono::steady_clock::now() + 30s;
+    while (a.running() && b.running() && std::chrono::steady_clock::now() < deadline) {
+      states.Wait(20ms);
+      take();
+    }
+    ASSERT_NE(a.running(), b.running()) << "both still run or both stopped\n" << a.Log() << b.Log();
+    Process& loser = a.running() ? b : a;
+    Process& winner = a.running() ? a : b;
+    const std::string winner_id = a.running() ? id_a : id_b;
+    ASSERT_EQ(loser.Wait(1s), 2) << loser.Log();
+    const std::string why = loser.Log();
+    if (same_id) {
+      EXPECT_THAT(why, HasSubstr("another server with the id 'lab'")) << why;
+    } else {
+      EXPECT_THAT(why, HasSubstr("vehicle 1 is")) << why;
+      EXPECT_THAT(why, HasSubstr("server '" + winner_id + "'")) << why;
+    }
+    if (why.find("started at the same moment") != std::string::npos) ++ties;
+    // The winner runs on, and is the only server whose states arrive: the loser published none.
+    std::uint64_t n_winner = 0;
+    ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+        states, 20s,
+        [&](const pb::VehicleState& st) {
+          published[st.server_id()].insert(st.vehicle_id());
+          n_winner += st.server_id() == winner_id;
+        },
+        [&] { return n_winner >= 300; }))
+        << winner.Log();
+    EXPECT_EQ(published.size(), 1u) << "states from more than one server";
+    EXPECT_EQ(published.count(winner_id), 1u);
+    EXPECT_TRUE(winner.running());
+    winner.Signal(SIGTERM);
+    EXPECT_EQ(winner.Wait(20s), 0) << winner.Log();
+    // States still in flight from this trial are not the next one's.
+    while (states.Wait(200ms)) take();
+  }
+  std::printf("  %d of %d trials met in the claim phase (a tie); the rest found a running server\n",
+              ties, kTrials);
+  // The gate makes the starts simultaneous: the tie itself was exercised.
+  EXPECT_GE(ties, 1);
+}
+
 // A live rig whose input is refused loses the vehicle to a valid backup within the lease, and the
 // diagnostics name it and say why.
 TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
@@ -627,23 +797,28 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   std::string source;
   bool safe = false;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
-    source = s.input().source_id();
-  }, [&] {
-    primary.Write(1, Input(1, 0.5, "primary"));
-    return source == "primary";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const auto& s) { source = s.input().source_id(); },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, Input(1, 0.5, "primary"))) << primary.last_error();
+        return source == "primary";
+      }))
+      << source << server->Log();
   // The primary goes on writing, but NaN steering: refused, it no longer counts as live.
   pb::DriverInput nan_input = Input(1, 0.5, "primary");
   nan_input.set_steer(std::numeric_limits<double>::quiet_NaN());
   const auto t0 = std::chrono::steady_clock::now();
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
-    source = s.input().source_id();
-    safe = safe || s.control().watchdog_safe_state();
-  }, [&] {
-    primary.Write(1, nan_input);
-    return source == "backup";
-  })) << source << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 10s,
+      [&](const auto& s) {
+        source = s.input().source_id();
+        safe = safe || s.control().watchdog_safe_state();
+      },
+      [&] {
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return source == "backup";
+      }))
+      << source << server->Log();
   std::printf("  a primary sending NaN lost the vehicle to the backup after %.0f ms (wall clock)\n",
               std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   EXPECT_FALSE(safe);
@@ -651,26 +826,31 @@ TEST_F(Net, ARigSendingBadInputLosesTheVehicleToAValidBackup) {
   pb::DriverInput wild = Input(1, 5.0, "rig30");
   bool rig30_drove = false;
   int n = 0;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
-    rig30_drove = rig30_drove || s.input().source_id() == "rig30";
-  }, [&] {
-    strong.Write(1, wild);
-    primary.Write(1, nan_input);
-    return ++n > 100;
-  }));
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 10s,
+      [&](const auto& s) { rig30_drove = rig30_drove || s.input().source_id() == "rig30"; },
+      [&] {
+        EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return ++n > 100;
+      }));
   EXPECT_FALSE(rig30_drove);
   // The diagnostics say who was refused, and why.
   std::map<std::string, pb::InputSourceDiagnostics> seen;
-  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& d) {
-    for (const auto& v : d.vehicles()) {
-      for (const auto& src : v.sources()) seen[src.source_id()] = src;
-    }
-  }, [&] {
-    strong.Write(1, wild);
-    primary.Write(1, nan_input);
-    return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
-           seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
-  })) << server->Log();
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 10s,
+      [&](const auto& d) {
+        for (const auto& v : d.vehicles()) {
+          for (const auto& src : v.sources()) seen[src.source_id()] = src;
+        }
+      },
+      [&] {
+        EXPECT_TRUE(strong.Write(1, wild)) << strong.last_error();
+        EXPECT_TRUE(primary.Write(1, nan_input)) << primary.last_error();
+        return seen.count("primary") && seen.count("rig30") && seen.count("backup") &&
+               seen["primary"].refused() > 0 && seen["rig30"].refused() > 0;
+      }))
+      << server->Log();
   EXPECT_THAT(seen["primary"].last_refusal(), HasSubstr("non-finite value on vdyn/input: steer"));
   EXPECT_EQ(seen["primary"].strength(), 20);
   EXPECT_FALSE(seen["primary"].driving());
@@ -759,6 +939,135 @@ TEST_F(Net, EveryRequestIsAnsweredWithAReason) {
   EXPECT_TRUE(server->running());
 }
 
+// Writes every request of a burst as fast as the writer takes them (a write the writer refuses is
+// tried again, bounded), then reads replies until each has one, or the timeout.
+struct Burst {
+  transport::Writer<pb::ControlRequest>& writer;
+  transport::Reader<pb::ControlReply>& replies;
+  std::map<std::uint64_t, pb::ControlReply> got;
+  std::uint64_t duplicates = 0;
+  void Send(const pb::ControlRequest& r) {
+    for (int tries = 0; !writer.Write(r.vehicle_id(), r); ++tries) {
+      ASSERT_LT(tries, 5000) << writer.last_error();
+      std::this_thread::sleep_for(1ms);  // the writer's history is full: the server is reading
+      replies.Take([&](const pb::ControlReply& reply, const auto&) { Note(reply); });
+    }
+  }
+  void Note(const pb::ControlReply& reply) {
+    if (!got.emplace(reply.request_id(), reply).second) ++duplicates;
+  }
+  bool AllAnswered(std::size_t n, std::chrono::milliseconds timeout) {
+    return ReadUntil<pb::ControlReply>(
+        replies, timeout, [&](const auto& r) { Note(r); }, [&] { return got.size() >= n; });
+  }
+};
+
+// Every request of a burst gets exactly one reply (issue 20: 2,000 resets gave 1,474 replies and
+// 10,000 spawns 7,980, and no counter said so), and the diagnostics' request counters agree with
+// what the client counted.
+TEST_F(Net, EveryRequestOfABurstGetsExactlyOneReply) {
+  auto server = StartServer({"--server-id", "burst"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Writer<pb::ControlRequest> writer(p, TopicId::kControl);
+  transport::Reader<pb::ControlReply> replies(p, TopicId::kControlReply, &drops);
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  transport::ControlClient control(p, "burst-probe");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  Burst burst{writer, replies, {}, 0};
+  constexpr int kResets = 2000, kSpawns = 10000;
+  std::uint64_t id = 0;
+  for (int i = 0; i < kResets; ++i) {
+    pb::ControlRequest r;
+    r.set_request_id(++id);
+    r.set_client_id("burst");
+    r.set_vehicle_id(1);
+    r.mutable_reset();
+    burst.Send(r);
+  }
+  for (int i = 0; i < kSpawns; ++i) {
+    pb::ControlRequest r;
+    r.set_request_id(++id);
+    r.set_client_id("burst");
+    r.set_server_id("burst");
+    r.set_vehicle_id(static_cast<std::uint32_t>(1000 + i));
+    // Every other one where there is no ground (the flat world ends at 20 km).
+    r.mutable_spawn()->mutable_pose()->set_x(i % 2 == 0 ? 10.0 * (i / 2 % 100) : 1e5);
+    r.mutable_spawn()->mutable_pose()->set_y(i % 2 == 0 ? 6.0 * (i / 200) : 0.0);
+    burst.Send(r);
+  }
+  ASSERT_TRUE(burst.AllAnswered(kResets + kSpawns, 120s))
+      << burst.got.size() << " of " << kResets + kSpawns << " answered\n"
+      << server->Log();
+  EXPECT_EQ(burst.duplicates, 0u);
+  int resets_accepted = 0, spawned = 0, full = 0, off_ground = 0;
+  for (const auto& [request_id, reply] : burst.got) {
+    if (request_id <= kResets) {
+      resets_accepted += reply.accepted();
+      continue;
+    }
+    spawned += reply.accepted();
+    full += reply.reason().find("maximum of 64 vehicles") != std::string::npos;
+    off_ground += reply.reason().find("no terrain below") != std::string::npos;
+  }
+  EXPECT_EQ(resets_accepted, kResets);
+  // Applied in order: the first 63 spawns on the ground fill the server (64 with vehicle 1), the
+  // 62 off the ground between them are refused for that, and every later one because it is full.
+  EXPECT_EQ(spawned, 63);
+  EXPECT_EQ(off_ground, 62);
+  EXPECT_EQ(full, kSpawns - 63 - 62);
+  for (int i = 0; i < 63; ++i) {
+    EXPECT_TRUE(burst.got[kResets + 1 + 2 * static_cast<std::uint64_t>(i)].accepted()) << i;
+  }
+  // The server's own count: every request received, every one answered, none unanswered, and
+  // no event lost on the way.
+  pb::Diagnostics last;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 20s, [&](const auto& d) { last = d; },
+      [&] { return last.replies_sent() >= kResets + kSpawns; }))
+      << last.ShortDebugString();
+  EXPECT_EQ(last.requests_received(), last.replies_sent()) << last.ShortDebugString();
+  EXPECT_EQ(last.requests_unanswered(), 0u);
+  for (const auto& dc : last.drops()) {
+    EXPECT_THAT(dc.kind(), ::testing::Not(HasSubstr("event queue full"))) << dc.count();
+    EXPECT_THAT(dc.kind(), ::testing::Not(HasSubstr("request queue full"))) << dc.count();
+    EXPECT_THAT(dc.kind(), ::testing::Not(HasSubstr("unanswered"))) << dc.count();
+  }
+  EXPECT_TRUE(server->running());
+}
+
+// A burst of 16 spawns is answered in full and every new vehicle runs (issue 19).
+TEST_F(Net, ABurstOf16SpawnsIsAnsweredInFullAndEveryVehicleRuns) {
+  auto server = StartServer({"--server-id", "lab", "--world", "facility"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Writer<pb::ControlRequest> writer(p, TopicId::kControl);
+  transport::Reader<pb::ControlReply> replies(p, TopicId::kControlReply, &drops);
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  transport::ControlClient control(p, "burst-probe");
+  ASSERT_TRUE(control.WaitForServer(30s)) << control.last_error() << server->Log();
+  Burst burst{writer, replies, {}, 0};
+  for (std::uint32_t i = 0; i < 16; ++i) {
+    pb::ControlRequest r;
+    r.set_request_id(i + 1);
+    r.set_client_id("spawner");
+    r.set_server_id("lab");
+    r.set_vehicle_id(10 + i);
+    r.mutable_spawn()->mutable_pose()->set_x(-200.0 + 8.0 * i);  // along the test road
+    r.mutable_spawn()->mutable_pose()->set_y(0.0);
+    burst.Send(r);
+  }
+  ASSERT_TRUE(burst.AllAnswered(16, 30s)) << burst.got.size() << "\n" << server->Log();
+  for (const auto& [request_id, reply] : burst.got) {
+    EXPECT_TRUE(reply.accepted()) << request_id << ": " << reply.reason();
+  }
+  std::set<std::uint32_t> running;
+  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
+      states, 20s, [&](const pb::VehicleState& s) { running.insert(s.vehicle_id()); },
+      [&] { return running.size() >= 17; }))
+      << running.size();
+}
+
 // Steps asked for by a client that then leaves are not run for nobody: the server publishes its
 // diagnostics while it steps, and drops the remaining steps when the client is gone.
 TEST_F(Net, TheStepsOfAClientThatLeavesAreDropped) {
@@ -767,11 +1076,15 @@ TEST_F(Net, TheStepsOfAClientThatLeavesAreDropped) {
   transport::DropCounters drops;
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   std::vector<std::uint64_t> steps;
-  std::uint64_t cancelled = 0;
+  std::uint64_t cancelled = 0, unanswered = 0;
   auto on_diag = [&](const pb::Diagnostics& d) {
     steps.push_back(d.steps());
+    unanswered = d.requests_unanswered();
     for (const auto& dc : d.drops()) {
-      if (dc.kind() == "rejected control request") cancelled = dc.count();
+      if (dc.kind() ==
+          "control request unanswered: its client went away before its steps were done") {
+        cancelled = dc.count();
+      }
     }
   };
   {
@@ -792,8 +1105,15 @@ TEST_F(Net, TheStepsOfAClientThatLeavesAreDropped) {
     return steps.size() >= 3 && steps[steps.size() - 1] == steps[steps.size() - 2];
   })) << server->Log();
   EXPECT_LT(steps.back(), 600'000u);
-  EXPECT_GE(cancelled, 1u);
-  EXPECT_THAT(server->Log(), HasSubstr("steps cancelled: the client that asked for them is gone"));
+  EXPECT_EQ(cancelled, 1u);
+  EXPECT_EQ(unanswered, 1u);
+  // Said in the operator's terms (issue 21: "a control client is gone; its pending steps are
+  // dropped" spoke the server's internals).
+  const std::string log = server->Log();
+  EXPECT_THAT(log, HasSubstr("client 'leaver' went away before the 600000 steps it asked for "
+                             "were done: the "));
+  EXPECT_THAT(log, HasSubstr(" still to run are cancelled, and the simulation stays paused at "));
+  EXPECT_THAT(log, ::testing::Not(HasSubstr("pending steps")));
 }
 
 }  // namespace

@@ -1,9 +1,9 @@
 // The 1 kHz thread allocates nothing: every heap allocation made by the stepping thread is
 // counted, through operator new and (outside the sanitizer build, which owns malloc) malloc
-// itself. Two paths: the simulator's step, and the server's whole loop body - Session::Step with
-// an input that changes every step (an analog wheel), the state message filled and handed to the
-// state outbox that writes it over DDS to a subscriber in another process (Cyclone allocates in
-// dds_write: the outbox's own thread does that), the input events gathered and handed on.
+// itself. Two paths: the simulator's step, and the server's real loop - a ServerNode running in
+// this process, its loop on a thread of this test, while driver input changes every millisecond
+// (an analog wheel), a subscriber in another process takes the states, and control requests of
+// every kind arrive: the request thread makes them ready, the loop only swaps them in.
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
@@ -12,24 +12,29 @@
 
 #include <gtest/gtest.h>
 
+#include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
 #include "vdyn/bridge/convert.h"
-#include "vdyn/base/spsc_queue.h"
 #include "vdyn/bridge/params.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
-#include "vdyn/runtime/session.h"
-#include "vdyn/runtime/state_outbox.h"
+#include "vdyn/runtime/server_node.h"
+#include "vdyn/transport/control_client.h"
 #include "vdyn/transport/dds.h"
 
 namespace {
-// Counting is per thread: DDS's own threads allocate as they please.
+// Counting is per thread: DDS's own threads, the server's other threads, allocate as they please.
+// t_counting: this thread, now; t_loop and g_count_loop: the server's loop thread, while set.
 thread_local bool t_counting = false;
+thread_local bool t_loop = false;
+std::atomic<bool> g_count_loop{false};
 std::atomic<long> g_allocations{0};
 void Count() {
-  if (t_counting) g_allocations.fetch_add(1);
+  if (t_counting || (t_loop && g_count_loop.load(std::memory_order_relaxed))) {
+    g_allocations.fetch_add(1);
+  }
 }
 }  // namespace
 
@@ -115,22 +120,23 @@ TEST(NoAllocation, StepsOnFacilityAllocateNothing) {
   const Eigen::Vector3d ramp = world->LandmarkAt("jump_ramp_a");
   sim.Spawn({ramp.x() - 30.0, ramp.y(), 0.0}, 50.0 / 3.6);
   // Warm up, then count over a stretch with a jump, wall traces and the speed control.
-  for (int i = 0; i < 10; ++i) sim.Step();
+  for (int i = 0; i < 10; ++i) ASSERT_EQ(sim.Step(), StepStatus::kOk);
   const std::uint64_t traced_before = sim.wall_traced_steps();
-  int airborne_steps = 0;
+  int airborne_steps = 0, nonfinite = 0;
   g_allocations = 0;
   t_counting = true;
   for (int i = 0; i < 5000; ++i) {
     DriverInput in = FromManeuver(m.At(20.0));
     in.steer = (i % 1000 < 500) ? 0.05 : -0.05;
     sim.SetInput(in);
-    sim.Step();
+    nonfinite += sim.Step() != StepStatus::kOk;
     bool airborne = true;
     for (const WheelOutputs& w : sim.last_step().derived.wheel) airborne = airborne && !w.contact;
     airborne_steps += airborne;
   }
   t_counting = false;
   EXPECT_EQ(g_allocations.load(), 0) << "allocations in 5000 steps";
+  EXPECT_EQ(nonfinite, 0);
   // The stretch did what it promises: a jump (all four wheels in the air) and wall traces (the
   // ramp's steep faces are near).
   EXPECT_GT(airborne_steps, 100);
@@ -138,7 +144,80 @@ TEST(NoAllocation, StepsOnFacilityAllocateNothing) {
   ExpectCounterWorks();
 }
 
-TEST(NoAllocation, TheServerLoopBodyAllocatesNothingWithAnInputChangingEveryStep) {
+// Requests of every kind, each answered: spawns (one where a removed vehicle lived), teleports,
+// a reset, new parameters, a restore of a new vehicle, a pause, steps while paused, a resume, a
+// removal. `round` keeps ids and poses apart between calls.
+void SendRequests(transport::ControlClient& control, int round, int* accepted, int* answered) {
+  auto call = [&](pb::ControlRequest r) {
+    const auto reply = control.Call(std::move(r), std::chrono::seconds(20));
+    *answered += reply.has_value();
+    *accepted += reply.has_value() && reply->accepted();
+    EXPECT_TRUE(reply.has_value()) << control.last_error();
+    if (reply) {
+      EXPECT_TRUE(reply->accepted()) << reply->reason();
+    }
+  };
+  // The spawned ids are the same every round: a vehicle comes back where a removed one lived.
+  const auto id = [&](int k) { return static_cast<std::uint32_t>(100 + k); };
+  const auto restored_id = static_cast<std::uint32_t>(105 + round);
+  for (int k = 0; k < 4; ++k) {
+    pb::ControlRequest spawn;
+    spawn.set_vehicle_id(id(k));
+    spawn.set_server_id("no-alloc");
+    spawn.mutable_spawn()->mutable_pose()->set_x(-200.0 + 8.0 * k);
+    spawn.mutable_spawn()->mutable_pose()->set_y(0.0);
+    spawn.mutable_spawn()->mutable_params()->set_mass(1500.0 + 10.0 * k);
+    call(spawn);
+  }
+  pb::ControlRequest teleport;
+  teleport.set_vehicle_id(1);
+  teleport.mutable_teleport()->mutable_pose()->set_x(-230.0);
+  teleport.mutable_teleport()->mutable_pose()->set_y(5.0 * round);
+  teleport.mutable_teleport()->set_speed(10.0);
+  call(teleport);
+  pb::ControlRequest reset;
+  reset.set_vehicle_id(id(0));
+  reset.mutable_reset();
+  call(reset);
+  pb::ControlRequest params;
+  params.set_vehicle_id(1);
+  params.mutable_set_params()->mutable_params()->set_mass(1600.0 + round);
+  call(params);
+  // A new vehicle from an exact state (as a takeover brings one back).
+  Simulator sim(testing::SharedWorld("facility"), ParamsFromProto(DefaultVehicleParams()));
+  sim.Spawn({-150.0, 0.0, 0.0}, 5.0);
+  pb::ControlRequest restore;
+  restore.set_vehicle_id(restored_id);
+  restore.set_server_id("no-alloc");
+  *restore.mutable_restore()->mutable_state() = ToExactState(sim.state());
+  restore.mutable_restore()->set_branched_from("test@" + std::to_string(round));
+  call(restore);
+  pb::ControlRequest pause;
+  pause.set_vehicle_id(1);
+  pause.mutable_pause();
+  call(pause);
+  pb::ControlRequest step;
+  step.set_vehicle_id(1);
+  step.mutable_step()->set_steps(20);
+  call(step);
+  call(step);
+  pb::ControlRequest resume;
+  resume.set_vehicle_id(1);
+  resume.mutable_resume();
+  call(resume);
+  for (int k = 0; k < 4; ++k) {
+    pb::ControlRequest remove;
+    remove.set_vehicle_id(id(k));
+    remove.mutable_remove();
+    call(remove);
+  }
+  pb::ControlRequest remove;
+  remove.set_vehicle_id(restored_id);
+  remove.mutable_remove();
+  call(remove);
+}
+
+TEST(NoAllocation, TheServerLoopAllocatesNothingWhileRequestsArriveAndInputChangesEveryStep) {
   testing::UseLoopbackDds();
   const std::uint32_t domain = testing::FreshDomain();
   // A subscriber in another process: the state writes take the network path.
@@ -146,96 +225,74 @@ TEST(NoAllocation, TheServerLoopBodyAllocatesNothingWithAnInputChangingEveryStep
   testing::Process subscriber({testing::StateSubscriberBinary(), std::to_string(domain), "100000",
                                "120"},
                               dir / "subscriber.log");
-  std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
-  transport::Participant participant(domain);
-  transport::DropCounters drops(/*deferred=*/true);
-  StateOutbox outbox(participant, drops);
-  // A probe writer on the same topic tells when the subscriber has matched.
-  transport::Writer<pb::VehicleState> probe(participant, transport::TopicId::kState);
-  long events = 0, input_changes = 0;
-  SessionConfig config;
-  config.server_id = "no-alloc";
-  config.default_params = DefaultVehicleParams();
-  // The events go into a lock-free queue, as the server's do, and a consumer thread (the
-  // server's publisher) takes them out.
-  base::SpscQueue<SessionEventRecord> queue(4096);
-  std::atomic<bool> done{false};
-  std::atomic<long> consumed{0};
-  std::thread consumer([&] {
-    SessionEventRecord r;
-    while (!done.load() || !queue.empty()) {
-      if (queue.TryPop(r)) {
-        ++consumed;
-        r.message.reset();
-        r.params.reset();
-      } else {
-        std::this_thread::sleep_for(std::chrono::microseconds(200));
+  std::shared_ptr<const World> world = testing::SharedWorld("facility");
+  ServerOptions options;
+  options.domain_id = domain;
+  options.vehicle_ids = {1, 2};
+  options.session.server_id = "no-alloc";
+  options.session.default_params = DefaultVehicleParams();
+  options.session.watchdog_s = 0.5;
+  ServerNode node(world, options);
+  std::atomic<bool> stop{false};
+  std::atomic<std::int64_t> loop_steps{0};
+  int code = -1;
+  std::thread loop([&] {
+    t_loop = true;  // the thread that runs ServerNode::Run is the loop
+    code = node.Run(stop);
+  });
+
+  // A rig on vehicle 1 whose steering changes every millisecond, and one on vehicle 2.
+  transport::Participant p(domain);
+  std::atomic<bool> rig_stop{false};
+  std::thread rig([&] {
+    transport::Writer<pb::DriverInput> input(p, transport::TopicId::kInput, 10);
+    pb::DriverInput in;
+    in.set_source_id("an-analog-wheel-with-a-long-source-id-0123456789");
+    in.set_cruise_on(true);
+    in.set_cruise_set_kmh(30.0);
+    for (std::uint64_t k = 0; !rig_stop.load(); ++k) {
+      for (std::uint32_t v : {1u, 2u}) {
+        in.set_vehicle_id(v);
+        in.set_steer(0.02 * std::sin(0.01 * static_cast<double>(k)));
+        in.set_sequence(k);
+        EXPECT_TRUE(input.Write(v, in)) << input.last_error();
       }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
   });
-  Session session(world, config, [&](SessionEventRecord&& r) {
-    ++events;
-    if (r.kind == SessionEventRecord::Kind::kInputBatch) input_changes += r.n_changes;
-    EXPECT_TRUE(queue.TryPush(std::move(r)));
-  });
-  const Eigen::Vector3d ramp = world->LandmarkAt("jump_ramp_a");
-  session.Spawn(1, {ramp.x() - 30.0, ramp.y(), 0.0}, 50.0 / 3.6, pb::VehicleParams());
-  long pushed = 0;
-  const Session::StateSink sink = [&](std::uint32_t id, const pb::VehicleState& s) {
-    pushed += outbox.Push(id, s);
-  };
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-  while (probe.MatchedReaders() == 0 && std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  ASSERT_GE(probe.MatchedReaders(), 1u) << "the subscriber never matched\n" << subscriber.Log();
-  pb::DriverInput in;
-  in.set_vehicle_id(1);
-  in.set_source_id("an-analog-wheel-with-a-long-source-id-0123456789");
-  in.set_cruise_on(true);
-  in.set_cruise_set_kmh(50.0);
-  int step = 0;
-  auto drive = [&](int n) {
-    for (int i = 0; i < n; ++i, ++step) {
-      in.set_steer(0.02 * std::sin(0.01 * step));  // new every step
-      in.set_sequence(static_cast<std::uint64_t>(step));
-      session.OfferInput(in, nullptr);
-      session.Step(sink);
-      outbox.Send();
-    }
-  };
-  // Paced like the server (a step a millisecond on average), so the outbox never fills up.
-  auto paced = [&](int n) {
-    for (int k = 0; k < n; k += 10) {
-      drive(10);
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-  };
-  paced(2000);  // warm-up: every buffer reaches its size
-  const long events_before = events, changes_before = input_changes;
+  transport::ControlClient control(p, "no-alloc-test");
+  ASSERT_TRUE(control.WaitForServer(std::chrono::seconds(30))) << control.last_error();
+  transport::DropCounters drops;
+  transport::Reader<pb::Diagnostics> diag(p, transport::TopicId::kDiagnostics, &drops);
+
+  // Warm-up: every kind of request once, and a second of steps, so every buffer has its size.
+  int accepted = 0, answered = 0;
+  SendRequests(control, 0, &accepted, &answered);
+  std::this_thread::sleep_for(std::chrono::seconds(1));
+
+  // Counted: the loop thread, from here, while the same kinds of requests arrive twice more.
   g_allocations = 0;
-  t_counting = true;
-  // 3 s with a jump, wall traces and checkpoints at steps 3000 and 4000. (The pacing sleep is
-  // not the loop's: the server sleeps with clock_nanosleep, which allocates nothing either.)
-  for (int k = 0; k < 3000; k += 10) {
-    drive(10);
-    t_counting = false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    t_counting = true;
-  }
-  t_counting = false;
-  EXPECT_EQ(g_allocations.load(), 0) << "allocations in 3000 steps of the loop body";
-  ASSERT_TRUE(outbox.Drain(base::Seconds(10)));
-  EXPECT_EQ(pushed, 5000);
-  EXPECT_EQ(outbox.written(), 5000u);
-  EXPECT_EQ(outbox.write_failures(), 0u);
-  // The path was exercised: inputs changed every step and went out batched.
-  EXPECT_GE(input_changes - changes_before, 2900);
-  EXPECT_GT(events - events_before, 100);
-  EXPECT_GT(session.simulator(1).wall_traced_steps(), 100u);
-  done = true;
-  consumer.join();
-  EXPECT_EQ(consumed.load(), events);
+  g_count_loop = true;
+  const int answered_before = answered;
+  SendRequests(control, 1, &accepted, &answered);
+  SendRequests(control, 2, &accepted, &answered);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // steps with all vehicles
+  g_count_loop = false;
+  const long loop_allocations = g_allocations.load();
+
+  // The loop ran and stepped meanwhile (the diagnostics say so), and every request was answered.
+  std::uint64_t steps = 0;
+  ASSERT_TRUE(testing::ReadUntil<pb::Diagnostics>(
+      diag, std::chrono::seconds(10), [&](const pb::Diagnostics& d) { steps = d.steps(); },
+      [&] { return steps > 2000; }));
+  rig_stop = true;
+  rig.join();
+  stop = true;
+  loop.join();
+  EXPECT_EQ(code, 0);
+  EXPECT_EQ(answered - answered_before, 2 * 17);
+  EXPECT_EQ(accepted, 3 * 17);
+  EXPECT_EQ(loop_allocations, 0) << "allocations on the server's loop thread";
   ExpectCounterWorks();
 }
 

@@ -96,6 +96,28 @@ TEST(Params, FullModelRulesNameFieldAndReason) {
   EXPECT_TRUE(ValidateVehicleParams(paper).empty()) << FormatIssues(ValidateVehicleParams(paper));
 }
 
+// A count too large for an int is refused with the number the file holds, not a clamped one
+// (issue 20: "gear_count: 4000000000" was refused as "got 1000").
+TEST(Params, AHugeGearCountIsRefusedWithTheNumberGiven) {
+  for (const std::uint32_t n : {4'000'000'000u, 4'294'967'295u, 2'147'483'648u, 1001u, 0u}) {
+    pb::VehicleParams m = DefaultVehicleParams();
+    m.set_gear_count(n);
+    const auto issues = ValidateVehicleParams(m);
+    EXPECT_TRUE(HasIssue(issues, "gear_count", "must be in [1, 10], got " + std::to_string(n)))
+        << FormatIssues(issues);
+    EXPECT_THROW(ParamsFromProto(m), ParamsError);
+  }
+  TempDir dir;
+  WriteFile(dir / "car.txt", "gear_count: 4000000000\n");
+  try {
+    LoadVehicleParamsFile(dir / "car.txt");
+    ADD_FAILURE() << "gear_count 4000000000 was accepted";
+  } catch (const ParamsError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("gear_count: number of forward gears must be in [1, 10], got "
+                                    "4000000000"));
+  }
+}
+
 TEST(Params, TextFileOverridesOnlyTheFieldsItLists) {
   TempDir dir;
   WriteFile(dir / "car.txt", "# a heavier car\nmass: 1800\nlf { spring_stiffness: 40000 }\n");

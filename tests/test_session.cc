@@ -7,11 +7,13 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "test_support.h"
 #include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
+#include "vdyn/runtime/claim.h"
+#include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
-#include "test_support.h"
 
 namespace vdyn {
 namespace {
@@ -89,7 +91,9 @@ TEST(Session, ExactStateCarriesEitherModelBitForBitAndRefusesMalformedStates) {
   DriverInput in;
   in.brake = 1.0;
   full.SetInput(in);
-  for (int i = 0; i < 300; ++i) full.Step();  // ABS, gear and shift clock all away from defaults
+  for (int i = 0; i < 300; ++i) {  // ABS, gear and shift clock all away from defaults
+    ASSERT_EQ(full.Step(), StepStatus::kOk);
+  }
   const State s = full.state();
   const pb::ExactState m = ToExactState(s);
   EXPECT_EQ(m.x_size(), kStateSize);
@@ -110,7 +114,7 @@ TEST(Session, ExactStateCarriesEitherModelBitForBitAndRefusesMalformedStates) {
   EXPECT_GT(s.discrete.gear, 0);
   Simulator paper(testing::SharedWorld("flat"), testing::PaperParams());
   paper.Spawn({0, 0, 0}, 12.0);
-  for (int i = 0; i < 30; ++i) paper.Step();
+  for (int i = 0; i < 30; ++i) ASSERT_EQ(paper.Step(), StepStatus::kOk);
   const pb::ExactState mp = ToExactState(paper.state());
   EXPECT_EQ(mp.x_size(), kPaperStateSize);
   EXPECT_EQ(StateHash(FromExactState(mp)), StateHash(paper.state()));
@@ -244,6 +248,65 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   EXPECT_TRUE(s.Apply(step).accepted());
   EXPECT_TRUE(s.paused());
   EXPECT_EQ(s.pending_steps(), 5u);
+}
+
+// A request is planned off the stepping thread and applied later: when the session changed in
+// between in a way the plan could not know, applying it refuses it with the reason, leaves the
+// vehicle as it is, and tells the planner (its view of the vehicles stays right).
+TEST(Session, APlanTheSessionNoLongerFitsIsRefusedWithTheReason) {
+  const auto world = testing::SharedWorld("flat");
+  Session s(world, Config(), nullptr);
+  s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
+  RequestPlanner planner(world, Config());
+  planner.Sync(s);
+  // New parameters planned for vehicle 1; meanwhile it is given others.
+  pb::ControlRequest heavy = Request(1);
+  heavy.mutable_set_params()->mutable_params()->set_mass(1700.0);
+  RequestPlanner::Plan plan = planner.Prepare(std::make_shared<const pb::ControlRequest>(heavy));
+  ASSERT_TRUE(plan.prepared) << plan.refusal;
+  pb::ControlRequest light = Request(1);
+  light.mutable_set_params()->mutable_params()->set_mass(1600.0);
+  ASSERT_TRUE(s.Apply(light).accepted());
+  RequestOutcome o = s.Commit(*plan.prepared);
+  EXPECT_FALSE(o.accepted);
+  EXPECT_THAT(OutcomeReason(o, "test"),
+              HasSubstr("vehicle 1 on server 'test' changed while this request waited"));
+  EXPECT_EQ(s.params(1).mass(), 1600.0);
+  planner.Settle(std::move(plan.prepared));
+  // A restore planned at the vehicle's step, applied after the vehicle stepped past it.
+  planner.Sync(s);
+  pb::ControlRequest restore = Request(1);
+  *restore.mutable_restore()->mutable_state() = ToExactState(s.simulator(1).state());
+  plan = planner.Prepare(std::make_shared<const pb::ControlRequest>(restore));
+  ASSERT_TRUE(plan.prepared) << plan.refusal;
+  EXPECT_TRUE(planner.waiting());  // nothing more is planned until it is settled
+  for (int i = 0; i < 10; ++i) s.Step();
+  o = s.Commit(*plan.prepared);
+  EXPECT_FALSE(o.accepted);
+  EXPECT_THAT(OutcomeReason(o, "test"),
+              HasSubstr("restore: vehicle 1 is at step 10 and a vehicle's steps only go forward; "
+                        "restore step 0"));
+  planner.Settle(std::move(plan.prepared));
+  EXPECT_FALSE(planner.waiting());
+  EXPECT_TRUE(planner.Knows(1));
+  // The session is full when a spawn planned while it was not is applied.
+  SessionConfig small = Config();
+  small.max_vehicles = 2;
+  Session t(world, small, nullptr);
+  t.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
+  RequestPlanner p2(world, small);
+  p2.Sync(t);
+  pb::ControlRequest spawn = Request(2);
+  spawn.set_server_id("test");
+  spawn.mutable_spawn()->mutable_pose()->set_x(10.0);
+  plan = p2.Prepare(std::make_shared<const pb::ControlRequest>(spawn));
+  ASSERT_TRUE(plan.prepared) << plan.refusal;
+  spawn.set_vehicle_id(3);
+  ASSERT_TRUE(t.Apply(spawn).accepted());
+  spawn.set_vehicle_id(2);
+  o = t.Commit(*plan.prepared);
+  EXPECT_THAT(OutcomeReason(o, "test"), HasSubstr("this server runs its maximum of 2 vehicles"));
+  EXPECT_FALSE(t.HasVehicle(2));
 }
 
 // A session with changing input, a parameter change, a teleport and a second vehicle, recorded
@@ -473,6 +536,30 @@ pb::DriverInput From(const std::string& source) {
   in.set_vehicle_id(1);
   in.set_source_id(source);
   return in;
+}
+
+// A server's claim (claim.h) reads back as written; what is not a claim is not one; two claims
+// clash on the id or a vehicle in common.
+TEST(ServerClaim, ReadsBackAndClashesOnTheIdOrAVehicle) {
+  const ServerClaim a{"lab a", {1, 2, 4294967295u}, false};
+  const std::string text = a.Encode();
+  EXPECT_EQ(text, "vdyn-server/1 claiming vehicles=1,2,4294967295 id=lab a");
+  const std::optional<ServerClaim> back = ServerClaim::Decode(text);
+  ASSERT_TRUE(back.has_value());
+  EXPECT_EQ(back->server_id, "lab a");
+  EXPECT_EQ(back->vehicle_ids, a.vehicle_ids);
+  EXPECT_FALSE(back->running);
+  EXPECT_TRUE(ServerClaim::Decode(ServerClaim{"b", {}, true}.Encode())->running);
+  for (const char* other :
+       {"", "vdyn-server/1 ", "vdyn-server/2 running vehicles=1 id=x",
+        "vdyn-server/1 running vehicles=1,x id=y", "vdyn-server/1 running vehicles=4294967296 id=y",
+        "vdyn-server/1 waiting vehicles=1 id=y", "some other program"}) {
+    EXPECT_FALSE(ServerClaim::Decode(other).has_value()) << other;
+  }
+  EXPECT_TRUE(a.Clashes({"lab b", {7, 2}, true}));
+  EXPECT_TRUE(a.Clashes({"lab a", {7}, true}));
+  EXPECT_FALSE(a.Clashes({"lab b", {7, 8}, false}));
+  EXPECT_FALSE(a.Clashes({"lab b", {}, false}));
 }
 
 // The strongest live valid source drives; refused input never counts as live.

@@ -453,7 +453,7 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
     in.set_throttle(throttle);
     in.set_brake(brake);
     in.set_handbrake(handbrake);
-    input.Write(1, in);
+    EXPECT_TRUE(input.Write(1, in)) << input.last_error();
   };
 
   // Until packets flow (the server and both bridges are up).

@@ -23,6 +23,7 @@ namespace {
 
 using Eigen::Vector3d;
 using testing::Drive;
+using ::testing::HasSubstr;
 using testing::SharedWorld;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
@@ -502,6 +503,59 @@ TEST(Properties, NonFiniteInputIsSanitizedAndCounted) {
   EXPECT_TRUE(sim.state().x.allFinite());
 }
 
+// The step's invariants (issue 19): each check trips on a crafted bad value and names it, and a
+// good step passes them all.
+TEST(Invariants, EachCheckTripsOnACraftedBadValue) {
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 50, {});
+  const StepRecord good = sim.last_step();
+  EXPECT_EQ(CheckStepInvariants(good, sim.state()), "");
+  StepRecord r = good;
+  r.state.x.segment<4>(sx::kQ) *= 1.5;
+  EXPECT_THAT(CheckStepInvariants(r, sim.state()),
+              HasSubstr("invariant: the starting state's quaternion has norm 1.5"));
+  State after = sim.state();
+  after.x.segment<4>(sx::kQ) *= 1.01;
+  EXPECT_THAT(CheckStepInvariants(good, after), HasSubstr("the new state's quaternion has norm"));
+  r = good;
+  r.derived.wheel[2].Fp = -5.0;
+  EXPECT_THAT(CheckStepInvariants(r, sim.state()),
+              HasSubstr("invariant: wheel LR: spring force Fp = -5 N < 0"));
+  r = good;
+  r.derived.a_WT_W.y() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(CheckStepInvariants(r, sim.state()),
+              HasSubstr("invariant: a_WT_W = nan is not a finite number"));
+  r = good;
+  r.derived.wheel[1].slip_ratio = std::numeric_limits<double>::infinity();
+  EXPECT_THAT(CheckStepInvariants(r, sim.state()), HasSubstr("RF slip_ratio = inf"));
+  r = good;
+  r.derived.drivetrain.engine_torque = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THAT(CheckStepInvariants(r, sim.state()), HasSubstr("engine_torque = nan"));
+  // A non-finite state is contained (the step discarded), not an invariant that fails.
+  r = good;
+  r.state.x[sx::kV] = std::numeric_limits<double>::infinity();
+  EXPECT_EQ(CheckStepInvariants(r, sim.state()), "");
+}
+
+// Debug and sanitizer builds run the checks after every step: a state given with a quaternion of
+// norm 1.5 trips the handler on the next step.
+TEST(Invariants, TheStepChecksThemInDebugAndSanitizerBuilds) {
+  if (!kCheckInvariants) GTEST_SKIP() << "this build does not check invariants (release)";
+  static std::vector<std::string> tripped;
+  tripped.clear();
+  SetInvariantHandler([](const std::string& what) { tripped.push_back(what); });
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 20, {});
+  EXPECT_TRUE(tripped.empty());
+  State s = sim.state();
+  s.x.segment<4>(sx::kQ) *= 1.5;
+  sim.SetState(s);
+  EXPECT_EQ(sim.Step(), StepStatus::kOk);
+  SetInvariantHandler(nullptr);
+  ASSERT_EQ(tripped.size(), 1u);
+  EXPECT_THAT(tripped[0], HasSubstr("the starting state's quaternion has norm 1.5"));
+}
+
 TEST(Properties, NonFiniteStateIsContained) {
   Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 50, {});  // a state with a history: step, cruise integral, motion all non-trivial
@@ -541,6 +595,7 @@ namespace {
 
 using Eigen::Vector3d;
 using testing::Drive;
+using ::testing::HasSubstr;
 using testing::SharedWorld;
 
 // --- the edge of the physics: starts that cannot be, contacts that cannot blow up ---------------

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <numbers>
 #include <set>
 
@@ -607,6 +608,42 @@ TEST(WheelReader, CombinedPedalsSplitAtRest) {
   // Both on one side of rest is not a combined axis.
   c->set_brake_full(-1000);
   EXPECT_THAT(ValidateMapping(m), ::testing::Contains(HasSubstr("opposite sides of rest")));
+}
+
+// Raw values at the int32 extremes are refused by their range, and the spans between them are
+// computed without overflow (issue 20: the report showed a wrapped difference). The sanitizer
+// build traps a signed overflow here.
+TEST(WheelMapping, Int32ExtremesAreRefusedWithoutOverflow) {
+  constexpr std::int32_t lo = std::numeric_limits<std::int32_t>::min();
+  constexpr std::int32_t hi = std::numeric_limits<std::int32_t>::max();
+  pb::WheelMapping m = GenericWheel(0x1234, 2, 3);
+  m.mutable_steer()->set_left(lo);
+  m.mutable_steer()->set_right(hi);
+  m.mutable_throttle()->set_rest(hi);
+  m.mutable_throttle()->set_full(lo);
+  m.mutable_brake()->set_rest(lo);
+  m.mutable_brake()->set_full(lo + 500);  // really less than 1000 apart
+  const auto why = ValidateMapping(m);
+  EXPECT_THAT(why, ::testing::Contains(HasSubstr(
+                       "steer.left: raw axis value must be in [-32768, 32767], got -2147483648")));
+  EXPECT_THAT(why, ::testing::Contains(HasSubstr(
+                       "steer.right: raw axis value must be in [-32768, 32767], got 2147483647")));
+  EXPECT_THAT(why, ::testing::Contains(HasSubstr("throttle.rest: raw axis value must be in")));
+  EXPECT_THAT(why, ::testing::Not(::testing::Contains(HasSubstr("steer: left"))));
+  EXPECT_THAT(why, ::testing::Not(::testing::Contains(HasSubstr("throttle: rest"))));
+  EXPECT_THAT(why, ::testing::Contains(HasSubstr(
+                       "brake: rest -2147483648 and full -2147483148 are less than 1000 raw units "
+                       "apart")));
+  pb::WheelMapping c = GenericWheel(0x1234, 2, 3);
+  c.clear_throttle();
+  c.clear_brake();
+  c.mutable_combined()->set_axis(1);
+  c.mutable_combined()->set_rest(lo);
+  c.mutable_combined()->set_throttle_full(hi);
+  c.mutable_combined()->set_brake_full(lo);
+  EXPECT_THAT(ValidateMapping(c), ::testing::Contains(HasSubstr("opposite sides of rest")));
+  EXPECT_THAT(ValidateMapping(c),
+              ::testing::Contains(HasSubstr("combined.rest: raw axis value must be in")));
 }
 
 // A person's session at the wheel, scripted: each step's motion on an SDL virtual joystick with

@@ -14,10 +14,11 @@
 namespace vdyn {
 namespace {
 
+using Eigen::Vector3d;
 using ::testing::HasSubstr;
+using testing::ReadFile;
 using testing::TempDir;
 using testing::WriteFile;
-using Eigen::Vector3d;
 
 // A 20 m x 10 m quad at height 3 in a Y-up file: x in [0, 20], "up" y = 3, z in [-10, 0].
 std::unique_ptr<aiScene> YUpQuadScene() {
@@ -127,15 +128,21 @@ TEST_P(BrokenWorldFiles, EndWithAMessageNamingFileAndReason) {
 
 INSTANTIATE_TEST_SUITE_P(
     Files, BrokenWorldFiles,
-    ::testing::Values(BrokenCase{"missing.obj", nullptr, "no such file"},
-                      BrokenCase{"empty.stl", "", "the file is empty"},
-                      BrokenCase{"garbage.fbx", "this is not an FBX file at all\n",
-                                 "cannot read the mesh"},
-                      BrokenCase{"garbage.gltf", "{ not json", "cannot read the mesh"},
-                      BrokenCase{"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n",
-                                 "no usable triangles"},
-                      BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
-                      BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"}));
+    ::testing::Values(
+        BrokenCase{"missing.obj", nullptr, "no such file"},
+        BrokenCase{"empty.stl", "", "the file is empty"},
+        BrokenCase{"garbage.fbx", "this is not an FBX file at all\n", "cannot read the mesh"},
+        BrokenCase{"garbage.gltf", "{ not json", "cannot read the mesh"},
+        BrokenCase{"flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "no usable triangles"},
+        BrokenCase{"broken.png", "\x89PNG\r\n\x1a\nxxxx", "cannot read the height map"},
+        BrokenCase{"tiny.pgm", "P5\n1 1\n255\n\x10", "at least 2 x 2 pixels"},
+        // A PNM's maximum value is 1 to 65535: 0 would divide every height by 0.
+        BrokenCase{"maxval0.pgm", "P5\n2 2\n0\n\x10\x20\x30\x40",
+                   "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
+        BrokenCase{"maxval0.ppm", "P6 2 2 0\n123456789012",
+                   "the maximum value is 0: a PGM or PPM needs 1 to 65535"},
+        BrokenCase{"maxval70000.pgm", "P5\n2 2\n70000\n\x10\x20\x30\x40\x10\x20\x30\x40",
+                   "the maximum value is 70000: a PGM or PPM needs 1 to 65535"}));
 
 std::string Le(std::uint32_t v, int bytes) {
   std::string out;
@@ -200,6 +207,49 @@ TEST(WorldFiles, ANonFiniteVertexDropsItsTrianglesOnly) {
   EXPECT_EQ(world->terrain.dropped_triangles(), 1u);
   EXPECT_NEAR(GroundZ(*world, 10.0, -20.0), 0.0, 1e-9);
 }
+
+// Whichever coordinate is not finite (x, y or z; NaN or an infinity), every triangle that uses the
+// vertex is dropped and counted, and the rest is the world: no terrain appears where the file has
+// none (issue 20: `v nan 0 0` became a real triangle).
+class NonFiniteVertex : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(NonFiniteVertex, DropsEveryTriangleThatUsesIt) {
+  TempDir dir;
+  // Two ground triangles (the square z = 0 from -50 to 50), and two triangles over the square
+  // x, y in [100, 110] at z = 5 that both use the bad vertex 5.
+  WriteFile(dir / "bad.obj", "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nv " + GetParam() +
+                                 "\nv 100 100 5\nv 110 100 5\nv 110 110 5\nv 100 110 5\n"
+                                 "f 1 2 3\nf 1 3 4\nf 6 7 5\nf 5 8 9\n");
+  const auto world = LoadWorld((dir / "bad.obj").string(), WorldFileOptions{});
+  EXPECT_EQ(world->terrain.triangle_count(), 2u) << GetParam();
+  EXPECT_EQ(world->terrain.dropped_triangles(), 2u) << GetParam();
+  EXPECT_NEAR(GroundZ(*world, 10.0, -20.0), 0.0, 1e-9);
+  // Nothing where only the dropped triangles were; the bounds are the kept ones'.
+  EXPECT_FALSE(world->terrain.Trace(Vector3d(105.0, 101.0, 100.0), -Vector3d::UnitZ(), 200.0).hit)
+      << GetParam();
+  EXPECT_TRUE(world->terrain.bounds_min().allFinite() && world->terrain.bounds_max().allFinite());
+}
+
+// The issue's file: Assimp's vertex joining made the NaN vertex (50, 50, 0), so the triangle became
+// real ground where the file has none.
+TEST(WorldFiles, ANanVertexIsNotJoinedWithARealOne) {
+  TempDir dir;
+  WriteFile(dir / "nan.obj",
+            "v -50 -50 0\nv 50 -50 0\nv 50 50 0\nv -50 50 0\nv nan 0 0\nv 60 0 0\nv 60 10 0\n"
+            "f 1 2 3\nf 1 3 4\nf 5 6 7\n");
+  const auto world = LoadWorld((dir / "nan.obj").string(), WorldFileOptions{});
+  EXPECT_EQ(world->terrain.triangle_count(), 2u);
+  EXPECT_EQ(world->terrain.dropped_triangles(), 1u);
+  EXPECT_FALSE(world->terrain.Trace(Vector3d(58.0, 5.0, 100.0), -Vector3d::UnitZ(), 200.0).hit);
+  // The same from memory (a world description's bytes).
+  const auto again = LoadWorldFromBytes(ReadFile(dir / "nan.obj"), "nan.obj", WorldFileOptions{});
+  EXPECT_EQ(again->terrain.dropped_triangles(), 1u);
+  EXPECT_FALSE(again->terrain.Trace(Vector3d(58.0, 5.0, 100.0), -Vector3d::UnitZ(), 200.0).hit);
+}
+
+INSTANTIATE_TEST_SUITE_P(WorldFiles, NonFiniteVertex,
+                         ::testing::Values("nan 0 0", "0 nan 0", "0 0 nan", "inf 0 0", "0 -inf 0",
+                                           "0 0 inf", "nan nan nan"));
 
 TEST(WorldFiles, BadOptionsAreRefused) {
   TempDir dir;

@@ -38,19 +38,23 @@ std::vector<std::string_view> Split(std::string_view line) {
 }  // namespace
 
 Maneuver Maneuver::Parse(const std::string& text, const std::string& source) {
+  std::istringstream in(std::string(base::StripBom(text)));
+  return Read(in, source);
+}
+
+Maneuver Maneuver::Read(std::istream& in, const std::string& source) {
   Maneuver m;
   int column_of[kNumColumns] = {-1, -1, -1, -1, -1};
   std::size_t n_fields = 0;
   bool have_header = false;
-  std::istringstream in(std::string(base::StripBom(text)));
   std::string raw;
-  int line_no = 0;
+  std::int64_t line_no = 0;
   auto fail = [&](const std::string& what) -> ManeuverError {
     return ManeuverError(source + ":" + std::to_string(line_no) + ": " + what);
   };
   while (std::getline(in, raw)) {
     ++line_no;
-    const std::string_view line = Trim(raw);
+    const std::string_view line = Trim(line_no == 1 ? base::StripBom(raw) : raw);
     if (line.empty() || line.front() == '#') continue;
     const std::vector<std::string_view> fields = Split(line);
     if (!have_header) {
@@ -110,6 +114,11 @@ Maneuver Maneuver::Parse(const std::string& text, const std::string& source) {
       throw fail("column 't_s': " + base::FormatNumber(v[0]) + " does not increase (previous row " +
                  base::FormatNumber(m.rows_.back().t) + ")");
     }
+    if (m.rows_.size() == limits::kMaxManeuverRows) {
+      throw fail("more than " + std::to_string(limits::kMaxManeuverRows) +
+                 " rows, the most a maneuver may hold (docs/formats.md): thin it out (rows are "
+                 "interpolated) or split the drive");
+    }
     ManeuverRow row;
     row.t = v[0];
     row.steer = v[1] * kDeg;
@@ -118,6 +127,7 @@ Maneuver Maneuver::Parse(const std::string& text, const std::string& source) {
     if (present[4]) row.cruise_speed = v[4] / 3.6;
     m.rows_.push_back(row);
   }
+  if (in.bad()) throw ManeuverError(source + ": reading failed at line " + std::to_string(line_no));
   if (!have_header) throw ManeuverError(source + ": empty maneuver (no header, no rows)");
   if (m.rows_.empty()) throw ManeuverError(source + ": the maneuver has a header but no rows");
   return m;
@@ -131,11 +141,18 @@ Maneuver Maneuver::Load(const std::filesystem::path& path) {
   if (!std::filesystem::exists(path, ec)) {
     throw ManeuverError(path.string() + ": no such maneuver file (or 'demo' for the built-in one)");
   }
+  // Refused before anything is read when larger than a maneuver may be; then read line by line.
+  const std::uintmax_t size = std::filesystem::file_size(path, ec);
+  if (!ec && size > limits::kMaxManeuverBytes) {
+    throw ManeuverError(path.string() + ": " + std::to_string(size) +
+                        " bytes, more than a maneuver file may hold (" +
+                        std::to_string(limits::kMaxManeuverBytes) +
+                        " bytes, docs/formats.md): thin it out (rows are interpolated) or split "
+                        "the drive");
+  }
   std::ifstream in(path, std::ios::binary);
   if (!in) throw ManeuverError(path.string() + ": cannot open the maneuver file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return Parse(ss.str(), path.string());
+  return Read(in, path.string());
 }
 
 Maneuver Maneuver::Named(const std::string& name_or_path) {

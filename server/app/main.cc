@@ -228,6 +228,7 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
       ->capture_default_str();
   app.add_option("--server-id", o.server_id, "This server's id (several may share a domain)")
+      ->check(vdyn::cli::Id("server id"))
       ->capture_default_str();
   app.add_option("--vehicle-ids", o.vehicle_ids, "Vehicles to spawn at start, e.g. 1,2")
       ->delimiter(',')

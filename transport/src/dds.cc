@@ -35,29 +35,33 @@ Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
   return d;
 }
 
-Participant::Participant(std::uint32_t domain_id) : domain_id_(domain_id) {
-  participant_ = dds_create_participant(domain_id, nullptr, nullptr);
-  if (participant_ < 0) {
-    throw TransportError(DdsError("cannot create the DDS participant on domain " +
-                                      std::to_string(domain_id),
-                                  participant_));
-  }
-}
+Participant::Participant(std::uint32_t domain_id) : Participant(domain_id, ParticipantOptions{}) {}
 
 Participant::Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes)
+    : Participant(domain_id, ParticipantOptions{receive_buffer_bytes, {}}) {}
+
+Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& options)
     : domain_id_(domain_id) {
-  // Ours first, then the user's configuration, so that the user's settings win.
-  std::string config = "<Internal><SocketReceiveBufferSize min=\"default\" max=\"" +
-                       std::to_string(receive_buffer_bytes) + "B\"/></Internal>";
-  if (const char* uri = std::getenv("CYCLONEDDS_URI"); uri != nullptr && *uri != '\0') {
-    config += ",";
-    config += uri;
+  if (options.receive_buffer_bytes > 0) {
+    // Ours first, then the user's configuration, so that the user's settings win.
+    std::string config = "<Internal><SocketReceiveBufferSize min=\"default\" max=\"" +
+                         std::to_string(options.receive_buffer_bytes) + "B\"/></Internal>";
+    if (const char* uri = std::getenv("CYCLONEDDS_URI"); uri != nullptr && *uri != '\0') {
+      config += ",";
+      config += uri;
+    }
+    // Fails when the domain exists in this process already (another participant made it): then
+    // this one joins it as it is.
+    const dds_entity_t d = dds_create_domain(domain_id, config.c_str());
+    if (d > 0) domain_ = d;
   }
-  // Fails when the domain exists in this process already (another participant made it): then
-  // this one joins it as it is.
-  const dds_entity_t d = dds_create_domain(domain_id, config.c_str());
-  if (d > 0) domain_ = d;
-  participant_ = dds_create_participant(domain_id, nullptr, nullptr);
+  dds_qos_t* q = nullptr;
+  if (!options.user_data.empty()) {
+    q = dds_create_qos();
+    dds_qset_userdata(q, options.user_data.data(), options.user_data.size());
+  }
+  participant_ = dds_create_participant(domain_id, q, nullptr);
+  if (q != nullptr) dds_delete_qos(q);
   if (participant_ < 0) {
     const dds_entity_t rc = participant_;
     participant_ = 0;
@@ -65,6 +69,102 @@ Participant::Participant(std::uint32_t domain_id, std::size_t receive_buffer_byt
     throw TransportError(DdsError("cannot create the DDS participant on domain " +
                                       std::to_string(domain_id),
                                   rc));
+  }
+  dds_guid_t g;
+  if (const dds_return_t rc = dds_get_guid(participant_, &g); rc != DDS_RETCODE_OK) {
+    dds_delete(participant_);
+    if (domain_ > 0) dds_delete(domain_);
+    throw TransportError(DdsError("dds_get_guid of the participant", rc));
+  }
+  std::memcpy(guid_.data(), g.v, guid_.size());
+}
+
+bool Participant::SetUserData(std::string_view text) {
+  dds_qos_t* q = dds_create_qos();
+  const dds_return_t get = dds_get_qos(participant_, q);
+  if (get != DDS_RETCODE_OK) {
+    dds_delete_qos(q);
+    last_error_ = DdsError("dds_get_qos of the participant", get);
+    return false;
+  }
+  dds_qset_userdata(q, text.data(), text.size());
+  const dds_return_t rc = dds_set_qos(participant_, q);
+  dds_delete_qos(q);
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError("dds_set_qos (user data) of the participant", rc);
+    return false;
+  }
+  return true;
+}
+
+ParticipantReader::ParticipantReader(Participant& participant) {
+  reader_ =
+      dds_create_reader(participant.handle(), DDS_BUILTIN_TOPIC_DCPSPARTICIPANT, nullptr, nullptr);
+  if (reader_ < 0) {
+    throw TransportError(
+        DdsError("cannot create a reader of the discovered participants", reader_));
+  }
+  waitset_ = dds_create_waitset(participant.handle());
+  if (waitset_ < 0) {
+    dds_delete(reader_);
+    throw TransportError(DdsError("cannot create a waitset for the participants", waitset_));
+  }
+  condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
+  const dds_return_t rc = condition_ < 0 ? condition_ : dds_waitset_attach(waitset_, condition_, 0);
+  if (rc < 0) {
+    dds_delete(waitset_);
+    dds_delete(reader_);
+    throw TransportError(DdsError("cannot wait on the discovered participants", rc));
+  }
+}
+
+ParticipantReader::~ParticipantReader() {
+  if (waitset_ > 0) dds_delete(waitset_);
+  if (condition_ > 0) dds_delete(condition_);
+  if (reader_ > 0) dds_delete(reader_);
+}
+
+bool ParticipantReader::Wait(std::chrono::nanoseconds timeout) {
+  dds_attach_t triggered;
+  const dds_return_t n = dds_waitset_wait(waitset_, &triggered, 1, timeout.count());
+  if (n < 0) {
+    last_error_ = DdsError("dds_waitset_wait", n);
+    return false;
+  }
+  return n > 0;
+}
+
+bool ParticipantReader::Take(std::vector<Peer>& out) {
+  constexpr int kBatch = 16;
+  while (true) {
+    void* samples[kBatch] = {};
+    dds_sample_info_t infos[kBatch];
+    const dds_return_t n = dds_take(reader_, samples, infos, kBatch, kBatch);
+    if (n < 0) {
+      last_error_ = DdsError("dds_take of the discovered participants", n);
+      return false;
+    }
+    for (int i = 0; i < n; ++i) {
+      const auto* p = static_cast<const dds_builtintopic_participant_t*>(samples[i]);
+      Peer peer;
+      std::memcpy(peer.guid.data(), p->key.v, peer.guid.size());
+      peer.alive = infos[i].instance_state == DDS_ALIVE_INSTANCE_STATE;
+      void* value = nullptr;
+      std::size_t size = 0;
+      if (infos[i].valid_data && p->qos != nullptr && dds_qget_userdata(p->qos, &value, &size) &&
+          value != nullptr) {
+        peer.user_data.assign(static_cast<const char*>(value), size);
+      }
+      dds_free(value);
+      out.push_back(std::move(peer));
+    }
+    if (n > 0) {
+      if (const dds_return_t rc = dds_return_loan(reader_, samples, n); rc != DDS_RETCODE_OK) {
+        last_error_ = DdsError("dds_return_loan of the discovered participants", rc);
+        return false;
+      }
+    }
+    if (n < kBatch) return true;
   }
 }
 
@@ -253,9 +353,10 @@ std::uint32_t RawReader::MatchedWriters() {
   return st.current_count;
 }
 
-Waitset::Waitset(Participant& participant) {
+Waitset::Waitset(Participant& participant, DropCounters* drops) : drops_(drops) {
   waitset_ = dds_create_waitset(participant.handle());
   if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset", waitset_));
+  if (drops_ != nullptr) drop_error_ = drops_->Register("DDS error in a waitset");
 }
 
 Waitset::~Waitset() {
@@ -280,6 +381,8 @@ bool Waitset::Wait(std::chrono::nanoseconds timeout) {
   const dds_return_t n = dds_waitset_wait(waitset_, triggered, 8, timeout.count());
   if (n < 0) {
     last_error_ = DdsError("dds_waitset_wait", n);
+    ++errors_;
+    if (drops_ != nullptr) drops_->Count(drop_error_, last_error_);
     return false;
   }
   return n > 0;

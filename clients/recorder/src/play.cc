@@ -364,7 +364,9 @@ void Player::HandleRequests() {
       }
     }
     reply.set_sim_time_ns(static_cast<std::int64_t>(Position()));
-    replies_->Write(r.vehicle_id(), reply);
+    if (!replies_->Write(r.vehicle_id(), reply)) {
+      drops_.Count("write failed on vdyn/control_reply", replies_->last_error());
+    }
     Status(true);
   });
 }

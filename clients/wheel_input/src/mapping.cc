@@ -1,5 +1,6 @@
 #include "vdyn/wheel_input/mapping.h"
 
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -30,7 +31,13 @@ class CollectErrors : public gp::io::ErrorCollector {
 
 // A pedal's travel must span at least this many raw units: a calibration that saw no movement
 // would otherwise divide by (almost) zero.
-constexpr int kMinSpan = 1000;
+constexpr std::int64_t kMinSpan = 1000;
+
+// The distance between two raw values, in 64 bits: values from a file may be any int32.
+std::int64_t Span(std::int32_t a, std::int32_t b) {
+  const std::int64_t d = std::int64_t{b} - std::int64_t{a};
+  return d < 0 ? -d : d;
+}
 
 void CheckRange(std::vector<std::string>& why, const std::string& field, const limits::Range& r,
                 double v) {
@@ -38,8 +45,17 @@ void CheckRange(std::vector<std::string>& why, const std::string& field, const l
   if (!s.empty()) why.push_back(field + ": " + s);
 }
 
+// A whole-number field (raw values, indices): the value as the file holds it, not as a double
+// (2147483647, not 2.147483647e9).
+void CheckWhole(std::vector<std::string>& why, const std::string& field, const limits::Range& r,
+                std::int64_t v) {
+  if (limits::Check(r, static_cast<double>(v)).empty()) return;
+  why.push_back(field + ": " + std::string(r.what) + " must be in " + limits::Describe(r) +
+                ", got " + std::to_string(v));
+}
+
 void CheckAxis(std::vector<std::string>& why, const std::string& field, int axis, int axes) {
-  CheckRange(why, field, limits::kAxisIndex, axis);
+  CheckWhole(why, field, limits::kAxisIndex, axis);
   if (axes >= 0 && axis >= axes) {
     why.push_back(field + ": axis " + std::to_string(axis) + " but the device has " +
                   std::to_string(axes) + " axes");
@@ -55,9 +71,9 @@ void CheckPedal(std::vector<std::string>& why, const std::string& name, const pb
     why.push_back(name + ": needs rest and full raw values");
     return;
   }
-  CheckRange(why, name + ".rest", limits::kRawAxis, p.rest());
-  CheckRange(why, name + ".full", limits::kRawAxis, p.full());
-  if (std::abs(p.full() - p.rest()) < kMinSpan) {
+  CheckWhole(why, name + ".rest", limits::kRawAxis, p.rest());
+  CheckWhole(why, name + ".full", limits::kRawAxis, p.full());
+  if (Span(p.rest(), p.full()) < kMinSpan) {
     why.push_back(name + ": rest " + std::to_string(p.rest()) + " and full " +
                   std::to_string(p.full()) + " are less than " + std::to_string(kMinSpan) +
                   " raw units apart");
@@ -81,9 +97,9 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
     why.push_back("steer: needs axis, left, right and range_deg");
   } else {
     CheckAxis(why, "steer.axis", s.axis(), axes);
-    CheckRange(why, "steer.left", limits::kRawAxis, s.left());
-    CheckRange(why, "steer.right", limits::kRawAxis, s.right());
-    if (std::abs(s.right() - s.left()) < kMinSpan) {
+    CheckWhole(why, "steer.left", limits::kRawAxis, s.left());
+    CheckWhole(why, "steer.right", limits::kRawAxis, s.right());
+    if (Span(s.left(), s.right()) < kMinSpan) {
       why.push_back("steer: left " + std::to_string(s.left()) + " and right " +
                     std::to_string(s.right()) + " are less than " + std::to_string(kMinSpan) +
                     " raw units apart");
@@ -105,8 +121,11 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
     if (!c.has_rest() || !c.has_throttle_full() || !c.has_brake_full()) {
       why.push_back("combined: needs rest, throttle_full and brake_full");
     } else {
-      const long t = static_cast<long>(c.throttle_full()) - c.rest();
-      const long b = static_cast<long>(c.brake_full()) - c.rest();
+      CheckWhole(why, "combined.rest", limits::kRawAxis, c.rest());
+      CheckWhole(why, "combined.throttle_full", limits::kRawAxis, c.throttle_full());
+      CheckWhole(why, "combined.brake_full", limits::kRawAxis, c.brake_full());
+      const std::int64_t t = std::int64_t{c.throttle_full()} - c.rest();
+      const std::int64_t b = std::int64_t{c.brake_full()} - c.rest();
       if (std::abs(t) < kMinSpan || std::abs(b) < kMinSpan || (t > 0) == (b > 0)) {
         why.push_back(
             "combined: throttle_full and brake_full must lie on opposite sides of rest, "
@@ -139,7 +158,7 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
   };
   for (const auto& [name, index] : buttons_used) {
     if (!index) continue;
-    CheckRange(why, std::string("buttons.") + name, limits::kButtonIndex, *index);
+    CheckWhole(why, std::string("buttons.") + name, limits::kButtonIndex, *index);
     if (buttons >= 0 && *index >= buttons) {
       why.push_back(std::string("buttons.") + name + ": button " + std::to_string(*index) +
                     " but the device has " + std::to_string(buttons) + " buttons");

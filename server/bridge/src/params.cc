@@ -159,8 +159,17 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
   CheckEnum(msg, "yaw_mode", out);
   CheckEnum(msg, "tire_law", out);
   CheckEnum(msg, "differential", out);
-  for (ParamIssue& i : CheckParams(RawParams(msg))) {
-    if (missing.count(i.field) == 0) out.push_back(std::move(i));
+  const Params raw = RawParams(msg);
+  for (ParamIssue& i : CheckParams(raw)) {
+    if (missing.count(i.field) != 0) continue;
+    if (i.field == "gear_count" && static_cast<std::uint64_t>(raw.gear_count) != msg.gear_count()) {
+      // RawParams clamps a count too large for an int: the reason names the number given, as
+      // a whole number (4000000000, not 4e9).
+      const limits::Range& r = *limits::ParamRange("gear_count");
+      i.reason = std::string(r.what) + " must be in " + limits::Describe(r) + ", got " +
+                 std::to_string(msg.gear_count());
+    }
+    out.push_back(std::move(i));
   }
   return out;
 }

@@ -41,9 +41,29 @@ Eigen::Vector3d ToWorld(double x, double y, double z, const WorldFileOptions& o)
 unsigned ImportFlags() {
   // No aiProcess_FindInvalidData: it removes a whole mesh for one NaN vertex ("No meshes
   // remaining"). Non-finite and degenerate triangles are dropped one by one, and counted, by
-  // Terrain::AddMesh; the rest of the mesh stays.
-  return aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_PreTransformVertices |
-         aiProcess_FindDegenerates | aiProcess_ValidateDataStructure | aiProcess_SortByPType;
+  // Terrain::AddMesh; the rest of the mesh stays. aiProcess_JoinIdenticalVertices runs apart,
+  // after the vertices are checked (JoinIdenticalVertices below).
+  return aiProcess_Triangulate | aiProcess_PreTransformVertices | aiProcess_FindDegenerates |
+         aiProcess_ValidateDataStructure | aiProcess_SortByPType;
+}
+
+// Assimp's vertex joining compares positions by distance: a NaN or infinite coordinate makes it
+// join the vertex with an unrelated one (issue 20: `v nan 0 0` in an OBJ became a real triangle
+// through a real vertex). So first every vertex with a coordinate that is not finite is moved
+// far beyond what a terrain may hold (1e10 m: Terrain::AddMesh drops, and counts, every triangle
+// that uses it), then vertices are joined: in Assimp's own order of steps joining is the last
+// of ours, so a clean file gives what one ReadFile with every step gave.
+const aiScene* JoinIdenticalVertices(Assimp::Importer& importer, const aiScene* scene) {
+  if (scene == nullptr) return nullptr;
+  constexpr float kFar = 1e10f;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    aiMesh* am = scene->mMeshes[m];
+    for (unsigned v = 0; v < am->mNumVertices; ++v) {
+      aiVector3D& p = am->mVertices[v];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) p = {kFar, kFar, kFar};
+    }
+  }
+  return importer.ApplyPostProcessing(aiProcess_JoinIdenticalVertices);
 }
 
 void ConfigureImporter(Assimp::Importer& importer) {
@@ -85,7 +105,8 @@ std::vector<TriangleMesh> LoadMeshFile(const fs::path& path, const WorldFileOpti
   // From the file (not from memory): a glTF's buffers and an OBJ's materials are found beside it.
   Assimp::Importer importer;
   ConfigureImporter(importer);
-  const aiScene* scene = importer.ReadFile(path.string(), ImportFlags());
+  const aiScene* scene =
+      JoinIdenticalVertices(importer, importer.ReadFile(path.string(), ImportFlags()));
   return MeshesFromScene(scene, importer, path.string(), o);
 }
 
@@ -94,8 +115,9 @@ std::vector<TriangleMesh> LoadMeshBytes(const std::string& bytes, const std::str
   Assimp::Importer importer;
   ConfigureImporter(importer);
   const std::string hint = ext.empty() ? std::string() : ext.substr(1);
-  const aiScene* scene =
-      importer.ReadFileFromMemory(bytes.data(), bytes.size(), ImportFlags(), hint.c_str());
+  const aiScene* scene = JoinIdenticalVertices(
+      importer,
+      importer.ReadFileFromMemory(bytes.data(), bytes.size(), ImportFlags(), hint.c_str()));
   return MeshesFromScene(scene, importer, name, o);
 }
 
@@ -139,6 +161,11 @@ void CheckImageData(const std::string& name, const std::string& b) {
     }
     ++i;  // the one blank after the header
     const std::uint64_t w = nums[0], h = nums[1], maxval = nums[2];
+    if (n_nums == 3 && (maxval == 0 || maxval > 65535)) {
+      // Heights are pixel / maxval: 0 would divide by zero (stb_image reads it as NaN terrain).
+      throw WorldError(name + ": the maximum value is " + std::to_string(maxval) +
+                       ": a PGM or PPM needs 1 to 65535");
+    }
     const std::uint64_t channels = (b[1] == '3' || b[1] == '6') ? 3 : 1;
     const std::uint64_t have = b.size() > i ? b.size() - i : 0;
     if (b[1] == '5' || b[1] == '6') {

@@ -1,6 +1,7 @@
 #include "vdyn/physics/simulator.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <stdexcept>
@@ -140,6 +141,88 @@ void Simulator::Spawn(const Pose2& pose, double speed) {
   state_ = s;
 }
 
+// The C library's assertion failure (glibc): the message on stderr, then abort. Declared here as
+// <cassert> declares it only without NDEBUG, and the invariants are also checked in builds with it.
+extern "C" [[noreturn]] void __assert_fail(const char* assertion, const char* file,
+                                           unsigned int line, const char* function) noexcept;
+
+namespace {
+
+void AssertionFailure(const std::string& what) {
+  __assert_fail(what.c_str(), __FILE__, __LINE__, "vdyn::Simulator::Step");
+}
+
+std::atomic<InvariantHandler> g_invariant_handler{&AssertionFailure};
+
+void InvariantFailed(const std::string& what) {
+  g_invariant_handler.load()(what);
+}
+
+// Sets `why` to "wheel name = value is not a finite number" when v is not finite (and `why` is
+// still empty). Nothing is allocated unless it fails: the check runs every step.
+void Finite(std::string& why, const char* wheel, const char* name, double v) {
+  if (std::isfinite(v) || !why.empty()) return;
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "%s%s%s = %g is not a finite number", wheel, *wheel ? " " : "",
+                name, v);
+  why = buf;
+}
+void Finite(std::string& why, const char* wheel, const char* name, const Eigen::Vector3d& v) {
+  for (int i = 0; i < 3; ++i) Finite(why, wheel, name, v[i]);
+}
+
+std::string UnitQuaternion(const char* which, const State& s) {
+  if (!s.x.allFinite()) return {};  // a non-finite state is contained, not an invariant
+  const double n = s.x.segment<4>(sx::kQ).norm();
+  if (std::abs(n - 1.0) <= 1e-9) return {};
+  char buf[128];
+  std::snprintf(buf, sizeof buf, "the %s state's quaternion has norm %.9g, not 1", which, n);
+  return buf;
+}
+
+}  // namespace
+
+void SetInvariantHandler(InvariantHandler handler) {
+  g_invariant_handler.store(handler != nullptr ? handler : &AssertionFailure);
+}
+
+std::string CheckStepInvariants(const StepRecord& r, const State& after) {
+  std::string why = UnitQuaternion("starting", r.state);
+  if (why.empty()) why = UnitQuaternion("new", after);
+  if (!why.empty()) return "invariant: " + why;
+  const Derived& d = r.derived;
+  for (int w = 0; w < kNumWheels && why.empty(); ++w) {
+    const WheelOutputs& o = d.wheel[w];
+    const char* wheel = kWheelNames[static_cast<std::size_t>(w)].data();
+    if (o.Fp < 0.0) {
+      char buf[128];
+      std::snprintf(buf, sizeof buf, "wheel %s: spring force Fp = %g N < 0 (a spring only pushes)",
+                    wheel, o.Fp);
+      why = buf;
+    }
+    const std::pair<const char*, double> scalars[] = {
+        {"Fp", o.Fp},           {"Fh", o.Fh},
+        {"Fb", o.Fb},           {"Fy", o.Fy},
+        {"Frr", o.Frr},         {"lS", o.lS},
+        {"lS_rate", o.lS_rate}, {"slip_angle", o.slip_angle},
+        {"omega", o.omega},     {"slip_ratio", o.slip_ratio},
+        {"Fx", o.Fx},           {"Mz", o.Mz}};
+    for (const auto& [name, v] : scalars) Finite(why, wheel, name, v);
+    Finite(why, wheel, "F_W", o.F_W);
+  }
+  Finite(why, "", "drag Da", d.Da);
+  Finite(why, "", "steering_torque", d.steering_torque);
+  Finite(why, "", "F_W", d.F_W);
+  Finite(why, "", "M_B", d.M_B);
+  Finite(why, "", "a_WT_W", d.a_WT_W);
+  Finite(why, "", "dw_B", d.dw_B);
+  Finite(why, "", "w_eff_B", d.w_eff_B);
+  Finite(why, "", "F_wall_W", d.F_wall_W);
+  Finite(why, "", "engine_speed", d.drivetrain.engine_speed);
+  Finite(why, "", "engine_torque", d.drivetrain.engine_torque);
+  return why.empty() ? why : "invariant: " + why;
+}
+
 StepStatus Simulator::Step() {
   const Terrain& terrain = world_->terrain;
   ws_.start = state_;
@@ -188,6 +271,9 @@ StepStatus Simulator::Step() {
   record_.state = ws_.start;
   state_.step = ws_.start.step + 1;
   record_.hash_after = StateHash(state_);
+  if constexpr (kCheckInvariants) {
+    if (std::string why = CheckStepInvariants(record_, state_); !why.empty()) InvariantFailed(why);
+  }
   return StepStatus::kOk;
 }
 

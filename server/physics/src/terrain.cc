@@ -26,6 +26,13 @@ void EmbreeError(void* user, RTCError code, const char* /*str*/) {
   impl->errors.fetch_add(1, std::memory_order_relaxed);
   impl->last_error.store(static_cast<int>(code), std::memory_order_relaxed);
 }
+
+// Embree stores single precision: a vertex out of float range, or not finite, is unusable. Each
+// coordinate is tested on its own: a NaN compares false, and a reduction such as maxCoeff() may
+// skip it (vectorised max returns the other operand), so `v nan 0 0` must not pass as 0.
+bool UsableVertex(const Eigen::Vector3d& v) {
+  return std::abs(v.x()) < 1e9 && std::abs(v.y()) < 1e9 && std::abs(v.z()) < 1e9;
+}
 }  // namespace
 
 Terrain::Terrain() : impl_(std::make_unique<Impl>()) {
@@ -62,9 +69,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
     const Eigen::Vector3d& c = mesh.vertices_W[tri[2]];
     const Eigen::Vector3d n = (b - a).cross(c - a);
     const double len = n.norm();
-    // Embree stores single precision: a vertex out of float range (or not finite) is unusable.
-    const auto usable = [](const Eigen::Vector3d& v) { return v.cwiseAbs().maxCoeff() < 1e9; };
-    if (!usable(a) || !usable(b) || !usable(c) || !(len > 1e-12)) {
+    if (!UsableVertex(a) || !UsableVertex(b) || !UsableVertex(c) || !(len > 1e-12)) {
       ++dropped_triangles_;
       continue;
     }
@@ -86,7 +91,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
     }
     for (std::size_t i = 0; i < nv; ++i) {
       const Eigen::Vector3d& v = mesh.vertices_W[i];
-      const bool ok = v.cwiseAbs().maxCoeff() < 1e9;  // false for NaN too
+      const bool ok = UsableVertex(v);
       vb[4 * i + 0] = ok ? static_cast<float>(v.x()) : 0.0f;
       vb[4 * i + 1] = ok ? static_cast<float>(v.y()) : 0.0f;
       vb[4 * i + 2] = ok ? static_cast<float>(v.z()) : 0.0f;

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <set>
+#include <thread>
 
 #include <spdlog/spdlog.h>
 
@@ -21,12 +23,20 @@ using transport::TopicId;
 namespace {
 constexpr TopicId kReliableTopics[] = {TopicId::kControlReply, TopicId::kParams, TopicId::kWorld,
                                        TopicId::kEvents, TopicId::kDiagnostics};
+// Step requests waiting for their steps; more wait in the queue until some are done.
+constexpr std::size_t kMaxDeferred = 256;
+// The most events one request makes (a restore: input changes, removed, spawned, applied): a
+// request waits rather than lose one (a re-simulation needs them all).
+constexpr std::size_t kEventsPerRequest = 4;
+// Room in the event queue kept for the steps' own events (input changes, checkpoints): requests
+// wait while the publisher is further behind than this.
+constexpr std::size_t kEventsForSteps = 1024;
 }  // namespace
 
 ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options)
     : world_(std::move(world)),
       options_(std::move(options)),
-      participant_(options_.domain_id),
+      participant_(options_.domain_id, transport::ParticipantOptions{0, Claim(false).Encode()}),
       input_reader_(participant_, TopicId::kInput, &drops_),
       control_reader_(participant_, TopicId::kControl, &drops_) {
   writers_.resize(8);
@@ -37,13 +47,25 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_events_full_ = drops_.Register("event queue full, event lost");
   drop_outbox_full_ = drops_.Register("publisher queue full, not sent");
   drop_inputs_full_ = drops_.Register("input queue full, input dropped");
-  drop_requests_full_ = drops_.Register("request queue full, request refused");
   drop_key_mismatch_ = drops_.Register("key mismatch on vdyn/input");
   drop_out_of_range_ = drops_.Register("out-of-range input on vdyn/input");
   drop_rejected_ = drops_.Register("rejected control request");
   drop_step_input_ = drops_.Register("out-of-range input in a step request");
+  drop_unknown_buttons_ = drops_.Register("unknown button bits on vdyn/input (ignored)");
+  drop_unanswered_gone_ = drops_.Register(
+      "control request unanswered: its client went away before its steps were done");
+  drop_unanswered_write_ =
+      drops_.Register("control request unanswered: the reply could not be written");
+  drop_unanswered_stopped_ = drops_.Register(
+      "control request unanswered: the server stopped before the reply was written");
+  drop_unanswered_room_ = drops_.Register("control request unanswered: no room to hand it on");
 
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
+  // From here on this server runs its vehicles: a server that starts later gives way to it.
+  if (!participant_.SetUserData(Claim(true).Encode())) {
+    spdlog::warn("server '{}': cannot announce that it runs its vehicles: {}",
+                 options_.session.server_id, participant_.last_error());
+  }
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
   // 64 steps of every vehicle it starts with (at least 512 frames): the writer thread may stall
@@ -64,15 +86,21 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
         DescribeVehicle(options_.vehicle_ids[i], session_->simulator(options_.vehicle_ids[i]).params());
   }
   Send(TopicId::kWorld, transport::ServerKey(options_.session.server_id), std::move(world_msg));
-  deferred_step_replies_.reserve(256);
+  deferred_step_replies_.reserve(kMaxDeferred);
+  planner_ = std::make_unique<RequestPlanner>(world_, options_.session);
+  planner_->Sync(*session_);
   // Last: if anything above throws, no thread is left running.
   publisher_ = std::thread([this] { PublisherLoop(); });
+  requests_ = std::thread([this] { RequestLoop(); });
   receiver_ = std::thread([this] { ReceiverLoop(); });
 }
 
 ServerNode::~ServerNode() {
   receiver_stop_ = true;
   if (receiver_.joinable()) receiver_.join();
+  requests_stop_ = true;
+  request_bell_.Ring();
+  if (requests_.joinable()) requests_.join();
   if (publisher_.joinable()) {
     if (publisher_deadline_ns_.load() == 0) {
       publisher_deadline_ns_ = (base::MonotonicNow() + base::Milliseconds(200)).ns;
@@ -103,60 +131,76 @@ void ServerNode::OnEvent(SessionEventRecord&& r) {
   publisher_bell_.Ring();
 }
 
-void ServerNode::HandleRequest(const pb::ControlRequest& r, std::uint64_t writer) {
-  const std::string& me = options_.session.server_id;
-  if (!r.server_id().empty() && r.server_id() != me) return;  // for another server
-  const bool server_wide = r.has_pause() || r.has_resume() || r.has_step() || r.has_spawn();
-  if (r.server_id().empty() && !server_wide && !session_->HasVehicle(r.vehicle_id())) {
-    return;  // another server's vehicle
-  }
-  pb::ControlReply reply;
-  if (options_.mode == ServerOptions::Mode::kLockstep && r.has_resume()) {
-    reply = session_->Reject(r, "lockstep mode advances only on step requests");
-  } else {
-    if (r.has_step() && r.step().has_input() && r.step().input().vehicle_id() != 0) {
-      std::string why;
-      if (!session_->OfferInput(r.step().input(), &why)) drops_.Count(drop_step_input_, why);
-    }
-    reply = session_->Apply(r);
-  }
-  if (r.has_step() && reply.accepted()) {
-    // Answered when its steps are done: the ones pending before it, then its own.
-    deferred_step_replies_.push_back({r.step().steps(), writer, reply});
-    return;
-  }
-  if ((r.has_pause() || r.has_resume()) && reply.accepted()) {
-    CancelStepReplies(std::string("cancelled by a ") + (r.has_pause() ? "pause" : "resume") +
-                      " request before its steps were done");
-  }
-  if (!reply.accepted()) drops_.Count(drop_rejected_, reply.reason());
-  Send(TopicId::kControlReply, r.vehicle_id(), std::make_unique<pb::ControlReply>(reply));
+void ServerNode::Answer(RequestOutcome&& o) {
+  // Room is checked before a request is taken; were it not there, the request is counted, not
+  // lost silently.
+  if (!outcomes_.TryPush(std::move(o))) NoRoomToAnswer();
+}
+
+void ServerNode::NoRoomToAnswer() {
+  requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+  drops_.Count(drop_unanswered_room_);
 }
 
 bool ServerNode::Boundary() {
-  bool got_request = false;
-  // At most 16 requests per step boundary: a flood waits in the queue instead of stretching one
-  // step of the 1 kHz loop. Requests are applied here (they may allocate); the request objects go
-  // back to the receiver to be freed.
-  Request req;
-  for (int n = 0; n < limits::kMaxRequestsPerBoundary && requests_.TryPop(req); ++n) {
-    got_request = true;
-    HandleRequest(*req.msg, req.writer);
-    if (!spent_requests_.TryPush(std::move(req.msg))) req.msg.reset();
+  bool applied = false;
+  const base::MonoTime t0 = prepared_.Front() != nullptr ? base::MonotonicNow() : base::MonoTime{};
+  // At most 16 requests per step boundary, each a swap (the request thread made it ready): a
+  // burst waits in the queue instead of stretching one step of the 1 kHz loop. A request is taken
+  // only when its answers have room: its own, and every step request a pause may cancel.
+  for (int n = 0; n < limits::kMaxRequestsPerBoundary; ++n) {
+    std::unique_ptr<PreparedRequest>* front = prepared_.Front();
+    if (front == nullptr) break;
+    PreparedRequest& p = **front;
+    if (OutcomeRoom() < 1 + deferred_step_replies_.size() || spent_.capacity() == spent_.size() ||
+        events_.capacity() - events_.size() < kEventsPerRequest + kEventsForSteps) {
+      break;
+    }
+    const bool step = p.op == PreparedRequest::Op::kStep;
+    if (step && deferred_step_replies_.size() == kMaxDeferred) break;
+    if (step && p.step_input) session_->OfferInput(p.request->step().input(), nullptr);
+    RequestOutcome o = session_->Commit(p);
+    if (step && o.accepted) {
+      // Answered when its steps are done: the ones pending before it, then its own.
+      deferred_step_replies_.push_back({p.steps, p.client, std::move(o)});
+    } else {
+      const bool pause = p.op == PreparedRequest::Op::kPause;
+      if ((pause || p.op == PreparedRequest::Op::kResume) && o.accepted) {
+        CancelStepReplies(pause ? RequestOutcome::Why::kCancelledByPause
+                                : RequestOutcome::Why::kCancelledByResume);
+      }
+      Answer(std::move(o));
+    }
+    // Back to the request thread, with what the swap replaced: freed there.
+    std::unique_ptr<PreparedRequest> spent = std::move(*front);
+    prepared_.Pop();
+    // Room checked above; were it not there, it is freed here rather than lost.
+    if (!spent_.TryPush(std::move(spent))) spent.reset();
+    applied = true;
   }
+  if (applied) {
+    request_boundaries_.Add((base::MonotonicNow() - t0).micros());
+    publisher_bell_.Ring();
+    request_bell_.Ring();
+  }
+  // A client that went away is taken once every step it may be owed can be answered (else at a
+  // later boundary, when the publisher has caught up).
   std::uint64_t gone = 0;
-  while (gone_clients_.TryPop(gone)) ClientGone(gone);
+  while (OutcomeRoom() >= deferred_step_replies_.size() && gone_clients_.TryPop(gone)) {
+    ClientGone(gone);
+  }
   // Inputs were checked by the receiver (key, ranges); the newest of each vehicle wins.
   while (pb::DriverInput* in = inputs_.Front()) {
     if (session_->HasVehicle(in->vehicle_id())) session_->OfferInput(*in, nullptr);
     inputs_.Pop();
   }
-  return got_request;
+  return applied;
 }
 
 void ServerNode::StepOnce() {
   session_->Step(state_sink_);
   states_->Send();
+  sim_time_ns_.store(session_->steps() * session_->step_ns(), std::memory_order_relaxed);
   if (session_->paused() && session_->pending_steps() > 0) {
     session_->ConsumePendingStep();
     if (!deferred_step_replies_.empty() && deferred_step_replies_.front().remaining > 0) {
@@ -167,29 +211,38 @@ void ServerNode::StepOnce() {
 }
 
 void ServerNode::SendDueStepReplies() {
-  // The requests are served in order: the first one's steps run first.
+  // The requests are served in order: the first one's steps run first. An answer without room
+  // now goes at a later boundary.
   std::size_t done = 0;
-  while (done < deferred_step_replies_.size() && deferred_step_replies_[done].remaining == 0) {
-    pb::ControlReply& reply = deferred_step_replies_[done].reply;
-    if (session_->HasVehicle(reply.vehicle_id())) {
-      reply.set_applied_step(
-          static_cast<std::uint64_t>(session_->simulator(reply.vehicle_id()).state().step));
-    }
-    reply.set_sim_time_ns(session_->steps() * session_->step_ns());
-    Send(TopicId::kControlReply, reply.vehicle_id(), std::make_unique<pb::ControlReply>(reply));
+  while (done < deferred_step_replies_.size() && deferred_step_replies_[done].remaining == 0 &&
+         OutcomeRoom() > 0) {
+    RequestOutcome& o = deferred_step_replies_[done].outcome;
+    const std::uint32_t id = o.request->vehicle_id();
+    if (session_->HasVehicle(id)) o.applied_step = session_->simulator(id).state().step;
+    o.sim_time_ns = session_->steps() * session_->step_ns();
+    Answer(std::move(o));
     ++done;
   }
+  if (done == 0) return;
   deferred_step_replies_.erase(deferred_step_replies_.begin(),
                                deferred_step_replies_.begin() + static_cast<std::ptrdiff_t>(done));
+  publisher_bell_.Ring();
 }
 
 void ServerNode::ClientGone(std::uint64_t writer) {
   // The steps a client asked for, and that have not run, are dropped with it: a long step
-  // request does not outlive the client that wanted it.
+  // request does not outlive the client that wanted it. Its outcome says so (the publisher tells
+  // the operator); no reply is written for a client that is gone.
   std::uint32_t dropped = 0;
   for (auto it = deferred_step_replies_.begin(); it != deferred_step_replies_.end();) {
-    if (it->writer == writer) {
+    if (it->writer == writer) {  // room checked before (Boundary)
       dropped += it->remaining;
+      RequestOutcome& o = it->outcome;
+      o.accepted = false;
+      o.why = RequestOutcome::Why::kClientGone;
+      o.n1 = it->remaining;
+      o.sim_time_ns = session_->steps() * session_->step_ns();
+      Answer(std::move(o));
       it = deferred_step_replies_.erase(it);
     } else {
       ++it;
@@ -197,19 +250,56 @@ void ServerNode::ClientGone(std::uint64_t writer) {
   }
   if (dropped > 0) {
     session_->CancelPendingSteps(dropped);
-    drops_.Count(drop_rejected_, "steps cancelled: the client that asked for them is gone");
+    publisher_bell_.Ring();
   }
   if (!deferred_step_replies_.empty()) SendDueStepReplies();
 }
 
-void ServerNode::CancelStepReplies(const std::string& why) {
+void ServerNode::CancelStepReplies(RequestOutcome::Why why) {
   for (DeferredReply& d : deferred_step_replies_) {
-    d.reply.set_accepted(false);
-    d.reply.set_reason(why);
-    d.reply.set_sim_time_ns(session_->steps() * session_->step_ns());
-    Send(TopicId::kControlReply, d.reply.vehicle_id(), std::make_unique<pb::ControlReply>(d.reply));
+    d.outcome.accepted = false;
+    d.outcome.why = why;
+    d.outcome.sim_time_ns = session_->steps() * session_->step_ns();
+    Answer(std::move(d.outcome));
   }
   deferred_step_replies_.clear();
+}
+
+void ServerNode::AnswerWhatIsLeft() {
+  // On the loop's thread once the loop has ended and the request thread has stopped: the steps
+  // still owed, and the requests that never reached the loop, are answered. Bounded: what the
+  // publisher cannot take by the shutdown deadline is counted as unanswered.
+  const base::MonoTime give_up =
+      base::MonotonicNow() +
+      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+  auto answer = [&](RequestOutcome&& o) {
+    while (!outcomes_.TryPush(std::move(o))) {
+      publisher_bell_.Ring();
+      if (base::MonotonicNow() >= give_up) {
+        requests_unanswered_.fetch_add(1);
+        drops_.Count(drop_unanswered_stopped_);
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  };
+  for (DeferredReply& d : deferred_step_replies_) {
+    d.outcome.accepted = false;
+    d.outcome.why = RequestOutcome::Why::kStopped;
+    d.outcome.sim_time_ns = session_->steps() * session_->step_ns();
+    answer(std::move(d.outcome));
+  }
+  deferred_step_replies_.clear();
+  std::unique_ptr<PreparedRequest> p;
+  while (prepared_.TryPop(p)) {
+    RequestOutcome o;
+    o.request = p->request;
+    o.why = RequestOutcome::Why::kText;
+    o.text = "the server is stopping: the request was not applied";
+    o.sim_time_ns = session_->steps() * session_->step_ns();
+    answer(std::move(o));
+  }
+  publisher_bell_.Ring();
 }
 
 void ServerNode::PushReport(base::MonoTime now) {
@@ -333,6 +423,17 @@ void ServerNode::WriteStats(base::MonoTime start, base::MonoTime end, base::Nano
   std::fprintf(f, "cpu_percent %.2f\n",
                100.0 * (base::ProcessCpuTime() - start_cpu).seconds() / wall_s);
   std::fprintf(f, "scheduling %s\n", scheduling_.c_str());
+  // The boundaries that applied requests, and how long the requests held each.
+  std::fprintf(f, "request_boundaries %llu\n",
+               static_cast<unsigned long long>(request_boundaries_.count()));
+  std::fprintf(f, "request_boundary_p50_us %.1f\n", request_boundaries_.Percentile(50));
+  std::fprintf(f, "request_boundary_p99_us %.1f\n", request_boundaries_.Percentile(99));
+  std::fprintf(f, "request_boundary_max_us %.1f\n", request_boundaries_.Max());
+  std::fprintf(f, "requests_received %llu\n",
+               static_cast<unsigned long long>(requests_received_.load()));
+  std::fprintf(f, "replies_sent %llu\n", static_cast<unsigned long long>(replies_sent_.load()));
+  std::fprintf(f, "requests_unanswered %llu\n",
+               static_cast<unsigned long long>(requests_unanswered_.load()));
   if (std::fclose(f) != 0) spdlog::error("writing the run summary {} failed", options_.stats_out);
 }
 
@@ -340,11 +441,14 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
   scheduling_ = "lockstep (no clock)";
   spdlog::info("server '{}': lockstep on domain {}; steps run on request", options_.session.server_id,
                options_.domain_id);
-  session_->Apply([] {
+  // Lockstep starts paused: steps run only on request.
+  const pb::ControlReply paused = session_->Apply([] {
     pb::ControlRequest r;
     r.mutable_pause();
     return r;
   }());
+  if (!paused.accepted())
+    throw std::logic_error("the session refused to pause: " + paused.reason());
   window_start_ = base::MonotonicNow();
   window_start_cpu_ = base::ProcessCpuTime();
   base::MonoTime last_request = base::MonotonicNow();
@@ -361,13 +465,15 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
       if ((now - window_start_).ns >= 1'000'000'000) PushReport(now);
     }
     const base::MonoTime now = base::MonotonicNow();
+    // A request the loop never saw (refused on its way) is a sign of life too.
+    last_request = std::max(last_request, base::MonoTime{last_request_ns_.load()});
     if ((now - window_start_).ns >= 1'000'000'000) PushReport(now);
     if (now - last_request > timeout) {
       spdlog::error("lockstep: no control request for {} s; the client is gone? stopping",
                     base::FormatNumber(options_.lockstep_timeout_s));
       return 3;
     }
-    if (requests_.empty() && inputs_.empty()) loop_bell_.Wait(token, base::Milliseconds(20));
+    if (prepared_.empty() && inputs_.empty()) loop_bell_.Wait(token, base::Milliseconds(20));
   }
   return 0;
 }
@@ -377,10 +483,16 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
                                                                     : RunLockstep(stop);
   session_->FlushEvents();
   states_->Drain(base::Milliseconds(500));
-  // Let the publisher drain (replies, events, diagnostics) for at most the deadline, whatever a
-  // reader does.
+  // The receiver takes what is still in the control reader, and the request thread answers it
+  // (the server is stopping); what never reached the loop, and the steps it owes, are answered
+  // here. Then the publisher drains (replies, events, diagnostics) for at most the deadline,
+  // whatever a reader does.
   receiver_stop_ = true;
   if (receiver_.joinable()) receiver_.join();
+  requests_stop_ = true;
+  request_bell_.Ring();
+  if (requests_.joinable()) requests_.join();
+  AnswerWhatIsLeft();
   publisher_deadline_ns_ =
       (base::MonotonicNow() +
        base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)}).ns;
@@ -393,32 +505,30 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
 // --- receiver thread -----------------------------------------------------------------------------
 
 void ServerNode::Refuse(const pb::ControlRequest& r, const std::string& why) {
-  // Answered here (the loop never sees it), from the request alone: the session belongs to the
-  // loop thread. An id too long to echo is cut to its limit (such a client cannot match it).
-  auto reply = std::make_unique<pb::ControlReply>();
-  reply->set_request_id(r.request_id());
-  reply->set_client_id(r.client_id().substr(0, limits::kMaxIdBytes));
-  reply->set_vehicle_id(r.vehicle_id());
-  reply->set_server_id(options_.session.server_id);
-  reply->set_accepted(false);
-  reply->set_reason(why.substr(0, limits::kMaxReasonBytes));
-  drops_.Count(drop_rejected_, why);
-  if (early_replies_.TryPush(std::move(reply))) publisher_bell_.Ring();
+  // Answered by the request thread from the request alone (the loop never sees it). Room in
+  // incoming_ was checked before the sample was taken.
+  Incoming in{std::make_shared<const pb::ControlRequest>(r), 0, why};
+  if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();
 }
 
 void ServerNode::ReceiverLoop() {
   const std::string& me = options_.session.server_id;
-  transport::Waitset waitset(participant_);
+  transport::Waitset waitset(participant_, &drops_);
   waitset.Attach(input_reader_);
   waitset.Attach(control_reader_);
   // What other servers on the domain run (their diagnostics, once a second, and worlds): a spawn
   // of one of their vehicles is refused here.
   transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops_);
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
-  std::unique_ptr<pb::ControlRequest> spent;
   std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
   std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
+  int got = 0;                                       // requests taken in the last round
   base::MonoTime next_housekeeping = base::MonotonicNow();
+  // Every bit a Button names (vdyn/input.proto).
+  std::uint32_t known_buttons = 0;
+  for (int i = 0; i < pb::Button_descriptor()->value_count(); ++i) {
+    known_buttons |= static_cast<std::uint32_t>(pb::Button_descriptor()->value(i)->number());
+  }
 
   // Inputs the reader refused (malformed, non-finite, ...): their source is blamed.
   input_reader_.on_refused = [&](const transport::SampleInfo& info, std::string_view kind,
@@ -447,13 +557,38 @@ void ServerNode::ReceiverLoop() {
                                   : detail.find_last_of('.') + 1)))) +
             " bytes";
     }
+    requests_received_.fetch_add(1, std::memory_order_relaxed);
+    last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
+    ++got;
     Refuse(*r, why);
   };
 
-  while (!receiver_stop_.load(std::memory_order_relaxed)) {
-    waitset.Wait(std::chrono::milliseconds(50));
+  // Set while incoming_ is full and requests may wait in the control reader: then the receiver
+  // waits for the request thread's ring (a millisecond at most, for the inputs), not on the
+  // waitset (which would not wait: the reader holds data).
+  bool backlog = false;
+  base::MonoTime drain_until{0};
+  while (true) {
+    const std::uint32_t room_token = receiver_bell_.Token();
+    const bool stopping = receiver_stop_.load(std::memory_order_relaxed);
+    if (stopping) {
+      // What is still in the control reader is taken and answered (the server is stopping), for
+      // at most the shutdown deadline.
+      if (drain_until.ns == 0) {
+        drain_until = base::MonotonicNow() +
+                      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+      } else if ((!backlog && got == 0) || base::MonotonicNow() >= drain_until) {
+        break;
+      }
+    }
+    if (backlog) {
+      receiver_bell_.Wait(room_token, base::Milliseconds(1));
+    } else if (!stopping) {
+      waitset.Wait(std::chrono::milliseconds(50));
+    }
     const base::MonoTime now = base::MonotonicNow();
     bool handed = false;
+    got = 0;
     // What the other servers run, first: a spawn below is checked against it.
     diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
       if (d.server_id() == me) return;
@@ -479,6 +614,14 @@ void ServerNode::ReceiverLoop() {
                         "out of range: " + why, now);
         return;
       }
+      const std::uint32_t unknown_bits = in.buttons() & ~known_buttons;
+      if (unknown_bits != 0) {
+        // Taken without them: a newer client's buttons mean nothing here, and are named.
+        char detail[160];
+        std::snprintf(detail, sizeof detail, "'%s' on vehicle %u set 0x%x",
+                      base::Quote(in.source_id(), 64).c_str(), in.vehicle_id(), unknown_bits);
+        drops_.Count(drop_unknown_buttons_, detail);
+      }
       auto known = strengths.find(info.publication_handle);
       if (known == strengths.end()) {
         known = strengths.emplace(info.publication_handle,
@@ -492,36 +635,43 @@ void ServerNode::ReceiverLoop() {
         return;
       }
       *slot = in;
+      slot->set_buttons(in.buttons() & known_buttons);
       inputs_.Commit();
       handed = true;
     });
-    control_reader_.Take(
-        [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
-          if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
-          if (info.key != r.vehicle_id()) {
-            Refuse(r, "the envelope key " + std::to_string(info.key) +
-                          " does not match vehicle_id " + std::to_string(r.vehicle_id()));
-            return;
-          }
-          if (r.has_spawn()) {
-            const auto other = others_.find(r.vehicle_id());
-            if (other != others_.end() && now - other->second.seen < base::Seconds(3)) {
-              Refuse(r, "vehicle " + std::to_string(r.vehicle_id()) + " is run by server '" +
-                            other->second.server_id + "' on this domain");
+    // As many requests as the request thread has room for: the rest wait in the reader.
+    if (const auto room = static_cast<int>(incoming_.capacity() - incoming_.size()); room > 0) {
+      control_reader_.Take(
+          [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
+            if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
+            requests_received_.fetch_add(1, std::memory_order_relaxed);
+            last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
+            ++got;
+            if (stopping) {
+              Refuse(r, "the server is stopping: the request was not applied");
               return;
             }
-          }
-          control_writers[info.publication_handle] = 0;
-          Request req{std::make_unique<pb::ControlRequest>(r), info.publication_handle};
-          if (!requests_.TryPush(std::move(req))) {
-            drops_.Count(drop_requests_full_);
-            Refuse(r, "the server is busy: too many requests waiting; try again");
-            return;
-          }
-          handed = true;
-        },
-        64);
-    while (spent_requests_.TryPop(spent)) spent.reset();
+            if (info.key != r.vehicle_id()) {
+              Refuse(r, "the envelope key " + std::to_string(info.key) +
+                            " does not match vehicle_id " + std::to_string(r.vehicle_id()));
+              return;
+            }
+            if (r.has_spawn()) {
+              const auto other = others_.find(r.vehicle_id());
+              if (other != others_.end() && now - other->second.seen < base::Seconds(3)) {
+                Refuse(r, "vehicle " + std::to_string(r.vehicle_id()) + " is run by server '" +
+                              other->second.server_id + "' on this domain");
+                return;
+              }
+            }
+            control_writers[info.publication_handle] = 0;
+            Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
+            if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
+          },
+          room);
+      request_bell_.Ring();
+    }
+    backlog = incoming_.size() == incoming_.capacity();
     if (handed) loop_bell_.Ring();
 
     if (now >= next_housekeeping) {
@@ -535,8 +685,7 @@ void ServerNode::ReceiverLoop() {
           const bool present = std::find(live.begin(), live.end(), it->first) != live.end();
           it->second = present ? 0 : it->second + 1;
           if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
-            spdlog::info("server '{}': a control client is gone; its pending steps are dropped",
-                         me);
+            // The loop cancels the steps it still owed that client; the publisher says so.
             it = control_writers.erase(it);
             handed = true;
           } else {
@@ -562,16 +711,25 @@ void ServerNode::ReceiverLoop() {
   control_reader_.on_refused = nullptr;
 }
 
+ServerClaim ServerNode::Claim(bool running) const {
+  return {options_.session.server_id, options_.vehicle_ids, running};
+}
+
 std::string ServerNode::FindClash() {
-  // Listen for what other servers publish about themselves: their worlds (transient-local, at
-  // once), diagnostics (once a second) and states. With nobody else on the domain the wait ends
-  // after discovery (300 ms); once another server is seen, for up to discovery_s.
+  // Listen for other servers: their claims (their participants' USER_DATA, seen at discovery,
+  // before they publish anything: claim.h), worlds (transient-local, at once), diagnostics (once a
+  // second) and states. With nobody else on the domain the wait ends after discovery (300 ms);
+  // once another server is seen, for up to discovery_s.
   const std::string& me = options_.session.server_id;
+  const std::string domain = std::to_string(options_.domain_id);
+  const ServerClaim mine = Claim(false);
+  const transport::Guid own_guid = participant_.guid();
   transport::DropCounters drops;
+  transport::ParticipantReader peers(participant_);
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops);
   transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops);
   transport::Reader<pb::VehicleState> states(participant_, TopicId::kState, &drops);
-  transport::Waitset waitset(participant_);
+  transport::Waitset waitset(participant_, &drops_);
   waitset.Attach(worlds);
   waitset.Attach(diagnostics);
   waitset.Attach(states);
@@ -598,11 +756,68 @@ std::string ServerNode::FindClash() {
     }
     return false;
   };
+  // Other servers' claims that clash with ours, by participant; the ones this server wins against
+  // are named once in the log.
+  std::map<transport::Guid, ServerClaim> claims;
+  std::set<transport::Guid> told;
+  std::vector<transport::ParticipantReader::Peer> changes;
+  std::string lost;  // why this server gives way to a claim, when it does
+  auto first_common = [&](const ServerClaim& c) -> std::string {
+    for (std::uint32_t v : mine.vehicle_ids) {
+      if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
+        return std::to_string(v);
+      }
+    }
+    return {};
+  };
   while (true) {
+    changes.clear();
+    if (!peers.Take(changes))
+      drops_.Count("DDS error on the domain's participants", peers.last_error());
+    for (const auto& peer : changes) {
+      if (peer.guid == own_guid) continue;
+      const std::optional<ServerClaim> c = ServerClaim::Decode(peer.user_data);
+      if (peer.alive && c && mine.Clashes(*c)) {
+        claims[peer.guid] = *c;
+      } else {
+        claims.erase(peer.guid);
+      }
+    }
+    for (const auto& [guid, c] : claims) {
+      const std::string vehicle = first_common(c);
+      if (c.running) {
+        lost = c.server_id == me
+                   ? "another server with the id '" + me + "' runs on domain " + domain +
+                         ": give this one another --server-id, or another --domain"
+                   : "vehicle " + vehicle + " is already run by server '" + c.server_id +
+                         "' on domain " + domain +
+                         ": choose other --vehicle-ids, or another --domain";
+      } else if (guid < own_guid) {
+        lost = c.server_id == me
+                   ? "another server with the id '" + me +
+                         "' started at the same moment on "
+                         "domain " +
+                         domain +
+                         " and keeps the id (a tie goes to the lower "
+                         "participant GUID): give this one another --server-id, or another --domain"
+                   : "vehicle " + vehicle + " is claimed by server '" + c.server_id +
+                         "', started at the same moment on domain " + domain +
+                         "; that server keeps it (a tie goes to the lower participant GUID): "
+                         "choose other --vehicle-ids, or another --domain";
+      } else if (told.insert(guid).second) {
+        spdlog::info(
+            "server '{}': server '{}' started at the same moment and claims {}; this "
+            "server keeps {} (a tie goes to the lower participant GUID)",
+            me, c.server_id, c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
+            c.server_id == me ? "it" : "the vehicle");
+      }
+      if (!lost.empty()) return lost;
+    }
     const base::MonoTime now = base::MonotonicNow();
-    const bool others = foreign(worlds) || foreign(diagnostics) || foreign(states);
+    const bool others =
+        !claims.empty() || foreign(worlds) || foreign(diagnostics) || foreign(states);
     if (now >= end || (!others && now >= quiet_end)) break;
-    waitset.Wait(std::chrono::milliseconds(20));
+    waitset.Wait(std::chrono::milliseconds(20));  // an error is counted in drops_
     worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
       for (const auto& v : w.vehicles()) note(w.server_id(), v.vehicle_id());
       if (w.server_id() == me) same_id = true;
@@ -620,7 +835,6 @@ std::string ServerNode::FindClash() {
     if (clash) break;
   }
   for (const auto& [vehicle, server] : taken) others_[vehicle] = {server, base::MonotonicNow()};
-  const std::string domain = std::to_string(options_.domain_id);
   if (same_id) {
     return "another server with the id '" + me + "' runs on domain " + domain +
            ": give this one another --server-id, or another --domain";
@@ -632,6 +846,92 @@ std::string ServerNode::FindClash() {
     }
   }
   return {};
+}
+
+// --- request thread ------------------------------------------------------------------------------
+
+bool ServerNode::ForThisServer(const pb::ControlRequest& r) const {
+  // The receiver passes requests for this server by name, and those for whichever server owns
+  // the vehicle: a vehicle command of that kind is for another server unless this one has it.
+  if (!r.server_id().empty()) return true;
+  const bool server_wide = r.has_pause() || r.has_resume() || r.has_step() || r.has_spawn();
+  return server_wide || planner_->Knows(r.vehicle_id());
+}
+
+void ServerNode::AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, std::string why) {
+  RequestOutcome o;
+  o.request = r;
+  o.why = RequestOutcome::Why::kText;
+  o.text = std::move(why);
+  o.sim_time_ns = sim_time_ns_.load(std::memory_order_relaxed);
+  if (!answers_.TryPush(std::move(o))) NoRoomToAnswer();  // room checked before
+}
+
+void ServerNode::RequestLoop() {
+  const bool lockstep = options_.mode == ServerOptions::Mode::kLockstep;
+  const std::string stopping_why = "the server is stopping: the request was not applied";
+  std::unique_ptr<PreparedRequest> spent;
+  Incoming in;
+  base::MonoTime give_up{0};  // once stopping: the shutdown deadline
+  while (true) {
+    const std::uint32_t token = request_bell_.Token();
+    bool did = false;
+    while (spent_.TryPop(spent)) {
+      planner_->Settle(std::move(spent));
+      did = true;
+    }
+    const bool stopping = requests_stop_.load();
+    if (stopping && give_up.ns == 0) {
+      give_up = base::MonotonicNow() +
+                base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+    }
+    if (stopping && base::MonotonicNow() >= give_up) {
+      // The publisher took no answer for the whole deadline: what is left is counted.
+      while (incoming_.TryPop(in)) {
+        requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+        drops_.Count(drop_unanswered_stopped_);
+      }
+      break;
+    }
+    // A request is taken only when both its ways on have room; none while a restore has not
+    // come back from the loop (its outcome decides what the vehicle is).
+    while ((stopping || !planner_->waiting()) && answers_.size() < answers_.capacity() &&
+           prepared_.size() < prepared_.capacity() && incoming_.TryPop(in)) {
+      did = true;
+      const std::shared_ptr<const pb::ControlRequest> request = std::move(in.request);
+      if (!in.refusal.empty()) {
+        AnswerHere(request, std::move(in.refusal));
+        continue;
+      }
+      if (!ForThisServer(*request)) {
+        requests_for_others_.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      if (stopping) {
+        AnswerHere(request, stopping_why);
+        continue;
+      }
+      if (lockstep && request->has_resume()) {
+        AnswerHere(request, "lockstep mode advances only on step requests");
+        continue;
+      }
+      RequestPlanner::Plan plan = planner_->Prepare(request);
+      if (!plan.bad_step_input.empty()) drops_.Count(drop_step_input_, plan.bad_step_input);
+      if (!plan.prepared) {
+        AnswerHere(request, std::move(plan.refusal));
+        continue;
+      }
+      plan.prepared->client = in.writer;
+      if (!prepared_.TryPush(std::move(plan.prepared))) NoRoomToAnswer();  // room checked before
+      loop_bell_.Ring();
+    }
+    if (did) {
+      receiver_bell_.Ring();
+      publisher_bell_.Ring();
+    }
+    if (stopping && incoming_.empty()) break;
+    if (!did) request_bell_.Wait(token, base::Milliseconds(50));
+  }
 }
 
 // --- publisher thread ----------------------------------------------------------------------------
@@ -706,6 +1006,10 @@ void ServerNode::PublishReport(WindowReport& r) {
     }
   }
   d.set_scheduling(scheduling_);
+  d.set_requests_received(requests_received_.load(std::memory_order_relaxed));
+  d.set_replies_sent(replies_sent_.load(std::memory_order_relaxed));
+  d.set_requests_unanswered(requests_unanswered_.load(std::memory_order_relaxed));
+  d.set_requests_for_other_servers(requests_for_others_.load(std::memory_order_relaxed));
   PublishOne(TopicId::kDiagnostics, transport::ServerKey(server_id), d,
              base::MonotonicNow() + base::Milliseconds(100));
 
@@ -728,42 +1032,75 @@ void ServerNode::PublishReport(WindowReport& r) {
   std::fflush(stderr);
 }
 
+void ServerNode::PublishOutcome(RequestOutcome& o, base::MonoTime now) {
+  const std::string& me = options_.session.server_id;
+  if (o.why == RequestOutcome::Why::kClientGone) {
+    // No reply: its client is gone. Said in the operator's terms.
+    requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+    const std::string client = base::Quote(o.request->client_id(), 64);
+    drops_.Count(drop_unanswered_gone_, "client '" + client + "'");
+    spdlog::warn(
+        "server '{}': client '{}' went away before the {} steps it asked for were done: "
+        "the {} still to run are cancelled, and the simulation stays paused at {:.3f} s",
+        me, client, o.request->step().steps(), o.n1, static_cast<double>(o.sim_time_ns) * 1e-9);
+    o = RequestOutcome{};
+    return;
+  }
+  const pb::ControlReply reply = ToReply(o, me);
+  if (!reply.accepted()) {
+    drops_.Count(drop_rejected_, reply.reason());
+    spdlog::debug("refused request {} of '{}': {}", reply.request_id(),
+                  base::Quote(reply.client_id(), 64), base::Quote(reply.reason(), 200));
+  }
+  if (PublishOne(TopicId::kControlReply, reply.vehicle_id(), reply, now + base::Seconds(1))) {
+    replies_sent_.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+    drops_.Count(drop_unanswered_write_,
+                 writers_[static_cast<int>(TopicId::kControlReply)]->last_error());
+  }
+  o = RequestOutcome{};  // the request is freed here, off the loop
+}
+
 void ServerNode::PublisherLoop() {
   const std::string& server_id = options_.session.server_id;
   const std::uint64_t terrain_hash = TerrainHash(world_->terrain);
   Outgoing out;
-  std::unique_ptr<pb::ControlReply> early;
+  RequestOutcome outcome;
   SessionEventRecord rec;
   auto queues_empty = [&] {
-    return outbox_.empty() && early_replies_.empty() && reports_.empty() && events_.empty();
+    return outbox_.empty() && outcomes_.empty() && answers_.empty() && reports_.empty() &&
+           events_.empty();
   };
   while (true) {
     const std::uint32_t token = publisher_bell_.Token();
     const base::MonoTime now = base::MonotonicNow();
     const std::int64_t deadline = publisher_deadline_ns_.load(std::memory_order_relaxed);
     if (publisher_stop_.load() && (queues_empty() || (deadline != 0 && now.ns >= deadline))) {
-      const std::size_t left = outbox_.size() + events_.size() + early_replies_.size();
+      // Replies not written by the deadline: their requests are unanswered, and counted so.
+      const std::size_t replies = outcomes_.size() + answers_.size();
+      while (outcomes_.TryPop(outcome) || answers_.TryPop(outcome)) {
+        if (outcome.why != RequestOutcome::Why::kClientGone) {
+          requests_unanswered_.fetch_add(1, std::memory_order_relaxed);
+          drops_.Count(drop_unanswered_stopped_);
+        }
+      }
+      const std::size_t left = outbox_.size() + events_.size() + replies;
       if (left > 0) {
-        spdlog::warn("server '{}': {} messages not sent by the shutdown deadline", server_id, left);
+        spdlog::warn(
+            "server '{}': {} messages not sent by the shutdown deadline ({} of them "
+            "replies)",
+            server_id, left, replies);
       }
       break;
     }
     // Replies, parameters and the world first: a slow recorder never delays an answer.
     while (outbox_.TryPop(out)) {
       PublishOne(out.topic, out.key, *out.msg, now + base::Seconds(1));
-      if (out.topic == TopicId::kControlReply) {
-        const auto& reply = static_cast<const pb::ControlReply&>(*out.msg);
-        if (!reply.accepted()) {
-          spdlog::debug("refused request {} of '{}': {}", reply.request_id(),
-                        base::Quote(reply.client_id(), 64), base::Quote(reply.reason(), 200));
-        }
-      }
       out.msg.reset();
     }
-    while (early_replies_.TryPop(early)) {
-      PublishOne(TopicId::kControlReply, early->vehicle_id(), *early, now + base::Seconds(1));
-      early.reset();
-    }
+    while (outcomes_.TryPop(outcome)) PublishOutcome(outcome, now);
+    while (answers_.TryPop(outcome)) PublishOutcome(outcome, now);
     while (WindowReport* r = reports_.Front()) {
       PublishReport(*r);
       reports_.Pop();
@@ -771,8 +1108,8 @@ void ServerNode::PublisherLoop() {
     // Then events, a batch at a time.
     for (int n = 0; n < 64 && events_.TryPop(rec); ++n) {
       const pb::SessionEvent e = ToMessage(rec, server_id, terrain_hash, options_.session.step_ns);
-      rec.message.reset();
       rec.params.reset();
+      rec.request.reset();
       PublishOne(TopicId::kEvents, e.vehicle_id(), e, base::MonotonicNow() + base::Seconds(1));
       const pb::VehicleParams* params = nullptr;
       if (e.has_spawned()) params = &e.spawned().params();

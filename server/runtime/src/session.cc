@@ -7,27 +7,16 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
+#include "vdyn/runtime/request_planner.h"
 
 namespace vdyn {
 namespace {
-
-Pose2 FromProto(const pb::Pose2& p) { return {p.x(), p.y(), p.yaw()}; }
 
 bool SamePhysics(const DriverInput& a, const DriverInput& b) {
   return a.steer == b.steer && a.throttle == b.throttle && a.brake == b.brake &&
          a.cruise_on == b.cruise_on && a.cruise_speed == b.cruise_speed &&
          a.steer_mode == b.steer_mode && a.clutch == b.clutch && a.handbrake == b.handbrake &&
          a.gear == b.gear;
-}
-
-std::string CheckPose(const pb::Pose2& p, double speed) {
-  for (const std::string& why : {limits::Check(limits::kPoseXY, p.x()),
-                                 limits::Check(limits::kPoseXY, p.y()),
-                                 limits::Check(limits::kPoseYaw, p.yaw()),
-                                 limits::Check(limits::kSpawnSpeed, speed)}) {
-    if (!why.empty()) return why;
-  }
-  return {};
 }
 
 }  // namespace
@@ -52,26 +41,122 @@ std::string CheckInputRanges(const pb::DriverInput& in) {
 
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns) {
+  using Kind = SessionEventRecord::Kind;
   pb::SessionEvent e;
-  if (r.kind == SessionEventRecord::Kind::kMessage && r.message) e = *r.message;
   e.set_vehicle_id(r.vehicle_id);
   e.set_server_id(server_id);
   e.set_step(static_cast<std::uint64_t>(r.step));
   e.set_sequence(r.sequence);
-  if (r.kind == SessionEventRecord::Kind::kInputBatch) {
-    auto* batch = e.mutable_input_batch();
-    for (int i = 0; i < r.n_changes; ++i) {
-      ToInputSample(r.changes[i].input, r.changes[i].step, *batch->add_samples());
+  switch (r.kind) {
+    case Kind::kInputBatch: {
+      auto* batch = e.mutable_input_batch();
+      for (int i = 0; i < r.n_changes; ++i) {
+        ToInputSample(r.changes[i].input, r.changes[i].step, *batch->add_samples());
+      }
+      break;
     }
-  } else if (r.kind == SessionEventRecord::Kind::kCheckpoint) {
-    auto* c = e.mutable_checkpoint();
-    *c->mutable_state() = ToExactState(r.state);
-    if (r.params) *c->mutable_params() = *r.params;
-    ToInputSample(r.input, r.step, *c->mutable_input());
-    c->set_terrain_hash(terrain_hash);
-    c->set_step_ns(step_ns);
+    case Kind::kCheckpoint: {
+      auto* c = e.mutable_checkpoint();
+      *c->mutable_state() = ToExactState(r.state);
+      if (r.params) *c->mutable_params() = *r.params;
+      ToInputSample(r.input, r.step, *c->mutable_input());
+      c->set_terrain_hash(terrain_hash);
+      c->set_step_ns(step_ns);
+      break;
+    }
+    case Kind::kSpawned: {
+      auto* s = e.mutable_spawned();
+      if (r.request && r.request->has_restore()) {
+        s->set_branched_from(r.request->restore().branched_from());
+      }
+      *s->mutable_state() = ToExactState(r.state);
+      if (r.params) *s->mutable_params() = *r.params;
+      if (r.world_name != nullptr) s->set_world_name(*r.world_name);
+      s->set_terrain_hash(terrain_hash);
+      s->set_step_ns(step_ns);
+      break;
+    }
+    case Kind::kRemoved:
+      e.mutable_removed();
+      break;
+    case Kind::kParamsChanged:
+      if (r.params) *e.mutable_params_changed()->mutable_params() = *r.params;
+      break;
+    case Kind::kControlApplied:
+      if (r.request) *e.mutable_control_applied()->mutable_request() = *r.request;
+      break;
   }
   return e;
+}
+
+std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id) {
+  using Why = RequestOutcome::Why;
+  const std::string vehicle = "vehicle " + std::to_string(o.request ? o.request->vehicle_id() : 0);
+  switch (o.why) {
+    case Why::kNone:
+      return {};
+    case Why::kText:
+      return o.text;
+    case Why::kExists:
+      return vehicle + " exists already";
+    case Why::kFull:
+      return "this server runs its maximum of " + std::to_string(o.n1) + " vehicles";
+    case Why::kStepBehind:
+      return "restore: " + vehicle + " is at step " + std::to_string(o.n1) +
+             " and a vehicle's steps only go forward; restore step " + std::to_string(o.n2) +
+             " into a fresh server or another vehicle id";
+    case Why::kChanged:
+      return vehicle + " on server '" + server_id +
+             "' changed while this request waited (a request before it came first); send it "
+             "again";
+    case Why::kCancelledByPause:
+      return "cancelled by a pause request before its steps were done";
+    case Why::kCancelledByResume:
+      return "cancelled by a resume request before its steps were done";
+    case Why::kClientGone:
+      return "its client went away before its steps were done";
+    case Why::kStopped:
+      return "the server stopped before its steps were done";
+  }
+  return {};
+}
+
+pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) {
+  pb::ControlReply reply;
+  if (o.request) {
+    reply.set_request_id(o.request->request_id());
+    // An id too long to echo is cut to its limit (such a client cannot match it anyway).
+    reply.set_client_id(o.request->client_id().substr(0, limits::kMaxIdBytes));
+    reply.set_vehicle_id(o.request->vehicle_id());
+  }
+  reply.set_server_id(server_id);
+  reply.set_accepted(o.accepted);
+  if (!o.accepted) reply.set_reason(OutcomeReason(o, server_id).substr(0, limits::kMaxReasonBytes));
+  if (o.applied_step >= 0) reply.set_applied_step(static_cast<std::uint64_t>(o.applied_step));
+  reply.set_sim_time_ns(o.sim_time_ns);
+  return reply;
+}
+
+SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
+                          const SessionConfig& config,
+                          std::shared_ptr<const pb::VehicleParams> params, const ValidParams& valid,
+                          const State* exact, const Pose2& pose, double speed) {
+  SimConfig sc;
+  sc.step_ns = config.step_ns;
+  SessionVehicle v;
+  v.id = id;
+  v.sim = std::make_unique<Simulator>(world, valid, sc, exact != nullptr ? *exact : State{});
+  if (exact == nullptr) v.sim->Spawn(pose, speed);  // throws WorldError when it cannot start
+  v.params = std::move(params);
+  v.spawn_pose = pose;
+  v.spawn_speed = speed;
+  // Grown once here: the stepping thread copies ids into these and fills the state message.
+  v.live_input.mutable_source_id()->reserve(limits::kMaxIdBytes);
+  v.applied_msg.mutable_source_id()->reserve(limits::kMaxIdBytes);
+  FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg, true,
+                   0.0, v.state_msg);
+  v.state_msg.mutable_input()->mutable_source_id()->reserve(limits::kMaxIdBytes);
+  return v;
 }
 
 Session::Session(std::shared_ptr<const World> world, SessionConfig config, EventSink on_event)
@@ -87,18 +172,25 @@ Session::Session(std::shared_ptr<const World> world, SessionConfig config, Event
                                           SessionEventRecord::kMaxBatchSamples);
 }
 
-void Session::EmitMessage(std::uint32_t vehicle_id, std::int64_t step,
-                          std::unique_ptr<pb::SessionEvent> e) {
+SessionEventRecord& Session::Begin(SessionEventRecord::Kind kind, std::uint32_t vehicle_id,
+                                   std::int64_t step) {
   // Input changes gathered so far come first: the events of one vehicle stay in step order.
   if (const auto it = vehicles_.find(vehicle_id); it != vehicles_.end()) FlushInputs(it->second);
   SessionEventRecord& r = scratch_;
-  r.kind = SessionEventRecord::Kind::kMessage;
+  r.kind = kind;
   r.vehicle_id = vehicle_id;
   r.step = step;
   r.sequence = event_sequence_++;
-  r.message = std::move(e);
-  if (on_event_) on_event_(std::move(r));
-  r.message.reset();
+  r.params.reset();
+  r.request.reset();
+  r.world_name = nullptr;
+  return r;
+}
+
+void Session::Emit() {
+  if (on_event_) on_event_(std::move(scratch_));
+  scratch_.params.reset();
+  scratch_.request.reset();
 }
 
 void Session::FlushInputs(Vehicle& v) {
@@ -124,16 +216,13 @@ void Session::FlushEvents() {
   for (auto& [id, v] : vehicles_) FlushInputs(v);
 }
 
-void Session::EmitSpawned(Vehicle& v, const std::string& branched_from) {
-  auto e = std::make_unique<pb::SessionEvent>();
-  auto* s = e->mutable_spawned();
-  s->set_branched_from(branched_from);
-  *s->mutable_state() = ToExactState(v.sim->state());
-  *s->mutable_params() = *v.params;
-  s->set_world_name(world_->name);
-  s->set_terrain_hash(terrain_hash_);
-  s->set_step_ns(config_.step_ns);
-  EmitMessage(v.id, v.sim->state().step, std::move(e));
+void Session::EmitSpawned(Vehicle& v, std::shared_ptr<const pb::ControlRequest> from) {
+  SessionEventRecord& r = Begin(SessionEventRecord::Kind::kSpawned, v.id, v.sim->state().step);
+  r.state = v.sim->state();
+  r.params = v.params;
+  r.world_name = &world_->name;
+  r.request = std::move(from);
+  Emit();
   v.applied_valid = false;  // the next latched input is announced again
 }
 
@@ -142,19 +231,16 @@ void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
   if (vehicles_.count(vehicle_id) != 0) {
     throw std::invalid_argument("vehicle " + std::to_string(vehicle_id) + " exists already");
   }
-  const pb::VehicleParams params = MergeVehicleParams(config_.default_params, params_update);
-  const auto issues = ValidateVehicleParams(params);
+  auto params = std::make_shared<const pb::VehicleParams>(
+      MergeVehicleParams(config_.default_params, params_update));
+  const auto issues = ValidateVehicleParams(*params);
   if (!issues.empty()) throw std::invalid_argument(FormatIssues(issues));
   if (vehicles_.size() >= config_.max_vehicles) {
     throw std::invalid_argument("this server runs its maximum of " +
                                 std::to_string(config_.max_vehicles) + " vehicles");
   }
-  SimConfig sc;
-  sc.step_ns = config_.step_ns;
-  Vehicle v;
-  v.id = vehicle_id;
-  v.sim = std::make_unique<Simulator>(world_, ParamsFromProto(params), sc, State{});
-  v.sim->Spawn(pose, speed);  // throws WorldError when no terrain is below
+  Vehicle v = NewVehicle(vehicle_id, world_, config_, params, ParamsFromProto(*params), nullptr,
+                         pose, speed);
   // A vehicle id used before in this session goes on counting where its last life ended, so
   // (vehicle, step) names one moment of the session.
   if (const auto r = retired_steps_.find(vehicle_id); r != retired_steps_.end()) {
@@ -162,201 +248,169 @@ void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
     s.step = r->second;
     v.sim->SetState(s);
   }
-  v.params = std::make_shared<const pb::VehicleParams>(params);
-  v.spawn_pose = pose;
-  v.spawn_speed = speed;
   auto [it, inserted] = vehicles_.emplace(vehicle_id, std::move(v));
   EmitSpawned(it->second);
 }
 
-pb::ControlReply Session::Reply(const pb::ControlRequest& r, bool accepted,
-                                const std::string& reason) {
-  pb::ControlReply reply;
-  reply.set_request_id(r.request_id());
-  reply.set_client_id(r.client_id());
-  reply.set_vehicle_id(r.vehicle_id());
-  reply.set_server_id(config_.server_id);
-  reply.set_accepted(accepted);
-  reply.set_reason(reason);
-  const auto it = vehicles_.find(r.vehicle_id());
-  if (it != vehicles_.end()) {
-    reply.set_applied_step(static_cast<std::uint64_t>(it->second.sim->state().step));
+RequestOutcome Session::Accept(const std::shared_ptr<const pb::ControlRequest>& r) {
+  RequestOutcome o;
+  o.request = r;
+  o.accepted = true;
+  o.sim_time_ns = steps_ * config_.step_ns;
+  if (const auto it = vehicles_.find(r->vehicle_id()); it != vehicles_.end()) {
+    o.applied_step = it->second.sim->state().step;
+    SessionEventRecord& e =
+        Begin(SessionEventRecord::Kind::kControlApplied, r->vehicle_id(), o.applied_step);
+    e.request = r;
+    Emit();
   }
-  reply.set_sim_time_ns(steps_ * config_.step_ns);
-  if (accepted && it != vehicles_.end()) {
-    auto e = std::make_unique<pb::SessionEvent>();
-    *e->mutable_control_applied()->mutable_request() = r;
-    EmitMessage(r.vehicle_id(), it->second.sim->state().step, std::move(e));
-  }
-  return reply;
+  return o;
 }
 
-pb::ControlReply Session::Apply(const pb::ControlRequest& r) {
-  const auto it = vehicles_.find(r.vehicle_id());
-  const bool exists = it != vehicles_.end();
-  const std::string no_vehicle = "no vehicle " + std::to_string(r.vehicle_id()) + " on server '" +
-                                 config_.server_id + "'";
-  switch (r.command_case()) {
-    case pb::ControlRequest::kPause:
-      paused_ = true;
-      pending_steps_ = 0;
-      return Reply(r, true, {});
-    case pb::ControlRequest::kResume:
-      paused_ = false;
-      pending_steps_ = 0;
-      return Reply(r, true, {});
-    case pb::ControlRequest::kStep:
-      if (r.step().steps() == 0) return Reply(r, false, "step needs steps >= 1");
-      if (r.step().steps() > limits::kMaxStepsPerRequest) {
-        return Reply(r, false, "step asks for more than " +
-                                   std::to_string(limits::kMaxStepsPerRequest) +
-                                   " steps; ask in several requests");
-      }
-      paused_ = true;
-      pending_steps_ += r.step().steps();
-      return Reply(r, true, {});
-    case pb::ControlRequest::kReset:
-    case pb::ControlRequest::kTeleport: {
-      if (!exists) return Reply(r, false, no_vehicle);
-      Vehicle& v = it->second;
-      Pose2 pose = v.spawn_pose;
-      double speed = 0.0;
-      if (r.has_teleport()) {
-        const std::string bad = CheckPose(r.teleport().pose(), r.teleport().speed());
-        if (!bad.empty()) return Reply(r, false, bad);
-        pose = FromProto(r.teleport().pose());
-        speed = r.teleport().speed();
-      }
-      try {
-        const std::int64_t step = v.sim->state().step;
-        v.sim->Spawn(pose, speed);
-        State s = v.sim->state();
-        s.step = step;  // the vehicle's step count goes on
-        v.sim->SetState(s);
-      } catch (const std::exception& e) {
-        return Reply(r, false, e.what());
-      }
-      pb::ControlReply reply = Reply(r, true, {});
-      EmitSpawned(v);
-      return reply;
-    }
-    case pb::ControlRequest::kSpawn: {
-      if (exists) {
-        return Reply(r, false, "vehicle " + std::to_string(r.vehicle_id()) + " exists already");
-      }
-      if (r.server_id().empty()) {
-        // Every server in the domain would take it and two vehicles would share one key.
-        return Reply(r, false, "spawn needs server_id: several servers may share the domain");
-      }
-      const std::string bad = CheckPose(r.spawn().pose(), r.spawn().speed());
-      if (!bad.empty()) return Reply(r, false, bad);
-      try {
-        Spawn(r.vehicle_id(), FromProto(r.spawn().pose()), r.spawn().speed(), r.spawn().params());
-      } catch (const std::exception& e) {
-        return Reply(r, false, e.what());
-      }
-      return Reply(r, true, {});
-    }
-    case pb::ControlRequest::kRemove: {
-      if (!exists) return Reply(r, false, no_vehicle);
-      pb::ControlReply reply = Reply(r, true, {});
-      auto e = std::make_unique<pb::SessionEvent>();
-      e->mutable_removed();
-      EmitMessage(r.vehicle_id(), it->second.sim->state().step, std::move(e));
-      retired_steps_[r.vehicle_id()] = it->second.sim->state().step;
-      vehicles_.erase(it);
-      return reply;
-    }
-    case pb::ControlRequest::kSetParams: {
-      if (!exists) return Reply(r, false, no_vehicle);
-      Vehicle& v = it->second;
-      const pb::VehicleParams merged = MergeVehicleParams(*v.params, r.set_params().params());
-      const auto issues = ValidateVehicleParams(merged);
-      if (!issues.empty()) return Reply(r, false, FormatIssues(issues));
-      const ValidParams valid = ParamsFromProto(merged);
-      if (const std::string why = CheckStep(valid, v.sim->h()); !why.empty()) {
-        return Reply(r, false, why);
-      }
-      v.params = std::make_shared<const pb::VehicleParams>(merged);
-      v.sim->SetParams(valid);
-      pb::ControlReply reply = Reply(r, true, {});
-      auto e = std::make_unique<pb::SessionEvent>();
-      *e->mutable_params_changed()->mutable_params() = merged;
-      EmitMessage(v.id, v.sim->state().step, std::move(e));
-      return reply;
-    }
-    case pb::ControlRequest::kRestore:
-      return Restore(r);
-    case pb::ControlRequest::kPlayback:
-      return Reply(r, false, "playback requests are for a player (vdyn-recorder play), not a server");
-    case pb::ControlRequest::COMMAND_NOT_SET:
-      break;
+RequestOutcome Session::Refuse(const std::shared_ptr<const pb::ControlRequest>& r,
+                               RequestOutcome::Why why, std::int64_t n1, std::int64_t n2) {
+  RequestOutcome o;
+  o.request = r;
+  o.why = why;
+  o.n1 = n1;
+  o.n2 = n2;
+  o.sim_time_ns = steps_ * config_.step_ns;
+  if (const auto it = vehicles_.find(r->vehicle_id()); it != vehicles_.end()) {
+    o.applied_step = it->second.sim->state().step;
   }
-  return Reply(r, false, "the request names no command");
+  return o;
 }
 
-pb::ControlReply Session::Restore(const pb::ControlRequest& r) {
-  const pb::ControlRequest::Restore& rs = r.restore();
-  const std::uint32_t id = r.vehicle_id();
+RequestOutcome Session::Commit(PreparedRequest& p) {
+  using Op = PreparedRequest::Op;
+  using Why = RequestOutcome::Why;
+  const std::shared_ptr<const pb::ControlRequest>& r = p.request;
+  const std::uint32_t id = p.vehicle_id;
   const auto it = vehicles_.find(id);
-  State state;
-  try {
-    state = FromExactState(rs.state());
-  } catch (const std::exception& e) {
-    return Reply(r, false, std::string("restore: ") + e.what());
-  }
-  if (state.step < 0) return Reply(r, false, "restore: the state's step is beyond range");
-  // (vehicle, step) names one moment of a session: a vehicle's steps never go back.
-  std::int64_t floor = 0;
-  if (it != vehicles_.end()) floor = it->second.sim->state().step;
-  if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
-    floor = std::max(floor, ret->second);
-  }
-  if (state.step < floor) {
-    return Reply(r, false, "restore: vehicle " + std::to_string(id) + " is at step " +
-                               std::to_string(floor) + " and a vehicle's steps only go forward; " +
-                               "restore step " + std::to_string(state.step) +
-                               " into a fresh server or another vehicle id");
-  }
-  const pb::VehicleParams params = MergeVehicleParams(config_.default_params, rs.params());
-  const auto issues = ValidateVehicleParams(params);
-  if (!issues.empty()) return Reply(r, false, "restore: " + FormatIssues(issues));
-  if (it == vehicles_.end()) {
-    if (r.server_id().empty()) {
-      return Reply(r, false, "restore of a new vehicle needs server_id, as spawn does");
+  const bool exists = it != vehicles_.end();
+  const auto max = static_cast<std::int64_t>(config_.max_vehicles);
+  auto apply = [&]() -> RequestOutcome {
+    // The vehicle is what the plan assumed (else a request planned before this one changed it).
+    const bool about_vehicle =
+        p.op == Op::kMove || p.op == Op::kRemove || p.op == Op::kSetParams || p.op == Op::kRestore;
+    if (about_vehicle &&
+        (exists != (p.expected != nullptr) || (exists && it->second.params != p.expected))) {
+      return Refuse(r, Why::kChanged);
     }
-    if (vehicles_.size() >= config_.max_vehicles) {
-      return Reply(r, false, "this server runs its maximum of " +
-                                 std::to_string(config_.max_vehicles) + " vehicles");
+    switch (p.op) {
+      case Op::kPause:
+        paused_ = true;
+        pending_steps_ = 0;
+        return Accept(r);
+      case Op::kResume:
+        paused_ = false;
+        pending_steps_ = 0;
+        return Accept(r);
+      case Op::kStep:
+        paused_ = true;
+        pending_steps_ += p.steps;
+        return Accept(r);
+      case Op::kMove: {
+        Vehicle& v = it->second;
+        State s = p.state;
+        s.step = v.sim->state().step;  // the vehicle's step count goes on
+        v.sim->SetState(s);
+        RequestOutcome o = Accept(r);
+        EmitSpawned(v);
+        return o;
+      }
+      case Op::kSpawn: {
+        if (exists) return Refuse(r, Why::kExists);
+        if (static_cast<std::int64_t>(vehicles_.size()) >= max) return Refuse(r, Why::kFull, max);
+        // A vehicle id used before in this session goes on counting where its last life ended.
+        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
+          Simulator& sim = *p.vehicle.mapped().sim;
+          State s = sim.state();
+          s.step = ret->second;
+          sim.SetState(s);
+        }
+        const auto ins = vehicles_.insert(std::move(p.vehicle));
+        EmitSpawned(ins.position->second);
+        return Accept(r);
+      }
+      case Op::kRemove: {
+        RequestOutcome o = Accept(r);
+        const std::int64_t step = it->second.sim->state().step;
+        Begin(SessionEventRecord::Kind::kRemoved, id, step);
+        Emit();
+        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
+          ret->second = step;
+        } else {
+          p.retired.key() = id;
+          p.retired.mapped() = step;
+          retired_steps_.insert(std::move(p.retired));
+        }
+        p.vehicle = vehicles_.extract(it);
+        return o;
+      }
+      case Op::kSetParams: {
+        Vehicle& v = it->second;
+        v.sim->SetParams(*p.valid);  // checked against this step when planned
+        std::swap(v.params, p.params);
+        RequestOutcome o = Accept(r);
+        SessionEventRecord& e =
+            Begin(SessionEventRecord::Kind::kParamsChanged, id, v.sim->state().step);
+        e.params = v.params;
+        Emit();
+        return o;
+      }
+      case Op::kRestore: {
+        // (vehicle, step) names one moment of a session: a vehicle's steps never go back.
+        const std::int64_t step = p.vehicle.mapped().sim->state().step;
+        std::int64_t floor = exists ? it->second.sim->state().step : 0;
+        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
+          floor = std::max(floor, ret->second);
+        }
+        if (step < floor) return Refuse(r, Why::kStepBehind, floor, step);
+        if (!exists && static_cast<std::int64_t>(vehicles_.size()) >= max) {
+          return Refuse(r, Why::kFull, max);
+        }
+        SessionVehicles::node_type old;
+        if (exists) {
+          // The old life ends here; the restored one starts at its own step (a re-simulation
+          // starts afresh from the Spawned event).
+          Begin(SessionEventRecord::Kind::kRemoved, id, it->second.sim->state().step);
+          Emit();
+          old = vehicles_.extract(it);
+        }
+        const auto ins = vehicles_.insert(std::move(p.vehicle));
+        p.vehicle = std::move(old);
+        EmitSpawned(ins.position->second, r);
+        return Accept(r);
+      }
     }
+    return Refuse(r, Why::kChanged);
+  };
+  RequestOutcome o = apply();
+  p.applied = o.accepted;
+  return o;
+}
+
+pb::ControlReply Session::Reject(const pb::ControlRequest& request, const std::string& reason) {
+  RequestOutcome o;
+  o.request = std::make_shared<const pb::ControlRequest>(request);
+  o.why = RequestOutcome::Why::kText;
+  o.text = reason;
+  o.sim_time_ns = steps_ * config_.step_ns;
+  if (const auto it = vehicles_.find(request.vehicle_id()); it != vehicles_.end()) {
+    o.applied_step = it->second.sim->state().step;
   }
-  const ValidParams valid = ParamsFromProto(params);
-  if (it != vehicles_.end()) {
-    // The old life ends here; the restored one starts at its own step (a re-simulation starts
-    // afresh from the Spawned event).
-    auto removed = std::make_unique<pb::SessionEvent>();
-    removed->mutable_removed();
-    EmitMessage(id, it->second.sim->state().step, std::move(removed));
-    vehicles_.erase(it);
-  }
-  SimConfig sc;
-  sc.step_ns = config_.step_ns;
-  Vehicle v;
-  v.id = id;
-  v.sim = std::make_unique<Simulator>(world_, valid, sc, state);
-  v.params = std::make_shared<const pb::VehicleParams>(params);
-  const Eigen::Vector3d p = Position(state.x);
-  v.spawn_pose = {p.x(), p.y(), RollPitchYaw(Orientation(state.x)).z()};
-  v.spawn_speed = 0.0;
-  // The restored input drives until a live input arrives; the watchdog counts from here.
-  v.restored_input = FromInputSample(rs.input());
-  v.input_restored = true;
-  v.live_input.set_vehicle_id(id);
-  v.live_input.set_source_id("restore");
-  v.live_input_step = state.step;
-  auto [ins, inserted] = vehicles_.emplace(id, std::move(v));
-  EmitSpawned(ins->second, rs.branched_from());
-  return Reply(r, true, {});
+  return ToReply(o, config_.server_id);
+}
+
+pb::ControlReply Session::Apply(const pb::ControlRequest& request) {
+  RequestPlanner planner(world_, config_);
+  planner.Sync(*this);
+  RequestPlanner::Plan plan = planner.Prepare(std::make_shared<const pb::ControlRequest>(request));
+  if (!plan.prepared) return Reject(request, plan.refusal);
+  const RequestOutcome o = Commit(*plan.prepared);
+  planner.Settle(std::move(plan.prepared));
+  return ToReply(o, config_.server_id);
 }
 
 bool Session::OfferInput(const pb::DriverInput& input, std::string* reason) {

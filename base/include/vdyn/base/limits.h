@@ -66,6 +66,13 @@ inline constexpr std::size_t kMaxWorldBytes = 512ull * 1024 * 1024;
 inline constexpr std::size_t kMaxEventBytes = 1024 * 1024;
 inline constexpr std::size_t kMaxDiagnosticsBytes = 1024 * 1024;
 
+// --- Files -----------------------------------------------------------------------------------
+// A maneuver (CSV, docs/formats.md): a million rows is 1000 s at a row a millisecond (rows are
+// interpolated, so a drive rarely needs more than a row per change). A larger file is refused
+// before it is read; a row beyond the limit where it starts. Rows are 48 bytes in memory.
+inline constexpr std::size_t kMaxManeuverBytes = 64u << 20;
+inline constexpr std::size_t kMaxManeuverRows = 1'000'000;
+
 // --- Vehicle parameters (vdyn.pb.VehicleParams), by field path -------------------------------
 struct ParamLimit {
   std::string_view path;  // "mass", "lf.free_length" (wheel fields are given as "wheel.<name>")

@@ -25,7 +25,7 @@ class SpscQueue {
   SpscQueue& operator=(const SpscQueue&) = delete;
 
   // Producer only. False (and the item untouched) when full.
-  bool TryPush(T&& item) {
+  [[nodiscard]] bool TryPush(T&& item) {
     const std::size_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_cache_ > mask_) {
       tail_cache_ = tail_.load(std::memory_order_acquire);
@@ -36,7 +36,7 @@ class SpscQueue {
     return true;
   }
   // Producer only: a slot to fill in place, or nullptr when full; Commit() publishes it.
-  T* Reserve() {
+  [[nodiscard]] T* Reserve() {
     const std::size_t head = head_.load(std::memory_order_relaxed);
     if (head - tail_cache_ > mask_) {
       tail_cache_ = tail_.load(std::memory_order_acquire);
@@ -47,7 +47,7 @@ class SpscQueue {
   void Commit() { head_.store(head_.load(std::memory_order_relaxed) + 1, std::memory_order_release); }
 
   // Consumer only. False when empty.
-  bool TryPop(T& out) {
+  [[nodiscard]] bool TryPop(T& out) {
     T* front = Front();
     if (front == nullptr) return false;
     out = std::move(*front);
@@ -55,7 +55,7 @@ class SpscQueue {
     return true;
   }
   // Consumer only: the oldest item in place (nullptr when empty); Pop() releases it.
-  T* Front() {
+  [[nodiscard]] T* Front() {
     const std::size_t tail = tail_.load(std::memory_order_relaxed);
     if (tail == head_cache_) {
       head_cache_ = head_.load(std::memory_order_acquire);

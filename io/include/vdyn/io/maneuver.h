@@ -3,6 +3,7 @@
 #pragma once
 
 #include <filesystem>
+#include <iosfwd>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -36,7 +37,8 @@ class Maneuver {
  public:
   // Parses CSV text; `source` names it in errors ("file.csv:7: column 'brake': ...").
   static Maneuver Parse(const std::string& text, const std::string& source);
-  // Reads a file (or says why not: missing, a directory, unreadable), then Parse.
+  // Reads a file line by line (or says why not: missing, a directory, unreadable, larger than
+  // limits::kMaxManeuverBytes); at most limits::kMaxManeuverRows rows.
   static Maneuver Load(const std::filesystem::path& path);
   // "demo" or a file.
   static Maneuver Named(const std::string& name_or_path);
@@ -49,6 +51,9 @@ class Maneuver {
   const std::vector<ManeuverRow>& rows() const { return rows_; }
 
  private:
+  // Parses lines until the end of `in`; a leading byte-order mark is skipped.
+  static Maneuver Read(std::istream& in, const std::string& source);
+
   std::vector<ManeuverRow> rows_;
 };
 

@@ -17,11 +17,11 @@ class ControlClient {
 
   // Sends `request` (its request_id and client_id are set here) and waits up to `timeout` for
   // the reply. Without a reply in time: nullopt and last_error() says so.
-  std::optional<pb::ControlReply> Call(pb::ControlRequest request,
-                                       std::chrono::milliseconds timeout);
+  [[nodiscard]] std::optional<pb::ControlReply> Call(pb::ControlRequest request,
+                                                     std::chrono::milliseconds timeout);
   // Waits until a server's reader has matched this client's writer (a request sent before that
   // could be lost on a volatile topic). False after the timeout.
-  bool WaitForServer(std::chrono::milliseconds timeout);
+  [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout);
   const std::string& last_error() const { return last_error_; }
 
  private:

@@ -4,9 +4,10 @@
 // reason; a failed write, take or wait is reported (last_error(), a drop counter), never ignored.
 #pragma once
 
+#include <algorithm>
+#include <array>
 #include <chrono>
 #include <cstdint>
-#include <algorithm>
 #include <functional>
 #include <limits>
 #include <memory>
@@ -48,16 +49,29 @@ struct Decoded {
 Decoded DecodeEnvelope(TopicId topic, std::string_view type_name,
                        std::span<const std::uint8_t> payload, google::protobuf::Message& into);
 
+// A participant's GUID as DDS gives it: unique on the network, the same seen from everywhere, and
+// ordered (std::array compares bytewise), so every process breaks a tie the same way.
+using Guid = std::array<std::uint8_t, 16>;
+
+struct ParticipantOptions {
+  // The sockets' receive buffer (0: Cyclone DDS's default, 1 MiB; the kernel caps it at
+  // net.core.rmem_max): for a process that takes a burst of traffic it must not lose, such as a
+  // recorder. Set through the domain's configuration, so it applies when this participant
+  // creates the domain in this process (the first on that domain id); CYCLONEDDS_URI still has
+  // the last word.
+  std::size_t receive_buffer_bytes = 0;
+  // Text in the participant's USER_DATA: every other participant on the domain sees it when it
+  // discovers this one, before any topic matches, and nothing records it (a server's claim on its
+  // vehicles; ParticipantReader reads it).
+  std::string user_data;
+};
+
 // A DDS domain participant and the vdyn topics created in it (once each).
 class Participant {
  public:
   explicit Participant(std::uint32_t domain_id);
-  // With the sockets' receive buffer asked to be `receive_buffer_bytes` (the kernel caps it at
-  // net.core.rmem_max; Cyclone DDS asks for 1 MiB by default): a process that takes a burst of
-  // traffic it must not lose, such as a recorder. Set through the domain's configuration, so it
-  // applies when this participant creates the domain in this process (the first on that domain
-  // id); CYCLONEDDS_URI still has the last word.
   Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes);
+  Participant(std::uint32_t domain_id, const ParticipantOptions& options);
   ~Participant();
   Participant(const Participant&) = delete;
   Participant& operator=(const Participant&) = delete;
@@ -65,12 +79,48 @@ class Participant {
   dds_entity_t handle() const { return participant_; }
   dds_entity_t Topic(TopicId id);
   std::uint32_t domain_id() const { return domain_id_; }
+  Guid guid() const { return guid_; }
+  // Replaces the USER_DATA text; discovery announces the change to every participant. False on
+  // error (last_error() says).
+  [[nodiscard]] bool SetUserData(std::string_view text);
+  const std::string& last_error() const { return last_error_; }
 
  private:
   dds_entity_t domain_ = 0;  // when this participant created the domain itself
   dds_entity_t participant_ = 0;
   std::uint32_t domain_id_ = 0;
+  Guid guid_{};
   dds_entity_t topics_[8] = {};
+  std::string last_error_;
+};
+
+// The participants on the domain as discovery sees them (DDS's built-in DCPSParticipant topic),
+// this process's own included, with their USER_DATA text.
+class ParticipantReader {
+ public:
+  explicit ParticipantReader(Participant& participant);
+  ~ParticipantReader();
+  ParticipantReader(const ParticipantReader&) = delete;
+  ParticipantReader& operator=(const ParticipantReader&) = delete;
+
+  struct Peer {
+    Guid guid{};
+    std::string user_data;
+    bool alive = true;  // false: it has gone (deleted, or its lease ran out)
+  };
+  // Appends every change since the last call to `out`, oldest first. False on a DDS error
+  // (last_error() says; what was taken before it is in `out`).
+  [[nodiscard]] bool Take(std::vector<Peer>& out);
+  // Blocks until a change is available or the timeout passes; true when one is. A DDS error is
+  // false, with last_error() set.
+  bool Wait(std::chrono::nanoseconds timeout);
+  const std::string& last_error() const { return last_error_; }
+
+ private:
+  dds_entity_t reader_ = 0;
+  dds_entity_t waitset_ = 0;
+  dds_entity_t condition_ = 0;
+  std::string last_error_;
 };
 
 // How a writer's samples go out. kEach: every write is its own datagram, sent before Write()
@@ -93,9 +143,9 @@ class RawWriter {
 
   // False when the message is not the topic's payload, cannot be serialised, is larger than the
   // topic allows, or DDS refused it (see last_error()).
-  bool Write(std::uint32_t key, const google::protobuf::Message& msg);
+  [[nodiscard]] bool Write(std::uint32_t key, const google::protobuf::Message& msg);
   // Writes an already serialised payload of the topic's type as it is (a recording played back).
-  bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
   // Sends what a kBatched writer has gathered (nothing to do for kEach).
   void Flush();
   // Number of readers matched right now (0 when the status cannot be read; last_error() says).
@@ -147,7 +197,7 @@ class RawReader {
   std::uint32_t MatchedWriters();
   // The instance handles of the writers matched right now into `out`; false on error (then
   // last_error() says, and `out` is empty: not "no writers").
-  bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
+  [[nodiscard]] bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
   // The ownership strength a matched writer declared in its QoS (0 when it declared none or is
   // not matched).
   std::int32_t WriterStrength(std::uint64_t publication_handle);
@@ -203,18 +253,24 @@ class RawReader {
 // Waits on several readers at once (one thread serving several topics).
 class Waitset {
  public:
-  explicit Waitset(Participant& participant);
+  // A failed wait is counted in `drops` ("DDS error in a waitset"), when given.
+  explicit Waitset(Participant& participant, DropCounters* drops = nullptr);
   ~Waitset();
   Waitset(const Waitset&) = delete;
   Waitset& operator=(const Waitset&) = delete;
   void Attach(RawReader& reader);
-  // Blocks until one of the readers has data or the timeout passes; true when one has.
+  // Blocks until one of the readers has data or the timeout passes; true when one has. An error
+  // is false, with last_error() set and counted.
   bool Wait(std::chrono::nanoseconds timeout);
   const std::string& last_error() const { return last_error_; }
+  std::uint64_t errors() const { return errors_; }
 
  private:
   dds_entity_t waitset_ = 0;
   std::vector<dds_entity_t> conditions_;
+  DropCounters* drops_ = nullptr;
+  int drop_error_ = -1;
+  std::uint64_t errors_ = 0;
   std::string last_error_;
 };
 
@@ -222,7 +278,7 @@ template <class M>
 class Writer : public RawWriter {
  public:
   using RawWriter::RawWriter;
-  bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
+  [[nodiscard]] bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
 };
 
 template <class M>

@@ -10,6 +10,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <string>
 
 #include "vdyn/physics/controls.h"
 #include "vdyn/physics/full_model.h"
@@ -67,7 +68,7 @@ class Simulator {
 
   // Advances by h. A step whose result is not finite is contained: the state stays at x_n, the
   // count is raised and kNonFinite is returned.
-  StepStatus Step();
+  [[nodiscard]] StepStatus Step();
 
   // Derived quantities (and the controls) at the current state with the current input; nothing
   // advances.
@@ -111,6 +112,25 @@ class Simulator {
   std::uint64_t wall_traced_steps_ = 0;
   std::uint64_t edge_traced_steps_ = 0;
 };
+
+// Invariants of a step the model guarantees by construction, checked after every step in debug and
+// sanitizer builds (VDYN_CHECK_INVARIANTS; compiled out elsewhere): the state it starts from and
+// the one it ends at have a unit quaternion (the step normalises it), every derived quantity
+// reported is a finite number (a non-finite result is contained before: the step is discarded),
+// and every spring force is >= 0 (a spring pushes, it never pulls). Empty when they hold, else
+// which one failed and with what value.
+std::string CheckStepInvariants(const StepRecord& r, const State& after);
+// Called with the failure when an invariant check fails. The physics cannot log: the default
+// handler is the C library's assertion failure (message on stderr, abort); tests install their own.
+using InvariantHandler = void (*)(const std::string& what);
+void SetInvariantHandler(InvariantHandler handler);
+// Whether this build checks invariants after every step.
+constexpr bool kCheckInvariants =
+#ifdef VDYN_CHECK_INVARIANTS
+    true;
+#else
+    false;
+#endif
 
 // Static equilibrium at (x, y, yaw) on the terrain: level in yaw, height, pitch and roll fitted so
 // that each spring carries its static share of the weight. Throws WorldError without terrain.

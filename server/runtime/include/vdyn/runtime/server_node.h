@@ -1,17 +1,21 @@
 // The networked server: a Session driven over DDS in real time or in lockstep.
 //
 //  receiver   takes driver inputs and control requests from DDS, decodes and checks them (sizes,
-//             finite numbers, ranges), answers what it must refuse, and hands the rest over
-//  loop       (SCHED_FIFO where permitted) at each step boundary: the inputs, at most 16 requests,
-//             then Session::Step and each state serialised into the state outbox; no lock, no
-//             allocation while stepping, nothing logged
+//             finite numbers, ranges, keys); every request goes on to the request thread
+//  requests   makes each request ready (RequestPlanner: parameters validated and converted, a new
+//             vehicle built at rest, a teleport's state found), or refuses it with the reason
+//  loop       (SCHED_FIFO where permitted) at each step boundary: the inputs, at most 16 ready
+//             requests (Session::Commit: a swap each), then Session::Step and each state
+//             serialised into the state outbox; no lock, no allocation, nothing logged
 //  states     the state outbox's writer: vdyn/state, best effort (state_outbox.h)
 //  publisher  replies, parameters, world, events, diagnostics and the status line: every reliable
 //             write, and every log line
 //
 // The threads hand work to each other through bounded lock-free queues (vdyn/base/spsc_queue.h)
-// and ring doorbells; a full queue drops and counts, it never blocks the loop. Shutdown drains
-// what is queued for at most a deadline, whatever a reader does.
+// and ring doorbells. On the request path each stage takes only what the next has room for, so
+// a burst waits (in the control reader's history) and every request is answered once, or counted
+// as unanswered with the reason; elsewhere a full queue drops and counts, it never blocks the
+// loop. Shutdown drains what is queued for at most a deadline, whatever a reader does.
 #pragma once
 
 #include <atomic>
@@ -28,8 +32,10 @@
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/diagnostics.pb.h"
+#include "vdyn/runtime/claim.h"
 #include "vdyn/runtime/input_arbiter.h"
 #include "vdyn/runtime/pacing.h"
+#include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/runtime/state_outbox.h"
 #include "vdyn/transport/dds.h"
@@ -98,41 +104,54 @@ class ServerNode {
     std::uint32_t key = 0;
     std::unique_ptr<google::protobuf::Message> msg;
   };
-  struct Request {
-    std::unique_ptr<pb::ControlRequest> msg;
+  // A request taken from DDS, for the request thread: refused already (why), or to plan.
+  struct Incoming {
+    std::shared_ptr<const pb::ControlRequest> request;
     std::uint64_t writer = 0;  // the DDS writer it came from (its client)
+    std::string refusal;
   };
   // A step request waits for its steps: `remaining` counts down as they run, in order.
   struct DeferredReply {
-    std::uint32_t remaining;
-    std::uint64_t writer;
-    pb::ControlReply reply;
+    std::uint32_t remaining = 0;
+    std::uint64_t writer = 0;
+    RequestOutcome outcome;
   };
 
   // Loop thread.
   void Send(transport::TopicId topic, std::uint32_t key,
             std::unique_ptr<google::protobuf::Message> msg);
   void OnEvent(SessionEventRecord&& r);
-  bool Boundary();  // true when a control request arrived
-  void HandleRequest(const pb::ControlRequest& r, std::uint64_t writer);
+  bool Boundary();                  // true when a control request was applied
+  void Answer(RequestOutcome&& o);  // room checked before
+  void NoRoomToAnswer();            // counts a request that could not be handed on
+  std::size_t OutcomeRoom() const { return outcomes_.capacity() - outcomes_.size(); }
   void StepOnce();
   void SendDueStepReplies();
-  void CancelStepReplies(const std::string& why);
+  void CancelStepReplies(RequestOutcome::Why why);
   void ClientGone(std::uint64_t writer);
+  // After the loop: what is still waiting is answered (the server stops).
+  void AnswerWhatIsLeft();
   void PushReport(base::MonoTime now);
   int RunRealtime(const std::atomic<bool>& stop);
   int RunLockstep(const std::atomic<bool>& stop);
   void WriteStats(base::MonoTime start, base::MonoTime end, base::Nanos start_cpu) const;
 
-  // Start: another server on the domain that runs one of our vehicles, or has our id.
+  // Start: another server on the domain that runs one of our vehicles, or has our id, or claims
+  // them at the same moment and wins the tie (claim.h). Empty when this server may run.
   std::string FindClash();
+  ServerClaim Claim(bool running) const;
   // Receiver thread.
   void ReceiverLoop();
   void Refuse(const pb::ControlRequest& r, const std::string& why);
+  // Request thread.
+  void RequestLoop();
+  bool ForThisServer(const pb::ControlRequest& r) const;
+  void AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, std::string why);
   // Publisher thread.
   void PublisherLoop();
   bool PublishOne(transport::TopicId topic, std::uint32_t key, const google::protobuf::Message& m,
                   base::MonoTime give_up);
+  void PublishOutcome(RequestOutcome& o, base::MonoTime now);
   void PublishReport(WindowReport& r);
 
   std::shared_ptr<const World> world_;
@@ -149,26 +168,45 @@ class ServerNode {
   std::unique_ptr<Session> session_;
   Session::StateSink state_sink_;
 
-  // Receiver -> loop.
+  // The request path (every request gets one reply, or is counted unanswered with the reason):
+  //   receiver -> incoming_ -> request thread (RequestPlanner) -> prepared_ -> loop (Commit)
+  //   loop -> outcomes_ -> publisher (the reply);  loop -> spent_ -> request thread (freed)
+  //   request thread -> answers_ -> publisher (refusals decided before the loop)
+  // Each stage takes only what the next has room for: a burst waits in the control reader's
+  // history, nothing is dropped.
   base::SpscQueue<pb::DriverInput> inputs_{1024};
-  base::SpscQueue<Request> requests_{256};
+  base::SpscQueue<Incoming> incoming_{256};
+  base::SpscQueue<std::unique_ptr<PreparedRequest>> prepared_{256};
+  base::SpscQueue<std::unique_ptr<PreparedRequest>> spent_{512};
+  base::SpscQueue<RequestOutcome> outcomes_{1024};
+  base::SpscQueue<RequestOutcome> answers_{1024};
   // Receiver -> loop: clients (control writers) that have gone away.
   base::SpscQueue<std::uint64_t> gone_clients_{64};
-  // Loop -> receiver: requests done with, freed off the loop thread.
-  base::SpscQueue<std::unique_ptr<pb::ControlRequest>> spent_requests_{256};
   // Loop -> publisher.
   base::SpscQueue<Outgoing> outbox_{1024};
   base::SpscQueue<SessionEventRecord> events_{4096};
   base::SpscQueue<WindowReport> reports_{8};
-  // Receiver -> publisher: requests refused before they reached the loop.
-  base::SpscQueue<std::unique_ptr<pb::ControlReply>> early_replies_{256};
   base::Doorbell publisher_bell_;
   base::Doorbell loop_bell_;
+  base::Doorbell request_bell_;   // rung for the request thread (work, or room)
+  base::Doorbell receiver_bell_;  // rung for the receiver (room in incoming_)
   std::atomic<bool> receiver_stop_{false};
+  std::atomic<bool> requests_stop_{false};
   std::atomic<bool> publisher_stop_{false};
   std::atomic<std::int64_t> publisher_deadline_ns_{0};
+  std::atomic<std::int64_t> sim_time_ns_{0};      // the loop's, for answers given elsewhere
+  std::atomic<std::int64_t> last_request_ns_{0};  // when the receiver last took a request
   std::thread receiver_;
+  std::thread requests_;
   std::thread publisher_;
+  std::unique_ptr<RequestPlanner> planner_;  // the request thread's
+
+  // Request accounting, for the diagnostics: taken from DDS for this server, answered (a reply
+  // written), unanswered (with the reason in drops_), and meant for another server.
+  std::atomic<std::uint64_t> requests_received_{0};
+  std::atomic<std::uint64_t> replies_sent_{0};
+  std::atomic<std::uint64_t> requests_unanswered_{0};
+  std::atomic<std::uint64_t> requests_for_others_{0};
 
   std::vector<DeferredReply> deferred_step_replies_;
 
@@ -184,14 +222,16 @@ class ServerNode {
   std::map<std::uint32_t, OtherVehicle> others_;
 
   // Drop kinds counted on the loop thread (registered up front: counting allocates nothing).
-  int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1,
-      drop_inputs_full_ = -1, drop_requests_full_ = -1, drop_key_mismatch_ = -1,
-      drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1;
+  int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1, drop_inputs_full_ = -1,
+      drop_key_mismatch_ = -1, drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1,
+      drop_unknown_buttons_ = -1, drop_unanswered_gone_ = -1, drop_unanswered_write_ = -1,
+      drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1;
 
   // Loop statistics: the current window and the whole run.
   std::string scheduling_;
   LatenessWindow lateness_;
   Histogram lateness_all_;
+  Histogram request_boundaries_;  // how long requests held each boundary that applied some, us
   std::uint64_t steps_caught_up_ = 0;
   std::uint64_t max_lag_steps_seen_ = 0;
   std::uint64_t schedule_rebases_ = 0;

@@ -5,9 +5,11 @@
 // request, periodic checkpoints), stamped with the step at which it took effect.
 //
 // It knows nothing of DDS: the server node (server_node.h) feeds it and publishes what it says.
-// Stepping - latching input, the step, the state message, input events and checkpoints - makes
-// no heap allocation (tests/test_no_alloc.cc): the frequent events are plain records (below) that
-// the server's publisher thread turns into messages. Applying a request may allocate.
+// Stepping - latching input, the step, the state message, events and checkpoints - and applying a
+// request made ready elsewhere (Commit, with a RequestPlanner's PreparedRequest) make no heap
+// allocation (tests/test_no_alloc.cc): events are plain records (below) that the server's
+// publisher thread turns into messages, answers plain outcomes. Apply() does both halves of a
+// request on one thread (tests, fuzzing) and allocates.
 #pragma once
 
 #include <algorithm>
@@ -49,31 +51,134 @@ struct InputChange {
   DriverInput input;
 };
 
-// An event of the session, in the order the session emitted it (`sequence`). The frequent kinds
-// (input batches, checkpoints) are plain data, filled without allocation; the rare ones (spawn,
-// parameter change, applied request, removal) come as a finished message.
+// An event of the session, in the order the session emitted it (`sequence`): plain data, filled
+// without allocation on the stepping thread; the server's publisher turns it into a message
+// (ToMessage).
 struct SessionEventRecord {
-  enum class Kind { kInputBatch, kCheckpoint, kMessage };
+  enum class Kind {
+    kInputBatch,      // changes of the applied input
+    kCheckpoint,      // the exact state, input and parameters
+    kSpawned,         // a vehicle starts (spawn, reset, teleport, restore, contained divergence)
+    kRemoved,         // a vehicle's life ends
+    kParamsChanged,   // new parameters in effect
+    kControlApplied,  // an accepted request
+  };
   static constexpr int kMaxBatchSamples = 32;
 
-  Kind kind = Kind::kMessage;
+  Kind kind = Kind::kInputBatch;
   std::uint32_t vehicle_id = 0;
   std::int64_t step = 0;
   std::uint64_t sequence = 0;
   // kInputBatch
   int n_changes = 0;
   std::array<InputChange, kMaxBatchSamples> changes{};
-  // kCheckpoint
+  // kCheckpoint (state, input, params), kSpawned (state, params, world_name)
   State state;
   DriverInput input;
   std::shared_ptr<const pb::VehicleParams> params;  // complete, in effect
-  // kMessage
-  std::unique_ptr<pb::SessionEvent> message;
+  const std::string* world_name = nullptr;          // the session's world (outlives the record)
+  // kControlApplied: the request; kSpawned by a restore: the request it came from (branched_from)
+  std::shared_ptr<const pb::ControlRequest> request;
 };
 
 // The message of a record (vehicle, server, step and sequence filled in).
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns);
+
+// One vehicle of a session: its simulator, parameters, spawn pose and input state. Built off the
+// stepping thread (RequestPlanner) and handed to the session whole.
+struct SessionVehicle {
+  std::uint32_t id = 0;
+  std::unique_ptr<Simulator> sim;
+  std::shared_ptr<const pb::VehicleParams> params;  // complete, in effect
+  Pose2 spawn_pose;
+  double spawn_speed = 0;
+  pb::DriverInput live_input;  // the last live input received
+  // A Restore request's exact input, applied in place of live_input until a live one arrives.
+  bool input_restored = false;
+  DriverInput restored_input;
+  std::int64_t live_input_step = -1;  // vehicle step at which it was received (-1: none yet)
+  bool safe_state = true;
+  DriverInput applied;  // physics fields of the input applied last step
+  bool applied_valid = false;
+  pb::DriverInput applied_msg;  // the message form of what was applied
+  pb::VehicleState state_msg;   // reused for every step
+  // Input changes not yet sent (an InputBatch event).
+  std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
+  int n_pending = 0;
+};
+using SessionVehicles = std::map<std::uint32_t, SessionVehicle>;
+
+// A new vehicle of a session: from `exact` when given (a restore), else at rest at `pose` (or at
+// `speed` along its heading); its message buffers grown so that its first steps allocate nothing.
+// Throws std::invalid_argument when the parameters do not resolve at the step, WorldError when
+// it cannot start at the pose.
+SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
+                          const SessionConfig& config,
+                          std::shared_ptr<const pb::VehicleParams> params, const ValidParams& valid,
+                          const State* exact, const Pose2& pose, double speed);
+
+// A control request made ready off the stepping thread (RequestPlanner::Prepare): checked, and
+// everything it needs built (a vehicle, parameters, a resting state, map nodes), so that applying
+// it at a step boundary (Session::Commit) allocates nothing: it checks what only the stepping
+// thread knows and swaps. What the swap replaces is left in it, to be freed where it came from.
+struct PreparedRequest {
+  enum class Op : std::uint8_t {
+    kPause,
+    kResume,
+    kStep,
+    kMove /* reset, teleport */,
+    kSpawn,
+    kRemove,
+    kSetParams,
+    kRestore
+  };
+  Op op = Op::kPause;
+  std::shared_ptr<const pb::ControlRequest> request;
+  std::uint32_t vehicle_id = 0;
+  // The vehicle's parameters as the planner knew them (nullptr: no such vehicle). Commit refuses
+  // a request whose vehicle is not what it was planned for.
+  std::shared_ptr<const pb::VehicleParams> expected;
+  std::uint32_t steps = 0;  // kStep
+  bool step_input = false;  // kStep: apply request->step().input() first
+  State state;              // kMove: the new state (the vehicle's step is kept)
+  std::shared_ptr<const pb::VehicleParams> params;  // kSetParams: new (after Commit: the old)
+  std::optional<ValidParams> valid;                 // kSetParams: checked against the step
+  SessionVehicles::node_type vehicle;  // kSpawn, kRestore: new (after Commit: the replaced one)
+  std::map<std::uint32_t, std::int64_t>::node_type retired;  // kRemove: a node for its step
+  bool applied = false;      // set by Commit: accepted (else refused)
+  std::uint64_t client = 0;  // the server's: the DDS writer it came from
+};
+
+// The answer to a request, as plain data: no allocation to make one (the publisher builds the
+// reply message). A refusal for a reason only the stepping thread knows carries its numbers;
+// one decided elsewhere its text.
+struct RequestOutcome {
+  enum class Why : std::uint8_t {
+    kNone,
+    kText,              // `text` says why
+    kExists,            // the vehicle exists already
+    kFull,              // n1: the most vehicles
+    kStepBehind,        // restore: n1 the vehicle's step, n2 the state's
+    kChanged,           // the vehicle changed between planning and applying
+    kCancelledByPause,  // a step request's steps were cancelled
+    kCancelledByResume,
+    kClientGone,  // a step request's client left: n1 steps not run (no reply is sent)
+    kStopped,     // the server stopped before its steps were done
+  };
+  std::shared_ptr<const pb::ControlRequest> request;
+  bool accepted = false;
+  Why why = Why::kNone;
+  std::int64_t n1 = 0, n2 = 0;
+  std::int64_t applied_step = -1;  // the vehicle's step then (-1: no such vehicle)
+  std::int64_t sim_time_ns = 0;
+  std::string text;
+};
+
+// The reason of a refusal as a person reads it.
+std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id);
+// The reply to send.
+pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id);
 
 class Session {
  public:
@@ -82,12 +187,16 @@ class Session {
 
   Session(std::shared_ptr<const World> world, SessionConfig config, EventSink on_event);
 
-  // Applies a request now (call it at a step boundary) and answers it.
-  pb::ControlReply Apply(const pb::ControlRequest& request);
+  // Applies a request now (call it at a step boundary) and answers it: Prepare (a planner of
+  // this session's vehicles) and Commit in one, on this thread.
+  [[nodiscard]] pb::ControlReply Apply(const pb::ControlRequest& request);
   // The answer to a request refused before it reached Apply.
-  pb::ControlReply Reject(const pb::ControlRequest& request, const std::string& reason) {
-    return Reply(request, false, reason);
-  }
+  [[nodiscard]] pb::ControlReply Reject(const pb::ControlRequest& request,
+                                        const std::string& reason);
+  // Applies a prepared request at a step boundary: checks what only this thread knows (the
+  // vehicle is what the plan assumed, the vehicle count, a restore's step) and swaps. No
+  // allocation: events go out as plain records, the answer is plain data.
+  [[nodiscard]] RequestOutcome Commit(PreparedRequest& p);
   // Spawns directly (the server's own vehicles at start). Throws std::invalid_argument.
   void Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
              const pb::VehicleParams& params_update);
@@ -112,6 +221,7 @@ class Session {
   std::size_t vehicle_count() const { return vehicles_.size(); }
   bool HasVehicle(std::uint32_t id) const { return vehicles_.count(id) != 0; }
   const Simulator& simulator(std::uint32_t id) const { return *vehicles_.at(id).sim; }
+  const SessionVehicles& vehicles() const { return vehicles_; }
   const pb::VehicleParams& params(std::uint32_t id) const { return *vehicles_.at(id).params; }
   // Watchdog view for diagnostics.
   bool in_safe_state(std::uint32_t id) const { return vehicles_.at(id).safe_state; }
@@ -134,39 +244,24 @@ class Session {
   void CancelPendingSteps(std::uint32_t n) { pending_steps_ -= std::min(n, pending_steps_); }
 
  private:
-  struct Vehicle {
-    std::uint32_t id = 0;
-    std::unique_ptr<Simulator> sim;
-    std::shared_ptr<const pb::VehicleParams> params;  // complete, in effect
-    Pose2 spawn_pose;
-    double spawn_speed = 0;
-    pb::DriverInput live_input;        // the last live input received
-    // A Restore request's exact input, applied in place of live_input until a live one arrives.
-    bool input_restored = false;
-    DriverInput restored_input;
-    std::int64_t live_input_step = -1;  // vehicle step at which it was received (-1: none yet)
-    bool safe_state = true;
-    DriverInput applied;               // physics fields of the input applied last step
-    bool applied_valid = false;
-    pb::DriverInput applied_msg;       // the message form of what was applied
-    pb::VehicleState state_msg;        // reused for every step
-    // Input changes not yet sent (an InputBatch event).
-    std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
-    int n_pending = 0;
-  };
+  using Vehicle = SessionVehicle;
 
-  void EmitMessage(std::uint32_t vehicle_id, std::int64_t step,
-                   std::unique_ptr<pb::SessionEvent> e);
-  void EmitSpawned(Vehicle& v, const std::string& branched_from = {});
-  pb::ControlReply Restore(const pb::ControlRequest& r);
+  // Starts an event record of the vehicle (its gathered input changes go out first).
+  SessionEventRecord& Begin(SessionEventRecord::Kind kind, std::uint32_t vehicle_id,
+                            std::int64_t step);
+  void Emit();
+  void EmitSpawned(Vehicle& v, std::shared_ptr<const pb::ControlRequest> from = nullptr);
   void FlushInputs(Vehicle& v);
-  pb::ControlReply Reply(const pb::ControlRequest& r, bool accepted, const std::string& reason);
+  // The outcome of an accepted request: the vehicle's step, and the ControlApplied event.
+  RequestOutcome Accept(const std::shared_ptr<const pb::ControlRequest>& r);
+  RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r, RequestOutcome::Why why,
+                        std::int64_t n1 = 0, std::int64_t n2 = 0);
   void LatchInput(Vehicle& v);
 
   std::shared_ptr<const World> world_;
   SessionConfig config_;
   EventSink on_event_;
-  std::map<std::uint32_t, Vehicle> vehicles_;
+  SessionVehicles vehicles_;
   std::map<std::uint32_t, std::int64_t> retired_steps_;  // removed ids: the step they ended at
   bool paused_ = false;
   std::uint32_t pending_steps_ = 0;
