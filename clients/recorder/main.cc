@@ -182,7 +182,7 @@ int main(int argc, char** argv) {
       transport::Participant participant(domain, limits::kRecorderReceiveBufferBytes);
       recorder::Capture capture(participant, ro);
       spdlog::info("vdyn-recorder: recording domain {} to {}{}", domain, ro.out.string(),
-                   ro.duration_s > 0 ? " for " + std::to_string(ro.duration_s) + " s" : "; Ctrl-C ends");
+                   ro.duration_s > 0 ? " for " + base::FormatNumber(ro.duration_s) + " s" : "; Ctrl-C ends");
       const recorder::CaptureSummary s = capture.Run(g_stop);
       std::string files;
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();

@@ -28,6 +28,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/client/driver_input.h"
@@ -75,6 +76,10 @@ struct PlayOptions {
   bool loop = false;
 };
 
+// A server publishes a state every step (1 kHz): this long without one, none is running (or it
+// is paused).
+constexpr double kSilentS = 2.0;
+
 int Play(const Common& c, const PlayOptions& o) {
   const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(o.maneuver);
   vdyn::transport::DropCounters drops;
@@ -82,39 +87,78 @@ int Play(const Common& c, const PlayOptions& o) {
   vdyn::client::InputPublisher writer(participant, c.vehicle_id, c.source_id, c.strength);
   vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant,
                                                          vdyn::transport::TopicId::kState, &drops);
+  const bool server_clock = o.clock == "server";
 
-  // Simulation time of the vehicle, from its newest state (clock=server).
+  // The vehicle's newest simulation time (clock=server) and what its states say about this input.
   std::int64_t sim_ns = -1;
+  std::uint64_t states_seen = 0, states_ours = 0;
+  std::string other_source;  // the newest other source that drove the vehicle
+  MonoTime last_state_at{};
   auto poll_states = [&] {
     states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
-      if (s.vehicle_id() == c.vehicle_id) sim_ns = s.sim_time_ns();
+      if (s.vehicle_id() != c.vehicle_id) return;
+      sim_ns = s.sim_time_ns();
+      ++states_seen;
+      last_state_at = MonotonicNow();
+      if (s.input().source_id() == c.source_id) {
+        ++states_ours;
+      } else if (!s.input().source_id().empty()) {
+        other_source = s.input().source_id();
+      }
     });
   };
-  if (o.clock == "server") {
+  const std::string where =
+      "vehicle " + std::to_string(c.vehicle_id) + " on domain " + std::to_string(c.domain);
+  if (server_clock) {
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::duration<double>(c.wait_s);
+    spdlog::info("vdyn-input: waiting up to {} s for a state of {}", c.wait_s, where);
     while (sim_ns < 0 && !g_stop && std::chrono::steady_clock::now() < deadline) {
       states.Wait(std::chrono::milliseconds(50));
       poll_states();
     }
+    if (g_stop) return 0;
     if (sim_ns < 0) {
-      std::cerr << "vdyn-input: no state of vehicle " << c.vehicle_id << " on domain " << c.domain
-                << " within " << c.wait_s << " s; is vdyn-server running?\n";
+      std::cerr << "vdyn-input: no state of " << where << " within " << c.wait_s
+                << " s; is vdyn-server running?\n";
       return 1;
     }
   }
-  spdlog::info("vdyn-input: playing '{}' ({:.1f} s) for vehicle {} as '{}' (strength {})",
-               o.maneuver, maneuver.end_time(), c.vehicle_id, c.source_id, c.strength);
+  spdlog::info("vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {})",
+               o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength);
 
   const MonoTime wall_start = MonotonicNow();
   const std::int64_t sim_start = sim_ns;
   vdyn::client::FixedRateLoop loop_clock(Period(c.rate_hz), wall_start);
   vdyn::pb::DriverInput msg;
+  bool warned_silent = false;
+  double t = 0.0;
   while (!g_stop) {
     const auto tick = loop_clock.Wait();
-    double t = 0.0;
-    if (o.clock == "server") {
-      poll_states();
+    poll_states();
+    // Silence: no server yet, or it went away or paused. The wall clock plays on; the server's
+    // clock stands still without states, and the maneuver with it. Either way, it is said.
+    const double silent_s = (tick.now - (states_seen > 0 ? last_state_at : wall_start)).seconds();
+    if (silent_s >= kSilentS && !warned_silent) {
+      warned_silent = true;
+      if (states_seen == 0) {
+        spdlog::warn(
+            "vdyn-input: no state of {} after {:.0f} s of playing; is vdyn-server "
+            "running? The maneuver plays on by the wall clock, heard by no one",
+            where, kSilentS);
+      } else {
+        spdlog::warn(
+            "vdyn-input: no state of {} for {:.0f} s, at {:.1f} s of the maneuver: "
+            "vdyn-server is paused or has stopped; {}",
+            where, kSilentS, t,
+            server_clock ? "the maneuver waits for its clock"
+                         : "the maneuver plays on by the wall clock");
+      }
+    } else if (silent_s < kSilentS && warned_silent) {
+      warned_silent = false;
+      spdlog::info("vdyn-input: states of {} again", where);
+    }
+    if (server_clock) {
       t = static_cast<double>(sim_ns - sim_start) * 1e-9;
     } else {
       t = (tick.now - wall_start).seconds();
@@ -129,6 +173,24 @@ int Play(const Common& c, const PlayOptions& o) {
       return 1;
     }
   }
+  // The outcome: whether a server took the input.
+  const std::string played =
+      g_stop ? "stopped at " + vdyn::base::FormatFixed(t, 1) + " s of '" + o.maneuver + "'"
+             : "played '" + o.maneuver + "' to its end (" +
+                   vdyn::base::FormatFixed(maneuver.end_time(), 1) + " s, " + o.clock + " clock)";
+  if (states_seen == 0) {
+    std::cerr << "vdyn-input: " << played << ", but no server took it: no state of " << where
+              << " arrived; is vdyn-server running there?\n";
+    return g_stop ? 0 : 1;
+  }
+  std::string outcome = "vdyn-input: " + played + "; " + std::to_string(states_ours) + " of " +
+                        std::to_string(states_seen) + " states of vehicle " +
+                        std::to_string(c.vehicle_id) + " applied this input";
+  if (states_ours == 0 && !other_source.empty()) {
+    outcome += " ('" + other_source + "' drove it: a stronger source than --strength " +
+               std::to_string(c.strength) + ")";
+  }
+  std::printf("%s\n", outcome.c_str());
   return 0;
 }
 
@@ -513,6 +575,7 @@ int main(int argc, char** argv) {
 
   CLI::App* play = app.add_subcommand("play", "Play a maneuver (CSV file or 'demo') as live input");
   play->add_option("maneuver", play_opt.maneuver, "Maneuver CSV, or 'demo'")->required();
+  add_play(play);
 
   RigOptions rig;
   auto add_rig = [&](CLI::App* a, bool wheel) {
@@ -608,6 +671,12 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::InRange(vdyn::limits::kWaitS))
       ->capture_default_str();
 
+  // The options before the command are taken after it too; each command's --help says so.
+  for (CLI::App* command : {play, drive, keyboard, list, calibrate}) {
+    command->footer(
+        "Before or after the command: --domain N, --vehicle-id ID, --source-id NAME, "
+        "--strength N, --rate-hz HZ, --wait S, --status (vdyn-input --help).");
+  }
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
