@@ -524,22 +524,27 @@ TEST(CliPrograms, EachProgramNamesTheNearestOptionOrCommand) {
 }
 
 TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
+  // Were a list taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string out = (dir / "x.mcap").string();
   struct Case {
     Result (*run)(const std::string&);
-    const char* args;
+    std::string args;
     const char* message;
   };
-  for (const Case& c :
-       std::vector<Case>{{RunServer, "--vehicle-ids 1,,2",
-                          "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
-                         {RunServer, "--batch --maneuver demo --spawn 1,2,",
-                          "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
-                         {RunRecorder, "record x.mcap --vehicles 1,,2",
-                          "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
-                         {RunRecorder, "record x.mcap --topics state,,events",
-                          "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
-                         {RunViewer, "--orbit 10,,5",
-                          "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}}) {
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
+            "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
+           {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
+            "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
+           {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
+            "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
+           {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
+            "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
+           {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
+            "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}}) {
     const Result r = c.run(c.args);
     EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
     EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
