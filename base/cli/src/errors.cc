@@ -4,7 +4,6 @@
 #include <cctype>
 #include <cstddef>
 #include <cstdio>
-#include <limits>
 #include <utility>
 
 #include "vdyn/base/text.h"
@@ -98,8 +97,8 @@ std::string CommandPath(const std::string& program, const std::vector<const CLI:
   return path;
 }
 
-// Where an option is taken in `ctx`: its own options and, while commands fall through to their
-// parent, the parent's.
+// The options taken where the command line ends up: the last command's own and, while commands
+// fall through to their parent, the parent's.
 std::vector<std::string> OptionsInScope(const std::vector<const CLI::App*>& chain) {
   std::vector<std::string> names;
   for (std::size_t i = chain.size(); i-- > 0;) {
