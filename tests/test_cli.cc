@@ -551,6 +551,35 @@ TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
   }
 }
 
+// An id the receivers would refuse in every message (empty or blank, longer than
+// limits::kMaxIdBytes, with a control character) is refused at the command line of each client that
+// sends it, as vdyn-server's --server-id is.
+TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
+  // Were an id taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunInput, "--source-id '' play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is empty"},
+           {RunInput, "--source-id ' ' play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is empty"},
+           {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
+           {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
+           {RunRecorder, "play x.mcap --server-id ''",
+            "vdyn-recorder play: --server-id: the server id is empty"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+  }
+}
+
 TEST(CliInput, PlayHelpListsItsOptionsAndTheCommonOnes) {
   const Result r = RunInput("play --help");
   EXPECT_EQ(r.exit_code, 0) << r.output;

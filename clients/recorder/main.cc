@@ -127,7 +127,7 @@ int main(int argc, char** argv) {
   play->add_option("--topics", play_topics, "Topics to republish (default: world,params,state,input)")
       ->delimiter(',')->check(TopicNames());
   auto* play_vehicle = play->add_option("--vehicle", vehicle, "Only this vehicle");
-  play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->capture_default_str();
+  play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->check(cli::Id("server id"))->capture_default_str();
   play->add_flag("--no-keys", no_keys, "Ignore the keyboard");
   play->add_flag("--force", pl.force, "Play even where a live server runs");
   play->add_flag("--status", status, "Print the status line (default: on a terminal)");

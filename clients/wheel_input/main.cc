@@ -549,6 +549,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")->capture_default_str();
   app.add_option("--source-id", c.source_id, "This source's name (shown in the state)")
+      ->check(vdyn::cli::Id("source id"))
       ->capture_default_str();
   app.add_option("--strength", c.strength,
                  "Ownership strength: the strongest live source drives (primary rig > backup)")

@@ -40,6 +40,26 @@ inline CLI::Validator WholeInRange(const limits::Range& r) {
       limits::Describe(r));
 }
 
+// An id that goes into messages (a server id): not empty or blank, at most limits::kMaxIdBytes
+// bytes (every reader refuses a longer one), no control characters. `what` names it.
+inline CLI::Validator Id(const std::string& what) {
+  return CLI::Validator(
+      [what](std::string& text) -> std::string {
+        if (text.find_first_not_of(" \t") == std::string::npos) return "the " + what + " is empty";
+        if (text.size() > limits::kMaxIdBytes) {
+          return "the " + what + " is " + std::to_string(text.size()) + " bytes long; at most " +
+                 std::to_string(limits::kMaxIdBytes);
+        }
+        for (const char c : text) {
+          if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+            return "the " + what + " holds a control character: '" + base::Quote(text, 80) + "'";
+          }
+        }
+        return {};
+      },
+      "ID");
+}
+
 // Parses argv; on --help prints and returns 0, on a usage error prints why to `err` and returns 2.
 // Returns -1 when the program should go on. Every program's command line goes through here, so
 // the errors read alike (vdyn/cli/errors.h): each names the program (and command), an unknown
