@@ -84,6 +84,9 @@ TEST(Text, NumbersPrintedWithoutNoise) {
   EXPECT_EQ(base::FormatNumber(1.5e-7), "1.5e-7");
   EXPECT_EQ(base::FormatNumber(1e300), "1e300");
   EXPECT_EQ(base::FormatNumber(-3), "-3");
+  EXPECT_EQ(base::FormatNumber(2147483647), "2147483647");  // shorter than 2.147483647e9
+  EXPECT_EQ(base::FormatNumber(-12345678), "-12345678");
+  EXPECT_EQ(base::FormatNumber(1e7), "1e7");
 }
 
 TEST(Text, ComputedQuantitiesToAFewDigits) {
@@ -92,6 +95,18 @@ TEST(Text, ComputedQuantitiesToAFewDigits) {
   EXPECT_EQ(base::FormatApprox(4.087499999999999e303), "4.087e303");
   EXPECT_EQ(base::FormatApprox(0.29), "0.29");
   EXPECT_EQ(base::FormatApprox(0.034641016151377546, 3), "0.0346");
+}
+
+// A display's reading: a value that rounds to zero from below is "0.0", never "-0.0".
+TEST(Text, FixedReadingsNeverShowMinusZero) {
+  EXPECT_EQ(base::FormatFixed(-0.04, 1), "0.0");
+  EXPECT_EQ(base::FormatFixed(-0.0, 1), "0.0");
+  EXPECT_EQ(base::FormatFixed(-0.4, 0), "0");
+  EXPECT_EQ(base::FormatFixed(-0.04, 1, true), "+0.0");
+  EXPECT_EQ(base::FormatFixed(-0.06, 1), "-0.1");
+  EXPECT_EQ(base::FormatFixed(-70.0, 1), "-70.0");
+  EXPECT_EQ(base::FormatFixed(2.5, 2, true), "+2.50");
+  EXPECT_EQ(base::FormatFixed(0.0, 1, true), "+0.0");
 }
 
 TEST(Text, QuoteCutsAndEscapesUntrustedText) {

@@ -1,12 +1,17 @@
-// vdyn-server as a user runs it: exit codes and messages for good and bad input.
+// The programs as a user runs them: vdyn-server's and vdyn-input's exit codes and messages for good
+// and bad input, and every program's wrong command line told the same way (base/cli).
 #include <sys/wait.h>
 
 #include <array>
 #include <cstdio>
+#include <sstream>
+#include <tuple>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "vdyn/cli/errors.h"
+#include "vdyn/cli/options.h"
 #include "vdyn/io/csv.h"
 #include "vdyn/bridge/params.h"
 #include "process.h"
@@ -301,6 +306,37 @@ TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
   EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain 229 within 1 s"));
 }
 
+// A server runs, but not with the vehicle asked for: play and drive name the vehicles there are
+// and how to drive one, not "is vdyn-server running?".
+TEST(CliInput, AVehicleTheServerDoesNotHaveIsToldWithTheVehiclesThereAre) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0.2,0,0\n0.3,0,0.2,0,0\n");
+  const std::string domain = std::to_string(testing::FreshDomain());
+  const std::string maneuver = (dir / "m.csv").string();
+  testing::Process server({testing::ServerBinary(), "--domain", domain, "--vehicle-ids", "1,3",
+                           "--duration", "120", "--no-status"},
+                          dir / "server.log");
+  // The server is up once vehicle 1 takes a maneuver.
+  const Result up = RunInput("--domain " + domain + " --wait 60 play " + maneuver);
+  ASSERT_EQ(up.exit_code, 0) << up.output << server.Log();
+  const std::string why =
+      "; vdyn-server there has vehicles 1,3: drive one with --vehicle-id 1, or "
+      "start vdyn-server with --vehicle-ids 1,3,2";
+  Result r = RunInput("--domain " + domain + " --vehicle-id 2 --wait 1 play " + maneuver);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output,
+              HasSubstr("no state of vehicle 2 on domain " + domain + " within 1 s" + why));
+  r = RunInput("--domain " + domain + " --vehicle-id 2 play " + maneuver + " --clock wall");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("but no server took it: no state of vehicle 2 on domain " +
+                                  domain + " arrived" + why));
+  r = RunInput("--domain " + domain + " --vehicle-id 2 --wait 1 drive --no-window");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output,
+              HasSubstr("no parameters of vehicle 2 on domain " + domain + " within 1 s" + why));
+}
+
 TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
   testing::UseLoopbackDds();
   const std::uint32_t domain = testing::FreshDomain();
@@ -308,6 +344,382 @@ TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
   EXPECT_EQ(r.exit_code, 1);
   EXPECT_THAT(r.output, HasSubstr("no state of vehicle 1 on domain " + std::to_string(domain) +
                                   " within 1 s"));
+}
+
+}  // namespace
+}  // namespace vdyn
+
+// --- Every program's wrong command line, told the same way (base/cli: vdyn/cli/errors.h) ------
+
+namespace vdyn {
+namespace {
+
+using ::testing::ElementsAre;
+using ::testing::Not;
+
+Result RunRecorder(const std::string& args) {
+  return Run(testing::RecorderBinary(), args);
+}
+Result RunTelemetry(const std::string& args) {
+  return Run(VDYN_TELEMETRY_BINARY, args);
+}
+Result RunViewer(const std::string& args) {
+  return Run(VDYN_VIEWER_BINARY, args);
+}
+
+TEST(CliErrors, EditDistanceCountsASwapOfNeighboursAsOne) {
+  EXPECT_EQ(cli::EditDistance("kitten", "sitting"), 3);  // Levenshtein's example
+  EXPECT_EQ(cli::EditDistance("wrold", "world"), 1);     // a swap
+  EXPECT_EQ(cli::EditDistance("recrod", "record"), 1);
+  EXPECT_EQ(cli::EditDistance("", "abc"), 3);
+  EXPECT_EQ(cli::EditDistance("World", "world"), 0);
+  EXPECT_EQ(cli::EditDistance("ca", "abc"), 3);  // optimal string alignment: no edit of a swap
+}
+
+TEST(CliErrors, NearestNamesTheClosestOnlyAndNothingFar) {
+  const std::vector<std::string> options{
+      "--world", "--world-scale",      "--vehicle", "--vehicle-ids", "--help",
+      "-h",      "--lockstep-timeout", "--lockstep"};
+  EXPECT_THAT(cli::Nearest("--wrold", options), ElementsAre("--world"));
+  EXPECT_THAT(cli::Nearest("--vehicle-id", options), ElementsAre("--vehicle-ids"));
+  EXPECT_THAT(cli::Nearest("--lockstep-time", options), ElementsAre("--lockstep-timeout"));
+  EXPECT_THAT(cli::Nearest("-world", options), ElementsAre("--world"));
+  EXPECT_TRUE(cli::Nearest("--warp-speed", options).empty());
+  EXPECT_TRUE(cli::Nearest("--x", options).empty());
+  EXPECT_THAT(cli::Nearest("--h", options), ElementsAre("-h"));
+  const std::vector<std::string> commands{"record", "info",   "export",   "plot",
+                                          "play",   "verify", "takeover", "recover"};
+  EXPECT_THAT(cli::Nearest("recrod", commands), ElementsAre("record"));
+  EXPECT_THAT(cli::Nearest("paly", commands), ElementsAre("play"));
+  EXPECT_TRUE(cli::Nearest("dance", commands).empty());
+}
+
+// An app shaped like the programs: options at the top, commands with their own options.
+struct TestApp {
+  CLI::App app{"test"};
+  std::string world;
+  std::vector<std::uint32_t> ids;
+  std::string out, file;
+  double rate = 1;
+  std::uint32_t domain = 0;
+  CLI::App* record = nullptr;
+  CLI::App* play = nullptr;
+  explicit TestApp(bool commands) {
+    app.add_option("--world", world, "the world");
+    app.add_option("--vehicle-ids", ids, "ids")->delimiter(',');
+    if (!commands) return;
+    app.require_subcommand(1);
+    record = app.add_subcommand("record", "record");
+    record->add_option("out", out, "the file")->required();
+    record->add_option("--domain", domain, "domain");
+    play = app.add_subcommand("play", "play");
+    play->add_option("file", file, "the file")->required();
+    play->add_option("--rate", rate, "rate");
+    play->add_option("--domain", domain, "domain");
+  }
+  // Parses as the program "prog"; the exit code and what it wrote to the error stream.
+  std::pair<int, std::string> Parse(std::vector<std::string> args) {
+    args.insert(args.begin(), "/usr/bin/prog");
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    std::ostringstream err;
+    const int code = cli::Parse(app, static_cast<int>(argv.size()), argv.data(), err);
+    return {code, err.str()};
+  }
+};
+
+TEST(CliErrors, AnUnknownOptionIsNamedWithTheNearestAndItsValueIsNotASecondProblem) {
+  TestApp t(false);
+  const auto [code, err] = t.Parse({"--wrold", "facility"});
+  EXPECT_EQ(code, 2);
+  EXPECT_EQ(err,
+            "prog: unknown option '--wrold'; did you mean '--world'?\n"
+            "Run 'prog --help' for more information.\n");
+  TestApp t2(false);
+  EXPECT_THAT(t2.Parse({"--wrold=facility"}).second,
+              HasSubstr("prog: unknown option '--wrold'; did you mean '--world'?"));
+  TestApp t3(false);
+  EXPECT_THAT(t3.Parse({"--warp-speed", "9"}).second,
+              HasSubstr("prog: unknown option '--warp-speed'\n"));
+  TestApp t4(false);
+  EXPECT_THAT(t4.Parse({"world", "facility"}).second,
+              HasSubstr("prog: unexpected argument 'world'; did you mean '--world'?"));
+  TestApp t5(false);
+  EXPECT_THAT(t5.Parse({"--world", "flat", "hills.obj"}).second,
+              HasSubstr("prog: unexpected argument 'hills.obj' (prog takes options only)"));
+  TestApp ok(false);
+  EXPECT_EQ(ok.Parse({"--world", "flat"}).first, -1);
+  EXPECT_EQ(ok.world, "flat");
+}
+
+TEST(CliErrors, AnUnknownCommandIsNamedWithTheNearestAndTheCommands) {
+  TestApp t(true);
+  const auto [code, err] = t.Parse({"recrod", "x.mcap"});
+  EXPECT_EQ(code, 2);
+  EXPECT_EQ(err,
+            "prog: unknown command 'recrod'; did you mean 'record'? (the commands: record, play)\n"
+            "Run 'prog --help' for more information.\n");
+  TestApp none(true);
+  EXPECT_THAT(none.Parse({}).second, HasSubstr("prog: choose a command: record, play\n"));
+}
+
+TEST(CliErrors, AnOptionOfAnotherCommandSaysWhereItBelongs) {
+  TestApp before(true);
+  auto [code, err] = before.Parse({"--domain", "3", "record", "x.mcap"});
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(err, HasSubstr("prog record: option '--domain' goes after the command: "
+                             "prog record ... --domain"));
+  TestApp other(true);
+  std::tie(code, err) = other.Parse({"record", "x.mcap", "--rate", "2"});
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(err, HasSubstr("prog record: option '--rate' is not one of 'prog record'; it "
+                             "belongs to 'prog play'"));
+  EXPECT_THAT(err, HasSubstr("Run 'prog record --help' for more information."));
+  TestApp typo(true);
+  std::tie(code, err) = typo.Parse({"play", "x.mcap", "--rtae", "2"});
+  EXPECT_THAT(err, HasSubstr("prog play: unknown option '--rtae'; did you mean '--rate'?"));
+  TestApp extra(true);
+  std::tie(code, err) = extra.Parse({"play", "x.mcap", "y.mcap"});
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(err, HasSubstr("prog play: unexpected argument 'y.mcap' (prog play takes FILE and "
+                             "options)"));
+}
+
+TEST(CliErrors, AListWithAnEmptyEntryIsRefusedNotShortened) {
+  for (const auto& [args, message] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+           {{"--vehicle-ids", "1,,2"}, "--vehicle-ids '1,,2': entry 2 of the list is empty"},
+           {{"--vehicle-ids=1,2,"}, "--vehicle-ids '1,2,': entry 3 of the list is empty"},
+           {{"--vehicle-ids", ",1"}, "--vehicle-ids ',1': entry 1 of the list is empty"},
+           {{"--vehicle-ids", ""}, "--vehicle-ids '': the list is empty"},
+           {{"--vehicle-ids", "1,", "2"},
+            "--vehicle-ids '1,': entry 2 of the list is empty (a space after a comma ends the "
+            "list"}}) {
+    TestApp t(false);
+    const auto [code, err] = t.Parse(args);
+    EXPECT_EQ(code, 2) << message;
+    EXPECT_THAT(err, HasSubstr("prog: " + message));
+  }
+  TestApp ok(false);
+  ASSERT_EQ(ok.Parse({"--vehicle-ids", "1,2,3"}).first, -1);
+  EXPECT_THAT(ok.ids, ElementsAre(1u, 2u, 3u));
+}
+
+// CLI11's own wording of a value of the wrong type, a missing value or argument, as a person says
+// it.
+TEST(CliErrors, WrongValuesAndMissingArgumentsAreSaidPlainly) {
+  TestApp conversion(false);
+  EXPECT_THAT(conversion.Parse({"--vehicle-ids", "-1"}).second,
+              HasSubstr("prog: --vehicle-ids: '-1' is not a whole number, 0 or more\n"));
+  TestApp octal(false);
+  ASSERT_EQ(octal.Parse({"--vehicle-ids", "010,1e3"}).first, -1);
+  EXPECT_THAT(octal.ids, ElementsAre(10u, 1000u));  // not 8 (octal), and 1e3 is a number
+  TestApp half(false);
+  EXPECT_THAT(half.Parse({"--vehicle-ids", "1.5"}).second,
+              HasSubstr("prog: --vehicle-ids: '1.5' is not a whole number\n"));
+  TestApp large(false);
+  EXPECT_THAT(large.Parse({"--vehicle-ids", "99999999999"}).second,
+              HasSubstr("prog: --vehicle-ids: '99999999999' is too large\n"));
+  TestApp number(true);
+  EXPECT_THAT(number.Parse({"play", "x.mcap", "--rate", "fast"}).second,
+              HasSubstr("prog play: --rate: 'fast' is not a number\n"));
+  TestApp value(false);
+  EXPECT_THAT(value.Parse({"--world"}).second, HasSubstr("prog: --world needs a value\n"));
+  TestApp argument(true);
+  const auto [code, err] = argument.Parse({"record"});
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(err, HasSubstr("prog record: OUT is missing: prog record OUT\n"));
+  CLI::App spawn{"test"};
+  std::vector<double> pose;
+  spawn.add_option("--spawn", pose, "pose")->expected(3)->delimiter(',');
+  std::vector<std::string> args{"prog", "--spawn", "1,2"};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  std::ostringstream out;
+  EXPECT_EQ(cli::Parse(spawn, 3, argv.data(), out), 2);
+  EXPECT_THAT(out.str(), HasSubstr("prog: --spawn needs 3 values (written as a,b,c), got 2\n"));
+}
+
+// A value that is not one of an option's choices (CLI::IsMember) is told with the choices as a
+// person writes them and the nearest one, not as "Wall not in {server,wall}".
+TEST(CliErrors, AValueOutsideTheChoicesIsToldWithTheNearest) {
+  for (const auto& [value, message] : std::vector<std::pair<std::string, std::string>>{
+           {"Wall",
+            "prog: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean 'wall'?\n"},
+           {"serve",
+            "prog: --clock: 'serve' is not one of 'server' or 'wall'; did you mean "
+            "'server'?\n"},
+           {"sundial", "prog: --clock: 'sundial' is not one of 'server' or 'wall'\n"}}) {
+    CLI::App app{"test"};
+    std::string clock = "server";
+    app.add_option("--clock", clock, "clock")->check(CLI::IsMember({"server", "wall"}));
+    std::vector<std::string> args{"/usr/bin/prog", "--clock", value};
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    std::ostringstream err;
+    EXPECT_EQ(cli::Parse(app, 3, argv.data(), err), 2) << value;
+    EXPECT_THAT(err.str(), HasSubstr(message));
+    EXPECT_THAT(err.str(), Not(HasSubstr("not in {")));
+  }
+}
+
+// The programs themselves: each uses the shared layer.
+TEST(CliPrograms, EachProgramNamesTheNearestOptionOrCommand) {
+  struct Case {
+    Result (*run)(const std::string&);
+    const char* args;
+    const char* message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--wrold facility",
+            "vdyn-server: unknown option '--wrold'; did you mean '--world'?"},
+           {RunRecorder, "recrod x.mcap",
+            "vdyn-recorder: unknown command 'recrod'; did you mean 'record'? (the commands: "
+            "record, info, export, plot, play, verify, takeover, recover)"},
+           {RunRecorder, "", "vdyn-recorder: choose a command: record, info, export, plot, play,"},
+           {RunRecorder, "info x.mcap --rate 2",
+            "vdyn-recorder info: option '--rate' is not one of 'vdyn-recorder info'; it belongs to "
+            "'vdyn-recorder play'"},
+           {RunInput, "plya demo", "vdyn-input: unknown command 'plya'; did you mean 'play'?"},
+           {RunInput, "play demo --clokc wall",
+            "vdyn-input play: unknown option '--clokc'; did you mean '--clock'?"},
+           {RunTelemetry, "--outsim 127.0.0.1:4123 --outsim-hx 50",
+            "vdyn-telemetry: unknown option '--outsim-hx'; did you mean '--outsim-hz'?"},
+           {RunViewer, "--camra map",
+            "vdyn-viewer: unknown option '--camra'; did you mean '--camera'?"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+    EXPECT_THAT(r.output, Not(HasSubstr("were not expected"))) << c.args;
+    EXPECT_THAT(r.output, Not(HasSubstr("unexpected argument"))) << c.args;
+  }
+}
+
+TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
+  // Were a list taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string out = (dir / "x.mcap").string();
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    const char* message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
+            "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
+           {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
+            "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
+           {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
+            "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
+           {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
+            "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
+           {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
+            "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+  }
+}
+
+// An id the receivers would refuse in every message (empty or blank, longer than
+// limits::kMaxIdBytes, with a control character) is refused at the command line of each client that
+// sends it, as vdyn-server's --server-id is.
+TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
+  // Were an id taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunInput, "--source-id '' play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is empty"},
+           {RunInput, "--source-id ' ' play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is empty"},
+           {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
+           {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
+            "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
+           {RunRecorder, "play x.mcap --server-id ''",
+            "vdyn-recorder play: --server-id: the server id is empty"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+  }
+}
+
+// Each program's choices, ranges and lists said the same way: a choice mistyped comes with the
+// nearest, a device index with its range as the table of limits writes it, a vehicle listed twice
+// as a slip in the list.
+TEST(CliPrograms, EachProgramNamesTheNearestChoice) {
+  // Were a value taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string out = (dir / "x.mcap").string();
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    const char* message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--model Paper --dump-vehicle",
+            "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
+            "'paper'?"},
+           {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
+           {RunInput, "play demo --clock Wall" + domain,
+            "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
+            "'wall'?"},
+           {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
+            "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
+            "you mean 'zstd'?"},
+           {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
+            "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
+            "(the topics: state, input, control, control_reply, params, world, events, "
+            "diagnostics)"},
+           {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
+            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map' or "
+            "'north'; did you mean 'map'?"},
+           {RunInput, "calibrate --device 300 --timeout 1",
+            "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
+           {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
+            "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+    EXPECT_THAT(r.output, Not(HasSubstr("not in {"))) << c.args;
+  }
+  // The help shows whole numbers as such and ranges as the table of limits writes them.
+  const Result help = RunInput("drive --help");
+  EXPECT_THAT(help.output, HasSubstr("--device INT:[0, 255]"));
+  EXPECT_THAT(help.output, HasSubstr("--gears INT:[1, 10]=6"));
+}
+
+TEST(CliInput, PlayHelpListsItsOptionsAndTheCommonOnes) {
+  const Result r = RunInput("play --help");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("--clock"));
+  EXPECT_THAT(r.output, HasSubstr("--loop"));
+  EXPECT_THAT(r.output, HasSubstr("Before or after the command: --domain N, --vehicle-id ID"));
+}
+
+// --clock wall plays without waiting for a server: without one it says so while playing and at
+// the end, and ends with exit code 1 (no server), not silently with 0.
+TEST(CliInput, PlayByTheWallClockWithoutAServerSaysSo) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0.2,0,0\n3,0,0.2,0,0\n");
+  const std::string domain = std::to_string(testing::FreshDomain());
+  const Result r =
+      RunInput("--domain " + domain + " play " + (dir / "m.csv").string() + " --clock wall");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("no state of vehicle 1 on domain " + domain +
+                                  " after 2 s of playing; is vdyn-server running?"));
+  EXPECT_THAT(r.output, HasSubstr("played '" + (dir / "m.csv").string() +
+                                  "' to its end (3.0 s, wall clock), but no server took it"));
 }
 
 }  // namespace

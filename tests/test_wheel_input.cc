@@ -27,6 +27,7 @@
 #include "vdyn/wheel_input/mapping.h"
 #include "vdyn/wheel_input/rig.h"
 #include "vdyn/wheel_input/wheel_reader.h"
+#include "vdyn/wheel_input/window.h"
 
 namespace vdyn::wheel_input {
 namespace {
@@ -1375,6 +1376,114 @@ TEST_F(SdlTest, RigPlaysTheServersTorqueAndTheEstopButtonStopsIt) {
   EXPECT_TRUE(rig.builder().estop());
   EXPECT_EQ(haptic->calls.back().kind, RecordingHaptic::Call::Kind::kStop);
   EXPECT_EQ(sink.last.buttons() & pb::BUTTON_ESTOP, static_cast<std::uint32_t>(pb::BUTTON_ESTOP));
+}
+
+// --- the status window -----------------------------------------------------------------------
+
+// Every field at its longest: the largest id, a 64-byte source and device name, a status of two
+// lines, full pedals, every button, the largest speed and torque, the e-stop on.
+WindowView LongestView(bool keyboard) {
+  WindowView v;
+  v.mode = keyboard ? "KEYBOARD" : "WHEEL: " + std::string(64, 'W');
+  v.status =
+      "wheel unplugged: neutral, braking at 0.3 until it is back; plug it in again or "
+      "press Ctrl+C to end";
+  v.status_alarm = true;
+  v.vehicle_id = 4294967295u;
+  v.source_id = std::string(64, 's');
+  v.have_state = true;
+  v.driving = false;
+  v.speed_kmh = -399.9;
+  v.input.set_steer_mode(pb::STEER_HAND_WHEEL);
+  v.input.set_steer(-limits::kHandWheel.hi);
+  v.input.set_throttle(1);
+  v.input.set_brake(1);
+  v.input.set_clutch(1);
+  v.input.set_handbrake(1);
+  v.input.set_gear(10);
+  v.input.set_cruise_on(true);
+  v.input.set_cruise_set_kmh(400);
+  v.input.set_buttons(0xFFFFFFFFu);
+  v.steer_fraction = -1;
+  v.hand_angle_deg = -1080;
+  v.ffb_present = true;
+  v.ffb_torque_nm = -50;
+  v.ffb_cap_nm = 50;
+  v.ffb_mode = "fading (state late)";
+  v.clip_percent = 100;
+  v.estop = true;
+  v.keyboard_help = keyboard;
+  return v;
+}
+
+bool Overlap(const SDL_Rect& a, const SDL_Rect& b) {
+  return a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+}
+
+// Before: the CLUTCH and HANDBRK bars reached 24 pixels past the right edge and the e-stop banner
+// was cut at "(F2 OR HOLD THE BUTTON 2 S TO RE".
+TEST(Window, EverythingDrawnLiesInsideTheWindowAndNothingOverlaps) {
+  for (const bool keyboard : {true, false}) {
+    SCOPED_TRACE(keyboard ? "keyboard" : "wheel");
+    const std::vector<WindowItem> items = LayoutWindow(LongestView(keyboard), StatusWindow::kWidth);
+    int bars = 0;
+    std::string banner;
+    for (std::size_t i = 0; i < items.size(); ++i) {
+      const SDL_Rect& b = items[i].box;
+      EXPECT_GE(b.x, 0) << items[i].text;
+      EXPECT_GE(b.y, 0) << items[i].text;
+      EXPECT_LE(b.x + b.w, StatusWindow::kWidth) << items[i].text;
+      EXPECT_LE(b.y + b.h, StatusWindow::kHeight) << items[i].text;
+      if (items[i].kind == WindowItem::Kind::kBar) ++bars;
+      if (items[i].kind == WindowItem::Kind::kFilledBox) {
+        // The banner's text lies inside its red box.
+        for (const WindowItem& t : items) {
+          if (t.kind == WindowItem::Kind::kText && Overlap(t.box, b)) {
+            EXPECT_TRUE(t.box.x >= b.x && t.box.x + t.box.w <= b.x + b.w && t.box.y >= b.y &&
+                        t.box.y + t.box.h <= b.y + b.h)
+                << t.text;
+            banner += t.text + " ";
+          }
+        }
+        continue;
+      }
+      for (std::size_t j = i + 1; j < items.size(); ++j) {
+        if (items[j].kind == WindowItem::Kind::kFilledBox) continue;
+        EXPECT_FALSE(Overlap(b, items[j].box)) << items[i].text << " | " << items[j].text;
+      }
+    }
+    EXPECT_EQ(bars, 4);  // throttle, clutch, brake, handbrake
+    EXPECT_THAT(banner, HasSubstr("EMERGENCY STOP"));
+    EXPECT_THAT(banner, HasSubstr(keyboard ? "RE-ARM: F2 " : "HOLD THE E-STOP BUTTON 2 S "));
+  }
+}
+
+// At rest the speed reads 0.0, not -0.0 (a parked car's speed is a tiny negative number), and no
+// other reading shows a minus zero.
+TEST(Window, ReadingsAtRestShowNoMinusZero) {
+  WindowView v;
+  v.have_state = true;
+  v.speed_kmh = -0.0004;
+  EXPECT_EQ(SpeedText(v), "SPEED    0.0 KM/H");
+  v.speed_kmh = -0.0;
+  EXPECT_EQ(SpeedText(v), "SPEED    0.0 KM/H");
+  v.speed_kmh = -3.25;
+  EXPECT_EQ(SpeedText(v), "SPEED   -3.2 KM/H");  // reversing is a real minus
+  v.speed_kmh = 70;
+  EXPECT_EQ(SpeedText(v), "SPEED   70.0 KM/H");
+  v.have_state = false;
+  EXPECT_EQ(SpeedText(v), "SPEED   --");
+
+  v.have_state = true;
+  v.speed_kmh = -0.0004;
+  v.input.set_steer(-1e-6);
+  v.hand_angle_deg = -0.2;
+  v.ffb_present = true;
+  v.ffb_torque_nm = -0.001;
+  for (const WindowItem& item : LayoutWindow(v, StatusWindow::kWidth)) {
+    EXPECT_THAT(item.text, ::testing::Not(::testing::ContainsRegex("-0(\\.0+)?( |$)")))
+        << item.text;
+  }
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
 #include "vdyn/base/text.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -67,6 +68,13 @@ std::string FormatNumber(double v) {
     }
     while (exp.size() > 1 && exp[0] == '0') exp.erase(0, 1);
     s = mant + "e" + (neg ? "-" : "") + exp;
+    // A large number is written out when that is shorter: 2147483647, not 2.147483647e9.
+    if (!neg && a < 1e17) {
+      auto [fptr, fec] = std::to_chars(buf, buf + sizeof buf, v, std::chars_format::fixed);
+      if (fec == std::errc() && fptr - buf < static_cast<std::ptrdiff_t>(s.size())) {
+        s.assign(buf, fptr);
+      }
+    }
   }
   return s;
 }
@@ -80,6 +88,22 @@ std::string FormatApprox(double v, int digits) {
   // Read back and print shortest: drops trailing zeros; then the exponent as a person writes it.
   const auto parsed = ParseNumber(buf);
   return parsed ? FormatNumber(*parsed) : std::string(buf);
+}
+
+std::string FormatFixed(double v, int decimals, bool plus) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, plus ? "%+.*f" : "%.*f", std::clamp(decimals, 0, 17), v);
+  std::string s = buf;
+  // A reading that shows no digit but zero has no sign but the one asked for.
+  if (!s.empty() && s[0] == '-' && s.find_first_of("123456789") == std::string::npos &&
+      std::isfinite(v)) {
+    if (plus) {
+      s[0] = '+';
+    } else {
+      s.erase(0, 1);
+    }
+  }
+  return s;
 }
 
 std::string Quote(std::string_view text, std::size_t max_bytes) {

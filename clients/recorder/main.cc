@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "vdyn/cli/errors.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
@@ -18,6 +19,7 @@
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/topics.h"
 
 namespace {
 
@@ -43,8 +45,18 @@ CLI::Validator TopicNames() {
   return CLI::Validator(
       [](std::string& text) -> std::string {
         if (TopicByName(text)) return {};
-        return "'" + text + "' is not a vdyn topic (state, input, control, control_reply, params, world, "
-               "events, diagnostics)";
+        std::vector<std::string> names;
+        for (const auto& spec : vdyn::transport::AllTopics()) {
+          const std::string name = spec.name;
+          names.push_back(name.rfind("vdyn/", 0) == 0 ? name.substr(5) : name);
+        }
+        std::string why = "'" + vdyn::base::Quote(text, 60) + "' is not a vdyn topic";
+        if (const auto near = vdyn::cli::Nearest(text, names); !near.empty()) {
+          why += "; did you mean '" + near.front() + "'?";
+        }
+        std::string all;
+        for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+        return why + " (the topics: " + all + ")";
       },
       "TOPIC");
 }
@@ -128,7 +140,7 @@ int main(int argc, char** argv) {
   play->add_option("--topics", play_topics, "Topics to republish (default: world,params,state,input)")
       ->delimiter(',')->check(TopicNames());
   auto* play_vehicle = play->add_option("--vehicle", vehicle, "Only this vehicle");
-  play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->capture_default_str();
+  play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->check(cli::Id("server id"))->capture_default_str();
   play->add_flag("--no-keys", no_keys, "Ignore the keyboard");
   play->add_flag("--force", pl.force, "Play even where a live server runs");
   play->add_flag("--status", status, "Print the status line (default: on a terminal)");
@@ -183,7 +195,7 @@ int main(int argc, char** argv) {
       transport::Participant participant(domain, limits::kRecorderReceiveBufferBytes);
       recorder::Capture capture(participant, ro);
       spdlog::info("vdyn-recorder: recording domain {} to {}{}", domain, ro.out.string(),
-                   ro.duration_s > 0 ? " for " + std::to_string(ro.duration_s) + " s" : "; Ctrl-C ends");
+                   ro.duration_s > 0 ? " for " + base::FormatNumber(ro.duration_s) + " s" : "; Ctrl-C ends");
       const recorder::CaptureSummary s = capture.Run(g_stop);
       std::string files;
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();

@@ -22,16 +22,19 @@
 #include <iostream>
 #include <map>
 #include <thread>
+#include <vector>
 
 #include <SDL2/SDL.h>
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/loop.h"
+#include "vdyn/client/session_view.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/state.pb.h"
@@ -48,6 +51,9 @@ namespace wi = vdyn::wheel_input;
 using vdyn::base::MonoTime;
 using vdyn::base::MonotonicNow;
 using vdyn::base::Nanos;
+
+// --device and --pedals: an index of SDL's device list (vdyn-input list).
+constexpr vdyn::limits::Range kDeviceIndex{0, 255, false, false, "SDL device index"};
 
 std::atomic<bool> g_stop{false};
 extern "C" void OnSignal(int) {
@@ -67,6 +73,33 @@ Nanos Period(double hz) {
   return Nanos{static_cast<std::int64_t>(1e9 / hz)};
 }
 
+// The vehicles the servers on the domain publish, by their parameters (kept for late joiners:
+// they arrive at once), looked for up to 1 s; empty where no server runs.
+std::vector<std::uint32_t> VehiclesOnDomain(vdyn::transport::Participant& participant) {
+  vdyn::client::SessionView view(
+      participant, {.states = false, .params = true, .world = false, .diagnostics = false});
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+  while (view.vehicles().empty() && std::chrono::steady_clock::now() < deadline) {
+    view.Wait(std::chrono::milliseconds(100));
+    view.Poll();
+  }
+  std::vector<std::uint32_t> ids;
+  for (const auto& [id, vehicle] : view.vehicles()) ids.push_back(id);
+  return ids;
+}
+
+// Why no state or parameters of the vehicle came, for a person: no server, or servers with other
+// vehicles (`others`) and how to drive one of them or add this one.
+std::string WhyNoVehicle(const Common& c, const std::vector<std::uint32_t>& others) {
+  if (others.empty()) return "is vdyn-server running?";
+  std::string ids;
+  for (const std::uint32_t id : others) ids += (ids.empty() ? "" : ",") + std::to_string(id);
+  return std::string("vdyn-server there has ") + (others.size() == 1 ? "vehicle " : "vehicles ") +
+         ids + ": drive " + (others.size() == 1 ? "it" : "one") + " with --vehicle-id " +
+         std::to_string(others.front()) + ", or start vdyn-server with --vehicle-ids " + ids + "," +
+         std::to_string(c.vehicle_id);
+}
+
 // --- play ------------------------------------------------------------------------------------
 
 struct PlayOptions {
@@ -75,6 +108,10 @@ struct PlayOptions {
   bool loop = false;
 };
 
+// A server publishes a state every step (1 kHz): this long without one, none is running (or it
+// is paused).
+constexpr double kSilentS = 2.0;
+
 int Play(const Common& c, const PlayOptions& o) {
   const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(o.maneuver);
   vdyn::transport::DropCounters drops;
@@ -82,39 +119,78 @@ int Play(const Common& c, const PlayOptions& o) {
   vdyn::client::InputPublisher writer(participant, c.vehicle_id, c.source_id, c.strength);
   vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant,
                                                          vdyn::transport::TopicId::kState, &drops);
+  const bool server_clock = o.clock == "server";
 
-  // Simulation time of the vehicle, from its newest state (clock=server).
+  // The vehicle's newest simulation time (clock=server) and what its states say about this input.
   std::int64_t sim_ns = -1;
+  std::uint64_t states_seen = 0, states_ours = 0;
+  std::string other_source;  // the newest other source that drove the vehicle
+  MonoTime last_state_at{};
   auto poll_states = [&] {
     states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
-      if (s.vehicle_id() == c.vehicle_id) sim_ns = s.sim_time_ns();
+      if (s.vehicle_id() != c.vehicle_id) return;
+      sim_ns = s.sim_time_ns();
+      ++states_seen;
+      last_state_at = MonotonicNow();
+      if (s.input().source_id() == c.source_id) {
+        ++states_ours;
+      } else if (!s.input().source_id().empty()) {
+        other_source = s.input().source_id();
+      }
     });
   };
-  if (o.clock == "server") {
+  const std::string where =
+      "vehicle " + std::to_string(c.vehicle_id) + " on domain " + std::to_string(c.domain);
+  if (server_clock) {
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::duration<double>(c.wait_s);
+    spdlog::info("vdyn-input: waiting up to {} s for a state of {}", c.wait_s, where);
     while (sim_ns < 0 && !g_stop && std::chrono::steady_clock::now() < deadline) {
       states.Wait(std::chrono::milliseconds(50));
       poll_states();
     }
+    if (g_stop) return 0;
     if (sim_ns < 0) {
-      std::cerr << "vdyn-input: no state of vehicle " << c.vehicle_id << " on domain " << c.domain
-                << " within " << c.wait_s << " s; is vdyn-server running?\n";
+      std::cerr << "vdyn-input: no state of " << where << " within " << c.wait_s << " s; "
+                << WhyNoVehicle(c, VehiclesOnDomain(participant)) << "\n";
       return 1;
     }
   }
-  spdlog::info("vdyn-input: playing '{}' ({:.1f} s) for vehicle {} as '{}' (strength {})",
-               o.maneuver, maneuver.end_time(), c.vehicle_id, c.source_id, c.strength);
+  spdlog::info("vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {})",
+               o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength);
 
   const MonoTime wall_start = MonotonicNow();
   const std::int64_t sim_start = sim_ns;
   vdyn::client::FixedRateLoop loop_clock(Period(c.rate_hz), wall_start);
   vdyn::pb::DriverInput msg;
+  bool warned_silent = false;
+  double t = 0.0;
   while (!g_stop) {
     const auto tick = loop_clock.Wait();
-    double t = 0.0;
-    if (o.clock == "server") {
-      poll_states();
+    poll_states();
+    // Silence: no server yet, or it went away or paused. The wall clock plays on; the server's
+    // clock stands still without states, and the maneuver with it. Either way, it is said.
+    const double silent_s = (tick.now - (states_seen > 0 ? last_state_at : wall_start)).seconds();
+    if (silent_s >= kSilentS && !warned_silent) {
+      warned_silent = true;
+      if (states_seen == 0) {
+        spdlog::warn(
+            "vdyn-input: no state of {} after {:.0f} s of playing; is vdyn-server "
+            "running? The maneuver plays on by the wall clock, heard by no one",
+            where, kSilentS);
+      } else {
+        spdlog::warn(
+            "vdyn-input: no state of {} for {:.0f} s, at {:.1f} s of the maneuver: "
+            "vdyn-server is paused or has stopped; {}",
+            where, kSilentS, t,
+            server_clock ? "the maneuver waits for its clock"
+                         : "the maneuver plays on by the wall clock");
+      }
+    } else if (silent_s < kSilentS && warned_silent) {
+      warned_silent = false;
+      spdlog::info("vdyn-input: states of {} again", where);
+    }
+    if (server_clock) {
       t = static_cast<double>(sim_ns - sim_start) * 1e-9;
     } else {
       t = (tick.now - wall_start).seconds();
@@ -129,6 +205,24 @@ int Play(const Common& c, const PlayOptions& o) {
       return 1;
     }
   }
+  // The outcome: whether a server took the input.
+  const std::string played =
+      g_stop ? "stopped at " + vdyn::base::FormatFixed(t, 1) + " s of '" + o.maneuver + "'"
+             : "played '" + o.maneuver + "' to its end (" +
+                   vdyn::base::FormatFixed(maneuver.end_time(), 1) + " s, " + o.clock + " clock)";
+  if (states_seen == 0) {
+    std::cerr << "vdyn-input: " << played << ", but no server took it: no state of " << where
+              << " arrived; " << WhyNoVehicle(c, VehiclesOnDomain(participant)) << "\n";
+    return g_stop ? 0 : 1;
+  }
+  std::string outcome = "vdyn-input: " + played + "; " + std::to_string(states_ours) + " of " +
+                        std::to_string(states_seen) + " states of vehicle " +
+                        std::to_string(c.vehicle_id) + " applied this input";
+  if (states_ours == 0 && !other_source.empty()) {
+    outcome += " ('" + other_source + "' drove it: a stronger source than --strength " +
+               std::to_string(c.strength) + ")";
+  }
+  std::printf("%s\n", outcome.c_str());
   return 0;
 }
 
@@ -152,8 +246,10 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
   wi::DdsLink link(participant, c.vehicle_id, c.source_id, c.strength);
   if (!link.WaitForParams(std::chrono::duration_cast<std::chrono::nanoseconds>(
           std::chrono::duration<double>(c.wait_s)))) {
+    std::vector<std::uint32_t> others;
+    for (const auto& [id, vehicle] : link.view().vehicles()) others.push_back(id);
     std::cerr << "vdyn-input: no parameters of vehicle " << c.vehicle_id << " on domain "
-              << c.domain << " within " << c.wait_s << " s; is vdyn-server running?\n";
+              << c.domain << " within " << c.wait_s << " s; " << WhyNoVehicle(c, others) << "\n";
     return 1;
   }
   wi::RigConfig cfg;
@@ -487,6 +583,7 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")->capture_default_str();
   app.add_option("--source-id", c.source_id, "This source's name (shown in the state)")
+      ->check(vdyn::cli::Id("source id"))
       ->capture_default_str();
   app.add_option("--strength", c.strength,
                  "Ownership strength: the strongest live source drives (primary rig > backup)")
@@ -513,6 +610,7 @@ int main(int argc, char** argv) {
 
   CLI::App* play = app.add_subcommand("play", "Play a maneuver (CSV file or 'demo') as live input");
   play->add_option("maneuver", play_opt.maneuver, "Maneuver CSV, or 'demo'")->required();
+  add_play(play);
 
   RigOptions rig;
   auto add_rig = [&](CLI::App* a, bool wheel) {
@@ -521,7 +619,7 @@ int main(int argc, char** argv) {
                     "Wheel mapping file (default: the user's, else the table)");
       a->add_option("--device", rig.device,
                     "SDL device index (vdyn-input list); default: the first wheel")
-          ->check(CLI::Range(0, 255));
+          ->check(vdyn::cli::WholeInRange(kDeviceIndex));
       a->add_option("--range-deg", rig.range_deg, "The wheel's rotation lock to lock, degrees")
           ->check(vdyn::cli::InRange(vdyn::limits::kWheelRangeDeg));
       a->add_flag("--no-ffb", rig.no_ffb, "No force feedback");
@@ -560,6 +658,7 @@ int main(int argc, char** argv) {
       a->add_flag("--no-window", rig.no_window, "No window (the wheel needs none)");
     }
     a->add_option("--gears", rig.gears, "Forward gears the paddles count to")
+        ->type_name("INT")
         ->check(vdyn::cli::WholeInRange(vdyn::limits::kGears))
         ->capture_default_str();
     a->add_option("--key-steer-rate", rig.key_steer_rate, "Keyboard steering, full lock per second")
@@ -587,9 +686,9 @@ int main(int argc, char** argv) {
   CLI::App* calibrate =
       app.add_subcommand("calibrate", "Write a wheel's mapping file, step by step");
   calibrate->add_option("--device", cal.device, "SDL device index (default: the first wheel)")
-      ->check(CLI::Range(0, 255));
+      ->check(vdyn::cli::WholeInRange(kDeviceIndex));
   calibrate->add_option("--pedals", cal.pedals, "SDL device index of a separate pedal set")
-      ->check(CLI::Range(0, 255));
+      ->check(vdyn::cli::WholeInRange(kDeviceIndex));
   calibrate->add_option("--out", cal.out,
                         "Mapping file to write (default: the user's for this wheel)");
   calibrate->add_option("--range-deg", cal.range_deg, "The wheel's rotation lock to lock, degrees")
@@ -608,6 +707,12 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::InRange(vdyn::limits::kWaitS))
       ->capture_default_str();
 
+  // The options before the command are taken after it too; each command's --help says so.
+  for (CLI::App* command : {play, drive, keyboard, list, calibrate}) {
+    command->footer(
+        "Before or after the command: --domain N, --vehicle-id ID, --source-id NAME, "
+        "--strength N, --rate-hz HZ, --wait S, --status (vdyn-input --help).");
+  }
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

@@ -77,6 +77,12 @@ SdlContext::SdlContext(bool want_video) {
   // Our loop reads the joysticks' state directly; their events would only fill the queue.
   SDL_JoystickEventState(SDL_IGNORE);
   if (want_video) {
+    if (std::getenv("WAYLAND_DISPLAY") == nullptr && std::getenv("XDG_RUNTIME_DIR") == nullptr) {
+      // No Wayland compositor can be reached: SDL's Wayland driver would only print a stray
+      // "XDG_RUNTIME_DIR is invalid or not set" before our own message says what is missing.
+      // (The SDL_VIDEODRIVER variable, as tests set it, still wins over this hint.)
+      SDL_SetHint(SDL_HINT_VIDEODRIVER, "x11,offscreen");
+    }
     if (SDL_InitSubSystem(SDL_INIT_VIDEO) == 0) {
       video_ = true;
       // Without a display SDL falls back to its offscreen driver: a window nobody sees or types
@@ -86,8 +92,7 @@ SdlContext::SdlContext(bool want_video) {
       if ((driver == "offscreen" || driver == "dummy") && (asked == nullptr || driver != asked)) {
         SDL_QuitSubSystem(SDL_INIT_VIDEO);
         video_ = false;
-        video_error_ =
-            "no display: SDL found only its " + driver + " video driver (is DISPLAY set?)";
+        video_error_ = "SDL found only its " + driver + " video driver; is DISPLAY set?";
       }
     } else {
       video_error_ = SDL_GetError();

@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "vdyn/base/text.h"
 #include "vdyn/wheel_input/mapping.h"
 #include "vdyn/wheel_input/sdl_haptic.h"
 
@@ -314,17 +315,17 @@ std::string RigLoop::StatusLine() const {
   const double deg = msg_.steer() * 180.0 / std::numbers::pi;
   std::string line =
       device_name_ + (wheel_mode_ && !wheel_ ? " UNPLUGGED" : "") +
-      fmt::format(" | steer {:+6.1f} deg ", deg) +
+      fmt::format(" | steer {:>6} deg ", base::FormatFixed(deg, 1, true)) +
       (msg_.steer_mode() == pb::STEER_HAND_WHEEL ? "hand" : "road") +
       fmt::format(" | thr {:.2f} brk {:.2f}", msg_.throttle(), msg_.brake()) + " | gear " +
       (msg_.gear() == 0 ? std::string("auto") : std::to_string(msg_.gear())) + " | cruise " +
       (msg_.cruise_on() ? fmt::format("{:.0f} km/h", msg_.cruise_set_kmh()) : "off");
   if (feed_.state() != nullptr) {
-    line +=
-        fmt::format(" | {:.1f} km/h", info_.speed_kmh) + (driving_ ? " driving" : " NOT driving");
+    line += " | " + base::FormatFixed(info_.speed_kmh, 1) + " km/h" +
+            (driving_ ? " driving" : " NOT driving");
   }
   if (ffb_ && ffb_->params().peak_torque_nm > 0) {
-    line += fmt::format(" | ffb {:+.2f} N*m ", ffb_->last().torque_nm) +
+    line += " | ffb " + base::FormatFixed(ffb_->last().torque_nm, 2, true) + " N*m " +
             ModeName(ffb_->last().mode) +
             fmt::format(" clip {:.1f} %", 100.0 * ffb_->clip_fraction());
   }

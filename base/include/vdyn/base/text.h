@@ -15,12 +15,17 @@ namespace vdyn::base {
 std::optional<double> ParseNumber(std::string_view text);
 
 // The shortest form that reads back to the same double, with the exponent as a person writes it:
-// 100000, 0.25, 1e9, 1.5e-7, -3. Never 17 significant digits of noise.
+// 100000, 0.25, 1e9, 1.5e-7, -3, 2147483647. Never 17 significant digits of noise.
 std::string FormatNumber(double v);
 
 // A computed quantity to `digits` significant digits, exponent as a person writes it:
 // 14094.8275... -> "14095", 3.0864e-07 -> "3.086e-7", 0.29 -> "0.29".
 std::string FormatApprox(double v, int digits = 4);
+
+// `v` with `decimals` digits after the point, as a display shows a reading: "12.3", and "0.0",
+// never "-0.0", for a value that rounds to zero from below; `plus` writes "+" before a positive
+// value (and before zero).
+std::string FormatFixed(double v, int decimals, bool plus = false);
 
 // Untrusted text made safe for one log line or reply: at most `max_bytes` bytes of it, printable
 // ASCII kept, everything else escaped (\n, \x1b, ...), and "... (N bytes)" when cut.

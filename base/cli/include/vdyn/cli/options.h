@@ -1,8 +1,11 @@
 // Command-line numbers checked in one place, for every vdyn program: a CLI11 validator that
 // accepts only a finite number inside a range of the table of limits (vdyn/base/limits.h), with
-// the limit written as a person writes it; and one rule for exit codes (2 for a usage error).
+// the limit written as a person writes it; one rule for exit codes (2 for a usage error) and one
+// way of telling what is wrong with a command line.
 #pragma once
 
+#include <cmath>
+#include <iostream>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -13,17 +16,14 @@
 namespace vdyn::cli {
 
 // The value must be a finite number in `r` ("nan", "inf", "1e300" for a bounded option are
-// refused; "1e-400" is a number: it underflows to 0). The text is rewritten to the parsed number,
-// so CLI11 converts exactly what was checked.
+// refused; "1e-400" is a number: it underflows to 0). CLI11 converts the text as ParseNumber
+// reads it (a check cannot change the text; whole numbers are made decimal first, by Parse).
 inline CLI::Validator InRange(const limits::Range& r) {
   return CLI::Validator(
       [r](std::string& text) -> std::string {
         const auto v = base::ParseNumber(text);
         if (!v) return "'" + base::Quote(text, 40) + "' is not a finite number";
-        std::string why = limits::Check(r, *v);
-        if (!why.empty()) return why;
-        text = base::FormatNumber(*v);
-        return {};
+        return limits::Check(r, *v);
       },
       limits::Describe(r));
 }
@@ -34,13 +34,8 @@ inline CLI::Validator WholeInRange(const limits::Range& r) {
       [r](std::string& text) -> std::string {
         const auto v = base::ParseNumber(text);
         if (!v) return "'" + base::Quote(text, 40) + "' is not a number";
-        if (*v != static_cast<double>(static_cast<long long>(*v))) {
-          return "'" + base::Quote(text, 40) + "' is not a whole number";
-        }
-        std::string why = limits::Check(r, *v);
-        if (!why.empty()) return why;
-        text = std::to_string(static_cast<long long>(*v));
-        return {};
+        if (*v != std::trunc(*v)) return "'" + base::Quote(text, 40) + "' is not a whole number";
+        return limits::Check(r, *v);
       },
       limits::Describe(r));
 }
@@ -65,15 +60,10 @@ inline CLI::Validator Id(const std::string& what) {
       "ID");
 }
 
-// Parses argv; on --help prints and returns 0, on a usage error prints why and returns 2.
-// Returns -1 when the program should go on.
-inline int Parse(CLI::App& app, int argc, char** argv) {
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  return -1;
-}
+// Parses argv; on --help prints and returns 0, on a usage error prints why to `err` and returns 2.
+// Returns -1 when the program should go on. Every program's command line goes through here, so
+// the errors read alike (vdyn/cli/errors.h): each names the program (and command), an unknown
+// option or command comes with the nearest one, and a list with an empty entry is refused.
+int Parse(CLI::App& app, int argc, char** argv, std::ostream& err = std::cerr);
 
 }  // namespace vdyn::cli

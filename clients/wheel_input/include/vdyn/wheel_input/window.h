@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <SDL2/SDL.h>
 
@@ -35,6 +36,26 @@ struct WindowView {
   bool estop = false;
   bool keyboard_help = false;
 };
+
+// One thing the window draws, in window pixels. A text's box is its extent in SDL2_test's 8x8
+// font (8 pixels a character); a bar's box is its frame.
+struct WindowItem {
+  enum class Kind { kText, kBar, kCentredBar, kFilledBox };
+  Kind kind = Kind::kText;
+  SDL_Rect box{0, 0, 0, 0};
+  std::string text;  // kText
+  double value = 0;  // kBar: [0, 1] from the left; kCentredBar: [-1, 1], positive to the left
+  SDL_Color color{255, 255, 255, 255};
+};
+
+// The window's content for `v` in a window `width` pixels wide, top to bottom. Text too long for
+// a line wraps at spaces (a field a person named, such as a device, ends in "..." past its lines),
+// so nothing reaches past the right edge, and with every field at its longest the rows fit
+// StatusWindow::kHeight (tests check both). The e-stop banner's place is kept when it is off.
+std::vector<WindowItem> LayoutWindow(const WindowView& v, int width);
+
+// The speed line: "SPEED   70.0 KM/H", "SPEED    0.0 KM/H" at rest (never -0.0), "SPEED   --".
+std::string SpeedText(const WindowView& v);
 
 class StatusWindow {
  public:
