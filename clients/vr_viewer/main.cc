@@ -1,7 +1,7 @@
 // vdyn-viewer: watch a vdyn session - live, or a recording played back by `vdyn-recorder play` -
 // on the desktop or in an OpenXR headset (docs in clients/vr_viewer/README.md).
 // Exit codes: 0 done, 1 no display / OpenGL / transport failure or an unwritable output, 2 bad
-// command line.
+// command line or a car model that cannot be read.
 #include <csignal>
 #include <iostream>
 
@@ -9,6 +9,7 @@
 #include <CLI/CLI.hpp>
 
 #include "vdyn/cli/options.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/viewer.h"
 
 namespace {
@@ -35,6 +36,7 @@ int main(int argc, char** argv) {
   double map_half_height = o.camera.map_half_height;
   std::vector<double> orbit;
   std::string xr_space = "seated";
+  std::string quality = "high", car_model;
   bool no_hud = false;
   app.add_option("--domain", o.domain, "DDS domain id")
       ->check(cli::WholeInRange(limits::kDomainId))
@@ -68,6 +70,13 @@ int main(int argc, char** argv) {
   app.add_option("--msaa", o.samples,
                  "Multisampling of the scene (0: off; default 4, off on a software renderer)")
       ->check(cli::WholeInRange(limits::kSamples));
+  app.add_option("--quality", quality,
+                 "high: sun shadows, clouds, glossy paint; low: none of them, for a slow or "
+                 "software renderer")
+      ->check(CLI::IsMember({"low", "high"}))
+      ->capture_default_str();
+  app.add_option("--car-model", car_model,
+                 "A car body from a glTF/GLB file (+Y up, +Z forward), fitted to each vehicle");
   app.add_option("--fps", o.fps, "Frame rate cap, Hz (0: as fast as it draws)")
       ->check(cli::InRange(limits::kViewerFps))
       ->capture_default_str();
@@ -116,6 +125,18 @@ int main(int argc, char** argv) {
   o.arrows.metres_per_newton = arrow_m_per_kn / 1000.0;
   o.xr_seated = xr_space == "seated";
   o.hud = !no_hud;
+  o.quality = *vdyn::viewer::QualityFromName(quality);
+  if (!car_model.empty()) {
+    try {
+      o.car_model =
+          std::make_shared<const vdyn::viewer::ModelMesh>(vdyn::viewer::LoadCarModel(car_model));
+      spdlog::info("vdyn-viewer: car model '{}': {} triangles", car_model,
+                   o.car_model->triangles());
+    } catch (const vdyn::viewer::CarModelError& e) {
+      std::cerr << "vdyn-viewer: " << e.what() << "\n";
+      return 2;
+    }
+  }
 
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

@@ -68,6 +68,7 @@ struct GoodState {
   std::int64_t source_timestamp_ns = 0;
   std::uint64_t seen = 0;  // SessionView's count when it was taken
   bool fresh = false;      // arrived since the last frame (its latency is measured)
+  WheelSpin spin;          // the wheels' turn, integrated state by state
 };
 
 }  // namespace
@@ -237,7 +238,8 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
                           stats_.renderer.find("softpipe") != std::string::npos;
     options_.samples = software ? 0 : 4;
   }
-  m.renderer = std::make_unique<Renderer>();
+  m.renderer = std::make_unique<Renderer>(SettingsFor(options_.quality));
+  if (options_.car_model) m.renderer->SetCarModel(options_.car_model);
   m.desktop = std::make_unique<RenderTarget>();
   m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
 
@@ -542,6 +544,7 @@ bool Viewer::Frame() {
     g.seen = v.states;
     if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
     g.state = v.state;
+    AdvanceWheelSpin(g.spin, g.state);
     g.source_timestamp_ns = v.source_timestamp_ns;
     g.fresh = true;
   }
@@ -590,7 +593,8 @@ bool Viewer::Frame() {
     const AcceptedWorld* own_world = m.WorldOf(owner);
     m.views.emplace(
         id, BuildVehicleView(
-                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params)));
+                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params),
+                &g.spin));
   }
   const VehicleView* followed = followed_ ? vehicle(*followed_) : nullptr;
   CameraScene cs;
@@ -810,6 +814,7 @@ bool Viewer::Frame() {
                           options_.xr_seated);
               eye.target->BeginScene();
               Renderer::View rv{eye.view, eye.proj, eye.eye_W};
+              if (followed != nullptr) rv.focus_W = followed->pose_WB.t;
               m.renderer->Draw(rv, m.lists);
               eye.target->Resolve();
             },
@@ -852,6 +857,7 @@ bool Viewer::Frame() {
     desktop.BeginScene();
     Renderer::View rv{cam.view, cam.proj, cam.eye_W};
     rv.haze = !cam.orthographic;
+    if (followed != nullptr) rv.focus_W = followed->pose_WB.t;
     m.renderer->Draw(rv, m.lists);
     desktop.Resolve();
   }

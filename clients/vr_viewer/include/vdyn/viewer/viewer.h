@@ -33,7 +33,10 @@ struct ViewerOptions {
   CameraState camera;
   ArrowStyle arrows;
   int width = 1280, height = 720;
-  int samples = -1;     // multisampling of the scene; -1: 4, or 0 on a software renderer
+  int samples = -1;  // multisampling of the scene; -1: 4, or 0 on a software renderer
+  Quality quality = Quality::kHigh;  // shadows, clouds, glossy paint (renderer.h)
+  // A car model (LoadCarModel) every vehicle gets instead of the built-in body; null: built-in.
+  std::shared_ptr<const ModelMesh> car_model;
   double fps = 60;      // frame rate cap; 0: as fast as it draws
   bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
   bool hud = true;
