@@ -127,6 +127,33 @@ struct Viewer::Impl {
     }
     return worlds.empty() ? std::string() : worlds.begin()->first;
   }
+
+  // What the frame's stages share: the drawn server and world, the followed vehicle's view and
+  // the desktop camera.
+  struct FrameScene {
+    std::string server;
+    const AcceptedWorld* accepted = nullptr;
+    const pb::WorldDescription* world = nullptr;
+    const VehicleView* followed = nullptr;
+    CameraScene cs;
+    CameraView cam;
+  };
+
+  // The stages of one frame, in order (Viewer::Frame).
+  void HandleEvents();                                   // SDL: keys, mouse, window
+  void TakeSamples();                                    // DDS: states, worlds; followed vehicle
+  FrameScene UpdateScene();                              // each vehicle's view, the camera
+  void BuildHud(const FrameScene& f);                    // ImGui: panels, compass, labels
+  bool DrawHeadset(const FrameScene& f);                 // both eyes and the HUD quad
+  void DrawDesktop(const FrameScene& f, bool xr_drawn);  // the window's target
+  void Present();                                        // HUD on top, to the window
+  void Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f);  // timing, headless end
+  void Pace();                                                          // the frame-rate cap
+
+  // The draw lists for one view. `inside`: the followed vehicle seen from its own seat (its body
+  // is left out). Vehicles out of sight are left out; far ones get fewer facets.
+  void BuildLists(const FrameScene& f, const Mat4& view_proj, const Vec3& eye, bool ortho,
+                  double metres_per_pixel, double fovy, int height_px, bool inside);
 };
 
 Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
@@ -427,32 +454,46 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
 
 }  // namespace
 
+// One frame, as its stages.
 bool Viewer::Frame() {
   Impl& m = *impl_;
   const base::MonoTime t0 = base::MonotonicNow();
-  ImGuiIO& io = ImGui::GetIO();
+  m.HandleEvents();
+  m.TakeSamples();
+  const Impl::FrameScene f = m.UpdateScene();
+  m.BuildHud(f);
+  const bool xr_drawn = m.DrawHeadset(f);
+  m.DrawDesktop(f, xr_drawn);
+  m.Present();
+  m.Account(t0, xr_drawn, f);
+  if (m.quit) return false;
+  m.Pace();
+  return true;
+}
 
-  // --- events ---
+void Viewer::Impl::HandleEvents() {
+  ViewerOptions& o = owner.options_;
+  ImGuiIO& io = ImGui::GetIO();
   SDL_Event ev;
   while (SDL_PollEvent(&ev)) {
     ImGui_ImplSDL2_ProcessEvent(&ev);
     switch (ev.type) {
       case SDL_QUIT:
-        m.quit = true;
+        quit = true;
         break;
       case SDL_WINDOWEVENT:
-        if (ev.window.event == SDL_WINDOWEVENT_CLOSE) m.quit = true;
-        if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !options_.xr) {
-          options_.width = std::max(ev.window.data1, 64);
-          options_.height = std::max(ev.window.data2, 64);
-          m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+        if (ev.window.event == SDL_WINDOWEVENT_CLOSE) quit = true;
+        if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !o.xr) {
+          o.width = std::max(ev.window.data1, 64);
+          o.height = std::max(ev.window.data2, 64);
+          desktop->Resize(DrawableWidth(window), DrawableHeight(window), o.samples);
         }
         break;
       case SDL_KEYDOWN: {
         if (io.WantCaptureKeyboard) break;
         const SDL_Keycode k = ev.key.keysym.sym;
-        CameraState& c = options_.camera;
-        if (k == SDLK_ESCAPE) m.quit = true;
+        CameraState& c = o.camera;
+        if (k == SDLK_ESCAPE) quit = true;
         if (k >= SDLK_1 && k <= SDLK_5) c.mode = static_cast<CameraMode>(k - SDLK_1);
         if (k == SDLK_c)
           c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
@@ -460,42 +501,43 @@ bool Viewer::Frame() {
         if (k == SDLK_e) TurnGeographic(c, -1);
         if (k == SDLK_n) c.geo_turn = 0;
         if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS)
-          options_.arrows.metres_per_newton *= 1.25;
-        if (k == SDLK_MINUS || k == SDLK_KP_MINUS) options_.arrows.metres_per_newton /= 1.25;
-        if (k == SDLK_h) options_.hud = !options_.hud;
-        if (k == SDLK_p) m.show_params = !m.show_params;
-        if (k == SDLK_l) m.show_legend = !m.show_legend;
-        if (k == SDLK_F1) m.show_help = !m.show_help;
-        if (k == SDLK_TAB && !m.good.empty()) {
+          o.arrows.metres_per_newton *= 1.25;
+        if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
+        if (k == SDLK_h) o.hud = !o.hud;
+        if (k == SDLK_p) show_params = !show_params;
+        if (k == SDLK_l) show_legend = !show_legend;
+        if (k == SDLK_F1) show_help = !show_help;
+        if (k == SDLK_TAB && !good.empty()) {
           // Next (Shift: previous) vehicle of the domain.
           std::vector<std::uint32_t> ids;
-          for (const auto& [id, g] : m.good) ids.push_back(id);
-          auto it = followed_ ? std::find(ids.begin(), ids.end(), *followed_) : ids.end();
+          for (const auto& [id, g] : good) ids.push_back(id);
+          auto it =
+              owner.followed_ ? std::find(ids.begin(), ids.end(), *owner.followed_) : ids.end();
           std::size_t i = it == ids.end() ? 0 : static_cast<std::size_t>(it - ids.begin());
           i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size()
                                                : (i + 1) % ids.size();
-          options_.follow = ids[i];
+          o.follow = ids[i];
         }
         if (k == SDLK_F12) {
           const std::string path =
               "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
-          if (WritePng(path, Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
+          if (WritePng(path, owner.Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
         }
         break;
       }
       case SDL_MOUSEBUTTONDOWN:
-        if (!io.WantCaptureMouse) m.dragging = true;
+        if (!io.WantCaptureMouse) dragging = true;
         break;
       case SDL_MOUSEBUTTONUP:
-        m.dragging = false;
+        dragging = false;
         break;
       case SDL_MOUSEMOTION:
-        if (m.dragging && !io.WantCaptureMouse) {
-          CameraState& c = options_.camera;
+        if (dragging && !io.WantCaptureMouse) {
+          CameraState& c = o.camera;
           if (c.mode != CameraMode::kOrbit && c.mode != CameraMode::kMap) {
             // Dragging starts orbiting from where the camera is.
-            const VehicleView* f = followed_ ? vehicle(*followed_) : nullptr;
-            const Vec3 d = last_camera_.eye_W - (f != nullptr ? f->pose_WB.t : Vec3{});
+            const VehicleView* fv = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
+            const Vec3 d = owner.last_camera_.eye_W - (fv != nullptr ? fv->pose_WB.t : Vec3{});
             c.orbit_yaw = std::atan2(d.y, d.x);
             c.orbit_distance = std::clamp(Norm(d), 1.0, 2000.0);
             c.orbit_pitch = std::clamp(
@@ -510,20 +552,20 @@ bool Viewer::Frame() {
         break;
       case SDL_MOUSEWHEEL:
         if (!io.WantCaptureMouse) {
-          CameraState& c = options_.camera;
-          const double f = std::pow(0.9, ev.wheel.y);
+          CameraState& c = o.camera;
+          const double factor = std::pow(0.9, ev.wheel.y);
           switch (c.mode) {
             case CameraMode::kMap:
-              c.map_half_height = std::clamp(c.map_half_height * f, 2.0, 5000.0);
+              c.map_half_height = std::clamp(c.map_half_height * factor, 2.0, 5000.0);
               break;
             case CameraMode::kChase:
-              c.chase_distance = std::clamp(c.chase_distance * f, 2.0, 200.0);
+              c.chase_distance = std::clamp(c.chase_distance * factor, 2.0, 200.0);
               break;
             case CameraMode::kNorth:
-              c.north_distance = std::clamp(c.north_distance * f, 2.0, 500.0);
+              c.north_distance = std::clamp(c.north_distance * factor, 2.0, 500.0);
               break;
             default:
-              c.orbit_distance = std::clamp(c.orbit_distance * f, 1.0, 2000.0);
+              c.orbit_distance = std::clamp(c.orbit_distance * factor, 1.0, 2000.0);
               break;
           }
         }
@@ -532,12 +574,13 @@ bool Viewer::Frame() {
         break;
     }
   }
+}
 
-  // --- DDS ---
-  m.session.Poll();
-  for (const auto& [id, v] : m.session.vehicles()) {
+void Viewer::Impl::TakeSamples() {
+  session.Poll();
+  for (const auto& [id, v] : session.vehicles()) {
     if (v.states == 0) continue;
-    GoodState& g = m.good[id];
+    GoodState& g = good[id];
     if (g.seen == v.states) continue;
     g.seen = v.states;
     if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
@@ -545,369 +588,384 @@ bool Viewer::Frame() {
     g.source_timestamp_ns = v.source_timestamp_ns;
     g.fresh = true;
   }
-  for (auto it = m.good.begin(); it != m.good.end();) {  // vehicles seen only with bad states
-    it = it->second.state.wheels_size() == 0 ? m.good.erase(it) : std::next(it);
+  for (auto it = good.begin(); it != good.end();) {  // vehicles seen only with bad states
+    it = it->second.state.wheels_size() == 0 ? good.erase(it) : std::next(it);
   }
   // The followed vehicle: the chosen one when present, else the lowest id.
-  followed_.reset();
-  if (options_.follow && m.good.count(*options_.follow)) {
-    followed_ = options_.follow;
-  } else if (!m.good.empty()) {
-    followed_ = m.good.begin()->first;
+  const ViewerOptions& o = owner.options_;
+  owner.followed_.reset();
+  if (o.follow && good.count(*o.follow)) {
+    owner.followed_ = o.follow;
+  } else if (!good.empty()) {
+    owner.followed_ = good.begin()->first;
   }
-  const std::string server = m.CurrentServer();
-  const AcceptedWorld* accepted = m.WorldOf(server);
-  const pb::WorldDescription* world = accepted != nullptr ? &accepted->desc : nullptr;
   // The followed server's terrain on the GPU.
+  const std::string server = CurrentServer();
+  const AcceptedWorld* accepted = WorldOf(server);
   if (accepted != nullptr) {
     const std::uint64_t serial = accepted->serial;
-    if (!m.uploaded || m.uploaded_server != server || m.uploaded_serial != serial) {
-      m.renderer->SetTerrain(TerrainFromWorld(*world));
-      m.uploaded = true;
-      m.uploaded_server = server;
-      m.uploaded_serial = serial;
+    if (!uploaded || uploaded_server != server || uploaded_serial != serial) {
+      renderer->SetTerrain(TerrainFromWorld(accepted->desc));
+      uploaded = true;
+      uploaded_server = server;
+      uploaded_serial = serial;
     }
-  } else if (m.uploaded) {
-    m.renderer->ClearTerrain();
-    m.uploaded = false;
+  } else if (uploaded) {
+    renderer->ClearTerrain();
+    uploaded = false;
   }
+}
 
-  // --- scene ---
+Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
+  FrameScene f;
+  f.server = CurrentServer();
+  f.accepted = WorldOf(f.server);
+  f.world = f.accepted != nullptr ? &f.accepted->desc : nullptr;
   // The vehicles of the drawn world: those of its server, and those of other servers on the same
   // terrain (several servers of a lab on one world); another world's vehicles would float.
-  m.views.clear();
-  for (const auto& [id, g] : m.good) {
-    const std::string& owner = g.state.server_id();
-    if (!server.empty() && owner != server) {
-      const AcceptedWorld* theirs = m.WorldOf(owner);
-      if (world == nullptr || theirs == nullptr || world->terrain_hash() == 0 ||
-          theirs->desc.terrain_hash() != world->terrain_hash()) {
+  views.clear();
+  for (const auto& [id, g] : good) {
+    const std::string& server_id = g.state.server_id();
+    if (!f.server.empty() && server_id != f.server) {
+      const AcceptedWorld* theirs = WorldOf(server_id);
+      if (f.world == nullptr || theirs == nullptr || f.world->terrain_hash() == 0 ||
+          theirs->desc.terrain_hash() != f.world->terrain_hash()) {
         continue;
       }
     }
-    const auto* sv = m.session.vehicle(id);
-    const pb::VehicleParams* params = sv != nullptr && sv->params ? &*sv->params : nullptr;
-    const AcceptedWorld* own_world = m.WorldOf(owner);
-    m.views.emplace(
+    const auto* sv = session.vehicle(id);
+    const pb::VehicleParams* vp = sv != nullptr && sv->params ? &*sv->params : nullptr;
+    const AcceptedWorld* own_world = WorldOf(server_id);
+    views.emplace(
         id, BuildVehicleView(
-                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params)));
+                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp)));
   }
-  const VehicleView* followed = followed_ ? vehicle(*followed_) : nullptr;
-  CameraScene cs;
-  cs.followed = followed;
-  if (accepted != nullptr) {
-    cs.north_yaw = world->north_yaw();
-    const double span =
-        std::max(accepted->max_W.x - accepted->min_W.x, accepted->max_W.y - accepted->min_W.y);
-    cs.top_z = accepted->max_W.z;
-    cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
-    cs.fallback_target_W = world->has_spawn() ? Vec3{world->spawn().x(), world->spawn().y(), 0}
-                                              : 0.5 * (accepted->min_W + accepted->max_W);
+  f.followed = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
+  f.cs.followed = f.followed;
+  if (f.accepted != nullptr) {
+    const AcceptedWorld& a = *f.accepted;
+    f.cs.north_yaw = f.world->north_yaw();
+    const double span = std::max(a.max_W.x - a.min_W.x, a.max_W.y - a.min_W.y);
+    f.cs.top_z = a.max_W.z;
+    f.cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
+    f.cs.fallback_target_W = f.world->has_spawn()
+                                 ? Vec3{f.world->spawn().x(), f.world->spawn().y(), 0}
+                                 : 0.5 * (a.min_W + a.max_W);
   }
-  const CameraView cam =
-      ComputeCamera(options_.camera, cs, m.desktop->width(), m.desktop->height());
-  last_camera_ = cam;
+  f.cam = ComputeCamera(owner.options_.camera, f.cs, desktop->width(), desktop->height());
+  owner.last_camera_ = f.cam;
+  return f;
+}
 
-  // `inside`: the followed vehicle seen from its own seat (its body is left out).
-  // Vehicles out of sight are left out; far ones get fewer facets.
-  auto build_lists = [&](const Mat4& view_proj, const Vec3& eye, bool ortho,
-                         double metres_per_pixel, double fovy, int height_px, bool inside) {
-    m.lists.Clear();
-    // Arrows at least ~3 px thick wherever they are.
-    auto radius_at = [&](const Vec3& p) {
-      const double mpp = ortho
-                             ? metres_per_pixel
+void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const Vec3& eye,
+                              bool ortho, double metres_per_pixel, double fovy, int height_px,
+                              bool inside) {
+  const ViewerOptions& o = owner.options_;
+  lists.Clear();
+  // Arrows at least ~3 px thick wherever they are.
+  auto radius_at = [&](const Vec3& p) {
+    const double mpp = ortho ? metres_per_pixel
                              : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
-      return std::max(0.03, 1.6 * mpp);
-    };
-    for (const auto& [id, v] : m.views) {
-      if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, options_.arrows))) continue;
-      const bool own = inside && followed_ && id == *followed_;
-      const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
-      AppendVehicle(v, options_.arrows, radius_at, !own, px_per_m < 40.0, m.lists);
-    }
-    if (world != nullptr) {
-      // Landmarks: a small marker on the ground (their names are labels on the desktop).
-      for (const pb::Landmark& l : world->landmarks()) {
-        const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
-        const double r = std::max(0.2, 2.0 * radius_at(p));
-        m.lists.opaque.Cone(p, p + Vec3{0, 0, 2 * r}, r, {255, 120, 40}, true, 10);
-      }
-    }
+    return std::max(0.03, 1.6 * mpp);
   };
+  for (const auto& [id, v] : views) {
+    if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
+    const bool own = inside && owner.followed_ && id == *owner.followed_;
+    const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
+    AppendVehicle(v, o.arrows, radius_at, !own, px_per_m < 40.0, lists);
+  }
+  if (f.world != nullptr) {
+    // Landmarks: a small marker on the ground (their names are labels on the desktop).
+    for (const pb::Landmark& l : f.world->landmarks()) {
+      const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
+      const double r = std::max(0.2, 2.0 * radius_at(p));
+      lists.opaque.Cone(p, p + Vec3{0, 0, 2 * r}, r, {255, 120, 40}, true, 10);
+    }
+  }
+}
 
-  // --- HUD (ImGui) ---
+void Viewer::Impl::BuildHud(const FrameScene& f) {
+  ViewerOptions& o = owner.options_;
+  ViewerStats& stats = owner.stats_;
+  const std::optional<std::uint32_t>& followed_id = owner.followed_;
+  const CameraView& cam = f.cam;
   ImGui_ImplOpenGL3_NewFrame();
   ImGui_ImplSDL2_NewFrame();
   ImGui::NewFrame();
-  const double heading_deg = std::fmod(Deg(cs.north_yaw - cam.heading) + 720.0, 360.0);
-  const double north_angle = CompassNorthAngle(cs.north_yaw, cam.heading);
-  if (options_.hud) {
-    const auto* gs = followed_ ? &m.good.at(*followed_) : nullptr;
-    ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowBgAlpha(0.7f);
-    ImGui::Begin("vdyn-viewer", nullptr,
-                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
-    std::string mode = options_.playback ? "PLAYBACK" : "LIVE";
-    std::string server_mode;
-    if (const auto d = m.session.diagnostics().find(server); d != m.session.diagnostics().end()) {
-      server_mode = d->second.mode();
-      if (server_mode == "playback") mode = "PLAYBACK";
-    }
-    ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
-                       mode.c_str());
+  const double heading_deg = std::fmod(Deg(f.cs.north_yaw - cam.heading) + 720.0, 360.0);
+  const double north_angle = CompassNorthAngle(f.cs.north_yaw, cam.heading);
+  if (!o.hud) {
+    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(o.width) - 75, 75), 55,
+                north_angle, heading_deg);
+    ImGui::Render();
+    return;
+  }
+  const auto* gs = followed_id ? &good.at(*followed_id) : nullptr;
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowBgAlpha(0.7f);
+  ImGui::Begin("vdyn-viewer", nullptr,
+               ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  std::string mode = o.playback ? "PLAYBACK" : "LIVE";
+  std::string server_mode;
+  if (const auto d = session.diagnostics().find(f.server); d != session.diagnostics().end()) {
+    server_mode = d->second.mode();
+    if (server_mode == "playback") mode = "PLAYBACK";
+  }
+  ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
+                     mode.c_str());
+  ImGui::SameLine();
+  ImGui::Text("server '%s'%s%s  world '%s'", f.server.c_str(), server_mode.empty() ? "" : " ",
+              server_mode.c_str(), f.world != nullptr ? f.world->name().c_str() : "(waiting)");
+  if (gs != nullptr) {
+    const pb::VehicleState& s = gs->state;
+    ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), good.size());
+    ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
+                FormatSeconds(s.sim_time_ns()).c_str(), static_cast<unsigned long long>(s.step()));
+    const std::string& src = s.input().source_id();
+    ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
     ImGui::SameLine();
-    ImGui::Text("server '%s'%s%s  world '%s'", server.c_str(), server_mode.empty() ? "" : " ",
-                server_mode.c_str(), world != nullptr ? world->name().c_str() : "(waiting)");
-    if (gs != nullptr) {
-      const pb::VehicleState& s = gs->state;
-      ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), m.good.size());
-      ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
-                  FormatSeconds(s.sim_time_ns()).c_str(),
-                  static_cast<unsigned long long>(s.step()));
-      const std::string& src = s.input().source_id();
-      ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
-      ImGui::SameLine();
-      if (s.control().watchdog_safe_state()) {
-        ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "WATCHDOG: safe state (no live input)");
-      } else {
-        ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
-      }
-      const double age_ms =
-          static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
-      ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
-                  Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
+    if (s.control().watchdog_safe_state()) {
+      ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "WATCHDOG: safe state (no live input)");
     } else {
-      ImGui::Text("no vehicle on domain %u yet", options_.domain);
+      ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
     }
-    const double frame_ms = stats_.frame_ms.empty() ? 0.0 : stats_.frame_ms.back();
-    ImGui::Text("camera %s (1-5, C)   frame %.1f ms",
-                std::string(CameraName(options_.camera.mode)).c_str(), frame_ms);
-    if (m.xr)
-      ImGui::Text("OpenXR: %s, %s", m.xr->runtime_name().c_str(), m.xr->state_name().c_str());
-    const std::uint64_t drops = m.session.drops().Total();
-    if (drops > 0) {
-      ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
-                         static_cast<unsigned long long>(drops));
-      if (ImGui::IsItemHovered()) {
-        ImGui::BeginTooltip();
-        for (const auto& [kind, n] : m.session.drops().Snapshot())
-          ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
-        if (!stats_.last_refusal.empty())
-          ImGui::TextWrapped("last: %s", stats_.last_refusal.c_str());
-        ImGui::EndTooltip();
-      }
+    const double age_ms = static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
+    ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
+                Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
+  } else {
+    ImGui::Text("no vehicle on domain %u yet", o.domain);
+  }
+  const double frame_ms = stats.frame_ms.empty() ? 0.0 : stats.frame_ms.back();
+  ImGui::Text("camera %s (1-5, C)   frame %.1f ms", std::string(CameraName(o.camera.mode)).c_str(),
+              frame_ms);
+  if (xr) ImGui::Text("OpenXR: %s, %s", xr->runtime_name().c_str(), xr->state_name().c_str());
+  const std::uint64_t drops = session.drops().Total();
+  if (drops > 0) {
+    ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
+                       static_cast<unsigned long long>(drops));
+    if (ImGui::IsItemHovered()) {
+      ImGui::BeginTooltip();
+      for (const auto& [kind, n] : session.drops().Snapshot())
+        ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
+      if (!stats.last_refusal.empty()) ImGui::TextWrapped("last: %s", stats.last_refusal.c_str());
+      ImGui::EndTooltip();
+    }
+  }
+  ImGui::End();
+
+  if (show_legend) {
+    ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(o.height) - 210), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowBgAlpha(0.7f);
+    ImGui::Begin("forces", &show_legend,
+                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+    for (int k = 0; k < kForceKinds; ++k) {
+      const auto kind = static_cast<ForceKind>(k);
+      const Rgb8 c = ForceColour(kind);
+      const ImVec2 p = ImGui::GetCursorScreenPos();
+      ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
+                                                ImColour(c));
+      ImGui::Dummy(ImVec2(26, 14));
+      ImGui::SameLine();
+      ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &o.arrows.show[k]);
+    }
+    float kn = static_cast<float>(o.arrows.metres_per_newton * 1000.0);
+    ImGui::SetNextItemWidth(140);
+    if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
+                           ImGuiSliderFlags_Logarithmic)) {
+      o.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
     }
     ImGui::End();
-
-    if (m.show_legend) {
-      ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(options_.height) - 210),
-                              ImGuiCond_FirstUseEver);
-      ImGui::SetNextWindowBgAlpha(0.7f);
-      ImGui::Begin("forces", &m.show_legend,
-                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
-      for (int k = 0; k < kForceKinds; ++k) {
-        const auto kind = static_cast<ForceKind>(k);
-        const Rgb8 c = ForceColour(kind);
-        const ImVec2 p = ImGui::GetCursorScreenPos();
-        ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
-                                                  ImColour(c));
-        ImGui::Dummy(ImVec2(26, 14));
-        ImGui::SameLine();
-        ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &options_.arrows.show[k]);
-      }
-      float kn = static_cast<float>(options_.arrows.metres_per_newton * 1000.0);
-      ImGui::SetNextItemWidth(140);
-      if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
-                             ImGuiSliderFlags_Logarithmic)) {
-        options_.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
-      }
-      ImGui::End();
-    }
-    if (m.show_params && followed_) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) - 430, 160),
-                              ImGuiCond_FirstUseEver);
-      ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
-      ImGui::Begin("parameters", &m.show_params);
-      const auto* sv = m.session.vehicle(*followed_);
-      ImGui::Text("vehicle %u (P to close)", *followed_);
-      m.params->Draw(*followed_, server, sv != nullptr && sv->params ? &*sv->params : nullptr);
-      ImGui::End();
-    }
-    if (m.show_help) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) * 0.5f - 200, 80),
-                              ImGuiCond_FirstUseEver);
-      ImGui::Begin("keys", &m.show_help, ImGuiWindowFlags_AlwaysAutoResize);
-      ImGui::TextUnformatted(
-          "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
-          "Q/E  turn the geographic cameras left/right    N  back to north\n"
-          "     (the wheel's paddle shifters do the same)\n"
-          "Tab  next vehicle (Shift: previous)\n"
-          "+/-  arrow scale     L legend   P parameters   H HUD\n"
-          "drag orbit   wheel zoom   F12 screenshot   Esc quit");
-      ImGui::End();
-    }
-    // Compass, landmark and vehicle labels.
-    ImDrawList* fg = ImGui::GetForegroundDrawList();
-    DrawCompass(fg, ImVec2(static_cast<float>(options_.width) - 75, 75), 55, north_angle,
-                heading_deg);
-    if (!xr_active()) {
-      if (world != nullptr) {
-        for (const pb::Landmark& l : world->landmarks()) {
-          ImVec2 p;
-          const Vec3 at{l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0};
-          // Names of the landmarks near the camera (far ones would pile up on the horizon).
-          if (!cam.orthographic && Norm(at - cam.eye_W) > 150.0) continue;
-          if (Project(cam, options_.width, options_.height, at, p)) {
-            fg->AddText(ImVec2(p.x - 20, p.y - 14), IM_COL32(255, 255, 255, 220), l.name().c_str());
-          }
-        }
-      }
-      for (const auto& [id, v] : m.views) {
+  }
+  if (show_params && followed_id) {
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) - 430, 160), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
+    ImGui::Begin("parameters", &show_params);
+    const auto* sv = session.vehicle(*followed_id);
+    ImGui::Text("vehicle %u (P to close)", *followed_id);
+    params->Draw(*followed_id, f.server, sv != nullptr && sv->params ? &*sv->params : nullptr);
+    ImGui::End();
+  }
+  if (show_help) {
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) * 0.5f - 200, 80),
+                            ImGuiCond_FirstUseEver);
+    ImGui::Begin("keys", &show_help, ImGuiWindowFlags_AlwaysAutoResize);
+    ImGui::TextUnformatted(
+        "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
+        "Q/E  turn the geographic cameras left/right    N  back to north\n"
+        "     (the wheel's paddle shifters do the same)\n"
+        "Tab  next vehicle (Shift: previous)\n"
+        "+/-  arrow scale     L legend   P parameters   H HUD\n"
+        "drag orbit   wheel zoom   F12 screenshot   Esc quit");
+    ImGui::End();
+  }
+  // Compass, landmark and vehicle labels.
+  ImDrawList* fg = ImGui::GetForegroundDrawList();
+  DrawCompass(fg, ImVec2(static_cast<float>(o.width) - 75, 75), 55, north_angle, heading_deg);
+  if (!owner.xr_active()) {
+    if (f.world != nullptr) {
+      for (const pb::Landmark& l : f.world->landmarks()) {
         ImVec2 p;
-        if (Project(cam, options_.width, options_.height, v.pose_WB * Vec3{0, 0, 1.6}, p)) {
-          const std::string label = "#" + std::to_string(id);
-          fg->AddText(ImVec2(p.x - 8, p.y - 14), ImColour(VehicleColour(id)), label.c_str());
+        const Vec3 at{l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0};
+        // Names of the landmarks near the camera (far ones would pile up on the horizon).
+        if (!cam.orthographic && Norm(at - cam.eye_W) > 150.0) continue;
+        if (Project(cam, o.width, o.height, at, p)) {
+          fg->AddText(ImVec2(p.x - 20, p.y - 14), IM_COL32(255, 255, 255, 220), l.name().c_str());
         }
       }
     }
-  } else {
-    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(options_.width) - 75, 75),
-                55, north_angle, heading_deg);
+    for (const auto& [id, v] : views) {
+      ImVec2 p;
+      if (Project(cam, o.width, o.height, v.pose_WB * Vec3{0, 0, 1.6}, p)) {
+        const std::string label = "#" + std::to_string(id);
+        fg->AddText(ImVec2(p.x - 8, p.y - 14), ImColour(VehicleColour(id)), label.c_str());
+      }
+    }
   }
   ImGui::Render();
+}
 
-  // --- draw ---
-  bool xr_drawn = false;
-  if (m.xr && !m.xr_ended) {
-    try {
-      if (!m.xr->PollEvents()) {
-        // The headset session is over (the person left through the runtime): so is the viewer.
-        m.xr_ended = true;
-        spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
-        m.quit = true;
-      } else if (m.xr->running()) {
-        // The reference space's origin in the world (docs in xr_session.h).
-        Pose world_from_space;
-        if (followed != nullptr) {
-          if (options_.xr_seated) {
-            const Pose& b = followed->pose_WB;
-            world_from_space = {XrAxesIn(b.R), b * options_.camera.seat_B};
-          } else {
-            const Mat3 yaw = RotationZ(followed->yaw);
-            // On the ground 6 m to the vehicle's left, facing it (looking along -Y of its yaw).
-            const Vec3 place = followed->pose_WB.t + yaw * Vec3{0, 6, 0};
-            double z = followed->ground_z;
-            if (m.xr->standing_on_local()) z += 1.6;
-            world_from_space = {XrAxesIn(RotationZ(followed->yaw - kPi / 2)),
-                                {place.x, place.y, z}};
-          }
+bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
+  if (!xr || xr_ended) return false;
+  const ViewerOptions& o = owner.options_;
+  bool drawn = false;
+  try {
+    if (!xr->PollEvents()) {
+      // The headset session is over (the person left through the runtime): so is the viewer.
+      xr_ended = true;
+      spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
+      quit = true;
+    } else if (xr->running()) {
+      // The reference space's origin in the world (docs in xr_session.h).
+      Pose world_from_space;
+      if (f.followed != nullptr) {
+        if (o.xr_seated) {
+          const Pose& b = f.followed->pose_WB;
+          world_from_space = {XrAxesIn(b.R), b * o.camera.seat_B};
+        } else {
+          const Mat3 yaw = RotationZ(f.followed->yaw);
+          // On the ground 6 m to the vehicle's left, facing it (looking along -Y of its yaw).
+          const Vec3 place = f.followed->pose_WB.t + yaw * Vec3{0, 6, 0};
+          double z = f.followed->ground_z;
+          if (xr->standing_on_local()) z += 1.6;
+          world_from_space = {XrAxesIn(RotationZ(f.followed->yaw - kPi / 2)),
+                              {place.x, place.y, z}};
         }
-        m.xr->Frame(
-            world_from_space, 0.05, cs.far_m,
-            [&](const XrEye& eye) {
-              build_lists(eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
-                          options_.xr_seated);
-              eye.target->BeginScene();
-              Renderer::View rv{eye.view, eye.proj, eye.eye_W};
-              m.renderer->Draw(rv, m.lists);
-              eye.target->Resolve();
-            },
-            [&](RenderTarget& hud) {
-              glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
-              glViewport(0, 0, hud.width(), hud.height());
-              glClearColor(0, 0, 0, 0);
-              glClear(GL_COLOR_BUFFER_BIT);
-              ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-            });
-        ++stats_.xr_frames;
-        xr_drawn = true;
       }
-    } catch (const XrError& e) {
-      spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
-      stats_.xr_status = std::string("failed: ") + e.what();
-      m.xr_ended = true;
+      xr->Frame(
+          world_from_space, 0.05, f.cs.far_m,
+          [&](const XrEye& eye) {
+            BuildLists(f, eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
+                       o.xr_seated);
+            eye.target->BeginScene();
+            Renderer::View rv{eye.view, eye.proj, eye.eye_W};
+            renderer->Draw(rv, lists);
+            eye.target->Resolve();
+          },
+          [&](RenderTarget& hud) {
+            glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
+            glViewport(0, 0, hud.width(), hud.height());
+            glClearColor(0, 0, 0, 0);
+            glClear(GL_COLOR_BUFFER_BIT);
+            ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+          });
+      ++owner.stats_.xr_frames;
+      drawn = true;
     }
+  } catch (const XrError& e) {
+    spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
+    owner.stats_.xr_status = std::string("failed: ") + e.what();
+    xr_ended = true;
   }
-  RenderTarget& desktop = *m.desktop;
+  return drawn;
+}
+
+void Viewer::Impl::DrawDesktop(const FrameScene& f, bool xr_drawn) {
+  const ViewerOptions& o = owner.options_;
+  RenderTarget& target = *desktop;
   if (xr_drawn) {
     // The window mirrors the left eye, with the HUD.
-    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
-    glViewport(0, 0, desktop.width(), desktop.height());
+    glBindFramebuffer(GL_FRAMEBUFFER, target.resolve_framebuffer());
+    glViewport(0, 0, target.width(), target.height());
     glClearColor(0, 0, 0, 1);
     glClear(GL_COLOR_BUFFER_BIT);
-    const RenderTarget& mirror = m.xr->mirror();
+    const RenderTarget& mirror = xr->mirror();
     glBindFramebuffer(GL_READ_FRAMEBUFFER, mirror.resolve_framebuffer());
-    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, desktop.resolve_framebuffer());
-    const double s = std::min(static_cast<double>(options_.width) / mirror.width(),
-                              static_cast<double>(options_.height) / mirror.height());
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, target.resolve_framebuffer());
+    const double s = std::min(static_cast<double>(o.width) / mirror.width(),
+                              static_cast<double>(o.height) / mirror.height());
     const int w = static_cast<int>(mirror.width() * s), h = static_cast<int>(mirror.height() * s);
-    const int x0 = (options_.width - w) / 2, y0 = (options_.height - h) / 2;
+    const int x0 = (o.width - w) / 2, y0 = (o.height - h) / 2;
     glBlitFramebuffer(0, 0, mirror.width(), mirror.height(), x0, y0, x0 + w, y0 + h,
                       GL_COLOR_BUFFER_BIT, GL_LINEAR);
-    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
-  } else {
-    build_lists(cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
-                desktop.height(), options_.camera.mode == CameraMode::kDriver);
-    desktop.BeginScene();
-    Renderer::View rv{cam.view, cam.proj, cam.eye_W};
-    rv.haze = !cam.orthographic;
-    m.renderer->Draw(rv, m.lists);
-    desktop.Resolve();
+    glBindFramebuffer(GL_FRAMEBUFFER, target.resolve_framebuffer());
+    return;
   }
+  const CameraView& cam = f.cam;
+  BuildLists(f, cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
+             target.height(), o.camera.mode == CameraMode::kDriver);
+  target.BeginScene();
+  Renderer::View rv{cam.view, cam.proj, cam.eye_W};
+  rv.haze = !cam.orthographic;
+  renderer->Draw(rv, lists);
+  target.Resolve();
+}
+
+void Viewer::Impl::Present() {
   ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
   int ww = 0, wh = 0;
-  SDL_GL_GetDrawableSize(m.window, &ww, &wh);
-  Renderer::PresentToWindow(desktop, ww, wh);
-  SDL_GL_SwapWindow(m.window);
+  SDL_GL_GetDrawableSize(window, &ww, &wh);
+  Renderer::PresentToWindow(*desktop, ww, wh);
+  SDL_GL_SwapWindow(window);
   glFinish();
+}
 
-  // --- timing ---
+void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  ViewerStats& stats = owner.stats_;
   const base::WallTime shown = base::WallNow();
-  for (auto& [id, g] : m.good) {
+  for (auto& [id, g] : good) {
     if (!g.fresh) continue;
     g.fresh = false;
-    if (m.views.count(id) == 0 || g.source_timestamp_ns <= 0) continue;
-    if (stats_.latency_ms.size() < kMaxSamples) {
-      stats_.latency_ms.push_back(static_cast<double>(shown.ns - g.source_timestamp_ns) * 1e-6);
+    if (views.count(id) == 0 || g.source_timestamp_ns <= 0) continue;
+    if (stats.latency_ms.size() < kMaxSamples) {
+      stats.latency_ms.push_back(static_cast<double>(shown.ns - g.source_timestamp_ns) * 1e-6);
     }
   }
-  ++stats_.frames;
+  ++stats.frames;
   const base::MonoTime t1 = base::MonotonicNow();
-  if (stats_.frame_ms.size() < kMaxSamples) stats_.frame_ms.push_back((t1 - t0).millis());
+  if (stats.frame_ms.size() < kMaxSamples) stats.frame_ms.push_back((t1 - t0).millis());
 
-  // --- headless end ---
-  if (!m.counting) {
-    const bool waited = (t1 - m.start).seconds() >= options_.wait_s;
-    if (ready() || waited) {
-      if (!ready() && options_.frames > 0) {
+  // The headless end.
+  if (!counting) {
+    const bool waited = (t1 - start).seconds() >= o.wait_s;
+    if (owner.ready() || waited) {
+      if (!owner.ready() && o.frames > 0) {
         spdlog::warn("vdyn-viewer: no {} after {:.0f} s; drawing what there is",
-                     world == nullptr ? "world" : "vehicle", options_.wait_s);
+                     f.world == nullptr ? "world" : "vehicle", o.wait_s);
       }
-      m.counting = true;
+      counting = true;
     }
   }
   // With a headset, only frames it was given count.
-  const bool xr_pending = m.xr != nullptr && !m.xr_ended;
-  if (m.counting && (!xr_pending || xr_drawn)) ++stats_.counted_frames;
-  if (options_.frames > 0 && stats_.counted_frames >= options_.frames) {
-    if (!m.have_image) {
-      m.last_image = desktop.Read();
-      m.have_image = true;
+  const bool xr_pending = xr != nullptr && !xr_ended;
+  if (counting && (!xr_pending || xr_drawn)) ++stats.counted_frames;
+  if (o.frames > 0 && stats.counted_frames >= o.frames) {
+    if (!have_image) {
+      last_image = desktop->Read();
+      have_image = true;
     }
-    m.quit = true;
+    quit = true;
   }
-  if (m.quit) return false;
+}
 
-  // --- pacing ---
-  if (options_.fps > 0) {
-    const base::Nanos period{static_cast<std::int64_t>(1e9 / options_.fps)};
-    m.next_frame = m.next_frame + period;
-    const base::MonoTime now = base::MonotonicNow();
-    if (m.next_frame < now) m.next_frame = now;  // late: no burst to catch up
-    base::SleepUntil(m.next_frame);
-  }
-  return true;
+void Viewer::Impl::Pace() {
+  const ViewerOptions& o = owner.options_;
+  if (o.fps <= 0) return;
+  const base::Nanos period{static_cast<std::int64_t>(1e9 / o.fps)};
+  next_frame = next_frame + period;
+  const base::MonoTime now = base::MonotonicNow();
+  if (next_frame < now) next_frame = now;  // late: no burst to catch up
+  base::SleepUntil(next_frame);
 }
 
 }  // namespace vdyn::viewer
