@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <stdexcept>
 
@@ -42,6 +45,16 @@ std::string FormatSeconds(std::int64_t ns) {
   return b;
 }
 
+// printf into a string (the HUD's lines: drawn and kept for tests).
+__attribute__((format(printf, 1, 2))) std::string Format(const char* fmt, ...) {
+  char b[512];
+  va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(b, sizeof b, fmt, args);
+  va_end(args);
+  return b;
+}
+
 // A world that passed CheckWorld, with its extent.
 struct AcceptedWorld {
   pb::WorldDescription desc;
@@ -62,13 +75,42 @@ int DrawableHeight(SDL_Window* w) {
   return std::max(y, 1);
 }
 
-// A vehicle's newest drawable state.
-struct GoodState {
-  pb::VehicleState state;
-  std::int64_t source_timestamp_ns = 0;
-  std::uint64_t seen = 0;  // SessionView's count when it was taken
-  bool fresh = false;      // arrived since the last frame (its latency is measured)
+// A vehicle as received: its states (each passed CheckState), and what the frame shows of it.
+struct Tracked {
+  StateHistory history;
+  std::uint64_t seen = 0;                // SessionView's count when last taken
+  std::string server;                    // of its newest state
+  pb::VehicleState drawn;                // at the frame's instant (interpolated)
+  const pb::VehicleState* at = nullptr;  // the received state at or before the instant
+  std::int64_t at_source_ns = 0;
+  std::int64_t instant_ns = 0;       // the instant shown, publisher's clock
+  std::int64_t last_instant_ns = 0;  // the previous frame's (latency counted when it moves)
 };
+
+// A key press held back until the frame's HUD has taken its input: keys typed into a text field
+// never reach the hotkeys.
+struct KeyPress {
+  SDL_Keycode key;
+  std::uint16_t mod;
+};
+
+// The headset's HUD panel in front of the head's reference pose (OpenXR axes), m: low and near
+// (a dashboard) when seated, further when standing; it faces the eyes.
+Pose HudPanel(bool seated) {
+  const Vec3 at = seated ? Vec3{0, -0.32, -0.8} : Vec3{0, -0.5, -1.1};
+  const Vec3 z = Normalized(-at);  // towards the eyes
+  const Vec3 x = Normalized(Cross({0, 1, 0}, z), {1, 0, 0});
+  Pose p;
+  p.R.c[0] = x;
+  p.R.c[1] = Cross(z, x);
+  p.R.c[2] = z;
+  p.t = at;
+  return p;
+}
+constexpr double kHudWidthSeatedM = 0.8, kHudWidthStandingM = 1.1;
+// The HUD's capital letters at least this tall as the eye sees them (about 0.8 deg reads well on
+// headsets of 15-25 pixels per degree).
+constexpr double kHudCapHeightDeg = 0.9;
 
 }  // namespace
 
@@ -91,12 +133,13 @@ struct Viewer::Impl {
   std::uint64_t uploaded_serial = 0;
   bool uploaded = false;
 
-  std::map<std::uint32_t, GoodState> good;
+  std::map<std::uint32_t, Tracked> tracked;
+  std::map<std::string, ClockOffset> clocks;   // each publisher's clock, by server
   std::map<std::uint32_t, VehicleView> views;  // this frame's, for the followed server
   std::map<std::pair<std::uint32_t, std::string>, std::uint32_t> buttons;  // by vehicle, source
   FrameLists lists;
 
-  bool show_params = false, show_legend = true, show_help = false;
+  bool show_params = false, legend_open = false, show_help = false;
   bool quit = false;
   bool dragging = false;
   base::MonoTime start = base::MonotonicNow();
@@ -104,6 +147,33 @@ struct Viewer::Impl {
   bool counting = false;
   Image last_image;
   bool have_image = false;
+
+  // The frame's display time (when it is expected on the screen), both clocks; the desktop's
+  // lead from the scene to the screen (a running mean of the frames before).
+  std::int64_t display_wall_ns = 0;
+  base::MonoTime scene_at{0};
+  double present_lead_ns = 0;
+
+  // Keys of this frame (applied once the HUD has seen them), and whether an ImGui item (a text
+  // field being typed into, a slider being dragged) had the input at the end of the last frame.
+  std::vector<KeyPress> keys;
+  bool item_active_before = false;
+
+  // The HUD's lines and the labels, as last drawn (for tests).
+  std::vector<std::string> hud_text;
+  std::vector<ShownLabel> shown_labels;
+
+  // --follow of a vehicle that is not there (yet): when the first vehicle was seen, and what was
+  // said about it.
+  std::optional<base::MonoTime> first_vehicle_at;
+  std::string missing_said;
+
+  // Headset: where the head is taken to be in the reference space (the place's eye point goes
+  // there); moved by recentring, back to the neutral head when the runtime recentres itself.
+  Pose head_ref;
+  std::uint64_t space_changes_seen = 0;
+  bool recentre_pending = false;
+  bool xr_waited = false;
 
   Impl(Viewer& v, const ViewerOptions& o)
       : owner(v), participant(o.domain), session(participant, Topics()) {}
@@ -122,10 +192,19 @@ struct Viewer::Impl {
   // The server whose world is drawn: the followed vehicle's, else the first with a world.
   std::string CurrentServer() const {
     if (owner.followed_) {
-      const auto it = good.find(*owner.followed_);
-      if (it != good.end()) return it->second.state.server_id();
+      const auto it = tracked.find(*owner.followed_);
+      if (it != tracked.end()) return it->second.server;
     }
     return worlds.empty() ? std::string() : worlds.begin()->first;
+  }
+
+  // The neutral head in the reference space: at the origin seated, standing at eye height.
+  Pose NeutralHead() const {
+    Pose p;
+    if (xr && !owner.options_.xr_seated && !xr->standing_on_local()) {
+      p.t.y = owner.options_.camera.eye_height;
+    }
+    return p;
   }
 
   // What the frame's stages share: the drawn server and world, the followed vehicle's view and
@@ -140,15 +219,22 @@ struct Viewer::Impl {
   };
 
   // The stages of one frame, in order (Viewer::Frame).
-  void HandleEvents();                                   // SDL: keys, mouse, window
+  void HandleEvents();                                   // SDL: mouse, window; keys held back
+  void WaitForDisplay();                                 // the display slot and its time
   void TakeSamples();                                    // DDS: states, worlds; followed vehicle
-  FrameScene UpdateScene();                              // each vehicle's view, the camera
+  FrameScene UpdateScene();                              // the vehicles at the display time
   void BuildHud(const FrameScene& f);                    // ImGui: panels, compass, labels
-  bool DrawHeadset(const FrameScene& f);                 // both eyes and the HUD quad
+  void ApplyKeys();                                      // hotkeys the HUD did not take
+  bool DrawHeadset(const FrameScene& f);                 // both eyes and the HUD panel
   void DrawDesktop(const FrameScene& f, bool xr_drawn);  // the window's target
   void Present();                                        // HUD on top, to the window
   void Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f);  // timing, headless end
-  void Pace();                                                          // the frame-rate cap
+
+  // Parts of the stages.
+  void NoteMissingFollow();
+  void HudStatus(const FrameScene& f);
+  void HudLabels(const FrameScene& f);
+  void Line(const std::string& text, const ImVec4* colour = nullptr);
 
   // The draw lists for one view. `inside`: the followed vehicle seen from its own seat (its body
   // is left out). Vehicles out of sight are left out; far ones get fewer facets.
@@ -218,6 +304,11 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
 
   // Window and OpenGL 3.3 core.
   SDL_SetHint(SDL_HINT_VIDEO_X11_FORCE_EGL, "0");  // GLX: OpenXR's Xlib binding needs it
+  if (std::getenv("WAYLAND_DISPLAY") == nullptr && std::getenv("XDG_RUNTIME_DIR") == nullptr) {
+    // No Wayland compositor can be reached: SDL's Wayland driver would only print a stray
+    // "XDG_RUNTIME_DIR is invalid or not set" before the offscreen fallback says what happened.
+    SDL_SetHint(SDL_HINT_VIDEODRIVER, "x11,offscreen");
+  }
   if (SDL_Init(SDL_INIT_VIDEO | SDL_INIT_EVENTS) != 0) {
     throw std::runtime_error(std::string("no display (SDL: ") + SDL_GetError() +
                              "); run it on a desktop, or headless under Xvfb (xvfb-run -s "
@@ -286,12 +377,25 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
     XrOptions xo;
     xo.seated = options_.xr_seated;
     xo.hud = options_.hud;
-    xo.hud_width = options_.width;
-    xo.hud_height = options_.height;
+    xo.hud_width = DrawableWidth(m.window);  // the HUD is drawn at the window's size
+    xo.hud_height = DrawableHeight(m.window);
+    xo.hud_width_m = options_.xr_seated ? kHudWidthSeatedM : kHudWidthStandingM;
     xo.samples = options_.samples;
     try {
       m.xr = std::make_unique<Headset>(xo);
       stats_.xr_status = "runtime '" + m.xr->runtime_name() + "'";
+      m.head_ref = m.NeutralHead();
+      // The HUD panel readable where it hangs: its text scaled so capitals subtend
+      // kHudCapHeightDeg at the eyes (ImGui's font: 13 px, capitals ~9 px).
+      const double distance = Norm(HudPanel(options_.xr_seated).t);
+      const double deg_per_px = Deg(xo.hud_width_m / xo.hud_width / distance);
+      io.FontGlobalScale =
+          static_cast<float>(std::clamp(kHudCapHeightDeg / (9.0 * deg_per_px), 1.0, 4.0));
+      // In a headset the first camera is where the person is: at the driver's seat seated,
+      // beside the vehicle standing (unless --camera chose).
+      if (!options_.camera_chosen) {
+        options_.camera.mode = options_.xr_seated ? CameraMode::kDriver : CameraMode::kBeside;
+      }
     } catch (const XrError& e) {
       stats_.xr_status = std::string("desktop fallback: ") + e.what();
       spdlog::warn("vdyn-viewer: {}; showing the desktop window instead", e.what());
@@ -348,8 +452,25 @@ const VehicleView* Viewer::vehicle(std::uint32_t id) const {
 
 bool Viewer::ready() const {
   if (!followed_) return false;
-  const auto it = impl_->good.find(*followed_);
-  return it != impl_->good.end() && impl_->WorldOf(it->second.state.server_id()) != nullptr;
+  const auto it = impl_->tracked.find(*followed_);
+  return it != impl_->tracked.end() && impl_->WorldOf(it->second.server) != nullptr;
+}
+
+const pb::VehicleState* Viewer::shown_state(std::uint32_t id) const {
+  const auto it = impl_->tracked.find(id);
+  return it == impl_->tracked.end() ? nullptr : it->second.at;
+}
+
+const std::vector<std::string>& Viewer::hud_text() const {
+  return impl_->hud_text;
+}
+
+const std::vector<Viewer::ShownLabel>& Viewer::labels() const {
+  return impl_->shown_labels;
+}
+
+void Viewer::RecentreHeadset() {
+  impl_->recentre_pending = true;
 }
 
 Image Viewer::Screenshot() const {
@@ -373,7 +494,8 @@ void Viewer::WriteStats(const std::string& path) const {
       << "worlds_refused " << s.worlds_refused << "\n"
       << "states_refused " << s.states_refused << "\n"
       << "paddle_presses " << s.paddle_presses << "\n"
-      << "vehicles " << impl_->good.size() << "\n"
+      << "vehicles " << impl_->tracked.size() << "\n"
+      << "last_display_mono_ns " << s.last_display_mono_ns << "\n"
       << "geo_turn_deg " << Deg(options_.camera.geo_turn) << "\n"
       << "drops_total " << impl_->session.drops().Total() << "\n";
   for (const auto& [kind, n] : impl_->session.drops().Snapshot()) {
@@ -459,21 +581,22 @@ bool Viewer::Frame() {
   Impl& m = *impl_;
   const base::MonoTime t0 = base::MonotonicNow();
   m.HandleEvents();
+  m.WaitForDisplay();
   m.TakeSamples();
   const Impl::FrameScene f = m.UpdateScene();
   m.BuildHud(f);
+  m.ApplyKeys();
   const bool xr_drawn = m.DrawHeadset(f);
   m.DrawDesktop(f, xr_drawn);
   m.Present();
   m.Account(t0, xr_drawn, f);
-  if (m.quit) return false;
-  m.Pace();
-  return true;
+  return !m.quit;
 }
 
 void Viewer::Impl::HandleEvents() {
   ViewerOptions& o = owner.options_;
   ImGuiIO& io = ImGui::GetIO();
+  keys.clear();
   SDL_Event ev;
   while (SDL_PollEvent(&ev)) {
     ImGui_ImplSDL2_ProcessEvent(&ev);
@@ -489,42 +612,11 @@ void Viewer::Impl::HandleEvents() {
           desktop->Resize(DrawableWidth(window), DrawableHeight(window), o.samples);
         }
         break;
-      case SDL_KEYDOWN: {
-        if (io.WantCaptureKeyboard) break;
-        const SDL_Keycode k = ev.key.keysym.sym;
-        CameraState& c = o.camera;
-        if (k == SDLK_ESCAPE) quit = true;
-        if (k >= SDLK_1 && k <= SDLK_5) c.mode = static_cast<CameraMode>(k - SDLK_1);
-        if (k == SDLK_c)
-          c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
-        if (k == SDLK_q) TurnGeographic(c, +1);
-        if (k == SDLK_e) TurnGeographic(c, -1);
-        if (k == SDLK_n) c.geo_turn = 0;
-        if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS)
-          o.arrows.metres_per_newton *= 1.25;
-        if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
-        if (k == SDLK_h) o.hud = !o.hud;
-        if (k == SDLK_p) show_params = !show_params;
-        if (k == SDLK_l) show_legend = !show_legend;
-        if (k == SDLK_F1) show_help = !show_help;
-        if (k == SDLK_TAB && !good.empty()) {
-          // Next (Shift: previous) vehicle of the domain.
-          std::vector<std::uint32_t> ids;
-          for (const auto& [id, g] : good) ids.push_back(id);
-          auto it =
-              owner.followed_ ? std::find(ids.begin(), ids.end(), *owner.followed_) : ids.end();
-          std::size_t i = it == ids.end() ? 0 : static_cast<std::size_t>(it - ids.begin());
-          i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size()
-                                               : (i + 1) % ids.size();
-          o.follow = ids[i];
-        }
-        if (k == SDLK_F12) {
-          const std::string path =
-              "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
-          if (WritePng(path, owner.Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
-        }
+      case SDL_KEYDOWN:
+        // Held back: whether the HUD takes it (a field being typed into) is known once the HUD
+        // has seen this frame's input (ApplyKeys).
+        keys.push_back({ev.key.keysym.sym, ev.key.keysym.mod});
         break;
-      }
       case SDL_MOUSEBUTTONDOWN:
         if (!io.WantCaptureMouse) dragging = true;
         break;
@@ -564,6 +656,9 @@ void Viewer::Impl::HandleEvents() {
             case CameraMode::kNorth:
               c.north_distance = std::clamp(c.north_distance * factor, 2.0, 500.0);
               break;
+            case CameraMode::kBeside:
+              c.beside_distance = std::clamp(c.beside_distance * factor, 1.0, 200.0);
+              break;
             default:
               c.orbit_distance = std::clamp(c.orbit_distance * factor, 1.0, 2000.0);
               break;
@@ -576,29 +671,72 @@ void Viewer::Impl::HandleEvents() {
   }
 }
 
+void Viewer::Impl::WaitForDisplay() {
+  const ViewerOptions& o = owner.options_;
+  xr_waited = false;
+  if (xr && !xr_ended) {
+    try {
+      if (!xr->PollEvents()) {
+        // The headset session is over (the person left through the runtime): so is the viewer.
+        xr_ended = true;
+        spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
+        quit = true;
+      } else if (xr->running()) {
+        // The runtime paces the frames and predicts when this one will be seen.
+        xr->WaitFrame();
+        xr_waited = true;
+        const base::MonoTime mono_now = base::MonotonicNow();
+        scene_at = mono_now;
+        display_wall_ns = base::WallNow().ns + (xr->display_mono_ns() - mono_now.ns);
+        owner.stats_.last_display_mono_ns = xr->display_mono_ns();
+        return;
+      }
+    } catch (const XrError& e) {
+      spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
+      owner.stats_.xr_status = std::string("failed: ") + e.what();
+      xr_ended = true;
+    }
+  }
+  // The desktop: the frame-rate cap, then on the screen when this frame's work is done (as long
+  // as the frames before took from here to the screen).
+  if (o.fps > 0 && owner.stats_.frames > 0) {
+    const base::Nanos period{static_cast<std::int64_t>(1e9 / o.fps)};
+    next_frame = next_frame + period;
+    const base::MonoTime now = base::MonotonicNow();
+    if (next_frame < now) next_frame = now;  // late: no burst to catch up
+    base::SleepUntil(next_frame);
+  }
+  scene_at = base::MonotonicNow();
+  const auto lead = static_cast<std::int64_t>(present_lead_ns);
+  display_wall_ns = base::WallNow().ns + lead;
+  owner.stats_.last_display_mono_ns = scene_at.ns + lead;
+}
+
 void Viewer::Impl::TakeSamples() {
   session.Poll();
+  const std::int64_t arrived = base::WallNow().ns;
   for (const auto& [id, v] : session.vehicles()) {
     if (v.states == 0) continue;
-    GoodState& g = good[id];
-    if (g.seen == v.states) continue;
-    g.seen = v.states;
+    if (tracked.count(id) == 0 && !CheckState(v.state).empty()) continue;  // only bad ones yet
+    Tracked& t = tracked[id];
+    if (t.seen == v.states) continue;
+    t.seen = v.states;
     if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
-    g.state = v.state;
-    g.source_timestamp_ns = v.source_timestamp_ns;
-    g.fresh = true;
+    clocks[v.state.server_id()].Observe(v.source_timestamp_ns, arrived);
+    t.history.Add(v.state, v.source_timestamp_ns, arrived);
+    t.server = v.state.server_id();
   }
-  for (auto it = good.begin(); it != good.end();) {  // vehicles seen only with bad states
-    it = it->second.state.wheels_size() == 0 ? good.erase(it) : std::next(it);
-  }
-  // The followed vehicle: the chosen one when present, else the lowest id.
+  // The followed vehicle: the chosen one when present, else the lowest id. One chosen but not
+  // there is waited for (and said so), never swapped for another.
   const ViewerOptions& o = owner.options_;
   owner.followed_.reset();
-  if (o.follow && good.count(*o.follow)) {
-    owner.followed_ = o.follow;
-  } else if (!good.empty()) {
-    owner.followed_ = good.begin()->first;
+  if (!tracked.empty() && !first_vehicle_at) first_vehicle_at = base::MonotonicNow();
+  if (o.follow) {
+    if (tracked.count(*o.follow) != 0) owner.followed_ = o.follow;
+  } else if (!tracked.empty()) {
+    owner.followed_ = tracked.begin()->first;
   }
+  NoteMissingFollow();
   // The followed server's terrain on the GPU.
   const std::string server = CurrentServer();
   const AcceptedWorld* accepted = WorldOf(server);
@@ -616,16 +754,61 @@ void Viewer::Impl::TakeSamples() {
   }
 }
 
+// --follow ID of a vehicle that is not on the domain: said once the others have had a moment to
+// arrive (with the ids that are there), again when that list changes, and when it comes.
+void Viewer::Impl::NoteMissingFollow() {
+  const ViewerOptions& o = owner.options_;
+  if (!o.follow) return;
+  if (owner.followed_) {
+    if (!missing_said.empty()) {
+      spdlog::info("vdyn-viewer: vehicle {} is here now: following it", *o.follow);
+      missing_said.clear();
+    }
+    return;
+  }
+  if (!first_vehicle_at || base::MonotonicNow() - *first_vehicle_at < base::Seconds(1)) return;
+  std::string there;
+  for (const auto& [id, t] : tracked) there += (there.empty() ? "" : ", ") + std::to_string(id);
+  if (there == missing_said) return;
+  spdlog::warn(
+      "vdyn-viewer: vehicle {} is not on domain {}; there: {} (Tab follows one); "
+      "waiting for vehicle {}",
+      *o.follow, o.domain, there, *o.follow);
+  missing_said = there;
+}
+
 Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
+  const ViewerOptions& o = owner.options_;
   FrameScene f;
   f.server = CurrentServer();
   f.accepted = WorldOf(f.server);
   f.world = f.accepted != nullptr ? &f.accepted->desc : nullptr;
+  // Each vehicle at the frame's instant: its display time less the presentation delay, on its
+  // publisher's clock (motion.h).
+  for (auto& [id, t] : tracked) {
+    if (t.history.empty()) continue;
+    StateHistory::Sample sample;
+    if (o.delay_ns > 0) {
+      const ClockOffset& clock = clocks[t.server];
+      sample = t.history.At(display_wall_ns - clock.offset_ns() - o.delay_ns);
+    } else {
+      sample = t.history.At(t.history.newest_source_ns());
+    }
+    t.at = sample.a;
+    t.at_source_ns = sample.a_source_ns;
+    t.instant_ns = sample.source_ns;
+    if (sample.b != nullptr) {
+      InterpolateState(*sample.a, *sample.b, sample.u, t.drawn);
+    } else {
+      t.drawn.CopyFrom(*sample.a);
+    }
+  }
   // The vehicles of the drawn world: those of its server, and those of other servers on the same
   // terrain (several servers of a lab on one world); another world's vehicles would float.
   views.clear();
-  for (const auto& [id, g] : good) {
-    const std::string& server_id = g.state.server_id();
+  for (const auto& [id, t] : tracked) {
+    if (t.at == nullptr) continue;
+    const std::string& server_id = t.server;
     if (!f.server.empty() && server_id != f.server) {
       const AcceptedWorld* theirs = WorldOf(server_id);
       if (f.world == nullptr || theirs == nullptr || f.world->terrain_hash() == 0 ||
@@ -638,7 +821,7 @@ Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
     const AcceptedWorld* own_world = WorldOf(server_id);
     views.emplace(
         id, BuildVehicleView(
-                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp)));
+                t.drawn, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp)));
   }
   f.followed = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
   f.cs.followed = f.followed;
@@ -652,7 +835,7 @@ Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
                                  ? Vec3{f.world->spawn().x(), f.world->spawn().y(), 0}
                                  : 0.5 * (a.min_W + a.max_W);
   }
-  f.cam = ComputeCamera(owner.options_.camera, f.cs, desktop->width(), desktop->height());
+  f.cam = ComputeCamera(o.camera, f.cs, desktop->width(), desktop->height());
   owner.last_camera_ = f.cam;
   return f;
 }
@@ -669,10 +852,12 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
     return std::max(0.03, 1.6 * mpp);
   };
   for (const auto& [id, v] : views) {
+    // From the driver's seat nothing of the own vehicle is drawn (its body, tyres and arrows
+    // would fill the view of the road ahead); its forces show in the other cameras.
+    if (inside && owner.followed_ && id == *owner.followed_) continue;
     if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
-    const bool own = inside && owner.followed_ && id == *owner.followed_;
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
-    AppendVehicle(v, o.arrows, radius_at, !own, px_per_m < 40.0, lists);
+    AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }
   if (f.world != nullptr) {
     // Landmarks: a small marker on the ground (their names are labels on the desktop).
@@ -684,80 +869,45 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
   }
 }
 
+// A line of the HUD: drawn, and kept for tests.
+void Viewer::Impl::Line(const std::string& text, const ImVec4* colour) {
+  if (colour != nullptr) {
+    ImGui::TextColored(*colour, "%s", text.c_str());
+  } else {
+    ImGui::TextUnformatted(text.c_str());
+  }
+  hud_text.push_back(text);
+}
+
 void Viewer::Impl::BuildHud(const FrameScene& f) {
   ViewerOptions& o = owner.options_;
-  ViewerStats& stats = owner.stats_;
-  const std::optional<std::uint32_t>& followed_id = owner.followed_;
   const CameraView& cam = f.cam;
   ImGui_ImplOpenGL3_NewFrame();
   ImGui_ImplSDL2_NewFrame();
   ImGui::NewFrame();
+  hud_text.clear();
+  shown_labels.clear();
   const double heading_deg = std::fmod(Deg(f.cs.north_yaw - cam.heading) + 720.0, 360.0);
   const double north_angle = CompassNorthAngle(f.cs.north_yaw, cam.heading);
+  const ImVec2 compass(static_cast<float>(o.width) - 75 * ImGui::GetIO().FontGlobalScale,
+                       75 * ImGui::GetIO().FontGlobalScale);
   if (!o.hud) {
-    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(o.width) - 75, 75), 55,
-                north_angle, heading_deg);
+    DrawCompass(ImGui::GetForegroundDrawList(), compass, 55, north_angle, heading_deg);
     ImGui::Render();
     return;
   }
-  const auto* gs = followed_id ? &good.at(*followed_id) : nullptr;
-  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  HudStatus(f);
+  // The forces legend, at the bottom left: collapsed to its title until L (or a click on its
+  // arrow) opens it.
+  ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(o.height) - 10), ImGuiCond_Always,
+                          ImVec2(0, 1));
   ImGui::SetNextWindowBgAlpha(0.7f);
-  ImGui::Begin("vdyn-viewer", nullptr,
-               ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
-  std::string mode = o.playback ? "PLAYBACK" : "LIVE";
-  std::string server_mode;
-  if (const auto d = session.diagnostics().find(f.server); d != session.diagnostics().end()) {
-    server_mode = d->second.mode();
-    if (server_mode == "playback") mode = "PLAYBACK";
-  }
-  ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
-                     mode.c_str());
-  ImGui::SameLine();
-  ImGui::Text("server '%s'%s%s  world '%s'", f.server.c_str(), server_mode.empty() ? "" : " ",
-              server_mode.c_str(), f.world != nullptr ? f.world->name().c_str() : "(waiting)");
-  if (gs != nullptr) {
-    const pb::VehicleState& s = gs->state;
-    ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), good.size());
-    ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
-                FormatSeconds(s.sim_time_ns()).c_str(), static_cast<unsigned long long>(s.step()));
-    const std::string& src = s.input().source_id();
-    ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
-    ImGui::SameLine();
-    if (s.control().watchdog_safe_state()) {
-      ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "WATCHDOG: safe state (no live input)");
-    } else {
-      ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
-    }
-    const double age_ms = static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
-    ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
-                Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
-  } else {
-    ImGui::Text("no vehicle on domain %u yet", o.domain);
-  }
-  const double frame_ms = stats.frame_ms.empty() ? 0.0 : stats.frame_ms.back();
-  ImGui::Text("camera %s (1-5, C)   frame %.1f ms", std::string(CameraName(o.camera.mode)).c_str(),
-              frame_ms);
-  if (xr) ImGui::Text("OpenXR: %s, %s", xr->runtime_name().c_str(), xr->state_name().c_str());
-  const std::uint64_t drops = session.drops().Total();
-  if (drops > 0) {
-    ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
-                       static_cast<unsigned long long>(drops));
-    if (ImGui::IsItemHovered()) {
-      ImGui::BeginTooltip();
-      for (const auto& [kind, n] : session.drops().Snapshot())
-        ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
-      if (!stats.last_refusal.empty()) ImGui::TextWrapped("last: %s", stats.last_refusal.c_str());
-      ImGui::EndTooltip();
-    }
-  }
-  ImGui::End();
-
-  if (show_legend) {
-    ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(o.height) - 210), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowBgAlpha(0.7f);
-    ImGui::Begin("forces", &show_legend,
-                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  ImGui::SetNextWindowCollapsed(!legend_open, ImGuiCond_Always);
+  const bool expanded =
+      ImGui::Begin("forces (L)", nullptr,
+                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  legend_open = !ImGui::IsWindowCollapsed();
+  if (expanded) {
     for (int k = 0; k < kForceKinds; ++k) {
       const auto kind = static_cast<ForceKind>(k);
       const Rgb8 c = ForceColour(kind);
@@ -774,103 +924,276 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
                            ImGuiSliderFlags_Logarithmic)) {
       o.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
     }
-    ImGui::End();
   }
-  if (show_params && followed_id) {
-    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) - 430, 160), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
+  ImGui::End();
+  if (show_params && owner.followed_) {
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) - 470, 160), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(460, 480), ImGuiCond_FirstUseEver);
     ImGui::Begin("parameters", &show_params);
-    const auto* sv = session.vehicle(*followed_id);
-    ImGui::Text("vehicle %u (P to close)", *followed_id);
-    params->Draw(*followed_id, f.server, sv != nullptr && sv->params ? &*sv->params : nullptr);
+    const std::uint32_t id = *owner.followed_;
+    const auto* sv = session.vehicle(id);
+    ImGui::Text("vehicle %u (P to close)", id);
+    params->Draw(id, f.server, sv != nullptr && sv->params ? &*sv->params : nullptr);
     ImGui::End();
   }
   if (show_help) {
-    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) * 0.5f - 200, 80),
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) * 0.5f - 220, 80),
                             ImGuiCond_FirstUseEver);
     ImGui::Begin("keys", &show_help, ImGuiWindowFlags_AlwaysAutoResize);
     ImGui::TextUnformatted(
-        "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
+        "1-6  chase, driver, orbit, map, north, beside camera   C  next camera\n"
+        "K    horizon level / with the body (chase, orbit)     R  recentre the headset\n"
         "Q/E  turn the geographic cameras left/right    N  back to north\n"
         "     (the wheel's paddle shifters do the same)\n"
         "Tab  next vehicle (Shift: previous)\n"
-        "+/-  arrow scale     L legend   P parameters   H HUD\n"
+        "+/-  arrow scale     L forces legend   P parameters   H HUD\n"
         "drag orbit   wheel zoom   F12 screenshot   Esc quit");
     ImGui::End();
   }
-  // Compass, landmark and vehicle labels.
-  ImDrawList* fg = ImGui::GetForegroundDrawList();
-  DrawCompass(fg, ImVec2(static_cast<float>(o.width) - 75, 75), 55, north_angle, heading_deg);
-  if (!owner.xr_active()) {
-    if (f.world != nullptr) {
-      for (const pb::Landmark& l : f.world->landmarks()) {
-        ImVec2 p;
-        const Vec3 at{l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0};
-        // Names of the landmarks near the camera (far ones would pile up on the horizon).
-        if (!cam.orthographic && Norm(at - cam.eye_W) > 150.0) continue;
-        if (Project(cam, o.width, o.height, at, p)) {
-          fg->AddText(ImVec2(p.x - 20, p.y - 14), IM_COL32(255, 255, 255, 220), l.name().c_str());
-        }
-      }
-    }
-    for (const auto& [id, v] : views) {
-      ImVec2 p;
-      if (Project(cam, o.width, o.height, v.pose_WB * Vec3{0, 0, 1.6}, p)) {
-        const std::string label = "#" + std::to_string(id);
-        fg->AddText(ImVec2(p.x - 8, p.y - 14), ImColour(VehicleColour(id)), label.c_str());
-      }
-    }
-  }
+  DrawCompass(ImGui::GetForegroundDrawList(), compass, 55, north_angle, heading_deg);
+  if (!owner.xr_active()) HudLabels(f);
   ImGui::Render();
 }
 
+// The HUD's status panel.
+void Viewer::Impl::HudStatus(const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  const ViewerStats& stats = owner.stats_;
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowBgAlpha(0.7f);
+  ImGui::Begin("vdyn-viewer", nullptr,
+               ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  // LIVE or PLAYBACK: a player says what it is on vdyn/diagnostics (mode "playback", the
+  // recording, the servers it replays); --playback says so whatever it says.
+  const pb::Diagnostics* player = nullptr;
+  for (const auto& [id, d] : session.diagnostics()) {
+    if (d.mode() != "playback") continue;
+    const auto& rs = d.replayed_servers();
+    if (id == f.server || rs.empty() || std::find(rs.begin(), rs.end(), f.server) != rs.end()) {
+      player = &d;
+    }
+  }
+  std::string mode = o.playback || player != nullptr ? "PLAYBACK" : "LIVE";
+  std::string source = "server '" + f.server + "'";
+  if (player != nullptr) {
+    source = "recording '" + player->recording() + "' (player '" + player->server_id() +
+             "', server '" + f.server + "')";
+  } else if (const auto d = session.diagnostics().find(f.server);
+             d != session.diagnostics().end() && !d->second.mode().empty()) {
+    source += " " + d->second.mode();
+  }
+  const ImVec4 green(0.4f, 1, 0.4f, 1), amber(1, 0.8f, 0.3f, 1), red(1, 0.35f, 0.3f, 1);
+  ImGui::TextColored(mode == "LIVE" ? green : amber, "%s", mode.c_str());
+  ImGui::SameLine();
+  const std::string where =
+      source + "  world '" + (f.world != nullptr ? f.world->name() : "(waiting)") + "'";
+  ImGui::TextUnformatted(where.c_str());
+  hud_text.push_back(mode + "  " + where);
+
+  const auto it = owner.followed_ ? tracked.find(*owner.followed_) : tracked.end();
+  if (o.follow && !owner.followed_) {
+    std::string there;
+    for (const auto& [id, t] : tracked) there += (there.empty() ? "" : ", ") + std::to_string(id);
+    Line(Format("waiting for vehicle %u (--follow): not on domain %u", *o.follow, o.domain),
+         &amber);
+    Line(there.empty() ? "no vehicle on the domain yet"
+                       : "on the domain: " + there + "  (Tab follows one)");
+  } else if (it != tracked.end() && it->second.at != nullptr) {
+    const pb::VehicleState& s = *it->second.at;
+    Line(Format("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), tracked.size()));
+    // The vehicle's time and step always agree: its time is its steps (since its first spawn;
+    // a restore continues a recording's); the server's clock is shown too where it differs
+    // (a vehicle spawned later, or restored into another session).
+    const std::int64_t vehicle_ns =
+        s.step_ns() > 0 ? static_cast<std::int64_t>(s.step()) * s.step_ns() : s.sim_time_ns();
+    std::string time =
+        Format("speed %6.1f km/h   sim time %s   step %llu", it->second.drawn.speed_kmh(),
+               FormatSeconds(vehicle_ns).c_str(), static_cast<unsigned long long>(s.step()));
+    if (s.sim_time_ns() != vehicle_ns) {
+      time += "   server clock " + FormatSeconds(s.sim_time_ns());
+    }
+    Line(time);
+    const std::string& src = s.input().source_id();
+    const std::string input = "input from " + (src.empty() ? "(none)" : "'" + src + "'");
+    ImGui::TextUnformatted(input.c_str());
+    ImGui::SameLine();
+    const bool safe = s.control().watchdog_safe_state();
+    const std::string watchdog = safe ? "WATCHDOG: safe state (no live input)" : "watchdog ok";
+    ImGui::TextColored(safe ? red : ImVec4(0.5f, 0.9f, 0.5f, 1), "%s", watchdog.c_str());
+    hud_text.push_back(input + "  " + watchdog);
+    const double age_ms = static_cast<double>(base::WallNow().ns - it->second.at_source_ns) * 1e-6;
+    Line(Format("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
+                Deg(s.control().gamma()), s.control().throttle(), s.control().brake()));
+  } else {
+    Line(Format("no vehicle on domain %u yet", o.domain));
+  }
+  const double frame_ms = stats.frame_ms.empty() ? 0.0 : stats.frame_ms.back();
+  const CameraMode cm = o.camera.mode;
+  const bool lockable = cm == CameraMode::kChase || cm == CameraMode::kOrbit;
+  Line(Format(
+      "camera %s%s (1-6, C)   frame %.1f ms", std::string(CameraName(cm)).c_str(),
+      lockable ? (o.camera.horizon_locked ? ", horizon level (K)" : ", with the body (K)") : "",
+      frame_ms));
+  if (xr) {
+    Line(Format("OpenXR: %s, %s  (R: recentre)", xr->runtime_name().c_str(),
+                xr->state_name().c_str()));
+  }
+  const std::uint64_t drops = session.drops().Total();
+  if (drops > 0) {
+    const ImVec4 orange(1, 0.6f, 0.3f, 1);
+    Line(Format("refused or dropped: %llu", static_cast<unsigned long long>(drops)), &orange);
+    if (ImGui::IsItemHovered()) {
+      ImGui::BeginTooltip();
+      for (const auto& [kind, n] : session.drops().Snapshot())
+        ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
+      if (!stats.last_refusal.empty()) ImGui::TextWrapped("last: %s", stats.last_refusal.c_str());
+      ImGui::EndTooltip();
+    }
+  }
+  ImGui::End();
+}
+
+// Landmark names and vehicle numbers beside what they name, never overlapping (labels.h).
+void Viewer::Impl::HudLabels(const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  const CameraView& cam = f.cam;
+  std::vector<LabelRequest> requests;
+  std::vector<ImU32> colours;
+  auto ask = [&](const std::string& text, const Vec3& at, int priority, ImU32 colour) {
+    ImVec2 p;
+    if (!Project(cam, o.width, o.height, at, p)) return;
+    const ImVec2 size = ImGui::CalcTextSize(text.c_str());
+    requests.push_back(
+        {text, p.x, p.y, size.x, size.y, cam.orthographic ? 0.0 : Norm(at - cam.eye_W), priority});
+    colours.push_back(colour);
+  };
+  for (const auto& [id, v] : views) {
+    const bool own = owner.followed_ && id == *owner.followed_;
+    if (own && o.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
+    ask(Format("#%u", id), v.pose_WB * Vec3{0, 0, 1.6}, own ? 2 : 1, ImColour(VehicleColour(id)));
+  }
+  if (f.world != nullptr) {
+    for (const pb::Landmark& l : f.world->landmarks()) {
+      ask(l.name(), {l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0}, 0, IM_COL32(255, 255, 255, 255));
+    }
+  }
+  ImDrawList* fg = ImGui::GetForegroundDrawList();
+  LabelStyle style;
+  for (const PlacedLabel& p :
+       LayoutLabels(requests, static_cast<float>(o.width), static_cast<float>(o.height), style)) {
+    const LabelRequest& r = requests[p.request];
+    const ImU32 c = colours[p.request];
+    const auto alpha = static_cast<int>(std::lround(p.alpha * ((c >> IM_COL32_A_SHIFT) & 0xFF)));
+    const ImU32 faded = (c & ~IM_COL32_A_MASK) | (static_cast<ImU32>(alpha) << IM_COL32_A_SHIFT);
+    fg->AddText(ImVec2(p.box.x0 + style.padding_px, p.box.y0 + style.padding_px), faded,
+                r.text.c_str());
+    shown_labels.push_back({r.text, p.box, p.alpha});
+  }
+}
+
+// The frame's key presses, unless the HUD took them: an ImGui item (a text field, a slider) had
+// the input when this frame began, has it now, or the frame's input went to one (the keys typed
+// right after a click into a field arrive with that click).
+void Viewer::Impl::ApplyKeys() {
+  ViewerOptions& o = owner.options_;
+  const bool active_now = ImGui::IsAnyItemActive();
+  const bool taken = item_active_before || active_now || ImGui::GetIO().WantTextInput;
+  item_active_before = active_now;
+  if (taken) return;
+  for (const KeyPress& kp : keys) {
+    const SDL_Keycode k = kp.key;
+    CameraState& c = o.camera;
+    if (k == SDLK_ESCAPE) quit = true;
+    if (k >= SDLK_1 && k <= SDLK_6) c.mode = static_cast<CameraMode>(k - SDLK_1);
+    if (k == SDLK_c)
+      c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
+    if (k == SDLK_k) c.horizon_locked = !c.horizon_locked;
+    if (k == SDLK_r) recentre_pending = true;
+    if (k == SDLK_q) TurnGeographic(c, +1);
+    if (k == SDLK_e) TurnGeographic(c, -1);
+    if (k == SDLK_n) c.geo_turn = 0;
+    if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS) o.arrows.metres_per_newton *= 1.25;
+    if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
+    if (k == SDLK_h) o.hud = !o.hud;
+    if (k == SDLK_p) show_params = !show_params;
+    if (k == SDLK_l) legend_open = !legend_open;
+    if (k == SDLK_F1) show_help = !show_help;
+    if (k == SDLK_TAB && !tracked.empty()) {
+      // Next (Shift: previous) vehicle of the domain; the first (last) when none is followed.
+      std::vector<std::uint32_t> ids;
+      for (const auto& [id, t] : tracked) ids.push_back(id);
+      const bool back = (kp.mod & KMOD_SHIFT) != 0;
+      const auto it =
+          owner.followed_ ? std::find(ids.begin(), ids.end(), *owner.followed_) : ids.end();
+      std::size_t i = 0;
+      if (it == ids.end()) {
+        i = back ? ids.size() - 1 : 0;
+      } else {
+        const auto at = static_cast<std::size_t>(it - ids.begin());
+        i = back ? (at + ids.size() - 1) % ids.size() : (at + 1) % ids.size();
+      }
+      o.follow = ids[i];
+    }
+    if (k == SDLK_F12) {
+      const std::string path =
+          "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
+      if (WritePng(path, owner.Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
+    }
+  }
+}
+
 bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
-  if (!xr || xr_ended) return false;
+  if (!xr_waited) return false;
+  xr_waited = false;
   const ViewerOptions& o = owner.options_;
   bool drawn = false;
   try {
-    if (!xr->PollEvents()) {
-      // The headset session is over (the person left through the runtime): so is the viewer.
-      xr_ended = true;
-      spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
-      quit = true;
-    } else if (xr->running()) {
-      // The reference space's origin in the world (docs in xr_session.h).
-      Pose world_from_space;
-      if (f.followed != nullptr) {
-        if (o.xr_seated) {
-          const Pose& b = f.followed->pose_WB;
-          world_from_space = {XrAxesIn(b.R), b * o.camera.seat_B};
-        } else {
-          const Mat3 yaw = RotationZ(f.followed->yaw);
-          // On the ground 6 m to the vehicle's left, facing it (looking along -Y of its yaw).
-          const Vec3 place = f.followed->pose_WB.t + yaw * Vec3{0, 6, 0};
-          double z = f.followed->ground_z;
-          if (xr->standing_on_local()) z += 1.6;
-          world_from_space = {XrAxesIn(RotationZ(f.followed->yaw - kPi / 2)),
-                              {place.x, place.y, z}};
-        }
-      }
-      xr->Frame(
-          world_from_space, 0.05, f.cs.far_m,
-          [&](const XrEye& eye) {
-            BuildLists(f, eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
-                       o.xr_seated);
-            eye.target->BeginScene();
-            Renderer::View rv{eye.view, eye.proj, eye.eye_W};
-            renderer->Draw(rv, lists);
-            eye.target->Resolve();
-          },
-          [&](RenderTarget& hud) {
-            glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
-            glViewport(0, 0, hud.width(), hud.height());
-            glClearColor(0, 0, 0, 0);
-            glClear(GL_COLOR_BUFFER_BIT);
-            ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-          });
-      ++owner.stats_.xr_frames;
-      drawn = true;
+    // Recentring: the head's place and heading now become the place's eye point (on the floor
+    // it stays on the floor). The runtime recentring its space itself starts over.
+    if (xr->space_changes() != space_changes_seen) {
+      space_changes_seen = xr->space_changes();
+      head_ref = NeutralHead();
     }
+    Pose head;
+    if (recentre_pending && xr->head_in_space(&head)) {
+      const Vec3 forward = -head.R.c[2];
+      head_ref.R = RotationAxisAngle({0, 1, 0}, std::atan2(-forward.x, -forward.z));
+      head_ref.t = head.t;
+      spdlog::info(
+          "vdyn-viewer: headset recentred (head at {:.2f} {:.2f} {:.2f} m, turned "
+          "{:.0f} deg)",
+          head.t.x, head.t.y, head.t.z, Deg(std::atan2(-forward.x, -forward.z)));
+    }
+    recentre_pending = false;
+    // The reference space's origin in the world: the camera's place (its eye point, level, or
+    // turning with the body), the floor under it when standing.
+    Pose place = XrPlace(o.camera, f.cs);
+    const Pose neutral = NeutralHead();
+    Pose ref = head_ref;
+    ref.t.y -= neutral.t.y;  // standing on STAGE: the head's height stays the runtime's
+    place.t = place.t - place.R.c[1] * neutral.t.y;
+    const Pose world_from_space = place * ref.Inverse();
+    // The HUD: a panel below and ahead of the (recentred) head, fixed in the space.
+    const Pose hud_in_space = head_ref * HudPanel(o.xr_seated);
+    xr->Frame(
+        world_from_space, hud_in_space, 0.05, f.cs.far_m,
+        [&](const XrEye& eye) {
+          BuildLists(f, eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
+                     o.camera.mode == CameraMode::kDriver);
+          eye.target->BeginScene();
+          Renderer::View rv{eye.view, eye.proj, eye.eye_W};
+          renderer->Draw(rv, lists);
+          eye.target->Resolve();
+        },
+        [&](RenderTarget& hud) {
+          glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
+          glViewport(0, 0, hud.width(), hud.height());
+          glClearColor(0, 0, 0, 0);
+          glClear(GL_COLOR_BUFFER_BIT);
+          ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        });
+    ++owner.stats_.xr_frames;
+    drawn = true;
   } catch (const XrError& e) {
     spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
     owner.stats_.xr_status = std::string("failed: ") + e.what();
@@ -922,18 +1245,24 @@ void Viewer::Impl::Present() {
 void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f) {
   const ViewerOptions& o = owner.options_;
   ViewerStats& stats = owner.stats_;
+  // What the frame showed is on the screen now: the latency of each vehicle whose instant moved.
   const base::WallTime shown = base::WallNow();
-  for (auto& [id, g] : good) {
-    if (!g.fresh) continue;
-    g.fresh = false;
-    if (views.count(id) == 0 || g.source_timestamp_ns <= 0) continue;
+  for (auto& [id, t] : tracked) {
+    if (t.at == nullptr || t.instant_ns == t.last_instant_ns) continue;
+    t.last_instant_ns = t.instant_ns;
+    if (views.count(id) == 0 || t.instant_ns <= 0) continue;
     if (stats.latency_ms.size() < kMaxSamples) {
-      stats.latency_ms.push_back(static_cast<double>(shown.ns - g.source_timestamp_ns) * 1e-6);
+      stats.latency_ms.push_back(static_cast<double>(shown.ns - t.instant_ns) * 1e-6);
     }
   }
   ++stats.frames;
   const base::MonoTime t1 = base::MonotonicNow();
   if (stats.frame_ms.size() < kMaxSamples) stats.frame_ms.push_back((t1 - t0).millis());
+  // The desktop's lead from the scene to the screen, for the next frame's display time.
+  if (!xr_drawn) {
+    const auto lead = static_cast<double>((t1 - scene_at).ns);
+    present_lead_ns = stats.frames == 1 ? lead : 0.9 * present_lead_ns + 0.1 * lead;
+  }
 
   // The headless end.
   if (!counting) {
@@ -956,16 +1285,6 @@ void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f
     }
     quit = true;
   }
-}
-
-void Viewer::Impl::Pace() {
-  const ViewerOptions& o = owner.options_;
-  if (o.fps <= 0) return;
-  const base::Nanos period{static_cast<std::int64_t>(1e9 / o.fps)};
-  next_frame = next_frame + period;
-  const base::MonoTime now = base::MonotonicNow();
-  if (next_frame < now) next_frame = now;  // late: no burst to catch up
-  base::SleepUntil(next_frame);
 }
 
 }  // namespace vdyn::viewer
