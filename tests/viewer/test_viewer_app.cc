@@ -117,7 +117,7 @@ TEST(Motion, StatesOfTwoLivesAreNeverBlended) {
   const std::int64_t s0 = 1'000'000'000;
   // A restore: the step jumps to a recording's (7779) while the server's clock goes on (5.989 s).
   pb::VehicleState before = At(5988, 0, 0, 0, 0, 3000);
-  pb::VehicleState restored = At(7779, 40, 0, 0, 0, 3000);
+  pb::VehicleState restored = At(7779, 0.001, 0, 0, 0, 3000);  // (restored where it was)
   restored.set_sim_time_ns(5'989'000'000);
   before.set_sim_time_ns(5'988'000'000);
   EXPECT_FALSE(viewer::Continuous(before, restored));
@@ -392,7 +392,10 @@ TEST_F(ViewerApp, TheForcesLegendStartsCollapsedAndLOpensIt) {
   Viewer v(o);
   TestVehicle t;
   for (auto& w : t.wheels) w.fp = 0;  // no arrows in the scene: their colours are the legend's
-  Image img = Show(v, pub, {MakeState(t)});
+  Show(v, pub, {MakeState(t)});
+  // (ImGui shows a new window from its second frame on.)
+  for (int i = 0; i < 3; ++i) v.Frame();
+  Image img = Keep(v.Screenshot());
   const Rect bottom_left{0, kH / 2, kW / 2, kH};
   auto swatches = [&](const Image& im) {
     int n = 0;

@@ -107,7 +107,8 @@ Pose HudPanel(bool seated) {
   p.t = at;
   return p;
 }
-constexpr double kHudWidthSeatedM = 0.8, kHudWidthStandingM = 1.1;
+// About 65 deg wide: the status panel's lines (some 55 characters) at a readable size.
+constexpr double kHudWidthSeatedM = 1.1, kHudWidthStandingM = 1.5;
 // The HUD's capital letters at least this tall as the eye sees them (about 0.8 deg reads well on
 // headsets of 15-25 pixels per degree).
 constexpr double kHudCapHeightDeg = 0.9;
@@ -386,11 +387,11 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
       stats_.xr_status = "runtime '" + m.xr->runtime_name() + "'";
       m.head_ref = m.NeutralHead();
       // The HUD panel readable where it hangs: its text scaled so capitals subtend
-      // kHudCapHeightDeg at the eyes (ImGui's font: 13 px, capitals ~9 px).
+      // kHudCapHeightDeg at the eyes (ImGui's font: 13 px, capitals 7.5 px).
       const double distance = Norm(HudPanel(options_.xr_seated).t);
       const double deg_per_px = Deg(xo.hud_width_m / xo.hud_width / distance);
       io.FontGlobalScale =
-          static_cast<float>(std::clamp(kHudCapHeightDeg / (9.0 * deg_per_px), 1.0, 4.0));
+          static_cast<float>(std::clamp(kHudCapHeightDeg / (7.5 * deg_per_px), 1.0, 4.0));
       // In a headset the first camera is where the person is: at the driver's seat seated,
       // beside the vehicle standing (unless --camera chose).
       if (!options_.camera_chosen) {
@@ -547,9 +548,10 @@ bool Project(const CameraView& cam, int w, int h, const Vec3& p, ImVec2& out) {
 }
 
 // The compass: a dial at the top right; the red needle points where north is, the letters turn
-// with it. Drawn into the HUD so it shows in the headset too.
+// with it. Drawn into the HUD so it shows in the headset too; its size follows the HUD's text.
 void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle,
                  double heading_deg) {
+  const float s = radius / 55.0f;
   dl->AddCircleFilled(centre, radius, IM_COL32(20, 24, 32, 200), 48);
   dl->AddCircle(centre, radius, IM_COL32(230, 230, 230, 255), 48, 2.0f);
   auto dir = [&](double a) {  // counter-clockwise from up, screen y down
@@ -558,7 +560,8 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
   const char* letters[] = {"N", "W", "S", "E"};
   for (int i = 0; i < 4; ++i) {
     const ImVec2 d = dir(north_angle + i * kPi / 2);
-    const ImVec2 p(centre.x + d.x * radius * 0.78f - 4, centre.y + d.y * radius * 0.78f - 7);
+    const ImVec2 p(centre.x + d.x * radius * 0.78f - 4 * s,
+                   centre.y + d.y * radius * 0.78f - 7 * s);
     dl->AddText(p, i == 0 ? IM_COL32(255, 90, 90, 255) : IM_COL32(220, 220, 220, 255), letters[i]);
   }
   const ImVec2 n = dir(north_angle), side = ImVec2(-n.y, n.x);
@@ -571,7 +574,8 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
   dl->AddTriangleFilled(r, tail, l, IM_COL32(235, 235, 235, 255));
   char b[32];
   std::snprintf(b, sizeof b, "view %03.0f deg", heading_deg);
-  dl->AddText(ImVec2(centre.x - 34, centre.y + radius + 4), IM_COL32(235, 235, 235, 255), b);
+  dl->AddText(ImVec2(centre.x - 34 * s, centre.y + radius + 4 * s), IM_COL32(235, 235, 235, 255),
+              b);
 }
 
 }  // namespace
@@ -889,10 +893,10 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
   shown_labels.clear();
   const double heading_deg = std::fmod(Deg(f.cs.north_yaw - cam.heading) + 720.0, 360.0);
   const double north_angle = CompassNorthAngle(f.cs.north_yaw, cam.heading);
-  const ImVec2 compass(static_cast<float>(o.width) - 75 * ImGui::GetIO().FontGlobalScale,
-                       75 * ImGui::GetIO().FontGlobalScale);
+  const float scale = ImGui::GetIO().FontGlobalScale;
+  const ImVec2 compass(static_cast<float>(o.width) - 75 * scale, 75 * scale);
   if (!o.hud) {
-    DrawCompass(ImGui::GetForegroundDrawList(), compass, 55, north_angle, heading_deg);
+    DrawCompass(ImGui::GetForegroundDrawList(), compass, 55 * scale, north_angle, heading_deg);
     ImGui::Render();
     return;
   }
@@ -950,7 +954,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
         "drag orbit   wheel zoom   F12 screenshot   Esc quit");
     ImGui::End();
   }
-  DrawCompass(ImGui::GetForegroundDrawList(), compass, 55, north_angle, heading_deg);
+  DrawCompass(ImGui::GetForegroundDrawList(), compass, 55 * scale, north_angle, heading_deg);
   if (!owner.xr_active()) HudLabels(f);
   ImGui::Render();
 }
