@@ -250,6 +250,14 @@ TEST(Labels, NoTwoBoxesOverlapHoweverTheAnchorsCrowd) {
   }
   // The followed vehicle's label comes first and always gets its place.
   EXPECT_EQ(r[placed.front().request].text, "#1");
+  // Nor under the HUD's panels: a label whose places are all under one is left out, one with a
+  // free place takes it.
+  const std::vector<viewer::LabelBox> hud = {{0, 0, 300, 200}};
+  const auto under = viewer::LayoutLabels(
+      {{"hidden", 150, 100, 40, 13, 10, 0}, {"edge", 302, 100, 40, 13, 10, 0}}, 640, 480, hud);
+  ASSERT_EQ(under.size(), 1u);
+  EXPECT_EQ(under[0].request, 1u);
+  EXPECT_FALSE(viewer::Overlap(under[0].box, hud[0]));
   // Far ones fade: full up to fade_start_m, gone by fade_end_m.
   const viewer::LabelStyle style;
   std::vector<viewer::LabelRequest> fade = {

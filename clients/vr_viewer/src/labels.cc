@@ -10,7 +10,8 @@ bool Overlap(const LabelBox& a, const LabelBox& b) {
 }
 
 std::vector<PlacedLabel> LayoutLabels(const std::vector<LabelRequest>& requests, float width,
-                                      float height, const LabelStyle& style) {
+                                      float height, const std::vector<LabelBox>& blocked,
+                                      const LabelStyle& style) {
   std::vector<std::size_t> order(requests.size());
   std::iota(order.begin(), order.end(), std::size_t{0});
   std::stable_sort(order.begin(), order.end(), [&](std::size_t i, std::size_t j) {
@@ -43,7 +44,9 @@ std::vector<PlacedLabel> LayoutLabels(const std::vector<LabelRequest>& requests,
     for (const LabelBox& c : candidates) {
       if (c.x0 < 0 || c.y0 < 0 || c.x1 > width || c.y1 > height) continue;
       const bool free = std::none_of(placed.begin(), placed.end(),
-                                     [&](const PlacedLabel& o) { return Overlap(c, o.box); });
+                                     [&](const PlacedLabel& o) { return Overlap(c, o.box); }) &&
+                        std::none_of(blocked.begin(), blocked.end(),
+                                     [&](const LabelBox& b) { return Overlap(c, b); });
       if (!free) continue;
       placed.push_back({i, c, alpha});
       break;

@@ -163,6 +163,7 @@ struct Viewer::Impl {
   // The HUD's lines and the labels, as last drawn (for tests).
   std::vector<std::string> hud_text;
   std::vector<ShownLabel> shown_labels;
+  std::vector<LabelBox> hud_boxes;  // the HUD's panels and compass: no label under them
 
   // --follow of a vehicle that is not there (yet): when the first vehicle was seen, and what was
   // said about it.
@@ -236,6 +237,7 @@ struct Viewer::Impl {
   void HudStatus(const FrameScene& f);
   void HudLabels(const FrameScene& f);
   void Line(const std::string& text, const ImVec4* colour = nullptr);
+  void Occupied();
 
   // The draw lists for one view. `inside`: the followed vehicle seen from its own seat (its body
   // is left out). Vehicles out of sight are left out; far ones get fewer facets.
@@ -873,6 +875,12 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
   }
 }
 
+// The current ImGui window's rectangle: labels keep out of it.
+void Viewer::Impl::Occupied() {
+  const ImVec2 p = ImGui::GetWindowPos(), sz = ImGui::GetWindowSize();
+  hud_boxes.push_back({p.x, p.y, p.x + sz.x, p.y + sz.y});
+}
+
 // A line of the HUD: drawn, and kept for tests.
 void Viewer::Impl::Line(const std::string& text, const ImVec4* colour) {
   if (colour != nullptr) {
@@ -891,6 +899,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
   ImGui::NewFrame();
   hud_text.clear();
   shown_labels.clear();
+  hud_boxes.clear();
   const double heading_deg = std::fmod(Deg(f.cs.north_yaw - cam.heading) + 720.0, 360.0);
   const double north_angle = CompassNorthAngle(f.cs.north_yaw, cam.heading);
   const float scale = ImGui::GetIO().FontGlobalScale;
@@ -929,6 +938,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
       o.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
     }
   }
+  Occupied();
   ImGui::End();
   if (show_params && owner.followed_) {
     ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) - 470, 160), ImGuiCond_FirstUseEver);
@@ -938,6 +948,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
     const auto* sv = session.vehicle(id);
     ImGui::Text("vehicle %u (P to close)", id);
     params->Draw(id, f.server, sv != nullptr && sv->params ? &*sv->params : nullptr);
+    Occupied();
     ImGui::End();
   }
   if (show_help) {
@@ -952,9 +963,12 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
         "Tab  next vehicle (Shift: previous)\n"
         "+/-  arrow scale     L forces legend   P parameters   H HUD\n"
         "drag orbit   wheel zoom   F12 screenshot   Esc quit");
+    Occupied();
     ImGui::End();
   }
   DrawCompass(ImGui::GetForegroundDrawList(), compass, 55 * scale, north_angle, heading_deg);
+  hud_boxes.push_back({compass.x - 60 * scale, compass.y - 60 * scale, compass.x + 60 * scale,
+                       compass.y + 85 * scale});
   if (!owner.xr_active()) HudLabels(f);
   ImGui::Render();
 }
@@ -1054,6 +1068,7 @@ void Viewer::Impl::HudStatus(const FrameScene& f) {
       ImGui::EndTooltip();
     }
   }
+  Occupied();
   ImGui::End();
 }
 
@@ -1083,8 +1098,8 @@ void Viewer::Impl::HudLabels(const FrameScene& f) {
   }
   ImDrawList* fg = ImGui::GetForegroundDrawList();
   LabelStyle style;
-  for (const PlacedLabel& p :
-       LayoutLabels(requests, static_cast<float>(o.width), static_cast<float>(o.height), style)) {
+  for (const PlacedLabel& p : LayoutLabels(requests, static_cast<float>(o.width),
+                                           static_cast<float>(o.height), hud_boxes, style)) {
     const LabelRequest& r = requests[p.request];
     const ImU32 c = colours[p.request];
     const auto alpha = static_cast<int>(std::lround(p.alpha * ((c >> IM_COL32_A_SHIFT) & 0xFF)));
@@ -1265,7 +1280,10 @@ void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f
   // The desktop's lead from the scene to the screen, for the next frame's display time.
   if (!xr_drawn) {
     const auto lead = static_cast<double>((t1 - scene_at).ns);
-    present_lead_ns = stats.frames == 1 ? lead : 0.9 * present_lead_ns + 0.1 * lead;
+    // (The first frames, with their shaders compiled and buffers filled, do not count.)
+    if (stats.frames > 3) {
+      present_lead_ns = present_lead_ns == 0 ? lead : 0.75 * present_lead_ns + 0.25 * lead;
+    }
   }
 
   // The headless end.

@@ -36,9 +36,11 @@ struct LabelStyle {
   float gap_px = 4;      // between the anchor and the text
 };
 
-// Places the labels on a screen of `width` x `height` pixels: no two returned boxes overlap, each
-// lies on the screen, and each is one of its anchor's four places (above, right, left, below).
+// Places the labels on a screen of `width` x `height` pixels: no two returned boxes overlap, none
+// overlaps a `blocked` box (the HUD's panels), each lies on the screen, and each is one of its
+// anchor's four places (above, right, left, below).
 std::vector<PlacedLabel> LayoutLabels(const std::vector<LabelRequest>& requests, float width,
-                                      float height, const LabelStyle& style = {});
+                                      float height, const std::vector<LabelBox>& blocked = {},
+                                      const LabelStyle& style = {});
 
 }  // namespace vdyn::viewer
