@@ -2,6 +2,7 @@
 // on the desktop or in an OpenXR headset (docs in clients/vr_viewer/README.md).
 // Exit codes: 0 done, 1 no display / OpenGL / transport failure or an unwritable output, 2 bad
 // command line or a car model that cannot be read.
+#include <cmath>
 #include <csignal>
 #include <iostream>
 
@@ -37,13 +38,28 @@ int main(int argc, char** argv) {
   std::vector<double> orbit;
   std::string xr_space = "seated";
   std::string quality = "high", car_model;
+  std::string horizon = "level";
+  double delay_ms = static_cast<double>(o.delay_ns) * 1e-6;
   bool no_hud = false;
   app.add_option("--domain", o.domain, "DDS domain id")
       ->check(cli::WholeInRange(limits::kDomainId))
       ->capture_default_str();
   app.add_option("--follow", follow, "Vehicle to follow (default: the lowest id on the domain)");
-  app.add_option("--camera", camera, "chase, driver, orbit, map or north")
-      ->check(CLI::IsMember({"chase", "driver", "orbit", "map", "north"}))
+  app.add_option("--camera", camera,
+                 "chase, driver, orbit, map, north or beside (default: chase; in a headset the "
+                 "driver's seat seated, beside the vehicle standing)")
+      ->check(CLI::IsMember({"chase", "driver", "orbit", "map", "north", "beside"}))
+      ->capture_default_str();
+  app.add_option("--horizon", horizon,
+                 "Chase and orbit cameras: level (the horizon stays level) or body (they roll "
+                 "and pitch with the vehicle); K switches")
+      ->check(CLI::IsMember({"level", "body"}))
+      ->capture_default_str();
+  app.add_option("--delay", delay_ms,
+                 "Presentation delay, ms: each frame shows the vehicles this long before its "
+                 "display time, interpolated between the states around that instant (0: the "
+                 "newest state as it arrives)")
+      ->check(cli::InRange(limits::kPresentationDelayMs))
       ->capture_default_str();
   app.add_option("--orbit", orbit, "Orbit camera: yaw_deg,pitch_deg,distance_m (world frame)")
       ->delimiter(',')
@@ -104,6 +120,9 @@ int main(int argc, char** argv) {
 
   if (app.count("--follow") > 0) o.follow = follow;
   o.camera.mode = *vdyn::viewer::CameraFromName(camera);
+  o.camera_chosen = app.count("--camera") > 0;
+  o.camera.horizon_locked = horizon == "level";
+  o.delay_ns = static_cast<std::int64_t>(std::llround(delay_ms * 1e6));
   o.camera.paddle_step = Rad(paddle_step_deg);
   o.camera.fovy = Rad(fov_deg);
   o.camera.map_half_height = map_half_height;
