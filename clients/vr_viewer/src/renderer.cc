@@ -640,8 +640,8 @@ void Renderer::SetTerrain(const TerrainData& t) {
     m.mesh = UploadTerrain(v, idx);
     terrain_meshes_.push_back(std::move(m));
   }
-  // What lies on the ground (road, bumps, rough patches: drawn a little nearer) before the
-  // ground, so the depth test spares shading the grass under them; the grass beyond the world
+  // What lies on the ground (road, bumps, rough patches) before the ground (drawn a little
+  // further), so the depth test spares shading the grass under them; the grass beyond the world
   // after it; translucent meshes (the glass barrier) last.
   auto order = [](const Terrain& m) {
     if (m.translucent) return 3;
@@ -764,11 +764,11 @@ void Renderer::DrawTerrain(const View& v, const Mat4& view_proj, double fog_m, b
   for (const Terrain& t : terrain_meshes_) {
     if (t.translucent != translucent) continue;
     const Program* current = nullptr;
-    // Everything but the ground a little nearer: where a road or a rough patch meets the ground
-    // at the same height, it wins.
-    if (t.style != SurfaceStyle::kGrass) {
+    // The ground a little further: where a road or a rough patch meets it at the same height,
+    // they win (and an arrow lying on the road is hidden only by the road).
+    if (t.style == SurfaceStyle::kGrass) {
       glEnable(GL_POLYGON_OFFSET_FILL);
-      glPolygonOffset(-1.0f, -2.0f);
+      glPolygonOffset(1.0f, 2.0f);
     }
     glBindVertexArray(t.mesh.vao);
     for (const TerrainChunk& c : t.chunks) {
