@@ -92,7 +92,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"low", "high"}))
       ->capture_default_str();
   app.add_option("--car-model", car_model,
-                 "A car body from a glTF/GLB file (+Y up, +Z forward), fitted to each vehicle");
+                 "A car body from a glTF/GLB file (+Y up, +Z forward), fitted to each vehicle (one "
+                 "that cannot be read: the built-in body)");
   app.add_option("--fps", o.fps, "Frame rate cap, Hz (0: as fast as it draws)")
       ->check(cli::InRange(limits::kViewerFps))
       ->capture_default_str();
@@ -152,8 +153,8 @@ int main(int argc, char** argv) {
       spdlog::info("vdyn-viewer: car model '{}': {} triangles", car_model,
                    o.car_model->triangles());
     } catch (const vdyn::viewer::CarModelError& e) {
-      std::cerr << "vdyn-viewer: " << e.what() << "\n";
-      return 2;
+      // A model is a look, not the data: the view goes on with the built-in body.
+      std::cerr << "vdyn-viewer: " << e.what() << "; drawing the built-in body instead\n";
     }
   }
 

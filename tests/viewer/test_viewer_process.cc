@@ -120,19 +120,22 @@ TEST_F(ViewerProcess, AViewerThatJoinsLateDrawsTheWorldOfARunningServer) {
   const auto img = LoadPng(png);
   ASSERT_TRUE(img.has_value());
   // The map is centred on vehicle 1 at its spawn on the test road (8 m wide along X, north up,
-  // 12 px per metre): road across the middle, open ground 5 m and more to either side.
-  const viewer::Rgb8 road = viewer::LookOf(pb::SURFACE_ROAD).colour;
-  const viewer::Rgb8 ground = viewer::LookOf(pb::SURFACE_GROUND).colour;
+  // 12 px per metre): asphalt across the middle, grass 5 m and more to either side. (Both are
+  // textured: the pixels are classified, and the means are the surfaces' colours from afar.)
   const int ppm = 480 / 40;
   // (The road starts 12 m west of the spawn: look east of it.)
   const Rect east_road{400, 240 - 3 * ppm, 600, 240 + 3 * ppm};
   const Rect north_ground{0, 0, 500, 240 - 5 * ppm};
   const Rect south_ground{0, 240 + 5 * ppm, 500, 480};
-  EXPECT_GT(FindColour(*img, road.r, road.g, road.b, 8, east_road).count, 200 * 5 * ppm);
-  EXPECT_EQ(FindColour(*img, road.r, road.g, road.b, 8, north_ground).count, 0);
-  // The grid darkens lines: most of the ground is its colour.
-  EXPECT_GT(FindColour(*img, ground.r, ground.g, ground.b, 8, north_ground).count, 500 * 150);
-  EXPECT_GT(FindColour(*img, ground.r, ground.g, ground.b, 8, south_ground).count, 500 * 150);
+  const RegionStats road = Classify(*img, east_road);
+  EXPECT_GT(road.asphalt, road.pixels * 8 / 10) << "not asphalt east of the car";
+  const viewer::Rgb8 asphalt = viewer::LookOf(pb::SURFACE_ROAD).colour;
+  EXPECT_NEAR(road.g, asphalt.g, 12.0);
+  for (const Rect& r : {north_ground, south_ground}) {
+    const RegionStats ground = Classify(*img, r);
+    EXPECT_EQ(ground.asphalt, 0) << "asphalt north or south of the road";
+    EXPECT_GT(ground.grass, ground.pixels * 95 / 100) << "not grass beside the road";
+  }
   // And the vehicle in the middle.
   const viewer::Rgb8 car = viewer::VehicleColour(1);
   EXPECT_GT(FindColour(*img, car.r, car.g, car.b, 12, {280, 200, 360, 280}).count, 100);
@@ -278,13 +281,60 @@ TEST_F(ViewerProcess, CommandLineMistakesExitWith2) {
                                              {"--xr-space", "lying"},
                                              {"--delay", "-5"},
                                              {"--delay", "2000"},
-                                             {"--horizon", "tilted"}}) {
+                                             {"--horizon", "tilted"},
+                                             {"--quality", "medium"}}) {
     std::vector<std::string> argv = {VDYN_VIEWER_BINARY};
     argv.insert(argv.end(), bad.begin(), bad.end());
     Process p(argv, dir_ / "bad.log");
     const auto code = p.Wait(std::chrono::seconds(30));
     ASSERT_TRUE(code.has_value());
     EXPECT_EQ(*code, 2) << bad[0] << " " << bad[1] << ": " << p.Log();
+  }
+}
+
+// --quality low and high are what they say (the stats and the log name them); a car model that
+// cannot be read is named with its reason and the built-in body is drawn instead.
+TEST_F(ViewerProcess, QualityPresetsAreAcceptedAndABrokenCarModelFallsBackToTheBuiltInBody) {
+  {
+    std::ofstream f(dir_ / "broken.glb", std::ios::binary);
+    f << "glTF\x02\x00\x00\x00 truncated";
+  }
+  struct Case {
+    std::string quality, model, expect_log;
+  };
+  for (const Case& c :
+       {Case{"low", "", "quality low (no sun shadows"},
+        Case{"high", "", "quality high (sun shadows"},
+        Case{"high", (dir_ / "broken.glb").string(), "drawing the built-in body instead"},
+        Case{"low", (dir_ / "missing.glb").string(), "drawing the built-in body instead"}}) {
+    SCOPED_TRACE(c.quality + " " + c.model);
+    const auto stats = dir_ / "stats.txt";
+    std::filesystem::remove(stats);
+    std::vector<std::string> argv = {VDYN_VIEWER_BINARY,
+                                     "--domain",
+                                     std::to_string(FreshDomain()),
+                                     "--frames",
+                                     "1",
+                                     "--wait",
+                                     "0",
+                                     "--quality",
+                                     c.quality,
+                                     "--stats-out",
+                                     stats.string()};
+    if (!c.model.empty()) {
+      argv.push_back("--car-model");
+      argv.push_back(c.model);
+    }
+    Process p(argv, dir_ / "quality.log");
+    const auto code = p.Wait(std::chrono::seconds(60));
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 0) << p.Log();
+    EXPECT_EQ(ReadKeyValues(stats)["quality"], c.quality);
+    EXPECT_NE(p.Log().find(c.expect_log), std::string::npos) << p.Log();
+    if (!c.model.empty()) {
+      EXPECT_NE(p.Log().find("car model '" + c.model + "'"), std::string::npos) << p.Log();
+      EXPECT_NE(p.Log().find("the built-in car body"), std::string::npos) << p.Log();
+    }
   }
 }
 

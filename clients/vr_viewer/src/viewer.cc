@@ -361,6 +361,13 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   }
   m.renderer = std::make_unique<Renderer>(SettingsFor(options_.quality));
   if (options_.car_model) m.renderer->SetCarModel(options_.car_model);
+  {
+    const RenderSettings& rs = m.renderer->settings();
+    spdlog::info("vdyn-viewer: quality {} ({}, {}, {}); the {} car body", QualityName(rs.quality),
+                 rs.shadows ? "sun shadows" : "no sun shadows", rs.clouds ? "clouds" : "no clouds",
+                 rs.high_shading ? "glossy highlights" : "no glossy highlights",
+                 options_.car_model ? "file's" : "built-in");
+  }
   m.desktop = std::make_unique<RenderTarget>();
   m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
 
@@ -509,6 +516,7 @@ void Viewer::WriteStats(const std::string& path) const {
     out << "drop." << k << " " << n << "\n";
   }
   out << "renderer " << s.renderer << "\n"
+      << "quality " << QualityName(options_.quality) << "\n"
       << "xr " << s.xr_status << "\n";
 }
 
