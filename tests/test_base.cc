@@ -2,8 +2,11 @@
 // (docs/hash.md's Python reference, and FNV's published test vectors), the table of limits, and
 // numbers as a person reads and writes them.
 #include <cmath>
+#include <fstream>
 #include <limits>
+#include <map>
 #include <memory>
+#include <sstream>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -13,6 +16,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/spsc_queue.h"
 #include "vdyn/base/text.h"
+#include "vdyn/vehicle_params.pb.h"
 
 namespace vdyn {
 namespace {
@@ -62,6 +66,64 @@ TEST(Limits, CheckNamesTheQuantityTheRangeAndTheValue) {
   // Clamp keeps the range and maps non-finite values to the fallback.
   EXPECT_EQ(limits::Clamp(limits::kBrake, 3.0), 1.0);
   EXPECT_EQ(limits::Clamp(limits::kBrake, std::numeric_limits<double>::infinity(), 0.25), 0.25);
+}
+
+// docs/formats.md's table of every vehicle parameter ("### Every field"): field -> (words, range).
+std::map<std::string, std::pair<std::string, std::string>> DocumentedParams() {
+  std::ifstream in(std::string(VDYN_SOURCE_DIR) + "/docs/formats.md");
+  std::map<std::string, std::pair<std::string, std::string>> rows;
+  bool in_section = false;
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("### Every field", 0) == 0) in_section = true;
+    if (!in_section) continue;
+    if (line.rfind("## ", 0) == 0) break;
+    if (line.rfind("| `", 0) != 0) continue;
+    std::vector<std::string> cells;
+    std::stringstream ss(line.substr(1));
+    for (std::string c; std::getline(ss, c, '|');) {
+      const auto b = c.find_first_not_of(' '), e = c.find_last_not_of(' ');
+      cells.push_back(b == std::string::npos ? "" : c.substr(b, e - b + 1));
+    }
+    if (cells.size() < 3) continue;
+    rows[cells[0].substr(1, cells[0].size() - 2)] = {cells[1], cells[2]};
+  }
+  return rows;
+}
+
+TEST(Limits, EveryVehicleParameterIsNamedInWordsAndTheDocumentationSaysTheSame) {
+  const auto doc = DocumentedParams();
+  ASSERT_FALSE(doc.empty()) << "no table of the parameters in docs/formats.md";
+  namespace gp = google::protobuf;
+  std::size_t expected = 0;
+  auto check = [&](const std::string& row, const std::string& path, const gp::FieldDescriptor* f) {
+    SCOPED_TRACE(row);
+    ++expected;
+    const std::string_view words = limits::ParamWords(path);
+    ASSERT_FALSE(words.empty()) << "the table of limits does not name " << path;
+    ASSERT_EQ(doc.count(row), 1u) << "docs/formats.md does not list " << row;
+    EXPECT_EQ(doc.at(row).first, words);
+    if (const limits::Range* r = limits::ParamRange(path)) {
+      EXPECT_EQ(doc.at(row).second, limits::Describe(*r));
+    } else if (f->enum_type() != nullptr) {
+      std::string choices;
+      for (int i = 1; i < f->enum_type()->value_count(); ++i) {
+        choices += (i > 1 ? ", `" : "`") + f->enum_type()->value(i)->name() + "`";
+      }
+      EXPECT_EQ(doc.at(row).second, choices);
+    }
+  };
+  const gp::Descriptor* d = pb::VehicleParams::descriptor();
+  for (int i = 0; i < d->field_count(); ++i)
+    check(d->field(i)->name(), d->field(i)->name(), d->field(i));
+  const gp::Descriptor* w = pb::WheelParams::descriptor();
+  for (int i = 0; i < w->field_count(); ++i) {
+    check("<wheel>." + w->field(i)->name(), "rr." + w->field(i)->name(), w->field(i));
+  }
+  EXPECT_EQ(doc.size(), expected) << "docs/formats.md lists fields the message does not have";
+  // The words say what a field is and its unit, not its name.
+  EXPECT_EQ(limits::ParamWords("b"), "distance T to front axle, m");
+  EXPECT_EQ(limits::ParamWords("lf.radius"), "wheel radius, m");
+  EXPECT_EQ(limits::ParamWords("wings"), "");
 }
 
 TEST(Text, NumbersReadAsAPersonWritesThem) {
@@ -247,15 +309,17 @@ TEST(Messages, TheWireCheckPassesCleanMessagesAndLeavesEveryProblemToTheReflecti
   both.insert(both.end(), tail.begin(), tail.end());
   EXPECT_FALSE(messages::WireClean(*pb::VehicleState::descriptor(), both));
   pb::VehicleState parsed;
-  EXPECT_EQ(transport::DecodeEnvelope(transport::TopicId::kState, "vdyn.pb.VehicleState", both, parsed).outcome,
-            transport::Decoded::Outcome::kOk);
+  EXPECT_EQ(
+      transport::DecodeEnvelope(transport::TopicId::kState, "vdyn.pb.VehicleState", both, parsed)
+          .outcome,
+      transport::Decoded::Outcome::kOk);
   EXPECT_EQ(parsed.steering_torque(), 2.0);
   // And one it does not replace is refused with the field's name.
   std::vector<std::uint8_t> nan_last = tail;
   const auto b = bytes(bad);
   nan_last.insert(nan_last.end(), b.begin(), b.end());
-  const transport::Decoded d =
-      transport::DecodeEnvelope(transport::TopicId::kState, "vdyn.pb.VehicleState", nan_last, parsed);
+  const transport::Decoded d = transport::DecodeEnvelope(transport::TopicId::kState,
+                                                         "vdyn.pb.VehicleState", nan_last, parsed);
   EXPECT_EQ(d.outcome, transport::Decoded::Outcome::kNonFinite);
   EXPECT_EQ(d.field, "steering_torque");
   // Not protobuf: not sure.

@@ -11,9 +11,9 @@ namespace {
 // clang-format off
 constexpr ParamLimit kParams[] = {
   {"mass",                 {0, 1e5, true, false, "vehicle mass, kg"}},
-  {"ixx",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
-  {"iyy",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
-  {"izz",                  {0, 1e7, true, false, "moment of inertia, kg*m^2"}},
+  {"ixx",                  {0, 1e7, true, false, "roll moment of inertia (about X), kg*m^2"}},
+  {"iyy",                  {0, 1e7, true, false, "pitch moment of inertia (about Y), kg*m^2"}},
+  {"izz",                  {0, 1e7, true, false, "yaw moment of inertia (about Z), kg*m^2"}},
   {"b",                    {0, 20, true, false, "distance T to front axle, m"}},
   {"c",                    {0, 20, true, false, "distance T to rear axle, m"}},
   {"b_l",                  {0, 5, true, false, "distance T to left wheels, m"}},
@@ -96,6 +96,16 @@ constexpr ParamLimit kWheel[] = {
   {"min_length",           {0, 5, false, false, "spring length at the end of travel, m"}},
   {"max_length",           {0, 5, true, false, "spring length at the rebound stop, m"}},
 };
+constexpr ParamChoice kChoices[] = {
+  {"model",        "vehicle model (the equations: full or the paper's)"},
+  {"yaw_mode",     "yaw equation (paper model)"},
+  {"tire_law",     "tire law (paper model)"},
+  {"differential", "differential of the driven axles (full model)"},
+  {"lf",           "left front wheel (LF)"},
+  {"rf",           "right front wheel (RF)"},
+  {"lr",           "left rear wheel (LR)"},
+  {"rr",           "right rear wheel (RR)"},
+};
 // clang-format on
 
 }  // namespace
@@ -137,6 +147,16 @@ const Range* ParamRange(std::string_view path) {
     }
   }
   return nullptr;
+}
+
+std::span<const ParamChoice> ParamChoices() { return kChoices; }
+
+std::string_view ParamWords(std::string_view path) {
+  if (const Range* r = ParamRange(path)) return r->what;
+  for (const ParamChoice& c : kChoices) {
+    if (c.path == path) return c.what;
+  }
+  return {};
 }
 
 }  // namespace vdyn::limits

@@ -1,7 +1,8 @@
 // vdyn-viewer: watch a vdyn session - live, or a recording played back by `vdyn-recorder play` -
 // on the desktop or in an OpenXR headset (docs in clients/vr_viewer/README.md).
 // Exit codes: 0 done, 1 no display / OpenGL / transport failure or an unwritable output, 2 bad
-// command line.
+// command line or a car model that cannot be read.
+#include <cmath>
 #include <csignal>
 #include <iostream>
 
@@ -9,6 +10,7 @@
 #include <CLI/CLI.hpp>
 
 #include "vdyn/cli/options.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/viewer.h"
 
 namespace {
@@ -35,13 +37,29 @@ int main(int argc, char** argv) {
   double map_half_height = o.camera.map_half_height;
   std::vector<double> orbit;
   std::string xr_space = "seated";
+  std::string quality = "high", car_model;
+  std::string horizon = "level";
+  double delay_ms = static_cast<double>(o.delay_ns) * 1e-6;
   bool no_hud = false;
   app.add_option("--domain", o.domain, "DDS domain id")
       ->check(cli::WholeInRange(limits::kDomainId))
       ->capture_default_str();
   app.add_option("--follow", follow, "Vehicle to follow (default: the lowest id on the domain)");
-  app.add_option("--camera", camera, "chase, driver, orbit, map or north")
-      ->check(CLI::IsMember({"chase", "driver", "orbit", "map", "north"}))
+  app.add_option("--camera", camera,
+                 "chase, driver, orbit, map, north or beside (default: chase; in a headset the "
+                 "driver's seat seated, beside the vehicle standing)")
+      ->check(CLI::IsMember({"chase", "driver", "orbit", "map", "north", "beside"}))
+      ->capture_default_str();
+  app.add_option("--horizon", horizon,
+                 "Chase and orbit cameras: level (the horizon stays level) or body (they roll "
+                 "and pitch with the vehicle); K switches")
+      ->check(CLI::IsMember({"level", "body"}))
+      ->capture_default_str();
+  app.add_option("--delay", delay_ms,
+                 "Presentation delay, ms: each frame shows the vehicles this long before its "
+                 "display time, interpolated between the states around that instant (0: the "
+                 "newest state as it arrives)")
+      ->check(cli::InRange(limits::kPresentationDelayMs))
       ->capture_default_str();
   app.add_option("--orbit", orbit, "Orbit camera: yaw_deg,pitch_deg,distance_m (world frame)")
       ->delimiter(',')
@@ -68,6 +86,14 @@ int main(int argc, char** argv) {
   app.add_option("--msaa", o.samples,
                  "Multisampling of the scene (0: off; default 4, off on a software renderer)")
       ->check(cli::WholeInRange(limits::kSamples));
+  app.add_option("--quality", quality,
+                 "high: sun shadows, clouds, glossy paint; low: none of them, for a slow or "
+                 "software renderer")
+      ->check(CLI::IsMember({"low", "high"}))
+      ->capture_default_str();
+  app.add_option("--car-model", car_model,
+                 "A car body from a glTF/GLB file (+Y up, +Z forward), fitted to each vehicle (one "
+                 "that cannot be read: the built-in body)");
   app.add_option("--fps", o.fps, "Frame rate cap, Hz (0: as fast as it draws)")
       ->check(cli::InRange(limits::kViewerFps))
       ->capture_default_str();
@@ -95,6 +121,9 @@ int main(int argc, char** argv) {
 
   if (app.count("--follow") > 0) o.follow = follow;
   o.camera.mode = *vdyn::viewer::CameraFromName(camera);
+  o.camera_chosen = app.count("--camera") > 0;
+  o.camera.horizon_locked = horizon == "level";
+  o.delay_ns = static_cast<std::int64_t>(std::llround(delay_ms * 1e6));
   o.camera.paddle_step = Rad(paddle_step_deg);
   o.camera.fovy = Rad(fov_deg);
   o.camera.map_half_height = map_half_height;
@@ -116,6 +145,18 @@ int main(int argc, char** argv) {
   o.arrows.metres_per_newton = arrow_m_per_kn / 1000.0;
   o.xr_seated = xr_space == "seated";
   o.hud = !no_hud;
+  o.quality = *vdyn::viewer::QualityFromName(quality);
+  if (!car_model.empty()) {
+    try {
+      o.car_model =
+          std::make_shared<const vdyn::viewer::ModelMesh>(vdyn::viewer::LoadCarModel(car_model));
+      spdlog::info("vdyn-viewer: car model '{}': {} triangles", car_model,
+                   o.car_model->triangles());
+    } catch (const vdyn::viewer::CarModelError& e) {
+      // A model is a look, not the data: the view goes on with the built-in body.
+      std::cerr << "vdyn-viewer: " << e.what() << "; drawing the built-in body instead\n";
+    }
+  }
 
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);

@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
 #include <functional>
 #include <memory>
 
@@ -15,7 +16,10 @@
 #include "../test_support.h"
 #include "vdyn/base/time.h"
 #include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/car_model.h"
+#include "vdyn/viewer/draw_list.h"
 #include "vdyn/viewer/params_editor.h"
+#include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
 #include "viewer_support.h"
 
@@ -559,6 +563,233 @@ TEST_F(ViewerTest, AWorldArrivingWithNoVehicleIsDrawnAroundItsSpawn) {
   EXPECT_GT(r.count, 100 * 100);
   EXPECT_NEAR(r.cy, kH / 2.0, 3.0);
   EXPECT_EQ(FindColour(img, road.r, road.g, road.b, 6, {0, 0, kW - 160, kH / 2 - 100}).count, 0);
+}
+
+// --- the look: sun, shadow, sky --------------------------------------------------------------
+
+// Mean of a channel-averaged colour over the map pixels of a world rectangle, in linear light
+// (sRGB decoded: shading multiplies light, the ratio of two surfaces is a ratio of irradiance).
+double MeanLinear(const Image& img, double x0, double y0, double x1, double y1, double half_m) {
+  const auto a = MapPixel(x0, y1, 0, 0, kPi / 2, half_m, kW, kH);  // top left (north-west)
+  const auto b = MapPixel(x1, y0, 0, 0, kPi / 2, half_m, kW, kH);  // bottom right
+  double sum = 0;
+  int n = 0;
+  for (int y = static_cast<int>(a[1]); y < static_cast<int>(b[1]); ++y) {
+    for (int x = static_cast<int>(a[0]); x < static_cast<int>(b[0]); ++x) {
+      const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+      for (int c = 0; c < 3; ++c) {
+        const double u = p[c] / 255.0;
+        sum += u <= 0.04045 ? u / 12.92 : std::pow((u + 0.055) / 1.055, 2.4);
+      }
+      ++n;
+    }
+  }
+  return n > 0 ? sum / (3.0 * n) : 0.0;
+}
+
+// The sun stands 48 deg up in the south-west: a car's body throws its shadow to the north-east,
+// out to about 0.9 m (the beltline) beyond its north side on the road. Seen from above, the road
+// north of the car is darker than the same strip south of it, where the sun shines - by about the
+// sky's share of the light (lighting.h: a face in shadow keeps about 30 %). At --quality low there
+// is no shadow map: both strips are lit alike (what darkens near the car then is only the contact
+// shadow, the same on both sides).
+TEST_F(ViewerTest, TheSunsShadowDarkensTheRoadOnTheCarsFarSideOnlyWithShadows) {
+  for (const viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string("quality ") + std::string(viewer::QualityName(q)));
+    const std::uint32_t domain = FreshDomain();
+    TestPublisher pub(domain);
+    ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+    ViewerOptions o = Options(domain);
+    o.quality = q;
+    o.hud = false;
+    o.camera.mode = CameraMode::kMap;
+    o.camera.map_half_height = 6;
+    Viewer v(o);
+    TestVehicle t;
+    for (auto& w : t.wheels) w.fp = 0;  // no arrows
+    const Image img = Show(v, pub, {MakeState(t)});
+    // Strips 1.2 .. 1.45 m from the car's axis (its side at 0.9 m, the contact shadow to 1.1 m),
+    // along its length shifted east as the shadow is.
+    const double north = MeanLinear(img, -1.0, 1.2, 1.5, 1.45, 6);
+    const double south = MeanLinear(img, -1.0, -1.45, 1.5, -1.2, 6);
+    ASSERT_GT(south, 0.02) << "the road south of the car is black";
+    const double ratio = north / south;
+    RecordProperty(std::string("north_over_south_") + std::string(viewer::QualityName(q)),
+                   std::to_string(ratio));
+    std::printf("quality %s: the road north of the car %.3f, south %.3f (linear), ratio %.3f\n",
+                std::string(viewer::QualityName(q)).c_str(), north, south, ratio);
+    if (q == viewer::Quality::kHigh) {
+      EXPECT_GT(ratio, 0.2) << "the shadow is black: no sky light in it";
+      EXPECT_LT(ratio, 0.42) << "no sun shadow north-east of the car";
+    } else {
+      EXPECT_NEAR(ratio, 1.0, 0.1) << "a shadow without the shadow map";
+    }
+    // The car itself is drawn (its roof in its colour) in both.
+    const viewer::Rgb8 c = viewer::VehicleColour(1);
+    EXPECT_GT(FindColour(img, c.r, c.g, c.b, 16).count, 1000);
+  }
+}
+
+// The sky is a gradient: a deep blue overhead, paler towards the horizon (the fog's colour there).
+// Without it the view would be one flat colour above the ground.
+TEST_F(ViewerTest, TheSkyIsDeeperBlueOverheadThanTowardsTheHorizon) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.quality = viewer::Quality::kLow;  // no clouds
+  o.hud = false;
+  o.camera.mode = CameraMode::kDriver;
+  o.camera.fovy = viewer::Rad(90);  // from the horizon in the middle to 45 deg up at the top
+  Viewer v(o);
+  TestVehicle t;
+  const Image img = Show(v, pub, {MakeState(t)});
+  struct Band {
+    double r = 0, g = 0, b = 0;
+  };
+  const auto band = [&](int y0, int y1) {
+    Band m;
+    int n = 0;
+    for (int y = y0; y < y1; ++y) {
+      for (int x = 0; x < kW; ++x) {
+        const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+        m.r += p[0];
+        m.g += p[1];
+        m.b += p[2];
+        ++n;
+      }
+    }
+    m.r /= n;
+    m.g /= n;
+    m.b /= n;
+    return m;
+  };
+  const Band top = band(0, 8);                      // about 44 deg up
+  const Band low = band(kH / 2 - 40, kH / 2 - 30);  // about 5 deg up
+  for (const Band& s : {top, low}) EXPECT_GT(s.b, s.r + 15) << "not sky blue";
+  EXPECT_GT(top.b - top.r, low.b - low.r + 30) << "no deeper blue overhead";
+  EXPECT_LT(top.r + top.g + top.b, low.r + low.g + low.b - 60) << "not paler at the horizon";
+}
+
+// --- the wheels turn with the published wheel speed ---------------------------------------------
+
+// The test car's geometry, as the test world describes it.
+viewer::VehicleGeometry TestGeometry() {
+  const pb::WorldDescription w = MakeWorld("test", kPi / 2);
+  return viewer::GeometryFor(1, &w, nullptr);
+}
+
+// A state of the full model whose four wheels turn at `omega` rad/s, at step `step` (1 ms).
+pb::VehicleState Spinning(std::uint64_t step, double omega) {
+  TestVehicle t;
+  t.step = step;
+  pb::VehicleState s = MakeState(t);
+  s.set_model(pb::VEHICLE_MODEL_FULL);
+  for (int w = 0; w < 4; ++w) s.mutable_wheels(w)->set_omega(omega);
+  return s;
+}
+
+// The angle a wheel instance's mark has turned from the wheel's forward (about its axle, positive
+// rolling forward: the front of the wheel goes down).
+double MarkAngle(const viewer::FrameLists& lists, const viewer::VehicleView& view, int wheel) {
+  const viewer::WheelInstance& wi = lists.wheels.at(static_cast<std::size_t>(wheel));
+  const viewer::WheelView& w = view.wheels[static_cast<std::size_t>(wheel)];
+  const viewer::Vec3 up = viewer::Cross(w.forward_W, w.left_W);
+  return std::atan2(-viewer::Dot(wi.R_WW.c[0], up), viewer::Dot(wi.R_WW.c[0], w.forward_W));
+}
+
+TEST(WheelSpin, TheRimTurnsByThePublishedWheelSpeedIntegratedOverSimulationTime) {
+  const viewer::VehicleGeometry g = TestGeometry();
+  viewer::WheelSpin spin;
+  // The wheel speed rises linearly from 10 to 20 rad/s in 40 ms: the trapezoidal rule is exact,
+  // the wheel turns (10 + 20) / 2 * 0.04 = 0.6 rad.
+  viewer::AdvanceWheelSpin(spin, Spinning(100, 10));
+  viewer::AdvanceWheelSpin(spin, Spinning(120, 15));
+  viewer::AdvanceWheelSpin(spin, Spinning(140, 20));
+  for (double a : spin.angle) EXPECT_NEAR(a, 0.6, 1e-9);
+  // The same state again (a repeat) and an earlier one (a restore) turn nothing.
+  viewer::AdvanceWheelSpin(spin, Spinning(140, 20));
+  viewer::AdvanceWheelSpin(spin, Spinning(90, 20));
+  for (double a : spin.angle) EXPECT_NEAR(a, 0.6, 1e-9);
+  // ... and the next state after the restore turns from there: 20 rad/s for 10 ms.
+  viewer::AdvanceWheelSpin(spin, Spinning(100, 20));
+  for (double a : spin.angle) EXPECT_NEAR(a, 0.8, 1e-9);
+
+  // The drawn wheel's mark (the rim and its tyre mark) is turned by that angle about the axle.
+  const pb::VehicleState s = Spinning(100, 20);
+  const viewer::VehicleView view = viewer::BuildVehicleView(s, g, &spin);
+  viewer::FrameLists lists;
+  viewer::AppendVehicleBody(view, viewer::VehicleParts{}, false, lists);
+  ASSERT_EQ(lists.wheels.size(), 4u);
+  for (int w = 0; w < 4; ++w) EXPECT_NEAR(MarkAngle(lists, view, w), 0.8, 1e-6) << "wheel " << w;
+  // Not turned at all without a spin.
+  const viewer::VehicleView still = viewer::BuildVehicleView(s, g, nullptr);
+  viewer::FrameLists none;
+  viewer::AppendVehicleBody(still, viewer::VehicleParts{}, false, none);
+  for (int w = 0; w < 4; ++w) EXPECT_NEAR(MarkAngle(none, still, w), 0.0, 1e-9);
+}
+
+// --- a car model from a file -------------------------------------------------------------------
+
+TEST(CarModel, AFilesBodyIsReadInBodyAxesWithoutItsWheelsAndBrokenFilesSayWhy) {
+  TempDir dir;
+  // A box 4 m long along +Z (forward), 1.8 m wide along X, 1.2 m tall along +Y (up), and a
+  // wheel node: OBJ, as a modeller writes it (+Y up).
+  const auto box = dir.path() / "car.obj";
+  {
+    std::ofstream f(box);
+    f << "o body\n";
+    for (int i = 0; i < 8; ++i) {
+      f << "v " << ((i & 1) ? 0.9 : -0.9) << " " << ((i & 2) ? 1.2 : 0.0) << " "
+        << ((i & 4) ? 2.0 : -2.0) << "\n";
+    }
+    // Six faces of two triangles (vertices 1-based: bit 0 x, bit 1 y, bit 2 z).
+    f << "f 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\nf 1 2 6\nf 1 6 5\n"
+         "f 3 7 8\nf 3 8 4\nf 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\n";
+    f << "o wheel_front_left\nv 0.9 -0.3 1.5\nv 1.2 -0.3 1.5\nv 0.9 0.3 1.8\nf 9 10 11\n";
+  }
+  const viewer::ModelMesh m = viewer::LoadCarModel(box.string());
+  EXPECT_EQ(m.triangles(), 12u) << "the wheel's triangle is the viewer's to draw";
+  // Body axes: X forward (the file's +Z), Y left (+X), Z up (+Y); the fit counts the wheel.
+  EXPECT_NEAR(m.fit_min.x, -2.0, 1e-6);
+  EXPECT_NEAR(m.fit_max.x, 2.0, 1e-6);
+  EXPECT_NEAR(m.fit_max.y, 1.2, 1e-6);
+  EXPECT_NEAR(m.fit_min.z, -0.3, 1e-6);
+  EXPECT_NEAR(m.max.z, 1.2, 1e-6);
+  // Fitted to a vehicle: its length the body box's (front + rear), its lowest point the ground.
+  const viewer::VehicleGeometry g = TestGeometry();
+  const viewer::Mat4 fit = viewer::FitModel(m, g, false);
+  const viewer::CarShape shape = viewer::CarShapeFor(g);
+  EXPECT_NEAR(fit.TransformPoint({-2, 0, 0}).x, -TestCar::kRear, 1e-6);
+  EXPECT_NEAR(fit.TransformPoint({2, 0, 0}).x, TestCar::kFront, 1e-6);
+  EXPECT_NEAR(fit.TransformPoint({0, 0, -0.3}).z, shape.z_ground, 1e-6);
+
+  const auto expect_error = [&](const std::filesystem::path& path, const std::string& why) {
+    try {
+      viewer::LoadCarModel(path.string());
+      ADD_FAILURE() << path << " was read";
+    } catch (const viewer::CarModelError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(path.string()), std::string::npos) << what;
+      EXPECT_NE(what.find(why), std::string::npos) << what;
+    }
+  };
+  expect_error(dir.path() / "missing.glb", "");
+  {
+    std::ofstream f(dir.path() / "garbage.glb", std::ios::binary);
+    f << "glTF\x02\x00\x00\x00 this is not a model";
+  }
+  expect_error(dir.path() / "garbage.glb", "");
+  {
+    std::ofstream f(dir.path() / "wheels.obj");
+    f << "o wheel\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  }
+  expect_error(dir.path() / "wheels.obj", "holds no triangle");
+  {
+    std::ofstream f(dir.path() / "flat.obj");
+    f << "o body\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";  // no length along +Z
+  }
+  expect_error(dir.path() / "flat.obj", "no length along +Z");
 }
 
 // --- the parameters panel --------------------------------------------------------------------

@@ -19,6 +19,9 @@
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/session_view.h"
+#include "vdyn/recorder/mcap.h"
+#include "vdyn/recorder/recording.h"
+#include "vdyn/session.pb.h"
 #include "vdyn/transport/control_client.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
@@ -117,19 +120,22 @@ TEST_F(ViewerProcess, AViewerThatJoinsLateDrawsTheWorldOfARunningServer) {
   const auto img = LoadPng(png);
   ASSERT_TRUE(img.has_value());
   // The map is centred on vehicle 1 at its spawn on the test road (8 m wide along X, north up,
-  // 12 px per metre): road across the middle, open ground 5 m and more to either side.
-  const viewer::Rgb8 road = viewer::LookOf(pb::SURFACE_ROAD).colour;
-  const viewer::Rgb8 ground = viewer::LookOf(pb::SURFACE_GROUND).colour;
+  // 12 px per metre): asphalt across the middle, grass 5 m and more to either side. (Both are
+  // textured: the pixels are classified, and the means are the surfaces' colours from afar.)
   const int ppm = 480 / 40;
   // (The road starts 12 m west of the spawn: look east of it.)
   const Rect east_road{400, 240 - 3 * ppm, 600, 240 + 3 * ppm};
   const Rect north_ground{0, 0, 500, 240 - 5 * ppm};
   const Rect south_ground{0, 240 + 5 * ppm, 500, 480};
-  EXPECT_GT(FindColour(*img, road.r, road.g, road.b, 8, east_road).count, 200 * 5 * ppm);
-  EXPECT_EQ(FindColour(*img, road.r, road.g, road.b, 8, north_ground).count, 0);
-  // The grid darkens lines: most of the ground is its colour.
-  EXPECT_GT(FindColour(*img, ground.r, ground.g, ground.b, 8, north_ground).count, 500 * 150);
-  EXPECT_GT(FindColour(*img, ground.r, ground.g, ground.b, 8, south_ground).count, 500 * 150);
+  const RegionStats road = Classify(*img, east_road);
+  EXPECT_GT(road.asphalt, road.pixels * 8 / 10) << "not asphalt east of the car";
+  const viewer::Rgb8 asphalt = viewer::LookOf(pb::SURFACE_ROAD).colour;
+  EXPECT_NEAR(road.g, asphalt.g, 12.0);
+  for (const Rect& r : {north_ground, south_ground}) {
+    const RegionStats ground = Classify(*img, r);
+    EXPECT_EQ(ground.asphalt, 0) << "asphalt north or south of the road";
+    EXPECT_GT(ground.grass, ground.pixels * 95 / 100) << "not grass beside the road";
+  }
   // And the vehicle in the middle.
   const viewer::Rgb8 car = viewer::VehicleColour(1);
   EXPECT_GT(FindColour(*img, car.r, car.g, car.b, 12, {280, 200, 360, 280}).count, 100);
@@ -272,13 +278,63 @@ TEST_F(ViewerProcess, CommandLineMistakesExitWith2) {
                                              {"--arrow-scale", "nan"},
                                              {"--width", "10"},
                                              {"--msaa", "3.5"},
-                                             {"--xr-space", "lying"}}) {
+                                             {"--xr-space", "lying"},
+                                             {"--delay", "-5"},
+                                             {"--delay", "2000"},
+                                             {"--horizon", "tilted"},
+                                             {"--quality", "medium"}}) {
     std::vector<std::string> argv = {VDYN_VIEWER_BINARY};
     argv.insert(argv.end(), bad.begin(), bad.end());
     Process p(argv, dir_ / "bad.log");
     const auto code = p.Wait(std::chrono::seconds(30));
     ASSERT_TRUE(code.has_value());
     EXPECT_EQ(*code, 2) << bad[0] << " " << bad[1] << ": " << p.Log();
+  }
+}
+
+// --quality low and high are what they say (the stats and the log name them); a car model that
+// cannot be read is named with its reason and the built-in body is drawn instead.
+TEST_F(ViewerProcess, QualityPresetsAreAcceptedAndABrokenCarModelFallsBackToTheBuiltInBody) {
+  {
+    std::ofstream f(dir_ / "broken.glb", std::ios::binary);
+    f << "glTF\x02\x00\x00\x00 truncated";
+  }
+  struct Case {
+    std::string quality, model, expect_log;
+  };
+  for (const Case& c :
+       {Case{"low", "", "quality low (no sun shadows"},
+        Case{"high", "", "quality high (sun shadows"},
+        Case{"high", (dir_ / "broken.glb").string(), "drawing the built-in body instead"},
+        Case{"low", (dir_ / "missing.glb").string(), "drawing the built-in body instead"}}) {
+    SCOPED_TRACE(c.quality + " " + c.model);
+    const auto stats = dir_ / "stats.txt";
+    std::filesystem::remove(stats);
+    std::vector<std::string> argv = {VDYN_VIEWER_BINARY,
+                                     "--domain",
+                                     std::to_string(FreshDomain()),
+                                     "--frames",
+                                     "1",
+                                     "--wait",
+                                     "0",
+                                     "--quality",
+                                     c.quality,
+                                     "--stats-out",
+                                     stats.string()};
+    if (!c.model.empty()) {
+      argv.push_back("--car-model");
+      argv.push_back(c.model);
+    }
+    Process p(argv, dir_ / "quality.log");
+    const auto code = p.Wait(std::chrono::seconds(60));
+    ASSERT_TRUE(code.has_value());
+    EXPECT_EQ(*code, 0) << p.Log();
+    EXPECT_EQ(ReadKeyValues(stats)["quality"], c.quality);
+    EXPECT_NE(p.Log().find(c.expect_log), std::string::npos) << p.Log();
+    if (!c.model.empty()) {
+      EXPECT_NE(p.Log().find("car model '" + c.model + "'"), std::string::npos) << p.Log();
+      EXPECT_NE(p.Log().find("the built-in car body"), std::string::npos) << p.Log();
+    }
   }
 }
 
@@ -339,6 +395,12 @@ class ViewerXr : public ViewerProcess {
                                                   std::vector<std::string> args,
                                                   const std::string& exit_after = "0",
                                                   const std::string& stage = "1") {
+    return RunInHeadset(std::vector<pb::VehicleState>{state}, std::move(args), exit_after, stage);
+  }
+  std::map<std::string, std::string> RunInHeadset(const std::vector<pb::VehicleState>& states,
+                                                  std::vector<std::string> args,
+                                                  const std::string& exit_after = "0",
+                                                  const std::string& stage = "1") {
     const std::uint32_t domain = FreshDomain();
     TestPublisher pub(domain);
     EXPECT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
@@ -355,15 +417,14 @@ class ViewerXr : public ViewerProcess {
                                      "0",
                                      "--msaa",
                                      "0",
-                                     "--width",
-                                     "640",
-                                     "--height",
-                                     "400",
                                      "--wait",
                                      "60",
                                      "--stats-out",
                                      (dir_ / "stats.txt").string()};
     argv.insert(argv.end(), args.begin(), args.end());
+    if (std::find(args.begin(), args.end(), "--width") == args.end()) {
+      argv.insert(argv.end(), {"--width", "640", "--height", "400"});
+    }
     Process viewer(argv, dir_ / "viewer.log");
     unsetenv("XR_RUNTIME_JSON");
     // The state until the viewer ends (best effort topic: written repeatedly).
@@ -371,7 +432,7 @@ class ViewerXr : public ViewerProcess {
     std::optional<int> code;
     while (!(code = viewer.Wait(std::chrono::milliseconds(20))) &&
            base::MonotonicNow() < deadline) {
-      pub.State(state);
+      for (const auto& st : states) pub.State(st);
     }
     EXPECT_TRUE(code.has_value()) << "the viewer did not end: " << viewer.Log();
     EXPECT_EQ(code.value_or(-1), 0) << viewer.Log();
@@ -408,11 +469,33 @@ ArrowInEye FindDriveArrow(const Image& img, bool plus_x_is_left) {
   return a;
 }
 
+// The orbit camera's place in the headset, written out: 2.5 m from T at yaw 60 deg and pitch
+// 5 deg, a level frame facing T (OpenXR axes: X right, Y up, Z back).
+struct Place {
+  viewer::Vec3 origin;
+  viewer::Mat3 axes;
+};
+Place OrbitPlace(double yaw_deg, double pitch_deg, double distance) {
+  const double y = viewer::Rad(yaw_deg), p = viewer::Rad(pitch_deg);
+  const viewer::Vec3 T{0, 0, TestCar::kHeight};
+  Place out;
+  out.origin = T + viewer::Vec3{std::cos(p) * std::cos(y), std::cos(p) * std::sin(y), std::sin(p)} *
+                       distance;
+  const viewer::Vec3 forward{-std::cos(y), -std::sin(y), 0}, up{0, 0, 1};
+  out.axes.c[0] = viewer::Cross(forward, up);
+  out.axes.c[1] = up;
+  out.axes.c[2] = -forward;
+  return out;
+}
+
 TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPlace) {
+  // Seated at the orbit camera's place, 2.5 m from the vehicle: its LF spring arrow ~1.4 m from
+  // the eyes, near enough for their 64 mm to show.
   TestVehicle t;
   for (auto& w : t.wheels) w.fp = 0;
   t.wheels[0].fp = 2000;  // LF spring: 1 m up from B at the default scale
-  const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--frames", "12"});
+  const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--camera", "orbit",
+                                                  "--orbit", "60,5,2.5", "--frames", "12"});
   ASSERT_FALSE(report.empty()) << "no report from the test runtime: " << log_;
   EXPECT_EQ(report.at("lifecycle"), "ok");
   EXPECT_EQ(report.at("states"), "idle ready synchronized visible focused stopping idle exiting");
@@ -424,8 +507,10 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   EXPECT_EQ(report.at("frames_with_projection"), report.at("frames_with_quad"));
   EXPECT_EQ(report.at("projection_space"),
             std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
+  // The HUD is a panel fixed in the reference space (it goes where the place goes), not to the
+  // head.
   EXPECT_EQ(report.at("quad_space"),
-            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_VIEW)));
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
   EXPECT_EQ(report.at("session_open"), "0");
   EXPECT_NE(log_.find("runtime 'vdyn test runtime'"), std::string::npos) << log_;
 
@@ -433,15 +518,8 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   const auto hud = LoadPng(dir_ / "hud.png");
   ASSERT_TRUE(left && right && hud);
   ASSERT_EQ(left->width, xrtest::kEyeWidth);
-  // The seated space: at the driver's seat (body frame, X forward, Y left, Z up), OpenXR axes
-  // X = -Y_B, Y = Z_B, Z = -X_B; the vehicle stands at the origin heading east.
-  const viewer::CameraState cam;
-  const viewer::Vec3 seat{cam.seat_B.x, cam.seat_B.y, cam.seat_B.z + TestCar::kHeight};
-  viewer::Mat3 axes;
-  axes.c[0] = {0, -1, 0};
-  axes.c[1] = {0, 0, 1};
-  axes.c[2] = {-1, 0, 0};
-  const auto eyes = Eyes(seat, axes, 0.0);
+  const Place place = OrbitPlace(60, 5, 2.5);
+  const auto eyes = Eyes(place.origin, place.axes, 0.0);
   const double scale = viewer::ArrowStyle{}.metres_per_newton;
   const viewer::Vec3 tip{TestCar::kB, TestCar::kBl, TestCar::kGround + 2000 * scale};
   const viewer::Rgb8 g = viewer::ForceColour(viewer::ForceKind::kSpring);
@@ -464,7 +542,7 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   EXPECT_NEAR(measured[0] - measured[1], pl[0] - pr[0], 2.0);
   // Without the offset (both eyes at the head's centre) the shift would differ by the parallax.
   auto centred = eyes;
-  centred[0].position = centred[1].position = seat;
+  centred[0].position = centred[1].position = place.origin;
   const double no_offset = EyePixel(centred[0], tip)[0] - EyePixel(centred[1], tip)[0];
   EXPECT_GT(std::abs((pl[0] - pr[0]) - no_offset), 8.0)
       << "the test would not see a missing offset";
@@ -473,6 +551,51 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   const Blob transparent = FindColour(*hud, 0, 0, 0, 0);
   EXPECT_GT(transparent.count, hud->width * hud->height / 4);
   EXPECT_LT(transparent.count, hud->width * hud->height - 5000) << "the HUD is empty";
+}
+
+TEST_F(ViewerXr, TheHudIsAReadablePanelBelowTheEyesFixedInTheSpaceFacingThem) {
+  TestVehicle t;
+  const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--frames", "8",
+                                                  "--width", "1280", "--height", "720"});
+  ASSERT_FALSE(report.empty()) << log_;
+  EXPECT_EQ(report.at("lifecycle"), "ok");
+  EXPECT_EQ(report.at("quad_space"),
+            std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
+  // Where it hangs (the head at the LOCAL origin, looking along -Z): ahead, below the eyes, its
+  // face (+Z) turned to them.
+  std::istringstream pose(report.at("quad_pose"));
+  double x, y, z, qx, qy, qz, qw;
+  pose >> x >> y >> z >> qx >> qy >> qz >> qw;
+  EXPECT_NEAR(x, 0.0, 1e-6);
+  EXPECT_LT(y, -0.1);
+  EXPECT_LT(z, -0.5);
+  const viewer::Mat3 R = viewer::RotationFromQuat(qw, qx, qy, qz);
+  const viewer::Vec3 to_eyes = viewer::Normalized(-viewer::Vec3{x, y, z});
+  EXPECT_GT(viewer::Dot(R.c[2], to_eyes), std::cos(viewer::Rad(3)));
+  // Readable: the capitals of its first word (LIVE, green) subtend at least 0.8 deg at the eyes.
+  // Their height: the rows from the first green one down to the first without green.
+  const auto hud = LoadPng(dir_ / "hud.png");
+  ASSERT_TRUE(hud.has_value());
+  const Rect top_left{0, 0, hud->width / 2, hud->height / 3};
+  const Blob green = FindColour(*hud, 102, 255, 102, 40, top_left);
+  ASSERT_GT(green.count, 20) << "no LIVE on the HUD";
+  int rows = 0;
+  while (FindColour(*hud, 102, 255, 102, 40,
+                    {0, green.min_y + rows, hud->width / 2, green.min_y + rows + 1})
+             .count > 0) {
+    ++rows;
+  }
+  std::istringstream size(report.at("quad_size_m"));
+  double width_m = 0, height_m = 0;
+  size >> width_m >> height_m;
+  const double metres = rows * width_m / hud->width;
+  const double deg = viewer::Deg(std::atan(metres / std::sqrt(x * x + y * y + z * z)));
+  EXPECT_GT(deg, 0.8) << "LIVE is " << rows << " px of " << hud->width << " on a " << width_m
+                      << " m panel";
+  // The frame is drawn at the runtime's predicted display time (its clock converted): the
+  // viewer's last display time is the one the runtime predicted for the last frame drawn.
+  const auto stats = ReadKeyValues(dir_ / "stats.txt");
+  EXPECT_EQ(stats.at("last_display_mono_ns"), report.at("last_drawn_display_ns"));
 }
 
 TEST_F(ViewerXr, StandingBesideTheVehicleTheRuntimeEndsTheSessionAndTheViewerFollows) {
@@ -510,6 +633,105 @@ TEST_F(ViewerXr, StandingBesideTheVehicleTheRuntimeEndsTheSessionAndTheViewerFol
   }
 }
 
+// Seated at the driver's seat with the head moved off the seat and turned (the test runtime's
+// kEnvHead); with `recentre`, the key R pressed once frames run. Returns where the tip of the
+// side-force arrow of a vehicle 8 m ahead (its LF wheel, pointing left, out of its body) appears
+// in the left eye, and where it appears from the seat itself.
+struct SeatView {
+  double measured_x = 0, measured_y = 0, expected_x = 0, expected_y = 0;
+  int count = 0;
+};
+SeatView ArrowFromTheSeat(const TempDir& dir, bool recentre) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  EXPECT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  TestVehicle own, ahead;
+  for (auto& w : own.wheels) w.fp = 0;
+  ahead.id = 2;
+  ahead.x = 8;
+  for (auto& w : ahead.wheels) w.fp = 0;
+  ahead.wheels[0].fy = 3000;
+  setenv("XR_RUNTIME_JSON", VDYN_XR_TEST_MANIFEST, 1);
+  setenv(xrtest::kEnvOut, dir.path().c_str(), 1);
+  setenv(xrtest::kEnvExitAfter, "0", 1);
+  setenv(xrtest::kEnvStage, "1", 1);
+  setenv(xrtest::kEnvHead, "0.25 0.1 0.15 15", 1);
+  {
+    viewer::ViewerOptions o;
+    o.domain = domain;
+    o.hidden = true;
+    o.fps = 0;
+    o.samples = 0;
+    o.width = 640;
+    o.height = 400;
+    o.xr = true;
+    viewer::Viewer v(o);
+    EXPECT_TRUE(v.xr_active()) << v.stats().xr_status;
+    const auto deadline = base::MonotonicNow() + base::Seconds(60);
+    auto frames = [&](std::uint64_t n) {
+      const std::uint64_t until = v.stats().xr_frames + n;
+      while (v.stats().xr_frames < until && base::MonotonicNow() < deadline) {
+        pub.State(MakeState(own));
+        pub.State(MakeState(ahead));
+        v.Frame();
+      }
+    };
+    while (!(v.ready() && v.vehicle(2) != nullptr) && base::MonotonicNow() < deadline) frames(1);
+    frames(3);
+    if (recentre) {
+      SDL_Event key{};
+      key.type = SDL_KEYDOWN;
+      key.key.keysym.sym = SDLK_r;
+      SDL_PushEvent(&key);
+    }
+    frames(4);
+  }  // the runtime writes its images as the viewer leaves the headset
+  unsetenv("XR_RUNTIME_JSON");
+  unsetenv(xrtest::kEnvHead);
+  SeatView out;
+  if (const char* keep = std::getenv("VDYN_VIEWER_TEST_PNGS")) {
+    std::error_code ec;
+    std::filesystem::copy_file(
+        dir / "left.png",
+        std::filesystem::path(keep) / (recentre ? "recentred-left.png" : "off-seat-left.png"),
+        std::filesystem::copy_options::overwrite_existing, ec);
+  }
+  const auto img = LoadPng(dir / "left.png");
+  EXPECT_TRUE(img.has_value());
+  if (!img) return out;
+  // The arrow points left (+Y): its tip is its leftmost pixel.
+  const viewer::Rgb8 c = viewer::ForceColour(viewer::ForceKind::kSide);
+  const Blob b = FindColour(*img, c.r, c.g, c.b, 12);
+  out.count = b.count;
+  out.measured_x = b.min_x;
+  out.measured_y = FindColour(*img, c.r, c.g, c.b, 12, {b.min_x, 0, b.min_x + 3, img->height}).cy;
+  // From the seat itself: OpenXR axes X = -Y_B, Y = Z_B, Z = -X_B (the vehicle heads east).
+  const viewer::CameraState cam;
+  const viewer::Vec3 seat{cam.seat_B.x, cam.seat_B.y, cam.seat_B.z + TestCar::kHeight};
+  viewer::Mat3 axes;
+  axes.c[0] = {0, -1, 0};
+  axes.c[1] = {0, 0, 1};
+  axes.c[2] = {-1, 0, 0};
+  const double scale = viewer::ArrowStyle{}.metres_per_newton;
+  const viewer::Vec3 tip{8 + TestCar::kB, TestCar::kBl + 3000 * scale, TestCar::kGround};
+  const auto e = EyePixel(Eyes(seat, axes, 0.0)[0], tip);
+  out.expected_x = e[0];
+  out.expected_y = e[1];
+  return out;
+}
+
+TEST_F(ViewerXr, RecentringPutsTheEyesAtTheSeatWhereverTheHeadIs) {
+  // Off the seat and turned 15 deg left, the arrow ahead is far from where the seat sees it...
+  const SeatView off = ArrowFromTheSeat(dir_, false);
+  ASSERT_GT(off.count, 20) << "no arrow in view";
+  EXPECT_GT(std::abs(off.measured_x - off.expected_x), 50.0);
+  // ... and after R it is where the seat sees it.
+  const SeatView centred = ArrowFromTheSeat(dir_, true);
+  ASSERT_GT(centred.count, 20);
+  EXPECT_NEAR(centred.measured_x, centred.expected_x, 3.0);
+  EXPECT_NEAR(centred.measured_y, centred.expected_y, 3.0);
+}
+
 TEST_F(ViewerXr, WithoutAStageTheStandingViewStandsOnLocalAtEyeHeight) {
   TestVehicle t;
   const auto report =
@@ -540,6 +762,173 @@ TEST_F(ViewerProcess, WithoutAnOpenXrRuntimeTheViewerSaysSoAndShowsTheDesktop) {
   EXPECT_EQ(kv.at("xr_frames"), "0");
   EXPECT_EQ(kv.at("xr").rfind("desktop fallback", 0), 0u) << kv.at("xr");
   EXPECT_TRUE(LoadPng(dir_ / "fallback.png").has_value());
+}
+
+// Lines of a log that contain `text`.
+int LinesWith(const std::string& log, const std::string& text) {
+  std::istringstream in(log);
+  int n = 0;
+  for (std::string line; std::getline(in, line);) n += line.find(text) != std::string::npos;
+  return n;
+}
+
+TEST_F(ViewerProcess, WithoutAnOpenXrRuntimeOrADisplayItSaysSoOnceWithoutTheLibrariesNoise) {
+  // No runtime, no display, no XDG_RUNTIME_DIR (a container, a plain ssh session): the OpenXR
+  // loader's own error lines and SDL's Wayland probe would come first; only the viewer's
+  // messages that say what to do remain.
+  Process viewer(
+      {"/usr/bin/env", "-u", "DISPLAY", "-u", "WAYLAND_DISPLAY", "-u", "XDG_RUNTIME_DIR", "-u",
+       "XR_LOADER_DEBUG", "XR_RUNTIME_JSON=" + (dir_ / "no-such-runtime.json").string(),
+       VDYN_VIEWER_BINARY, "--domain", std::to_string(FreshDomain()), "--xr", "--frames", "1",
+       "--wait", "0"},
+      dir_ / "viewer.log");
+  const auto code = viewer.Wait(std::chrono::seconds(120));
+  ASSERT_TRUE(code.has_value());
+  EXPECT_EQ(*code, 0) << viewer.Log();
+  const std::string log = viewer.Log();
+  EXPECT_EQ(LinesWith(log, "OpenXR-Loader"), 0) << log;
+  EXPECT_EQ(LinesWith(log, "XDG_RUNTIME_DIR"), 0) << log;
+  EXPECT_EQ(LinesWith(log, "no OpenXR runtime"), 1) << log;
+  EXPECT_EQ(LinesWith(log, "no display"), 1) << log;
+}
+
+// --- the HUD's time and step after a restore ---------------------------------------------------
+
+TEST_F(ViewerProcess, AfterARestoreTheHudsTimeAndStepAgree) {
+  // Server a drives vehicle 1; its checkpoint at a step of at least 1000 is restored into server
+  // b, which has run for a shorter time: the vehicle's steps and b's clock disagree.
+  const std::uint32_t da = FreshDomain(), db = FreshDomain();
+  Process a({ServerBinary(), "--domain", std::to_string(da), "--world", "flat", "--duration", "120",
+             "--server-id", "a"},
+            dir_ / "a.log");
+  transport::Participant pa(da);
+  transport::DropCounters drops;
+  transport::Reader<pb::SessionEvent> events(pa, transport::TopicId::kEvents, &drops);
+  std::optional<pb::SessionEvent> checkpoint;
+  const auto deadline = base::MonotonicNow() + base::Seconds(60);
+  while (!checkpoint && base::MonotonicNow() < deadline) {
+    events.Wait(std::chrono::milliseconds(100));
+    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
+      if (e.vehicle_id() == 1 && e.has_checkpoint() && e.step() >= 1000) checkpoint = e;
+    });
+  }
+  ASSERT_TRUE(checkpoint.has_value()) << a.Log();
+  Process b({ServerBinary(), "--domain", std::to_string(db), "--world", "flat", "--duration", "120",
+             "--server-id", "b", "--vehicle-ids", "2"},
+            dir_ / "b.log");
+  ASSERT_TRUE(WaitForServer(db, 2, 60)) << b.Log();
+  transport::Participant pb_(db);
+  transport::ControlClient client(pb_, "test-takeover");
+  ASSERT_TRUE(client.WaitForServer(std::chrono::seconds(30)));
+  pb::ControlRequest r;
+  r.set_vehicle_id(1);
+  r.set_server_id("b");
+  auto* rs = r.mutable_restore();
+  *rs->mutable_state() = checkpoint->checkpoint().state();
+  *rs->mutable_params() = checkpoint->checkpoint().params();
+  *rs->mutable_input() = checkpoint->checkpoint().input();
+  const auto reply = client.Call(r, std::chrono::seconds(30));
+  ASSERT_TRUE(reply.has_value()) << client.last_error();
+  ASSERT_TRUE(reply->accepted()) << reply->reason();
+
+  viewer::ViewerOptions o;
+  o.domain = db;
+  o.follow = 1;
+  o.hidden = true;
+  o.fps = 0;
+  o.samples = 0;
+  o.width = 800;
+  o.height = 600;
+  viewer::Viewer v(o);
+  const auto until = base::MonotonicNow() + base::Seconds(60);
+  while (base::MonotonicNow() < until) {
+    v.Frame();
+    const auto* s = v.shown_state(1);
+    if (s != nullptr && s->step() > checkpoint->step()) break;
+  }
+  const pb::VehicleState* s = v.shown_state(1);
+  ASSERT_NE(s, nullptr);
+  ASSERT_GT(s->step(), checkpoint->step());
+  ASSERT_NE(s->sim_time_ns(), static_cast<std::int64_t>(s->step()) * s->step_ns())
+      << "b's clock and the vehicle's steps agree anyway: the test shows nothing";
+  // The HUD's line: "... sim time T s   step N   server clock C s", T the step's time.
+  std::string line;
+  for (const std::string& l : v.hud_text()) {
+    if (l.find("sim time") != std::string::npos) line = l;
+  }
+  ASSERT_FALSE(line.empty());
+  double t_s = 0, clock_s = 0;
+  unsigned long long step = 0;
+  const auto at = line.find("sim time");
+  ASSERT_EQ(std::sscanf(line.c_str() + at, "sim time %lf s step %llu server clock %lf s", &t_s,
+                        &step, &clock_s),
+            3)
+      << line;
+  EXPECT_NEAR(t_s, static_cast<double>(step) * 1e-3, 5e-4) << line;
+  EXPECT_NEAR(clock_s, static_cast<double>(s->sim_time_ns()) * 1e-9, 5e-4) << line;
+  EXPECT_NE(std::lround(t_s * 1000), std::lround(clock_s * 1000)) << line;
+}
+
+// --- playback ------------------------------------------------------------------------------
+
+// A recording of server 'recorded': a small square world and 3 s of vehicle 1 rolling at 1 m/s.
+void WriteDrive(const std::filesystem::path& path) {
+  using transport::TopicId;
+  mcap::Writer w(path, {});
+  auto channel = [&](TopicId t, std::uint32_t key) {
+    const auto* d = recorder::PayloadDescriptor(t);
+    const std::uint16_t s =
+        w.AddSchema(d->full_name(), "protobuf", recorder::FileDescriptorSetOf(d));
+    return w.AddChannel(s, recorder::ChannelTopic(t, key), "protobuf",
+                        recorder::ChannelMetadata(t, key));
+  };
+  auto put = [&](std::uint16_t ch, std::uint64_t t, const google::protobuf::Message& m) {
+    const std::string b = m.SerializeAsString();
+    w.WriteMessage(ch, 0, t, t, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+  };
+  const std::uint64_t t0 = 1'800'000'000'000'000'000ull;
+  put(channel(TopicId::kWorld, transport::ServerKey("recorded")), t0,
+      MakeWorld("recorded", kPi / 2));
+  const std::uint16_t state = channel(TopicId::kState, 1);
+  for (std::uint64_t i = 1; i <= 3000; ++i) {
+    TestVehicle tv;
+    tv.server = "recorded";
+    tv.step = i;
+    tv.x = 0.001 * static_cast<double>(i);
+    tv.speed = 1;
+    put(state, t0 + i * 1'000'000, MakeState(tv));
+  }
+  w.Close();
+}
+
+TEST_F(ViewerProcess, APlaybackIsRecognisedWithoutAFlagAndNamesItsRecording) {
+  const auto file = dir_ / "drive.mcap";
+  WriteDrive(file);
+  const std::uint32_t domain = FreshDomain();
+  Process player(
+      {RecorderBinary(), "play", file.string(), "--domain", std::to_string(domain), "--loop"},
+      dir_ / "play.log");
+  // The viewer joins once the playback runs: it learns what the player is from its announcement
+  // of every second, not from the one at the start.
+  ASSERT_TRUE(WaitForServer(domain, 1, 60)) << player.Log();
+  viewer::ViewerOptions o;
+  o.domain = domain;
+  o.hidden = true;
+  o.fps = 0;
+  o.samples = 0;
+  o.width = 800;
+  o.height = 600;
+  ASSERT_FALSE(o.playback);
+  viewer::Viewer v(o);
+  auto first = [&] { return v.hud_text().empty() ? std::string() : v.hud_text().front(); };
+  const auto deadline = base::MonotonicNow() + base::Seconds(60);
+  while (base::MonotonicNow() < deadline) {
+    v.Frame();
+    if (v.ready() && first().rfind("PLAYBACK", 0) == 0) break;
+  }
+  EXPECT_EQ(first().rfind("PLAYBACK", 0), 0u) << first() << "\n" << player.Log();
+  EXPECT_NE(first().find("recording 'drive.mcap'"), std::string::npos) << first();
+  EXPECT_NE(first().find("server 'recorded'"), std::string::npos) << first();
 }
 
 }  // namespace

@@ -240,6 +240,35 @@ Blob FindColour(const viewer::Image& img, std::uint8_t r, std::uint8_t g, std::u
   return out;
 }
 
+RegionStats Classify(const viewer::Image& img, Rect region) {
+  RegionStats s;
+  const int x1 = std::min(region.x1, img.width), y1 = std::min(region.y1, img.height);
+  for (int y = std::max(region.y0, 0); y < y1; ++y) {
+    for (int x = std::max(region.x0, 0); x < x1; ++x) {
+      const std::uint8_t* p =
+          img.rgba.data() + (static_cast<std::size_t>(y) * static_cast<std::size_t>(img.width) +
+                             static_cast<std::size_t>(x)) *
+                                4;
+      const int r = p[0], g = p[1], b = p[2];
+      const int hi = std::max({r, g, b}), lo = std::min({r, g, b});
+      ++s.pixels;
+      s.r += r;
+      s.g += g;
+      s.b += b;
+      if (hi - lo <= 16 && hi >= 25 && hi <= 150) ++s.asphalt;
+      if (hi - lo <= 30 && lo >= 170) ++s.white;
+      if (g > r + 6 && g > b + 20) ++s.grass;
+      if (r > 120 && r > 3 * g && r > 3 * b) ++s.red;
+    }
+  }
+  if (s.pixels > 0) {
+    s.r /= s.pixels;
+    s.g /= s.pixels;
+    s.b /= s.pixels;
+  }
+  return s;
+}
+
 std::array<double, 2> MapPixel(double x, double y, double centre_x, double centre_y, double up_yaw,
                                double half_height_m, int width, int height) {
   const double ppm = height / (2.0 * half_height_m);

@@ -109,6 +109,17 @@ struct Blob {
 Blob FindColour(const viewer::Image& img, std::uint8_t r, std::uint8_t g, std::uint8_t b,
                 int tolerance, Rect region = {});
 
+// Pixels of a region that a test classifies, and their mean colour (sRGB, 0..255).
+struct RegionStats {
+  int pixels = 0;
+  int asphalt = 0;  // grey, dark to mid: the road's asphalt
+  int grass = 0;    // green over red and blue: the ground's grass
+  int white = 0;    // bright and grey: markings, white kerb blocks
+  int red = 0;      // red kerb blocks
+  double r = 0, g = 0, b = 0;
+};
+RegionStats Classify(const viewer::Image& img, Rect region);
+
 // Where a world point lands on the map camera's image (top-down, orthographic, centred on
 // `centre`, the geographic heading `up_yaw` pointing up, `half_height_m` from centre to the top):
 // pixel x right, y down. The closed form, independent of the viewer's matrices.

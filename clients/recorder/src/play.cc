@@ -18,6 +18,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
+#include "vdyn/diagnostics.pb.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/transport/dds.h"
@@ -87,6 +88,7 @@ class Player {
   void HandleKeys(const std::string& keys, bool& quit);
   void HandleRequests();
   void Status(bool force);
+  void Announce(bool force);
   std::uint64_t Now() const { return static_cast<std::uint64_t>(base::MonotonicNow().ns); }
   // Where the playback is, ns from the recording's first message.
   std::uint64_t Position() const {
@@ -133,6 +135,11 @@ class Player {
   transport::DropCounters drops_;
   std::unique_ptr<transport::Reader<pb::ControlRequest>> control_;
   std::unique_ptr<transport::Writer<pb::ControlReply>> replies_;
+  // What it is, once a second on vdyn/diagnostics: a player (mode "playback"), of which
+  // recording, republishing which servers' topics (a viewer labels their view PLAYBACK).
+  std::unique_ptr<transport::Writer<pb::Diagnostics>> announce_;
+  std::set<std::string> servers_;
+  std::uint64_t last_announce_ = 0;
   bool tty_ = false;
 };
 
@@ -193,6 +200,10 @@ bool Player::Load() {
       if (it == channels_.end() || !it->second.play) return;
       if (it->second.topic != TopicId::kWorld && it->second.topic != TopicId::kParams) return;
       latched_.push_back({m.log_time - first_, m.channel_id, {m.data.begin(), m.data.end()}});
+      pb::WorldDescription w;
+      if (it->second.topic == TopicId::kWorld && w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        servers_.insert(w.server_id());
+      }
     }, scratch_);
   }
   return true;
@@ -383,6 +394,19 @@ void Player::Status(bool force) {
   std::fflush(stderr);
 }
 
+void Player::Announce(bool force) {
+  const std::uint64_t now = Now();
+  if (!force && now - last_announce_ < 1'000'000'000) return;
+  last_announce_ = now;
+  pb::Diagnostics d;
+  d.set_server_id(o_.server_id);
+  d.set_mode("playback");
+  d.set_sim_time_ns(static_cast<std::int64_t>(Position()));
+  d.set_recording(o_.file.filename().string().substr(0, limits::kMaxNameBytes));
+  for (const std::string& s : servers_) d.add_replayed_servers(s);
+  announce_->Write(transport::ServerKey(o_.server_id), d);
+}
+
 int Player::Run(const std::atomic<bool>& stop) {
   if (!Load()) return 1;
   participant_ = std::make_unique<transport::Participant>(o_.domain);
@@ -411,6 +435,8 @@ int Player::Run(const std::atomic<bool>& stop) {
   }
   control_ = std::make_unique<transport::Reader<pb::ControlRequest>>(*participant_, TopicId::kControl, &drops_);
   replies_ = std::make_unique<transport::Writer<pb::ControlReply>>(*participant_, TopicId::kControlReply);
+  announce_ = std::make_unique<transport::Writer<pb::Diagnostics>>(*participant_, TopicId::kDiagnostics);
+  Announce(true);
   RawTerminal terminal;
   const bool keys = o_.keyboard && terminal.active();
   tty_ = isatty(STDERR_FILENO) == 1;
@@ -430,6 +456,7 @@ int Player::Run(const std::atomic<bool>& stop) {
     if (keys) HandleKeys(terminal.Read(), quit);
     HandleRequests();
     Status(false);
+    Announce(false);
     if (paused_) {
       control_->Wait(std::chrono::milliseconds(20));
       continue;

@@ -14,10 +14,6 @@ void Basis(const Vec3& axis, Vec3& u, Vec3& w) {
   w = Cross(a, u);
 }
 
-constexpr Rgb8 kTyre{34, 34, 38};
-constexpr Rgb8 kRim{175, 178, 185};
-constexpr Rgb8 kSpring{120, 120, 128};
-
 }  // namespace
 
 void DrawList::Push(const Vec3& p, const Vec3& n, Rgb8 c, std::uint8_t alpha) {
@@ -117,29 +113,87 @@ ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style) {
 
 double BoundingRadius(const VehicleView& v, const ArrowStyle& style) {
   const VehicleGeometry& g = v.geometry;
-  double r = std::hypot(std::max(g.front, g.rear), g.half_width) + 1.5;  // body, wheels, cabin
+  // The body, the wheels, and the shadow the body casts (1.5 m beside it at most): a vehicle just
+  // out of sight may still darken the ground in view.
+  double r = std::hypot(std::max(g.front, g.rear), g.half_width) + 1.5;
   double longest = 0;
   for (const ForceArrow& a : v.arrows) longest = std::max(longest, Norm(a.force_W));
   return r + longest * style.metres_per_newton;
 }
 
-void AppendVehicleBody(const VehicleView& v, bool body, bool coarse, FrameLists& lists) {
-  DrawList& opaque = lists.opaque;
-  if (body) {
-    const BodyBoxes boxes = BodyBoxesFor(v.geometry);
-    const Rgb8 colour = VehicleColour(v.id);
-    lists.translucent.Box(v.pose_WB, boxes.lower_min, boxes.lower_max, colour, 110);
-    opaque.Box(v.pose_WB, boxes.cabin_min, boxes.cabin_max, colour);
-  }
+namespace {
+
+// The plane z = a + b x + c y through the contact points (least squares), or false when fewer
+// than three wheels touch the ground.
+bool ContactPlane(const VehicleView& v, double& a, double& b, double& c) {
+  double n = 0, sx = 0, sy = 0, sz = 0, sxx = 0, sxy = 0, syy = 0, sxz = 0, syz = 0;
   for (const WheelView& w : v.wheels) {
-    const double half_width = 0.35 * w.radius;
-    opaque.Cylinder(w.centre_W - w.left_W * half_width, w.centre_W + w.left_W * half_width,
-                    w.radius, kTyre, true, coarse ? 10 : 20);
-    // The rim, a little proud of the tyre on both sides, shows the steering angle from above.
-    opaque.Cylinder(w.centre_W - w.left_W * (half_width + 0.01),
-                    w.centre_W + w.left_W * (half_width + 0.01), 0.6 * w.radius, kRim, true,
-                    coarse ? 6 : 12);
-    if (!coarse) opaque.Cylinder(w.mount_W, w.centre_W, 0.035, kSpring, true, 8);
+    if (!w.contact) continue;
+    const Vec3& p = w.contact_W;
+    n += 1;
+    sx += p.x;
+    sy += p.y;
+    sz += p.z;
+    sxx += p.x * p.x;
+    sxy += p.x * p.y;
+    syy += p.y * p.y;
+    sxz += p.x * p.z;
+    syz += p.y * p.z;
+  }
+  if (n < 3) return false;
+  // Centred normal equations for b, c; a from the means.
+  const double mx = sx / n, my = sy / n, mz = sz / n;
+  const double cxx = sxx / n - mx * mx, cxy = sxy / n - mx * my, cyy = syy / n - my * my;
+  const double cxz = sxz / n - mx * mz, cyz = syz / n - my * mz;
+  const double det = cxx * cyy - cxy * cxy;
+  if (std::abs(det) < 1e-12) {
+    b = c = 0;
+  } else {
+    b = (cxz * cyy - cyz * cxy) / det;
+    c = (cyz * cxx - cxz * cxy) / det;
+  }
+  a = mz - b * mx - c * my;
+  return true;
+}
+
+}  // namespace
+
+void AppendVehicleBody(const VehicleView& v, VehicleParts parts, bool coarse, FrameLists& lists) {
+  if (parts.body) {
+    BodyInstance b;
+    b.vehicle_id = v.id;
+    b.pose_WB = v.pose_WB;
+    b.geometry = v.geometry;
+    b.paint = VehicleColour(v.id);
+    b.coarse = coarse;
+    lists.bodies.push_back(b);
+    double a = 0, bx = 0, cy = 0;
+    if (ContactPlane(v, a, bx, cy)) {
+      const VehicleGeometry& g = v.geometry;
+      const double x0 = -g.rear - 0.25, x1 = g.front + 0.25, y = g.half_width + 0.2;
+      ContactShadow s;
+      const Vec3 corners_B[4] = {{x0, -y, 0}, {x1, -y, 0}, {x1, y, 0}, {x0, y, 0}};
+      for (int i = 0; i < 4; ++i) {
+        const Vec3 p = v.pose_WB * corners_B[i];
+        s.corners_W[static_cast<std::size_t>(i)] = {p.x, p.y, a + bx * p.x + cy * p.y};
+      }
+      lists.contact_shadows.push_back(s);
+    }
+  }
+  if (parts.wheels) {
+    for (const WheelView& w : v.wheels) {
+      WheelInstance wi;
+      wi.centre_W = w.centre_W;
+      // Turned about the axle (left) by the spin: forward tips down, up tips forward.
+      const double c = std::cos(w.spin), s = std::sin(w.spin);
+      const Vec3 up = Normalized(Cross(w.forward_W, w.left_W), w.up_W);
+      wi.R_WW.c[0] = w.forward_W * c - up * s;
+      wi.R_WW.c[1] = w.left_W;
+      wi.R_WW.c[2] = w.forward_W * s + up * c;
+      wi.radius = w.radius;
+      wi.coarse = coarse;
+      lists.wheels.push_back(wi);
+    }
   }
 }
 

@@ -5,9 +5,12 @@
 #include <google/protobuf/descriptor.h>
 #include <google/protobuf/reflection.h>
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <vector>
+
+#include "vdyn/base/limits.h"
 
 namespace vdyn::viewer {
 
@@ -104,6 +107,20 @@ pb::VehicleParams ParamsEditor::Changes(const pb::VehicleParams& current,
                 any = true;
               }
               break;
+            case gp::FieldDescriptor::CPPTYPE_UINT32:
+              if (rb->HasField(b, f) &&
+                  (!ra->HasField(a, f) || ra->GetUInt32(a, f) != rb->GetUInt32(b, f))) {
+                ro->SetUInt32(&o, f, rb->GetUInt32(b, f));
+                any = true;
+              }
+              break;
+            case gp::FieldDescriptor::CPPTYPE_BOOL:
+              if (rb->HasField(b, f) &&
+                  (!ra->HasField(a, f) || ra->GetBool(a, f) != rb->GetBool(b, f))) {
+                ro->SetBool(&o, f, rb->GetBool(b, f));
+                any = true;
+              }
+              break;
             case gp::FieldDescriptor::CPPTYPE_ENUM:
               if (rb->HasField(b, f) &&
                   (!ra->HasField(a, f) || ra->GetEnumValue(a, f) != rb->GetEnumValue(b, f))) {
@@ -123,21 +140,60 @@ pb::VehicleParams ParamsEditor::Changes(const pb::VehicleParams& current,
 
 namespace {
 
-// One message's fields as ImGui inputs; true when one was changed.
-bool EditFields(gp::Message& m) {
+// The field's words under its input, its name and range when hovered.
+void Hover(const std::string& path) {
+  if (!ImGui::IsItemHovered()) return;
+  ImGui::BeginTooltip();
+  if (const limits::Range* r = limits::ParamRange(path)) {
+    ImGui::Text("%s  in %s", path.c_str(), limits::Describe(*r).c_str());
+  } else {
+    ImGui::TextUnformatted(path.c_str());
+  }
+  ImGui::EndTooltip();
+}
+
+}  // namespace
+
+std::string ParamsEditor::FieldLabel(const std::string& path) {
+  const std::string_view words = limits::ParamWords(path);
+  return words.empty() ? path : std::string(words);
+}
+
+bool ParamsEditor::EditFields(gp::Message& m, const std::string& prefix) {
   bool changed = false;
   const gp::Descriptor* d = m.GetDescriptor();
   const gp::Reflection* r = m.GetReflection();
   for (int i = 0; i < d->field_count(); ++i) {
     const gp::FieldDescriptor* f = d->field(i);
     if (f->is_repeated()) continue;
+    const std::string path = prefix + f->name();
+    // The label shown is the field in words with its unit; the ImGui id is its path.
+    const std::string label = FieldLabel(path) + "##" + path;
     ImGui::PushID(f->number());
+    bool open = false;
     switch (f->cpp_type()) {
       case gp::FieldDescriptor::CPPTYPE_DOUBLE: {
         double v = r->GetDouble(m, f);
-        ImGui::SetNextItemWidth(120);
-        if (ImGui::InputDouble(f->name().c_str(), &v, 0.0, 0.0, "%.6g")) {
+        ImGui::SetNextItemWidth(110);
+        if (ImGui::InputDouble(label.c_str(), &v, 0.0, 0.0, "%.6g")) {
           r->SetDouble(&m, f, v);
+          changed = true;
+        }
+        break;
+      }
+      case gp::FieldDescriptor::CPPTYPE_UINT32: {
+        int v = static_cast<int>(r->GetUInt32(m, f));
+        ImGui::SetNextItemWidth(110);
+        if (ImGui::InputInt(label.c_str(), &v, 1, 1)) {
+          r->SetUInt32(&m, f, static_cast<std::uint32_t>(std::max(v, 0)));
+          changed = true;
+        }
+        break;
+      }
+      case gp::FieldDescriptor::CPPTYPE_BOOL: {
+        bool v = r->GetBool(m, f);
+        if (ImGui::Checkbox(label.c_str(), &v)) {
+          r->SetBool(&m, f, v);
           changed = true;
         }
         break;
@@ -145,8 +201,8 @@ bool EditFields(gp::Message& m) {
       case gp::FieldDescriptor::CPPTYPE_ENUM: {
         const gp::EnumDescriptor* e = f->enum_type();
         const gp::EnumValueDescriptor* cur = r->GetEnum(m, f);
-        ImGui::SetNextItemWidth(220);
-        if (ImGui::BeginCombo(f->name().c_str(), cur->name().c_str())) {
+        ImGui::SetNextItemWidth(200);
+        if (ImGui::BeginCombo(label.c_str(), cur->name().c_str())) {
           for (int k = 0; k < e->value_count(); ++k) {
             const gp::EnumValueDescriptor* ev = e->value(k);
             if (ImGui::Selectable(ev->name().c_str(), ev == cur)) {
@@ -158,20 +214,26 @@ bool EditFields(gp::Message& m) {
         }
         break;
       }
-      case gp::FieldDescriptor::CPPTYPE_MESSAGE: {
-        if (ImGui::TreeNode(f->name().c_str())) {
-          changed |= EditFields(*r->MutableMessage(&m, f));
-          ImGui::TreePop();
-        }
+      case gp::FieldDescriptor::CPPTYPE_MESSAGE:
+        open = ImGui::TreeNode(label.c_str());
         break;
-      }
       default:
-        break;
+        ImGui::PopID();
+        continue;
+    }
+    const ImVec2 lo = ImGui::GetItemRectMin(), hi = ImGui::GetItemRectMax();
+    drawn_[path] = {FieldLabel(path), lo.x, lo.y, hi.x, hi.y};
+    Hover(path);
+    if (open) {
+      changed |= EditFields(*r->MutableMessage(&m, f), path + ".");
+      ImGui::TreePop();
     }
     ImGui::PopID();
   }
   return changed;
 }
+
+namespace {
 
 // Set scalar fields, nested messages' fields counted one by one.
 int CountFields(const gp::Message& m) {
@@ -227,7 +289,8 @@ void ParamsEditor::Draw(std::uint32_t vehicle_id, const std::string& server_id,
   }
   ImGui::Separator();
   ImGui::BeginChild("fields", ImVec2(0, 0), false);
-  EditFields(edited_);
+  drawn_.clear();
+  EditFields(edited_, "");
   ImGui::EndChild();
 }
 

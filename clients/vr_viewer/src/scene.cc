@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vdyn/viewer/car_model.h"
+
 namespace vdyn::viewer {
 namespace {
 
@@ -173,7 +175,39 @@ std::string CheckState(const pb::VehicleState& s) {
   return {};
 }
 
-VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g) {
+double WheelSpinRate(const pb::VehicleState& s, int wheel) {
+  const pb::WheelState& ws = s.wheels(wheel);
+  if (s.model() == pb::VEHICLE_MODEL_FULL) return ws.omega();
+  // The paper model: B rolls along the wheel's heading in the ground plane without slip.
+  const pb::Quat& q = s.q_wb();
+  const Mat3 R = RotationFromQuat(q.w(), q.x(), q.y(), q.z());
+  const Vec3 B = V(ws.p_b_w()), A = V(ws.p_a_w());
+  const Vec3 v_B = V(s.v_wt_w()) + Cross(R * V(s.w_wb_b()), B - V(s.p_wt_w()));
+  const Vec3 forward = R.c[0] * std::cos(ws.gamma()) + R.c[1] * std::sin(ws.gamma());
+  const Vec3 n = ws.contact() ? Normalized(V(ws.n_w()), Vec3{0, 0, 1}) : R.c[2];
+  const Vec3 t_long = Normalized(forward - n * Dot(forward, n), R.c[0]);
+  // The radius: from A to B is the spring's length plus the radius.
+  double radius = Norm(A - B) - ws.ls();
+  if (!(radius > 0.05)) radius = 0.3;
+  return Dot(v_B, t_long) / radius;
+}
+
+void AdvanceWheelSpin(WheelSpin& spin, const pb::VehicleState& s) {
+  std::array<double, kWheels> rate{};
+  for (int w = 0; w < kWheels; ++w) rate[static_cast<std::size_t>(w)] = WheelSpinRate(s, w);
+  if (spin.started && s.sim_time_ns() > spin.sim_time_ns) {
+    const double dt = static_cast<double>(s.sim_time_ns() - spin.sim_time_ns) * 1e-9;
+    for (std::size_t w = 0; w < kWheels; ++w) {
+      spin.angle[w] = WrapAngle(spin.angle[w] + 0.5 * (spin.rate[w] + rate[w]) * dt);
+    }
+  }
+  spin.rate = rate;
+  spin.sim_time_ns = s.sim_time_ns();
+  spin.started = true;
+}
+
+VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g,
+                             const WheelSpin* spin) {
   VehicleView v;
   v.id = s.vehicle_id();
   v.step = s.step();
@@ -195,6 +229,7 @@ VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g
     WheelView& wv = v.wheels[static_cast<std::size_t>(w)];
     wv.radius = g.radius[static_cast<std::size_t>(w)];
     wv.contact = ws.contact();
+    if (spin != nullptr) wv.spin = spin->angle[static_cast<std::size_t>(w)];
     wv.mount_W = V(ws.p_a_w());
     wv.contact_W = V(ws.p_b_w());
     ground += wv.contact_W.z;
@@ -232,25 +267,9 @@ VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g
   const Vec3 nose = v.pose_WB * Vec3{g.front, 0, 0};
   v.arrows.push_back({ForceKind::kDrag, -1, nose, x_B * (-s.da()), true});
   // The wall force from above the roof (the state does not say where the wall touched).
-  const BodyBoxes boxes = BodyBoxesFor(g);
-  const Vec3 roof = v.pose_WB * Vec3{0, 0, boxes.cabin_max.z + 0.3};
+  const Vec3 roof = v.pose_WB * Vec3{0, 0, CarShapeFor(g).z_roof + 0.3};
   v.arrows.push_back({ForceKind::kWall, -1, roof, V(s.f_wall_w()), false});
   return v;
-}
-
-BodyBoxes BodyBoxesFor(const VehicleGeometry& g) {
-  double z_mount = 0, r = 0;
-  for (int w = 0; w < kWheels; ++w) {
-    z_mount += g.mount_B[static_cast<std::size_t>(w)].z / kWheels;
-    r += g.radius[static_cast<std::size_t>(w)] / kWheels;
-  }
-  BodyBoxes b;
-  b.lower_min = {-g.rear, -g.half_width, z_mount - 0.9 * r};
-  b.lower_max = {g.front, g.half_width, z_mount + 0.9 * r};
-  // The cabin: over the middle of the body, a little narrower, 0.55 m high for a 0.32 m wheel.
-  b.cabin_min = {-0.6 * g.rear, -0.85 * g.half_width, b.lower_max.z};
-  b.cabin_max = {0.3 * g.front, 0.85 * g.half_width, b.lower_max.z + 1.7 * r};
-  return b;
 }
 
 }  // namespace vdyn::viewer

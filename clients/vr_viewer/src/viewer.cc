@@ -10,6 +10,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <stdexcept>
 
@@ -42,6 +45,16 @@ std::string FormatSeconds(std::int64_t ns) {
   return b;
 }
 
+// printf into a string (the HUD's lines: drawn and kept for tests).
+__attribute__((format(printf, 1, 2))) std::string Format(const char* fmt, ...) {
+  char b[512];
+  va_list args;
+  va_start(args, fmt);
+  std::vsnprintf(b, sizeof b, fmt, args);
+  va_end(args);
+  return b;
+}
+
 // A world that passed CheckWorld, with its extent.
 struct AcceptedWorld {
   pb::WorldDescription desc;
@@ -62,13 +75,44 @@ int DrawableHeight(SDL_Window* w) {
   return std::max(y, 1);
 }
 
-// A vehicle's newest drawable state.
-struct GoodState {
-  pb::VehicleState state;
-  std::int64_t source_timestamp_ns = 0;
-  std::uint64_t seen = 0;  // SessionView's count when it was taken
-  bool fresh = false;      // arrived since the last frame (its latency is measured)
+// A vehicle as received: its states (each passed CheckState), and what the frame shows of it.
+struct Tracked {
+  StateHistory history;
+  std::uint64_t seen = 0;                // SessionView's count when last taken
+  std::string server;                    // of its newest state
+  pb::VehicleState drawn;                // at the frame's instant (interpolated)
+  const pb::VehicleState* at = nullptr;  // the received state at or before the instant
+  std::int64_t at_source_ns = 0;
+  std::int64_t instant_ns = 0;       // the instant shown, publisher's clock
+  std::int64_t last_instant_ns = 0;  // the previous frame's (latency counted when it moves)
+  WheelSpin spin;                    // the wheels' turn, integrated frame by frame
 };
+
+// A key press held back until the frame's HUD has taken its input: keys typed into a text field
+// never reach the hotkeys.
+struct KeyPress {
+  SDL_Keycode key;
+  std::uint16_t mod;
+};
+
+// The headset's HUD panel in front of the head's reference pose (OpenXR axes), m: low and near
+// (a dashboard) when seated, further when standing; it faces the eyes.
+Pose HudPanel(bool seated) {
+  const Vec3 at = seated ? Vec3{0, -0.32, -0.8} : Vec3{0, -0.5, -1.1};
+  const Vec3 z = Normalized(-at);  // towards the eyes
+  const Vec3 x = Normalized(Cross({0, 1, 0}, z), {1, 0, 0});
+  Pose p;
+  p.R.c[0] = x;
+  p.R.c[1] = Cross(z, x);
+  p.R.c[2] = z;
+  p.t = at;
+  return p;
+}
+// About 65 deg wide: the status panel's lines (some 55 characters) at a readable size.
+constexpr double kHudWidthSeatedM = 1.1, kHudWidthStandingM = 1.5;
+// The HUD's capital letters at least this tall as the eye sees them (about 0.8 deg reads well on
+// headsets of 15-25 pixels per degree).
+constexpr double kHudCapHeightDeg = 0.9;
 
 }  // namespace
 
@@ -91,12 +135,13 @@ struct Viewer::Impl {
   std::uint64_t uploaded_serial = 0;
   bool uploaded = false;
 
-  std::map<std::uint32_t, GoodState> good;
+  std::map<std::uint32_t, Tracked> tracked;
+  std::map<std::string, ClockOffset> clocks;   // each publisher's clock, by server
   std::map<std::uint32_t, VehicleView> views;  // this frame's, for the followed server
   std::map<std::pair<std::uint32_t, std::string>, std::uint32_t> buttons;  // by vehicle, source
   FrameLists lists;
 
-  bool show_params = false, show_legend = true, show_help = false;
+  bool show_params = false, legend_open = false, show_help = false;
   bool quit = false;
   bool dragging = false;
   base::MonoTime start = base::MonotonicNow();
@@ -104,6 +149,34 @@ struct Viewer::Impl {
   bool counting = false;
   Image last_image;
   bool have_image = false;
+
+  // The frame's display time (when it is expected on the screen), both clocks; the desktop's
+  // lead from the scene to the screen (a running mean of the frames before).
+  std::int64_t display_wall_ns = 0;
+  base::MonoTime scene_at{0};
+  double present_lead_ns = 0;
+
+  // Keys of this frame (applied once the HUD has seen them), and whether an ImGui item (a text
+  // field being typed into, a slider being dragged) had the input at the end of the last frame.
+  std::vector<KeyPress> keys;
+  bool item_active_before = false;
+
+  // The HUD's lines and the labels, as last drawn (for tests).
+  std::vector<std::string> hud_text;
+  std::vector<ShownLabel> shown_labels;
+  std::vector<LabelBox> hud_boxes;  // the HUD's panels and compass: no label under them
+
+  // --follow of a vehicle that is not there (yet): when the first vehicle was seen, and what was
+  // said about it.
+  std::optional<base::MonoTime> first_vehicle_at;
+  std::string missing_said;
+
+  // Headset: where the head is taken to be in the reference space (the place's eye point goes
+  // there); moved by recentring, back to the neutral head when the runtime recentres itself.
+  Pose head_ref;
+  std::uint64_t space_changes_seen = 0;
+  bool recentre_pending = false;
+  bool xr_waited = false;
 
   Impl(Viewer& v, const ViewerOptions& o)
       : owner(v), participant(o.domain), session(participant, Topics()) {}
@@ -122,11 +195,55 @@ struct Viewer::Impl {
   // The server whose world is drawn: the followed vehicle's, else the first with a world.
   std::string CurrentServer() const {
     if (owner.followed_) {
-      const auto it = good.find(*owner.followed_);
-      if (it != good.end()) return it->second.state.server_id();
+      const auto it = tracked.find(*owner.followed_);
+      if (it != tracked.end()) return it->second.server;
     }
     return worlds.empty() ? std::string() : worlds.begin()->first;
   }
+
+  // The neutral head in the reference space: at the origin seated, standing at eye height.
+  Pose NeutralHead() const {
+    Pose p;
+    if (xr && !owner.options_.xr_seated && !xr->standing_on_local()) {
+      p.t.y = owner.options_.camera.eye_height;
+    }
+    return p;
+  }
+
+  // What the frame's stages share: the drawn server and world, the followed vehicle's view and
+  // the desktop camera.
+  struct FrameScene {
+    std::string server;
+    const AcceptedWorld* accepted = nullptr;
+    const pb::WorldDescription* world = nullptr;
+    const VehicleView* followed = nullptr;
+    CameraScene cs;
+    CameraView cam;
+  };
+
+  // The stages of one frame, in order (Viewer::Frame).
+  void HandleEvents();                                   // SDL: mouse, window; keys held back
+  void WaitForDisplay();                                 // the display slot and its time
+  void TakeSamples();                                    // DDS: states, worlds; followed vehicle
+  FrameScene UpdateScene();                              // the vehicles at the display time
+  void BuildHud(const FrameScene& f);                    // ImGui: panels, compass, labels
+  void ApplyKeys();                                      // hotkeys the HUD did not take
+  bool DrawHeadset(const FrameScene& f);                 // both eyes and the HUD panel
+  void DrawDesktop(const FrameScene& f, bool xr_drawn);  // the window's target
+  void Present();                                        // HUD on top, to the window
+  void Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f);  // timing, headless end
+
+  // Parts of the stages.
+  void NoteMissingFollow();
+  void HudStatus(const FrameScene& f);
+  void HudLabels(const FrameScene& f);
+  void Line(const std::string& text, const ImVec4* colour = nullptr);
+  void Occupied();
+
+  // The draw lists for one view. `inside`: the followed vehicle seen from its own seat (its body
+  // is left out). Vehicles out of sight are left out; far ones get fewer facets.
+  void BuildLists(const FrameScene& f, const Mat4& view_proj, const Vec3& eye, bool ortho,
+                  double metres_per_pixel, double fovy, int height_px, bool inside);
 };
 
 Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
@@ -191,6 +308,11 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
 
   // Window and OpenGL 3.3 core.
   SDL_SetHint(SDL_HINT_VIDEO_X11_FORCE_EGL, "0");  // GLX: OpenXR's Xlib binding needs it
+  if (std::getenv("WAYLAND_DISPLAY") == nullptr && std::getenv("XDG_RUNTIME_DIR") == nullptr) {
+    // No Wayland compositor can be reached: SDL's Wayland driver would only print a stray
+    // "XDG_RUNTIME_DIR is invalid or not set" before the offscreen fallback says what happened.
+    SDL_SetHint(SDL_HINT_VIDEODRIVER, "x11,offscreen");
+  }
   if (SDL_Init(SDL_INIT_VIDEO | SDL_INIT_EVENTS) != 0) {
     throw std::runtime_error(std::string("no display (SDL: ") + SDL_GetError() +
                              "); run it on a desktop, or headless under Xvfb (xvfb-run -s "
@@ -237,7 +359,15 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
                           stats_.renderer.find("softpipe") != std::string::npos;
     options_.samples = software ? 0 : 4;
   }
-  m.renderer = std::make_unique<Renderer>();
+  m.renderer = std::make_unique<Renderer>(SettingsFor(options_.quality));
+  if (options_.car_model) m.renderer->SetCarModel(options_.car_model);
+  {
+    const RenderSettings& rs = m.renderer->settings();
+    spdlog::info("vdyn-viewer: quality {} ({}, {}, {}); the {} car body", QualityName(rs.quality),
+                 rs.shadows ? "sun shadows" : "no sun shadows", rs.clouds ? "clouds" : "no clouds",
+                 rs.high_shading ? "glossy highlights" : "no glossy highlights",
+                 options_.car_model ? "file's" : "built-in");
+  }
   m.desktop = std::make_unique<RenderTarget>();
   m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
 
@@ -259,12 +389,25 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
     XrOptions xo;
     xo.seated = options_.xr_seated;
     xo.hud = options_.hud;
-    xo.hud_width = options_.width;
-    xo.hud_height = options_.height;
+    xo.hud_width = DrawableWidth(m.window);  // the HUD is drawn at the window's size
+    xo.hud_height = DrawableHeight(m.window);
+    xo.hud_width_m = options_.xr_seated ? kHudWidthSeatedM : kHudWidthStandingM;
     xo.samples = options_.samples;
     try {
       m.xr = std::make_unique<Headset>(xo);
       stats_.xr_status = "runtime '" + m.xr->runtime_name() + "'";
+      m.head_ref = m.NeutralHead();
+      // The HUD panel readable where it hangs: its text scaled so capitals subtend
+      // kHudCapHeightDeg at the eyes (ImGui's font: 13 px, capitals 7.5 px).
+      const double distance = Norm(HudPanel(options_.xr_seated).t);
+      const double deg_per_px = Deg(xo.hud_width_m / xo.hud_width / distance);
+      io.FontGlobalScale =
+          static_cast<float>(std::clamp(kHudCapHeightDeg / (7.5 * deg_per_px), 1.0, 4.0));
+      // In a headset the first camera is where the person is: at the driver's seat seated,
+      // beside the vehicle standing (unless --camera chose).
+      if (!options_.camera_chosen) {
+        options_.camera.mode = options_.xr_seated ? CameraMode::kDriver : CameraMode::kBeside;
+      }
     } catch (const XrError& e) {
       stats_.xr_status = std::string("desktop fallback: ") + e.what();
       spdlog::warn("vdyn-viewer: {}; showing the desktop window instead", e.what());
@@ -321,8 +464,25 @@ const VehicleView* Viewer::vehicle(std::uint32_t id) const {
 
 bool Viewer::ready() const {
   if (!followed_) return false;
-  const auto it = impl_->good.find(*followed_);
-  return it != impl_->good.end() && impl_->WorldOf(it->second.state.server_id()) != nullptr;
+  const auto it = impl_->tracked.find(*followed_);
+  return it != impl_->tracked.end() && impl_->WorldOf(it->second.server) != nullptr;
+}
+
+const pb::VehicleState* Viewer::shown_state(std::uint32_t id) const {
+  const auto it = impl_->tracked.find(id);
+  return it == impl_->tracked.end() ? nullptr : it->second.at;
+}
+
+const std::vector<std::string>& Viewer::hud_text() const {
+  return impl_->hud_text;
+}
+
+const std::vector<Viewer::ShownLabel>& Viewer::labels() const {
+  return impl_->shown_labels;
+}
+
+void Viewer::RecentreHeadset() {
+  impl_->recentre_pending = true;
 }
 
 Image Viewer::Screenshot() const {
@@ -346,7 +506,8 @@ void Viewer::WriteStats(const std::string& path) const {
       << "worlds_refused " << s.worlds_refused << "\n"
       << "states_refused " << s.states_refused << "\n"
       << "paddle_presses " << s.paddle_presses << "\n"
-      << "vehicles " << impl_->good.size() << "\n"
+      << "vehicles " << impl_->tracked.size() << "\n"
+      << "last_display_mono_ns " << s.last_display_mono_ns << "\n"
       << "geo_turn_deg " << Deg(options_.camera.geo_turn) << "\n"
       << "drops_total " << impl_->session.drops().Total() << "\n";
   for (const auto& [kind, n] : impl_->session.drops().Snapshot()) {
@@ -355,6 +516,7 @@ void Viewer::WriteStats(const std::string& path) const {
     out << "drop." << k << " " << n << "\n";
   }
   out << "renderer " << s.renderer << "\n"
+      << "quality " << QualityName(options_.quality) << "\n"
       << "xr " << s.xr_status << "\n";
 }
 
@@ -398,9 +560,10 @@ bool Project(const CameraView& cam, int w, int h, const Vec3& p, ImVec2& out) {
 }
 
 // The compass: a dial at the top right; the red needle points where north is, the letters turn
-// with it. Drawn into the HUD so it shows in the headset too.
+// with it. Drawn into the HUD so it shows in the headset too; its size follows the HUD's text.
 void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle,
                  double heading_deg) {
+  const float s = radius / 55.0f;
   dl->AddCircleFilled(centre, radius, IM_COL32(20, 24, 32, 200), 48);
   dl->AddCircle(centre, radius, IM_COL32(230, 230, 230, 255), 48, 2.0f);
   auto dir = [&](double a) {  // counter-clockwise from up, screen y down
@@ -409,7 +572,8 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
   const char* letters[] = {"N", "W", "S", "E"};
   for (int i = 0; i < 4; ++i) {
     const ImVec2 d = dir(north_angle + i * kPi / 2);
-    const ImVec2 p(centre.x + d.x * radius * 0.78f - 4, centre.y + d.y * radius * 0.78f - 7);
+    const ImVec2 p(centre.x + d.x * radius * 0.78f - 4 * s,
+                   centre.y + d.y * radius * 0.78f - 7 * s);
     dl->AddText(p, i == 0 ? IM_COL32(255, 90, 90, 255) : IM_COL32(220, 220, 220, 255), letters[i]);
   }
   const ImVec2 n = dir(north_angle), side = ImVec2(-n.y, n.x);
@@ -422,80 +586,66 @@ void DrawCompass(ImDrawList* dl, ImVec2 centre, float radius, double north_angle
   dl->AddTriangleFilled(r, tail, l, IM_COL32(235, 235, 235, 255));
   char b[32];
   std::snprintf(b, sizeof b, "view %03.0f deg", heading_deg);
-  dl->AddText(ImVec2(centre.x - 34, centre.y + radius + 4), IM_COL32(235, 235, 235, 255), b);
+  dl->AddText(ImVec2(centre.x - 34 * s, centre.y + radius + 4 * s), IM_COL32(235, 235, 235, 255),
+              b);
 }
 
 }  // namespace
 
+// One frame, as its stages.
 bool Viewer::Frame() {
   Impl& m = *impl_;
   const base::MonoTime t0 = base::MonotonicNow();
-  ImGuiIO& io = ImGui::GetIO();
+  m.HandleEvents();
+  m.WaitForDisplay();
+  m.TakeSamples();
+  const Impl::FrameScene f = m.UpdateScene();
+  m.BuildHud(f);
+  m.ApplyKeys();
+  const bool xr_drawn = m.DrawHeadset(f);
+  m.DrawDesktop(f, xr_drawn);
+  m.Present();
+  m.Account(t0, xr_drawn, f);
+  return !m.quit;
+}
 
-  // --- events ---
+void Viewer::Impl::HandleEvents() {
+  ViewerOptions& o = owner.options_;
+  ImGuiIO& io = ImGui::GetIO();
+  keys.clear();
   SDL_Event ev;
   while (SDL_PollEvent(&ev)) {
     ImGui_ImplSDL2_ProcessEvent(&ev);
     switch (ev.type) {
       case SDL_QUIT:
-        m.quit = true;
+        quit = true;
         break;
       case SDL_WINDOWEVENT:
-        if (ev.window.event == SDL_WINDOWEVENT_CLOSE) m.quit = true;
-        if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !options_.xr) {
-          options_.width = std::max(ev.window.data1, 64);
-          options_.height = std::max(ev.window.data2, 64);
-          m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+        if (ev.window.event == SDL_WINDOWEVENT_CLOSE) quit = true;
+        if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !o.xr) {
+          o.width = std::max(ev.window.data1, 64);
+          o.height = std::max(ev.window.data2, 64);
+          desktop->Resize(DrawableWidth(window), DrawableHeight(window), o.samples);
         }
         break;
-      case SDL_KEYDOWN: {
-        if (io.WantCaptureKeyboard) break;
-        const SDL_Keycode k = ev.key.keysym.sym;
-        CameraState& c = options_.camera;
-        if (k == SDLK_ESCAPE) m.quit = true;
-        if (k >= SDLK_1 && k <= SDLK_5) c.mode = static_cast<CameraMode>(k - SDLK_1);
-        if (k == SDLK_c)
-          c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
-        if (k == SDLK_q) TurnGeographic(c, +1);
-        if (k == SDLK_e) TurnGeographic(c, -1);
-        if (k == SDLK_n) c.geo_turn = 0;
-        if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS)
-          options_.arrows.metres_per_newton *= 1.25;
-        if (k == SDLK_MINUS || k == SDLK_KP_MINUS) options_.arrows.metres_per_newton /= 1.25;
-        if (k == SDLK_h) options_.hud = !options_.hud;
-        if (k == SDLK_p) m.show_params = !m.show_params;
-        if (k == SDLK_l) m.show_legend = !m.show_legend;
-        if (k == SDLK_F1) m.show_help = !m.show_help;
-        if (k == SDLK_TAB && !m.good.empty()) {
-          // Next (Shift: previous) vehicle of the domain.
-          std::vector<std::uint32_t> ids;
-          for (const auto& [id, g] : m.good) ids.push_back(id);
-          auto it = followed_ ? std::find(ids.begin(), ids.end(), *followed_) : ids.end();
-          std::size_t i = it == ids.end() ? 0 : static_cast<std::size_t>(it - ids.begin());
-          i = (ev.key.keysym.mod & KMOD_SHIFT) ? (i + ids.size() - 1) % ids.size()
-                                               : (i + 1) % ids.size();
-          options_.follow = ids[i];
-        }
-        if (k == SDLK_F12) {
-          const std::string path =
-              "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
-          if (WritePng(path, Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
-        }
+      case SDL_KEYDOWN:
+        // Held back: whether the HUD takes it (a field being typed into) is known once the HUD
+        // has seen this frame's input (ApplyKeys).
+        keys.push_back({ev.key.keysym.sym, ev.key.keysym.mod});
         break;
-      }
       case SDL_MOUSEBUTTONDOWN:
-        if (!io.WantCaptureMouse) m.dragging = true;
+        if (!io.WantCaptureMouse) dragging = true;
         break;
       case SDL_MOUSEBUTTONUP:
-        m.dragging = false;
+        dragging = false;
         break;
       case SDL_MOUSEMOTION:
-        if (m.dragging && !io.WantCaptureMouse) {
-          CameraState& c = options_.camera;
+        if (dragging && !io.WantCaptureMouse) {
+          CameraState& c = o.camera;
           if (c.mode != CameraMode::kOrbit && c.mode != CameraMode::kMap) {
             // Dragging starts orbiting from where the camera is.
-            const VehicleView* f = followed_ ? vehicle(*followed_) : nullptr;
-            const Vec3 d = last_camera_.eye_W - (f != nullptr ? f->pose_WB.t : Vec3{});
+            const VehicleView* fv = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
+            const Vec3 d = owner.last_camera_.eye_W - (fv != nullptr ? fv->pose_WB.t : Vec3{});
             c.orbit_yaw = std::atan2(d.y, d.x);
             c.orbit_distance = std::clamp(Norm(d), 1.0, 2000.0);
             c.orbit_pitch = std::clamp(
@@ -510,20 +660,23 @@ bool Viewer::Frame() {
         break;
       case SDL_MOUSEWHEEL:
         if (!io.WantCaptureMouse) {
-          CameraState& c = options_.camera;
-          const double f = std::pow(0.9, ev.wheel.y);
+          CameraState& c = o.camera;
+          const double factor = std::pow(0.9, ev.wheel.y);
           switch (c.mode) {
             case CameraMode::kMap:
-              c.map_half_height = std::clamp(c.map_half_height * f, 2.0, 5000.0);
+              c.map_half_height = std::clamp(c.map_half_height * factor, 2.0, 5000.0);
               break;
             case CameraMode::kChase:
-              c.chase_distance = std::clamp(c.chase_distance * f, 2.0, 200.0);
+              c.chase_distance = std::clamp(c.chase_distance * factor, 2.0, 200.0);
               break;
             case CameraMode::kNorth:
-              c.north_distance = std::clamp(c.north_distance * f, 2.0, 500.0);
+              c.north_distance = std::clamp(c.north_distance * factor, 2.0, 500.0);
+              break;
+            case CameraMode::kBeside:
+              c.beside_distance = std::clamp(c.beside_distance * factor, 1.0, 200.0);
               break;
             default:
-              c.orbit_distance = std::clamp(c.orbit_distance * f, 1.0, 2000.0);
+              c.orbit_distance = std::clamp(c.orbit_distance * factor, 1.0, 2000.0);
               break;
           }
         }
@@ -532,382 +685,642 @@ bool Viewer::Frame() {
         break;
     }
   }
+}
 
-  // --- DDS ---
-  m.session.Poll();
-  for (const auto& [id, v] : m.session.vehicles()) {
-    if (v.states == 0) continue;
-    GoodState& g = m.good[id];
-    if (g.seen == v.states) continue;
-    g.seen = v.states;
-    if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
-    g.state = v.state;
-    g.source_timestamp_ns = v.source_timestamp_ns;
-    g.fresh = true;
-  }
-  for (auto it = m.good.begin(); it != m.good.end();) {  // vehicles seen only with bad states
-    it = it->second.state.wheels_size() == 0 ? m.good.erase(it) : std::next(it);
-  }
-  // The followed vehicle: the chosen one when present, else the lowest id.
-  followed_.reset();
-  if (options_.follow && m.good.count(*options_.follow)) {
-    followed_ = options_.follow;
-  } else if (!m.good.empty()) {
-    followed_ = m.good.begin()->first;
-  }
-  const std::string server = m.CurrentServer();
-  const AcceptedWorld* accepted = m.WorldOf(server);
-  const pb::WorldDescription* world = accepted != nullptr ? &accepted->desc : nullptr;
-  // The followed server's terrain on the GPU.
-  if (accepted != nullptr) {
-    const std::uint64_t serial = accepted->serial;
-    if (!m.uploaded || m.uploaded_server != server || m.uploaded_serial != serial) {
-      m.renderer->SetTerrain(TerrainFromWorld(*world));
-      m.uploaded = true;
-      m.uploaded_server = server;
-      m.uploaded_serial = serial;
-    }
-  } else if (m.uploaded) {
-    m.renderer->ClearTerrain();
-    m.uploaded = false;
-  }
-
-  // --- scene ---
-  // The vehicles of the drawn world: those of its server, and those of other servers on the same
-  // terrain (several servers of a lab on one world); another world's vehicles would float.
-  m.views.clear();
-  for (const auto& [id, g] : m.good) {
-    const std::string& owner = g.state.server_id();
-    if (!server.empty() && owner != server) {
-      const AcceptedWorld* theirs = m.WorldOf(owner);
-      if (world == nullptr || theirs == nullptr || world->terrain_hash() == 0 ||
-          theirs->desc.terrain_hash() != world->terrain_hash()) {
-        continue;
-      }
-    }
-    const auto* sv = m.session.vehicle(id);
-    const pb::VehicleParams* params = sv != nullptr && sv->params ? &*sv->params : nullptr;
-    const AcceptedWorld* own_world = m.WorldOf(owner);
-    m.views.emplace(
-        id, BuildVehicleView(
-                g.state, GeometryFor(id, own_world != nullptr ? &own_world->desc : world, params)));
-  }
-  const VehicleView* followed = followed_ ? vehicle(*followed_) : nullptr;
-  CameraScene cs;
-  cs.followed = followed;
-  if (accepted != nullptr) {
-    cs.north_yaw = world->north_yaw();
-    const double span =
-        std::max(accepted->max_W.x - accepted->min_W.x, accepted->max_W.y - accepted->min_W.y);
-    cs.top_z = accepted->max_W.z;
-    cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
-    cs.fallback_target_W = world->has_spawn() ? Vec3{world->spawn().x(), world->spawn().y(), 0}
-                                              : 0.5 * (accepted->min_W + accepted->max_W);
-  }
-  const CameraView cam =
-      ComputeCamera(options_.camera, cs, m.desktop->width(), m.desktop->height());
-  last_camera_ = cam;
-
-  // `inside`: the followed vehicle seen from its own seat (its body is left out).
-  // Vehicles out of sight are left out; far ones get fewer facets.
-  auto build_lists = [&](const Mat4& view_proj, const Vec3& eye, bool ortho,
-                         double metres_per_pixel, double fovy, int height_px, bool inside) {
-    m.lists.Clear();
-    // Arrows at least ~3 px thick wherever they are.
-    auto radius_at = [&](const Vec3& p) {
-      const double mpp = ortho
-                             ? metres_per_pixel
-                             : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
-      return std::max(0.03, 1.6 * mpp);
-    };
-    for (const auto& [id, v] : m.views) {
-      if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, options_.arrows))) continue;
-      const bool own = inside && followed_ && id == *followed_;
-      const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
-      AppendVehicle(v, options_.arrows, radius_at, !own, px_per_m < 40.0, m.lists);
-    }
-    if (world != nullptr) {
-      // Landmarks: a small marker on the ground (their names are labels on the desktop).
-      for (const pb::Landmark& l : world->landmarks()) {
-        const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
-        const double r = std::max(0.2, 2.0 * radius_at(p));
-        m.lists.opaque.Cone(p, p + Vec3{0, 0, 2 * r}, r, {255, 120, 40}, true, 10);
-      }
-    }
-  };
-
-  // --- HUD (ImGui) ---
-  ImGui_ImplOpenGL3_NewFrame();
-  ImGui_ImplSDL2_NewFrame();
-  ImGui::NewFrame();
-  const double heading_deg = std::fmod(Deg(cs.north_yaw - cam.heading) + 720.0, 360.0);
-  const double north_angle = CompassNorthAngle(cs.north_yaw, cam.heading);
-  if (options_.hud) {
-    const auto* gs = followed_ ? &m.good.at(*followed_) : nullptr;
-    ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowBgAlpha(0.7f);
-    ImGui::Begin("vdyn-viewer", nullptr,
-                 ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
-    std::string mode = options_.playback ? "PLAYBACK" : "LIVE";
-    std::string server_mode;
-    if (const auto d = m.session.diagnostics().find(server); d != m.session.diagnostics().end()) {
-      server_mode = d->second.mode();
-      if (server_mode == "playback") mode = "PLAYBACK";
-    }
-    ImGui::TextColored(mode == "LIVE" ? ImVec4(0.4f, 1, 0.4f, 1) : ImVec4(1, 0.8f, 0.3f, 1), "%s",
-                       mode.c_str());
-    ImGui::SameLine();
-    ImGui::Text("server '%s'%s%s  world '%s'", server.c_str(), server_mode.empty() ? "" : " ",
-                server_mode.c_str(), world != nullptr ? world->name().c_str() : "(waiting)");
-    if (gs != nullptr) {
-      const pb::VehicleState& s = gs->state;
-      ImGui::Text("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), m.good.size());
-      ImGui::Text("speed %6.1f km/h   sim time %s   step %llu", s.speed_kmh(),
-                  FormatSeconds(s.sim_time_ns()).c_str(),
-                  static_cast<unsigned long long>(s.step()));
-      const std::string& src = s.input().source_id();
-      ImGui::Text("input from %s", src.empty() ? "(none)" : ("'" + src + "'").c_str());
-      ImGui::SameLine();
-      if (s.control().watchdog_safe_state()) {
-        ImGui::TextColored(ImVec4(1, 0.35f, 0.3f, 1), "WATCHDOG: safe state (no live input)");
-      } else {
-        ImGui::TextColored(ImVec4(0.5f, 0.9f, 0.5f, 1), "watchdog ok");
-      }
-      const double age_ms =
-          static_cast<double>(base::WallNow().ns - gs->source_timestamp_ns) * 1e-6;
-      ImGui::Text("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
-                  Deg(s.control().gamma()), s.control().throttle(), s.control().brake());
-    } else {
-      ImGui::Text("no vehicle on domain %u yet", options_.domain);
-    }
-    const double frame_ms = stats_.frame_ms.empty() ? 0.0 : stats_.frame_ms.back();
-    ImGui::Text("camera %s (1-5, C)   frame %.1f ms",
-                std::string(CameraName(options_.camera.mode)).c_str(), frame_ms);
-    if (m.xr)
-      ImGui::Text("OpenXR: %s, %s", m.xr->runtime_name().c_str(), m.xr->state_name().c_str());
-    const std::uint64_t drops = m.session.drops().Total();
-    if (drops > 0) {
-      ImGui::TextColored(ImVec4(1, 0.6f, 0.3f, 1), "refused or dropped: %llu",
-                         static_cast<unsigned long long>(drops));
-      if (ImGui::IsItemHovered()) {
-        ImGui::BeginTooltip();
-        for (const auto& [kind, n] : m.session.drops().Snapshot())
-          ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
-        if (!stats_.last_refusal.empty())
-          ImGui::TextWrapped("last: %s", stats_.last_refusal.c_str());
-        ImGui::EndTooltip();
-      }
-    }
-    ImGui::End();
-
-    if (m.show_legend) {
-      ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(options_.height) - 210),
-                              ImGuiCond_FirstUseEver);
-      ImGui::SetNextWindowBgAlpha(0.7f);
-      ImGui::Begin("forces", &m.show_legend,
-                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
-      for (int k = 0; k < kForceKinds; ++k) {
-        const auto kind = static_cast<ForceKind>(k);
-        const Rgb8 c = ForceColour(kind);
-        const ImVec2 p = ImGui::GetCursorScreenPos();
-        ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
-                                                  ImColour(c));
-        ImGui::Dummy(ImVec2(26, 14));
-        ImGui::SameLine();
-        ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &options_.arrows.show[k]);
-      }
-      float kn = static_cast<float>(options_.arrows.metres_per_newton * 1000.0);
-      ImGui::SetNextItemWidth(140);
-      if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
-                             ImGuiSliderFlags_Logarithmic)) {
-        options_.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
-      }
-      ImGui::End();
-    }
-    if (m.show_params && followed_) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) - 430, 160),
-                              ImGuiCond_FirstUseEver);
-      ImGui::SetNextWindowSize(ImVec2(420, 480), ImGuiCond_FirstUseEver);
-      ImGui::Begin("parameters", &m.show_params);
-      const auto* sv = m.session.vehicle(*followed_);
-      ImGui::Text("vehicle %u (P to close)", *followed_);
-      m.params->Draw(*followed_, server, sv != nullptr && sv->params ? &*sv->params : nullptr);
-      ImGui::End();
-    }
-    if (m.show_help) {
-      ImGui::SetNextWindowPos(ImVec2(static_cast<float>(options_.width) * 0.5f - 200, 80),
-                              ImGuiCond_FirstUseEver);
-      ImGui::Begin("keys", &m.show_help, ImGuiWindowFlags_AlwaysAutoResize);
-      ImGui::TextUnformatted(
-          "1-5  chase, driver, orbit, map, north camera   C  next camera\n"
-          "Q/E  turn the geographic cameras left/right    N  back to north\n"
-          "     (the wheel's paddle shifters do the same)\n"
-          "Tab  next vehicle (Shift: previous)\n"
-          "+/-  arrow scale     L legend   P parameters   H HUD\n"
-          "drag orbit   wheel zoom   F12 screenshot   Esc quit");
-      ImGui::End();
-    }
-    // Compass, landmark and vehicle labels.
-    ImDrawList* fg = ImGui::GetForegroundDrawList();
-    DrawCompass(fg, ImVec2(static_cast<float>(options_.width) - 75, 75), 55, north_angle,
-                heading_deg);
-    if (!xr_active()) {
-      if (world != nullptr) {
-        for (const pb::Landmark& l : world->landmarks()) {
-          ImVec2 p;
-          const Vec3 at{l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0};
-          // Names of the landmarks near the camera (far ones would pile up on the horizon).
-          if (!cam.orthographic && Norm(at - cam.eye_W) > 150.0) continue;
-          if (Project(cam, options_.width, options_.height, at, p)) {
-            fg->AddText(ImVec2(p.x - 20, p.y - 14), IM_COL32(255, 255, 255, 220), l.name().c_str());
-          }
-        }
-      }
-      for (const auto& [id, v] : m.views) {
-        ImVec2 p;
-        if (Project(cam, options_.width, options_.height, v.pose_WB * Vec3{0, 0, 1.6}, p)) {
-          const std::string label = "#" + std::to_string(id);
-          fg->AddText(ImVec2(p.x - 8, p.y - 14), ImColour(VehicleColour(id)), label.c_str());
-        }
-      }
-    }
-  } else {
-    DrawCompass(ImGui::GetForegroundDrawList(), ImVec2(static_cast<float>(options_.width) - 75, 75),
-                55, north_angle, heading_deg);
-  }
-  ImGui::Render();
-
-  // --- draw ---
-  bool xr_drawn = false;
-  if (m.xr && !m.xr_ended) {
+void Viewer::Impl::WaitForDisplay() {
+  const ViewerOptions& o = owner.options_;
+  xr_waited = false;
+  if (xr && !xr_ended) {
     try {
-      if (!m.xr->PollEvents()) {
+      if (!xr->PollEvents()) {
         // The headset session is over (the person left through the runtime): so is the viewer.
-        m.xr_ended = true;
+        xr_ended = true;
         spdlog::info("vdyn-viewer: the OpenXR session ended; closing");
-        m.quit = true;
-      } else if (m.xr->running()) {
-        // The reference space's origin in the world (docs in xr_session.h).
-        Pose world_from_space;
-        if (followed != nullptr) {
-          if (options_.xr_seated) {
-            const Pose& b = followed->pose_WB;
-            world_from_space = {XrAxesIn(b.R), b * options_.camera.seat_B};
-          } else {
-            const Mat3 yaw = RotationZ(followed->yaw);
-            // On the ground 6 m to the vehicle's left, facing it (looking along -Y of its yaw).
-            const Vec3 place = followed->pose_WB.t + yaw * Vec3{0, 6, 0};
-            double z = followed->ground_z;
-            if (m.xr->standing_on_local()) z += 1.6;
-            world_from_space = {XrAxesIn(RotationZ(followed->yaw - kPi / 2)),
-                                {place.x, place.y, z}};
-          }
-        }
-        m.xr->Frame(
-            world_from_space, 0.05, cs.far_m,
-            [&](const XrEye& eye) {
-              build_lists(eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
-                          options_.xr_seated);
-              eye.target->BeginScene();
-              Renderer::View rv{eye.view, eye.proj, eye.eye_W};
-              m.renderer->Draw(rv, m.lists);
-              eye.target->Resolve();
-            },
-            [&](RenderTarget& hud) {
-              glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
-              glViewport(0, 0, hud.width(), hud.height());
-              glClearColor(0, 0, 0, 0);
-              glClear(GL_COLOR_BUFFER_BIT);
-              ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-            });
-        ++stats_.xr_frames;
-        xr_drawn = true;
+        quit = true;
+      } else if (xr->running()) {
+        // The runtime paces the frames and predicts when this one will be seen.
+        xr->WaitFrame();
+        xr_waited = true;
+        const base::MonoTime mono_now = base::MonotonicNow();
+        scene_at = mono_now;
+        display_wall_ns = base::WallNow().ns + (xr->display_mono_ns() - mono_now.ns);
+        owner.stats_.last_display_mono_ns = xr->display_mono_ns();
+        return;
       }
     } catch (const XrError& e) {
       spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
-      stats_.xr_status = std::string("failed: ") + e.what();
-      m.xr_ended = true;
+      owner.stats_.xr_status = std::string("failed: ") + e.what();
+      xr_ended = true;
     }
   }
-  RenderTarget& desktop = *m.desktop;
+  // The desktop: the frame-rate cap, then on the screen when this frame's work is done (as long
+  // as the frames before took from here to the screen).
+  if (o.fps > 0 && owner.stats_.frames > 0) {
+    const base::Nanos period{static_cast<std::int64_t>(1e9 / o.fps)};
+    next_frame = next_frame + period;
+    const base::MonoTime now = base::MonotonicNow();
+    if (next_frame < now) next_frame = now;  // late: no burst to catch up
+    base::SleepUntil(next_frame);
+  }
+  scene_at = base::MonotonicNow();
+  const auto lead = static_cast<std::int64_t>(present_lead_ns);
+  display_wall_ns = base::WallNow().ns + lead;
+  owner.stats_.last_display_mono_ns = scene_at.ns + lead;
+}
+
+void Viewer::Impl::TakeSamples() {
+  session.Poll();
+  const std::int64_t arrived = base::WallNow().ns;
+  for (const auto& [id, v] : session.vehicles()) {
+    if (v.states == 0) continue;
+    if (tracked.count(id) == 0 && !CheckState(v.state).empty()) continue;  // only bad ones yet
+    Tracked& t = tracked[id];
+    if (t.seen == v.states) continue;
+    t.seen = v.states;
+    if (!CheckState(v.state).empty()) continue;  // refused (counted as it arrived)
+    clocks[v.state.server_id()].Observe(v.source_timestamp_ns, arrived);
+    t.history.Add(v.state, v.source_timestamp_ns, arrived);
+    t.server = v.state.server_id();
+  }
+  // The followed vehicle: the chosen one when present, else the lowest id. One chosen but not
+  // there is waited for (and said so), never swapped for another.
+  const ViewerOptions& o = owner.options_;
+  owner.followed_.reset();
+  if (!tracked.empty() && !first_vehicle_at) first_vehicle_at = base::MonotonicNow();
+  if (o.follow) {
+    if (tracked.count(*o.follow) != 0) owner.followed_ = o.follow;
+  } else if (!tracked.empty()) {
+    owner.followed_ = tracked.begin()->first;
+  }
+  NoteMissingFollow();
+  // The followed server's terrain on the GPU.
+  const std::string server = CurrentServer();
+  const AcceptedWorld* accepted = WorldOf(server);
+  if (accepted != nullptr) {
+    const std::uint64_t serial = accepted->serial;
+    if (!uploaded || uploaded_server != server || uploaded_serial != serial) {
+      renderer->SetTerrain(TerrainFromWorld(accepted->desc));
+      uploaded = true;
+      uploaded_server = server;
+      uploaded_serial = serial;
+    }
+  } else if (uploaded) {
+    renderer->ClearTerrain();
+    uploaded = false;
+  }
+}
+
+// --follow ID of a vehicle that is not on the domain: said once the others have had a moment to
+// arrive (with the ids that are there), again when that list changes, and when it comes.
+void Viewer::Impl::NoteMissingFollow() {
+  const ViewerOptions& o = owner.options_;
+  if (!o.follow) return;
+  if (owner.followed_) {
+    if (!missing_said.empty()) {
+      spdlog::info("vdyn-viewer: vehicle {} is here now: following it", *o.follow);
+      missing_said.clear();
+    }
+    return;
+  }
+  if (!first_vehicle_at || base::MonotonicNow() - *first_vehicle_at < base::Seconds(1)) return;
+  std::string there;
+  for (const auto& [id, t] : tracked) there += (there.empty() ? "" : ", ") + std::to_string(id);
+  if (there == missing_said) return;
+  spdlog::warn(
+      "vdyn-viewer: vehicle {} is not on domain {}; there: {} (Tab follows one); "
+      "waiting for vehicle {}",
+      *o.follow, o.domain, there, *o.follow);
+  missing_said = there;
+}
+
+Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
+  const ViewerOptions& o = owner.options_;
+  FrameScene f;
+  f.server = CurrentServer();
+  f.accepted = WorldOf(f.server);
+  f.world = f.accepted != nullptr ? &f.accepted->desc : nullptr;
+  // Each vehicle at the frame's instant: its display time less the presentation delay, on its
+  // publisher's clock (motion.h).
+  for (auto& [id, t] : tracked) {
+    if (t.history.empty()) continue;
+    StateHistory::Sample sample;
+    if (o.delay_ns > 0) {
+      const ClockOffset& clock = clocks[t.server];
+      sample = t.history.At(display_wall_ns - clock.offset_ns() - o.delay_ns);
+    } else {
+      sample = t.history.At(t.history.newest_source_ns());
+    }
+    t.at = sample.a;
+    t.at_source_ns = sample.a_source_ns;
+    t.instant_ns = sample.source_ns;
+    if (sample.b != nullptr) {
+      InterpolateState(*sample.a, *sample.b, sample.u, t.drawn);
+    } else {
+      t.drawn.CopyFrom(*sample.a);
+    }
+    AdvanceWheelSpin(t.spin, t.drawn);
+  }
+  // The vehicles of the drawn world: those of its server, and those of other servers on the same
+  // terrain (several servers of a lab on one world); another world's vehicles would float.
+  views.clear();
+  for (const auto& [id, t] : tracked) {
+    if (t.at == nullptr) continue;
+    const std::string& server_id = t.server;
+    if (!f.server.empty() && server_id != f.server) {
+      const AcceptedWorld* theirs = WorldOf(server_id);
+      if (f.world == nullptr || theirs == nullptr || f.world->terrain_hash() == 0 ||
+          theirs->desc.terrain_hash() != f.world->terrain_hash()) {
+        continue;
+      }
+    }
+    const auto* sv = session.vehicle(id);
+    const pb::VehicleParams* vp = sv != nullptr && sv->params ? &*sv->params : nullptr;
+    const AcceptedWorld* own_world = WorldOf(server_id);
+    views.emplace(
+        id, BuildVehicleView(
+                t.drawn, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp),
+                &t.spin));
+  }
+  f.followed = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
+  f.cs.followed = f.followed;
+  if (f.accepted != nullptr) {
+    const AcceptedWorld& a = *f.accepted;
+    f.cs.north_yaw = f.world->north_yaw();
+    const double span = std::max(a.max_W.x - a.min_W.x, a.max_W.y - a.min_W.y);
+    f.cs.top_z = a.max_W.z;
+    f.cs.far_m = std::clamp(2.0 * span, 500.0, 50000.0);
+    f.cs.fallback_target_W = f.world->has_spawn()
+                                 ? Vec3{f.world->spawn().x(), f.world->spawn().y(), 0}
+                                 : 0.5 * (a.min_W + a.max_W);
+  }
+  f.cam = ComputeCamera(o.camera, f.cs, desktop->width(), desktop->height());
+  owner.last_camera_ = f.cam;
+  return f;
+}
+
+void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const Vec3& eye,
+                              bool ortho, double metres_per_pixel, double fovy, int height_px,
+                              bool inside) {
+  const ViewerOptions& o = owner.options_;
+  lists.Clear();
+  // Arrows at least ~3 px thick wherever they are.
+  auto radius_at = [&](const Vec3& p) {
+    const double mpp = ortho ? metres_per_pixel
+                             : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
+    return std::max(0.03, 1.6 * mpp);
+  };
+  for (const auto& [id, v] : views) {
+    // From the driver's seat nothing of the own vehicle is drawn (its body, tyres and arrows
+    // would fill the view of the road ahead); its forces show in the other cameras.
+    if (inside && owner.followed_ && id == *owner.followed_) continue;
+    if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
+    const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
+    AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
+  }
+  if (f.world != nullptr) {
+    // Landmarks: a small marker on the ground (their names are labels on the desktop).
+    for (const pb::Landmark& l : f.world->landmarks()) {
+      const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
+      const double r = std::max(0.2, 2.0 * radius_at(p));
+      lists.opaque.Cone(p, p + Vec3{0, 0, 2 * r}, r, {255, 120, 40}, true, 10);
+    }
+  }
+}
+
+// The current ImGui window's rectangle: labels keep out of it.
+void Viewer::Impl::Occupied() {
+  const ImVec2 p = ImGui::GetWindowPos(), sz = ImGui::GetWindowSize();
+  hud_boxes.push_back({p.x, p.y, p.x + sz.x, p.y + sz.y});
+}
+
+// A line of the HUD: drawn, and kept for tests.
+void Viewer::Impl::Line(const std::string& text, const ImVec4* colour) {
+  if (colour != nullptr) {
+    ImGui::TextColored(*colour, "%s", text.c_str());
+  } else {
+    ImGui::TextUnformatted(text.c_str());
+  }
+  hud_text.push_back(text);
+}
+
+void Viewer::Impl::BuildHud(const FrameScene& f) {
+  ViewerOptions& o = owner.options_;
+  const CameraView& cam = f.cam;
+  ImGui_ImplOpenGL3_NewFrame();
+  ImGui_ImplSDL2_NewFrame();
+  ImGui::NewFrame();
+  hud_text.clear();
+  shown_labels.clear();
+  hud_boxes.clear();
+  const double heading_deg = std::fmod(Deg(f.cs.north_yaw - cam.heading) + 720.0, 360.0);
+  const double north_angle = CompassNorthAngle(f.cs.north_yaw, cam.heading);
+  const float scale = ImGui::GetIO().FontGlobalScale;
+  const ImVec2 compass(static_cast<float>(o.width) - 75 * scale, 75 * scale);
+  if (!o.hud) {
+    DrawCompass(ImGui::GetForegroundDrawList(), compass, 55 * scale, north_angle, heading_deg);
+    ImGui::Render();
+    return;
+  }
+  HudStatus(f);
+  // The forces legend, at the bottom left: collapsed to its title until L (or a click on its
+  // arrow) opens it.
+  ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(o.height) - 10), ImGuiCond_Always,
+                          ImVec2(0, 1));
+  ImGui::SetNextWindowBgAlpha(0.7f);
+  ImGui::SetNextWindowCollapsed(!legend_open, ImGuiCond_Always);
+  const bool expanded =
+      ImGui::Begin("forces (L)", nullptr,
+                   ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  legend_open = !ImGui::IsWindowCollapsed();
+  if (expanded) {
+    for (int k = 0; k < kForceKinds; ++k) {
+      const auto kind = static_cast<ForceKind>(k);
+      const Rgb8 c = ForceColour(kind);
+      const ImVec2 p = ImGui::GetCursorScreenPos();
+      ImGui::GetWindowDrawList()->AddRectFilled(ImVec2(p.x, p.y + 3), ImVec2(p.x + 22, p.y + 13),
+                                                ImColour(c));
+      ImGui::Dummy(ImVec2(26, 14));
+      ImGui::SameLine();
+      ImGui::Checkbox(std::string(ForceLabel(kind)).c_str(), &o.arrows.show[k]);
+    }
+    float kn = static_cast<float>(o.arrows.metres_per_newton * 1000.0);
+    ImGui::SetNextItemWidth(140);
+    if (ImGui::SliderFloat("m per kN (+/-)", &kn, 0.02f, 10.0f, "%.2f",
+                           ImGuiSliderFlags_Logarithmic)) {
+      o.arrows.metres_per_newton = static_cast<double>(kn) / 1000.0;
+    }
+  }
+  Occupied();
+  ImGui::End();
+  if (show_params && owner.followed_) {
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) - 470, 160), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(460, 480), ImGuiCond_FirstUseEver);
+    ImGui::Begin("parameters", &show_params);
+    const std::uint32_t id = *owner.followed_;
+    const auto* sv = session.vehicle(id);
+    ImGui::Text("vehicle %u (P to close)", id);
+    params->Draw(id, f.server, sv != nullptr && sv->params ? &*sv->params : nullptr);
+    Occupied();
+    ImGui::End();
+  }
+  if (show_help) {
+    ImGui::SetNextWindowPos(ImVec2(static_cast<float>(o.width) * 0.5f - 220, 80),
+                            ImGuiCond_FirstUseEver);
+    ImGui::Begin("keys", &show_help, ImGuiWindowFlags_AlwaysAutoResize);
+    ImGui::TextUnformatted(
+        "1-6  chase, driver, orbit, map, north, beside camera   C  next camera\n"
+        "K    horizon level / with the body (chase, orbit)     R  recentre the headset\n"
+        "Q/E  turn the geographic cameras left/right    N  back to north\n"
+        "     (the wheel's paddle shifters do the same)\n"
+        "Tab  next vehicle (Shift: previous)\n"
+        "+/-  arrow scale     L forces legend   P parameters   H HUD\n"
+        "drag orbit   wheel zoom   F12 screenshot   Esc quit");
+    Occupied();
+    ImGui::End();
+  }
+  DrawCompass(ImGui::GetForegroundDrawList(), compass, 55 * scale, north_angle, heading_deg);
+  hud_boxes.push_back({compass.x - 60 * scale, compass.y - 60 * scale, compass.x + 60 * scale,
+                       compass.y + 85 * scale});
+  if (!owner.xr_active()) HudLabels(f);
+  ImGui::Render();
+}
+
+// The HUD's status panel.
+void Viewer::Impl::HudStatus(const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  const ViewerStats& stats = owner.stats_;
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowBgAlpha(0.7f);
+  ImGui::Begin("vdyn-viewer", nullptr,
+               ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  // LIVE or PLAYBACK: a player says what it is on vdyn/diagnostics (mode "playback", the
+  // recording, the servers it replays); --playback says so whatever it says.
+  const pb::Diagnostics* player = nullptr;
+  for (const auto& [id, d] : session.diagnostics()) {
+    if (d.mode() != "playback") continue;
+    const auto& rs = d.replayed_servers();
+    if (id == f.server || rs.empty() || std::find(rs.begin(), rs.end(), f.server) != rs.end()) {
+      player = &d;
+    }
+  }
+  std::string mode = o.playback || player != nullptr ? "PLAYBACK" : "LIVE";
+  std::string source = "server '" + f.server + "'";
+  if (player != nullptr) {
+    source = "recording '" + player->recording() + "' (player '" + player->server_id() +
+             "', server '" + f.server + "')";
+  } else if (const auto d = session.diagnostics().find(f.server);
+             d != session.diagnostics().end() && !d->second.mode().empty()) {
+    source += " " + d->second.mode();
+  }
+  const ImVec4 green(0.4f, 1, 0.4f, 1), amber(1, 0.8f, 0.3f, 1), red(1, 0.35f, 0.3f, 1);
+  ImGui::TextColored(mode == "LIVE" ? green : amber, "%s", mode.c_str());
+  ImGui::SameLine();
+  const std::string where =
+      source + "  world '" + (f.world != nullptr ? f.world->name() : "(waiting)") + "'";
+  ImGui::TextUnformatted(where.c_str());
+  hud_text.push_back(mode + "  " + where);
+
+  const auto it = owner.followed_ ? tracked.find(*owner.followed_) : tracked.end();
+  if (o.follow && !owner.followed_) {
+    std::string there;
+    for (const auto& [id, t] : tracked) there += (there.empty() ? "" : ", ") + std::to_string(id);
+    Line(Format("waiting for vehicle %u (--follow): not on domain %u", *o.follow, o.domain),
+         &amber);
+    Line(there.empty() ? "no vehicle on the domain yet"
+                       : "on the domain: " + there + "  (Tab follows one)");
+  } else if (it != tracked.end() && it->second.at != nullptr) {
+    const pb::VehicleState& s = *it->second.at;
+    Line(Format("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), tracked.size()));
+    // The vehicle's time and step always agree: its time is its steps (since its first spawn;
+    // a restore continues a recording's); the server's clock is shown too where it differs
+    // (a vehicle spawned later, or restored into another session).
+    const std::int64_t vehicle_ns =
+        s.step_ns() > 0 ? static_cast<std::int64_t>(s.step()) * s.step_ns() : s.sim_time_ns();
+    std::string time =
+        Format("speed %6.1f km/h   sim time %s   step %llu", it->second.drawn.speed_kmh(),
+               FormatSeconds(vehicle_ns).c_str(), static_cast<unsigned long long>(s.step()));
+    if (s.sim_time_ns() != vehicle_ns) {
+      time += "   server clock " + FormatSeconds(s.sim_time_ns());
+    }
+    Line(time);
+    const std::string& src = s.input().source_id();
+    const std::string input = "input from " + (src.empty() ? "(none)" : "'" + src + "'");
+    ImGui::TextUnformatted(input.c_str());
+    ImGui::SameLine();
+    const bool safe = s.control().watchdog_safe_state();
+    const std::string watchdog = safe ? "WATCHDOG: safe state (no live input)" : "watchdog ok";
+    ImGui::TextColored(safe ? red : ImVec4(0.5f, 0.9f, 0.5f, 1), "%s", watchdog.c_str());
+    hud_text.push_back(input + "  " + watchdog);
+    const double age_ms = static_cast<double>(base::WallNow().ns - it->second.at_source_ns) * 1e-6;
+    Line(Format("state age %.1f ms   steer %.1f deg  throttle %.2f  brake %.2f", age_ms,
+                Deg(s.control().gamma()), s.control().throttle(), s.control().brake()));
+  } else {
+    Line(Format("no vehicle on domain %u yet", o.domain));
+  }
+  const double frame_ms = stats.frame_ms.empty() ? 0.0 : stats.frame_ms.back();
+  const CameraMode cm = o.camera.mode;
+  const bool lockable = cm == CameraMode::kChase || cm == CameraMode::kOrbit;
+  Line(Format(
+      "camera %s%s (1-6, C)   frame %.1f ms", std::string(CameraName(cm)).c_str(),
+      lockable ? (o.camera.horizon_locked ? ", horizon level (K)" : ", with the body (K)") : "",
+      frame_ms));
+  if (xr) {
+    Line(Format("OpenXR: %s, %s  (R: recentre)", xr->runtime_name().c_str(),
+                xr->state_name().c_str()));
+  }
+  const std::uint64_t drops = session.drops().Total();
+  if (drops > 0) {
+    const ImVec4 orange(1, 0.6f, 0.3f, 1);
+    Line(Format("refused or dropped: %llu", static_cast<unsigned long long>(drops)), &orange);
+    if (ImGui::IsItemHovered()) {
+      ImGui::BeginTooltip();
+      for (const auto& [kind, n] : session.drops().Snapshot())
+        ImGui::Text("%s: %llu", kind.c_str(), static_cast<unsigned long long>(n));
+      if (!stats.last_refusal.empty()) ImGui::TextWrapped("last: %s", stats.last_refusal.c_str());
+      ImGui::EndTooltip();
+    }
+  }
+  Occupied();
+  ImGui::End();
+}
+
+// Landmark names and vehicle numbers beside what they name, never overlapping (labels.h).
+void Viewer::Impl::HudLabels(const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  const CameraView& cam = f.cam;
+  std::vector<LabelRequest> requests;
+  std::vector<ImU32> colours;
+  auto ask = [&](const std::string& text, const Vec3& at, int priority, ImU32 colour) {
+    ImVec2 p;
+    if (!Project(cam, o.width, o.height, at, p)) return;
+    const ImVec2 size = ImGui::CalcTextSize(text.c_str());
+    requests.push_back(
+        {text, p.x, p.y, size.x, size.y, cam.orthographic ? 0.0 : Norm(at - cam.eye_W), priority});
+    colours.push_back(colour);
+  };
+  for (const auto& [id, v] : views) {
+    const bool own = owner.followed_ && id == *owner.followed_;
+    if (own && o.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
+    ask(Format("#%u", id), v.pose_WB * Vec3{0, 0, 1.6}, own ? 2 : 1, ImColour(VehicleColour(id)));
+  }
+  if (f.world != nullptr) {
+    for (const pb::Landmark& l : f.world->landmarks()) {
+      ask(l.name(), {l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0}, 0, IM_COL32(255, 255, 255, 255));
+    }
+  }
+  ImDrawList* fg = ImGui::GetForegroundDrawList();
+  LabelStyle style;
+  for (const PlacedLabel& p : LayoutLabels(requests, static_cast<float>(o.width),
+                                           static_cast<float>(o.height), hud_boxes, style)) {
+    const LabelRequest& r = requests[p.request];
+    const ImU32 c = colours[p.request];
+    const auto alpha = static_cast<int>(std::lround(p.alpha * ((c >> IM_COL32_A_SHIFT) & 0xFF)));
+    const ImU32 faded = (c & ~IM_COL32_A_MASK) | (static_cast<ImU32>(alpha) << IM_COL32_A_SHIFT);
+    fg->AddText(ImVec2(p.box.x0 + style.padding_px, p.box.y0 + style.padding_px), faded,
+                r.text.c_str());
+    shown_labels.push_back({r.text, p.box, p.alpha});
+  }
+}
+
+// The frame's key presses, unless the HUD took them: an ImGui item (a text field, a slider) had
+// the input when this frame began, has it now, or the frame's input went to one (the keys typed
+// right after a click into a field arrive with that click).
+void Viewer::Impl::ApplyKeys() {
+  ViewerOptions& o = owner.options_;
+  const bool active_now = ImGui::IsAnyItemActive();
+  const bool taken = item_active_before || active_now || ImGui::GetIO().WantTextInput;
+  item_active_before = active_now;
+  if (taken) return;
+  for (const KeyPress& kp : keys) {
+    const SDL_Keycode k = kp.key;
+    CameraState& c = o.camera;
+    if (k == SDLK_ESCAPE) quit = true;
+    if (k >= SDLK_1 && k <= SDLK_6) c.mode = static_cast<CameraMode>(k - SDLK_1);
+    if (k == SDLK_c)
+      c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
+    if (k == SDLK_k) c.horizon_locked = !c.horizon_locked;
+    if (k == SDLK_r) recentre_pending = true;
+    if (k == SDLK_q) TurnGeographic(c, +1);
+    if (k == SDLK_e) TurnGeographic(c, -1);
+    if (k == SDLK_n) c.geo_turn = 0;
+    if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS) o.arrows.metres_per_newton *= 1.25;
+    if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
+    if (k == SDLK_h) o.hud = !o.hud;
+    if (k == SDLK_p) show_params = !show_params;
+    if (k == SDLK_l) legend_open = !legend_open;
+    if (k == SDLK_F1) show_help = !show_help;
+    if (k == SDLK_TAB && !tracked.empty()) {
+      // Next (Shift: previous) vehicle of the domain; the first (last) when none is followed.
+      std::vector<std::uint32_t> ids;
+      for (const auto& [id, t] : tracked) ids.push_back(id);
+      const bool back = (kp.mod & KMOD_SHIFT) != 0;
+      const auto it =
+          owner.followed_ ? std::find(ids.begin(), ids.end(), *owner.followed_) : ids.end();
+      std::size_t i = 0;
+      if (it == ids.end()) {
+        i = back ? ids.size() - 1 : 0;
+      } else {
+        const auto at = static_cast<std::size_t>(it - ids.begin());
+        i = back ? (at + ids.size() - 1) % ids.size() : (at + 1) % ids.size();
+      }
+      o.follow = ids[i];
+    }
+    if (k == SDLK_F12) {
+      const std::string path =
+          "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
+      if (WritePng(path, owner.Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
+    }
+  }
+}
+
+bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
+  if (!xr_waited) return false;
+  xr_waited = false;
+  const ViewerOptions& o = owner.options_;
+  bool drawn = false;
+  try {
+    // Recentring: the head's place and heading now become the place's eye point (on the floor
+    // it stays on the floor). The runtime recentring its space itself starts over.
+    if (xr->space_changes() != space_changes_seen) {
+      space_changes_seen = xr->space_changes();
+      head_ref = NeutralHead();
+    }
+    Pose head;
+    if (recentre_pending && xr->head_in_space(&head)) {
+      const Vec3 forward = -head.R.c[2];
+      head_ref.R = RotationAxisAngle({0, 1, 0}, std::atan2(-forward.x, -forward.z));
+      head_ref.t = head.t;
+      spdlog::info(
+          "vdyn-viewer: headset recentred (head at {:.2f} {:.2f} {:.2f} m, turned "
+          "{:.0f} deg)",
+          head.t.x, head.t.y, head.t.z, Deg(std::atan2(-forward.x, -forward.z)));
+    }
+    recentre_pending = false;
+    // The reference space's origin in the world: the camera's place (its eye point, level, or
+    // turning with the body), the floor under it when standing.
+    Pose place = XrPlace(o.camera, f.cs);
+    const Pose neutral = NeutralHead();
+    Pose ref = head_ref;
+    ref.t.y -= neutral.t.y;  // standing on STAGE: the head's height stays the runtime's
+    place.t = place.t - place.R.c[1] * neutral.t.y;
+    const Pose world_from_space = place * ref.Inverse();
+    // The HUD: a panel below and ahead of the (recentred) head, fixed in the space.
+    const Pose hud_in_space = head_ref * HudPanel(o.xr_seated);
+    xr->Frame(
+        world_from_space, hud_in_space, 0.05, f.cs.far_m,
+        [&](const XrEye& eye) {
+          BuildLists(f, eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
+                     o.camera.mode == CameraMode::kDriver);
+          eye.target->BeginScene();
+          Renderer::View rv{eye.view, eye.proj, eye.eye_W};
+          if (f.followed != nullptr) rv.focus_W = f.followed->pose_WB.t;  // the sun's shadow map
+          renderer->Draw(rv, lists);
+          eye.target->Resolve();
+        },
+        [&](RenderTarget& hud) {
+          glBindFramebuffer(GL_FRAMEBUFFER, hud.resolve_framebuffer());
+          glViewport(0, 0, hud.width(), hud.height());
+          glClearColor(0, 0, 0, 0);
+          glClear(GL_COLOR_BUFFER_BIT);
+          ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+        });
+    ++owner.stats_.xr_frames;
+    drawn = true;
+  } catch (const XrError& e) {
+    spdlog::error("vdyn-viewer: OpenXR failed: {}; back to the desktop window", e.what());
+    owner.stats_.xr_status = std::string("failed: ") + e.what();
+    xr_ended = true;
+  }
+  return drawn;
+}
+
+void Viewer::Impl::DrawDesktop(const FrameScene& f, bool xr_drawn) {
+  const ViewerOptions& o = owner.options_;
+  RenderTarget& target = *desktop;
   if (xr_drawn) {
     // The window mirrors the left eye, with the HUD.
-    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
-    glViewport(0, 0, desktop.width(), desktop.height());
+    glBindFramebuffer(GL_FRAMEBUFFER, target.resolve_framebuffer());
+    glViewport(0, 0, target.width(), target.height());
     glClearColor(0, 0, 0, 1);
     glClear(GL_COLOR_BUFFER_BIT);
-    const RenderTarget& mirror = m.xr->mirror();
+    const RenderTarget& mirror = xr->mirror();
     glBindFramebuffer(GL_READ_FRAMEBUFFER, mirror.resolve_framebuffer());
-    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, desktop.resolve_framebuffer());
-    const double s = std::min(static_cast<double>(options_.width) / mirror.width(),
-                              static_cast<double>(options_.height) / mirror.height());
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, target.resolve_framebuffer());
+    const double s = std::min(static_cast<double>(o.width) / mirror.width(),
+                              static_cast<double>(o.height) / mirror.height());
     const int w = static_cast<int>(mirror.width() * s), h = static_cast<int>(mirror.height() * s);
-    const int x0 = (options_.width - w) / 2, y0 = (options_.height - h) / 2;
+    const int x0 = (o.width - w) / 2, y0 = (o.height - h) / 2;
     glBlitFramebuffer(0, 0, mirror.width(), mirror.height(), x0, y0, x0 + w, y0 + h,
                       GL_COLOR_BUFFER_BIT, GL_LINEAR);
-    glBindFramebuffer(GL_FRAMEBUFFER, desktop.resolve_framebuffer());
-  } else {
-    build_lists(cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
-                desktop.height(), options_.camera.mode == CameraMode::kDriver);
-    desktop.BeginScene();
-    Renderer::View rv{cam.view, cam.proj, cam.eye_W};
-    rv.haze = !cam.orthographic;
-    m.renderer->Draw(rv, m.lists);
-    desktop.Resolve();
+    glBindFramebuffer(GL_FRAMEBUFFER, target.resolve_framebuffer());
+    return;
   }
+  const CameraView& cam = f.cam;
+  BuildLists(f, cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
+             target.height(), o.camera.mode == CameraMode::kDriver);
+  target.BeginScene();
+  Renderer::View rv{cam.view, cam.proj, cam.eye_W};
+  rv.haze = !cam.orthographic;
+  if (f.followed != nullptr) rv.focus_W = f.followed->pose_WB.t;  // the sun's shadow map
+  renderer->Draw(rv, lists);
+  target.Resolve();
+}
+
+void Viewer::Impl::Present() {
   ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
   int ww = 0, wh = 0;
-  SDL_GL_GetDrawableSize(m.window, &ww, &wh);
-  Renderer::PresentToWindow(desktop, ww, wh);
-  SDL_GL_SwapWindow(m.window);
+  SDL_GL_GetDrawableSize(window, &ww, &wh);
+  Renderer::PresentToWindow(*desktop, ww, wh);
+  SDL_GL_SwapWindow(window);
   glFinish();
+}
 
-  // --- timing ---
+void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f) {
+  const ViewerOptions& o = owner.options_;
+  ViewerStats& stats = owner.stats_;
+  // What the frame showed is on the screen now: the latency of each vehicle whose instant moved.
   const base::WallTime shown = base::WallNow();
-  for (auto& [id, g] : m.good) {
-    if (!g.fresh) continue;
-    g.fresh = false;
-    if (m.views.count(id) == 0 || g.source_timestamp_ns <= 0) continue;
-    if (stats_.latency_ms.size() < kMaxSamples) {
-      stats_.latency_ms.push_back(static_cast<double>(shown.ns - g.source_timestamp_ns) * 1e-6);
+  for (auto& [id, t] : tracked) {
+    if (t.at == nullptr || t.instant_ns == t.last_instant_ns) continue;
+    t.last_instant_ns = t.instant_ns;
+    if (views.count(id) == 0 || t.instant_ns <= 0) continue;
+    if (stats.latency_ms.size() < kMaxSamples) {
+      stats.latency_ms.push_back(static_cast<double>(shown.ns - t.instant_ns) * 1e-6);
     }
   }
-  ++stats_.frames;
+  ++stats.frames;
   const base::MonoTime t1 = base::MonotonicNow();
-  if (stats_.frame_ms.size() < kMaxSamples) stats_.frame_ms.push_back((t1 - t0).millis());
+  if (stats.frame_ms.size() < kMaxSamples) stats.frame_ms.push_back((t1 - t0).millis());
+  // The desktop's lead from the scene to the screen, for the next frame's display time.
+  if (!xr_drawn) {
+    const auto lead = static_cast<double>((t1 - scene_at).ns);
+    // (The first frames, with their shaders compiled and buffers filled, do not count.)
+    if (stats.frames > 3) {
+      present_lead_ns = present_lead_ns == 0 ? lead : 0.75 * present_lead_ns + 0.25 * lead;
+    }
+  }
 
-  // --- headless end ---
-  if (!m.counting) {
-    const bool waited = (t1 - m.start).seconds() >= options_.wait_s;
-    if (ready() || waited) {
-      if (!ready() && options_.frames > 0) {
+  // The headless end.
+  if (!counting) {
+    const bool waited = (t1 - start).seconds() >= o.wait_s;
+    if (owner.ready() || waited) {
+      if (!owner.ready() && o.frames > 0) {
         spdlog::warn("vdyn-viewer: no {} after {:.0f} s; drawing what there is",
-                     world == nullptr ? "world" : "vehicle", options_.wait_s);
+                     f.world == nullptr ? "world" : "vehicle", o.wait_s);
       }
-      m.counting = true;
+      counting = true;
     }
   }
   // With a headset, only frames it was given count.
-  const bool xr_pending = m.xr != nullptr && !m.xr_ended;
-  if (m.counting && (!xr_pending || xr_drawn)) ++stats_.counted_frames;
-  if (options_.frames > 0 && stats_.counted_frames >= options_.frames) {
-    if (!m.have_image) {
-      m.last_image = desktop.Read();
-      m.have_image = true;
+  const bool xr_pending = xr != nullptr && !xr_ended;
+  if (counting && (!xr_pending || xr_drawn)) ++stats.counted_frames;
+  if (o.frames > 0 && stats.counted_frames >= o.frames) {
+    if (!have_image) {
+      last_image = desktop->Read();
+      have_image = true;
     }
-    m.quit = true;
+    quit = true;
   }
-  if (m.quit) return false;
-
-  // --- pacing ---
-  if (options_.fps > 0) {
-    const base::Nanos period{static_cast<std::int64_t>(1e9 / options_.fps)};
-    m.next_frame = m.next_frame + period;
-    const base::MonoTime now = base::MonotonicNow();
-    if (m.next_frame < now) m.next_frame = now;  // late: no burst to catch up
-    base::SleepUntil(m.next_frame);
-  }
-  return true;
 }
 
 }  // namespace vdyn::viewer

@@ -1,7 +1,12 @@
 #include "vdyn/viewer/world_mesh.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
+#include <map>
+
+#include "vdyn/viewer/mesh_util.h"
+#include "vdyn/viewer/textures.h"
 
 namespace vdyn::viewer {
 
@@ -36,52 +41,285 @@ std::string CheckWorld(const pb::WorldDescription& world) {
   return {};
 }
 
+StripFrame FrameOf(const std::vector<Vec3>& points_W) {
+  StripFrame f;
+  if (points_W.empty()) return f;
+  // The long axis: the principal axis of the points' spread in XY.
+  double mx = 0, my = 0;
+  for (const Vec3& p : points_W) {
+    mx += p.x;
+    my += p.y;
+  }
+  const auto n = static_cast<double>(points_W.size());
+  mx /= n;
+  my /= n;
+  double sxx = 0, syy = 0, sxy = 0;
+  for (const Vec3& p : points_W) {
+    sxx += (p.x - mx) * (p.x - mx);
+    syy += (p.y - my) * (p.y - my);
+    sxy += (p.x - mx) * (p.y - my);
+  }
+  const double angle = 0.5 * std::atan2(2 * sxy, sxx - syy);
+  f.along_W = {std::cos(angle), std::sin(angle), 0};
+  const Vec3 across{-f.along_W.y, f.along_W.x, 0};
+  constexpr double kBig = std::numeric_limits<double>::max();
+  double a0 = kBig, a1 = -kBig, c0 = kBig, c1 = -kBig;
+  for (const Vec3& p : points_W) {
+    const Vec3 d{p.x - mx, p.y - my, 0};
+    a0 = std::min(a0, Dot(d, f.along_W));
+    a1 = std::max(a1, Dot(d, f.along_W));
+    c0 = std::min(c0, Dot(d, across));
+    c1 = std::max(c1, Dot(d, across));
+  }
+  f.centre_W = Vec3{mx, my, 0} + f.along_W * (0.5 * (a0 + a1)) + across * (0.5 * (c0 + c1));
+  f.half_length_m = 0.5 * (a1 - a0);
+  f.half_width_m = 0.5 * (c1 - c0);
+  f.strip = f.half_length_m >= 3 * f.half_width_m && f.half_width_m <= 20.0 && f.half_width_m > 0.5;
+  return f;
+}
+
+SurfaceStyle StyleOf(pb::SurfaceKind kind, const StripFrame& frame) {
+  switch (kind) {
+    case pb::SURFACE_ROAD:
+      return SurfaceStyle::kAsphalt;
+    case pb::SURFACE_OBSTACLE:
+      // A bump across a lane is short; a long stretch (the washboard) is a concrete surface.
+      return std::min(frame.half_length_m, frame.half_width_m) <= 1.25 ? SurfaceStyle::kHazard
+                                                                       : SurfaceStyle::kConcrete;
+    case pb::SURFACE_ROUGH:
+      return SurfaceStyle::kDirt;
+    case pb::SURFACE_RAMP:
+      return SurfaceStyle::kConcrete;
+    case pb::SURFACE_BARRIER:
+      return SurfaceStyle::kGlass;
+    case pb::SURFACE_PROP:
+      return SurfaceStyle::kPainted;
+    case pb::SURFACE_GROUND:
+    default:
+      return SurfaceStyle::kGrass;
+  }
+}
+
+namespace {
+
+constexpr double kChunkM = 32.0;
+constexpr std::size_t kLodMinTriangles = 4000;  // smaller meshes have one level
+constexpr double kMaxEdgeM = 16.0;              // longer edges are split (for the chunks)
+
+// Splits every triangle with an edge longer than kMaxEdgeM in four (the same surface: the
+// ground's 50 m tiles become chunks small enough to leave out of view and out of the shadow).
+void SplitLongEdges(std::vector<Vec3>& points, std::vector<std::uint32_t>& indices) {
+  for (int round = 0; round < 12; ++round) {
+    std::vector<std::uint32_t> out;
+    out.reserve(indices.size());
+    bool split = false;
+    for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+      const std::uint32_t a = indices[t], b = indices[t + 1], c = indices[t + 2];
+      const double longest = std::max(
+          {Norm(points[a] - points[b]), Norm(points[b] - points[c]), Norm(points[c] - points[a])});
+      if (longest <= kMaxEdgeM) {
+        out.insert(out.end(), {a, b, c});
+        continue;
+      }
+      split = true;
+      const auto ab = static_cast<std::uint32_t>(points.size());
+      points.push_back(0.5 * (points[a] + points[b]));
+      points.push_back(0.5 * (points[b] + points[c]));
+      points.push_back(0.5 * (points[c] + points[a]));
+      const std::uint32_t bc = ab + 1, ca = ab + 2;
+      out.insert(out.end(), {a, ab, ca, ab, b, bc, ca, bc, c, ab, bc, ca});
+    }
+    indices = std::move(out);
+    if (!split) return;
+  }
+}
+
+// Splits a mesh's triangles into chunks of kChunkM by their centroid (one chunk for a small
+// mesh) and orders its indices by chunk; a large mesh gets its coarser levels after them.
+void Chunk(TerrainMesh& m) {
+  const std::size_t triangles = m.indices.size() / 3;
+  const bool large = triangles >= kLodMinTriangles;
+  const bool wide = std::max(m.max_W.x - m.min_W.x, m.max_W.y - m.min_W.y) > 2 * kChunkM;
+  auto pos = [&](std::uint32_t i) {
+    const TerrainVertex& v = m.vertices[i];
+    return Vec3{v.p[0], v.p[1], v.p[2]};
+  };
+  std::map<std::pair<std::int64_t, std::int64_t>, std::vector<std::uint32_t>> cells;
+  for (std::size_t t = 0; t < triangles; ++t) {
+    std::pair<std::int64_t, std::int64_t> cell{0, 0};
+    if (large || wide) {
+      const Vec3 c =
+          (pos(m.indices[3 * t]) + pos(m.indices[3 * t + 1]) + pos(m.indices[3 * t + 2])) / 3.0;
+      cell = {static_cast<std::int64_t>(std::floor(c.x / kChunkM)),
+              static_cast<std::int64_t>(std::floor(c.y / kChunkM))};
+    }
+    cells[cell].push_back(static_cast<std::uint32_t>(t));
+  }
+  // The coarser levels' vertices: per cell of the level (over the whole mesh, so neighbouring
+  // chunks share them), the mean of the vertices in it.
+  std::array<std::vector<std::uint32_t>, kTerrainLods> merged;
+  if (large) {
+    const std::size_t n = m.vertices.size();
+    for (int lod = 1; lod < kTerrainLods; ++lod) {
+      const double cell = kLodCellM[lod];
+      std::map<std::array<std::int64_t, 3>, std::uint32_t> rep_of_cell;
+      std::vector<Vec3> sum_p, sum_n;
+      std::vector<double> count;
+      auto& map = merged[static_cast<std::size_t>(lod)];
+      map.resize(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        const Vec3 p = pos(static_cast<std::uint32_t>(i));
+        const std::array<std::int64_t, 3> key = {static_cast<std::int64_t>(std::floor(p.x / cell)),
+                                                 static_cast<std::int64_t>(std::floor(p.y / cell)),
+                                                 static_cast<std::int64_t>(std::floor(p.z / cell))};
+        const auto [it, added] =
+            rep_of_cell.try_emplace(key, static_cast<std::uint32_t>(sum_p.size()));
+        if (added) {
+          sum_p.emplace_back();
+          sum_n.emplace_back();
+          count.push_back(0);
+        }
+        const TerrainVertex& v = m.vertices[i];
+        sum_p[it->second] += p;
+        sum_n[it->second] += Vec3{v.n[0], v.n[1], v.n[2]};
+        count[it->second] += 1;
+        map[i] = it->second;
+      }
+      const auto base = static_cast<std::uint32_t>(m.vertices.size());
+      for (std::size_t c = 0; c < sum_p.size(); ++c) {
+        const Vec3 p = sum_p[c] / count[c], nn = Normalized(sum_n[c], {0, 0, 1});
+        m.vertices.push_back(
+            {{static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(p.z)},
+             {static_cast<float>(nn.x), static_cast<float>(nn.y), static_cast<float>(nn.z)}});
+      }
+      for (std::uint32_t& r : map) r += base;
+    }
+  }
+  std::vector<std::uint32_t> ordered;
+  ordered.reserve(m.indices.size() * (large ? 2 : 1));
+  constexpr double kBig = std::numeric_limits<double>::max();
+  for (const auto& [cell, tris] : cells) {
+    TerrainChunk c;
+    c.min_W = {kBig, kBig, kBig};
+    c.max_W = {-kBig, -kBig, -kBig};
+    for (int lod = 0; lod < (large ? kTerrainLods : 1); ++lod) {
+      TerrainChunk::Range& r = c.lods[static_cast<std::size_t>(lod)];
+      r.first = static_cast<std::uint32_t>(ordered.size());
+      for (std::uint32_t t : tris) {
+        std::uint32_t v[3];
+        for (int k = 0; k < 3; ++k) {
+          const std::uint32_t i = m.indices[3 * t + static_cast<std::size_t>(k)];
+          v[k] = lod == 0 ? i : merged[static_cast<std::size_t>(lod)][i];
+          if (lod == 0) {
+            const Vec3 p = pos(i);
+            c.min_W = {std::min(c.min_W.x, p.x), std::min(c.min_W.y, p.y),
+                       std::min(c.min_W.z, p.z)};
+            c.max_W = {std::max(c.max_W.x, p.x), std::max(c.max_W.y, p.y),
+                       std::max(c.max_W.z, p.z)};
+          }
+        }
+        if (v[0] == v[1] || v[1] == v[2] || v[0] == v[2]) continue;  // merged away
+        ordered.insert(ordered.end(), {v[0], v[1], v[2]});
+      }
+      r.count = static_cast<std::uint32_t>(ordered.size()) - r.first;
+    }
+    if (!large) c.lods[1] = c.lods[2] = c.lods[0];
+    m.chunks.push_back(c);
+  }
+  m.indices = std::move(ordered);
+}
+
+}  // namespace
+
 TerrainData TerrainFromWorld(const pb::WorldDescription& world) {
   TerrainData t;
   t.name = world.name();
   constexpr double kBig = std::numeric_limits<double>::max();
-  t.min_W = {kBig, kBig, kBig};
-  t.max_W = {-kBig, -kBig, -kBig};
+  t.min_W = t.ground_min_W = {kBig, kBig, kBig};
+  t.max_W = t.ground_max_W = {-kBig, -kBig, -kBig};
   t.meshes.reserve(static_cast<std::size_t>(world.meshes_size()));
   for (const pb::Mesh& mesh : world.meshes()) {
     if (mesh.indices_size() == 0) continue;
     TerrainMesh& m = t.meshes.emplace_back();
     m.name = mesh.name();
     m.kind = mesh.kind();
-    m.positions_W.resize(static_cast<std::size_t>(mesh.vertices_size()));
-    for (int i = 0; i + 2 < mesh.vertices_size(); i += 3) {
-      const double x = mesh.vertices(i), y = mesh.vertices(i + 1), z = mesh.vertices(i + 2);
-      const auto k = static_cast<std::size_t>(i);
-      m.positions_W[k] = static_cast<float>(x);
-      m.positions_W[k + 1] = static_cast<float>(y);
-      m.positions_W[k + 2] = static_cast<float>(z);
-      t.min_W = {std::min(t.min_W.x, x), std::min(t.min_W.y, y), std::min(t.min_W.z, z)};
-      t.max_W = {std::max(t.max_W.x, x), std::max(t.max_W.y, y), std::max(t.max_W.z, z)};
+    std::vector<Vec3> points(static_cast<std::size_t>(mesh.vertices_size() / 3));
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const int k = static_cast<int>(3 * i);
+      points[i] = {mesh.vertices(k), mesh.vertices(k + 1), mesh.vertices(k + 2)};
     }
-    m.indices.assign(mesh.indices().begin(), mesh.indices().end());
+    std::vector<std::uint32_t> indices(mesh.indices().begin(), mesh.indices().end());
+    // Only the vertices triangles use count for the frame and the bounds.
+    std::vector<Vec3> used;
+    {
+      std::vector<bool> seen(points.size(), false);
+      for (std::uint32_t i : indices) {
+        if (!seen[i]) {
+          seen[i] = true;
+          used.push_back(points[i]);
+        }
+      }
+    }
+    m.frame = FrameOf(used);
+    m.style = StyleOf(m.kind, m.frame);
+    SplitLongEdges(points, indices);
+    const SmoothedMesh s = SmoothNormals(points, indices, {}, 40.0);
+    m.min_W = {kBig, kBig, kBig};
+    m.max_W = {-kBig, -kBig, -kBig};
+    m.vertices.reserve(s.positions.size());
+    for (std::size_t i = 0; i < s.positions.size(); ++i) {
+      const Vec3& p = s.positions[i];
+      const Vec3& n = s.normals[i];
+      TerrainVertex v{};
+      v.p[0] = static_cast<float>(p.x);
+      v.p[1] = static_cast<float>(p.y);
+      v.p[2] = static_cast<float>(p.z);
+      v.n[0] = static_cast<float>(n.x);
+      v.n[1] = static_cast<float>(n.y);
+      v.n[2] = static_cast<float>(n.z);
+      m.vertices.push_back(v);
+      m.min_W = {std::min(m.min_W.x, p.x), std::min(m.min_W.y, p.y), std::min(m.min_W.z, p.z)};
+      m.max_W = {std::max(m.max_W.x, p.x), std::max(m.max_W.y, p.y), std::max(m.max_W.z, p.z)};
+    }
+    m.indices = s.indices;
+    Chunk(m);
     t.triangles += m.indices.size() / 3;
+    t.min_W = {std::min(t.min_W.x, m.min_W.x), std::min(t.min_W.y, m.min_W.y),
+               std::min(t.min_W.z, m.min_W.z)};
+    t.max_W = {std::max(t.max_W.x, m.max_W.x), std::max(t.max_W.y, m.max_W.y),
+               std::max(t.max_W.z, m.max_W.z)};
+    if (m.style == SurfaceStyle::kGrass) {
+      t.has_ground = true;
+      t.ground_min_W = {std::min(t.ground_min_W.x, m.min_W.x),
+                        std::min(t.ground_min_W.y, m.min_W.y),
+                        std::min(t.ground_min_W.z, m.min_W.z)};
+      t.ground_max_W = {std::max(t.ground_max_W.x, m.max_W.x),
+                        std::max(t.ground_max_W.y, m.max_W.y),
+                        std::max(t.ground_max_W.z, m.max_W.z)};
+    }
   }
   if (t.meshes.empty()) t.min_W = t.max_W = Vec3{};
+  if (!t.has_ground) t.ground_min_W = t.ground_max_W = Vec3{};
   return t;
 }
 
 SurfaceLook LookOf(pb::SurfaceKind kind) {
   switch (kind) {
     case pb::SURFACE_ROAD:
-      return {{72, 74, 80}, 1.0f};
+      return {MeanColour(TextureLayer::kAsphalt), 1.0f};
     case pb::SURFACE_OBSTACLE:
-      return {{190, 160, 90}, 1.0f};
+      return {{130, 105, 25}, 1.0f};  // yellow and black paint, from afar
     case pb::SURFACE_ROUGH:
-      return {{128, 104, 78}, 1.0f};
+      return {MeanColour(TextureLayer::kDirt), 1.0f};
     case pb::SURFACE_RAMP:
-      return {{165, 170, 185}, 1.0f};
+      return {MeanColour(TextureLayer::kConcrete), 1.0f};
     case pb::SURFACE_BARRIER:
-      return {{170, 225, 240}, 0.35f};
+      return {{150, 200, 215}, 0.3f};
     case pb::SURFACE_PROP:
-      return {{215, 205, 190}, 1.0f};
+      return {{196, 198, 200}, 1.0f};
     case pb::SURFACE_GROUND:
     default:
-      return {{128, 146, 112}, 1.0f};
+      return {MeanColour(TextureLayer::kGrass), 1.0f};
   }
 }
 

@@ -1,6 +1,10 @@
 #include "vdyn/viewer/xr_session.h"
 
+#include <time.h>
+
 #include <array>
+#include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <vector>
 
@@ -11,6 +15,7 @@
 #include <epoxy/glx.h>
 #define XR_USE_PLATFORM_XLIB
 #define XR_USE_GRAPHICS_API_OPENGL
+#define XR_USE_TIMESPEC
 #include <openxr/openxr.h>
 #include <openxr/openxr_platform.h>
 
@@ -59,6 +64,34 @@ std::string ResultName(XrInstance instance, XrResult r) {
 Pose PoseOf(const XrPosef& p) {
   return {RotationFromQuat(p.orientation.w, p.orientation.x, p.orientation.y, p.orientation.z),
           {p.position.x, p.position.y, p.position.z}};
+}
+
+// A rotation matrix as a unit quaternion (Shepperd's method), with the pose's position.
+XrPosef XrPoseOf(const Pose& p) {
+  const Mat3& R = p.R;
+  const double m00 = R.c[0].x, m11 = R.c[1].y, m22 = R.c[2].z;
+  const double m01 = R.c[1].x, m10 = R.c[0].y, m02 = R.c[2].x, m20 = R.c[0].z;
+  const double m12 = R.c[2].y, m21 = R.c[1].z;
+  double w, qx, qy, qz;
+  const double tr = m00 + m11 + m22;
+  if (tr > 0) {
+    const double s = std::sqrt(tr + 1.0) * 2;
+    w = 0.25 * s, qx = (m21 - m12) / s, qy = (m02 - m20) / s, qz = (m10 - m01) / s;
+  } else if (m00 > m11 && m00 > m22) {
+    const double s = std::sqrt(1.0 + m00 - m11 - m22) * 2;
+    w = (m21 - m12) / s, qx = 0.25 * s, qy = (m01 + m10) / s, qz = (m02 + m20) / s;
+  } else if (m11 > m22) {
+    const double s = std::sqrt(1.0 + m11 - m00 - m22) * 2;
+    w = (m02 - m20) / s, qx = (m01 + m10) / s, qy = 0.25 * s, qz = (m12 + m21) / s;
+  } else {
+    const double s = std::sqrt(1.0 + m22 - m00 - m11) * 2;
+    w = (m10 - m01) / s, qx = (m02 + m20) / s, qy = (m12 + m21) / s, qz = 0.25 * s;
+  }
+  XrPosef out{};
+  out.orientation = {static_cast<float>(qx), static_cast<float>(qy), static_cast<float>(qz),
+                     static_cast<float>(w)};
+  out.position = {static_cast<float>(p.t.x), static_cast<float>(p.t.y), static_cast<float>(p.t.z)};
+  return out;
 }
 
 const char* StateName(XrSessionState s) {
@@ -112,6 +145,15 @@ struct Headset::Impl {
   std::array<XrViewConfigurationView, 2> config_views{};
   std::uint64_t frames = 0;
   RenderTarget mirror;
+  // The waited frame.
+  XrFrameState frame_state{};
+  bool frame_waited = false;
+  std::int64_t display_mono_ns = 0;
+  PFN_xrConvertTimeToTimespecTimeKHR to_timespec = nullptr;
+  // The head at the last tracked frame.
+  Pose head;
+  bool head_known = false;
+  std::uint64_t space_changes = 0;
 
   void Check(XrResult r, const char* what) const {
     if (XR_FAILED(r)) throw XrError(std::string("OpenXR ") + what + ": " + ResultName(instance, r));
@@ -178,6 +220,10 @@ struct Headset::Impl {
 Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
   Impl& x = *impl_;
   x.options = options;
+  // The loader writes its own error lines to stderr (five of them when there is no runtime) before
+  // it returns the error this viewer explains in one sentence; XR_LOADER_DEBUG set by the person
+  // (e.g. to "error" or "all") brings them back.
+  setenv("XR_LOADER_DEBUG", "none", 0);
   try {
     // The runtime must offer OpenGL.
     std::uint32_t n = 0;
@@ -190,9 +236,12 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
         n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
     x.Check(xrEnumerateInstanceExtensionProperties(nullptr, n, &n, exts.data()),
             "xrEnumerateInstanceExtensionProperties");
-    bool has_gl = false;
-    for (const auto& e : exts)
+    bool has_gl = false, has_timespec = false;
+    for (const auto& e : exts) {
       has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
+      has_timespec |=
+          std::strcmp(e.extensionName, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME) == 0;
+    }
     if (!has_gl) throw XrError("the OpenXR runtime does not offer XR_KHR_opengl_enable");
 
     auto ici = XrStruct<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
@@ -201,13 +250,20 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
     ici.applicationInfo.applicationVersion = 1;
     std::strncpy(ici.applicationInfo.engineName, "vdyn", XR_MAX_ENGINE_NAME_SIZE - 1);
     ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
-    const char* enabled[] = {XR_KHR_OPENGL_ENABLE_EXTENSION_NAME};
-    ici.enabledExtensionCount = 1;
+    // The display time of a frame in this machine's clock (for drawing the scene at that instant).
+    const char* enabled[] = {XR_KHR_OPENGL_ENABLE_EXTENSION_NAME,
+                             XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME};
+    ici.enabledExtensionCount = has_timespec ? 2 : 1;
     ici.enabledExtensionNames = enabled;
     r = xrCreateInstance(&ici, &x.instance);
     if (XR_FAILED(r)) {
       throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
                     "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
+    }
+    if (has_timespec) {
+      x.Check(xrGetInstanceProcAddr(x.instance, "xrConvertTimeToTimespecTimeKHR",
+                                    reinterpret_cast<PFN_xrVoidFunction*>(&x.to_timespec)),
+              "xrGetInstanceProcAddr(xrConvertTimeToTimespecTimeKHR)");
     }
     auto ip = XrStruct<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
     x.Check(xrGetInstanceProperties(x.instance, &ip), "xrGetInstanceProperties");
@@ -368,6 +424,9 @@ bool Headset::PollEvents() {
         }
         break;
       }
+      case XR_TYPE_EVENT_DATA_REFERENCE_SPACE_CHANGE_PENDING:
+        ++x.space_changes;  // the runtime recentred: the caller's own recentring starts over
+        break;
       case XR_TYPE_EVENT_DATA_INSTANCE_LOSS_PENDING:
         spdlog::warn("OpenXR: instance loss pending; leaving the headset");
         x.running = false;
@@ -384,13 +443,36 @@ bool Headset::running() const {
   return impl_->running;
 }
 
-bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
-                    const std::function<void(const XrEye&)>& draw_eye,
+void Headset::WaitFrame() {
+  Impl& x = *impl_;
+  if (x.frame_waited) throw XrError("OpenXR: a frame waited for twice without being drawn");
+  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
+  x.frame_state = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
+  x.Check(xrWaitFrame(x.session, &wi, &x.frame_state), "xrWaitFrame");
+  x.frame_waited = true;
+  timespec now{};
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  x.display_mono_ns = static_cast<std::int64_t>(now.tv_sec) * 1'000'000'000 + now.tv_nsec +
+                      x.frame_state.predictedDisplayPeriod;
+  if (x.to_timespec != nullptr) {
+    timespec t{};
+    if (XR_SUCCEEDED(x.to_timespec(x.instance, x.frame_state.predictedDisplayTime, &t))) {
+      x.display_mono_ns = static_cast<std::int64_t>(t.tv_sec) * 1'000'000'000 + t.tv_nsec;
+    }
+  }
+}
+
+std::int64_t Headset::display_mono_ns() const {
+  return impl_->display_mono_ns;
+}
+
+bool Headset::Frame(const Pose& world_from_space, const Pose& hud_in_space, double near_m,
+                    double far_m, const std::function<void(const XrEye&)>& draw_eye,
                     const std::function<void(RenderTarget&)>& draw_hud) {
   Impl& x = *impl_;
-  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
-  auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
-  x.Check(xrWaitFrame(x.session, &wi, &fs), "xrWaitFrame");
+  if (!x.frame_waited) throw XrError("OpenXR: a frame drawn without waiting for it");
+  x.frame_waited = false;
+  const XrFrameState& fs = x.frame_state;
   auto bi = XrStruct<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
   x.Check(xrBeginFrame(x.session, &bi), "xrBeginFrame");
 
@@ -411,6 +493,10 @@ bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
     const bool tracked = (vs.viewStateFlags & XR_VIEW_STATE_POSITION_VALID_BIT) != 0 &&
                          (vs.viewStateFlags & XR_VIEW_STATE_ORIENTATION_VALID_BIT) != 0;
     if (nv == 2 && tracked) {
+      // The head: between the eyes, looking as they do.
+      const Pose l = PoseOf(views[0].pose), r = PoseOf(views[1].pose);
+      x.head = {l.R, 0.5 * (l.t + r.t)};
+      x.head_known = true;
       for (int e = 0; e < 2; ++e) {
         const auto ei = static_cast<std::size_t>(e);
         Swapchain& sc = x.eyes[ei];
@@ -451,12 +537,11 @@ bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
         draw_hud(x.hud.target);
         x.Release(x.hud);
         quad.layerFlags = XR_COMPOSITION_LAYER_BLEND_TEXTURE_SOURCE_ALPHA_BIT;
-        quad.space = x.view_space;
+        quad.space = x.space;  // fixed where it is put, not to the head
         quad.eyeVisibility = XR_EYE_VISIBILITY_BOTH;
         quad.subImage.swapchain = x.hud.handle;
         quad.subImage.imageRect.extent = {x.hud.width, x.hud.height};
-        quad.pose.orientation.w = 1;
-        quad.pose.position = {0.0f, -0.25f, static_cast<float>(-x.options.hud_distance_m)};
+        quad.pose = XrPoseOf(hud_in_space);
         quad.size.width = static_cast<float>(x.options.hud_width_m);
         quad.size.height =
             static_cast<float>(x.options.hud_width_m * x.hud.height / std::max(x.hud.width, 1));
@@ -477,9 +562,9 @@ bool Headset::Frame(const Pose& world_from_space, double near_m, double far_m,
 
 void Headset::EmptyFrame() {
   Impl& x = *impl_;
-  auto wi = XrStruct<XrFrameWaitInfo>(XR_TYPE_FRAME_WAIT_INFO);
-  auto fs = XrStruct<XrFrameState>(XR_TYPE_FRAME_STATE);
-  x.Check(xrWaitFrame(x.session, &wi, &fs), "xrWaitFrame");
+  if (!x.frame_waited) WaitFrame();  // (a frame waited for and not drawn is ended here)
+  x.frame_waited = false;
+  const XrFrameState& fs = x.frame_state;
   auto bi = XrStruct<XrFrameBeginInfo>(XR_TYPE_FRAME_BEGIN_INFO);
   x.Check(xrBeginFrame(x.session, &bi), "xrBeginFrame");
   auto ei = XrStruct<XrFrameEndInfo>(XR_TYPE_FRAME_END_INFO);
@@ -522,6 +607,14 @@ const RenderTarget& Headset::mirror() const {
 }
 bool Headset::standing_on_local() const {
   return impl_->standing_on_local;
+}
+bool Headset::head_in_space(Pose* out) const {
+  if (!impl_->head_known) return false;
+  *out = impl_->head;
+  return true;
+}
+std::uint64_t Headset::space_changes() const {
+  return impl_->space_changes;
 }
 
 }  // namespace vdyn::viewer

@@ -11,6 +11,7 @@
 #include <epoxy/glx.h>
 #define XR_USE_PLATFORM_XLIB
 #define XR_USE_GRAPHICS_API_OPENGL
+#define XR_USE_TIMESPEC
 #include <openxr/openxr.h>
 #include <openxr/openxr_platform.h>
 #include <stb_image_write.h>
@@ -19,6 +20,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <deque>
@@ -105,6 +107,9 @@ struct State {
   std::vector<std::string> polled;  // session states in the order the application received them
   bool frame_waited = false, frame_begun = false;
   XrTime predicted = 0;
+  XrTime last_drawn_display = 0;  // the display time of the last frame with a projection layer
+  bool timespec_enabled = false;
+  std::array<double, 4> head{0, 0, 0, 0};  // kEnvHead: x, y, z, yaw (rad)
   std::uint64_t frames_ended = 0, frames_projection = 0, frames_quad = 0;
   std::uint64_t exit_after = 0;
   bool stage = true;
@@ -118,6 +123,7 @@ struct State {
   double quad_width_m = 0, quad_height_m = 0;
   XrReferenceSpaceType projection_space = XR_REFERENCE_SPACE_TYPE_MAX_ENUM;
   XrReferenceSpaceType quad_space = XR_REFERENCE_SPACE_TYPE_MAX_ENUM;
+  XrPosef quad_pose{};
   std::string out_dir;
 };
 
@@ -204,6 +210,11 @@ void WriteReport() {
       << "projection_space " << static_cast<int>(s.projection_space) << "\n"
       << "quad_space " << static_cast<int>(s.quad_space) << "\n"
       << "quad_size_m " << s.quad_width_m << " " << s.quad_height_m << "\n"
+      << "quad_pose " << s.quad_pose.position.x << " " << s.quad_pose.position.y << " "
+      << s.quad_pose.position.z << " " << s.quad_pose.orientation.x << " "
+      << s.quad_pose.orientation.y << " " << s.quad_pose.orientation.z << " "
+      << s.quad_pose.orientation.w << "\n"
+      << "last_drawn_display_ns " << s.last_drawn_display << "\n"
       << "session_open " << (s.session ? 1 : 0) << "\n";
   auto png = [&](const char* name, const Image& img) {
     if (img.width > 0) {
@@ -221,12 +232,16 @@ void WriteReport() {
 XrResult EnumerateInstanceExtensionProperties(const char* layer, std::uint32_t capacity,
                                               std::uint32_t* count, XrExtensionProperties* props) {
   if (layer != nullptr) return XR_ERROR_API_LAYER_NOT_PRESENT;
-  *count = 1;
+  *count = 2;
   if (capacity == 0) return XR_SUCCESS;
   if (props == nullptr) return XR_ERROR_VALIDATION_FAILURE;
+  if (capacity < 2) return XR_ERROR_SIZE_INSUFFICIENT;
   std::strncpy(props[0].extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME,
                XR_MAX_EXTENSION_NAME_SIZE - 1);
   props[0].extensionVersion = XR_KHR_opengl_enable_SPEC_VERSION;
+  std::strncpy(props[1].extensionName, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME,
+               XR_MAX_EXTENSION_NAME_SIZE - 1);
+  props[1].extensionVersion = XR_KHR_convert_timespec_time_SPEC_VERSION;
   return XR_SUCCESS;
 }
 
@@ -237,10 +252,13 @@ XrResult CreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance) 
     return XR_ERROR_VALIDATION_FAILURE;
   if (XR_VERSION_MAJOR(info->applicationInfo.apiVersion) != 1)
     return XR_ERROR_API_VERSION_UNSUPPORTED;
-  bool gl = false;
+  bool gl = false, timespec_time = false;
   for (std::uint32_t i = 0; i < info->enabledExtensionCount; ++i) {
     if (std::strcmp(info->enabledExtensionNames[i], XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0) {
       gl = true;
+    } else if (std::strcmp(info->enabledExtensionNames[i],
+                           XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME) == 0) {
+      timespec_time = true;
     } else {
       return XR_ERROR_EXTENSION_NOT_PRESENT;
     }
@@ -249,6 +267,15 @@ XrResult CreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance) 
   State& fresh = S();
   if (!gl) Violation("instance created without XR_KHR_opengl_enable");
   fresh.instance = true;
+  fresh.timespec_enabled = timespec_time;
+  if (const char* h = std::getenv(kEnvHead)) {
+    double v[4] = {0, 0, 0, 0};
+    if (std::sscanf(h, "%lf %lf %lf %lf", &v[0], &v[1], &v[2], &v[3]) == 4) {
+      fresh.head = {v[0], v[1], v[2], v[3] * 3.14159265358979323846 / 180.0};
+    } else {
+      Violation(std::string(kEnvHead) + " is not 'x y z yaw_deg'");
+    }
+  }
   if (const char* d = std::getenv(kEnvOut)) fresh.out_dir = d;
   if (const char* e = std::getenv(kEnvExitAfter)) fresh.exit_after = std::strtoull(e, nullptr, 10);
   if (const char* st = std::getenv(kEnvStage)) fresh.stage = std::string(st) != "0";
@@ -492,12 +519,18 @@ XrResult LocateViews(XrSession, const XrViewLocateInfo* info, XrViewState* state
   state->viewStateFlags = XR_VIEW_STATE_ORIENTATION_VALID_BIT | XR_VIEW_STATE_POSITION_VALID_BIT |
                           XR_VIEW_STATE_ORIENTATION_TRACKED_BIT |
                           XR_VIEW_STATE_POSITION_TRACKED_BIT;
+  // The head moved and turned by kEnvHead (yaw about +Y); each eye half the IPD along its X.
+  const double yaw = s.head[3];
+  const double c = std::cos(yaw), sn = std::sin(yaw);
   for (int e = 0; e < 2; ++e) {
     XrView& v = views[e];
-    v.pose.orientation = {0, 0, 0, 1};
+    v.pose.orientation = {0, static_cast<float>(std::sin(0.5 * yaw)), 0,
+                          static_cast<float>(std::cos(0.5 * yaw))};
     const double px = sp.pose.position.x, py = sp.pose.position.y, pz = sp.pose.position.z;
-    v.pose.position = {static_cast<float>((e == 0 ? -0.5 : 0.5) * kIpd - px),
-                       static_cast<float>(head_y - py), static_cast<float>(-pz)};
+    const double side = (e == 0 ? -0.5 : 0.5) * kIpd;  // along the head's X: (cos, 0, -sin)
+    v.pose.position = {static_cast<float>(s.head[0] + side * c - px),
+                       static_cast<float>(head_y + s.head[1] - py),
+                       static_cast<float>(s.head[2] - side * sn - pz)};
     if (e == 0) {
       v.fov = {static_cast<float>(kAngleOuter), static_cast<float>(kAngleInner),
                static_cast<float>(kAngleUp), static_cast<float>(kAngleDown)};
@@ -717,6 +750,7 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
       if (!released(q->subImage.swapchain, q->subImage.imageRect, &sc)) continue;
       if (!(q->size.width > 0 && q->size.height > 0)) Violation("a quad layer of no size");
       s.quad_space = space->second->type;
+      s.quad_pose = q->pose;
       s.quad_width_m = q->size.width;
       s.quad_height_m = q->size.height;
       s.hud = ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)], sc->width,
@@ -727,7 +761,10 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
     }
   }
   ++s.frames_ended;
-  if (projection) ++s.frames_projection;
+  if (projection) {
+    ++s.frames_projection;
+    s.last_drawn_display = info->displayTime;
+  }
   if (quad) ++s.frames_quad;
   if (s.frames_ended == 1) {
     // Synchronized with the application's frames: visible, then focused.
@@ -739,6 +776,27 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
     s.runtime_exit = true;  // the user left through the runtime
     s.events.push_back(XR_SESSION_STATE_STOPPING);
   }
+  return XR_SUCCESS;
+}
+
+// --- time (XR_KHR_convert_timespec_time): XrTime is CLOCK_MONOTONIC in ns here --------------
+
+XrResult ConvertTimeToTimespecTime(XrInstance, XrTime time, timespec* out) {
+  std::lock_guard<std::mutex> lock(g_mu);
+  if (!S().timespec_enabled) {
+    Violation("xrConvertTimeToTimespecTimeKHR without its extension enabled");
+    return XR_ERROR_FUNCTION_UNSUPPORTED;
+  }
+  if (time <= 0 || out == nullptr) return XR_ERROR_TIME_INVALID;
+  out->tv_sec = static_cast<time_t>(time / 1'000'000'000);
+  out->tv_nsec = static_cast<long>(time % 1'000'000'000);
+  return XR_SUCCESS;
+}
+
+XrResult ConvertTimespecTimeToTime(XrInstance, const timespec* in, XrTime* out) {
+  std::lock_guard<std::mutex> lock(g_mu);
+  if (!S().timespec_enabled) return XR_ERROR_FUNCTION_UNSUPPORTED;
+  *out = static_cast<XrTime>(in->tv_sec) * 1'000'000'000 + in->tv_nsec;
   return XR_SUCCESS;
 }
 
@@ -787,6 +845,8 @@ XrResult GetInstanceProcAddr(XrInstance instance, const char* name, PFN_xrVoidFu
       VDYN_XR_ENTRY("xrWaitFrame", WaitFrame, false),
       VDYN_XR_ENTRY("xrBeginFrame", BeginFrame, false),
       VDYN_XR_ENTRY("xrEndFrame", EndFrame, false),
+      VDYN_XR_ENTRY("xrConvertTimeToTimespecTimeKHR", ConvertTimeToTimespecTime, false),
+      VDYN_XR_ENTRY("xrConvertTimespecTimeToTimeKHR", ConvertTimespecTimeToTime, false),
   };
 #undef VDYN_XR_ENTRY
   if (name == nullptr || fn == nullptr) return XR_ERROR_VALIDATION_FAILURE;

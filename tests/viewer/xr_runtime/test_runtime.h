@@ -24,5 +24,8 @@ inline constexpr double kStageHeadHeight = 1.6;  // STAGE: origin on the floor
 inline constexpr const char* kEnvOut = "VDYN_XR_TEST_OUT";
 inline constexpr const char* kEnvExitAfter = "VDYN_XR_TEST_EXIT_AFTER";
 inline constexpr const char* kEnvStage = "VDYN_XR_TEST_STAGE";
+// Where the head is, moved from its place above and turned about the vertical: "x y z yaw_deg"
+// (OpenXR axes of the base space, m; yaw positive to the left), e.g. a person sitting off-centre.
+inline constexpr const char* kEnvHead = "VDYN_XR_TEST_HEAD";
 
 }  // namespace vdyn::xrtest

@@ -82,6 +82,17 @@ std::span<const ParamLimit> VehicleParamLimits();
 std::span<const ParamLimit> WheelParamLimits();  // per wheel, path without the wheel prefix
 // The limit of a field path ("mass", "lf.radius"); nullptr for a path with no limit.
 const Range* ParamRange(std::string_view path);
+// The fields that are not numbers with a limit: choices (enums) and the per-wheel groups, named.
+struct ParamChoice {
+  std::string_view path;  // "model", "lf"
+  std::string_view what;  // "vehicle model (the equations)"
+};
+std::span<const ParamChoice> ParamChoices();
+// What every field of vdyn.pb.VehicleParams is, in words with its unit ("vehicle mass, kg";
+// "lf.radius": "wheel radius, m"): the `what` of its limit above, or of its choice. Empty for a
+// path that names no field. The viewer's parameters panel labels its fields with it, and
+// docs/formats.md's table of the parameters is checked against it (tests/test_base.cc).
+std::string_view ParamWords(std::string_view path);
 
 // --- Driving rigs (vdyn-input: wheel mapping files and force feedback options) -------------
 // SDL's raw axis values.
@@ -126,6 +137,7 @@ inline constexpr Range kMapHalfHeight{1, 10000, false, false, "map half height, 
 inline constexpr Range kFovDeg{10, 150, false, false, "field of view, deg"};
 inline constexpr Range kCameraDistance{0.5, 5000, false, false, "camera distance, m"};
 inline constexpr Range kAngleDeg{-360, 360, false, false, "angle, deg"};
+inline constexpr Range kPresentationDelayMs{0, 1000, false, false, "presentation delay, ms"};
 
 // --- Recordings (vdyn-recorder) ---------------------------------------------------------------
 // A recorder's reader history per instance on keep-last topics (vdyn/state: one second of a

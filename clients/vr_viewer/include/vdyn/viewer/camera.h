@@ -6,7 +6,16 @@
 //   map      straight down, orthographic, geographic: north up by default
 //   north    the paper's geographic camera: behind the vehicle looking north by default, turned in
 //            steps by the wheel's paddle shifters (driver input buttons) or the keys Q and E
+//   beside   standing on the ground 6 m to the vehicle's left at eye height, facing it
 // Map and north share the geographic heading: north_yaw of the world plus the turn.
+//
+// Horizon lock (chase and orbit): locked (the default), the view keeps the horizon level whatever
+// the body does (only the heading turns it); unlocked, it rolls and pitches with the body, as a
+// camera bolted to the car would.
+//
+// In a headset (XrPlace) each camera is a place: its eye point with a level frame facing where
+// the camera looks (the head turns and tilts itself), the driver's seat rolling and pitching with
+// the body, chase and orbit with the body too when unlocked.
 #pragma once
 
 #include <optional>
@@ -18,8 +27,8 @@
 
 namespace vdyn::viewer {
 
-enum class CameraMode { kChase, kDriver, kOrbit, kMap, kNorth };
-inline constexpr int kCameraModes = 5;
+enum class CameraMode { kChase, kDriver, kOrbit, kMap, kNorth, kBeside };
+inline constexpr int kCameraModes = 6;
 std::string_view CameraName(CameraMode m);
 std::optional<CameraMode> CameraFromName(std::string_view name);
 
@@ -34,7 +43,10 @@ struct CameraState {
   double north_distance = 14, north_height = 6;
   double orbit_yaw = Rad(-120), orbit_pitch = Rad(25), orbit_distance = 12;  // world frame
   double map_half_height = 30;     // metres from the centre to the top edge
+  double beside_distance = 6;      // m to the vehicle's left
+  double eye_height = 1.6;         // m above the ground: beside, and a standing headset's eyes
   Vec3 seat_B{-0.35, 0.37, 0.55};  // the driver's eyes from T, body frame, m
+  bool horizon_locked = true;      // chase and orbit keep the horizon level
 };
 
 struct CameraView {
@@ -59,6 +71,14 @@ struct CameraScene {
 };
 
 CameraView ComputeCamera(const CameraState& c, const CameraScene& s, int width_px, int height_px);
+
+// A headset's place for a camera: the world pose of the frame its eyes are in, in OpenXR axes
+// (X right, Y up, Z back: it faces along -Z), with its origin at the camera's eye point.
+Pose XrPlace(const CameraState& c, const CameraScene& s);
+
+// The body's roll and pitch without its heading (R_WB with its yaw taken out): what an unlocked
+// horizon turns the chase and orbit cameras by about the vehicle.
+Mat3 Tilt(const Pose& pose_WB, double yaw);
 
 // Where north lies on the screen for a view heading: an angle counter-clockwise from the screen's
 // up direction, rad (0: north is straight ahead / up).

@@ -1,8 +1,11 @@
-// Triangles built on the CPU each frame for what moves: bodies, wheels, springs, force arrows,
-// landmarks. One vertex is a position (float, world frame), a normal (zero: drawn unlit, in its
-// exact colour - the arrows) and an RGBA colour. The renderer uploads a list in one buffer.
+// What a frame draws of what moves. Triangles built on the CPU each frame for the force arrows and
+// the landmarks: one vertex is a position (float, world frame), a normal (zero: drawn unlit, in
+// its exact colour - the arrows) and an RGBA colour; the renderer uploads a list in one buffer.
+// The vehicles' bodies and wheels are instances of meshes the renderer keeps (car_model.h): a
+// pose, a size, a colour.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -48,25 +51,73 @@ struct ArrowStyle {
   bool show[kForceKinds] = {true, true, true, true, true, true};
 };
 
+// A car body to draw: the built-in body made for `geometry` (or the model given on the command
+// line, fitted to it) at a pose, in the vehicle's colour.
+struct BodyInstance {
+  std::uint32_t vehicle_id = 0;
+  Pose pose_WB;
+  VehicleGeometry geometry;
+  Rgb8 paint;
+  bool coarse = false;
+};
+
+// A wheel to draw: the wheel mesh (radius 1, axle along Y) turned into the frame R_WW (columns:
+// the wheel's forward turned by its spin, its axle, its up turned by its spin), scaled by its
+// radius, at its centre.
+struct WheelInstance {
+  Vec3 centre_W;
+  Mat3 R_WW;
+  double radius = 0.3;
+  bool coarse = false;
+};
+
+// The darkening under a vehicle standing on the ground (the sky's light it keeps off): a
+// rectangle around its body on the plane of its contact points, darkest in the middle.
+struct ContactShadow {
+  std::array<Vec3, 4> corners_W;  // counter-clockwise seen from above
+};
+
 // The lists of one frame: what is opaque, what is translucent (drawn after), and the force
-// arrows (drawn last, in full colour where seen and as a faint ghost where something hides them).
+// arrows (drawn last, in full colour where seen and as a faint ghost where something hides them);
+// the bodies and wheels of the vehicles and their contact shadows.
 struct FrameLists {
   DrawList opaque, translucent, arrows;
+  std::vector<BodyInstance> bodies;
+  std::vector<WheelInstance> wheels;
+  std::vector<ContactShadow> contact_shadows;
   void Clear() {
     opaque.Clear();
     translucent.Clear();
     arrows.Clear();
+    bodies.clear();
+    wheels.clear();
+    contact_shadows.clear();
   }
 };
 
-// Appends a vehicle: the translucent lower body, the cabin (both left out with `body` false: the
-// driver's own car seen from its seat), the wheels at their spring positions and steering
-// angles, the springs A to wheel centre, and the force arrows. `radius_at(p)` gives an arrow's
-// shaft radius at a point (thicker far away, so an arrow stays a few pixels wide). `coarse`: fewer
-// facets, for a vehicle far from the eye.
+// Which parts of a vehicle are drawn (the driver camera leaves out its own car's body, wheels and
+// arrows: they would fill the view of the road).
+struct VehicleParts {
+  bool body = true;    // the body and its contact shadow
+  bool wheels = true;  // the wheels, turned by their spin and steering
+  bool arrows = true;  // the force arrows
+};
+
+// Appends a vehicle's parts: the body at its pose, the wheels at their spring positions and
+// steering angles, turned by their spin, and the force arrows. `radius_at(p)` gives an arrow's
+// shaft radius at a point (thicker far away, so an arrow stays a few pixels wide). `coarse`:
+// fewer facets, for a vehicle far from the eye.
+template <class RadiusAt>
+void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at,
+                   VehicleParts parts, bool coarse, FrameLists& lists);
+// The same with `body` false leaving out the body only.
 template <class RadiusAt>
 void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
-                   bool coarse, FrameLists& lists);
+                   bool coarse, FrameLists& lists) {
+  VehicleParts parts;
+  parts.body = body;
+  AppendVehicle(v, style, radius_at, parts, coarse, lists);
+}
 
 // The radius of a sphere about T that holds the vehicle and its arrows (for culling).
 double BoundingRadius(const VehicleView& v, const ArrowStyle& style);
@@ -79,12 +130,13 @@ ArrowSpan ArrowSpanOf(const ForceArrow& a, const ArrowStyle& style);
 
 // --- implementation of the template ---------------------------------------------------------
 
-void AppendVehicleBody(const VehicleView& v, bool body, bool coarse, FrameLists& lists);
+void AppendVehicleBody(const VehicleView& v, VehicleParts parts, bool coarse, FrameLists& lists);
 
 template <class RadiusAt>
-void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at, bool body,
-                   bool coarse, FrameLists& lists) {
-  AppendVehicleBody(v, body, coarse, lists);
+void AppendVehicle(const VehicleView& v, const ArrowStyle& style, RadiusAt radius_at,
+                   VehicleParts parts, bool coarse, FrameLists& lists) {
+  AppendVehicleBody(v, parts, coarse, lists);
+  if (!parts.arrows) return;
   for (const ForceArrow& a : v.arrows) {
     if (!style.show[static_cast<int>(a.kind)]) continue;
     if (Norm(a.force_W) * style.metres_per_newton < style.min_length_m) continue;

@@ -1,11 +1,14 @@
 // The parameters panel: a vehicle's parameters as the transient-local topic has them, editable
-// field by field (the message's own descriptor lists them), sent as a set_params request with only
-// the changed fields, and answered: accepted at a step, or rejected with the server's reason. The
-// request waits for its reply on a worker thread of its own, so a frame never blocks on it.
+// field by field (the message's own descriptor lists them, each labelled in words with its unit
+// from the one table the documentation is checked against: limits::ParamWords), sent as a
+// set_params request with only the changed fields, and answered: accepted at a step, or rejected
+// with the server's reason. The request waits for its reply on a worker thread of its own, so a
+// frame never blocks on it.
 #pragma once
 
 #include <condition_variable>
 #include <cstdint>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -45,10 +48,22 @@ class ParamsEditor {
   static pb::VehicleParams Changes(const pb::VehicleParams& current,
                                    const pb::VehicleParams& edited);
 
+  // A field's label: its words and unit ("vehicle mass, kg"; "lf.radius": "wheel radius, m"),
+  // or its path where the table has none.
+  static std::string FieldLabel(const std::string& path);
+
+  // The fields the last Draw showed, by path ("mass", "lf.radius"): label and screen rectangle.
+  struct DrawnField {
+    std::string label;
+    float x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  };
+  const std::map<std::string, DrawnField>& drawn() const { return drawn_; }
+
   std::chrono::milliseconds reply_timeout{3000};
 
  private:
   void Worker();
+  bool EditFields(google::protobuf::Message& m, const std::string& prefix);
 
   transport::ControlClient client_;
   mutable std::mutex mu_;
@@ -64,6 +79,7 @@ class ParamsEditor {
   bool editing_valid_ = false;
   pb::VehicleParams base_;
   pb::VehicleParams edited_;
+  std::map<std::string, DrawnField> drawn_;
 };
 
 }  // namespace vdyn::viewer

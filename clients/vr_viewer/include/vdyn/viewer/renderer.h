@@ -1,17 +1,25 @@
-// OpenGL 3.3 core drawing of the scene (through libepoxy): a sky, the terrain by surface kind with
-// a grid and distance haze, the glass barrier translucent, and the frame's draw lists (vehicles,
-// arrows, landmarks). It draws into a RenderTarget: an offscreen framebuffer (multisampled, then
-// resolved into a colour texture) that the desktop window shows, a screenshot reads, and an
-// OpenXR swapchain image receives. Needs a current GL 3.3 context; GL errors in construction
-// throw std::runtime_error.
+// OpenGL 3.3 core drawing of the scene (through libepoxy), in linear light and encoded to sRGB at
+// the end (lighting.h): a sky with the sun, far hills and clouds; the terrain by surface style
+// with procedural textures (textures.h), road markings and kerbs, the grass carried on to the
+// horizon and fogged towards it; the vehicles' bodies and wheels (car_model.h) with their contact
+// shadows; the sun's shadow map fitted around the followed vehicle; the landmarks, and the force
+// arrows in their exact colours (a faint ghost where something hides them).
+//
+// It draws into a RenderTarget: an offscreen framebuffer (multisampled, then resolved into a
+// colour texture) that the desktop window shows, a screenshot reads, and an OpenXR swapchain image
+// receives. Needs a current GL 3.3 context; GL errors in construction throw GlError.
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/draw_list.h"
 #include "vdyn/viewer/math.h"
 #include "vdyn/viewer/world_mesh.h"
@@ -70,12 +78,35 @@ struct LandmarkView {
   Vec3 p_W;
 };
 
+// Quality presets (`--quality`). Low draws no shadow map, no clouds, no glossy highlights and no
+// large-scale variation of the grass, with smaller textures: on a software renderer it costs no
+// more than the plain viewer before it. High is everything.
+enum class Quality { kLow, kHigh };
+std::string_view QualityName(Quality q);
+std::optional<Quality> QualityFromName(std::string_view name);
+
+struct RenderSettings {
+  Quality quality = Quality::kHigh;
+  bool shadows = true;          // the sun's shadow map
+  int shadow_map_px = 1024;     // its size
+  double shadow_radius_m = 20;  // half its side on the ground, around the followed vehicle
+  bool clouds = true;
+  bool high_shading = true;  // glossy paint, glass and chrome; the grass's large-scale variation
+  int texture_px = 512;      // surface textures' size
+};
+RenderSettings SettingsFor(Quality q);
+
 class Renderer {
  public:
-  Renderer();
+  explicit Renderer(const RenderSettings& settings = SettingsFor(Quality::kHigh));
   ~Renderer();
   Renderer(const Renderer&) = delete;
   Renderer& operator=(const Renderer&) = delete;
+
+  const RenderSettings& settings() const { return settings_; }
+  // The body every vehicle gets instead of the built-in one (a file's model, LoadCarModel);
+  // null: the built-in body.
+  void SetCarModel(std::shared_ptr<const ModelMesh> model);
 
   // Uploads a world's terrain (replacing the one before); Clear draws none.
   void SetTerrain(const TerrainData& t);
@@ -85,11 +116,14 @@ class Renderer {
   struct View {
     Mat4 view, proj;
     Vec3 eye_W;
-    double grid_step_m = 10;
-    bool haze = true;
+    double grid_step_m = 10;  // on an orthographic view (the map): a grid on the ground
+    bool haze = true;         // fog towards the horizon
+    // The centre of the sun's shadow map (the followed vehicle); without it, where the view's
+    // centre meets the ground, at most 30 m ahead.
+    std::optional<Vec3> focus_W = std::nullopt;
   };
-  // Draws sky, terrain and the frame's lists into the bound target: opaque, then translucent,
-  // then the arrows (full colour where seen, a faint ghost where hidden).
+  // Draws the sky, the terrain and the frame's lists into the bound target: the shadow map
+  // first, then what is opaque, the sky, what is translucent, the arrows.
   void Draw(const View& v, const FrameLists& lists);
 
   // Blits a target's colour into the default framebuffer of a window (letterboxed, no scaling of
@@ -97,18 +131,55 @@ class Renderer {
   static void PresentToWindow(const RenderTarget& t, int window_width, int window_height);
 
  private:
-  struct Mesh {
+  struct Program;
+  struct GpuMesh {
     std::uint32_t vao = 0, vbo = 0, ibo = 0;
     std::int32_t count = 0;
-    SurfaceLook look;
   };
+  struct Terrain {
+    GpuMesh mesh;
+    SurfaceStyle style = SurfaceStyle::kGrass;
+    StripFrame frame;
+    std::vector<TerrainChunk> chunks;
+    bool translucent = false;
+  };
+  GpuMesh Upload(const ModelMesh& m);
+  GpuMesh UploadTerrain(const std::vector<TerrainVertex>& v, const std::vector<std::uint32_t>& i);
+  void Free(GpuMesh& m);
+  const GpuMesh& BodyMesh(const BodyInstance& b);
+  Mat4 BodyTransform(const BodyInstance& b) const;
+  void ShadowPass(const Vec3& focus, const FrameLists& lists);
+  const Program& TerrainProgram(SurfaceStyle style, bool grid, bool shadows);
+  void DrawTerrain(const View& v, const Mat4& view_proj, double fog_m, bool translucent,
+                   double grid_m);
+  void DrawModels(const Program& p, const FrameLists& lists, const Mat4& view_proj);
+  void DrawContactShadows(const FrameLists& lists, const Mat4& view_proj);
   enum class Pass { kOpaque, kTranslucent, kGhost };
-  void DrawList(const viewer::DrawList& list, Pass pass, const View& v);
-  std::uint32_t terrain_prog_ = 0, lit_prog_ = 0, sky_prog_ = 0;
+  void DrawList(const viewer::DrawList& list, Pass pass, const Mat4& view_proj);
+  void UseScene(const Program& p, const View& v, double fog_m);
+
+  RenderSettings settings_;
+  // By style, grid and shadows (chunks away from the shadow map's box go without), made when
+  // first used.
+  std::map<int, std::unique_ptr<Program>> terrain_;
+  std::unique_ptr<Program> model_, list_, sky_, hills_, contact_, depth_;
+  bool software_ = false;  // a software renderer (llvmpipe): no anisotropic filtering
   std::uint32_t sky_vao_ = 0;
+  std::uint32_t hills_vao_ = 0, hills_vbo_ = 0;
+  std::int32_t hills_vertices_ = 0;
   std::uint32_t dyn_vao_ = 0, dyn_vbo_ = 0;
-  std::vector<Mesh> meshes_;
+  std::uint32_t contact_vao_ = 0, contact_vbo_ = 0;
+  std::uint32_t surfaces_tex_ = 0, clouds_tex_ = 0;
+  std::uint32_t shadow_fbo_ = 0, shadow_tex_ = 0;
+  Mat4 shadow_mat_;  // world -> shadow map texture coordinates and depth
+  Vec3 shadow_centre_W_;
+  bool shadow_ready_ = false;
+  std::vector<Terrain> terrain_meshes_;
   std::size_t terrain_triangles_ = 0;
+  GpuMesh wheel_fine_, wheel_coarse_;
+  std::map<std::vector<std::int64_t>, GpuMesh> bodies_;  // built-in bodies by geometry
+  std::shared_ptr<const ModelMesh> car_model_;
+  GpuMesh car_model_mesh_;
 };
 
 }  // namespace vdyn::viewer

@@ -67,6 +67,9 @@ struct WheelView {
   Vec3 t_lat_W;   // n x t_long
   double radius = 0.3;
   bool contact = false;
+  // The wheel's turn about its axle, rad (positive rolling forward): its rim and the marks on its
+  // tyre are drawn turned by it (WheelSpin).
+  double spin = 0;
 };
 
 struct ForceArrow {
@@ -96,15 +99,24 @@ struct VehicleView {
 // else why not. (Non-finite numbers never get here: the transport drops them.)
 std::string CheckState(const pb::VehicleState& s);
 
-// The drawable view of a state that passed CheckState.
-VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g);
-
-// The body's parts as the renderer draws them, in the body frame (shared with tests): the lower
-// body (translucent) and the cabin (opaque) as boxes [min, max].
-struct BodyBoxes {
-  Vec3 lower_min, lower_max;
-  Vec3 cabin_min, cabin_max;
+// How far each wheel of a vehicle has turned about its axle: the published spin rate integrated
+// over simulation time, state by state (trapezoidal rule over the states the viewer took, so a
+// recording played back turns the wheels as they turned). The rate is the full model's wheel
+// speed omega; the paper model has none, so there it is the rolling speed of B along the wheel's
+// heading over the radius (the wheel rolls without slip). A state at the same or an earlier time
+// (the same state again, a restart, a take-over) starts again from it without turning.
+struct WheelSpin {
+  std::array<double, kWheels> angle{};  // rad, in (-pi, pi]
+  std::array<double, kWheels> rate{};   // rad/s at the last state
+  std::int64_t sim_time_ns = 0;
+  bool started = false;
 };
-BodyBoxes BodyBoxesFor(const VehicleGeometry& g);
+void AdvanceWheelSpin(WheelSpin& spin, const pb::VehicleState& s);
+// A wheel's spin rate in a state that passed CheckState, rad/s (positive rolling forward).
+double WheelSpinRate(const pb::VehicleState& s, int wheel);
+
+// The drawable view of a state that passed CheckState; `spin` turns its wheels.
+VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g,
+                             const WheelSpin* spin = nullptr);
 
 }  // namespace vdyn::viewer

@@ -3,11 +3,13 @@
 // the HUD, the legend, the compass and the parameters panel - on the desktop (SDL2 + OpenGL 3.3)
 // and, with --xr, in an OpenXR headset. Live and playback look the same: both are the DDS topics.
 //
-// One Frame() = events, DDS samples taken (SessionView), the scene built, drawn (into an
-// offscreen target that the window shows and a screenshot reads; with a headset into both eyes
-// and the HUD quad), and timed. Bad input is refused and counted, never fatal: a world that cannot
-// be drawn (CheckWorld), a state that cannot (CheckState; non-finite ones the transport already
-// drops), a vehicle geometry that is malformed.
+// One Frame() = events; the display slot (the headset's xrWaitFrame, or the frame-rate cap) and
+// its display time; DDS samples taken (SessionView) into each vehicle's history; the scene at the
+// display time (each vehicle interpolated between the states around it: motion.h); the HUD; drawn
+// (into an offscreen target that the window shows and a screenshot reads; with a headset into both
+// eyes and the HUD panel); presented; timed. Bad input is refused and counted, never fatal: a
+// world that cannot be drawn (CheckWorld), a state that cannot (CheckState; non-finite ones the
+// transport already drops), a vehicle geometry that is malformed.
 #pragma once
 
 #include <cstdint>
@@ -22,6 +24,8 @@
 #include "vdyn/transport/dds.h"
 #include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/labels.h"
+#include "vdyn/viewer/motion.h"
 #include "vdyn/viewer/renderer.h"
 #include "vdyn/viewer/scene.h"
 
@@ -31,9 +35,13 @@ struct ViewerOptions {
   std::uint32_t domain = 0;
   std::optional<std::uint32_t> follow;  // vehicle id; default: the lowest on the domain
   CameraState camera;
+  bool camera_chosen = false;  // --camera given (else a headset starts at its seat or beside)
   ArrowStyle arrows;
   int width = 1280, height = 720;
-  int samples = -1;     // multisampling of the scene; -1: 4, or 0 on a software renderer
+  int samples = -1;  // multisampling of the scene; -1: 4, or 0 on a software renderer
+  Quality quality = Quality::kHigh;  // shadows, clouds, glossy paint (renderer.h)
+  // A car model (LoadCarModel) every vehicle gets instead of the built-in body; null: built-in.
+  std::shared_ptr<const ModelMesh> car_model;
   double fps = 60;      // frame rate cap; 0: as fast as it draws
   bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
   bool hud = true;
@@ -44,6 +52,9 @@ struct ViewerOptions {
   double wait_s = 10;
   std::string stats_out;  // key-value lines at the end: frames, frame times, latency, refusals
   bool playback = false;  // label the HUD PLAYBACK whatever the diagnostics say
+  // Each frame shows the vehicles this long before its display time (motion.h); 0: the newest
+  // state as it arrives, not interpolated.
+  std::int64_t delay_ns = kDefaultPresentationDelayNs;
   // OpenXR: stereo in a headset; without a runtime, the desktop window with a clear message.
   bool xr = false;
   bool xr_seated = true;
@@ -62,10 +73,13 @@ struct ViewerStats {
   std::uint64_t states_refused = 0;  // failed CheckState (non-finite ones: transport drops)
   std::uint64_t paddle_presses = 0;
   std::string last_refusal;
-  std::vector<double> frame_ms;    // work per frame (events to presented), ms
-  std::vector<double> latency_ms;  // state's source stamp to the frame showing it, ms
-  std::string renderer;            // GL_RENDERER
-  std::string xr_status;           // "off", "runtime '...'", or why it fell back
+  std::vector<double> frame_ms;  // work per frame (events to presented), ms
+  // The instant a frame shows (publisher's clock) to the frame on the screen, ms: the delay, the
+  // transit and the frame's own work.
+  std::vector<double> latency_ms;
+  std::int64_t last_display_mono_ns = 0;  // the last frame's display time (monotonic clock)
+  std::string renderer;                   // GL_RENDERER
+  std::string xr_status;                  // "off", "runtime '...'", or why it fell back
 };
 
 class Viewer {
@@ -95,8 +109,21 @@ class Viewer {
   // True once the followed vehicle has a state and its server's world has been accepted.
   bool ready() const;
   bool xr_active() const;
-  // The newest drawable view of a vehicle (null before its first good state).
+  // The drawn view of a vehicle at the last frame's instant (null before its first good state).
   const VehicleView* vehicle(std::uint32_t id) const;
+  // The received state the last frame's instant lies at or after (the HUD's), or null.
+  const pb::VehicleState* shown_state(std::uint32_t id) const;
+  // The HUD's lines of text as the last frame drew them (empty with the HUD hidden).
+  const std::vector<std::string>& hud_text() const;
+  // The labels (landmark names, vehicle numbers) the last desktop frame drew.
+  struct ShownLabel {
+    std::string text;
+    LabelBox box;
+    float alpha = 1;
+  };
+  const std::vector<ShownLabel>& labels() const;
+  // Headset: the place's origin moves to where the head is now, facing where it looks (key R).
+  void RecentreHeadset();
   // The camera of the last desktop frame.
   const CameraView& last_camera() const { return last_camera_; }
   class ParamsEditor& params_editor();

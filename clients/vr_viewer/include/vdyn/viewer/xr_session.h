@@ -1,13 +1,15 @@
 // Stereo through OpenXR with XR_KHR_opengl_enable (Xlib/GLX binding from the window's current GL
 // context). The session's life follows the runtime's state events: READY -> xrBeginSession;
 // frames (wait, begin, render both eyes and the HUD, end) while it runs; STOPPING ->
-// xrEndSession; EXITING or LOSS_PENDING -> done. A frame submits one projection layer (both eyes,
-// in the reference space) and, with a HUD, one quad layer fixed in front of the head (view space).
+// xrEndSession; EXITING or LOSS_PENDING -> done. A frame is waited for first (WaitFrame: its
+// predicted display time is the instant the scene is drawn at), then drawn and submitted (Frame):
+// one projection layer (both eyes, in the reference space) and, with a HUD, one quad layer fixed
+// in the reference space (a panel that stays where it is put while the head turns).
 //
-// Reference spaces: `seated` is LOCAL, its origin carried at the driver's seat of the followed
-// vehicle (it moves, rolls and pitches with the body); `standing` is STAGE (LOCAL with an assumed
-// eye height where the runtime has no STAGE), its origin on the ground beside the vehicle, facing
-// it, following its position and heading. The caller gives the world pose of that origin.
+// Reference spaces: `seated` is LOCAL (the eyes at its origin), `standing` is STAGE (its origin on
+// the floor; LOCAL with an assumed eye height where the runtime has no STAGE). The caller carries
+// the origin through the world (at the driver's seat, behind the vehicle, ...) and gives its world
+// pose each frame.
 #pragma once
 
 #include <functional>
@@ -30,7 +32,6 @@ struct XrOptions {
   bool hud = true;
   int hud_width = 1024, hud_height = 640;
   double hud_width_m = 0.9;  // size of the HUD quad, m
-  double hud_distance_m = 1.2;
   int samples = 4;
 };
 
@@ -55,11 +56,18 @@ class Headset {
   bool PollEvents();
   // True while frames are to be submitted (between READY and STOPPING).
   bool running() const;
-  // One frame: waits for the runtime's slot, draws each eye and the HUD through the callbacks,
-  // submits. `world_from_space` maps the reference space (OpenXR axes: X right, Y up, -Z
-  // forward, already turned into the world's Z-up axes by the caller) to the world. Returns true
-  // when the runtime asked for the frame to be drawn (false: submitted without layers).
-  bool Frame(const Pose& world_from_space, double near_m, double far_m,
+  // Waits for the runtime's next frame slot (xrWaitFrame); Frame must follow.
+  void WaitFrame();
+  // The waited frame's predicted display time on this machine's monotonic clock, ns: the runtime's
+  // time converted through XR_KHR_convert_timespec_time, or (a runtime without it) the time
+  // WaitFrame returned plus the predicted display period.
+  std::int64_t display_mono_ns() const;
+  // Draws the waited frame's eyes and HUD through the callbacks and submits them.
+  // `world_from_space` maps the reference space (OpenXR axes: X right, Y up, -Z forward, already
+  // turned into the world's Z-up axes by the caller) to the world; `hud_in_space` is the HUD
+  // quad's pose in the reference space (OpenXR axes; it faces along its +Z). Returns true when
+  // the runtime asked for the frame to be drawn (false: submitted without layers).
+  bool Frame(const Pose& world_from_space, const Pose& hud_in_space, double near_m, double far_m,
              const std::function<void(const XrEye&)>& draw_eye,
              const std::function<void(RenderTarget&)>& draw_hud);
   // A frame submitted with no layers (while leaving: the runtime still expects frames).
@@ -77,6 +85,11 @@ class Headset {
   const RenderTarget& mirror() const;
   // True when standing fell back to LOCAL: the caller adds an eye height to the origin.
   bool standing_on_local() const;
+  // The head in the reference space at the last drawn frame (between the eyes, with their
+  // orientation; OpenXR axes); false before the first tracked frame.
+  bool head_in_space(Pose* out) const;
+  // Counts the runtime's "reference space changed" events (it recentred the space itself).
+  std::uint64_t space_changes() const;
 
  private:
   struct Impl;

@@ -1,0 +1,36 @@
+// The viewer's textures, generated in code at start-up (no image files: nothing to license):
+// tileable grass, asphalt, concrete and dirt with gravel, a large-scale variation map that breaks
+// up the tiling, and clouds. Each is a square RGBA8 image in sRGB, made from integer-hashed value
+// noise, so it is the same on every machine. A surface texture's mean colour (averaged in linear
+// light) is exactly its kind's colour in LookOf (world_mesh.h): from far away, or on the map, a
+// surface has that colour.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "vdyn/viewer/scene.h"
+
+namespace vdyn::viewer {
+
+enum class TextureLayer { kGrass, kAsphalt, kConcrete, kDirt, kMacro, kClouds };
+inline constexpr int kTextureLayers = 6;
+
+struct TextureImage {
+  int size = 0;                    // width = height, pixels
+  std::vector<std::uint8_t> rgba;  // rows top down, sRGB
+};
+
+// The layer's image, `size` pixels square (a power of two, at least 16); one tile covers
+// TileMetres(layer) on the ground.
+TextureImage MakeTexture(TextureLayer layer, int size);
+double TileMetres(TextureLayer layer);
+
+// The mean colour a surface layer is made to have (grass, asphalt, concrete, dirt), sRGB.
+Rgb8 MeanColour(TextureLayer layer);
+
+// sRGB <-> linear light (the sRGB curve, as the GPU decodes textures and the shaders encode).
+double ToLinear(std::uint8_t srgb);
+std::uint8_t ToSrgb(double linear);
+
+}  // namespace vdyn::viewer

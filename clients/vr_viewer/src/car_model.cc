@@ -1,0 +1,627 @@
+#include "vdyn/viewer/car_model.h"
+
+#include <assimp/material.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <algorithm>
+#include <assimp/Importer.hpp>
+#include <cctype>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <map>
+#include <utility>
+
+#include "vdyn/viewer/mesh_util.h"
+
+namespace vdyn::viewer {
+namespace {
+
+// Triangles with a look (material and colour) each, welded and smoothed at the end.
+struct Soup {
+  std::vector<Vec3> positions;
+  std::vector<std::uint32_t> indices;
+  std::vector<std::uint32_t> group;  // per triangle: its look
+  std::vector<std::pair<Material, Rgb8>> looks;
+
+  std::uint32_t Look(Material m, Rgb8 c) {
+    for (std::size_t i = 0; i < looks.size(); ++i) {
+      const auto& [lm, lc] = looks[i];
+      if (lm == m && lc.r == c.r && lc.g == c.g && lc.b == c.b) {
+        return static_cast<std::uint32_t>(i);
+      }
+    }
+    looks.emplace_back(m, c);
+    return static_cast<std::uint32_t>(looks.size() - 1);
+  }
+  void Tri(const Vec3& a, const Vec3& b, const Vec3& c, std::uint32_t look) {
+    const auto i = static_cast<std::uint32_t>(positions.size());
+    positions.insert(positions.end(), {a, b, c});
+    indices.insert(indices.end(), {i, i + 1, i + 2});
+    group.push_back(look);
+  }
+  // Counter-clockwise seen from outside: a, b, c, d.
+  void Quad(const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d, std::uint32_t look) {
+    Tri(a, b, c, look);
+    Tri(a, c, d, look);
+  }
+};
+
+ModelMesh Finish(const Soup& s, double crease_deg) {
+  const SmoothedMesh m = SmoothNormals(s.positions, s.indices, s.group, crease_deg);
+  ModelMesh out;
+  out.vertices.reserve(m.positions.size());
+  constexpr double kBig = std::numeric_limits<double>::max();
+  out.min = {kBig, kBig, kBig};
+  out.max = {-kBig, -kBig, -kBig};
+  for (std::size_t i = 0; i < m.positions.size(); ++i) {
+    ModelVertex v{};
+    const Vec3& p = m.positions[i];
+    const Vec3& n = m.normals[i];
+    v.p[0] = static_cast<float>(p.x);
+    v.p[1] = static_cast<float>(p.y);
+    v.p[2] = static_cast<float>(p.z);
+    v.n[0] = static_cast<float>(n.x);
+    v.n[1] = static_cast<float>(n.y);
+    v.n[2] = static_cast<float>(n.z);
+    const auto& [material, colour] = s.looks[m.group[i]];
+    v.rgba[0] = colour.r;
+    v.rgba[1] = colour.g;
+    v.rgba[2] = colour.b;
+    v.rgba[3] = 255;
+    v.material[0] = static_cast<std::uint8_t>(material);
+    out.vertices.push_back(v);
+    out.min = {std::min(out.min.x, p.x), std::min(out.min.y, p.y), std::min(out.min.z, p.z)};
+    out.max = {std::max(out.max.x, p.x), std::max(out.max.y, p.y), std::max(out.max.z, p.z)};
+  }
+  out.indices = m.indices;
+  if (out.vertices.empty()) out.min = out.max = Vec3{};
+  out.fit_min = out.min;
+  out.fit_max = out.max;
+  return out;
+}
+
+// A piecewise linear function through (x, y) points sorted by x, constant beyond the ends.
+double Pwl(const std::vector<std::pair<double, double>>& pts, double x) {
+  if (x <= pts.front().first) return pts.front().second;
+  for (std::size_t i = 1; i < pts.size(); ++i) {
+    if (x <= pts[i].first) {
+      const auto& [x0, y0] = pts[i - 1];
+      const auto& [x1, y1] = pts[i];
+      return x1 - x0 < 1e-9 ? y1 : y0 + (y1 - y0) * (x - x0) / (x1 - x0);
+    }
+  }
+  return pts.back().second;
+}
+
+double Mix(double a, double b, double t) {
+  return a + (b - a) * t;
+}
+
+constexpr Rgb8 kWhite{255, 255, 255};  // paint: the vehicle's colour times this
+constexpr Rgb8 kTrim{34, 35, 38};
+constexpr Rgb8 kUnderbody{28, 28, 30};
+constexpr Rgb8 kGlassTint{22, 28, 34};
+constexpr Rgb8 kGrille{18, 18, 20};
+constexpr Rgb8 kHeadlight{240, 240, 232};
+constexpr Rgb8 kTaillight{205, 22, 24};
+constexpr Rgb8 kPlate{230, 230, 222};
+
+// A body cross-section at one station: 14 points around, starting at the bottom centre, up the
+// left (+Y) side, over the roof and down the right side.
+//
+//        P6 ___ P7 ___ P6'         P4-P5: the side window (the greenhouse), P6-P7 the roof or
+//       P5 /           \ P5'       the windscreen / rear window; where there is no greenhouse
+//      P4 |             | P4'      (bonnet, boot) P4..P7 lie on the deck.
+//   P3  _/               \_  P3'
+//   P2 |                   | P2'   P2: the widest point
+//   P1 |________P0_________| P1'
+constexpr int kSection = 14;
+using Section = std::array<Vec3, kSection>;
+
+}  // namespace
+
+CarShape CarShapeFor(const VehicleGeometry& g) {
+  CarShape s;
+  s.x_rear = -g.rear;
+  s.x_front = g.front;
+  s.half_width = g.half_width;
+  s.x_front_axle = 0.5 * (g.mount_B[0].x + g.mount_B[1].x);
+  s.x_rear_axle = 0.5 * (g.mount_B[2].x + g.mount_B[3].x);
+  s.radius_front = 0.5 * (g.radius[0] + g.radius[1]);
+  s.radius_rear = 0.5 * (g.radius[2] + g.radius[3]);
+  const double spring_front = 0.7 * 0.5 * (g.free_length[0] + g.free_length[1]);
+  const double spring_rear = 0.7 * 0.5 * (g.free_length[2] + g.free_length[3]);
+  s.z_wheel_centre_front = 0.5 * (g.mount_B[0].z + g.mount_B[1].z) - spring_front;
+  s.z_wheel_centre_rear = 0.5 * (g.mount_B[2].z + g.mount_B[3].z) - spring_rear;
+  s.z_ground =
+      0.5 * (s.z_wheel_centre_front - s.radius_front + s.z_wheel_centre_rear - s.radius_rear);
+  const double r = 0.5 * (s.radius_front + s.radius_rear);
+  const double scale = std::clamp(r / 0.32, 0.7, 1.6);
+  s.z_roof = s.z_ground + 1.46 * scale;
+  return s;
+}
+
+ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
+  const CarShape s = CarShapeFor(g);
+  const double L = std::max(s.x_front - s.x_rear, 0.5);
+  const double xr = s.x_rear, xf = s.x_rear + L;
+  const double hw = std::max(s.half_width, 0.2);
+  const double r = 0.5 * (s.radius_front + s.radius_rear);
+  // Heights are those of a saloon on 0.32 m wheels, scaled with the wheel radius.
+  const double sv = std::clamp(r / 0.32, 0.7, 1.6);
+  auto H = [&](double h) { return s.z_ground + h * sv; };
+  // The axles as the cabin's reference; implausible ones (outside the body, or a wheelbase under
+  // a third of it) give way to a saloon's proportions.
+  double xra = s.x_rear_axle, xfa = s.x_front_axle;
+  const bool axles_inside = xra > xr && xfa < xf && xfa - xra > L / 3;
+  if (!axles_inside) {
+    xra = xr + 0.21 * L;
+    xfa = xf - 0.19 * L;
+  }
+  const double wb = xfa - xra;
+  // The greenhouse: rear window base, roof from rear to front, windscreen base (the cowl).
+  std::array<double, 4> cabin = {xra - 0.20 * wb, xra + 0.02 * wb, xra + 0.50 * wb,
+                                 xra + 0.78 * wb};
+  const double lo = xr + 0.10 * L, hi = xf - 0.22 * L, gap = 0.05 * L;
+  for (std::size_t i = 0; i < cabin.size(); ++i) {
+    cabin[i] = std::clamp(cabin[i], lo + gap * static_cast<double>(i),
+                          hi - gap * static_cast<double>(cabin.size() - 1 - i));
+    if (i > 0) cabin[i] = std::max(cabin[i], cabin[i - 1] + gap);
+  }
+  const auto [x_rwb, x_rr, x_rf, x_cowl] = cabin;
+  const double x_b = Mix(x_rr, x_rf, 0.45);  // B pillar
+  const double end = std::min(0.1, 0.03 * L);
+
+  const std::vector<std::pair<double, double>> belt = {
+      {xr, H(0.74)},       {xr + end, H(0.90)}, {xr + 0.12 * L / 4.7, H(0.96)},
+      {x_rwb, H(0.99)},    {x_cowl, H(0.93)},   {xf - 0.14 * L / 4.7, H(0.80)},
+      {xf - end, H(0.74)}, {xf, H(0.66)}};
+  const std::vector<std::pair<double, double>> roof = {{x_rwb, H(0.99)},
+                                                       {x_rr, H(1.40)},
+                                                       {Mix(x_rr, x_rf, 0.5), H(1.44)},
+                                                       {x_rf, H(1.42)},
+                                                       {x_cowl, H(0.93)}};
+  const std::vector<std::pair<double, double>> bottom = {
+      {xr, H(0.34)}, {xr + 0.18 * L / 4.7, H(0.22)}, {xf - 0.18 * L / 4.7, H(0.20)}, {xf, H(0.30)}};
+  const std::vector<std::pair<double, double>> width = {
+      {xr, 0.86},       {xr + end, 0.95}, {xr + 0.4 * L / 4.7, 1.0}, {xf - 0.45 * L / 4.7, 1.0},
+      {xf - end, 0.95}, {xf, 0.85}};
+
+  // Stations along X: the key places, and the wheel arches (a half circle over each axle at the
+  // nominal wheel centre, 7 cm above the tyre; the body's bottom follows it).
+  struct Station {
+    double x, z_bottom;
+  };
+  std::vector<Station> stations;
+  auto add = [&](double x) { stations.push_back({x, Pwl(bottom, x)}); };
+  for (double x : {xr, xr + end, xr + 0.12 * L / 4.7, x_rwb, x_rr, x_b - 0.035, x_b + 0.035, x_rf,
+                   x_cowl, xf - 0.14 * L / 4.7, xf - end, xf}) {
+    add(x);
+  }
+  if (!coarse) {
+    for (double x = xr + 0.3; x < xf - 0.3; x += 0.3) add(x);  // smooth sides between the keys
+  }
+  struct Arch {
+    double x, z_centre, radius;
+  };
+  std::vector<Arch> arches;
+  if (axles_inside) {
+    arches.push_back({s.x_rear_axle, s.z_wheel_centre_rear, s.radius_rear + 0.07});
+    arches.push_back({s.x_front_axle, s.z_wheel_centre_front, s.radius_front + 0.07});
+  }
+  std::erase_if(stations, [&](const Station& st) {
+    for (const Arch& a : arches) {
+      if (std::abs(st.x - a.x) <= a.radius + 0.02) return true;
+    }
+    return false;
+  });
+  for (const Arch& a : arches) {
+    if (a.x - a.radius < xr + 0.05 || a.x + a.radius > xf - 0.05) continue;
+    const double base_in = Pwl(bottom, a.x - a.radius), base_out = Pwl(bottom, a.x + a.radius);
+    stations.push_back({a.x - a.radius, base_in});
+    const int arch_steps = coarse ? 5 : 10;
+    for (int k = 0; k <= arch_steps; ++k) {
+      const double t = kPi * (1.0 - static_cast<double>(k) / arch_steps);
+      stations.push_back(
+          {a.x + a.radius * std::cos(t), std::max(a.z_centre + a.radius * std::sin(t), base_in)});
+    }
+    stations.push_back({a.x + a.radius, base_out});
+  }
+  std::stable_sort(stations.begin(), stations.end(),
+                   [](const Station& a, const Station& b) { return a.x < b.x - 1e-9; });
+  // Keep the first of stations closer than 1 mm unless they are an arch's vertical edge.
+  std::vector<Station> unique;
+  for (const Station& st : stations) {
+    if (!unique.empty() && std::abs(st.x - unique.back().x) < 1e-3 &&
+        std::abs(st.z_bottom - unique.back().z_bottom) < 1e-3) {
+      continue;
+    }
+    unique.push_back(st);
+  }
+  stations = std::move(unique);
+
+  auto section = [&](const Station& st) {
+    const double x = st.x;
+    const double w = hw * Pwl(width, x);
+    const double zb = st.z_bottom;
+    const double zmid = std::max(H(0.55), zb + 0.03);
+    const double zbelt = std::max(Pwl(belt, x), zmid + 0.05);
+    const double gh = (x > x_rwb && x < x_cowl) ? std::max(Pwl(roof, x) - zbelt, 0.0) : 0.0;
+    const double k = std::clamp(gh / 0.15, 0.0, 1.0);
+    const double ztop = zbelt + std::max(gh, 0.02);
+    std::array<Vec3, 8> half = {
+        Vec3{x, 0, zb},
+        Vec3{x, 0.97 * w, zb},
+        Vec3{x, w, zmid},
+        Vec3{x, 0.975 * w, zbelt},
+        Vec3{x, 0.94 * w, zbelt + 0.01},
+        Vec3{x, Mix(0.90, 0.74, k) * w, zbelt + std::max(gh - 0.04, 0.015)},
+        Vec3{x, Mix(0.86, 0.68, k) * w, ztop},
+        Vec3{x, 0, ztop + 0.02 + 0.02 * k},
+    };
+    Section sec;
+    for (int i = 0; i < 8; ++i)
+      sec[static_cast<std::size_t>(i)] = half[static_cast<std::size_t>(i)];
+    for (int i = 1; i <= 6; ++i) {  // down the right side
+      const Vec3& p = half[static_cast<std::size_t>(7 - i)];
+      sec[static_cast<std::size_t>(7 + i)] = {p.x, -p.y, p.z};
+    }
+    return sec;
+  };
+
+  Soup soup;
+  const std::uint32_t paint = soup.Look(Material::kPaint, kWhite);
+  const std::uint32_t glass = soup.Look(Material::kGlass, kGlassTint);
+  const std::uint32_t trim = soup.Look(Material::kMatte, kTrim);
+  const std::uint32_t under = soup.Look(Material::kMatte, kUnderbody);
+  // The look of the band between points i and i+1 of the left half (mirrored on the right) over
+  // stations at xm.
+  auto band_look = [&](int i, double xm) {
+    const bool rear_window = xm > x_rwb && xm < x_rr;
+    const bool roof_zone = xm > x_rr && xm < x_rf;
+    const bool screen = xm > x_rf && xm < x_cowl;
+    const bool b_pillar = std::abs(xm - x_b) < 0.035;
+    switch (i) {
+      case 0:
+        return under;
+      case 1:  // the lower side: paint, black bumpers at the ends
+        return (xm < xr + 0.25 * L / 4.7 || xm > xf - 0.2 * L / 4.7) ? trim : paint;
+      case 4:
+        if (roof_zone) return b_pillar ? trim : glass;
+        return screen ? glass : paint;
+      case 6:
+        return (rear_window || screen) ? glass : paint;
+      default:
+        return paint;
+    }
+  };
+  std::vector<Section> secs;
+  for (const Station& st : stations) secs.push_back(section(st));
+  for (std::size_t j = 0; j + 1 < secs.size(); ++j) {
+    const Section &a = secs[j], &b = secs[j + 1];
+    const double xm = 0.5 * (stations[j].x + stations[j + 1].x);
+    for (int i = 0; i < kSection; ++i) {
+      const int n = (i + 1) % kSection;
+      const int band = i < 7 ? i : 13 - i;  // the right side mirrors the left's bands
+      soup.Quad(a[static_cast<std::size_t>(i)], a[static_cast<std::size_t>(n)],
+                b[static_cast<std::size_t>(n)], b[static_cast<std::size_t>(i)],
+                band_look(band, xm));
+    }
+  }
+  // End caps (fans from the section's middle), facing back and forward.
+  auto cap = [&](const Section& sec, bool front) {
+    Vec3 c;
+    for (const Vec3& p : sec) c += p / kSection;
+    for (int i = 0; i < kSection; ++i) {
+      const Vec3& p = sec[static_cast<std::size_t>(i)];
+      const Vec3& q = sec[static_cast<std::size_t>((i + 1) % kSection)];
+      if (front) {
+        soup.Tri(c, p, q, paint);
+      } else {
+        soup.Tri(c, q, p, paint);
+      }
+    }
+  };
+  cap(secs.front(), false);
+  cap(secs.back(), true);
+
+  // Details on the ends, a few millimetres proud: headlights, grille and the lower intake at the
+  // front; tail lights, the number plate and the bumper at the back.
+  auto end_quad = [&](double x, double y0, double y1, double z0, double z1, std::uint32_t look,
+                      bool front) {
+    const Vec3 a{x, y0, z0}, b{x, y1, z0}, c{x, y1, z1}, d{x, y0, z1};
+    if (front) {
+      soup.Quad(a, b, c, d, look);  // facing +X
+    } else {
+      soup.Quad(a, d, c, b, look);  // facing -X
+    }
+  };
+  const std::uint32_t head = soup.Look(Material::kLightFront, kHeadlight);
+  const std::uint32_t tail = soup.Look(Material::kLightRear, kTaillight);
+  const std::uint32_t grille = soup.Look(Material::kMatte, kGrille);
+  const std::uint32_t plate = soup.Look(Material::kMatte, kPlate);
+  const double wf = hw * Pwl(width, xf), wr = hw * Pwl(width, xr);
+  const double xfd = xf + 0.004, xrd = xr - 0.004;
+  for (double side : {1.0, -1.0}) {
+    const double y0 = side * 0.52 * wf, y1 = side * 0.84 * wf;
+    end_quad(xfd, std::min(y0, y1), std::max(y0, y1), H(0.53), H(0.62), head, true);
+    const double t0 = side * 0.58 * wr, t1 = side * 0.88 * wr;
+    end_quad(xrd, std::min(t0, t1), std::max(t0, t1), H(0.60), H(0.70), tail, false);
+  }
+  end_quad(xfd, -0.40 * wf, 0.40 * wf, H(0.38), H(0.52), grille, true);
+  end_quad(xfd, -0.70 * wf, 0.70 * wf, H(0.24), H(0.33), grille, true);
+  end_quad(xrd, -0.26 * wr, 0.26 * wr, H(0.45), H(0.56), plate, false);
+  // Door mirrors: small wedges on the doors at the windscreen's base, inside the body box.
+  for (double side : {1.0, -1.0}) {
+    const double zb = Pwl(belt, x_cowl) + 0.03, zt = zb + 0.11 * sv;
+    const double x0 = x_cowl - 0.16, x1 = x_cowl - 0.04;
+    const double yi = side * 0.9 * hw, yo = side * hw;
+    const Vec3 p[8] = {{x0, yi, zb}, {x1, yi, zb}, {x1, yo, zb}, {x0, yo, zb},
+                       {x0, yi, zt}, {x1, yi, zt}, {x1, yo, zt}, {x0, yo, zt}};
+    const std::uint32_t shell = paint;
+    auto q = [&](int a, int b, int c, int d, std::uint32_t look) {
+      if (side > 0) {
+        soup.Quad(p[a], p[b], p[c], p[d], look);
+      } else {
+        soup.Quad(p[a], p[d], p[c], p[b], look);
+      }
+    };
+    q(0, 3, 2, 1, shell);  // bottom
+    q(4, 5, 6, 7, shell);  // top
+    q(1, 2, 6, 5, trim);   // forward face
+    q(0, 4, 7, 3, glass);  // the glass, facing back
+    q(3, 7, 6, 2, shell);  // outer side
+    q(0, 1, 5, 4, shell);  // inner side
+  }
+  return Finish(soup, 40.0);
+}
+
+ModelMesh BuildWheel(int segments) {
+  segments = std::max(segments, 12);
+  Soup soup;
+  const std::uint32_t tread = soup.Look(Material::kRubber, {26, 26, 28});
+  const std::uint32_t wall = soup.Look(Material::kRubber, {38, 38, 41});
+  const std::uint32_t mark = soup.Look(Material::kMatte, {236, 236, 230});
+  const std::uint32_t rim = soup.Look(Material::kChrome, {182, 185, 190});
+  const std::uint32_t disc = soup.Look(Material::kMatte, {58, 56, 54});
+  const std::uint32_t cap = soup.Look(Material::kMatte, {30, 30, 34});
+  const double hw = 0.5 * kTyreWidthPerRadius;
+  // The tyre's cross-section (radius, axial offset), from the bead on the left (+Y) over the
+  // tread to the bead on the right.
+  const bool detailed = segments >= 16;
+  const std::vector<std::pair<double, double>> profile =
+      detailed ? std::vector<std::pair<double, double>>{{0.60, 0.84 * hw},   {0.70, 0.97 * hw},
+                                                        {0.86, 1.0 * hw},    {0.955, 0.92 * hw},
+                                                        {0.995, 0.77 * hw},  {1.0, 0.0},
+                                                        {0.995, -0.77 * hw}, {0.955, -0.92 * hw},
+                                                        {0.86, -1.0 * hw},   {0.70, -0.97 * hw},
+                                                        {0.60, -0.84 * hw}}
+               : std::vector<std::pair<double, double>>{{0.60, 0.84 * hw}, {0.86, 1.0 * hw},
+                                                        {0.99, 0.8 * hw},  {0.99, -0.8 * hw},
+                                                        {0.86, -1.0 * hw}, {0.60, -0.84 * hw}};
+  // A point at radius rho and axial offset y, at angle t from +Z towards +X.
+  auto at = [](double rho, double y, double t) {
+    return Vec3{rho * std::sin(t), y, rho * std::cos(t)};
+  };
+  for (int i = 0; i < segments; ++i) {
+    const double t0 = 2 * kPi * i / segments, t1 = 2 * kPi * (i + 1) / segments;
+    for (std::size_t k = 0; k + 1 < profile.size(); ++k) {
+      const auto [r0, y0] = profile[k];
+      const auto [r1, y1] = profile[k + 1];
+      const bool on_tread = r0 > 0.99 || r1 > 0.99 || (r0 > 0.95 && r1 > 0.95);
+      // Outward: (along the profile) x (along the turn) points away from the axle.
+      soup.Quad(at(r0, y0, t0), at(r1, y1, t0), at(r1, y1, t1), at(r0, y0, t1),
+                on_tread ? tread : wall);
+    }
+  }
+  // The marks: a strip on each sidewall, 8 % of the radius wide, along +Z.
+  for (double side : {1.0, -1.0}) {
+    const double y = side * (1.0 * hw + 0.006);
+    const Vec3 a{-0.04, y, 0.72}, b{0.04, y, 0.72}, c{0.04, y, 0.90}, d{-0.04, y, 0.90};
+    if (side > 0) {
+      soup.Quad(a, d, c, b, mark);
+    } else {
+      soup.Quad(a, b, c, d, mark);
+    }
+  }
+  // The rim on both faces: a lip, five spokes from the hub, the brake disc behind them.
+  const int spoke_steps = detailed ? std::max(segments, 20) : segments;
+  for (double side : {1.0, -1.0}) {
+    auto face = [&](const Vec3& a, const Vec3& b, const Vec3& c, const Vec3& d, std::uint32_t l) {
+      // Quads given with their normal along +Y; flipped for the right face.
+      if (side > 0) {
+        soup.Quad(a, b, c, d, l);
+      } else {
+        soup.Quad(a, d, c, b, l);
+      }
+    };
+    auto p = [&](double rho, double y, double t) { return at(rho, side * y, t); };
+    for (int i = 0; i < segments; ++i) {
+      const double t0 = 2 * kPi * i / segments, t1 = 2 * kPi * (i + 1) / segments;
+      face(p(0.56, 0.80 * hw, t1), p(0.56, 0.80 * hw, t0), p(0.61, 0.84 * hw, t0),
+           p(0.61, 0.84 * hw, t1), rim);
+      face(p(0.0, 0.15 * hw, t1), p(0.0, 0.15 * hw, t0), p(0.56, 0.15 * hw, t0),
+           p(0.56, 0.15 * hw, t1), disc);
+    }
+    for (int i = 0; i < spoke_steps; ++i) {
+      const double t0 = 2 * kPi * i / spoke_steps, t1 = 2 * kPi * (i + 1) / spoke_steps;
+      // Hub: a low dome, the centre cap dark.
+      face(p(0.06, 0.80 * hw, t1), p(0.06, 0.80 * hw, t0), p(0.17, 0.74 * hw, t0),
+           p(0.17, 0.74 * hw, t1), rim);
+      soup.Tri(p(0.0, 0.82 * hw, 0), side > 0 ? p(0.06, 0.80 * hw, t0) : p(0.06, 0.80 * hw, t1),
+               side > 0 ? p(0.06, 0.80 * hw, t1) : p(0.06, 0.80 * hw, t0), cap);
+    }
+    for (int s = 0; s < 5; ++s) {
+      const double c = 2 * kPi * s / 5 + kPi / 5;  // no spoke on the mark's line
+      const double root = Rad(11), tip = Rad(6.5);
+      const Vec3 a = p(0.16, 0.74 * hw, c - root), b = p(0.16, 0.74 * hw, c + root);
+      const Vec3 e = p(0.565, 0.70 * hw, c + tip), d = p(0.565, 0.70 * hw, c - tip);
+      face(b, a, d, e, rim);
+      if (!detailed) continue;
+      // The spoke's edges, down to the disc.
+      const Vec3 a2 = p(0.16, 0.3 * hw, c - root), d2 = p(0.565, 0.3 * hw, c - tip);
+      const Vec3 b2 = p(0.16, 0.3 * hw, c + root), e2 = p(0.565, 0.3 * hw, c + tip);
+      face(a, a2, d2, d, rim);
+      face(b, e, e2, b2, rim);
+    }
+  }
+  ModelMesh m = Finish(soup, 35.0);
+  return m;
+}
+
+namespace {
+
+bool NameHas(std::string name, std::initializer_list<const char*> words) {
+  std::transform(name.begin(), name.end(), name.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  for (const char* w : words) {
+    if (name.find(w) != std::string::npos) return true;
+  }
+  return false;
+}
+
+Rgb8 ColourOf(const aiMaterial& m, float* opacity) {
+  aiColor4D c(0.7f, 0.7f, 0.7f, 1.0f);
+  if (m.Get(AI_MATKEY_BASE_COLOR, c) != AI_SUCCESS) {
+    aiColor3D d(0.7f, 0.7f, 0.7f);
+    if (m.Get(AI_MATKEY_COLOR_DIFFUSE, d) == AI_SUCCESS) c = aiColor4D(d.r, d.g, d.b, 1.0f);
+  }
+  float o = c.a;
+  if (m.Get(AI_MATKEY_OPACITY, o) != AI_SUCCESS) o = c.a;
+  *opacity = std::min(o, c.a);
+  // glTF's base colour factors are linear: to sRGB.
+  auto to8 = [](float v) {
+    const double l = std::clamp(static_cast<double>(v), 0.0, 1.0);
+    const double e = l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
+    return static_cast<std::uint8_t>(std::lround(e * 255));
+  };
+  return {to8(c.r), to8(c.g), to8(c.b)};
+}
+
+}  // namespace
+
+ModelMesh LoadCarModel(const std::string& path) {
+  Assimp::Importer importer;
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
+                              aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  const aiScene* scene =
+      importer.ReadFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
+                                  aiProcess_SortByPType | aiProcess_FindDegenerates |
+                                  aiProcess_FindInvalidData | aiProcess_ValidateDataStructure);
+  if (scene == nullptr || scene->mRootNode == nullptr ||
+      (scene->mFlags & AI_SCENE_FLAGS_INCOMPLETE) != 0) {
+    throw CarModelError("car model '" + path + "': " + importer.GetErrorString());
+  }
+  // Looks by material: paint by name, glass by name or opacity, else the material's colour.
+  std::vector<std::pair<Material, Rgb8>> looks(scene->mNumMaterials);
+  std::vector<bool> named_paint(scene->mNumMaterials, false);
+  bool any_paint = false;
+  for (unsigned i = 0; i < scene->mNumMaterials; ++i) {
+    const aiMaterial& m = *scene->mMaterials[i];
+    const std::string name = m.GetName().C_Str();
+    float opacity = 1;
+    const Rgb8 c = ColourOf(m, &opacity);
+    if (NameHas(name, {"paint", "body", "carpaint"})) {
+      looks[i] = {Material::kPaint, kWhite};
+      named_paint[i] = any_paint = true;
+    } else if (NameHas(name, {"glass", "window"}) || opacity < 0.9f) {
+      looks[i] = {Material::kGlass, kGlassTint};
+    } else if (NameHas(name, {"chrome", "metal"})) {
+      looks[i] = {Material::kChrome, c};
+    } else {
+      looks[i] = {Material::kMatte, c};
+    }
+  }
+  // The triangles of every node but the wheels, in body axes: X = glTF +Z, Y = +X, Z = +Y.
+  constexpr double kBig = std::numeric_limits<double>::max();
+  Vec3 all_min{kBig, kBig, kBig}, all_max{-kBig, -kBig, -kBig};
+  std::vector<Vec3> positions;
+  std::vector<std::uint32_t> indices, group;
+  std::vector<double> area(scene->mNumMaterials, 0.0);
+  constexpr std::size_t kMaxTriangles = 2'000'000;
+  std::function<void(const aiNode*, const aiMatrix4x4&, bool)> walk = [&](const aiNode* node,
+                                                                          const aiMatrix4x4& parent,
+                                                                          bool wheel) {
+    const aiMatrix4x4 t = parent * node->mTransformation;
+    wheel = wheel || NameHas(node->mName.C_Str(), {"wheel", "tire", "tyre", "rim"});
+    for (unsigned mi = 0; mi < node->mNumMeshes; ++mi) {
+      const aiMesh& mesh = *scene->mMeshes[node->mMeshes[mi]];
+      if ((mesh.mPrimitiveTypes & aiPrimitiveType_TRIANGLE) == 0) continue;
+      const auto base = static_cast<std::uint32_t>(positions.size());
+      for (unsigned v = 0; v < mesh.mNumVertices; ++v) {
+        const aiVector3D p = t * mesh.mVertices[v];
+        const Vec3 b{p.z, p.x, p.y};
+        if (!std::isfinite(b.x) || !std::isfinite(b.y) || !std::isfinite(b.z)) {
+          throw CarModelError("car model '" + path + "': mesh '" + mesh.mName.C_Str() +
+                              "' has a vertex that is not a finite number");
+        }
+        all_min = {std::min(all_min.x, b.x), std::min(all_min.y, b.y), std::min(all_min.z, b.z)};
+        all_max = {std::max(all_max.x, b.x), std::max(all_max.y, b.y), std::max(all_max.z, b.z)};
+        if (!wheel) positions.push_back(b);
+      }
+      if (wheel) continue;
+      for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+        const aiFace& face = mesh.mFaces[f];
+        if (face.mNumIndices != 3) continue;
+        for (unsigned k = 0; k < 3; ++k) indices.push_back(base + face.mIndices[k]);
+        group.push_back(mesh.mMaterialIndex);
+        const Vec3 &a = positions[base + face.mIndices[0]], &b = positions[base + face.mIndices[1]],
+                   &c = positions[base + face.mIndices[2]];
+        if (mesh.mMaterialIndex < area.size()) {
+          area[mesh.mMaterialIndex] += 0.5 * Norm(Cross(b - a, c - a));
+        }
+      }
+      if (group.size() > kMaxTriangles) {
+        throw CarModelError("car model '" + path + "': more than 2 million triangles");
+      }
+    }
+    for (unsigned c = 0; c < node->mNumChildren; ++c) walk(node->mChildren[c], t, wheel);
+  };
+  walk(scene->mRootNode, aiMatrix4x4(), false);
+  if (group.empty()) {
+    throw CarModelError("car model '" + path + "': holds no triangle (apart from wheels)");
+  }
+  if (!any_paint && !area.empty()) {
+    const auto largest =
+        static_cast<std::size_t>(std::max_element(area.begin(), area.end()) - area.begin());
+    looks[largest] = {Material::kPaint, kWhite};
+  }
+  Soup soup;
+  soup.positions = std::move(positions);
+  soup.indices = std::move(indices);
+  std::map<std::uint32_t, std::uint32_t> look_of_material;
+  soup.group.reserve(group.size());
+  for (std::uint32_t m : group) {
+    if (!look_of_material.count(m)) {
+      const auto& [material, colour] =
+          m < looks.size() ? looks[m]
+                           : std::pair<Material, Rgb8>{Material::kMatte, {180, 180, 180}};
+      look_of_material[m] = soup.Look(material, colour);
+    }
+    soup.group.push_back(look_of_material[m]);
+  }
+  ModelMesh out = Finish(soup, 45.0);
+  out.fit_min = all_min;
+  out.fit_max = all_max;
+  if (!(out.fit_max.x - out.fit_min.x > 1e-6)) {
+    throw CarModelError("car model '" + path + "': has no length along +Z (forward)");
+  }
+  return out;
+}
+
+Mat4 FitModel(const ModelMesh& model, const VehicleGeometry& g, bool built_in) {
+  if (built_in) return Mat4{};
+  const CarShape s = CarShapeFor(g);
+  const double length = model.fit_max.x - model.fit_min.x;
+  const double k = (s.x_front - s.x_rear) / std::max(length, 1e-6);
+  Mat4 m;
+  m(0, 0) = m(1, 1) = m(2, 2) = k;
+  m(0, 3) = s.x_rear - k * model.fit_min.x;
+  m(1, 3) = -k * 0.5 * (model.fit_min.y + model.fit_max.y);
+  m(2, 3) = s.z_ground - k * model.fit_min.z;
+  return m;
+}
+
+}  // namespace vdyn::viewer

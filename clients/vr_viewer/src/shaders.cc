@@ -1,0 +1,458 @@
+#include "shaders.h"
+
+#include <cmath>
+#include <cstdio>
+
+#include "vdyn/viewer/lighting.h"
+#include "vdyn/viewer/world_mesh.h"
+
+namespace vdyn::viewer {
+
+const Lighting& SceneLighting() {
+  static const Lighting l = [] {
+    Lighting x;
+    const double elevation = Rad(48), azimuth = Rad(225);  // from +X towards +Y: south-west
+    x.sun_W = {std::cos(elevation) * std::cos(azimuth), std::cos(elevation) * std::sin(azimuth),
+               std::sin(elevation)};
+    x.sky_rgb = {0.24, 0.28, 0.34};
+    // Balanced: sun_rgb * sun.z + sky_rgb = 1 on a face turned up.
+    x.sun_rgb = Vec3{1 - x.sky_rgb.x, 1 - x.sky_rgb.y, 1 - x.sky_rgb.z} / x.sun_W.z;
+    x.ground_rgb = {0.09, 0.10, 0.08};
+    x.zenith_rgb = {0.13, 0.29, 0.66};
+    x.horizon_rgb = {0.60, 0.68, 0.78};
+    return x;
+  }();
+  return l;
+}
+
+namespace shaders {
+namespace {
+
+std::string Vec(const Vec3& v) {
+  char b[96];
+  std::snprintf(b, sizeof b, "vec3(%.6f, %.6f, %.6f)", v.x, v.y, v.z);
+  return b;
+}
+
+std::string Num(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6f", v);
+  return b;
+}
+
+// Shared by every fragment shader.
+constexpr const char* kCommon = R"(
+uniform vec3 u_eye;
+uniform float u_fog_m;  // the fog's distance scale, m; 0: no fog
+
+// sRGB <-> linear light (the sRGB curve, as the GPU decodes the textures).
+vec3 Decode(vec3 c) {
+  return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(vec3(0.04045), c));
+}
+// The sRGB curve's power part from three square roots (cheaper than pow on a software renderer;
+// every 8-bit level comes back exactly).
+vec3 Encode(vec3 c) {
+  c = clamp(c, 0.0, 1.0);
+  vec3 s1 = sqrt(c), s2 = sqrt(s1), s3 = sqrt(s2);
+  vec3 e = 0.662002687 * s1 + 0.684122060 * s2 - 0.323583601 * s3 - 0.0225411470 * c;
+  return mix(12.92 * c, e, step(vec3(0.0031308), c));
+}
+// The sky's and the ground's light on a face with normal n.
+vec3 Hemi(vec3 n) { return mix(kGroundRgb, kSkyRgb, clamp(0.5 + 0.5 * n.z, 0.0, 1.0)); }
+// What a mirror turned towards d reflects.
+vec3 SkyRadiance(vec3 d) {
+  if (d.z < 0.0) return mix(kHorizonRgb, kGroundRgb * 2.0, clamp(-d.z * 4.0, 0.0, 1.0));
+  return mix(kHorizonRgb, kZenithRgb, sqrt(d.z));
+}
+float FogAmount(vec3 p) {
+  if (u_fog_m <= 0.0) return 0.0;
+  float d = length(p - u_eye) / u_fog_m;
+  return 1.0 - exp(-d * d);
+}
+// Fogged towards the horizon's colour, encoded for the screen.
+vec3 Finish(vec3 c, vec3 p) { return Encode(mix(c, kHorizonRgb, FogAmount(p))); }
+
+#ifdef SHADOWS
+uniform sampler2DShadow u_shadow_map;
+uniform mat4 u_shadow_mat;        // world -> shadow map [0, 1]^3
+uniform vec4 u_shadow_box;        // centre x, y; radius; metres per texel
+uniform float u_shadow_texel_uv;  // one texel in texture coordinates
+// How much of the sun reaches p (1: all): two bilinear comparisons half a texel apart (a soft
+// edge two texels wide), fading out towards the edge of the map.
+float SunVisibility(vec3 p, vec3 n) {
+  float texel = u_shadow_box.w;
+  vec3 q = p + n * (1.5 * texel) + kSunDir * (0.5 * texel);
+  vec3 s = (u_shadow_mat * vec4(q, 1.0)).xyz;
+  if (any(lessThan(s, vec3(0.0))) || any(greaterThan(s, vec3(1.0)))) return 1.0;
+  float t = u_shadow_texel_uv;
+  float v = 0.5 * (texture(u_shadow_map, s + vec3(-0.5 * t, -0.25 * t, 0.0)) +
+                   texture(u_shadow_map, s + vec3(0.5 * t, 0.25 * t, 0.0)));
+  float fade = smoothstep(0.8 * u_shadow_box.z, u_shadow_box.z, length(p.xy - u_shadow_box.xy));
+  return mix(v, 1.0, fade);
+}
+#else
+float SunVisibility(vec3 p, vec3 n) { return 1.0; }
+#endif
+
+// Diffuse light on a face: the sun (where it reaches) and the sky.
+vec3 Diffuse(vec3 n, float sun) {
+  return kSunRgb * (max(dot(n, kSunDir), 0.0) * sun) + Hemi(n);
+}
+)";
+
+}  // namespace
+
+std::string Vertex(const char* body) {
+  return std::string("#version 330 core\n") + body;
+}
+
+std::string Fragment(const Options& o, const char* body) {
+  const Lighting& l = SceneLighting();
+  std::string s = "#version 330 core\n";
+  if (o.high) s += "#define HIGH 1\n";
+  if (o.shadows) s += "#define SHADOWS 1\n";
+  if (o.clouds) s += "#define CLOUDS 1\n";
+  if (o.grid) s += "#define GRID 1\n";
+  s += "#define STYLE " + std::to_string(o.style) + "\n";
+  s += "const vec3 kSunDir = " + Vec(l.sun_W) + ";\n";
+  s += "const vec3 kSunRgb = " + Vec(l.sun_rgb) + ";\n";
+  s += "const vec3 kSkyRgb = " + Vec(l.sky_rgb) + ";\n";
+  s += "const vec3 kGroundRgb = " + Vec(l.ground_rgb) + ";\n";
+  s += "const vec3 kZenithRgb = " + Vec(l.zenith_rgb) + ";\n";
+  s += "const vec3 kHorizonRgb = " + Vec(l.horizon_rgb) + ";\n";
+  s += "const float kKerbWidth = " + Num(RoadMarkings::kKerbWidth) + ";\n";
+  s += "const float kKerbBlock = " + Num(RoadMarkings::kKerbBlock) + ";\n";
+  s += "const float kEdgeLineInset = " + Num(RoadMarkings::kEdgeLineInset) + ";\n";
+  s += "const float kLineWidth = " + Num(RoadMarkings::kLineWidth) + ";\n";
+  s += "const float kDash = " + Num(RoadMarkings::kDash) + ";\n";
+  s += "const float kDashPeriod = " + Num(RoadMarkings::kDashPeriod) + ";\n";
+  s += kCommon;
+  s += body;
+  return s;
+}
+
+// --- terrain -----------------------------------------------------------------------------------
+
+const char* const kTerrainVs = R"(
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec3 a_normal;
+uniform mat4 u_view_proj;
+out vec3 v_pos;
+out vec3 v_normal;
+void main() {
+  v_pos = a_pos;
+  v_normal = a_normal;
+  gl_Position = u_view_proj * vec4(a_pos, 1.0);
+}
+)";
+
+// Surfaces by style (SurfaceStyle in world_mesh.h; one program per style: a software renderer
+// runs every branch of a shader for every pixel): textures from the array (grass, asphalt,
+// concrete, dirt; the large-scale variation in layer 4), road markings and kerbs from the strip
+// frame, the glass barrier with its posts and rail.
+const char* const kTerrainFs = R"(
+in vec3 v_pos;
+in vec3 v_normal;
+uniform sampler2DArray u_surfaces;
+uniform vec4 u_frame;        // the mesh's strip frame: centre x, y; its long axis x, y
+uniform vec2 u_half_size;    // from the centre along and across, m
+uniform float u_strip;       // 1: a strip (markings and kerbs)
+uniform float u_grid;        // grid spacing, m
+out vec4 o_colour;
+
+vec3 Tex(float layer, vec2 uv_m, float tile_m) {
+  return texture(u_surfaces, vec3(uv_m / tile_m, layer)).rgb;
+}
+float Variation(vec2 xy) {
+#ifdef HIGH
+  return 0.7 + 0.6 * texture(u_surfaces, vec3(xy / 61.0, 4.0)).r;
+#else
+  return 1.0;
+#endif
+}
+// Coverage of a band |d| < half_width, antialiased over a pixel.
+float Band(float d, float half_width) {
+  return clamp((half_width - abs(d)) / max(fwidth(d), 1e-4) + 0.5, 0.0, 1.0);
+}
+float Luma(vec3 c) { return dot(c, vec3(0.2126, 0.7152, 0.0722)); }
+
+void main() {
+  vec3 n = normalize(v_normal);
+  vec3 to_eye = u_eye - v_pos;
+  n *= sign(dot(n, to_eye) + 1e-9);
+  vec2 xy = v_pos.xy;
+  // The frame's coordinates: along, across from the centre line.
+  vec2 rel = xy - u_frame.xy;
+  vec2 v_uv = vec2(dot(rel, u_frame.zw), dot(rel, vec2(-u_frame.w, u_frame.z)));
+  vec3 add = vec3(0.0);
+  float alpha = 1.0;
+#if STYLE == 0 || STYLE == 4
+  vec2 tc = xy;
+#else
+  // On a steep face: along the face and up.
+  vec2 t = normalize(vec2(-n.y, n.x) + vec2(1e-6, 0.0));
+  vec2 tc = mix(vec2(dot(xy, t), v_pos.z), xy, step(0.6, abs(n.z)));
+#endif
+#if STYLE == 1
+  // Asphalt; on a strip its markings and kerbs.
+  vec3 albedo = Tex(1.0, tc, 3.0);
+  float along = v_uv.x, across = v_uv.y, d = abs(across), hw = u_half_size.y;
+  float grain = 0.75 + 0.6 * Luma(albedo) / 0.077;
+  vec3 paint = vec3(0.80, 0.80, 0.76) * clamp(grain, 0.7, 1.15);
+  float edge = Band(d - (hw - kEdgeLineInset), 0.5 * kLineWidth);
+  float dash = step(fract(along / kDashPeriod), kDash / kDashPeriod);
+  float centre = Band(across, 0.5 * kLineWidth) * dash;
+  albedo = mix(albedo, paint, 0.92 * u_strip * max(edge, centre));
+  float kerb = clamp((d - (hw - kKerbWidth)) / max(fwidth(d), 1e-4) + 0.5, 0.0, 1.0);
+  float block = mod(floor(along / kKerbBlock), 2.0);
+  vec3 kerb_rgb = mix(vec3(0.58, 0.012, 0.011), vec3(0.80, 0.80, 0.76), block);
+  albedo = mix(albedo, kerb_rgb * clamp(grain, 0.8, 1.1), u_strip * kerb);
+#elif STYLE == 2
+  // Hazard paint: yellow and black blocks along the bump.
+  float block = mod(floor(v_uv.x / 0.5), 2.0);
+  vec3 albedo = mix(vec3(0.80, 0.50, 0.008), vec3(0.018), block) *
+                clamp(0.7 + 0.5 * Luma(Tex(1.0, tc, 3.0)) / 0.077, 0.7, 1.2);
+#elif STYLE == 3
+  vec3 albedo = Tex(2.0, tc, 3.0);  // concrete
+#elif STYLE == 4
+  // Dirt and gravel, into the grass at the edge.
+  vec3 dirt = Tex(3.0, tc, 3.0) * Variation(xy + vec2(17.0, 5.0));
+  vec2 inside = u_half_size - abs(v_uv);
+  float edge = min(inside.x, inside.y);
+  vec3 albedo = mix(Tex(0.0, tc, 4.0) * Variation(xy), dirt, smoothstep(0.5, 5.0, edge));
+#elif STYLE == 5
+  // Glass: posts every 3 m, a rail on top, a concrete foot.
+  float along = abs(n.x) > abs(n.y) ? v_pos.y : v_pos.x;
+  float post = Band(fract(along / 3.0 + 0.5) - 0.5, 0.06 / 3.0);
+  float solid = clamp(post + step(0.7, n.z) + step(v_pos.z, 0.12), 0.0, 1.0);
+  vec3 view = normalize(to_eye);
+  float fres = pow(1.0 - abs(dot(n, view)), 5.0);
+  vec3 albedo = mix(vec3(0.05, 0.08, 0.08), vec3(0.30, 0.31, 0.32), solid);
+  add = (1.0 - solid) * SkyRadiance(reflect(-view, n)) * (0.08 + 0.8 * fres);
+  alpha = mix(0.22 + 0.6 * fres, 1.0, solid);
+#elif STYLE == 6
+  vec3 albedo = vec3(0.55, 0.57, 0.59) * (0.85 + 0.3 * Luma(Tex(2.0, tc, 3.0)) / 0.38);
+#else
+  vec3 albedo = Tex(0.0, tc, 4.0) * Variation(xy);  // grass
+#endif
+  vec3 c = albedo * Diffuse(n, SunVisibility(v_pos, n)) + add;
+#ifdef GRID
+  vec2 g = xy / u_grid;
+  vec2 w = fwidth(g);
+  vec2 gd = abs(fract(g - 0.5) - 0.5) / max(w, vec2(1e-6));
+  c *= 1.0 - 0.35 * (1.0 - clamp(min(gd.x, gd.y), 0.0, 1.0));
+#endif
+  o_colour = vec4(Finish(c, v_pos), alpha);
+}
+)";
+
+// --- models: car bodies, wheels ----------------------------------------------------------------
+
+const char* const kModelVs = R"(
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in vec4 a_rgba;
+layout(location = 3) in uint a_material;
+uniform mat4 u_model;
+uniform mat4 u_view_proj;
+uniform vec3 u_paint;  // linear
+out vec3 v_pos;
+out vec3 v_normal;
+out vec3 v_albedo;
+// The material's shading (car_model.h: matte, paint, glass, chrome, rubber, headlight, tail
+// light), as numbers rather than branches: diffuse share, the sky's reflection (at normal
+// incidence, at grazing incidence, tinted by the albedo), the sun's highlight (share, power),
+// light of its own.
+flat out vec4 v_reflect;  // diffuse, sky, sky at grazing angles, sky tinted
+flat out vec3 v_shine;    // highlight share, power, own light
+const vec4 kReflect[7] = vec4[7](vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.03, 0.45, 0.0),
+                                 vec4(1.0, 0.08, 0.7, 0.0), vec4(0.45, 0.0, 0.0, 0.55),
+                                 vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.0, 0.0, 0.0),
+                                 vec4(1.0, 0.0, 0.0, 0.0));
+const vec3 kShine[7] = vec3[7](vec3(0.0, 1.0, 0.0), vec3(0.6, 120.0, 0.0), vec3(2.0, 400.0, 0.0),
+                               vec3(0.9, 60.0, 0.0), vec3(0.05, 16.0, 0.0), vec3(0.0, 1.0, 0.9),
+                               vec3(0.3, 60.0, 0.6));
+vec3 Decode(vec3 c) {
+  return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(vec3(0.04045), c));
+}
+void main() {
+  vec4 p = u_model * vec4(a_pos, 1.0);
+  v_pos = p.xyz;
+  v_normal = mat3(u_model) * a_normal;
+  int m = int(min(a_material, 6u));
+  v_albedo = Decode(a_rgba.rgb) * (m == 1 ? u_paint : vec3(1.0));
+  v_reflect = kReflect[m];
+  v_shine = kShine[m];
+  gl_Position = u_view_proj * p;
+}
+)";
+
+// The inside of a body (a face seen from behind) is dark. Quality low: diffuse and own light only.
+const char* const kModelFs = R"(
+in vec3 v_pos;
+in vec3 v_normal;
+in vec3 v_albedo;
+flat in vec4 v_reflect;
+flat in vec3 v_shine;
+out vec4 o_colour;
+void main() {
+  vec3 n = normalize(v_normal);
+  float sun = SunVisibility(v_pos, n);
+  vec3 c = v_albedo * Diffuse(n, sun) * v_reflect.x;
+#ifdef HIGH
+  vec3 view = normalize(u_eye - v_pos);
+  float ndh = max(dot(n, normalize(kSunDir + view)), 0.0);
+  float lit = sun * step(0.0, dot(n, kSunDir));
+  float fres = pow(1.0 - max(dot(n, view), 0.0), 5.0);
+  vec3 sky = SkyRadiance(reflect(-view, n));
+  c += sky * (v_reflect.y + v_reflect.z * fres + v_reflect.w * v_albedo) +
+       kSunRgb * (lit * v_shine.x * pow(ndh, v_shine.y));
+#else
+  c += vec3(0.04, 0.05, 0.07) * step(0.05, v_reflect.y);  // glass: a hint of the sky
+#endif
+  c = max(c, v_albedo * v_shine.z);
+  c = gl_FrontFacing ? c : vec3(0.012);
+  o_colour = vec4(Finish(c, v_pos), 1.0);
+}
+)";
+
+// --- the frame's lists: landmarks (lit), arrows (unlit, exact colours) -------------------------
+
+const char* const kListVs = R"(
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in vec4 a_colour;
+uniform mat4 u_view_proj;
+out vec3 v_pos;
+out vec3 v_normal;
+out vec4 v_colour;
+void main() {
+  v_pos = a_pos;
+  v_normal = a_normal;
+  v_colour = a_colour;
+  gl_Position = u_view_proj * vec4(a_pos, 1.0);
+}
+)";
+
+// A zero normal means unlit: the arrows keep the legend's exact colours.
+const char* const kListFs = R"(
+in vec3 v_pos;
+in vec3 v_normal;
+in vec4 v_colour;
+uniform float u_alpha;
+out vec4 o_colour;
+void main() {
+  vec4 c = v_colour;
+  float len = length(v_normal);
+  if (len > 0.5) {
+    vec3 n = v_normal / len;
+    if (dot(n, u_eye - v_pos) < 0.0) n = -n;
+    c.rgb = Finish(Decode(c.rgb) * Diffuse(n, SunVisibility(v_pos, n)), v_pos);
+  }
+  c.a *= u_alpha;
+  o_colour = c;
+}
+)";
+
+// --- sky ---------------------------------------------------------------------------------------
+
+const char* const kSkyVs = R"(
+out vec2 v_ndc;
+void main() {
+  vec2 p = vec2((gl_VertexID == 1) ? 3.0 : -1.0, (gl_VertexID == 2) ? 3.0 : -1.0);
+  v_ndc = p;
+  gl_Position = vec4(p, 1.0, 1.0);
+}
+)";
+
+// The gradient from the horizon's haze to the zenith, the sun and its glow, a band of far hills
+// in the haze, and (quality high) clouds.
+const char* const kSkyFs = R"(
+in vec2 v_ndc;
+uniform mat4 u_inv_view_proj;
+uniform sampler2D u_clouds;
+out vec4 o_colour;
+void main() {
+  vec4 a = u_inv_view_proj * vec4(v_ndc, -1.0, 1.0);
+  vec4 b = u_inv_view_proj * vec4(v_ndc, 1.0, 1.0);
+  vec3 dir = normalize(b.xyz / b.w - a.xyz / a.w);
+  vec3 c = SkyRadiance(dir);
+  float s = max(dot(dir, kSunDir), 0.0);
+  c += kSunRgb * (0.18 * pow(s, 8.0) + 0.5 * pow(s, 200.0)) + vec3(6.0) * smoothstep(0.99955, 0.9997, s);
+#ifdef CLOUDS
+  if (dir.z > 0.0) {
+    vec2 uv = dir.xy / (dir.z + 0.08) * 0.35 + vec2(0.13, 0.41);
+    vec4 cl = texture(u_clouds, uv);
+    float cover = cl.a * smoothstep(0.0, 0.15, dir.z);
+    vec3 lit = cl.rgb * (0.55 * kSunRgb + 1.3 * kSkyRgb);
+    c = mix(c, lit, 0.9 * cover);
+  }
+#endif
+  o_colour = vec4(Encode(c), 1.0);
+}
+)";
+
+// --- far hills: a ring of low hills in the haze, around the eye near the far plane -------------
+
+const char* const kHillsVs = R"(
+layout(location = 0) in vec3 a_dir;  // cos, sin of the azimuth; elevation angle, rad
+uniform mat4 u_view_proj;
+uniform vec3 u_eye;
+uniform float u_radius;
+out float v_height;
+void main() {
+  v_height = a_dir.z;
+  vec3 p = u_eye + vec3(a_dir.xy * u_radius, tan(a_dir.z) * u_radius);
+  gl_Position = u_view_proj * vec4(p, 1.0);
+}
+)";
+
+const char* const kHillsFs = R"(
+in float v_height;
+out vec4 o_colour;
+void main() {
+  vec3 hills = mix(vec3(0.10, 0.15, 0.12), kHorizonRgb, 0.6 + 8.0 * max(v_height, 0.0));
+  o_colour = vec4(Encode(hills), 1.0);
+}
+)";
+
+// --- contact shadows under the vehicles ----------------------------------------------------------
+
+const char* const kContactVs = R"(
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec2 a_uv;
+uniform mat4 u_view_proj;
+out vec2 v_uv;
+void main() {
+  v_uv = a_uv;
+  gl_Position = u_view_proj * vec4(a_pos, 1.0);
+}
+)";
+
+// Multiplies what is behind (blend: zero, source colour): darkest under the middle of the body.
+const char* const kContactFs = R"(
+in vec2 v_uv;
+uniform float u_strength;
+out vec4 o_colour;
+void main() {
+  vec2 q = abs(v_uv);
+  float k = (1.0 - smoothstep(0.55, 1.0, q.x)) * (1.0 - smoothstep(0.35, 1.0, q.y));
+  o_colour = vec4(vec3(1.0 - u_strength * k), 1.0);
+}
+)";
+
+// --- the sun's shadow map ----------------------------------------------------------------------
+
+const char* const kDepthVs = R"(
+layout(location = 0) in vec3 a_pos;
+uniform mat4 u_model;
+uniform mat4 u_view_proj;
+void main() { gl_Position = u_view_proj * (u_model * vec4(a_pos, 1.0)); }
+)";
+
+const char* const kDepthFs = R"(
+void main() {}
+)";
+
+}  // namespace shaders
+}  // namespace vdyn::viewer

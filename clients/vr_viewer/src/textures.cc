@@ -1,0 +1,272 @@
+#include "vdyn/viewer/textures.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+
+namespace vdyn::viewer {
+namespace {
+
+// Integer hash of a lattice point, in [0, 1).
+double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
+  std::uint64_t h = seed * 0xD6E8FEB86659FD93ull ^
+                    (static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ull) ^
+                    (static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4Full);
+  h ^= h >> 33;
+  h *= 0xFF51AFD7ED558CCDull;
+  h ^= h >> 33;
+  h *= 0xC4CEB9FE1A85EC53ull;
+  h ^= h >> 33;
+  return static_cast<double>(h >> 11) * (1.0 / 9007199254740992.0);
+}
+
+std::int64_t Wrap(std::int64_t i, std::int64_t period) {
+  const std::int64_t m = i % period;
+  return m < 0 ? m + period : m;
+}
+
+// Value noise with a lattice of `period` cells across the tile (x, y in [0, 1)): tileable.
+double Noise(double x, double y, int period, std::uint64_t seed) {
+  const double fx = x * period, fy = y * period;
+  const double x0 = std::floor(fx), y0 = std::floor(fy);
+  const auto i = static_cast<std::int64_t>(x0), j = static_cast<std::int64_t>(y0);
+  double tx = fx - x0, ty = fy - y0;
+  tx = tx * tx * (3 - 2 * tx);
+  ty = ty * ty * (3 - 2 * ty);
+  const std::int64_t p = period;
+  const double a = Hash(Wrap(i, p), Wrap(j, p), seed), b = Hash(Wrap(i + 1, p), Wrap(j, p), seed);
+  const double c = Hash(Wrap(i, p), Wrap(j + 1, p), seed);
+  const double d = Hash(Wrap(i + 1, p), Wrap(j + 1, p), seed);
+  return (a + (b - a) * tx) * (1 - ty) + (c + (d - c) * tx) * ty;
+}
+
+// Fractal sum of octaves from `period` cells up, each twice as fine and half as strong; [0, 1].
+double Fbm(double x, double y, int period, int octaves, std::uint64_t seed) {
+  double sum = 0, weight = 0, w = 1;
+  for (int o = 0; o < octaves; ++o) {
+    sum += w * Noise(x, y, period << o, seed + static_cast<std::uint64_t>(o) * 101);
+    weight += w;
+    w *= 0.5;
+  }
+  return sum / weight;
+}
+
+double Smooth(double e0, double e1, double x) {
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+
+struct Lin {
+  double r = 0, g = 0, b = 0;
+};
+Lin L(Rgb8 c) {
+  return {ToLinear(c.r), ToLinear(c.g), ToLinear(c.b)};
+}
+Lin Mix(const Lin& a, const Lin& b, double t) {
+  return {a.r + (b.r - a.r) * t, a.g + (b.g - a.g) * t, a.b + (b.b - a.b) * t};
+}
+Lin Scale(const Lin& a, double s) {
+  return {a.r * s, a.g * s, a.b * s};
+}
+
+// Small stones scattered over the tile: per cell of a grid, one stone at a hashed place with a
+// hashed radius and brightness. Returns the stone's brightness factor at a pixel, or 0.
+double Stones(double x, double y, int cells, double radius_cells, std::uint64_t seed,
+              double* shade) {
+  const double fx = x * cells, fy = y * cells;
+  const auto ci = static_cast<std::int64_t>(std::floor(fx));
+  const auto cj = static_cast<std::int64_t>(std::floor(fy));
+  double best = 0;
+  for (std::int64_t dj = -1; dj <= 1; ++dj) {
+    for (std::int64_t di = -1; di <= 1; ++di) {
+      const std::int64_t i = Wrap(ci + di, cells), j = Wrap(cj + dj, cells);
+      const double sx = static_cast<double>(ci + di) + Hash(i, j, seed);
+      const double sy = static_cast<double>(cj + dj) + Hash(i, j, seed + 7);
+      const double r = radius_cells * (0.5 + Hash(i, j, seed + 13));
+      const double d = std::hypot(fx - sx, fy - sy) / r;
+      if (d < 1.0) {
+        const double cover = 1.0 - d * d;
+        if (cover > best) {
+          best = cover;
+          *shade = Hash(i, j, seed + 29);
+        }
+      }
+    }
+  }
+  return best;
+}
+
+Lin Grass(double x, double y) {
+  const double patches = Fbm(x, y, 4, 4, 11);
+  const double fine = Fbm(x, y, 64, 2, 12);
+  const double blades =
+      Hash(static_cast<std::int64_t>(x * 4096), static_cast<std::int64_t>(y * 4096), 13);
+  Lin c = Mix(L({58, 88, 34}), L({112, 138, 58}), Smooth(0.25, 0.75, patches));
+  // Dry, yellowish patches and clover-dark spots.
+  const double dry = Smooth(0.62, 0.8, Fbm(x + 0.37, y + 0.11, 3, 3, 14));
+  c = Mix(c, L({138, 134, 74}), 0.45 * dry);
+  c = Scale(c, 0.7 + 0.45 * fine + 0.25 * (blades - 0.5));
+  return c;
+}
+
+Lin Asphalt(double x, double y) {
+  const double patches = Fbm(x, y, 3, 4, 21);
+  const double grain =
+      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 22);
+  Lin c = Scale(L({72, 72, 75}), 0.88 + 0.24 * patches + 0.22 * (grain - 0.5));
+  double shade = 0;
+  const double stone = Stones(x, y, 96, 0.22, 23, &shade);
+  if (stone > 0) c = Mix(c, Scale(L({150, 148, 142}), 0.6 + 0.6 * shade), std::min(1.0, 2 * stone));
+  return c;
+}
+
+Lin Concrete(double x, double y) {
+  const double mottle = Fbm(x, y, 4, 5, 31);
+  const double grain =
+      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 32);
+  Lin c = Scale(L({164, 161, 154}), 0.86 + 0.24 * mottle + 0.08 * (grain - 0.5));
+  double shade = 0;
+  if (Stones(x, y, 64, 0.12, 33, &shade) > 0.2) c = Scale(c, 0.72);  // pores
+  return c;
+}
+
+Lin Dirt(double x, double y) {
+  const double patches = Fbm(x, y, 4, 5, 41);
+  const double grain =
+      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 42);
+  Lin c = Mix(L({96, 76, 56}), L({146, 122, 92}), Smooth(0.2, 0.8, patches));
+  c = Scale(c, 0.9 + 0.2 * (grain - 0.5));
+  double shade = 0;
+  const double stone = Stones(x, y, 48, 0.3, 43, &shade);
+  if (stone > 0) {
+    // A pebble: lit on top, its shadow towards the lower right.
+    const Lin pebble = Scale(Mix(L({120, 112, 100}), L({190, 182, 168}), shade), 0.7 + 0.5 * stone);
+    c = Mix(c, pebble, Smooth(0.0, 0.25, stone));
+  }
+  return c;
+}
+
+}  // namespace
+
+double ToLinear(std::uint8_t srgb) {
+  const double c = srgb / 255.0;
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+std::uint8_t ToSrgb(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  const double v = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+  return static_cast<std::uint8_t>(std::lround(v * 255.0));
+}
+
+Rgb8 MeanColour(TextureLayer layer) {
+  switch (layer) {
+    case TextureLayer::kGrass:
+      return {92, 118, 54};
+    case TextureLayer::kAsphalt:
+      return {78, 78, 80};
+    case TextureLayer::kConcrete:
+      return {168, 165, 158};
+    case TextureLayer::kDirt:
+      return {128, 106, 80};
+    case TextureLayer::kMacro:
+      return {128, 128, 128};
+    case TextureLayer::kClouds:
+      return {255, 255, 255};
+  }
+  return {128, 128, 128};
+}
+
+double TileMetres(TextureLayer layer) {
+  switch (layer) {
+    case TextureLayer::kGrass:
+      return 4.0;
+    case TextureLayer::kAsphalt:
+      return 3.0;
+    case TextureLayer::kConcrete:
+      return 3.0;
+    case TextureLayer::kDirt:
+      return 3.0;
+    case TextureLayer::kMacro:
+      return 61.0;  // not a multiple of the others: their tiling does not line up with it
+    case TextureLayer::kClouds:
+      return 2400.0;
+  }
+  return 1.0;
+}
+
+TextureImage MakeTexture(TextureLayer layer, int size) {
+  if (size < 16 || (size & (size - 1)) != 0) {
+    throw std::invalid_argument("texture size must be a power of two >= 16");
+  }
+  TextureImage img;
+  img.size = size;
+  const auto n = static_cast<std::size_t>(size) * static_cast<std::size_t>(size);
+  img.rgba.resize(n * 4);
+  std::vector<Lin> lin(n);
+  std::vector<double> alpha(n, 1.0);
+  for (int j = 0; j < size; ++j) {
+    for (int i = 0; i < size; ++i) {
+      const double x = (i + 0.5) / size, y = (j + 0.5) / size;
+      const std::size_t k = static_cast<std::size_t>(j) * static_cast<std::size_t>(size) +
+                            static_cast<std::size_t>(i);
+      switch (layer) {
+        case TextureLayer::kGrass:
+          lin[k] = Grass(x, y);
+          break;
+        case TextureLayer::kAsphalt:
+          lin[k] = Asphalt(x, y);
+          break;
+        case TextureLayer::kConcrete:
+          lin[k] = Concrete(x, y);
+          break;
+        case TextureLayer::kDirt:
+          lin[k] = Dirt(x, y);
+          break;
+        case TextureLayer::kMacro: {
+          const double v = Fbm(x, y, 3, 4, 51);
+          lin[k] = {v, v, v};
+          break;
+        }
+        case TextureLayer::kClouds: {
+          const double f = Fbm(x, y, 4, 6, 61);
+          const double cover = Smooth(0.48, 0.78, f);
+          const double lum = 1.0 - 0.35 * Smooth(0.6, 0.95, f);  // denser: greyer underneath
+          lin[k] = {lum, lum, lum * 1.02};
+          alpha[k] = cover;
+          break;
+        }
+      }
+    }
+  }
+  if (layer != TextureLayer::kMacro && layer != TextureLayer::kClouds) {
+    // Scale each channel (in linear light) so the mean is the layer's colour; clamping moves it
+    // a little, so repeat.
+    const Lin target = L(MeanColour(layer));
+    for (int pass = 0; pass < 4; ++pass) {
+      Lin mean;
+      for (const Lin& c : lin) {
+        mean.r += c.r / static_cast<double>(n);
+        mean.g += c.g / static_cast<double>(n);
+        mean.b += c.b / static_cast<double>(n);
+      }
+      for (Lin& c : lin) {
+        c.r = std::min(1.0, c.r * target.r / std::max(mean.r, 1e-9));
+        c.g = std::min(1.0, c.g * target.g / std::max(mean.g, 1e-9));
+        c.b = std::min(1.0, c.b * target.b / std::max(mean.b, 1e-9));
+      }
+    }
+  }
+  // Every layer is stored sRGB-encoded (the GPU decodes it while filtering, so far-away mip
+  // levels average in linear light); the macro map and the clouds then read back as they were.
+  for (std::size_t k = 0; k < n; ++k) {
+    std::uint8_t* p = img.rgba.data() + 4 * k;
+    p[0] = ToSrgb(lin[k].r);
+    p[1] = ToSrgb(lin[k].g);
+    p[2] = ToSrgb(lin[k].b);
+    p[3] = static_cast<std::uint8_t>(std::lround(std::clamp(alpha[k], 0.0, 1.0) * 255));
+  }
+  return img;
+}
+
+}  // namespace vdyn::viewer

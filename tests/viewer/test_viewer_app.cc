@@ -1,0 +1,659 @@
+// vdyn-viewer as an application: motion between states (drawn at a display time, interpolated),
+// the horizon lock of the chase and orbit cameras and their places in a headset, labels that never
+// overlap, the driver camera's view of the road, the forces legend, the parameters panel (labels
+// from the one table, keys typed into it) and a --follow of a vehicle that is not there. The
+// closed forms are written out here, not taken from the viewer.
+#include <gtest/gtest.h>
+
+#include <SDL.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <set>
+
+#include "../process.h"
+#include "../test_support.h"
+#include "vdyn/base/limits.h"
+#include "vdyn/base/time.h"
+#include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/labels.h"
+#include "vdyn/viewer/motion.h"
+#include "vdyn/viewer/params_editor.h"
+#include "vdyn/viewer/scene.h"
+#include "vdyn/viewer/viewer.h"
+#include "viewer_support.h"
+
+namespace vdyn::testing {
+namespace {
+
+using viewer::CameraMode;
+using viewer::Image;
+using viewer::kPi;
+using viewer::Vec3;
+using viewer::Viewer;
+using viewer::ViewerOptions;
+
+// --- motion --------------------------------------------------------------------------------
+
+// A state of vehicle 1 at step `step` (1 ms steps), at (x, y) heading `yaw`, rolling at `speed`,
+// its LF spring force `fp`.
+pb::VehicleState At(std::uint64_t step, double x, double y, double yaw, double speed, double fp) {
+  TestVehicle t;
+  t.step = step;
+  t.x = x;
+  t.y = y;
+  t.yaw = yaw;
+  t.speed = speed;
+  t.wheels[0].fp = fp;
+  return MakeState(t);
+}
+
+TEST(Motion, HalfWayBetweenTwoStatesInTimeTheVehicleIsHalfWayThere) {
+  // Two states 20 ms apart (steps 1000 and 1020): the car drove 1 m along X at 50 m/s, turned
+  // from 0.1 to 0.3 rad and its LF spring force rose from 3000 to 4000 N.
+  const std::int64_t s0 = 5'000'000'000;  // source stamps, ns
+  viewer::StateHistory h;
+  h.Add(At(1000, 0.0, 0.0, 0.1, 50, 3000), s0, s0 + 1'000'000);
+  h.Add(At(1020, 1.0, 0.2, 0.3, 50, 4000), s0 + 20'000'000, s0 + 21'000'000);
+  // A frame due on the screen at D shows D - offset - delay: half-way when D is 10 ms past the
+  // first state plus the offset (1 ms of transit seen) and the delay.
+  viewer::ClockOffset clock;
+  clock.Observe(s0, s0 + 1'000'000);
+  clock.Observe(s0 + 20'000'000, s0 + 23'000'000);  // a slower transit: the offset stays 1 ms
+  // (It may rise by 1 ms per second between observations: 23 us here.)
+  ASSERT_NEAR(clock.offset_ns(), 1'000'000, 25'000);
+  const std::int64_t delay = viewer::kDefaultPresentationDelayNs;
+  const std::int64_t display = s0 + 10'000'000 + clock.offset_ns() + delay;
+  const auto sample = h.At(display - clock.offset_ns() - delay);
+  ASSERT_NE(sample.a, nullptr);
+  ASSERT_NE(sample.b, nullptr);
+  EXPECT_DOUBLE_EQ(sample.u, 0.5);
+  pb::VehicleState mid;
+  viewer::InterpolateState(*sample.a, *sample.b, sample.u, mid);
+  EXPECT_DOUBLE_EQ(mid.p_wt_w().x(), 0.5);
+  EXPECT_DOUBLE_EQ(mid.p_wt_w().y(), 0.1);
+  EXPECT_DOUBLE_EQ(mid.wheels(0).fp(), 3500);
+  EXPECT_DOUBLE_EQ(mid.wheels(0).p_b_w().x(),
+                   0.5 * (sample.a->wheels(0).p_b_w().x() + sample.b->wheels(0).p_b_w().x()));
+  // The orientation by slerp: half the turn about the vertical (0.2 rad), a unit quaternion.
+  const pb::Quat& q = mid.q_wb();
+  EXPECT_NEAR(q.w(), std::cos(0.1), 1e-12);
+  EXPECT_NEAR(q.z(), std::sin(0.1), 1e-12);
+  EXPECT_NEAR(q.w() * q.w() + q.z() * q.z(), 1.0, 1e-12);
+  EXPECT_NEAR(mid.rpy().z(), 0.2, 1e-12);
+  // Discrete values are the earlier state's until the later one is reached.
+  EXPECT_EQ(mid.step(), 1000u);
+  EXPECT_EQ(mid.sim_time_ns(), 1'000'000'000);
+  // The drawn view: half-way along, turned half-way.
+  const viewer::VehicleView v =
+      viewer::BuildVehicleView(mid, viewer::GeometryFor(1, nullptr, nullptr));
+  EXPECT_NEAR(v.yaw, 0.2, 1e-12);
+  EXPECT_NEAR(v.pose_WB.t.x, 0.5, 1e-12);
+
+  // Before the first state: the first; after the last: the last, as it is (held, never
+  // extrapolated).
+  EXPECT_EQ(h.At(s0 - 5).b, nullptr);
+  EXPECT_EQ(h.At(s0 - 5).a->step(), 1000u);
+  const auto held = h.At(s0 + 500'000'000);
+  EXPECT_EQ(held.b, nullptr);
+  EXPECT_EQ(held.a->step(), 1020u);
+  EXPECT_EQ(held.source_ns, s0 + 20'000'000);
+}
+
+TEST(Motion, HeadingsAcrossTheBackTurnTheShortWayRound) {
+  // From 3.1 rad to -3.1 rad is 0.083 rad through pi, not 6.2 rad through 0.
+  pb::VehicleState a = At(10, 0, 0, 3.1, 10, 3000), b = At(11, 0, 0, -3.1, 10, 3000);
+  pb::VehicleState mid;
+  viewer::InterpolateState(a, b, 0.5, mid);
+  EXPECT_NEAR(std::abs(mid.rpy().z()), kPi, 1e-9);
+  const viewer::VehicleView v =
+      viewer::BuildVehicleView(mid, viewer::GeometryFor(1, nullptr, nullptr));
+  EXPECT_NEAR(std::abs(v.yaw), kPi, 1e-9);
+}
+
+TEST(Motion, StatesOfTwoLivesAreNeverBlended) {
+  const std::int64_t s0 = 1'000'000'000;
+  // A restore: the step jumps to a recording's (7779) while the server's clock goes on (5.989 s).
+  pb::VehicleState before = At(5988, 0, 0, 0, 0, 3000);
+  pb::VehicleState restored = At(7779, 0.001, 0, 0, 0, 3000);  // (restored where it was)
+  restored.set_sim_time_ns(5'989'000'000);
+  before.set_sim_time_ns(5'988'000'000);
+  EXPECT_FALSE(viewer::Continuous(before, restored));
+  // A teleport: steps go on, the car is 40 m away 1 ms later.
+  EXPECT_FALSE(viewer::Continuous(At(100, 0, 0, 0, 10, 3000), At(101, 40, 0, 0, 10, 3000)));
+  // A drive: 1 ms at 10 m/s is 1 cm.
+  EXPECT_TRUE(viewer::Continuous(At(100, 0, 0, 0, 10, 3000), At(101, 0.01, 0, 0, 10, 3000)));
+  viewer::StateHistory h;
+  h.Add(before, s0, s0);
+  h.Add(restored, s0 + 1'000'000, s0 + 1'000'000);
+  const auto s = h.At(s0 + 500'000);
+  EXPECT_EQ(s.b, nullptr) << "blended across a restore";
+  EXPECT_EQ(s.a->step(), 5988u);
+  // A step back (a recording sought back, a restarted server): the history starts afresh.
+  h.Add(At(10, 0, 0, 0, 0, 3000), s0 + 2'000'000, s0 + 2'000'000);
+  EXPECT_EQ(h.size(), 1u);
+  // A repeat of the newest is not a new state.
+  h.Add(At(10, 0, 0, 0, 0, 3000), s0 + 3'000'000, s0 + 3'000'000);
+  EXPECT_EQ(h.size(), 1u);
+}
+
+TEST(Motion, ThePublishersClockIsFoundByTheShortestTransitAndFollowedWhenItDrifts) {
+  viewer::ClockOffset c;
+  // Transits of 3, 1 and 2 ms (the other machine's clock 100 ms behind): 100 + 1 ms.
+  const std::int64_t skew = 100'000'000;
+  c.Observe(0, skew + 3'000'000);
+  c.Observe(10'000'000, 10'000'000 + skew + 1'000'000);
+  c.Observe(20'000'000, 20'000'000 + skew + 2'000'000);
+  EXPECT_NEAR(c.offset_ns(), skew + 1'000'000, 20'000);  // (+1 ms per second since: 10 us)
+  // The clocks moved 50 ms apart: followed at 1 ms per second (60 s later, fully).
+  std::int64_t t = 20'000'000;
+  for (int i = 0; i < 600; ++i) {
+    t += 100'000'000;
+    c.Observe(t, t + skew + 51'000'000);
+  }
+  EXPECT_EQ(c.offset_ns(), skew + 51'000'000);
+}
+
+// --- cameras: the horizon lock and a headset's places ----------------------------------------
+
+// A vehicle at (3, 4) heading 30 deg, rolled 10 deg and pitched 5 deg.
+viewer::VehicleView Tilted() {
+  viewer::VehicleView v;
+  v.yaw = viewer::Rad(30);
+  v.pose_WB.R = viewer::RotationZ(v.yaw) * viewer::RotationAxisAngle({0, 1, 0}, viewer::Rad(5)) *
+                viewer::RotationAxisAngle({1, 0, 0}, viewer::Rad(10));
+  v.pose_WB.t = {3, 4, 0.6};
+  return v;
+}
+
+// The camera's right and up axes in the world (from its view matrix: rows of the rotation).
+std::array<Vec3, 2> RightUp(const viewer::Mat4& view) {
+  return {Vec3{view(0, 0), view(0, 1), view(0, 2)}, Vec3{view(1, 0), view(1, 1), view(1, 2)}};
+}
+
+TEST(Cameras, LockedChaseAndOrbitKeepTheHorizonLevelUnlockedTheyRollAndPitchWithTheBody) {
+  const viewer::VehicleView car = Tilted();
+  viewer::CameraScene scene;
+  scene.followed = &car;
+  for (CameraMode mode : {CameraMode::kChase, CameraMode::kOrbit}) {
+    SCOPED_TRACE(std::string(viewer::CameraName(mode)));
+    viewer::CameraState c;
+    c.mode = mode;
+    // Locked: the screen's horizontal is level (its right axis has no vertical part).
+    const auto locked = RightUp(viewer::ComputeCamera(c, scene, 640, 480).view);
+    EXPECT_NEAR(locked[0].z, 0.0, 1e-9);
+    // A headset's place: a level frame, up the world's up.
+    const viewer::Pose place = viewer::XrPlace(c, scene);
+    EXPECT_NEAR(place.R.c[1].z, 1.0, 1e-9);
+    EXPECT_NEAR(place.R.c[0].z, 0.0, 1e-9);
+    // Unlocked: the right axis tilts as the body's does, the place's up is the body's Z.
+    c.horizon_locked = false;
+    const auto body = RightUp(viewer::ComputeCamera(c, scene, 640, 480).view);
+    const Vec3 tilt_right = viewer::Tilt(car.pose_WB, car.yaw) * (locked[0]);
+    EXPECT_NEAR(body[0].x, tilt_right.x, 1e-9);
+    EXPECT_NEAR(body[0].y, tilt_right.y, 1e-9);
+    EXPECT_NEAR(body[0].z, tilt_right.z, 1e-9);
+    EXPECT_GT(std::abs(body[0].z), 0.1);  // 10 deg of roll shows
+    const viewer::Pose moving = viewer::XrPlace(c, scene);
+    const Vec3 z_B = car.pose_WB.R.c[2];
+    EXPECT_NEAR(viewer::Dot(moving.R.c[1], z_B), 1.0, 1e-9);
+  }
+  // The driver's seat always moves with the body: its place's axes are the body's.
+  viewer::CameraState d;
+  d.mode = CameraMode::kDriver;
+  const viewer::Pose seat = viewer::XrPlace(d, scene);
+  EXPECT_NEAR(viewer::Dot(seat.R.c[2], -car.pose_WB.R.c[0]), 1.0, 1e-9);  // looks along X_B
+  EXPECT_NEAR(viewer::Dot(seat.R.c[1], car.pose_WB.R.c[2]), 1.0, 1e-9);
+  const Vec3 eye = car.pose_WB * d.seat_B;
+  EXPECT_NEAR(viewer::Norm(seat.t - eye), 0.0, 1e-12);
+}
+
+TEST(Cameras, BesideStandsOnTheGroundToTheVehiclesLeftAtEyeHeightFacingIt) {
+  viewer::VehicleView car;
+  car.yaw = viewer::Rad(90);  // heading north: its left is west
+  car.pose_WB.R = viewer::RotationZ(car.yaw);
+  car.pose_WB.t = {10, 20, 0.6};
+  car.ground_z = 0.02;
+  viewer::CameraScene scene;
+  scene.followed = &car;
+  viewer::CameraState c;
+  c.mode = CameraMode::kBeside;
+  const viewer::Pose p = viewer::XrPlace(c, scene);
+  EXPECT_NEAR(p.t.x, 10 - 6, 1e-9);
+  EXPECT_NEAR(p.t.y, 20, 1e-9);
+  EXPECT_NEAR(p.t.z, 0.02 + 1.6, 1e-9);
+  // Facing the vehicle (east): OpenXR's -Z is forward.
+  EXPECT_NEAR(-p.R.c[2].x, 1.0, 1e-9);
+}
+
+// --- labels --------------------------------------------------------------------------------
+
+TEST(Labels, NoTwoBoxesOverlapHoweverTheAnchorsCrowd) {
+  // 200 labels of landmarks near the horizon: anchors within a 300 x 20 pixel strip.
+  std::vector<viewer::LabelRequest> r;
+  for (int i = 0; i < 200; ++i) {
+    r.push_back({"landmark " + std::to_string(i), 200.0f + static_cast<float>((i * 37) % 300),
+                 300.0f + static_cast<float>((i * 11) % 20), 70, 13, 40.0 + i, 0});
+  }
+  r.push_back({"#1", 350, 310, 16, 13, 8.0, 2});  // the followed vehicle among them
+  const auto placed = viewer::LayoutLabels(r, 640, 480);
+  ASSERT_FALSE(placed.empty());
+  for (std::size_t i = 0; i < placed.size(); ++i) {
+    const auto& b = placed[i].box;
+    EXPECT_TRUE(b.x0 >= 0 && b.y0 >= 0 && b.x1 <= 640 && b.y1 <= 480);
+    for (std::size_t j = i + 1; j < placed.size(); ++j) {
+      EXPECT_FALSE(viewer::Overlap(b, placed[j].box))
+          << r[placed[i].request].text << " and " << r[placed[j].request].text;
+    }
+  }
+  // The followed vehicle's label comes first and always gets its place.
+  EXPECT_EQ(r[placed.front().request].text, "#1");
+  // Nor under the HUD's panels: a label whose places are all under one is left out, one with a
+  // free place takes it.
+  const std::vector<viewer::LabelBox> hud = {{0, 0, 300, 200}};
+  const auto under = viewer::LayoutLabels(
+      {{"hidden", 150, 100, 40, 13, 10, 0}, {"edge", 302, 100, 40, 13, 10, 0}}, 640, 480, hud);
+  ASSERT_EQ(under.size(), 1u);
+  EXPECT_EQ(under[0].request, 1u);
+  EXPECT_FALSE(viewer::Overlap(under[0].box, hud[0]));
+  // Far ones fade: full up to fade_start_m, gone by fade_end_m.
+  const viewer::LabelStyle style;
+  std::vector<viewer::LabelRequest> fade = {
+      {"near", 100, 100, 30, 13, style.fade_start_m - 1, 0},
+      {"mid", 300, 100, 30, 13, 0.5 * (style.fade_start_m + style.fade_end_m), 0},
+      {"far", 500, 100, 30, 13, style.fade_end_m + 1, 0}};
+  const auto f = viewer::LayoutLabels(fade, 640, 480);
+  ASSERT_EQ(f.size(), 2u);
+  EXPECT_FLOAT_EQ(f[0].alpha, 1.0f);
+  EXPECT_NEAR(f[1].alpha, 0.5f, 1e-6);
+}
+
+// --- the viewer in-process -------------------------------------------------------------------
+
+constexpr int kW = 640, kH = 480;
+constexpr int kTol = 12;
+
+class ViewerApp : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    xvfb_ = new Xvfb(1280, 800);
+    setenv("DISPLAY", xvfb_->display().c_str(), 1);
+    UseLoopbackDds();
+  }
+  static void TearDownTestSuite() {
+    delete xvfb_;
+    xvfb_ = nullptr;
+  }
+  static ViewerOptions Options(std::uint32_t domain) {
+    ViewerOptions o;
+    o.domain = domain;
+    o.hidden = true;
+    o.fps = 0;
+    o.samples = 0;
+    o.width = kW;
+    o.height = kH;
+    o.wait_s = 60;
+    return o;
+  }
+  static bool FramesUntil(Viewer& v, const std::function<void()>& publish,
+                          const std::function<bool()>& done) {
+    const auto deadline = base::MonotonicNow() + base::Seconds(60);
+    while (base::MonotonicNow() < deadline) {
+      if (publish) publish();
+      if (!v.Frame()) return false;
+      if (done()) return true;
+    }
+    return false;
+  }
+  static Image Show(Viewer& v, TestPublisher& pub, const std::vector<pb::VehicleState>& states) {
+    const bool shown = FramesUntil(
+        v,
+        [&] {
+          for (const auto& s : states) pub.State(s);
+        },
+        [&] {
+          for (const auto& s : states) {
+            const viewer::VehicleView* view = v.vehicle(s.vehicle_id());
+            if (view == nullptr || view->step != s.step()) return false;
+          }
+          return true;
+        });
+    EXPECT_TRUE(shown) << "the viewer did not draw the published states within 60 s";
+    return Keep(v.Screenshot());
+  }
+  static Image Keep(Image img) {
+    static int n = 0;
+    if (const char* dir = std::getenv("VDYN_VIEWER_TEST_PNGS")) {
+      const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+      viewer::WritePng(std::string(dir) + "/" + info->test_suite_name() + "." + info->name() + "-" +
+                           std::to_string(++n) + ".png",
+                       img);
+    }
+    return img;
+  }
+  static void Key(SDL_Keycode k) {
+    SDL_Event e{};
+    e.type = SDL_KEYDOWN;
+    e.key.keysym.sym = k;
+    SDL_PushEvent(&e);
+    e.type = SDL_KEYUP;
+    SDL_PushEvent(&e);
+  }
+  static bool HudHas(const Viewer& v, const std::string& text) {
+    for (const std::string& l : v.hud_text()) {
+      if (l.find(text) != std::string::npos) return true;
+    }
+    return false;
+  }
+  static std::string Hud(const Viewer& v) {
+    std::string s;
+    for (const std::string& l : v.hud_text()) s += l + "\n";
+    return s;
+  }
+  static Xvfb* xvfb_;
+};
+Xvfb* ViewerApp::xvfb_ = nullptr;
+
+TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.hud = false;
+  o.camera.mode = CameraMode::kDriver;
+  Viewer v(o);
+  // Large forces at every wheel: 4 kN springs (2 m arrows), drive and side forces.
+  TestVehicle t;
+  for (auto& w : t.wheels) w = {4000, 2000, 0, 1500};
+  const Image img = Show(v, pub, {MakeState(t)});
+  // The lower middle of the view (where the bonnet, the front tyres and their arrows were) shows
+  // the road: none of the arrows' or the vehicle's colours, and asphalt mostly (grey: textured,
+  // its pixels are classified; its lane marking is white).
+  const Rect lower{kW / 3, kH * 6 / 10, kW * 2 / 3, kH * 95 / 100};
+  for (int k = 0; k < viewer::kForceKinds; ++k) {
+    const viewer::Rgb8 c = viewer::ForceColour(static_cast<viewer::ForceKind>(k));
+    EXPECT_EQ(FindColour(img, c.r, c.g, c.b, kTol, lower).count, 0)
+        << viewer::ForceLabel(static_cast<viewer::ForceKind>(k)) << " in the driver's view";
+  }
+  const viewer::Rgb8 own = viewer::VehicleColour(1);
+  EXPECT_EQ(FindColour(img, own.r, own.g, own.b, kTol, lower).count, 0);
+  const RegionStats road = Classify(img, lower);
+  EXPECT_GT(road.asphalt, road.pixels * 8 / 10) << "the road ahead is not what the driver sees";
+  EXPECT_EQ(road.grass, 0);
+  // Another vehicle 15 m ahead is drawn, arrows and all.
+  TestVehicle ahead = t;
+  ahead.id = 2;
+  ahead.x = 15;
+  const Image with = Show(v, pub, {MakeState(t), MakeState(ahead)});
+  const viewer::Rgb8 g = viewer::ForceColour(viewer::ForceKind::kSpring);
+  EXPECT_GT(FindColour(with, g.r, g.g, g.b, kTol).count, 50) << "the car ahead's springs";
+}
+
+TEST_F(ViewerApp, TheForcesLegendStartsCollapsedAndLOpensIt) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.camera.mode = CameraMode::kMap;
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;  // no arrows in the scene: their colours are the legend's
+  Show(v, pub, {MakeState(t)});
+  // (ImGui shows a new window from its second frame on.)
+  for (int i = 0; i < 3; ++i) v.Frame();
+  Image img = Keep(v.Screenshot());
+  const Rect bottom_left{0, kH / 2, kW / 2, kH};
+  auto swatches = [&](const Image& im) {
+    int n = 0;
+    for (int k = 0; k < viewer::kForceKinds; ++k) {
+      const viewer::Rgb8 c = viewer::ForceColour(static_cast<viewer::ForceKind>(k));
+      n += FindColour(im, c.r, c.g, c.b, 4, bottom_left).count > 100 ? 1 : 0;
+    }
+    return n;
+  };
+  EXPECT_EQ(swatches(img), 0) << "the legend is open at the start";
+  // (An opened window takes a frame or two to size itself to what it holds.)
+  auto frames_until = [&](int want) {
+    for (int i = 0; i < 10; ++i) {
+      v.Frame();
+      img = Keep(v.Screenshot());
+      if (swatches(img) == want) return true;
+    }
+    return false;
+  };
+  Key(SDLK_l);
+  EXPECT_TRUE(frames_until(viewer::kForceKinds)) << "L did not open the legend";
+  Key(SDLK_l);
+  EXPECT_TRUE(frames_until(0)) << "L did not close it again";
+}
+
+// The parameters of vehicle 1 as a server publishes them (every field set).
+pb::VehicleParams AllParams() {
+  pb::VehicleParams p;
+  const auto* d = p.GetDescriptor();
+  const auto* r = p.GetReflection();
+  for (int i = 0; i < d->field_count(); ++i) {
+    const auto* f = d->field(i);
+    switch (f->cpp_type()) {
+      case google::protobuf::FieldDescriptor::CPPTYPE_DOUBLE:
+        r->SetDouble(&p, f, 1.5);
+        break;
+      case google::protobuf::FieldDescriptor::CPPTYPE_UINT32:
+        r->SetUInt32(&p, f, 5);
+        break;
+      case google::protobuf::FieldDescriptor::CPPTYPE_BOOL:
+        r->SetBool(&p, f, true);
+        break;
+      case google::protobuf::FieldDescriptor::CPPTYPE_ENUM:
+        r->SetEnumValue(&p, f, 1);
+        break;
+      case google::protobuf::FieldDescriptor::CPPTYPE_MESSAGE: {
+        auto* w = r->MutableMessage(&p, f);
+        for (int k = 0; k < w->GetDescriptor()->field_count(); ++k) {
+          w->GetReflection()->SetDouble(w, w->GetDescriptor()->field(k), 0.3);
+        }
+        break;
+      }
+      default:
+        break;
+    }
+  }
+  return p;
+}
+
+// xdotool on the private X server (real pointer and key events, as a person's): true when it
+// ran; its output in `out`.
+bool Xdo(const std::vector<std::string>& args, std::string* out = nullptr) {
+  static int n = 0;
+  const auto log = std::filesystem::temp_directory_path() /
+                   ("vdyn-xdo-" + std::to_string(getpid()) + "-" + std::to_string(++n) + ".log");
+  std::vector<std::string> argv = {"/usr/bin/xdotool"};
+  argv.insert(argv.end(), args.begin(), args.end());
+  Process p(argv, log);
+  const auto code = p.Wait(std::chrono::seconds(30));
+  if (out != nullptr) *out = p.Log();
+  std::filesystem::remove(log);
+  return code == 0;
+}
+
+// The viewer's window on the X server.
+std::string WindowId() {
+  std::string out;
+  if (!Xdo({"search", "--name", "^vdyn-viewer$"}, &out)) return {};
+  return out.substr(0, out.find('\n'));
+}
+
+class ParamsPanel : public ViewerApp {
+ protected:
+  // A viewer following vehicle 1 with its parameters, the panel open.
+  void Open() {
+    domain_ = FreshDomain();
+    pub_ = std::make_unique<TestPublisher>(domain_);
+    ASSERT_TRUE(pub_->World(MakeWorld("test", kPi / 2)));
+    ASSERT_TRUE(pub_->Params(1, AllParams()));
+    ViewerOptions o = Options(domain_);
+    o.camera.mode = CameraMode::kMap;
+    o.hidden = false;  // a window on the X server, for the pointer and the keys
+    v_ = std::make_unique<Viewer>(o);
+    window_ = WindowId();
+    ASSERT_FALSE(window_.empty()) << "no vdyn-viewer window on the X server";
+    Show(*v_, *pub_, {MakeState(TestVehicle{})});
+    Key(SDLK_p);
+    ASSERT_TRUE(FramesUntil(
+        *v_, [&] { pub_->State(MakeState(TestVehicle{})); },
+        [&] { return v_->params_editor().drawn().count("mass") > 0; }))
+        << "the parameters panel did not show the fields";
+  }
+  // A click at a point of the window.
+  void Click(float x, float y) {
+    ASSERT_TRUE(Xdo({"mousemove", "--window", window_, std::to_string(static_cast<int>(x)),
+                     std::to_string(static_cast<int>(y)), "click", "1"}));
+  }
+  // Keys typed into the window.
+  void Type(const std::string& text) {
+    ASSERT_TRUE(Xdo({"type", "--window", window_, "--delay", "0", text}));
+  }
+  void Press(const std::string& key) { ASSERT_TRUE(Xdo({"key", "--window", window_, key})); }
+  std::uint32_t domain_ = 0;
+  std::unique_ptr<TestPublisher> pub_;
+  std::unique_ptr<Viewer> v_;
+  std::string window_;
+};
+
+TEST_F(ParamsPanel, EveryFieldIsNamedInWordsWithItsUnitFromTheOneTable) {
+  Open();
+  const auto& drawn = v_->params_editor().drawn();
+  const auto* d = pb::VehicleParams::descriptor();
+  for (int i = 0; i < d->field_count(); ++i) {
+    const std::string path = d->field(i)->name();
+    SCOPED_TRACE(path);
+    const std::string_view words = limits::ParamWords(path);
+    ASSERT_FALSE(words.empty()) << "the table does not name " << path;
+    ASSERT_EQ(drawn.count(path), 1u) << "not in the panel";
+    EXPECT_EQ(drawn.at(path).label, words);
+    EXPECT_NE(drawn.at(path).label, path);
+  }
+  // The fields of a wheel, once its group is opened.
+  const auto lf = drawn.at("lf");
+  EXPECT_EQ(lf.label, "left front wheel (LF)");
+  Click(0.5f * (lf.x0 + lf.x1), 0.5f * (lf.y0 + lf.y1));
+  ASSERT_TRUE(FramesUntil(*v_, {}, [&] { return v_->params_editor().drawn().count("lf.radius"); }));
+  const auto* w = pb::WheelParams::descriptor();
+  for (int i = 0; i < w->field_count(); ++i) {
+    const std::string path = "lf." + w->field(i)->name();
+    SCOPED_TRACE(path);
+    ASSERT_EQ(v_->params_editor().drawn().count(path), 1u);
+    EXPECT_EQ(v_->params_editor().drawn().at(path).label, limits::ParamWords(path));
+  }
+  EXPECT_EQ(v_->params_editor().drawn().at("lf.radius").label, "wheel radius, m");
+  EXPECT_EQ(v_->params_editor().drawn().at("b").label, "distance T to front axle, m");
+}
+
+TEST_F(ParamsPanel, TextTypedIntoAFieldNeverReachesTheHotkeys) {
+  Open();
+  ASSERT_EQ(v_->camera().mode, CameraMode::kMap);
+  const auto mass = v_->params_editor().drawn().at("mass");
+  // A click into the mass field and, arriving with it before the next frame, "1", "c", "p" and
+  // "h": camera 1, next camera, the panel and the HUD if they reached the hotkeys.
+  Click(mass.x0 + 20, 0.5f * (mass.y0 + mass.y1));
+  Type("1cph");
+  for (int i = 0; i < 3; ++i) v_->Frame();
+  // More typed while the field has the input.
+  Type("2l");
+  for (int i = 0; i < 3; ++i) v_->Frame();
+  EXPECT_EQ(v_->camera().mode, CameraMode::kMap) << "typing changed the camera";
+  EXPECT_TRUE(v_->params_editor().drawn().count("mass")) << "typing closed the panel";
+  EXPECT_FALSE(v_->hud_text().empty()) << "typing hid the HUD";
+  // Enter ends the editing; then the keys are the viewer's again.
+  // (A key pressed and released within one frame is lost to this ImGui: down, a frame, up.)
+  ASSERT_TRUE(Xdo({"keydown", "--window", window_, "Return"}));
+  for (int i = 0; i < 2; ++i) v_->Frame();
+  ASSERT_TRUE(Xdo({"keyup", "--window", window_, "Return"}));
+  for (int i = 0; i < 2; ++i) v_->Frame();
+  Press("c");
+  for (int i = 0; i < 2; ++i) v_->Frame();
+  EXPECT_EQ(v_->camera().mode, CameraMode::kNorth) << "C after editing: the next camera";
+}
+
+TEST_F(ViewerApp, FollowingAVehicleThatIsNotThereSaysSoListsThoseThatAreAndWaitsForIt) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2, 7})));
+  ViewerOptions o = Options(domain);
+  o.follow = 7;
+  Viewer v(o);
+  TestVehicle a, b;
+  a.id = 1;
+  b.id = 2;
+  b.x = 8;
+  ExpectLogs logs;
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        pub.State(MakeState(a));
+        pub.State(MakeState(b));
+      },
+      [&] { return HudHas(v, "on the domain: 1, 2"); }))
+      << Hud(v);
+  EXPECT_TRUE(HudHas(v, "waiting for vehicle 7")) << Hud(v);
+  EXPECT_FALSE(v.followed().has_value()) << "followed another vehicle instead";
+  EXPECT_FALSE(v.ready());
+  // It was said in the log too (once the others had a second to arrive).
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        pub.State(MakeState(a));
+        pub.State(MakeState(b));
+      },
+      [&] { return logs.count() > 0; }));
+  // Vehicle 7 comes: followed.
+  TestVehicle c;
+  c.id = 7;
+  c.x = -8;
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        pub.State(MakeState(a));
+        pub.State(MakeState(c));
+      },
+      [&] { return v.followed() == 7u; }));
+  v.Frame();
+  EXPECT_TRUE(HudHas(v, "vehicle 7  (3 on the domain")) << Hud(v);
+}
+
+TEST_F(ViewerApp, LandmarkNamesNeverOverlapAndFadeTowardsTheHorizon) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  // Forty landmarks in a row ahead of the vehicle, 5 m apart: their names crowd towards the
+  // horizon of the chase camera.
+  pb::WorldDescription w = MakeWorld("test", kPi / 2);
+  for (int i = 0; i < 40; ++i) {
+    pb::Landmark* l = w.add_landmarks();
+    l->set_name("post " + std::to_string(i));
+    l->mutable_p_w()->set_x(10 + 5.0 * i);
+    l->mutable_p_w()->set_y(i % 2 == 0 ? 3 : -3);
+  }
+  ASSERT_TRUE(pub.World(w));
+  ViewerOptions o = Options(domain);
+  Viewer v(o);
+  Show(v, pub, {MakeState(TestVehicle{})});
+  v.Frame();
+  const auto& labels = v.labels();
+  ASSERT_GT(labels.size(), 3u);
+  std::set<std::string> names;
+  for (std::size_t i = 0; i < labels.size(); ++i) {
+    names.insert(labels[i].text);
+    for (std::size_t j = i + 1; j < labels.size(); ++j) {
+      EXPECT_FALSE(viewer::Overlap(labels[i].box, labels[j].box))
+          << labels[i].text << " overlaps " << labels[j].text;
+    }
+  }
+  EXPECT_TRUE(names.count("#1")) << "the followed vehicle's number";
+  EXPECT_TRUE(names.count("post 0"));
+  EXPECT_LT(labels.size(), 41u) << "nothing decluttered";
+}
+
+}  // namespace
+}  // namespace vdyn::testing
