@@ -32,6 +32,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/loop.h"
+#include "vdyn/client/session_view.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/state.pb.h"
@@ -77,18 +78,26 @@ struct PlayOptions {
 
 int Play(const Common& c, const PlayOptions& o) {
   const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(o.maneuver);
-  vdyn::transport::DropCounters drops;
   vdyn::transport::Participant participant(c.domain);
   vdyn::client::InputPublisher writer(participant, c.vehicle_id, c.source_id, c.strength);
-  vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant,
-                                                         vdyn::transport::TopicId::kState, &drops);
+  // This vehicle's states only (its partition): the others' are not sent here.
+  vdyn::client::SessionView states(participant, {.states = true,
+                                                 .params = false,
+                                                 .world = false,
+                                                 .diagnostics = false,
+                                                 .inputs = false,
+                                                 .only_vehicle = c.vehicle_id});
+  if (!states.one_vehicle_fallback().empty()) {
+    spdlog::warn("vdyn-input: reading every vehicle's states ({})", states.one_vehicle_fallback());
+  }
 
   // Simulation time of the vehicle, from its newest state (clock=server).
   std::int64_t sim_ns = -1;
   auto poll_states = [&] {
-    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
-      if (s.vehicle_id() == c.vehicle_id) sim_ns = s.sim_time_ns();
-    });
+    states.Poll();
+    if (const auto* v = states.vehicle(c.vehicle_id); v != nullptr && v->states > 0) {
+      sim_ns = static_cast<std::int64_t>(v->state.sim_time_ns());
+    }
   };
   if (o.clock == "server") {
     const auto deadline =
