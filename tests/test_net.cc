@@ -206,6 +206,31 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
   EXPECT_EQ(drops.Total(), 0u);
 }
 
+// --max-vehicles 256: a server starts 256 vehicles and publishes every one's states (functional,
+// not timed: on a loaded machine some steps may be late).
+TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
+  std::string ids;
+  for (int i = 1; i <= 256; ++i) {
+    if (i > 1) ids += ',';
+    ids += std::to_string(i);
+  }
+  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", ids});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::map<std::uint32_t, std::uint64_t> steps;  // the highest step seen of each vehicle
+  const bool all = ReadUntil<pb::VehicleState>(
+      states, 120s, [&](const pb::VehicleState& s) { steps[s.vehicle_id()] = s.step(); },
+      [&] {
+        return steps.size() == 256 && std::all_of(steps.begin(), steps.end(),
+                                                  [](const auto& kv) { return kv.second >= 100; });
+      });
+  ASSERT_TRUE(all) << steps.size() << " vehicles seen\n" << server->Log();
+  EXPECT_EQ(steps.begin()->first, 1u);
+  EXPECT_EQ(steps.rbegin()->first, 256u);
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
 TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   auto server = StartServer({});
   transport::Participant p(domain_);
