@@ -35,6 +35,7 @@ run() {  # prints the command, then runs it
   run "$bin/net_bench" 60 20
   run "$bin/input_bench" 30
   run "$bin/recorder_bench" 30 3
+  run "$bin/follow_bench" 10 3
   run "$bin/viewer_bench" 3 300
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"
 echo "results written to $out"
