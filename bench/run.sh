@@ -36,6 +36,7 @@ run() {  # prints the command, then runs it
   run "$bin/request_bench" 20 3
   run "$bin/input_bench" 30
   run "$bin/recorder_bench" 30 3
+  run "$bin/follow_bench" 10 3
   # VDYN_VIEWER_PEER: an earlier vdyn-viewer built apart, measured in the same run as the peer.
   run "$bin/viewer_bench" 3 300 ${VDYN_VIEWER_PEER:+"$VDYN_VIEWER_PEER"}
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"

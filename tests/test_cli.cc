@@ -152,18 +152,30 @@ INSTANTIATE_TEST_SUITE_P(
     Options, ServerRefusesBadNumbers,
     ::testing::Values(
         BadOption{"--step-ms nan", "--step-ms: 'nan' is not a finite number"},
-        BadOption{"--step-ms 1e300", "--step-ms: integration step, ms must be in [0.01, 100], got 1e300"},
-        BadOption{"--lockstep --lockstep-timeout nan", "--lockstep-timeout: 'nan' is not a finite number"},
+        BadOption{"--step-ms 1e300",
+                  "--step-ms: integration step, ms must be in [0.01, 100], got 1e300"},
+        BadOption{"--lockstep --lockstep-timeout nan",
+                  "--lockstep-timeout: 'nan' is not a finite number"},
         BadOption{"--watchdog-ms nan", "--watchdog-ms: 'nan' is not a finite number"},
         BadOption{"--watchdog-ms -5", "watchdog, ms must be in [1, 60000], got -5"},
-        BadOption{"--batch --maneuver demo --duration nan", "--duration: 'nan' is not a finite number"},
-        BadOption{"--batch --maneuver demo --duration 1e300", "duration, s must be in (0, 1e7], got 1e300"},
+        BadOption{"--batch --maneuver demo --duration nan",
+                  "--duration: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --duration 1e300",
+                  "duration, s must be in (0, 1e7], got 1e300"},
         BadOption{"--duration inf", "--duration: 'inf' is not a finite number"},
-        BadOption{"--batch --maneuver demo --speed-kmh nan", "--speed-kmh: 'nan' is not a finite number"},
-        BadOption{"--batch --maneuver demo --spawn nan,0,0", "--spawn: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --speed-kmh nan",
+                  "--speed-kmh: 'nan' is not a finite number"},
+        BadOption{"--batch --maneuver demo --spawn nan,0,0",
+                  "--spawn: 'nan' is not a finite number"},
         BadOption{"--batch --maneuver demo --csv-every 0", "must be in [1, 1000000], got 0"},
         BadOption{"--domain 1.5", "--domain: '1.5' is not a whole number"},
         BadOption{"--domain 999", "DDS domain id must be in [0, 232], got 999"},
+        BadOption{"--max-vehicles 0",
+                  "--max-vehicles: vehicles per server must be in [1, 256], got 0"},
+        BadOption{"--max-vehicles 257",
+                  "--max-vehicles: vehicles per server must be in [1, 256], got 257"},
+        BadOption{"--max-vehicles abc", "--max-vehicles: 'abc' is not a number"},
+        BadOption{"--max-vehicles 2.5", "--max-vehicles: '2.5' is not a whole number"},
         BadOption{"--rt-priority abc", "--rt-priority: 'abc' is not a number"},
         BadOption{"--world-scale inf", "--world-scale: 'inf' is not a finite number"},
         BadOption{"--heightmap-cell 0", "height-map cell, m must be in (0, 10000], got 0"}));
@@ -225,6 +237,9 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   const Result twice = RunServer("--vehicle-ids 1,1 --duration 1" + domain);
   EXPECT_EQ(twice.exit_code, 2) << twice.output;
   EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));
+  const Result over = RunServer("--max-vehicles 2 --vehicle-ids 1,2,3 --duration 1" + domain);
+  EXPECT_EQ(over.exit_code, 2) << over.output;
+  EXPECT_THAT(over.output, HasSubstr("this server runs its maximum of 2 vehicles"));
   const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --duration 1" + domain);
   EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
   EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));

@@ -19,14 +19,15 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
-#include "vdyn/transport/control_client.h"
-#include "vdyn/bridge/convert.h"
-#include "vdyn/transport/dds.h"
 #include "dds_wait.h"
 #include "process.h"
-#include "vdyn/replay/resim.h"
 #include "test_support.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/client/session_view.h"
 #include "vdyn/diagnostics.pb.h"
+#include "vdyn/replay/resim.h"
+#include "vdyn/transport/control_client.h"
+#include "vdyn/transport/dds.h"
 #include "vdyn/world.pb.h"
 #include "vdyn_envelope.h"
 
@@ -169,6 +170,74 @@ TEST_F(Net, LateJoiningSubscriberGetsWorldAndParamsAtOnce) {
     EXPECT_TRUE(ValidateVehicleParams(m).empty());
     ++n_params;
   }, [&] { return n_params >= 2; }));
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+// A client that follows one vehicle reads in the vehicle's partition: it receives that vehicle's
+// states and no other's (counted at the reader, as they arrive), while a reader of every vehicle
+// still gets all of them.
+TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
+  auto server = StartServer({"--vehicle-ids", "1,2,3"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> all(p, TopicId::kState, &drops);
+  transport::Reader<pb::VehicleState> own(
+      p, TopicId::kState, &drops, transport::ReaderRole::kDefault, transport::VehiclePartition(2));
+  client::SessionView view(p, {.states = true,
+                               .params = false,
+                               .world = false,
+                               .diagnostics = false,
+                               .inputs = false,
+                               .only_vehicle = 3});
+  ASSERT_EQ(view.one_vehicle_fallback(), "");
+  std::map<std::uint32_t, std::uint64_t> at_all, at_own, at_view;
+  view.on_state = [&](const pb::VehicleState&, const transport::SampleInfo& info) {
+    ++at_view[info.key];
+  };
+  auto count = [](const std::map<std::uint32_t, std::uint64_t>& m, std::uint32_t k) {
+    const auto it = m.find(k);
+    return it == m.end() ? std::uint64_t{0} : it->second;
+  };
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (std::chrono::steady_clock::now() < deadline &&
+         !(at_all.size() == 3 && count(at_own, 2) >= 500 && count(at_view, 3) >= 500)) {
+    all.Wait(20ms);
+    all.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_all[i.key]; });
+    own.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_own[i.key]; });
+    view.Poll();
+  }
+  EXPECT_EQ(at_all.size(), 3u) << server->Log();
+  EXPECT_GE(count(at_own, 2), 500u) << server->Log();
+  EXPECT_GE(count(at_view, 3), 500u) << server->Log();
+  // Nothing of any other vehicle reached the one-vehicle readers.
+  EXPECT_EQ(at_own.size(), 1u);
+  EXPECT_EQ(at_view.size(), 1u);
+  EXPECT_EQ(view.vehicles().size(), 1u);
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+// --max-vehicles 256: a server starts 256 vehicles and publishes every one's states (functional,
+// not timed: on a loaded machine some steps may be late).
+TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
+  std::string ids;
+  for (int i = 1; i <= 256; ++i) {
+    if (i > 1) ids += ',';
+    ids += std::to_string(i);
+  }
+  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", ids});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  std::map<std::uint32_t, std::uint64_t> steps;  // the highest step seen of each vehicle
+  const bool all = ReadUntil<pb::VehicleState>(
+      states, 120s, [&](const pb::VehicleState& s) { steps[s.vehicle_id()] = s.step(); },
+      [&] {
+        return steps.size() == 256 && std::all_of(steps.begin(), steps.end(),
+                                                  [](const auto& kv) { return kv.second >= 100; });
+      });
+  ASSERT_TRUE(all) << steps.size() << " vehicles seen\n" << server->Log();
+  EXPECT_EQ(steps.begin()->first, 1u);
+  EXPECT_EQ(steps.rbegin()->first, 256u);
   EXPECT_EQ(drops.Total(), 0u);
 }
 

@@ -427,7 +427,11 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops, transport::ReaderRole::kRecorder);
   transport::Reader<pb::DriverInput> inputs(p, TopicId::kInput, &drops, transport::ReaderRole::kRecorder);
+  // A client that follows vehicle 1 (its partition) sees the playback too.
+  transport::Reader<pb::VehicleState> own(
+      p, TopicId::kState, &drops, transport::ReaderRole::kRecorder, transport::VehiclePartition(1));
   for (double rate : {1.0, 2.0}) {
+    std::uint64_t own_states = 0;
     auto play = Recorder({"play", file.string(), "--domain", std::to_string(domain_), "--rate",
                           std::to_string(rate), "--no-keys", "--no-status"},
                          "play" + std::to_string(static_cast<int>(rate)) + ".log");
@@ -439,6 +443,8 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
       const std::int64_t now = base::MonotonicNow().ns;
       states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { got.push_back({s.step(), now}); });
       inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) { presses += in.buttons() & 1u; });
+      own_states += static_cast<std::uint64_t>(
+          own.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}));
     }
     ASSERT_EQ(play->Wait(10s), 0) << play->Log();
     states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
@@ -446,6 +452,9 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
     });
     // In order, (nearly) all of them, the paddle presses with them.
     ASSERT_GE(got.size(), 2970u) << play->Log();
+    own_states += static_cast<std::uint64_t>(
+        own.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}));
+    EXPECT_GE(own_states, 2970u) << play->Log();
     for (std::size_t i = 1; i < got.size(); ++i) ASSERT_GT(got[i].step, got[i - 1].step);
     EXPECT_GT(presses, 100u);
     // In time: each state's arrival against its recorded time, scaled by the rate. The offsets

@@ -114,11 +114,18 @@ constexpr double kSilentS = 2.0;
 
 int Play(const Common& c, const PlayOptions& o) {
   const vdyn::Maneuver maneuver = vdyn::Maneuver::Named(o.maneuver);
-  vdyn::transport::DropCounters drops;
   vdyn::transport::Participant participant(c.domain);
   vdyn::client::InputPublisher writer(participant, c.vehicle_id, c.source_id, c.strength);
-  vdyn::transport::Reader<vdyn::pb::VehicleState> states(participant,
-                                                         vdyn::transport::TopicId::kState, &drops);
+  // This vehicle's states only (its partition): the others' are not sent here.
+  vdyn::client::SessionView states(participant, {.states = true,
+                                                 .params = false,
+                                                 .world = false,
+                                                 .diagnostics = false,
+                                                 .inputs = false,
+                                                 .only_vehicle = c.vehicle_id});
+  if (!states.one_vehicle_fallback().empty()) {
+    spdlog::warn("vdyn-input: reading every vehicle's states ({})", states.one_vehicle_fallback());
+  }
   const bool server_clock = o.clock == "server";
 
   // The vehicle's newest simulation time (clock=server) and what its states say about this input.
@@ -126,18 +133,19 @@ int Play(const Common& c, const PlayOptions& o) {
   std::uint64_t states_seen = 0, states_ours = 0;
   std::string other_source;  // the newest other source that drove the vehicle
   MonoTime last_state_at{};
+  states.on_state = [&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+    if (s.vehicle_id() != c.vehicle_id) return;
+    sim_ns = s.sim_time_ns();
+    ++states_seen;
+    last_state_at = MonotonicNow();
+    if (s.input().source_id() == c.source_id) {
+      ++states_ours;
+    } else if (!s.input().source_id().empty()) {
+      other_source = s.input().source_id();
+    }
+  };
   auto poll_states = [&] {
-    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
-      if (s.vehicle_id() != c.vehicle_id) return;
-      sim_ns = s.sim_time_ns();
-      ++states_seen;
-      last_state_at = MonotonicNow();
-      if (s.input().source_id() == c.source_id) {
-        ++states_ours;
-      } else if (!s.input().source_id().empty()) {
-        other_source = s.input().source_id();
-      }
-    });
+    states.Poll();
   };
   const std::string where =
       "vehicle " + std::to_string(c.vehicle_id) + " on domain " + std::to_string(c.domain);

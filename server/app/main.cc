@@ -59,6 +59,7 @@ struct Options {
   std::uint32_t domain = 0;
   std::string server_id = "vdyn";
   std::vector<std::uint32_t> vehicle_ids = {1};
+  int max_vehicles = 64;
   double watchdog_ms = 100.0;
   double lockstep_timeout_s = 10.0;
   int rt_priority = 50;
@@ -109,6 +110,7 @@ int RunNetworked(const Options& o) {
                        : vdyn::ServerOptions::Mode::kRealtime;
   so.domain_id = o.domain;
   so.vehicle_ids = o.vehicle_ids;
+  so.session.max_vehicles = static_cast<std::size_t>(o.max_vehicles);
   so.session.server_id = o.server_id;
   so.session.step_ns = std::llround(o.step_ms * 1e6);
   so.session.watchdog_s = o.watchdog_ms / 1000.0;
@@ -233,6 +235,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--vehicle-ids", o.vehicle_ids, "Vehicles to spawn at start, e.g. 1,2")
       ->delimiter(',')
+      ->capture_default_str();
+  app.add_option("--max-vehicles", o.max_vehicles,
+                 "Vehicles this server runs at most (started and spawned); spawns beyond are "
+                 "refused")
+      ->check(vdyn::cli::WholeInRange(vdyn::limits::kMaxVehicles))
       ->capture_default_str();
   app.add_option("--watchdog-ms", o.watchdog_ms,
                  "Without live input for this long a vehicle brakes to a safe state (a live backup "

@@ -196,7 +196,7 @@ std::atomic<bool> g_batching{false};
 }  // namespace
 
 RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength,
-                     Sending sending)
+                     Sending sending, const std::string& partition)
     : id_(id), sending_(sending) {
   if (sending == Sending::kBatched) {
     g_batching.store(true);
@@ -204,16 +204,42 @@ RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownershi
     // these domains starts batched (the setting is read at creation).
     dds_write_set_batch(true);
   }
+  dds_entity_t parent = participant.handle();
+  if (!partition.empty()) {
+    dds_qos_t* pq = PartitionQos(partition);
+    publisher_ = dds_create_publisher(participant.handle(), pq, nullptr);
+    dds_delete_qos(pq);
+    if (publisher_ < 0) {
+      const dds_entity_t rc = publisher_;
+      publisher_ = 0;
+      throw TransportError(DdsError("cannot create a publisher in partition " + partition, rc));
+    }
+    parent = publisher_;
+  }
+  // The listener is set with the writer, so no match is missed between creation and setting it.
+  dds_listener_t* l = dds_create_listener(&matched_);
+  if (l == nullptr) throw TransportError("dds_create_listener failed");
+  dds_lset_publication_matched(l, [](dds_entity_t, dds_publication_matched_status_t st, void* arg) {
+    static_cast<std::atomic<std::uint32_t>*>(arg)->store(st.current_count,
+                                                         std::memory_order_relaxed);
+  });
   dds_qos_t* q = WriterQos(id, ownership_strength);
-  writer_ = dds_create_writer(participant.handle(), participant.Topic(id), q, nullptr);
+  writer_ = dds_create_writer(parent, participant.Topic(id), q, l);
   dds_delete_qos(q);
+  dds_delete_listener(l);
   if (writer_ < 0) {
-    throw TransportError(DdsError(std::string("cannot create a writer on ") + Spec(id).name, writer_));
+    const dds_entity_t rc = writer_;
+    writer_ = 0;
+    if (publisher_ > 0) dds_delete(publisher_);
+    throw TransportError(DdsError(std::string("cannot create a writer on ") + Spec(id).name +
+                                      (partition.empty() ? "" : " in partition " + partition),
+                                  rc));
   }
 }
 
 RawWriter::~RawWriter() {
-  if (writer_ > 0) dds_delete(writer_);
+  if (writer_ > 0) dds_delete(writer_);  // waits for a listener call in progress
+  if (publisher_ > 0) dds_delete(publisher_);
 }
 
 bool RawWriter::Write(std::uint32_t key, const google::protobuf::Message& msg) {
@@ -277,13 +303,34 @@ std::uint32_t RawWriter::MatchedReaders() {
   return st.current_count;
 }
 
-RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops, ReaderRole role)
+RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops, ReaderRole role,
+                     const std::string& partition)
     : id_(id), drops_(drops) {
-  dds_qos_t* q = ReaderQos(id, role);
-  reader_ = dds_create_reader(participant.handle(), participant.Topic(id), q, nullptr);
-  dds_delete_qos(q);
   const std::string name = Spec(id).name;
-  if (reader_ < 0) throw TransportError(DdsError("cannot create a reader on " + name, reader_));
+  dds_entity_t parent = participant.handle();
+  if (!partition.empty()) {
+    dds_qos_t* sq = PartitionQos(partition);
+    subscriber_ = dds_create_subscriber(participant.handle(), sq, nullptr);
+    dds_delete_qos(sq);
+    if (subscriber_ < 0) {
+      const dds_entity_t rc = subscriber_;
+      subscriber_ = 0;
+      throw TransportError(DdsError("cannot create a subscriber in partition " + partition, rc));
+    }
+    parent = subscriber_;
+  }
+  dds_qos_t* q = ReaderQos(id, role);
+  reader_ = dds_create_reader(parent, participant.Topic(id), q, nullptr);
+  dds_delete_qos(q);
+  if (reader_ < 0) {
+    const dds_entity_t rc = reader_;
+    reader_ = 0;
+    if (subscriber_ > 0) dds_delete(subscriber_);
+    subscriber_ = 0;
+    throw TransportError(DdsError("cannot create a reader on " + name +
+                                      (partition.empty() ? "" : " in partition " + partition),
+                                  rc));
+  }
   waitset_ = dds_create_waitset(participant.handle());
   if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset for " + name, waitset_));
   condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
@@ -308,6 +355,7 @@ RawReader::~RawReader() {
   if (waitset_ > 0) dds_delete(waitset_);
   if (condition_ > 0) dds_delete(condition_);
   if (reader_ > 0) dds_delete(reader_);
+  if (subscriber_ > 0) dds_delete(subscriber_);
 }
 
 bool RawReader::Wait(std::chrono::nanoseconds timeout) {

@@ -2,6 +2,7 @@
 
 #include <array>
 #include <stdexcept>
+#include <string>
 
 #include "vdyn/base/hash.h"
 #include "vdyn/base/limits.h"
@@ -98,6 +99,17 @@ dds_qos_t* ReaderQos(TopicId id, ReaderRole role) {
     // same writers.
     dds_qset_history(q, DDS_HISTORY_KEEP_LAST, limits::kRecorderHistoryDepth);
   }
+  return q;
+}
+
+std::string VehiclePartition(std::uint32_t vehicle_id) {
+  return "vdyn.vehicle." + std::to_string(vehicle_id);
+}
+
+dds_qos_t* PartitionQos(const std::string& partition) {
+  dds_qos_t* q = dds_create_qos();
+  const char* names[] = {partition.c_str()};
+  dds_qset_partition(q, 1, names);
   return q;
 }
 

@@ -7,8 +7,20 @@ using transport::TopicId;
 SessionView::SessionView(transport::Participant& participant, Topics topics) {
   waitset_ = std::make_unique<transport::Waitset>(participant);
   if (topics.states) {
-    states_ = std::make_unique<transport::Reader<pb::VehicleState>>(participant, TopicId::kState,
-                                                                    &drops_);
+    if (topics.only_vehicle) {
+      try {
+        states_ = std::make_unique<transport::Reader<pb::VehicleState>>(
+            participant, TopicId::kState, &drops_, transport::ReaderRole::kDefault,
+            transport::VehiclePartition(*topics.only_vehicle));
+      } catch (const transport::TransportError& e) {
+        one_vehicle_fallback_ = e.what();
+        filter_vehicle_ = topics.only_vehicle;
+      }
+    }
+    if (!states_) {
+      states_ = std::make_unique<transport::Reader<pb::VehicleState>>(participant, TopicId::kState,
+                                                                      &drops_);
+    }
     waitset_->Attach(*states_);
   }
   if (topics.params) {
@@ -69,6 +81,7 @@ int SessionView::Poll() {
   if (states_) {
     n += states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
       if (info.key != s.vehicle_id()) return;
+      if (filter_vehicle_ && s.vehicle_id() != *filter_vehicle_) return;
       Vehicle& v = vehicles_[s.vehicle_id()];
       v.state = s;
       v.received = base::MonotonicNow();

@@ -22,6 +22,7 @@
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/state_writers.h"
 #include "vdyn/world.pb.h"
 
 namespace vdyn::recorder {
@@ -131,8 +132,10 @@ class Player {
   std::uint64_t last_status_ = 0;
   // DDS.
   std::unique_ptr<transport::Participant> participant_;
-  std::map<TopicId, std::unique_ptr<transport::RawWriter>> writers_;
   transport::DropCounters drops_;
+  std::map<TopicId, std::unique_ptr<transport::RawWriter>> writers_;  // every topic but states
+  // States: to everyone, and to a vehicle's partition while one-vehicle readers read there.
+  std::unique_ptr<transport::StateWriters> states_;
   std::unique_ptr<transport::Reader<pb::ControlRequest>> control_;
   std::unique_ptr<transport::Writer<pb::ControlReply>> replies_;
   // What it is, once a second on vdyn/diagnostics: a player (mode "playback"), of which
@@ -252,6 +255,21 @@ void Player::PublishLatched(std::uint64_t pos) {
 void Player::Publish(const mcap::Message& m, bool latched) {
   const auto it = channels_.find(m.channel_id);
   if (it == channels_.end() || !it->second.play || (it->second.repeat && !latched)) return;
+  if (it->second.topic == TopicId::kState) {
+    if (!states_) {
+      states_ = std::make_unique<transport::StateWriters>(
+          *participant_, drops_,
+          transport::StateWriters::Options{.sending = transport::Sending::kEach});
+    }
+    const bool ok = states_->WriteBytes(it->second.key, m.data);
+    states_->Flush();  // creates a new vehicle's own writer
+    if (!ok) {
+      drops_.Count("write failed on vdyn/state", states_->last_error());
+      return;
+    }
+    ++sent_;
+    return;
+  }
   auto& w = writers_[it->second.topic];
   if (!w) w = std::make_unique<transport::RawWriter>(*participant_, it->second.topic);
   if (!w->WriteBytes(it->second.key, m.data)) {
@@ -413,7 +431,16 @@ int Player::Run(const std::atomic<bool>& stop) {
   // Writers first: readers discover them while we look for a live server, so the first states
   // of the playback are not sent before anyone listens.
   for (const auto& [id, ch] : channels_) {
-    if (ch.play && !writers_[ch.topic]) {
+    if (!ch.play) continue;
+    if (ch.topic == TopicId::kState) {
+      if (!states_) {
+        states_ = std::make_unique<transport::StateWriters>(
+            *participant_, drops_,
+            transport::StateWriters::Options{.sending = transport::Sending::kEach});
+      }
+      // The vehicle's own writer now: one-vehicle readers match it before the first state.
+      states_->Prepare(ch.key);
+    } else if (!writers_[ch.topic]) {
       writers_[ch.topic] = std::make_unique<transport::RawWriter>(*participant_, ch.topic);
     }
   }

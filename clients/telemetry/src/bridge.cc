@@ -10,8 +10,9 @@
 namespace vdyn::telemetry {
 namespace {
 
-client::SessionView::Topics StateAndParams() {
+client::SessionView::Topics StateAndParams(std::uint32_t vehicle_id) {
   client::SessionView::Topics t;
+  t.only_vehicle = vehicle_id;  // its partition: the other vehicles' states are not sent here
   t.states = true;
   t.params = true;  // which dash lights the car has
   t.world = false;  // worlds can be large and say nothing a dashboard shows
@@ -29,7 +30,7 @@ std::string Destinations(const UdpSender* s) {
 }  // namespace
 
 Bridge::Bridge(transport::Participant& participant, BridgeConfig config)
-    : config_(std::move(config)), view_(participant, StateAndParams()) {
+    : config_(std::move(config)), view_(participant, StateAndParams(config_.vehicle_id)) {
   outsim_.name = "OutSim";
   outsim_.hz = config_.outsim_hz;
   if (!config_.outsim.empty()) outsim_.sender = std::make_unique<UdpSender>(config_.outsim);
@@ -85,6 +86,10 @@ void Bridge::Run(const std::atomic<bool>& stop, const std::function<void(const s
   if (!gauge.empty()) streams += (streams.empty() ? "" : "; ") + gauge;
   say(fmt::format("vdyn-telemetry: vehicle {}: {}; waiting for its states", config_.vehicle_id,
                   streams));
+  if (!view_.one_vehicle_fallback().empty()) {
+    say(fmt::format("vdyn-telemetry: reading every vehicle's states ({})",
+                    view_.one_vehicle_fallback()));
+  }
   if (outsim_.sender) outsim_.thread = std::thread([this] { StreamLoop(outsim_, true); });
   if (outgauge_.sender) outgauge_.thread = std::thread([this] { StreamLoop(outgauge_, false); });
 

@@ -13,8 +13,12 @@ DdsLink::DdsLink(transport::Participant& participant, std::uint32_t vehicle_id,
                                                      .params = true,
                                                      .world = false,
                                                      .diagnostics = false,
-                                                     .inputs = false}),
+                                                     .inputs = false,
+                                                     .only_vehicle = vehicle_id}),
       control_(participant, source_id) {
+  if (!view_.one_vehicle_fallback().empty()) {
+    spdlog::warn("vdyn-input: reading every vehicle's states ({})", view_.one_vehicle_fallback());
+  }
   worker_ = std::thread([this] { ResetWorker(); });
 }
 

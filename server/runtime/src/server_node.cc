@@ -68,10 +68,13 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   }
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
-  // 64 steps of every vehicle it starts with (at least 512 frames): the writer thread may stall
-  // for tens of ms while a session starts (discovery, the world, every vehicle's parameters).
+  // 32 steps of as many vehicles as it may run (at least 512 frames): the writer thread may
+  // stall for tens of ms while a session starts (discovery, the world, every vehicle's
+  // parameters, the vehicles' own state writers).
   states_ = std::make_unique<StateOutbox>(
-      participant_, drops_, std::max<std::size_t>(512, 64 * options_.vehicle_ids.size()));
+      participant_, drops_,
+      std::max<std::size_t>(
+          512, 32 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)));
   state_sink_ = [this](std::uint32_t id, const pb::VehicleState& s) { states_->Push(id, s); };
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(

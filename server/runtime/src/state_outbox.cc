@@ -4,9 +4,7 @@ namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
                          std::size_t frames)
-    : writer_(participant, transport::TopicId::kState, 0, transport::Sending::kBatched),
-      drops_(drops),
-      frames_(frames) {
+    : writer_(participant, drops), drops_(drops), frames_(frames) {
   drop_full_ = drops_.Register("state queue full, state not sent");
   drop_large_ = drops_.Register("state larger than a frame, not sent");
   drop_write_ = drops_.Register("write failed on vdyn/state");

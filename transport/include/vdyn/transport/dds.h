@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <functional>
@@ -132,11 +133,13 @@ class ParticipantReader {
 enum class Sending { kEach, kBatched };
 
 // Writes protobuf messages on one topic. Serialises into a buffer it keeps between writes (no
-// allocation once the buffer has grown to the message's size).
+// allocation once the buffer has grown to the message's size). With a `partition` the writer
+// lives in that partition (a publisher of its own) and only readers there match it; without,
+// in the default partition.
 class RawWriter {
  public:
   RawWriter(Participant& participant, TopicId id, std::int32_t ownership_strength = 0,
-            Sending sending = Sending::kEach);
+            Sending sending = Sending::kEach, const std::string& partition = {});
   ~RawWriter();
   RawWriter(const RawWriter&) = delete;
   RawWriter& operator=(const RawWriter&) = delete;
@@ -150,6 +153,9 @@ class RawWriter {
   void Flush();
   // Number of readers matched right now (0 when the status cannot be read; last_error() says).
   std::uint32_t MatchedReaders();
+  // Whether a reader is matched, as a publication-matched listener last set it: an atomic load,
+  // no DDS call (for a hot thread that writes only while someone reads).
+  bool HasReaders() const { return matched_.load(std::memory_order_relaxed) > 0; }
   const std::string& last_error() const { return last_error_; }
   dds_entity_t handle() const { return writer_; }
   TopicId topic() const { return id_; }
@@ -159,7 +165,9 @@ class RawWriter {
  private:
   TopicId id_;
   Sending sending_ = Sending::kEach;
+  dds_entity_t publisher_ = 0;  // with a partition
   dds_entity_t writer_ = 0;
+  std::atomic<std::uint32_t> matched_{0};
   std::string buffer_;
   std::string last_error_;
 };
@@ -181,10 +189,14 @@ struct RawSample {
 // Reads one topic. Each sample is checked - envelope type name, payload size, protobuf parse,
 // finite numbers, string lengths - and one that fails is dropped and counted in `drops` with its
 // kind; the rest reach the caller.
+//
+// With a `partition` the reader lives there (a subscriber of its own) and receives only what
+// writers in that partition send: TopicId::kState in VehiclePartition(id) is one vehicle's states,
+// filtered before they are sent, not after they arrive.
 class RawReader {
  public:
   RawReader(Participant& participant, TopicId id, DropCounters* drops,
-            ReaderRole role = ReaderRole::kDefault);
+            ReaderRole role = ReaderRole::kDefault, const std::string& partition = {});
   ~RawReader();
   RawReader(const RawReader&) = delete;
   RawReader& operator=(const RawReader&) = delete;
@@ -239,6 +251,7 @@ class RawReader {
   bool Decode(const RawSample& raw, google::protobuf::Message& scratch);
 
   TopicId id_;
+  dds_entity_t subscriber_ = 0;  // with a partition
   dds_entity_t reader_ = 0;
   dds_entity_t waitset_ = 0;
   dds_entity_t condition_ = 0;

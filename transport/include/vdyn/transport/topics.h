@@ -48,6 +48,14 @@ enum class ReaderRole { kDefault, kRecorder };
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength = 0);
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role = ReaderRole::kDefault);
 
+// The partition of one vehicle's own state writer, "vdyn.vehicle.<id>": a reader that follows one
+// vehicle subscribes there and receives that vehicle's states and no others. Everything else,
+// and every state too, travels in the default partition (docs/topics.md, "Partitions").
+std::string VehiclePartition(std::uint32_t vehicle_id);
+// The QoS of a publisher or subscriber whose writers or readers live in `partition` (for use
+// with dds_create_publisher/subscriber; the caller deletes it with dds_delete_qos).
+dds_qos_t* PartitionQos(const std::string& partition);
+
 // The envelope key of a server's own topics (world, diagnostics): vdyn/base/hash.h's ServerKey.
 std::uint32_t ServerKey(const std::string& server_id);
 // The spec of the topic named `name` ("vdyn/state"), or nullptr.

@@ -30,6 +30,10 @@ class SessionView {
     bool world = true;
     bool diagnostics = true;
     bool inputs = false;
+    // States of this vehicle only, read in its partition (transport::VehiclePartition): the
+    // other vehicles' states are not sent here at all, so a client that follows one vehicle pays
+    // for one whatever the number of vehicles. Without it, every vehicle's states.
+    std::optional<std::uint32_t> only_vehicle;
   };
   struct Vehicle {
     pb::VehicleState state;                 // the newest
@@ -65,6 +69,10 @@ class SessionView {
   // Increases each time a world arrives (a viewer rebuilds its meshes when it changes).
   std::uint64_t world_version() const { return world_version_; }
   transport::DropCounters& drops() { return drops_; }
+  // With Topics::only_vehicle: empty when the states are read in the vehicle's partition; else
+  // why that reader could not be created (e.g. DDS Security permissions without the partition),
+  // and every vehicle's states are read and the others' dropped here.
+  const std::string& one_vehicle_fallback() const { return one_vehicle_fallback_; }
 
  private:
   transport::DropCounters drops_;
@@ -78,6 +86,8 @@ class SessionView {
   std::map<std::string, pb::WorldDescription> worlds_;
   std::map<std::string, pb::Diagnostics> diagnostics_;
   std::uint64_t world_version_ = 0;
+  std::optional<std::uint32_t> filter_vehicle_;  // the fallback: drop other vehicles' states
+  std::string one_vehicle_fallback_;
 };
 
 }  // namespace vdyn::client

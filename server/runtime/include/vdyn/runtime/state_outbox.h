@@ -1,8 +1,9 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
 // serialised sample, an instance lookup), so the loop serialises each state into a preallocated
 // frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
-// effort, keep last 1), batched: a step's states leave together. The loop neither allocates nor
-// blocks; a full queue drops the state and counts it.
+// effort, keep last 1), batched: a step's states leave together. A vehicle's state also goes to
+// its own partition while someone reads there (transport/state_writers.h). The loop neither
+// allocates nor blocks; a full queue drops the state and counts it.
 #pragma once
 
 #include <array>
@@ -15,6 +16,7 @@
 #include "vdyn/base/spsc_queue.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/state_writers.h"
 
 namespace vdyn {
 
@@ -49,7 +51,7 @@ class StateOutbox {
   };
   void WriterLoop();
 
-  transport::Writer<pb::VehicleState> writer_;
+  transport::StateWriters writer_;  // all vehicles batched; a vehicle's partition while read
   transport::DropCounters& drops_;
   int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1;
   base::SpscQueue<Frame> frames_;

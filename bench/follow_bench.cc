@@ -1,0 +1,215 @@
+// follow_bench: what a client that follows one vehicle costs, and what the server's 1 kHz loop
+// thread costs, against the number of vehicles the server runs (issue 19: a reader pays only for
+// what it reads; 256 vehicles per server).
+//
+// For each vehicle count N (1, 16, 64, 256) and each run: a real-time vdyn-server on `flat` with
+// vehicles 1..N (--max-vehicles 256); then, one after another and each alone with the server,
+//  - the one-vehicle client: `vdyn-input play demo --clock wall --loop` driving vehicle 1 at
+//    1 kHz (it reads vehicle 1's states in its partition, SessionView::Topics::only_vehicle),
+//  - the peer: the same 1 kHz client loop reading every vehicle's states (a SessionView without
+//    only_vehicle, as vdyn-input read before; this binary with --all-reader),
+// each process's CPU (user + system, /proc/PID/stat) over `seconds` after a 3 s warm-up, and the
+// server's loop thread (its SCHED_FIFO thread, /proc/PID/task/TID/stat) and whole process over the
+// one-vehicle client's window. Medians over the runs; the load average is printed with each run.
+//
+// Usage: follow_bench [seconds=10] [runs=3] [counts=1,16,64,256]
+#include <signal.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <map>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "child.h"
+#include "vdyn/base/time.h"
+#include "vdyn/client/loop.h"
+#include "vdyn/client/session_view.h"
+#include "vdyn/transport/dds.h"
+
+namespace {
+
+using vdyn::base::MonotonicNow;
+using vdyn::bench::Median;
+using vdyn::bench::ProcessCpuSeconds;
+using vdyn::bench::Spawn;
+using vdyn::bench::WaitPid;
+
+vdyn::base::Nanos Secs(double s) {
+  return vdyn::base::Nanos{static_cast<std::int64_t>(s * 1e9)};
+}
+
+// The peer: a 1 kHz client loop that reads every vehicle's states (and keeps vehicle 1's).
+int AllReader(std::uint32_t domain, double seconds) {
+  vdyn::transport::Participant participant(domain);
+  vdyn::client::SessionView view(participant, {.states = true,
+                                               .params = false,
+                                               .world = false,
+                                               .diagnostics = false,
+                                               .inputs = false,
+                                               .only_vehicle = std::nullopt});
+  vdyn::client::FixedRateLoop loop(vdyn::base::Milliseconds(1));
+  const auto end = MonotonicNow() + Secs(seconds);
+  while (MonotonicNow() < end) {
+    loop.Wait();
+    view.Poll();
+  }
+  const auto* v = view.vehicle(1);
+  std::printf("all-reader: %zu vehicles, %llu states of vehicle 1\n", view.vehicles().size(),
+              static_cast<unsigned long long>(v != nullptr ? v->states : 0));
+  return 0;
+}
+
+// utime + stime of one thread, and its scheduling policy (field 41; 1 = SCHED_FIFO).
+bool ThreadStat(pid_t pid, const std::string& tid, double& cpu_s, int& policy) {
+  std::FILE* file = std::fopen(fmt::format("/proc/{}/task/{}/stat", pid, tid).c_str(), "r");
+  if (file == nullptr) return false;
+  char buf[2048];
+  const std::size_t got = std::fread(buf, 1, sizeof buf - 1, file);
+  std::fclose(file);
+  const std::string all(buf, got);
+  const std::size_t close = all.rfind(')');
+  if (close == std::string::npos) return false;
+  std::istringstream rest(all.substr(close + 2));
+  std::vector<std::string> f;  // fields from 3 (state) on
+  for (std::string x; rest >> x;) f.push_back(x);
+  if (f.size() < 39) return false;
+  const double tick = static_cast<double>(sysconf(_SC_CLK_TCK));
+  cpu_s = (std::stod(f[11]) + std::stod(f[12])) / tick;  // fields 14, 15
+  policy = std::stoi(f[38]);                             // field 41
+  return true;
+}
+
+// The server's 1 kHz loop: its SCHED_FIFO thread, else its main thread (ServerNode::Run runs the
+// loop on the thread that calls it, and sets SCHED_FIFO when it is permitted).
+std::string LoopThread(pid_t pid) {
+  const std::string dir = fmt::format("/proc/{}/task", pid);
+  for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    double cpu = 0;
+    int policy = 0;
+    if (ThreadStat(pid, e.path().filename().string(), cpu, policy) && policy == 1) {
+      return e.path().filename().string();
+    }
+  }
+  return std::to_string(pid);
+}
+
+double ThreadCpu(pid_t pid, const std::string& tid) {
+  double cpu = -1;
+  int policy = 0;
+  if (tid.empty() || !ThreadStat(pid, tid, cpu, policy)) return -1;
+  return cpu;
+}
+
+double LoadAverage() {
+  double l = 0;
+  if (std::FILE* f = std::fopen("/proc/loadavg", "r"); f != nullptr) {
+    if (std::fscanf(f, "%lf", &l) != 1) l = 0;
+    std::fclose(f);
+  }
+  return l;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc >= 4 && std::string(argv[1]) == "--all-reader") {
+    return AllReader(static_cast<std::uint32_t>(std::atoi(argv[2])), std::atof(argv[3]));
+  }
+  const double seconds = argc > 1 ? std::atof(argv[1]) : 10.0;
+  const int runs = argc > 2 ? std::atoi(argv[2]) : 3;
+  std::vector<int> counts = {1, 16, 64, 256};
+  if (argc > 3) {
+    counts.clear();
+    std::istringstream in(argv[3]);
+    for (std::string x; std::getline(in, x, ',');) counts.push_back(std::atoi(x.c_str()));
+  }
+  if (std::getenv("CYCLONEDDS_URI") == nullptr) {
+    setenv("CYCLONEDDS_URI",
+           "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
+           "<Discovery><MaxAutoParticipantIndex>64</MaxAutoParticipantIndex></Discovery>",
+           1);
+  }
+  const std::string tmp = fmt::format("/tmp/vdyn-follow-bench-{}", getpid());
+  const double warmup = 3.0;
+  struct Figures {
+    std::vector<double> client, peer, loop, server;
+  };
+  std::map<int, Figures> figures;
+  for (int run = 0; run < runs; ++run) {
+    for (int n : counts) {
+      const std::uint32_t domain = 150 + static_cast<std::uint32_t>(getpid() + run * 7 + n) % 60;
+      const std::string dom = std::to_string(domain);
+      std::string ids;
+      for (int i = 1; i <= n; ++i) {
+        if (i > 1) ids += ',';
+        ids += std::to_string(i);
+      }
+      const double server_s = 2 * (warmup + seconds) + 20;
+      const pid_t server = Spawn(
+          {VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status", "--max-vehicles",
+           "256", "--vehicle-ids", ids, "--duration", std::to_string(server_s)},
+          fmt::format("{}-server-{}-{}.log", tmp, n, run));
+      vdyn::base::SleepUntil(MonotonicNow() + Secs(2.0));
+      const std::string loop_tid = LoopThread(server);
+      // The one-vehicle client, with the server's loop and process over its window.
+      const pid_t client = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "5", "--wait",
+                                  "30", "play", "demo", "--clock", "wall", "--loop"},
+                                 fmt::format("{}-client-{}-{}.log", tmp, n, run));
+      vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
+      const double c0 = ProcessCpuSeconds(client), l0 = ThreadCpu(server, loop_tid),
+                   s0 = ProcessCpuSeconds(server);
+      const auto t0 = MonotonicNow();
+      vdyn::base::SleepUntil(t0 + Secs(seconds));
+      const double wall = (MonotonicNow() - t0).seconds();
+      const double c1 = ProcessCpuSeconds(client), l1 = ThreadCpu(server, loop_tid),
+                   s1 = ProcessCpuSeconds(server);
+      kill(client, SIGTERM);
+      WaitPid(client);
+      // The peer: every vehicle's states.
+      const pid_t peer = Spawn({argv[0], "--all-reader", dom, std::to_string(warmup + seconds + 1)},
+                               fmt::format("{}-peer-{}-{}.log", tmp, n, run));
+      vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
+      const double p0 = ProcessCpuSeconds(peer);
+      const auto tp = MonotonicNow();
+      vdyn::base::SleepUntil(tp + Secs(seconds));
+      const double pwall = (MonotonicNow() - tp).seconds();
+      const double p1 = ProcessCpuSeconds(peer);
+      WaitPid(peer);
+      kill(server, SIGTERM);
+      WaitPid(server);
+      Figures& f = figures[n];
+      f.client.push_back(100 * (c1 - c0) / wall);
+      f.peer.push_back(100 * (p1 - p0) / pwall);
+      f.loop.push_back(loop_tid.empty() ? -1 : 100 * (l1 - l0) / wall);
+      f.server.push_back(100 * (s1 - s0) / wall);
+      std::printf(
+          "run %d, %3d vehicles (load %.1f): one-vehicle client %.2f %%, all-vehicles reader "
+          "%.2f %%, server loop thread %.2f %%, server %.2f %%\n",
+          run + 1, n, LoadAverage(), f.client.back(), f.peer.back(), f.loop.back(),
+          f.server.back());
+      std::fflush(stdout);
+    }
+  }
+  std::printf("\nmedians of %d runs, %% of one core:\n", runs);
+  std::printf(
+      "| vehicles | one-vehicle client | all-vehicles reader (peer) | server loop thread | "
+      "server |\n| --- | --- | --- | --- | --- |\n");
+  for (int n : counts) {
+    const Figures& f = figures[n];
+    std::printf("| %d | %.2f | %.2f | %.2f | %.2f |\n", n, Median(f.client), Median(f.peer),
+                Median(f.loop), Median(f.server));
+  }
+  const double c1 = Median(figures[counts.front()].client);
+  for (int n : counts) {
+    std::printf("one-vehicle client at %d vehicles / at %d: %.2fx\n", n, counts.front(),
+                Median(figures[n].client) / c1);
+  }
+  return 0;
+}
