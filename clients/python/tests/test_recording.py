@@ -7,31 +7,12 @@ import numpy as np
 import pytest
 
 import vdyn
-from conftest import RECORDER, SERVER
+from conftest import RECORDER
 
 
 def read_csv(path):
     import pandas as pd
     return pd.read_csv(path, float_precision="round_trip")
-
-
-@pytest.fixture
-def recorded_run(start, domain, tmp_path):
-    out = tmp_path / "run.mcap"
-    rec = start([RECORDER, "record", str(out), "--domain", str(domain), "--status"], "recorder")
-    server = start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain)],
-                   "server")
-    assert rec.wait_for(["recording world", "hearing 1 writer(s) on vdyn/state",
-                         "hearing 1 writer(s) on vdyn/events"]), rec.log()
-    sim = vdyn.Client(domain=domain, timeout=30)
-    sim.reset(1)
-    got = []
-    for k in range(20):  # a driver who changes the input every 100 steps
-        inp = vdyn.make_input(steer=0.01 * (k % 5), throttle=0.2 + 0.02 * k, vehicle_id=1)
-        got.append(sim.step(100, inp)[1])
-    assert server.stop(15) == 0, server.log()
-    assert rec.stop(2) == 0, rec.log()
-    return out, got
 
 
 def test_a_recording_equals_the_recorders_export_and_the_lockstep_states(recorded_run, tmp_path):

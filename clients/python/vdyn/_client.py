@@ -2,6 +2,7 @@
 
 import math
 import os
+import time
 
 from . import _vdyn
 from . import control_pb2, input_pb2, vehicle_params_pb2, world_pb2, exact_pb2
@@ -125,7 +126,9 @@ class Client:
         data = _vdyn.pose_request("spawn", vehicle_id, x, y, yaw, speed,
                                   None if p is None else p.SerializeToString())
         req = control_pb2.ControlRequest.FromString(data)
-        return self._request(req, f"spawn of vehicle {vehicle_id}", timeout)
+        reply = self._request(req, f"spawn of vehicle {vehicle_id}", timeout)
+        self._wait_params(vehicle_id, p or vehicle_params_pb2.VehicleParams(), timeout)
+        return reply
 
     def despawn(self, vehicle_id, timeout=None):
         """Removes a vehicle."""
@@ -156,10 +159,32 @@ class Client:
 
     def set_params(self, vehicle_id, params, timeout=None):
         """Changes parameters (a vdyn.pb.VehicleParams or a dict: partial, merged over the
-        vehicle's current ones at a step boundary)."""
+        vehicle's current ones at a step boundary). Returns once the server accepted them and
+        publishes them on vdyn/params (so params() shows them)."""
+        want = _params_message(params)
         req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
-        req.set_params.params.CopyFrom(_params_message(params))
-        return self._request(req, f"parameter change of vehicle {vehicle_id}", timeout)
+        req.set_params.params.CopyFrom(want)
+        reply = self._request(req, f"parameter change of vehicle {vehicle_id}", timeout)
+        self._wait_params(vehicle_id, want, timeout)
+        return reply
+
+    def _wait_params(self, vehicle_id, want, timeout):
+        """Waits until vdyn/params shows every field of `want` (the server publishes a change
+        a moment after its reply)."""
+        from ._errors import TimeoutError
+        t = self._t(timeout)
+        deadline = time.monotonic() + t
+        while True:
+            current = self.params(vehicle_id, max(0.0, deadline - time.monotonic()))
+            merged = vehicle_params_pb2.VehicleParams()
+            merged.CopyFrom(current)
+            merged.MergeFrom(want)
+            if merged == current:
+                return current
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f"the parameters of vehicle {vehicle_id} the server accepted "
+                                   f"did not appear on vdyn/params within {t:g} s")
+            time.sleep(0.005)  # vdyn/params has no per-change event to wait on
 
     def restore(self, vehicle_id, state, params=None, input=None, branched_from="", timeout=None):
         """Brings a vehicle back to an exact state (vdyn.pb.ExactState, e.g. from a recording's
