@@ -359,6 +359,11 @@ void Subscription::Run() {
   }
 }
 
+std::uint64_t Subscription::dds_lost() {
+  std::lock_guard lock(mutex_);
+  return source_.Lost();
+}
+
 std::size_t Subscription::queued() {
   std::lock_guard lock(mutex_);
   return queue_.rows() - head_;

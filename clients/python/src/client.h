@@ -126,6 +126,8 @@ class Subscription {
   // overwrote them before they were taken, or steps missing in the sequence.
   std::uint64_t overflowed() const { return overflowed_.load(); }
   std::uint64_t missing_steps() const { return missing_.load(); }
+  // States DDS reports it dropped for this reader (its history overwritten before a take).
+  std::uint64_t dds_lost();
   std::size_t queued();
 
  private:

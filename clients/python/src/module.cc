@@ -211,6 +211,7 @@ PYBIND11_MODULE(_vdyn, m) {
       .def_property_readonly("received", &Subscription::received)
       .def_property_readonly("overflowed", &Subscription::overflowed)
       .def_property_readonly("missing_steps", &Subscription::missing_steps)
+      .def_property_readonly("dds_lost", &Subscription::dds_lost)
       .def_property_readonly("queued", &Subscription::queued);
 
   py::class_<RecordingReader>(m, "RecordingReader")

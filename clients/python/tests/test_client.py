@@ -76,6 +76,11 @@ def test_control_requests_and_refusals_carry_the_servers_reason(lockstep_server,
     assert sim.params(2).mass == 1500.0  # set_params returns once vdyn/params shows it
     with pytest.raises(vdyn.RefusedError, match="mass"):
         sim.set_params(2, {"mass": -1.0})
+    with pytest.raises(vdyn.RefusedError) as nan:
+        sim.set_params(2, vdyn.pb.VehicleParams(mass=float("nan")))
+    assert nan.value.reason
+    with pytest.raises(ValueError, match="massive"):
+        sim.set_params(2, {"massive": 1.0})
     sim.reset(2)
     back = sim.step(1)[2]
     assert back.x_m[0] == pytest.approx(0.0, abs=0.05)

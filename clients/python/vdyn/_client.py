@@ -39,7 +39,10 @@ def _params_message(params):
         return params
     if isinstance(params, dict):
         from google.protobuf import json_format
-        return json_format.ParseDict(params, vehicle_params_pb2.VehicleParams())
+        try:
+            return json_format.ParseDict(params, vehicle_params_pb2.VehicleParams())
+        except json_format.ParseError as e:
+            raise ValueError(f"bad vehicle parameters: {e}") from None
     raise TypeError("params must be a vdyn.pb.VehicleParams or a dict of its fields")
 
 
@@ -331,6 +334,11 @@ class Subscription:
     @property
     def missing_steps(self):
         return self._s.missing_steps
+
+    @property
+    def dds_lost(self):
+        """States DDS reports it dropped for this subscription's reader."""
+        return self._s.dds_lost
 
     @property
     def queued(self):
