@@ -36,5 +36,6 @@ run() {  # prints the command, then runs it
   run "$bin/input_bench" 30
   run "$bin/recorder_bench" 30 3
   run "$bin/viewer_bench" 3 300
+  PYTHONPATH=build/release/clients/python/package run /usr/bin/python3 bench/python_bench.py build/release 60 600
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"
 echo "results written to $out"
