@@ -6,6 +6,7 @@
 
 #include "vdyn/base/limits.h"
 #include "vdyn/client/loop.h"
+#include "vdyn/io/maneuver.h"
 
 namespace vdyn::python {
 namespace {
@@ -208,6 +209,38 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     done += chunk;
   }
   for (auto& [id, table] : out) table.SortByStep();
+  return out;
+}
+
+std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneuver,
+                                                        std::uint32_t vehicle_id, double duration_s,
+                                                        const std::string& source_id,
+                                                        double timeout_s) {
+  const Maneuver m = Maneuver::Named(maneuver);  // ManeuverError names the file, line and column
+  if (!std::isfinite(duration_s)) throw std::invalid_argument("duration must be finite");
+  const double h = static_cast<double>(step_ns_) * 1e-9;  // as the simulator computes its step
+  const double end = duration_s > 0 ? duration_s : m.end_time();
+  const auto steps = static_cast<std::uint64_t>(std::llround(end / h));
+  auto input_at = [&](std::uint64_t k) {
+    pb::DriverInput in;
+    in.set_vehicle_id(vehicle_id);
+    in.set_source_id(source_id);
+    client::FillFromManeuver(m.At(static_cast<double>(k) * h), in);
+    return in;
+  };
+  std::map<std::uint32_t, StateTable> out;
+  std::uint64_t k = 0;
+  while (k < steps) {
+    const pb::DriverInput in = input_at(k);
+    const std::string bytes = in.SerializeAsString();
+    std::uint32_t run = 1;  // the steps from k on whose input is the same
+    while (k + run < steps && run < kInputRepeatSteps &&
+           input_at(k + run).SerializeAsString() == bytes) {
+      ++run;
+    }
+    for (auto& [id, table] : Step(run, &in, timeout_s)) out[id].Extend(table);
+    k += run;
+  }
   return out;
 }
 

@@ -63,6 +63,13 @@ class Client {
   // by default, replaces an input that is not renewed).
   std::map<std::uint32_t, StateTable> Step(std::uint32_t steps, const pb::DriverInput* input,
                                            double timeout_s);
+  // A maneuver (a CSV file as vdyn-server --batch reads it, or "demo") driven in lockstep for
+  // `duration_s` (<= 0: to its last row) from the vehicle's step on: at each step the input the
+  // maneuver gives at that step's time from the start, as the batch runner applies it; steps
+  // whose inputs are equal go in one request. Every vehicle's states of those steps.
+  std::map<std::uint32_t, StateTable> RunManeuver(const std::string& maneuver,
+                                                  std::uint32_t vehicle_id, double duration_s,
+                                                  const std::string& source_id, double timeout_s);
   // The newest state of a vehicle (waits up to timeout_s for a first one).
   StateTable Latest(std::uint32_t vehicle_id, double timeout_s);
 

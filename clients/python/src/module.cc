@@ -10,6 +10,7 @@
 #include "client.h"
 #include "recording_reader.h"
 #include "state_columns.h"
+#include "vdyn/io/maneuver.h"
 #include "vdyn/recorder/mcap.h"
 
 namespace py = pybind11;
@@ -85,6 +86,8 @@ PYBIND11_MODULE(_vdyn, m) {
     } catch (const mcap::McapError& e) {
       py::object cls = py::module_::import("vdyn._errors").attr("RecordingError");
       PyErr_SetObject(cls.ptr(), py::str(e.what()).ptr());
+    } catch (const ManeuverError& e) {
+      PyErr_SetString(PyExc_ValueError, e.what());
     } catch (const transport::TransportError& e) {
       py::object cls = py::module_::import("vdyn._errors").attr("TransportError");
       PyErr_SetObject(cls.ptr(), py::str(e.what()).ptr());
@@ -132,6 +135,18 @@ PYBIND11_MODULE(_vdyn, m) {
              }
              py::dict d;
              for (auto& [id, t] : out) d[py::int_(id)] = Table(std::move(t));
+             return d;
+           })
+      .def("run_maneuver",
+           [](Client& c, const std::string& maneuver, std::uint32_t id, double duration,
+              const std::string& source_id, double timeout) {
+             std::map<std::uint32_t, StateTable> out;
+             {
+               py::gil_scoped_release release;
+               out = c.RunManeuver(maneuver, id, duration, source_id, timeout);
+             }
+             py::dict d;
+             for (auto& [vid, t] : out) d[py::int_(vid)] = Table(std::move(t));
              return d;
            })
       .def("latest", [](Client& c, std::uint32_t id, double timeout) {

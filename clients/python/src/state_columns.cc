@@ -28,6 +28,14 @@ void StateTable::Append(const pb::VehicleState& s) {
   sim_time_ns.push_back(s.sim_time_ns());
 }
 
+void StateTable::Extend(const StateTable& more) {
+  values.insert(values.end(), more.values.begin(), more.values.end());
+  step.insert(step.end(), more.step.begin(), more.step.end());
+  state_hash.insert(state_hash.end(), more.state_hash.begin(), more.state_hash.end());
+  sim_time_ns.insert(sim_time_ns.end(), more.sim_time_ns.begin(), more.sim_time_ns.end());
+  log_time_ns.insert(log_time_ns.end(), more.log_time_ns.begin(), more.log_time_ns.end());
+}
+
 void StateTable::SortByStep() {
   if (std::is_sorted(step.begin(), step.end())) return;
   const std::size_t n = rows(), c = StateColumns().size();

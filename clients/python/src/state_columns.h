@@ -27,6 +27,7 @@ struct StateTable {
   void Append(const pb::VehicleState& s);
   std::size_t rows() const { return step.size(); }
   void Reserve(std::size_t n);
+  void Extend(const StateTable& more);  // appends its rows
   // Sorts the rows by step (a recording's states arrive in the order the recorder took them).
   void SortByStep();
 };

@@ -1,6 +1,7 @@
 """The vdyn package against a real vdyn-server: connect, control, lockstep, real time, driving."""
 
 import math
+import subprocess
 import time
 
 import numpy as np
@@ -124,3 +125,25 @@ def test_a_driver_drives_and_the_subscription_loses_no_state(realtime_server, do
         assert sub.missing_steps == 0 and sub.overflowed == 0
         drv.stop()
         assert drv.sent > 0 and drv.failed == 0
+
+
+def test_a_maneuver_in_lockstep_equals_the_servers_batch_run(start, domain, tmp_path):
+    from conftest import SERVER
+    maneuver = tmp_path / "drive.csv"
+    maneuver.write_text("t_s,steer_deg,throttle,brake\n0,0,0.7,0\n0.8,4,0.7,0\n1.6,-6,0.4,0\n"
+                        "2.2,0,0,0.5\n3,2,0.2,0\n")
+    batch_csv = tmp_path / "batch.csv"
+    subprocess.run([SERVER, "--batch", "--world", "flat", "--maneuver", str(maneuver),
+                    "--duration", "2.5", "--csv", str(batch_csv), "--quiet"], check=True,
+                   timeout=120)
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--world", "flat", "--domain",
+           str(domain)], "server")
+    sim = vdyn.Client(domain=domain, timeout=30)
+    s = sim.run_maneuver(maneuver, vehicle_id=1, duration=2.5)[1]
+    assert len(s) == 2500
+    batch = np.loadtxt(batch_csv, delimiter=",", skiprows=1)
+    # The batch writes a row per step and the final state: the first 2500 rows are these steps,
+    # equal to the last bit.
+    np.testing.assert_array_equal(s.values, batch[:2500])
+    with pytest.raises(ValueError, match="nope.csv"):
+        sim.run_maneuver(tmp_path / "nope.csv")

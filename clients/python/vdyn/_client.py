@@ -215,6 +215,19 @@ class Client:
                               self._t(timeout))
         return {vid: States(vid, t) for vid, t in tables.items()}
 
+    def run_maneuver(self, maneuver, vehicle_id=1, duration=None, source_id="python",
+                     timeout=None):
+        """A batch run in lockstep: the maneuver (a CSV file with the header
+        t_s,steer_deg,throttle,brake,cruise_kmh, or "demo") applied step by step from the
+        vehicle's present step for ``duration`` s (default: to its last row), the input at each
+        step exactly as ``vdyn-server --batch`` applies it. Returns {vehicle_id: States}. Reset or
+        spawn the vehicle first for a run from rest. A bad file raises ValueError naming the file,
+        line and column."""
+        tables = self._c.run_maneuver(str(maneuver), vehicle_id,
+                                      0.0 if duration is None else float(duration), source_id,
+                                      self._t(timeout))
+        return {vid: States(vid, t) for vid, t in tables.items()}
+
     # --- real time ----------------------------------------------------------------------------
     def latest(self, vehicle_id, timeout=None):
         """The newest state of a vehicle (States of one row)."""
