@@ -105,22 +105,29 @@ def realtime_server(start, domain):
     return start([SERVER, "--domain", str(domain), "--duration", "60"], "server")
 
 
-@pytest.fixture
-def recorded_run(start, domain, tmp_path):
+@pytest.fixture(scope="session")
+def recorded_run(tmp_path_factory):
     """A lockstep run of 2000 steps recorded by vdyn-recorder: (file, the States each step
-    call returned)."""
+    call returned). Made once for the tests that read it."""
+    tmp_path = tmp_path_factory.mktemp("recorded")
+    domain = fresh_domain()
     out = tmp_path / "run.mcap"
-    rec = start([RECORDER, "record", str(out), "--domain", str(domain), "--status"], "recorder")
-    server = start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain)],
-                   "server")
-    assert rec.wait_for(["recording world", "hearing 1 writer(s) on vdyn/state",
-                         "hearing 1 writer(s) on vdyn/events"]), rec.log()
-    sim = vdyn.Client(domain=domain, timeout=30)
-    sim.reset(1)
-    got = []
-    for k in range(20):  # a driver who changes the input every 100 steps
-        inp = vdyn.make_input(steer=0.01 * (k % 5), throttle=0.2 + 0.02 * k, vehicle_id=1)
-        got.append(sim.step(100, inp)[1])
-    assert server.stop(15) == 0, server.log()
-    assert rec.stop(2) == 0, rec.log()
+    rec = Proc([RECORDER, "record", str(out), "--domain", str(domain), "--status"],
+               str(tmp_path / "recorder.log"))
+    server = Proc([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain)],
+                  str(tmp_path / "server.log"))
+    try:
+        assert rec.wait_for(["recording world", "hearing 1 writer(s) on vdyn/state",
+                             "hearing 1 writer(s) on vdyn/events"]), rec.log()
+        sim = vdyn.Client(domain=domain, timeout=30)
+        sim.reset(1)
+        got = []
+        for k in range(20):  # a driver who changes the input every 100 steps
+            inp = vdyn.make_input(steer=0.01 * (k % 5), throttle=0.2 + 0.02 * k, vehicle_id=1)
+            got.append(sim.step(100, inp)[1])
+        assert server.stop(15) == 0, server.log()
+        assert rec.stop(2) == 0, rec.log()
+    finally:
+        server.stop()
+        rec.stop()
     return out, got
