@@ -16,6 +16,8 @@ build_packages=(
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
   libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
   clang libclang-rt-14-dev
+  python3 python3-dev pybind11-dev python3-numpy python3-protobuf python3-pytest
+  python3-pandas python3-matplotlib python3-venv python3-setuptools python3-pip
 )
 # The recorder's independent-reader test also needs Node.js with npm (it installs @mcap/core from
 # the npm registry); these machines come with Node.js 20.

@@ -1,0 +1,155 @@
+// The Python client's C++ side: a connection to one server on a DDS domain (world, vehicles,
+// control requests, lockstep steps with their states), a driver (input with a source id and an
+// ownership strength, once or at a fixed rate in the background) and a real-time subscription
+// (every state of one vehicle). Built only on the client layer: no physics, no server code.
+// Every wait is bounded and ends in TimeoutError naming what did not arrive.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "state_columns.h"
+#include "state_source.h"
+#include "vdyn/client/driver_input.h"
+#include "vdyn/client/session_view.h"
+#include "vdyn/control.pb.h"
+#include "vdyn/transport/control_client.h"
+#include "vdyn/transport/dds.h"
+
+namespace vdyn::python {
+
+struct ReplyInfo {
+  std::string server_id;
+  std::uint64_t applied_step = 0;
+  std::int64_t sim_time_ns = 0;
+};
+
+class Client {
+ public:
+  // Connects: waits up to `timeout_s` for a server (the one named `server_id`, or the first whose
+  // world arrives) to match this client's control writer and publish its world.
+  Client(std::uint32_t domain, const std::string& server_id, double timeout_s,
+         const std::string& client_id);
+  ~Client();
+
+  const std::string& server_id() const { return server_id_; }
+  std::uint32_t domain() const { return participant_.domain_id(); }
+  double timeout_s() const { return timeout_s_; }
+  // The server's world description, serialised (vdyn.pb.WorldDescription).
+  std::string WorldBytes();
+  // The vehicles of the server as this client knows them: the world's at the start, those this
+  // client spawned, restored or removed since, and any whose states a step delivered.
+  std::vector<std::uint32_t> Vehicles();
+  // A vehicle's parameters in effect, serialised (vdyn.pb.VehicleParams); waits for them.
+  std::string ParamsBytes(std::uint32_t vehicle_id, double timeout_s);
+
+  // Sends a request to this server and waits for its reply; throws TimeoutError without one in
+  // time and RefusedError with the server's reason when it is rejected. `what` names it.
+  ReplyInfo Request(pb::ControlRequest request, const std::string& what, double timeout_s);
+
+  // Lockstep: `steps` steps, `input` (when given) applied first; the states of every vehicle at
+  // every one of those steps. Requests go in chunks the server's state outbox holds whole; with
+  // an input, in chunks of at most 50 steps, each carrying it (the server's input watchdog, 100 ms
+  // by default, replaces an input that is not renewed).
+  std::map<std::uint32_t, StateTable> Step(std::uint32_t steps, const pb::DriverInput* input,
+                                           double timeout_s);
+  // A maneuver (a CSV file as vdyn-server --batch reads it, or "demo") driven in lockstep for
+  // `duration_s` (<= 0: to its last row) from the vehicle's step on: at each step the input the
+  // maneuver gives at that step's time from the start, as the batch runner applies it; steps
+  // whose inputs are equal go in one request. Every vehicle's states of those steps.
+  std::map<std::uint32_t, StateTable> RunManeuver(const std::string& maneuver,
+                                                  std::uint32_t vehicle_id, double duration_s,
+                                                  const std::string& source_id, double timeout_s);
+  // The newest state of a vehicle (waits up to timeout_s for a first one).
+  StateTable Latest(std::uint32_t vehicle_id, double timeout_s);
+
+  transport::Participant& participant() { return participant_; }
+
+ private:
+  void PollView();
+  std::string server_id_;
+  double timeout_s_;
+  std::mutex mutex_;
+  transport::Participant participant_;
+  transport::ControlClient control_;
+  client::SessionView view_;                     // world, params, diagnostics (no states)
+  std::unique_ptr<client::SessionView> latest_;  // states only, made by the first Latest()
+  StateSource states_;                           // every state, for lockstep
+  std::set<std::uint32_t> vehicles_;             // see Vehicles(); a step expects states of each
+  std::int64_t step_ns_ = 1'000'000;
+};
+
+// Driver input for one vehicle from one source with an ownership strength.
+class Driver {
+ public:
+  Driver(Client& client, std::uint32_t vehicle_id, const std::string& source_id,
+         std::int32_t strength);
+  ~Driver();
+  // Publishes once, now.
+  void Send(const pb::DriverInput& input);
+  // Publishes the current input at `rate_hz` from a thread of its own until Stop().
+  void Start(double rate_hz);
+  void Set(const pb::DriverInput& input);  // the input the background thread sends from now on
+  void Stop();
+  bool running() const { return running_.load(); }
+  std::uint64_t sent();
+  std::uint64_t failed() const { return failed_.load(); }
+  std::uint64_t skipped_ticks() const { return skipped_.load(); }
+  // Waits until the server's reader of vdyn/input has matched (input sent before may be lost).
+  bool WaitForServer(double timeout_s);
+
+ private:
+  std::mutex mutex_;
+  std::uint32_t vehicle_id_;
+  client::InputPublisher publisher_;
+  pb::DriverInput current_, sending_;
+  std::atomic<bool> running_{false};
+  std::atomic<std::uint64_t> failed_{0}, skipped_{0};
+  std::thread thread_;
+};
+
+// Every state of one vehicle as it arrives, taken by a thread of its own into a bounded queue.
+class Subscription {
+ public:
+  Subscription(Client& client, std::uint32_t vehicle_id, std::size_t capacity);
+  ~Subscription();
+  // The next state (one row); TimeoutError when none arrives within timeout_s.
+  StateTable Next(double timeout_s);
+  // Every state queued now (possibly none).
+  StateTable TakeAll();
+  void Close();
+  std::uint64_t received() const { return received_.load(); }
+  // States lost: the queue overflowed (the Python side fell behind by `capacity` states), DDS
+  // overwrote them before they were taken, or steps missing in the sequence.
+  std::uint64_t overflowed() const { return overflowed_.load(); }
+  std::uint64_t missing_steps() const { return missing_.load(); }
+  // States DDS reports it dropped for this reader (its history overwritten before a take).
+  std::uint64_t dds_lost();
+  std::size_t queued();
+
+ private:
+  void Run();
+  std::uint32_t vehicle_id_;
+  std::size_t capacity_;
+  StateSource source_;
+  std::mutex mutex_;
+  std::condition_variable ready_;
+  StateTable queue_;  // rows [head_, end)
+  std::size_t head_ = 0;
+  std::atomic<bool> stop_{false};
+  std::atomic<std::uint64_t> received_{0}, overflowed_{0}, missing_{0};
+  std::optional<std::uint64_t> last_step_;
+  std::thread thread_;
+};
+
+}  // namespace vdyn::python

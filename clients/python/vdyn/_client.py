@@ -1,0 +1,367 @@
+"""Connect to a vdyn server: world, vehicles, control requests, lockstep, real time, driving."""
+
+import math
+import os
+import time
+
+from . import _vdyn
+from . import control_pb2, input_pb2, vehicle_params_pb2, world_pb2, exact_pb2
+from ._states import States
+
+DEFAULT_TIMEOUT = 10.0
+
+
+def make_input(steer=0.0, throttle=0.0, brake=0.0, *, gear=0, buttons=0, clutch=0.0,
+               handbrake=0.0, cruise_kmh=None, steer_mode="road_wheel", vehicle_id=0,
+               source_id=""):
+    """A driver input (vdyn.pb.DriverInput): steer in rad (the road-wheel angle, or the
+    hand-wheel angle with steer_mode="hand_wheel"), throttle [-1, 1], brake [0, 1], gear (0
+    automatic, -1 reverse, 1..N), buttons (vdyn.pb.Button bits), cruise_kmh (a set speed switches
+    the speed control on)."""
+    modes = {"road_wheel": input_pb2.STEER_ROAD_WHEEL, "hand_wheel": input_pb2.STEER_HAND_WHEEL,
+             "hands_off": input_pb2.STEER_HANDS_OFF}
+    if steer_mode not in modes:
+        raise ValueError(f"steer_mode must be one of {sorted(modes)}, got {steer_mode!r}")
+    msg = input_pb2.DriverInput(vehicle_id=vehicle_id, source_id=source_id, steer=steer,
+                                throttle=throttle, brake=brake, gear=gear, buttons=buttons,
+                                clutch=clutch, handbrake=handbrake, steer_mode=modes[steer_mode])
+    if cruise_kmh is not None:
+        msg.cruise_on = True
+        msg.cruise_set_kmh = cruise_kmh
+    return msg
+
+
+def _params_message(params):
+    """VehicleParams from a message or a dict of its fields (nested dicts for wheels)."""
+    if params is None:
+        return None
+    if isinstance(params, vehicle_params_pb2.VehicleParams):
+        return params
+    if isinstance(params, dict):
+        from google.protobuf import json_format
+        try:
+            return json_format.ParseDict(params, vehicle_params_pb2.VehicleParams())
+        except json_format.ParseError as e:
+            raise ValueError(f"bad vehicle parameters: {e}") from None
+    raise TypeError("params must be a vdyn.pb.VehicleParams or a dict of its fields")
+
+
+def _input_message(inp, vehicle_id, source_id):
+    if inp is None:
+        return None
+    if isinstance(inp, dict):
+        inp = make_input(**inp)
+    if not isinstance(inp, input_pb2.DriverInput):
+        raise TypeError("input must be a vdyn.pb.DriverInput (vdyn.make_input) or a dict")
+    msg = input_pb2.DriverInput()
+    msg.CopyFrom(inp)
+    if vehicle_id is not None:
+        msg.vehicle_id = vehicle_id
+    if not msg.source_id:
+        msg.source_id = source_id
+    return msg
+
+
+class Client:
+    """A connection to one vdyn server on a DDS domain.
+
+    ``Client(domain=0, server_id=None, timeout=10.0)`` waits up to ``timeout`` seconds for a
+    server (the one named, or the first whose world arrives) and raises vdyn.TimeoutError saying
+    what did not arrive. Every later wait is bounded by ``timeout`` too unless a call is given its
+    own. A refused request raises vdyn.RefusedError with the server's reason.
+    """
+
+    def __init__(self, domain=0, server_id=None, timeout=DEFAULT_TIMEOUT, client_id=None):
+        self.timeout = float(timeout)
+        self.client_id = client_id or f"python-{os.getpid()}-{id(self):x}"
+        self._c = _vdyn.Client(int(domain), server_id or "", self.timeout, self.client_id)
+        self._world = None
+
+    # --- the world and the vehicles -----------------------------------------------------------
+    @property
+    def server_id(self):
+        return self._c.server_id
+
+    @property
+    def domain(self):
+        return self._c.domain
+
+    @property
+    def world(self):
+        """The server's world description (vdyn.pb.WorldDescription): name, terrain_hash,
+        step_ns, meshes, landmarks, spawn, the vehicles' geometry."""
+        if self._world is None:
+            self._world = world_pb2.WorldDescription.FromString(self._c.world_bytes())
+        return self._world
+
+    @property
+    def world_name(self):
+        return self.world.name
+
+    @property
+    def world_hash(self):
+        """The terrain hash (docs/hash.md), an int."""
+        return self.world.terrain_hash
+
+    @property
+    def step_s(self):
+        return self.world.step_ns * 1e-9
+
+    @property
+    def vehicles(self):
+        """Vehicle ids: the world's, plus this client's spawns and restores, minus its removals,
+        plus any whose states a step delivered."""
+        return self._c.vehicles()
+
+    def params(self, vehicle_id, timeout=None):
+        """The vehicle's parameters in effect (vdyn.pb.VehicleParams, complete)."""
+        data = self._c.params_bytes(vehicle_id, self._t(timeout))
+        return vehicle_params_pb2.VehicleParams.FromString(data)
+
+    # --- control ------------------------------------------------------------------------------
+    def _request(self, req, what, timeout):
+        return self._c.request(req.SerializeToString(), what, self._t(timeout))
+
+    def spawn(self, vehicle_id, x, y, yaw=0.0, speed=0.0, params=None, timeout=None):
+        """Creates a vehicle at (x, y) m heading yaw rad at speed m/s, with parameters (partial:
+        merged over the server's defaults). Returns the reply (applied_step, sim_time_ns)."""
+        p = _params_message(params)
+        data = _vdyn.pose_request("spawn", vehicle_id, x, y, yaw, speed,
+                                  None if p is None else p.SerializeToString())
+        req = control_pb2.ControlRequest.FromString(data)
+        reply = self._request(req, f"spawn of vehicle {vehicle_id}", timeout)
+        self._wait_params(vehicle_id, p or vehicle_params_pb2.VehicleParams(), timeout)
+        return reply
+
+    def despawn(self, vehicle_id, timeout=None):
+        """Removes a vehicle."""
+        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req.remove.SetInParent()
+        return self._request(req, f"removal of vehicle {vehicle_id}", timeout)
+
+    def reset(self, vehicle_id, timeout=None):
+        """Back to the spawn pose, at rest."""
+        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req.reset.SetInParent()
+        return self._request(req, f"reset of vehicle {vehicle_id}", timeout)
+
+    def teleport(self, vehicle_id, x, y, yaw=0.0, speed=0.0, timeout=None):
+        data = _vdyn.pose_request("teleport", vehicle_id, x, y, yaw, speed, None)
+        req = control_pb2.ControlRequest.FromString(data)
+        return self._request(req, f"teleport of vehicle {vehicle_id}", timeout)
+
+    def pause(self, timeout=None):
+        req = control_pb2.ControlRequest()
+        req.pause.SetInParent()
+        return self._request(req, "pause", timeout)
+
+    def resume(self, timeout=None):
+        req = control_pb2.ControlRequest()
+        req.resume.SetInParent()
+        return self._request(req, "resume", timeout)
+
+    def set_params(self, vehicle_id, params, timeout=None):
+        """Changes parameters (a vdyn.pb.VehicleParams or a dict: partial, merged over the
+        vehicle's current ones at a step boundary). Returns once the server accepted them and
+        publishes them on vdyn/params (so params() shows them)."""
+        want = _params_message(params)
+        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req.set_params.params.CopyFrom(want)
+        reply = self._request(req, f"parameter change of vehicle {vehicle_id}", timeout)
+        self._wait_params(vehicle_id, want, timeout)
+        return reply
+
+    def _wait_params(self, vehicle_id, want, timeout):
+        """Waits until vdyn/params shows every field of `want` (the server publishes a change
+        a moment after its reply)."""
+        from ._errors import TimeoutError
+        t = self._t(timeout)
+        deadline = time.monotonic() + t
+        while True:
+            current = self.params(vehicle_id, max(0.0, deadline - time.monotonic()))
+            merged = vehicle_params_pb2.VehicleParams()
+            merged.CopyFrom(current)
+            merged.MergeFrom(want)
+            if merged == current:
+                return current
+            if time.monotonic() >= deadline:
+                raise TimeoutError(f"the parameters of vehicle {vehicle_id} the server accepted "
+                                   f"did not appear on vdyn/params within {t:g} s")
+            time.sleep(0.005)  # vdyn/params has no per-change event to wait on
+
+    def restore(self, vehicle_id, state, params=None, input=None, branched_from="", timeout=None):
+        """Brings a vehicle back to an exact state (vdyn.pb.ExactState, e.g. from a recording's
+        checkpoint event), with parameters and the input to hold until a live input arrives
+        (vdyn.pb.InputSample)."""
+        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req.restore.state.CopyFrom(state)
+        if params is not None:
+            req.restore.params.CopyFrom(_params_message(params))
+        if input is not None:
+            req.restore.input.CopyFrom(input)
+        req.restore.branched_from = branched_from
+        return self._request(req, f"restore of vehicle {vehicle_id}", timeout)
+
+    # --- lockstep -----------------------------------------------------------------------------
+    def step(self, n=1, input=None, vehicle_id=None, source_id="python", timeout=None):
+        """Advances the server n steps (lockstep; a real-time server pauses its clock for them)
+        with ``input`` (vdyn.make_input(...) or a dict; for ``vehicle_id``, else the input's own)
+        applied first, and returns {vehicle_id: States} with every vehicle's state at each of
+        those steps. Raises vdyn.TimeoutError naming what did not arrive."""
+        msg = _input_message(input, vehicle_id, source_id)
+        if msg is not None and msg.vehicle_id == 0:
+            raise ValueError("the input names no vehicle: give vehicle_id=")
+        tables = self._c.step(int(n), None if msg is None else msg.SerializeToString(),
+                              self._t(timeout))
+        return {vid: States(vid, t) for vid, t in tables.items()}
+
+    def run_maneuver(self, maneuver, vehicle_id=1, duration=None, source_id="python",
+                     timeout=None):
+        """A batch run in lockstep: the maneuver (a CSV file with the header
+        t_s,steer_deg,throttle,brake,cruise_kmh, or "demo") applied step by step from the
+        vehicle's present step for ``duration`` s (default: to its last row), the input at each
+        step exactly as ``vdyn-server --batch`` applies it. Returns {vehicle_id: States}. Reset or
+        spawn the vehicle first for a run from rest. A bad file raises ValueError naming the file,
+        line and column."""
+        tables = self._c.run_maneuver(str(maneuver), vehicle_id,
+                                      0.0 if duration is None else float(duration), source_id,
+                                      self._t(timeout))
+        return {vid: States(vid, t) for vid, t in tables.items()}
+
+    # --- real time ----------------------------------------------------------------------------
+    def latest(self, vehicle_id, timeout=None):
+        """The newest state of a vehicle (States of one row)."""
+        return States(vehicle_id, self._c.latest(vehicle_id, self._t(timeout)))
+
+    def subscribe(self, vehicle_id, capacity=10000):
+        """Every state of a vehicle from now on (vdyn.Subscription: iterate, or take())."""
+        return Subscription(self, vehicle_id, capacity)
+
+    def driver(self, vehicle_id, source_id="python", strength=10):
+        """A driver publishing input for a vehicle (vdyn.Driver)."""
+        return Driver(self, vehicle_id, source_id, strength)
+
+    def _t(self, timeout):
+        t = self.timeout if timeout is None else float(timeout)
+        if not math.isfinite(t) or t < 0:
+            raise ValueError(f"a timeout must be a finite number of seconds >= 0, got {timeout!r}")
+        return t
+
+    def __repr__(self):
+        return (f"<vdyn.Client domain {self.domain} server {self.server_id!r} "
+                f"world {self.world_name!r}>")
+
+
+class Driver:
+    """Driver input for one vehicle from one source (``source_id``) with an ownership strength:
+    the strongest live source drives (docs/topics.md). ``send(input)`` publishes once;
+    ``start(rate_hz)`` publishes the input set by ``set(input)`` at a fixed rate from a
+    background thread until ``stop()`` (also a context manager)."""
+
+    def __init__(self, client, vehicle_id, source_id="python", strength=10):
+        self.vehicle_id = vehicle_id
+        self.source_id = source_id
+        self.strength = strength
+        self._client = client
+        self._d = _vdyn.Driver(client._c, vehicle_id, source_id, strength)
+
+    def _bytes(self, inp):
+        return _input_message(inp, self.vehicle_id, self.source_id).SerializeToString()
+
+    def wait_for_server(self, timeout=None):
+        """Waits until the server reads this driver's input; raises vdyn.TimeoutError."""
+        from ._errors import TimeoutError
+        t = self._client._t(timeout)
+        if not self._d.wait_for_server(t):
+            raise TimeoutError(f"no reader of vdyn/input matched driver '{self.source_id}' of "
+                               f"vehicle {self.vehicle_id} within {t:g} s")
+
+    def send(self, input):
+        self._d.send(self._bytes(input))
+
+    def set(self, input):
+        self._d.set(self._bytes(input))
+
+    def start(self, rate_hz=1000.0, input=None):
+        if input is not None:
+            self.set(input)
+        self._d.start(float(rate_hz))
+        return self
+
+    def stop(self):
+        self._d.stop()
+
+    @property
+    def running(self):
+        return self._d.running
+
+    @property
+    def sent(self):
+        return self._d.sent
+
+    @property
+    def failed(self):
+        return self._d.failed
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+class Subscription:
+    """Every state of one vehicle as it arrives, queued by a thread of its own (up to
+    ``capacity`` states; more are counted in ``overflowed``). Iterating yields States of one row
+    each and stops when none arrives within the client's timeout; ``take()`` returns every queued
+    state at once. ``missing_steps`` counts steps absent from the sequence received."""
+
+    def __init__(self, client, vehicle_id, capacity=10000):
+        self.vehicle_id = vehicle_id
+        self._client = client
+        self._s = _vdyn.Subscription(client._c, vehicle_id, int(capacity))
+
+    def next(self, timeout=None):
+        """The next state; raises vdyn.TimeoutError when none arrives in time."""
+        return States(self.vehicle_id, self._s.next(self._client._t(timeout)))
+
+    def take(self):
+        return States(self.vehicle_id, self._s.take_all())
+
+    def __iter__(self):
+        from ._errors import TimeoutError
+        while True:
+            try:
+                yield self.next()
+            except TimeoutError:
+                return
+
+    @property
+    def received(self):
+        return self._s.received
+
+    @property
+    def overflowed(self):
+        return self._s.overflowed
+
+    @property
+    def missing_steps(self):
+        return self._s.missing_steps
+
+    @property
+    def dds_lost(self):
+        """States DDS reports it dropped for this subscription's reader."""
+        return self._s.dds_lost
+
+    @property
+    def queued(self):
+        return self._s.queued
+
+    def close(self):
+        self._s.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -1,0 +1,73 @@
+"""Recordings (MCAP files of vdyn-recorder), read through the recorder's own reader."""
+
+from . import _vdyn
+from . import session_pb2
+from ._states import States
+
+
+class Recording:
+    """A vdyn recording. Opening scans the file once (a bad file raises vdyn.RecordingError with
+    the file, the offset and the reason).
+
+    ``channels`` and ``vehicles`` are lists of dicts (per vehicle: states, first_step,
+    last_step and the gaps: missing, jumps, largest_gap, largest_gap_from, as
+    ``vdyn-recorder info`` counts them); ``states(vehicle_id)`` every state as States (sorted by
+    step, ``log_time_ns`` when the recorder took each); ``dataframe(vehicle_id)`` the same as a
+    pandas DataFrame; ``events()`` the session events as (log_time_ns, vdyn.pb.SessionEvent).
+    """
+
+    def __init__(self, path):
+        self.path = str(path)
+        self._r = _vdyn.RecordingReader(self.path)
+
+    @property
+    def channels(self):
+        return self._r.channels()
+
+    @property
+    def vehicles(self):
+        return self._r.vehicles()
+
+    @property
+    def vehicle_ids(self):
+        return [v["vehicle_id"] for v in self._r.vehicles()]
+
+    @property
+    def gaps(self):
+        """{vehicle_id: states missing} (holes in a vehicle's steps not explained by a spawn,
+        reset or restore)."""
+        return {v["vehicle_id"]: v["missing"] for v in self._r.vehicles()}
+
+    @property
+    def duration_s(self):
+        return (self._r.end_ns - self._r.start_ns) * 1e-9
+
+    @property
+    def complete(self):
+        """True when the file was closed properly (summary and footer)."""
+        return self._r.complete
+
+    @property
+    def metadata(self):
+        return self._r.metadata()
+
+    def states(self, vehicle_id=None):
+        return States(self._one(vehicle_id), self._r.states(self._one(vehicle_id)))
+
+    def dataframe(self, vehicle_id=None):
+        return self.states(vehicle_id).to_dataframe()
+
+    def events(self):
+        return [(t, session_pb2.SessionEvent.FromString(b)) for t, b in self._r.events()]
+
+    def _one(self, vehicle_id):
+        if vehicle_id is not None:
+            return int(vehicle_id)
+        ids = self.vehicle_ids
+        if len(ids) != 1:
+            raise ValueError(f"{self.path} holds vehicles {ids}: name one")
+        return ids[0]
+
+    def __repr__(self):
+        return (f"<vdyn.Recording {self.path!r}: {self.duration_s:.3f} s, "
+                f"vehicles {self.vehicle_ids}>")
