@@ -86,6 +86,10 @@ XML
 openssl smime -sign -in governance.xml -text -out governance.p7s -signer ca.pem -inkey ca.key
 
 topics() { for t in "$@"; do printf '<topic>vdyn/%s</topic>' "$t"; done; }
+# The default partition, and each vehicle's own states partition (docs/topics.md, "Partitions"):
+# without it a client that follows one vehicle would fall back to reading every vehicle's states.
+parts='<partitions><partition></partition><partition>vdyn.vehicle.*</partition></partitions>'
+
 all=(state input control control_reply params world events diagnostics)
 for spec in "$@"; do
   name=${spec%%:*}
@@ -108,7 +112,7 @@ for spec in "$@"; do
   fi
   subject_name=$(openssl x509 -noout -subject -nameopt RFC2253 -in "$name.pem" | sed 's/^subject=//')
   publish=""
-  [ ${#pub[@]} -gt 0 ] && publish="<publish><topics>$(topics "${pub[@]}")</topics></publish>"
+  [ ${#pub[@]} -gt 0 ] && publish="<publish><topics>$(topics "${pub[@]}")</topics>$parts</publish>"
   cat > "$name.permissions.xml" <<XML
 <?xml version="1.0" encoding="utf-8"?>
 <dds xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:noNamespaceSchemaLocation="https://www.omg.org/spec/DDS-SECURITY/20170901/omg_shared_ca_permissions.xsd">
@@ -119,7 +123,7 @@ for spec in "$@"; do
       <allow_rule>
         <domains><id_range><min>0</min><max>230</max></id_range></domains>
         $publish
-        <subscribe><topics>$(topics "${sub[@]}")</topics></subscribe>
+        <subscribe><topics>$(topics "${sub[@]}")</topics>$parts</subscribe>
       </allow_rule>
       <default>DENY</default>
     </grant>

@@ -77,7 +77,12 @@ Nanos Period(double hz) {
 // they arrive at once), looked for up to 1 s; empty where no server runs.
 std::vector<std::uint32_t> VehiclesOnDomain(vdyn::transport::Participant& participant) {
   vdyn::client::SessionView view(
-      participant, {.states = false, .params = true, .world = false, .diagnostics = false});
+      participant, {.states = false,
+                    .params = true,
+                    .world = false,
+                    .diagnostics = false,
+                    .inputs = false,
+                    .only_vehicle = std::nullopt});
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
   while (view.vehicles().empty() && std::chrono::steady_clock::now() < deadline) {
     view.Wait(std::chrono::milliseconds(100));

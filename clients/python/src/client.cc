@@ -51,7 +51,8 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                                                       .params = true,
                                                       .world = true,
                                                       .diagnostics = true,
-                                                      .inputs = false}),
+                                                      .inputs = false,
+                                                      .only_vehicle = std::nullopt}),
       states_(participant_, std::nullopt) {
   const auto timeout = Ms(timeout_s);
   const auto deadline = Clock::now() + timeout;
@@ -252,7 +253,8 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
                                                   .params = false,
                                                   .world = false,
                                                   .diagnostics = false,
-                                                  .inputs = false});
+                                                  .inputs = false,
+                                                  .only_vehicle = std::nullopt});
   }
   const auto deadline = Clock::now() + Ms(timeout_s);
   for (;;) {

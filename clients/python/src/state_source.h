@@ -1,16 +1,20 @@
 // The seam between the Python client and the client layer's state reading: every state of the
 // domain (or of one vehicle) as it arrives, none overwritten while the taker keeps up within a
-// second. Today it is a vdyn/state reader with the recorder's QoS (keep last 1000 per vehicle)
-// filtered here; a one-vehicle reader of the client layer can replace the inside without changing
-// the callers.
+// second: a vdyn/state reader with the recorder's QoS (keep last 1000 per vehicle). For one
+// vehicle it reads in that vehicle's partition (transport::VehiclePartition), so the other
+// vehicles' states are not sent to it at all; where that reader cannot be made (DDS Security
+// permissions without the partition) it reads every state and keeps the vehicle's.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
+#include <memory>
 #include <optional>
+#include <string>
 
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/topics.h"
 
 namespace vdyn::python {
 
@@ -18,17 +22,29 @@ class StateSource {
  public:
   // Every vehicle, or only `vehicle_id`.
   StateSource(transport::Participant& participant, std::optional<std::uint32_t> vehicle_id)
-      : vehicle_(vehicle_id),
-        reader_(participant, transport::TopicId::kState, &drops_,
-                transport::ReaderRole::kRecorder) {}
+      : vehicle_(vehicle_id) {
+    if (vehicle_id) {
+      try {
+        reader_ = std::make_unique<transport::Reader<pb::VehicleState>>(
+            participant, transport::TopicId::kState, &drops_, transport::ReaderRole::kRecorder,
+            transport::VehiclePartition(*vehicle_id));
+      } catch (const transport::TransportError& e) {
+        partition_fallback_ = e.what();
+      }
+    }
+    if (!reader_) {
+      reader_ = std::make_unique<transport::Reader<pb::VehicleState>>(
+          participant, transport::TopicId::kState, &drops_, transport::ReaderRole::kRecorder);
+    }
+  }
 
   // Blocks until a state may be available or the timeout passes.
-  bool Wait(std::chrono::nanoseconds timeout) { return reader_.Wait(timeout); }
+  bool Wait(std::chrono::nanoseconds timeout) { return reader_->Wait(timeout); }
   // Hands every state that arrived (of the vehicle, if one) to fn; returns how many.
   template <class F>
   int Take(F&& fn) {
     int n = 0;
-    reader_.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+    reader_->Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       if (vehicle_ && s.vehicle_id() != *vehicle_) return;
       fn(s);
       ++n;
@@ -36,13 +52,16 @@ class StateSource {
     return n;
   }
   // States DDS reports lost to this reader (a taker that fell a second behind).
-  std::uint64_t Lost() { return reader_.SamplesLost(); }
+  std::uint64_t Lost() { return reader_->SamplesLost(); }
   transport::DropCounters& drops() { return drops_; }
+  // For one vehicle: empty when it reads in the vehicle's partition, else why it could not.
+  const std::string& partition_fallback() const { return partition_fallback_; }
 
  private:
   std::optional<std::uint32_t> vehicle_;
   transport::DropCounters drops_;
-  transport::Reader<pb::VehicleState> reader_;
+  std::string partition_fallback_;
+  std::unique_ptr<transport::Reader<pb::VehicleState>> reader_;
 };
 
 }  // namespace vdyn::python

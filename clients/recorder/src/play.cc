@@ -422,7 +422,9 @@ void Player::Announce(bool force) {
   d.set_sim_time_ns(static_cast<std::int64_t>(Position()));
   d.set_recording(o_.file.filename().string().substr(0, limits::kMaxNameBytes));
   for (const std::string& s : servers_) d.add_replayed_servers(s);
-  announce_->Write(transport::ServerKey(o_.server_id), d);
+  if (!announce_->Write(transport::ServerKey(o_.server_id), d)) {
+    drops_.Count("write failed on vdyn/diagnostics", announce_->last_error());
+  }
 }
 
 int Player::Run(const std::atomic<bool>& stop) {
