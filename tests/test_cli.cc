@@ -224,7 +224,7 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const Result twice = RunServer("--vehicle-ids 1,1 --duration 1" + domain);
   EXPECT_EQ(twice.exit_code, 2) << twice.output;
-  EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));
+  EXPECT_THAT(twice.output, HasSubstr("vdyn-server: --vehicle-ids: vehicle 1 is listed twice"));
   const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --duration 1" + domain);
   EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
   EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
@@ -491,6 +491,29 @@ TEST(CliErrors, WrongValuesAndMissingArgumentsAreSaidPlainly) {
   EXPECT_THAT(out.str(), HasSubstr("prog: --spawn needs 3 values (written as a,b,c), got 2\n"));
 }
 
+// A value that is not one of an option's choices (CLI::IsMember) is told with the choices as a
+// person writes them and the nearest one, not as "Wall not in {server,wall}".
+TEST(CliErrors, AValueOutsideTheChoicesIsToldWithTheNearest) {
+  for (const auto& [value, message] : std::vector<std::pair<std::string, std::string>>{
+           {"Wall",
+            "prog: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean 'wall'?\n"},
+           {"serve",
+            "prog: --clock: 'serve' is not one of 'server' or 'wall'; did you mean "
+            "'server'?\n"},
+           {"sundial", "prog: --clock: 'sundial' is not one of 'server' or 'wall'\n"}}) {
+    CLI::App app{"test"};
+    std::string clock = "server";
+    app.add_option("--clock", clock, "clock")->check(CLI::IsMember({"server", "wall"}));
+    std::vector<std::string> args{"/usr/bin/prog", "--clock", value};
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    std::ostringstream err;
+    EXPECT_EQ(cli::Parse(app, 3, argv.data(), err), 2) << value;
+    EXPECT_THAT(err.str(), HasSubstr(message));
+    EXPECT_THAT(err.str(), Not(HasSubstr("not in {")));
+  }
+}
+
 // The programs themselves: each uses the shared layer.
 TEST(CliPrograms, EachProgramNamesTheNearestOptionOrCommand) {
   struct Case {
@@ -578,6 +601,53 @@ TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
     EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
     EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
   }
+}
+
+// Each program's choices, ranges and lists said the same way: a choice mistyped comes with the
+// nearest, a device index with its range as the table of limits writes it, a vehicle listed twice
+// as a slip in the list.
+TEST(CliPrograms, EachProgramNamesTheNearestChoice) {
+  // Were a value taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string out = (dir / "x.mcap").string();
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    const char* message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--model Paper --dump-vehicle",
+            "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
+            "'paper'?"},
+           {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
+           {RunInput, "play demo --clock Wall" + domain,
+            "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
+            "'wall'?"},
+           {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
+            "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
+            "you mean 'zstd'?"},
+           {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
+            "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
+            "(the topics: state, input, control, control_reply, params, world, events, "
+            "diagnostics)"},
+           {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
+            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map' or "
+            "'north'; did you mean 'map'?"},
+           {RunInput, "calibrate --device 300 --timeout 1",
+            "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
+           {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
+            "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+    EXPECT_THAT(r.output, Not(HasSubstr("not in {"))) << c.args;
+  }
+  // The help shows whole numbers as such and ranges as the table of limits writes them.
+  const Result help = RunInput("drive --help");
+  EXPECT_THAT(help.output, HasSubstr("--device INT:[0, 255]"));
+  EXPECT_THAT(help.output, HasSubstr("--gears INT:[1, 10]=6"));
 }
 
 TEST(CliInput, PlayHelpListsItsOptionsAndTheCommonOnes) {

@@ -11,12 +11,14 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "vdyn/cli/errors.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/topics.h"
 
 namespace {
 
@@ -42,8 +44,18 @@ CLI::Validator TopicNames() {
   return CLI::Validator(
       [](std::string& text) -> std::string {
         if (TopicByName(text)) return {};
-        return "'" + text + "' is not a vdyn topic (state, input, control, control_reply, params, world, "
-               "events, diagnostics)";
+        std::vector<std::string> names;
+        for (const auto& spec : vdyn::transport::AllTopics()) {
+          const std::string name = spec.name;
+          names.push_back(name.rfind("vdyn/", 0) == 0 ? name.substr(5) : name);
+        }
+        std::string why = "'" + vdyn::base::Quote(text, 60) + "' is not a vdyn topic";
+        if (const auto near = vdyn::cli::Nearest(text, names); !near.empty()) {
+          why += "; did you mean '" + near.front() + "'?";
+        }
+        std::string all;
+        for (const std::string& n : names) all += (all.empty() ? "" : ", ") + n;
+        return why + " (the topics: " + all + ")";
       },
       "TOPIC");
 }

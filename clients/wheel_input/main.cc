@@ -50,6 +50,9 @@ using vdyn::base::MonoTime;
 using vdyn::base::MonotonicNow;
 using vdyn::base::Nanos;
 
+// --device and --pedals: an index of SDL's device list (vdyn-input list).
+constexpr vdyn::limits::Range kDeviceIndex{0, 255, false, false, "SDL device index"};
+
 std::atomic<bool> g_stop{false};
 extern "C" void OnSignal(int) {
   g_stop.store(true);
@@ -585,7 +588,7 @@ int main(int argc, char** argv) {
                     "Wheel mapping file (default: the user's, else the table)");
       a->add_option("--device", rig.device,
                     "SDL device index (vdyn-input list); default: the first wheel")
-          ->check(CLI::Range(0, 255));
+          ->check(vdyn::cli::WholeInRange(kDeviceIndex));
       a->add_option("--range-deg", rig.range_deg, "The wheel's rotation lock to lock, degrees")
           ->check(vdyn::cli::InRange(vdyn::limits::kWheelRangeDeg));
       a->add_flag("--no-ffb", rig.no_ffb, "No force feedback");
@@ -624,6 +627,7 @@ int main(int argc, char** argv) {
       a->add_flag("--no-window", rig.no_window, "No window (the wheel needs none)");
     }
     a->add_option("--gears", rig.gears, "Forward gears the paddles count to")
+        ->type_name("INT")
         ->check(vdyn::cli::WholeInRange(vdyn::limits::kGears))
         ->capture_default_str();
     a->add_option("--key-steer-rate", rig.key_steer_rate, "Keyboard steering, full lock per second")
@@ -651,9 +655,9 @@ int main(int argc, char** argv) {
   CLI::App* calibrate =
       app.add_subcommand("calibrate", "Write a wheel's mapping file, step by step");
   calibrate->add_option("--device", cal.device, "SDL device index (default: the first wheel)")
-      ->check(CLI::Range(0, 255));
+      ->check(vdyn::cli::WholeInRange(kDeviceIndex));
   calibrate->add_option("--pedals", cal.pedals, "SDL device index of a separate pedal set")
-      ->check(CLI::Range(0, 255));
+      ->check(vdyn::cli::WholeInRange(kDeviceIndex));
   calibrate->add_option("--out", cal.out,
                         "Mapping file to write (default: the user's for this wheel)");
   calibrate->add_option("--range-deg", cal.range_deg, "The wheel's rotation lock to lock, degrees")

@@ -5,6 +5,7 @@
 // failed (non-finite state), 2 bad command line or input file, 3 lockstep client gone.
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
@@ -251,6 +252,13 @@ int main(int argc, char** argv) {
 
   // --help is a success; every parse error is a usage error (exit code 2).
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
+  // A vehicle listed twice is a slip in the list, said as one (not "vehicle 1 exists already").
+  for (auto id = o.vehicle_ids.begin(); id != o.vehicle_ids.end(); ++id) {
+    if (std::find(o.vehicle_ids.begin(), id, *id) != id) {
+      std::cerr << "vdyn-server: --vehicle-ids: vehicle " << *id << " is listed twice\n";
+      return 2;
+    }
+  }
 
   try {
     if (o.dump_vehicle) {

@@ -213,6 +213,26 @@ std::string Reworded(const std::string& what, const std::vector<const CLI::App*>
       return want == 1 ? name + " needs a value"
                        : name + " needs " + std::to_string(want) + " values" + list;
     }
+    // "--clock: Wall not in {server,wall}" (CLI::IsMember): the choices as a person writes them,
+    // and the nearest one.
+    const std::size_t set = rest.rfind(" not in {");
+    if (set != std::string::npos && rest.back() == '}') {
+      const std::string value = rest.substr(0, set);
+      const std::string inside = rest.substr(set + 9, rest.size() - set - 10);
+      std::vector<std::string> choices;
+      for (std::size_t begin = 0;;) {
+        const std::size_t end = inside.find(',', begin);
+        std::string choice = inside.substr(begin, end == std::string::npos ? end : end - begin);
+        choice.erase(0, choice.find_first_not_of(' '));
+        if (!choice.empty()) choices.push_back(choice);
+        if (end == std::string::npos) break;
+        begin = end + 1;
+      }
+      std::string msg = name + ": " + Quoted(value) + " is not one of " + OneOf(choices);
+      const std::vector<std::string> near = Nearest(value, choices);
+      if (!near.empty()) msg += "; did you mean " + OneOf(near) + "?";
+      return msg;
+    }
   }
   // "file is required": a command's argument left out.
   const std::string required = " is required";
