@@ -289,6 +289,37 @@ TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
   EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain 229 within 1 s"));
 }
 
+// A server runs, but not with the vehicle asked for: play and drive name the vehicles there are
+// and how to drive one, not "is vdyn-server running?".
+TEST(CliInput, AVehicleTheServerDoesNotHaveIsToldWithTheVehiclesThereAre) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0.2,0,0\n0.3,0,0.2,0,0\n");
+  const std::string domain = std::to_string(testing::FreshDomain());
+  const std::string maneuver = (dir / "m.csv").string();
+  testing::Process server({testing::ServerBinary(), "--domain", domain, "--vehicle-ids", "1,3",
+                           "--duration", "120", "--no-status"},
+                          dir / "server.log");
+  // The server is up once vehicle 1 takes a maneuver.
+  const Result up = RunInput("--domain " + domain + " --wait 60 play " + maneuver);
+  ASSERT_EQ(up.exit_code, 0) << up.output << server.Log();
+  const std::string why =
+      "; vdyn-server there has vehicles 1,3: drive one with --vehicle-id 1, or "
+      "start vdyn-server with --vehicle-ids 1,3,2";
+  Result r = RunInput("--domain " + domain + " --vehicle-id 2 --wait 1 play " + maneuver);
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output,
+              HasSubstr("no state of vehicle 2 on domain " + domain + " within 1 s" + why));
+  r = RunInput("--domain " + domain + " --vehicle-id 2 play " + maneuver + " --clock wall");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("but no server took it: no state of vehicle 2 on domain " +
+                                  domain + " arrived" + why));
+  r = RunInput("--domain " + domain + " --vehicle-id 2 --wait 1 drive --no-window");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_THAT(r.output,
+              HasSubstr("no parameters of vehicle 2 on domain " + domain + " within 1 s" + why));
+}
+
 TEST(CliInput, NoServerEndsWithAMessageNotAHang) {
   testing::UseLoopbackDds();
   const std::uint32_t domain = testing::FreshDomain();

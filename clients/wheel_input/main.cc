@@ -22,6 +22,7 @@
 #include <iostream>
 #include <map>
 #include <thread>
+#include <vector>
 
 #include <SDL2/SDL.h>
 #include <fmt/format.h>
@@ -33,6 +34,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/loop.h"
+#include "vdyn/client/session_view.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/state.pb.h"
@@ -69,6 +71,34 @@ struct Common {
 
 Nanos Period(double hz) {
   return Nanos{static_cast<std::int64_t>(1e9 / hz)};
+}
+
+// The vehicles the servers on the domain publish, by their parameters (kept for late joiners:
+// they arrive soon after the reader matches, not always together), gathered for 1 s; empty where
+// no server runs.
+std::vector<std::uint32_t> VehiclesOnDomain(vdyn::transport::Participant& participant) {
+  vdyn::client::SessionView view(
+      participant, {.states = false, .params = true, .world = false, .diagnostics = false});
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+  while (std::chrono::steady_clock::now() < deadline) {
+    view.Wait(std::chrono::milliseconds(100));
+    view.Poll();
+  }
+  std::vector<std::uint32_t> ids;
+  for (const auto& [id, vehicle] : view.vehicles()) ids.push_back(id);
+  return ids;
+}
+
+// Why no state or parameters of the vehicle came, for a person: no server, or servers with other
+// vehicles (`others`) and how to drive one of them or add this one.
+std::string WhyNoVehicle(const Common& c, const std::vector<std::uint32_t>& others) {
+  if (others.empty()) return "is vdyn-server running?";
+  std::string ids;
+  for (const std::uint32_t id : others) ids += (ids.empty() ? "" : ",") + std::to_string(id);
+  return std::string("vdyn-server there has ") + (others.size() == 1 ? "vehicle " : "vehicles ") +
+         ids + ": drive " + (others.size() == 1 ? "it" : "one") + " with --vehicle-id " +
+         std::to_string(others.front()) + ", or start vdyn-server with --vehicle-ids " + ids + "," +
+         std::to_string(c.vehicle_id);
 }
 
 // --- play ------------------------------------------------------------------------------------
@@ -122,8 +152,8 @@ int Play(const Common& c, const PlayOptions& o) {
     }
     if (g_stop) return 0;
     if (sim_ns < 0) {
-      std::cerr << "vdyn-input: no state of " << where << " within " << c.wait_s
-                << " s; is vdyn-server running?\n";
+      std::cerr << "vdyn-input: no state of " << where << " within " << c.wait_s << " s; "
+                << WhyNoVehicle(c, VehiclesOnDomain(participant)) << "\n";
       return 1;
     }
   }
@@ -183,7 +213,7 @@ int Play(const Common& c, const PlayOptions& o) {
                    vdyn::base::FormatFixed(maneuver.end_time(), 1) + " s, " + o.clock + " clock)";
   if (states_seen == 0) {
     std::cerr << "vdyn-input: " << played << ", but no server took it: no state of " << where
-              << " arrived; is vdyn-server running there?\n";
+              << " arrived; " << WhyNoVehicle(c, VehiclesOnDomain(participant)) << "\n";
     return g_stop ? 0 : 1;
   }
   std::string outcome = "vdyn-input: " + played + "; " + std::to_string(states_ours) + " of " +
@@ -217,8 +247,10 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
   wi::DdsLink link(participant, c.vehicle_id, c.source_id, c.strength);
   if (!link.WaitForParams(std::chrono::duration_cast<std::chrono::nanoseconds>(
           std::chrono::duration<double>(c.wait_s)))) {
+    std::vector<std::uint32_t> others;
+    for (const auto& [id, vehicle] : link.view().vehicles()) others.push_back(id);
     std::cerr << "vdyn-input: no parameters of vehicle " << c.vehicle_id << " on domain "
-              << c.domain << " within " << c.wait_s << " s; is vdyn-server running?\n";
+              << c.domain << " within " << c.wait_s << " s; " << WhyNoVehicle(c, others) << "\n";
     return 1;
   }
   wi::RigConfig cfg;
