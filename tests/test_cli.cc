@@ -236,7 +236,7 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const Result twice = RunServer("--vehicle-ids 1,1 --duration 1" + domain);
   EXPECT_EQ(twice.exit_code, 2) << twice.output;
-  EXPECT_THAT(twice.output, HasSubstr("vehicle 1 exists already"));
+  EXPECT_THAT(twice.output, HasSubstr("vdyn-server: --vehicle-ids: vehicle 1 is listed twice"));
   const Result over = RunServer("--max-vehicles 2 --vehicle-ids 1,2,3 --duration 1" + domain);
   EXPECT_EQ(over.exit_code, 2) << over.output;
   EXPECT_THAT(over.output, HasSubstr("this server runs its maximum of 2 vehicles"));
