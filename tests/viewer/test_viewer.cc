@@ -21,6 +21,7 @@
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
+#include "vdyn/viewer/world_mesh.h"
 #include "viewer_support.h"
 
 namespace vdyn::testing {
@@ -727,6 +728,60 @@ TEST(WheelSpin, TheRimTurnsByThePublishedWheelSpeedIntegratedOverSimulationTime)
   viewer::FrameLists none;
   viewer::AppendVehicleBody(still, viewer::VehicleParts{}, false, none);
   for (int w = 0; w < 4; ++w) EXPECT_NEAR(MarkAngle(none, still, w), 0.0, 1e-9);
+}
+
+// --- the terrain's chunks ------------------------------------------------------------------------
+
+// The ground's large tiles are split until no edge is longer than 16 m (chunks small enough to
+// leave out of view and out of the shadow map) - but a huge plane (the server's `flat`: 40 km in
+// 1 km tiles) stops splitting while it is still a mesh a viewer can hold: a 4 km plane in 1 km
+// tiles, split to 16 m, would be 524,288 triangles.
+TEST(TerrainChunks, LargeTilesAreSplitToChunksButAHugePlaneStaysBounded) {
+  const viewer::TerrainData facility_like = viewer::TerrainFromWorld(MakeWorld("test", kPi / 2));
+  int ground_meshes = 0;
+  for (const viewer::TerrainMesh& m : facility_like.meshes) {
+    if (m.style != viewer::SurfaceStyle::kGrass) continue;
+    ++ground_meshes;
+    EXPECT_GT(m.chunks.size(), 100u) << "400 m of ground in 32 m chunks";
+    for (const viewer::TerrainChunk& c : m.chunks) {
+      for (std::uint32_t k = 0; k + 2 < c.lods[0].count; k += 3) {
+        const auto p = [&](std::uint32_t j) {
+          const viewer::TerrainVertex& v = m.vertices[m.indices[c.lods[0].first + k + j]];
+          return viewer::Vec3{v.p[0], v.p[1], v.p[2]};
+        };
+        const double longest = std::max(
+            {viewer::Norm(p(0) - p(1)), viewer::Norm(p(1) - p(2)), viewer::Norm(p(2) - p(0))});
+        ASSERT_LE(longest, 16.0 + 1e-3);
+      }
+    }
+  }
+  EXPECT_EQ(ground_meshes, 1);
+
+  pb::WorldDescription huge;
+  huge.set_name("huge_flat");
+  pb::Mesh* g = huge.add_meshes();
+  g->set_name("ground");
+  g->set_kind(pb::SURFACE_GROUND);
+  for (int i = -2; i < 2; ++i) {
+    for (int j = -2; j < 2; ++j) {
+      const auto base = static_cast<std::uint32_t>(g->vertices_size() / 3);
+      for (auto [x, y] : {std::pair{i, j}, {i + 1, j}, {i + 1, j + 1}, {i, j + 1}}) {
+        g->add_vertices(1000.0 * x);
+        g->add_vertices(1000.0 * y);
+        g->add_vertices(0.0);
+      }
+      for (std::uint32_t k : {0u, 1u, 2u, 0u, 2u, 3u}) g->add_indices(base + k);
+    }
+  }
+  ASSERT_EQ(viewer::CheckWorld(huge), "");
+  const viewer::TerrainData t = viewer::TerrainFromWorld(huge);
+  ASSERT_EQ(t.meshes.size(), 1u);
+  std::size_t finest = 0;  // the full-detail level's triangles (coarser levels come after them)
+  for (const viewer::TerrainChunk& c : t.meshes[0].chunks) finest += c.lods[0].count / 3;
+  EXPECT_LE(finest, 262144u);
+  EXPECT_GE(finest, 32u * 64u) << "not split at all";
+  EXPECT_NEAR(t.min_W.x, -2000, 1e-6);
+  EXPECT_NEAR(t.max_W.y, 2000, 1e-6);
 }
 
 // --- a car model from a file -------------------------------------------------------------------

@@ -103,21 +103,31 @@ SurfaceStyle StyleOf(pb::SurfaceKind kind, const StripFrame& frame) {
 namespace {
 
 constexpr double kChunkM = 32.0;
-constexpr std::size_t kLodMinTriangles = 4000;  // smaller meshes have one level
-constexpr double kMaxEdgeM = 16.0;              // longer edges are split (for the chunks)
+constexpr std::size_t kLodMinTriangles = 4000;       // smaller meshes have one level
+constexpr double kMaxEdgeM = 16.0;                   // longer edges are split (for the chunks)
+constexpr std::size_t kMaxSplitTriangles = 1 << 18;  // ... while a mesh stays under this
+
+double LongestEdge(const std::vector<Vec3>& p, std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+  return std::max({Norm(p[a] - p[b]), Norm(p[b] - p[c]), Norm(p[c] - p[a])});
+}
 
 // Splits every triangle with an edge longer than kMaxEdgeM in four (the same surface: the
-// ground's 50 m tiles become chunks small enough to leave out of view and out of the shadow).
+// ground's 50 m tiles become chunks small enough to leave out of view and out of the shadow),
+// round by round while the mesh stays under kMaxSplitTriangles (a 40 km plane in 1 km tiles
+// stops at 125 m tiles instead of growing to 50 million triangles).
 void SplitLongEdges(std::vector<Vec3>& points, std::vector<std::uint32_t>& indices) {
   for (int round = 0; round < 12; ++round) {
+    std::size_t to_split = 0;
+    for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
+      if (LongestEdge(points, indices[t], indices[t + 1], indices[t + 2]) > kMaxEdgeM) ++to_split;
+    }
+    if (to_split == 0 || indices.size() / 3 + 3 * to_split > kMaxSplitTriangles) return;
     std::vector<std::uint32_t> out;
-    out.reserve(indices.size());
+    out.reserve(indices.size() + 9 * to_split);
     bool split = false;
     for (std::size_t t = 0; t + 2 < indices.size(); t += 3) {
       const std::uint32_t a = indices[t], b = indices[t + 1], c = indices[t + 2];
-      const double longest = std::max(
-          {Norm(points[a] - points[b]), Norm(points[b] - points[c]), Norm(points[c] - points[a])});
-      if (longest <= kMaxEdgeM) {
+      if (LongestEdge(points, a, b, c) <= kMaxEdgeM) {
         out.insert(out.end(), {a, b, c});
         continue;
       }
