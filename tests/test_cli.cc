@@ -696,8 +696,8 @@ TEST(CliPrograms, EachProgramNamesTheNearestChoice) {
             "(the topics: state, input, control, control_reply, params, world, events, "
             "diagnostics)"},
            {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
-            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map' or "
-            "'north'; did you mean 'map'?"},
+            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map', "
+            "'north' or 'beside'; did you mean 'map'?"},
            {RunInput, "calibrate --device 300 --timeout 1",
             "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
            {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,

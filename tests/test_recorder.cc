@@ -614,7 +614,9 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
     step.mutable_step()->set_steps(1);
     *step.mutable_step()->mutable_input() = InputAt(k);
     auto reply = control.Call(step, 60s);
-    ASSERT_TRUE(reply && reply->accepted()) << "step " << k;
+    ASSERT_TRUE(reply && reply->accepted())
+        << "step " << k << ": " << (reply ? reply->reason() : control.last_error()) << "\n"
+        << server->Log();
   }
   server->Signal(SIGTERM);
   ASSERT_TRUE(server->Wait(60s).has_value());

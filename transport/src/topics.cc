@@ -87,6 +87,13 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
   }
   // Instances stay alive when a writer goes away: a restarted server keeps its keys.
   dds_qset_writer_data_lifecycle(q, false);
+  if (id == TopicId::kControl) {
+    // Only clients write requests, never a server's loop: a client stepping in lockstep sends
+    // thousands a second, and while a slow reader (a recorder under load) has not yet acknowledged
+    // the last ~30 kB Cyclone holds the write; 10 ms lost a request now and then (dds_write:
+    // Timeout), a second waits it out.
+    dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
+  }
   return q;
 }
 
