@@ -170,7 +170,8 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
                           hi - gap * static_cast<double>(cabin.size() - 1 - i));
     if (i > 0) cabin[i] = std::max(cabin[i], cabin[i - 1] + gap);
   }
-  const auto [x_rwb, x_rr, x_rf, x_cowl] = cabin;
+  // Plain names, not a structured binding: clang 14 cannot capture those in the lambdas below.
+  const double x_rwb = cabin[0], x_rr = cabin[1], x_rf = cabin[2], x_cowl = cabin[3];
   const double x_b = Mix(x_rr, x_rf, 0.45);  // B pillar
   const double end = std::min(0.1, 0.03 * L);
 
