@@ -234,7 +234,6 @@ TEST(NoAllocation, TheServerLoopAllocatesNothingWhileRequestsArriveAndInputChang
   options.session.watchdog_s = 0.5;
   ServerNode node(world, options);
   std::atomic<bool> stop{false};
-  std::atomic<std::int64_t> loop_steps{0};
   int code = -1;
   std::thread loop([&] {
     t_loop = true;  // the thread that runs ServerNode::Run is the loop
