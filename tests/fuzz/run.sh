@@ -14,7 +14,8 @@ seconds="${1:-10}"
 seed="${VDYN_FUZZ_SEED:-1}"
 targets=(maneuver vehicle_params world_file world_description server_messages mcap recover_verify)
 dir=build/asan
-./scripts/build.sh asan "${targets[@]/%/_libfuzzer}" >/dev/null
+libfuzzer_targets=("${targets[@]/#/fuzz_}")
+./scripts/build.sh asan "${libfuzzer_targets[@]/%/_libfuzzer}" >/dev/null
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:allocator_may_return_null=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 export CYCLONEDDS_URI='<General><Interfaces><NetworkInterface name="lo"/></Interfaces></General>'
