@@ -178,8 +178,17 @@ TEST_F(ViewerProcess, AParameterChangeIsAnsweredAndARejectedOneShowsItsReason) {
   using State = viewer::ParamsEditor::Status::State;
   pb::VehicleParams bad;
   bad.set_mass(-1);
-  ASSERT_TRUE(v.params_editor().Submit(1, "", bad));
+  // A request to a server that does not exist waits its whole reply timeout (3 s): while it
+  // waits, a second request is refused; then the panel says that nobody answered.
+  ASSERT_TRUE(v.params_editor().Submit(1, "no-such-server", bad));
   EXPECT_FALSE(v.params_editor().Submit(1, "", bad)) << "a second request while one waits";
+  ASSERT_TRUE(frames_until([&] { return v.params_editor().status().state != State::kPending; }));
+  EXPECT_EQ(v.params_editor().status().state, State::kNoReply);
+  EXPECT_NE(v.params_editor().status().text.find("no server 'no-such-server' answered"),
+            std::string::npos)
+      << v.params_editor().status().text;
+
+  ASSERT_TRUE(v.params_editor().Submit(1, "", bad));
   ASSERT_TRUE(frames_until([&] { return v.params_editor().status().state != State::kPending; }));
   auto s = v.params_editor().status();
   EXPECT_EQ(s.state, State::kRejected) << s.text;
