@@ -2,8 +2,9 @@
 # Configures and builds one configuration: release (default) or asan.
 #   release   GCC, -O3, the programs, the tests and the benchmarks
 #   asan      clang, AddressSanitizer + UndefinedBehaviorSanitizer, -O1 with line tables, the
-#             programs and the tests; the parsers' libraries also carry libFuzzer's coverage, so
-#             tests/fuzz/run.sh fuzzes from this same build (no third compile of the code)
+#             programs and the tests (not the Python module: its tests run in the release build);
+#             the parsers' libraries also carry libFuzzer's coverage, so tests/fuzz/run.sh fuzzes
+#             from this same build (no third compile of the code)
 # Usage: scripts/build.sh [release|asan] [extra targets...]
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,7 +14,7 @@ case "$config" in
   release) flags=(-DCMAKE_BUILD_TYPE=Release -DVDYN_SANITIZE=OFF -DCMAKE_CXX_COMPILER=g++
                   -DCMAKE_C_COMPILER=gcc) ;;
   asan) flags=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DVDYN_SANITIZE=ON -DVDYN_FUZZ=ON
-               -DVDYN_BUILD_BENCH=OFF -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++
+               -DVDYN_BUILD_BENCH=OFF -DVDYN_PYTHON=OFF -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++
                "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -gline-tables-only -DNDEBUG"
                "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -gline-tables-only -DNDEBUG") ;;
   *) echo "build.sh: unknown configuration '$config' (release, asan)" >&2; exit 2 ;;

@@ -61,16 +61,7 @@ void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
 void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 
-// GCC names AddressSanitizer with a macro, clang with a feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define VDYN_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define VDYN_ASAN 1
-#endif
-#endif
-
-#if !defined(VDYN_ASAN)
+#if !defined(VDYN_TEST_ASAN)  // (test_support.h)
 extern "C" {
 void* __libc_malloc(std::size_t);
 void* __libc_calloc(std::size_t, std::size_t);

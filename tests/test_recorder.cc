@@ -138,9 +138,11 @@ class RecorderTest : public ::testing::Test {
   // A lockstep session of vehicle 1 driven step by step with InputAt(step), from a reset at
   // step 0 (so the recording holds the spawn) to `steps`; recorded to `out`.
   void LockstepSession(std::uint32_t domain, const std::filesystem::path& out, std::uint64_t steps,
-                       const std::function<pb::DriverInput(std::uint64_t)>& input) {
-    auto recorder = Recorder({"record", out.string(), "--domain", std::to_string(domain), "--status"},
-                             out.filename().string() + ".log");
+                       const std::function<pb::DriverInput(std::uint64_t)>& input,
+                       const std::vector<std::string>& recorder_options = {}) {
+    std::vector<std::string> args{"record", out.string(), "--domain", std::to_string(domain), "--status"};
+    args.insert(args.end(), recorder_options.begin(), recorder_options.end());
+    auto recorder = Recorder(args, out.filename().string() + ".log");
     auto server = Server({"--lockstep", "--lockstep-timeout", "300"}, domain, out.filename().string() + ".server.log");
     ASSERT_TRUE(WaitForWorld(*recorder)) << recorder->Log() << server->Log();
     transport::Participant p(domain);
@@ -943,7 +945,10 @@ std::vector<ChunkContents> Contents(const std::filesystem::path& file) {
 // comes from its copies.
 TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorldSurvives) {
   const auto file = dir_ / "a.mcap";
-  LockstepSession(domain_, file, 2500, InputAt);
+  // Chunks closed by size (16 kB: about ten states), not by their 250 ms of wall-clock time: how
+  // many steps a chunk holds must not depend on how fast the lockstep ran (a fast run put a
+  // checkpoint into every chunk).
+  LockstepSession(domain_, file, 2500, InputAt, {"--chunk-kb", "16"});
   if (HasFatalFailure()) return;
   auto [code, verified] = Run({"verify", file.string()});
   ASSERT_EQ(code, 0) << verified;
