@@ -459,23 +459,25 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
     EXPECT_GE(own_states, 2970u) << play->Log();
     for (std::size_t i = 1; i < got.size(); ++i) ASSERT_GT(got[i].step, got[i - 1].step);
     EXPECT_GT(presses, 100u);
-    // In time: each state's arrival against its recorded time, scaled by the rate. Never early
-    // (a player without pacing sends the 3 s in a few milliseconds), and keeping up: the bounds on
-    // lateness are generous because a loaded machine delays this reader and the player alike
-    // (the player's own clock is absolute: a delay is caught up, never accumulated).
-    std::vector<double> late;
+    // In time: each state's arrival less its recorded time scaled by the rate is the same all
+    // through (the player's own clock is the recording's). Compared as the medians of the first
+    // and the last tenth, so that a loaded machine delaying a few arrivals (this reader or the
+    // player) moves nothing; a player without pacing sends the 3 s in a few milliseconds (the
+    // last tenth then arrives ~2.7 s "early"), one that falls behind arrives ever later.
+    std::vector<double> offset;
     for (const Received& r : got) {
       const double recorded = static_cast<double>(r.step - got[0].step) * 1e-3 / rate;
-      late.push_back(static_cast<double>(r.at_ns - got[0].at_ns) * 1e-9 - recorded);
+      offset.push_back(static_cast<double>(r.at_ns - got[0].at_ns) * 1e-9 - recorded);
     }
-    std::sort(late.begin(), late.end());
-    const double p05 = late[late.size() / 20], p95 = late[late.size() * 19 / 20];
-    EXPECT_GT(p05, -0.025) << "states arrive early: the player runs fast";
-    EXPECT_LT(p95, 0.5) << "states arrive late: the player falls behind";
-    const double span = static_cast<double>(got.back().at_ns - got.front().at_ns) * 1e-9;
-    const double recorded_span = static_cast<double>(got.back().step - got.front().step) * 1e-3 / rate;
-    EXPECT_GT(span, 0.95 * recorded_span - 0.05) << "the player runs fast";
-    EXPECT_LT(span, recorded_span + 1.0) << "the player falls behind";
+    const auto median = [](std::vector<double> v) {
+      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+      return v[v.size() / 2];
+    };
+    const std::size_t tenth = offset.size() / 10;
+    const double first = median({offset.begin(), offset.begin() + static_cast<std::ptrdiff_t>(tenth)});
+    const double last = median({offset.end() - static_cast<std::ptrdiff_t>(tenth), offset.end()});
+    EXPECT_GT(last - first, -0.025) << "states arrive early: the player runs fast";
+    EXPECT_LT(last - first, 0.25) << "states arrive ever later: the player falls behind";
   }
 }
 

@@ -220,7 +220,9 @@ echo "multihost: the primary drives; the backup waits on host C"
 if [[ $WANT_VIEWER -eq 1 ]]; then
   if [[ -x $VIEWER ]] && command -v Xvfb >/dev/null; then
     # A viewer on host C renders the world and the vehicle it receives across the switch.
-    Xvfb -displayfd 1 -screen 0 1280x720x24 -nolisten tcp >"$WORK/xvfb.display" 2>"$WORK/xvfb.log" &
+    # (The file exists before Xvfb starts: the background shell may not have opened it yet.)
+    : >"$WORK/xvfb.display"
+    Xvfb -displayfd 1 -screen 0 1280x720x24 -nolisten tcp >>"$WORK/xvfb.display" 2>"$WORK/xvfb.log" &
     XVFB_PID=$!
     XDISP=''
     for _ in $(seq 1 300); do XDISP=$(head -n 1 "$WORK/xvfb.display"); [[ -n $XDISP ]] && break; sleep 0.1; done

@@ -38,8 +38,8 @@ constexpr std::array<TopicSpec, 8> kTopics = {{
 
 dds_qos_t* BaseQos(const TopicSpec& s) {
   dds_qos_t* q = dds_create_qos();
-  // A reliable writer blocks at most 10 ms when the reader's history is full (keep-all topics
-  // only); the server writes those from a thread of their own, never from the step loop.
+  // A reliable writer blocks at most 10 ms when the readers have not acknowledged enough
+  // (WriterQos gives the topics no 1 kHz loop writes a second).
   dds_qset_reliability(q, s.reliable ? DDS_RELIABILITY_RELIABLE : DDS_RELIABILITY_BEST_EFFORT,
                        DDS_MSECS(10));
   if (s.history_depth == 0) {
@@ -87,11 +87,13 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
   }
   // Instances stay alive when a writer goes away: a restarted server keeps its keys.
   dds_qset_writer_data_lifecycle(q, false);
-  if (id == TopicId::kControl) {
-    // Only clients write requests, never a server's loop: a client stepping in lockstep sends
-    // thousands a second, and while a slow reader (a recorder under load) has not yet acknowledged
-    // the last ~30 kB Cyclone holds the write; 10 ms lost a request now and then (dds_write:
-    // Timeout), a second waits it out.
+  if (s.reliable && id != TopicId::kInput) {
+    // Requests, replies, events, parameters, the world and diagnostics are never written from a
+    // 1 kHz loop (the server writes them from its publisher thread, clients from their request
+    // calls): while a slow reader (a recorder or client under load) has not yet acknowledged the
+    // last ~30 kB, Cyclone holds the write, and 10 ms lost a request or a reply now and then
+    // (dds_write: Timeout; 2 replies of a burst of 12,000 on a loaded machine). A second waits it
+    // out. Driver input keeps 10 ms: a rig writes it from its own 1 kHz loop.
     dds_qset_reliability(q, DDS_RELIABILITY_RELIABLE, DDS_SECS(1));
   }
   return q;
