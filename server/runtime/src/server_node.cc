@@ -343,7 +343,14 @@ void ServerNode::PushReport(base::MonoTime now) {
 }
 
 int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
-  scheduling_ = SetUpRealtimeScheduling(options_.rt_priority);
+  std::string scheduling = SetUpRealtimeScheduling(options_.rt_priority);
+  // The stepping workers wait on the loop and the loop on them: they share its scheduling.
+  if (session_->step_threads() > 1 && scheduling.rfind("SCHED_FIFO", 0) == 0) {
+    const std::string refused = session_->SetStepThreadsPriority(options_.rt_priority);
+    if (!refused.empty()) scheduling += "; stepping workers: " + refused;
+  }
+  scheduling_ =
+      scheduling + "; " + std::to_string(session_->step_threads()) + " stepping thread(s)";
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
       options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
@@ -426,6 +433,10 @@ void ServerNode::WriteStats(base::MonoTime start, base::MonoTime end, base::Nano
   std::fprintf(f, "cpu_percent %.2f\n",
                100.0 * (base::ProcessCpuTime() - start_cpu).seconds() / wall_s);
   std::fprintf(f, "scheduling %s\n", scheduling_.c_str());
+  // Every state a step made: handed to the state writer, or refused there (queue full).
+  std::fprintf(f, "states_pushed %llu\n", static_cast<unsigned long long>(states_->pushed()));
+  std::fprintf(f, "states_refused %llu\n", static_cast<unsigned long long>(states_->refused()));
+  std::fprintf(f, "step_threads %d\n", session_->step_threads());
   // The boundaries that applied requests, and how long the requests held each.
   std::fprintf(f, "request_boundaries %llu\n",
                static_cast<unsigned long long>(request_boundaries_.count()));

@@ -21,11 +21,13 @@ bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
   const std::size_t size = s.ByteSizeLong();
   if (size > kFrameBytes) {
     drops_.Count(drop_large_);
+    refused_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
   Frame* f = frames_.Reserve();
   if (f == nullptr) {
     drops_.Count(drop_full_);
+    refused_.fetch_add(1, std::memory_order_relaxed);
     return false;
   }
   f->key = key;

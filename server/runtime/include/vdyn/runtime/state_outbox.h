@@ -40,6 +40,9 @@ class StateOutbox {
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
+  // States handed over by Push, and those Push refused (queue full, larger than a frame).
+  std::uint64_t pushed() const { return pushed_.load(std::memory_order_relaxed); }
+  std::uint64_t refused() const { return refused_.load(std::memory_order_relaxed); }
 
   static constexpr std::size_t kFrameBytes = 8192;
 
@@ -60,6 +63,7 @@ class StateOutbox {
   std::atomic<std::uint64_t> written_{0};
   std::atomic<std::uint64_t> failures_{0};
   std::atomic<std::uint64_t> pushed_{0};
+  std::atomic<std::uint64_t> refused_{0};
   std::thread thread_;
 };
 
