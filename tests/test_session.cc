@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <span>
 #include <stdexcept>
 #include <thread>
 
@@ -469,8 +470,8 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
 }
 
 // The pool's fixed partition: every item once, by one thread, in contiguous parts in order, the
-// first on the calling thread; and Run returns only when every part is done (checked right after
-// each of many jobs).
+// first (the smaller) on the calling thread; and Run returns only when every part is done (checked
+// right after each of many jobs).
 TEST(StepPool, EachItemOnceInContiguousPartsAndRunWaitsForEveryPart) {
   for (const int threads : {1, 2, 3, 5}) {
     StepPool pool(threads);
@@ -488,9 +489,11 @@ TEST(StepPool, EachItemOnceInContiguousPartsAndRunWaitsForEveryPart) {
         pool.Run(n, part);
         for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(visits[i], job) << "item " << i;
       }
-      // Part k is [n k / T, n (k + 1) / T): the same thread for each part, another for the next.
+      // Part k starts at n W(k) / W(T) with W(0) = 0, W(k) = 2 + 3 (k - 1): the calling thread's
+      // part weighs 2, a worker's 3. The same thread for each part, another for the next.
+      const auto w = [](int k) { return k == 0 ? 0 : 2 + 3 * (k - 1); };
       for (int k = 0; k < threads; ++k) {
-        const std::size_t b = n * k / threads, e = n * (k + 1) / threads;
+        const std::size_t b = n * w(k) / w(threads), e = n * w(k + 1) / w(threads);
         for (std::size_t i = b; i < e; ++i) EXPECT_EQ(by[i], by[b]) << "item " << i;
         if (k == 0 && e > 0) {
           EXPECT_EQ(by[0], std::this_thread::get_id());
@@ -518,8 +521,9 @@ TEST(StepPool, AThreadCountOutsideItsRangeIsRefusedWithTheReason) {
 }
 
 // What a session says - its events and every published state, byte for byte and in order - is
-// the same stepped by 1 or 3 threads, over a drive of several vehicles whose input changes every
-// step, with spawns, a removal, a teleport, a contained divergence and a respawn in the middle.
+// the same stepped by 1 or 3 threads (and encoded on the pool or serialised by the caller), over a
+// drive of several vehicles whose input changes every step, with spawns, a removal, a teleport, a
+// contained divergence and a respawn in the middle.
 TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads) {
   const auto world = testing::SharedWorld("facility");
   struct Output {
@@ -527,7 +531,7 @@ TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads)
     std::uint64_t nonfinite = 0;
     int elsewhere = 0;  // events and states handed out on another thread than the caller's
   };
-  auto run = [&world](int threads) {
+  auto run = [&world](int threads, bool encoded) {
     Output out;
     SessionConfig c = Config();
     c.step_threads = threads;
@@ -589,16 +593,25 @@ TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads)
         spawn.mutable_spawn()->mutable_pose()->set_y(world->spawn.y + 12.0);
         apply(spawn);
       }
-      s.Step([&out, caller](std::uint32_t id, const pb::VehicleState& st) {
-        out.elsewhere += std::this_thread::get_id() != caller;
-        out.states.push_back(std::to_string(id) + ":" + st.SerializeAsString());
-      });
+      if (encoded) {  // as the server publishes them: encoded on the pool
+        s.StepEncoded([&out, caller](std::uint32_t id, std::span<const std::uint8_t> bytes) {
+          out.elsewhere += std::this_thread::get_id() != caller;
+          out.states.push_back(std::to_string(id) + ":" + std::string(bytes.begin(), bytes.end()));
+        });
+      } else {
+        s.Step([&out, caller](std::uint32_t id, const pb::VehicleState& st) {
+          out.elsewhere += std::this_thread::get_id() != caller;
+          out.states.push_back(std::to_string(id) + ":" + st.SerializeAsString());
+        });
+      }
     }
     s.FlushEvents();
     s.ForEachVehicle([&](std::uint32_t id) { out.nonfinite += s.simulator(id).nonfinite_steps(); });
     return out;
   };
-  const Output one = run(1), three = run(3);
+  // One thread with the messages serialised here; three with the states encoded on the pool, as
+  // the server sends them: the same bytes.
+  const Output one = run(1, false), three = run(3, true);
   // The drive did what it says: every kind of event, and the divergence was contained.
   int spawned = 0, removed = 0, checkpoints = 0, batches = 0;
   for (const std::string& bytes : one.events) {

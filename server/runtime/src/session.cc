@@ -156,6 +156,7 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
   FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg, true,
                    0.0, v.state_msg);
   v.state_msg.mutable_input()->mutable_source_id()->reserve(limits::kMaxIdBytes);
+  v.state_bytes.resize(kEncodedStateBytes);
   return v;
 }
 
@@ -506,21 +507,33 @@ void Session::ContainNonFinite(Vehicle& v) {
   EmitSpawned(v);
 }
 
-void Session::StepPart(std::size_t begin, std::size_t end, bool fill_state) {
+void Session::StepPart(std::size_t begin, std::size_t end, Fill fill) {
   // Only the vehicle's own simulator and messages are written, and the world is only read: a
   // vehicle's result does not depend on the thread that steps it.
   const std::int64_t time_ns = steps_ * config_.step_ns;
   for (std::size_t i = begin; i < end; ++i) {
     Vehicle& v = *order_[i];
     v.step_status = v.sim->Step();
-    if (!fill_state || v.step_status != StepStatus::kOk) continue;
+    if (fill == Fill::kNone || v.step_status != StepStatus::kOk) continue;
     const StepRecord& r = v.sim->last_step();
     FillVehicleState(v.id, config_.server_id, config_.step_ns, time_ns, r, v.applied_msg,
                      v.safe_state, r.derived.steering_torque, v.state_msg);
+    if (fill != Fill::kEncoded) continue;
+    const std::size_t size = v.state_msg.ByteSizeLong();
+    v.state_size = size <= v.state_bytes.size() ? size : 0;
+    if (v.state_size > 0) v.state_msg.SerializeWithCachedSizesToArray(v.state_bytes.data());
   }
 }
 
 void Session::Step(const StateSink& on_state) {
+  StepPhases(on_state ? &on_state : nullptr, nullptr);
+}
+
+void Session::StepEncoded(const EncodedStateSink& on_state) {
+  StepPhases(nullptr, on_state ? &on_state : nullptr);
+}
+
+void Session::StepPhases(const StateSink* on_state, const EncodedStateSink* on_encoded) {
   if (order_stale_) {
     order_.clear();  // within its reserve: the vehicles are at most max_vehicles
     for (auto& [id, v] : vehicles_) order_.push_back(&v);
@@ -529,10 +542,10 @@ void Session::Step(const StateSink& on_state) {
   // 1. Serial, in id order: inputs latched (a full batch of input changes goes out as an event).
   for (Vehicle* v : order_) LatchInput(*v);
   // 2. The pool: each vehicle's step and its own state message.
-  const bool fill_state = static_cast<bool>(on_state);
-  auto part = [this, fill_state](std::size_t begin, std::size_t end) {
-    StepPart(begin, end, fill_state);
-  };
+  const Fill fill = on_encoded != nullptr ? Fill::kEncoded
+                    : on_state != nullptr ? Fill::kMessage
+                                          : Fill::kNone;
+  auto part = [this, fill](std::size_t begin, std::size_t end) { StepPart(begin, end, fill); };
   pool_.Run(order_.size(), part);
   // 3. Serial, in id order: what goes out (events, states), as if one thread had done it all.
   for (Vehicle* vp : order_) {
@@ -542,7 +555,8 @@ void Session::Step(const StateSink& on_state) {
       ContainNonFinite(v);
       continue;
     }
-    if (on_state) on_state(id, v.state_msg);
+    if (on_state != nullptr) (*on_state)(id, v.state_msg);
+    if (on_encoded != nullptr) (*on_encoded)(id, {v.state_bytes.data(), v.state_size});
     const std::int64_t step = v.sim->state().step;
     if (v.n_pending > 0 && step - v.pending[0].step >= batch_steps_) FlushInputs(v);
     if (config_.checkpoint_every_steps > 0 && step % config_.checkpoint_every_steps == 0) {

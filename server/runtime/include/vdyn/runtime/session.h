@@ -19,6 +19,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -89,6 +90,9 @@ struct SessionEventRecord {
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns);
 
+// The largest state message Session::StepEncoded encodes (the state outbox's frame).
+inline constexpr std::size_t kEncodedStateBytes = 8192;
+
 // One vehicle of a session: its simulator, parameters, spawn pose and input state. Built off the
 // stepping thread (RequestPlanner) and handed to the session whole.
 struct SessionVehicle {
@@ -107,6 +111,9 @@ struct SessionVehicle {
   bool applied_valid = false;
   pb::DriverInput applied_msg;  // the message form of what was applied
   pb::VehicleState state_msg;   // reused for every step
+  // state_msg's wire bytes (Session::StepEncoded), sized once: kEncodedStateBytes.
+  std::vector<std::uint8_t> state_bytes;
+  std::size_t state_size = 0;                // 0: larger than the buffer, not encoded
   StepStatus step_status = StepStatus::kOk;  // of the last step (written by a stepping thread)
   // Input changes not yet sent (an InputBatch event).
   std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
@@ -189,6 +196,8 @@ class Session {
  public:
   using EventSink = std::function<void(SessionEventRecord&&)>;
   using StateSink = std::function<void(std::uint32_t, const pb::VehicleState&)>;
+  // A state as its wire bytes (empty: larger than kEncodedStateBytes).
+  using EncodedStateSink = std::function<void(std::uint32_t, std::span<const std::uint8_t>)>;
 
   Session(std::shared_ptr<const World> world, SessionConfig config, EventSink on_event);
 
@@ -216,6 +225,9 @@ class Session {
   // order: a non-finite step contained, on_state, input flushes and checkpoints. So events and
   // states come out in the same order and with the same content for any number of threads.
   void Step(const StateSink& on_state = {});
+  // Step, with each state message also encoded on the pool (protobuf wire bytes, the costly part
+  // of publishing it): on_state gets the bytes, in the same order.
+  void StepEncoded(const EncodedStateSink& on_state);
   int step_threads() const { return pool_.threads(); }
   // The pool's workers get the loop's scheduling (StepPool::SetRealtimePriority).
   std::string SetStepThreadsPriority(int priority) { return pool_.SetRealtimePriority(priority); }
@@ -271,7 +283,9 @@ class Session {
   void LatchInput(Vehicle& v);
   void ContainNonFinite(Vehicle& v);
   // Phase 2 of Step for the vehicles [begin, end) of order_ (on any of the pool's threads).
-  void StepPart(std::size_t begin, std::size_t end, bool fill_state);
+  enum class Fill : std::uint8_t { kNone, kMessage, kEncoded };
+  void StepPart(std::size_t begin, std::size_t end, Fill fill);
+  void StepPhases(const StateSink* on_state, const EncodedStateSink* on_encoded);
 
   std::shared_ptr<const World> world_;
   SessionConfig config_;

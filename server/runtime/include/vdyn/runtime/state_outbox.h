@@ -1,14 +1,16 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
-// serialised sample, an instance lookup), so the loop serialises each state into a preallocated
-// frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
-// effort, keep last 1), batched: a step's states leave together. A vehicle's state also goes to
-// its own partition while someone reads there (transport/state_writers.h). The loop neither
-// allocates nor blocks; a full queue drops the state and counts it.
+// serialised sample, an instance lookup), so the loop copies each state, encoded by the stepping
+// threads, into a preallocated frame of a lock-free queue and a writer thread of its own puts the
+// frames on vdyn/state (best effort, keep last 1), batched: a step's states leave together. A
+// vehicle's state also goes to its own partition while someone reads there
+// (transport/state_writers.h). The loop neither allocates nor blocks; a full queue drops the state
+// and counts it.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <span>
 #include <thread>
 
 #include "vdyn/base/doorbell.h"
@@ -28,9 +30,10 @@ class StateOutbox {
   StateOutbox(const StateOutbox&) = delete;
   StateOutbox& operator=(const StateOutbox&) = delete;
 
-  // Loop thread: serialises `s` into a free frame for the writer. False (and counted) when the
-  // queue is full or the state is larger than a frame.
-  bool Push(std::uint32_t key, const pb::VehicleState& s);
+  // Loop thread: copies a state's wire bytes (encoded on the stepping threads,
+  // Session::StepEncoded) into a free frame for the writer. False (and counted) when the queue is
+  // full or the state is larger than a frame (`bytes` empty: it did not fit its buffer).
+  bool PushEncoded(std::uint32_t key, std::span<const std::uint8_t> bytes);
   // Loop thread, after a step's pushes: wakes the writer, which writes every frame pushed so far
   // and then sends them together (several states per datagram; one sendmsg per datagram and
   // reader, not per state).

@@ -1,11 +1,12 @@
 // StepPool: a fixed set of threads that step a session's vehicles together (issue 19).
 //
 // The calling thread (the server's loop) and N-1 workers, all created once, share one job at a
-// time: [0, n) cut into N contiguous parts in order, part k = [n*k/N, n*(k+1)/N), part 0 on the
-// calling thread. The cut depends only on n and N, never on timing, and each item is stepped by
-// exactly one thread; what an item's result is does not depend on which thread computes it (a
-// vehicle's step reads only its own simulator and the immutable world), so results are bit for
-// bit the same for any N.
+// time: [0, n) cut into N contiguous parts in order, part 0 on the calling thread. The calling
+// thread also runs the session's serial phases, so its part weighs 2 and each worker's 3:
+// part k starts at n * W(k) / W(N), W(0) = 0, W(k) = 2 + 3 (k - 1) (Begin). The cut depends only
+// on n and N, never on timing, and each item is stepped by exactly one thread; what an item's
+// result is does not depend on which thread computes it (a vehicle's step reads only its own
+// simulator and the immutable world), so results are bit for bit the same for any N.
 //
 //   loop:    publish job, gen++ ──► part 0 ──► wait remaining == 0 ──► (serial phase)
 //   worker k:    wait gen changes ──► part k ──► remaining-- (the last one wakes the loop)
@@ -35,9 +36,13 @@ class StepPool {
 
   int threads() const { return threads_; }
 
-  // Part k of [0, n) among `threads` (the fixed partition): [Begin(n, k), Begin(n, k + 1)).
+  // Part k of [0, n) among `threads` (the fixed partition): [Begin(n, T, k), Begin(n, T, k + 1)).
+  static constexpr std::size_t kCallerWeight = 2, kWorkerWeight = 3;
   static std::size_t Begin(std::size_t n, int threads, int k) {
-    return n * static_cast<std::size_t>(k) / static_cast<std::size_t>(threads);
+    auto weight = [](int parts) {  // of the first `parts` parts
+      return parts <= 0 ? 0 : kCallerWeight + kWorkerWeight * static_cast<std::size_t>(parts - 1);
+    };
+    return n * weight(k) / weight(threads);
   }
 
   // Calls fn(context, begin, end) once for each non-empty part of [0, n), part 0 on this thread,
