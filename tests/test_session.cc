@@ -1,5 +1,6 @@
 // Session rules without the network: requests, input latching, the watchdog, events and the
 // bit-exact re-simulation of a session from its events.
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -520,6 +521,48 @@ TEST(StepPool, AThreadCountOutsideItsRangeIsRefusedWithTheReason) {
   EXPECT_THROW(Session(testing::SharedWorld("flat"), c, nullptr), std::invalid_argument);
 }
 
+// State frames in memory (the outbox's part): the states of each step, in frame order, as
+// "id:bytes" when the step's frames are closed; opened and closed on the caller's thread (else
+// counted).
+class CollectedFrames final : public StateFrames {
+ public:
+  CollectedFrames(std::vector<std::string>& states, int& elsewhere)
+      : states_(states), elsewhere_(elsewhere) {}
+  std::size_t Open(std::size_t n) override {
+    elsewhere_ += std::this_thread::get_id() != caller;
+    frames_.resize(n);
+    return n;
+  }
+  std::span<std::uint8_t> Buffer(std::size_t i) override { return frames_[i].bytes; }
+  void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) override {
+    frames_[i].key = key;
+    frames_[i].size = size;
+    frames_[i].too_large = too_large;
+  }
+  void Close(std::size_t n) override {
+    elsewhere_ += std::this_thread::get_id() != caller;
+    EXPECT_EQ(n, frames_.size());
+    for (const Frame& f : frames_) {
+      EXPECT_FALSE(f.too_large);
+      if (f.size == 0) continue;  // a contained step: no state
+      states_.push_back(std::to_string(f.key) + ":" +
+                        std::string(f.bytes.begin(), f.bytes.begin() + f.size));
+    }
+  }
+  std::thread::id caller;
+
+ private:
+  struct Frame {
+    std::uint32_t key = 0;
+    std::size_t size = 0;
+    bool too_large = false;
+    std::array<std::uint8_t, 8192> bytes{};
+  };
+  std::vector<Frame> frames_;
+  std::vector<std::string>& states_;
+  int& elsewhere_;
+};
+
 // What a session says - its events and every published state, byte for byte and in order - is
 // the same stepped by 1 or 3 threads (and encoded on the pool or serialised by the caller), over a
 // drive of several vehicles whose input changes every step, with spawns, a removal, a teleport, a
@@ -533,6 +576,7 @@ TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads)
   };
   auto run = [&world](int threads, bool encoded) {
     Output out;
+    CollectedFrames frames(out.states, out.elsewhere);
     SessionConfig c = Config();
     c.step_threads = threads;
     const std::uint64_t terrain = TerrainHash(world->terrain);
@@ -593,11 +637,9 @@ TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads)
         spawn.mutable_spawn()->mutable_pose()->set_y(world->spawn.y + 12.0);
         apply(spawn);
       }
-      if (encoded) {  // as the server publishes them: encoded on the pool
-        s.StepEncoded([&out, caller](std::uint32_t id, std::span<const std::uint8_t> bytes) {
-          out.elsewhere += std::this_thread::get_id() != caller;
-          out.states.push_back(std::to_string(id) + ":" + std::string(bytes.begin(), bytes.end()));
-        });
+      if (encoded) {  // as the server publishes them: encoded on the pool into frames
+        frames.caller = caller;
+        s.StepInto(frames);
       } else {
         s.Step([&out, caller](std::uint32_t id, const pb::VehicleState& st) {
           out.elsewhere += std::this_thread::get_id() != caller;
@@ -609,8 +651,8 @@ TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads)
     s.ForEachVehicle([&](std::uint32_t id) { out.nonfinite += s.simulator(id).nonfinite_steps(); });
     return out;
   };
-  // One thread with the messages serialised here; three with the states encoded on the pool, as
-  // the server sends them: the same bytes.
+  // One thread with the messages serialised here; three with the states encoded on the pool into
+  // frames, as the server sends them: the same bytes.
   const Output one = run(1, false), three = run(3, true);
   // The drive did what it says: every kind of event, and the divergence was contained.
   int spawned = 0, removed = 0, checkpoints = 0, batches = 0;

@@ -75,11 +75,6 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
       participant_, drops_,
       std::max<std::size_t>(
           512, 32 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)));
-  // Encoded on the stepping threads (Session::StepEncoded); the loop only copies the bytes.
-  static_assert(kEncodedStateBytes == StateOutbox::kFrameBytes);
-  state_sink_ = [this](std::uint32_t id, std::span<const std::uint8_t> bytes) {
-    states_->PushEncoded(id, bytes);
-  };
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
@@ -205,7 +200,7 @@ bool ServerNode::Boundary() {
 }
 
 void ServerNode::StepOnce() {
-  session_->StepEncoded(state_sink_);
+  session_->StepInto(*states_);  // each state encoded into its frame by its stepping thread
   states_->Send();
   sim_time_ns_.store(session_->steps() * session_->step_ns(), std::memory_order_relaxed);
   if (session_->paused() && session_->pending_steps() > 0) {

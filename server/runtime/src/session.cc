@@ -156,7 +156,6 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
   FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg, true,
                    0.0, v.state_msg);
   v.state_msg.mutable_input()->mutable_source_id()->reserve(limits::kMaxIdBytes);
-  v.state_bytes.resize(kEncodedStateBytes);
   return v;
 }
 
@@ -514,14 +513,20 @@ void Session::StepPart(std::size_t begin, std::size_t end, Fill fill) {
   for (std::size_t i = begin; i < end; ++i) {
     Vehicle& v = *order_[i];
     v.step_status = v.sim->Step();
-    if (fill == Fill::kNone || v.step_status != StepStatus::kOk) continue;
+    const bool frame = fill == Fill::kEncoded && i < frames_open_;
+    if (fill == Fill::kNone || v.step_status != StepStatus::kOk) {
+      if (frame) frames_->Fill(i, v.id, 0, false);
+      continue;
+    }
     const StepRecord& r = v.sim->last_step();
     FillVehicleState(v.id, config_.server_id, config_.step_ns, time_ns, r, v.applied_msg,
                      v.safe_state, r.derived.steering_torque, v.state_msg);
-    if (fill != Fill::kEncoded) continue;
+    if (!frame) continue;
+    const std::span<std::uint8_t> buffer = frames_->Buffer(i);
     const std::size_t size = v.state_msg.ByteSizeLong();
-    v.state_size = size <= v.state_bytes.size() ? size : 0;
-    if (v.state_size > 0) v.state_msg.SerializeWithCachedSizesToArray(v.state_bytes.data());
+    const bool fits = size <= buffer.size();
+    if (fits) v.state_msg.SerializeWithCachedSizesToArray(buffer.data());
+    frames_->Fill(i, v.id, fits ? size : 0, !fits);
   }
 }
 
@@ -529,11 +534,11 @@ void Session::Step(const StateSink& on_state) {
   StepPhases(on_state ? &on_state : nullptr, nullptr);
 }
 
-void Session::StepEncoded(const EncodedStateSink& on_state) {
-  StepPhases(nullptr, on_state ? &on_state : nullptr);
+void Session::StepInto(StateFrames& frames) {
+  StepPhases(nullptr, &frames);
 }
 
-void Session::StepPhases(const StateSink* on_state, const EncodedStateSink* on_encoded) {
+void Session::StepPhases(const StateSink* on_state, StateFrames* frames) {
   if (order_stale_) {
     order_.clear();  // within its reserve: the vehicles are at most max_vehicles
     for (auto& [id, v] : vehicles_) order_.push_back(&v);
@@ -541,10 +546,12 @@ void Session::StepPhases(const StateSink* on_state, const EncodedStateSink* on_e
   }
   // 1. Serial, in id order: inputs latched (a full batch of input changes goes out as an event).
   for (Vehicle* v : order_) LatchInput(*v);
-  // 2. The pool: each vehicle's step and its own state message.
-  const Fill fill = on_encoded != nullptr ? Fill::kEncoded
+  // 2. The pool: each vehicle's step and its own state message (encoded into its frame).
+  const Fill fill = frames != nullptr     ? Fill::kEncoded
                     : on_state != nullptr ? Fill::kMessage
                                           : Fill::kNone;
+  frames_ = frames;
+  frames_open_ = frames != nullptr ? frames->Open(order_.size()) : 0;
   auto part = [this, fill](std::size_t begin, std::size_t end) { StepPart(begin, end, fill); };
   pool_.Run(order_.size(), part);
   // 3. Serial, in id order: what goes out (events, states), as if one thread had done it all.
@@ -556,7 +563,6 @@ void Session::StepPhases(const StateSink* on_state, const EncodedStateSink* on_e
       continue;
     }
     if (on_state != nullptr) (*on_state)(id, v.state_msg);
-    if (on_encoded != nullptr) (*on_encoded)(id, {v.state_bytes.data(), v.state_size});
     const std::int64_t step = v.sim->state().step;
     if (v.n_pending > 0 && step - v.pending[0].step >= batch_steps_) FlushInputs(v);
     if (config_.checkpoint_every_steps > 0 && step % config_.checkpoint_every_steps == 0) {
@@ -573,6 +579,9 @@ void Session::StepPhases(const StateSink* on_state, const EncodedStateSink* on_e
       c.params.reset();
     }
   }
+  // The frames go out after the events of the step (as the states did before them).
+  if (frames != nullptr) frames->Close(order_.size());
+  frames_ = nullptr;
   ++steps_;
 }
 

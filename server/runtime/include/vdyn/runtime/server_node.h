@@ -168,7 +168,6 @@ class ServerNode {
   transport::Reader<pb::DriverInput> input_reader_;
   transport::Reader<pb::ControlRequest> control_reader_;
   std::unique_ptr<Session> session_;
-  Session::EncodedStateSink state_sink_;
 
   // The request path (every request gets one reply, or is counted unanswered with the reason):
   //   receiver -> incoming_ -> request thread (RequestPlanner) -> prepared_ -> loop (Commit)

@@ -90,8 +90,23 @@ struct SessionEventRecord {
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns);
 
-// The largest state message Session::StepEncoded encodes (the state outbox's frame).
-inline constexpr std::size_t kEncodedStateBytes = 8192;
+// Where Session::StepInto puts a step's states: one frame per vehicle, in id order, each filled
+// with the vehicle's encoded state message (protobuf wire bytes) on the thread that stepped it -
+// the state outbox (state_outbox.h), so the loop thread copies nothing.
+class StateFrames {
+ public:
+  virtual ~StateFrames() = default;
+  // Loop thread, before the parallel phase: frames for up to n states; how many it has (the
+  // states beyond are refused, and counted, by Close).
+  virtual std::size_t Open(std::size_t n) = 0;
+  // A stepping thread, i < Open's count: frame i's buffer, filled in place.
+  virtual std::span<std::uint8_t> Buffer(std::size_t i) = 0;
+  // The same thread: frame i holds vehicle `key`'s state, `size` bytes (0: none - its step was
+  // contained - or `too_large` for the buffer).
+  virtual void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) = 0;
+  // Loop thread, after the step: hands the frames on; `n` as asked of Open.
+  virtual void Close(std::size_t n) = 0;
+};
 
 // One vehicle of a session: its simulator, parameters, spawn pose and input state. Built off the
 // stepping thread (RequestPlanner) and handed to the session whole.
@@ -111,9 +126,6 @@ struct SessionVehicle {
   bool applied_valid = false;
   pb::DriverInput applied_msg;  // the message form of what was applied
   pb::VehicleState state_msg;   // reused for every step
-  // state_msg's wire bytes (Session::StepEncoded), sized once: kEncodedStateBytes.
-  std::vector<std::uint8_t> state_bytes;
-  std::size_t state_size = 0;                // 0: larger than the buffer, not encoded
   StepStatus step_status = StepStatus::kOk;  // of the last step (written by a stepping thread)
   // Input changes not yet sent (an InputBatch event).
   std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
@@ -196,8 +208,6 @@ class Session {
  public:
   using EventSink = std::function<void(SessionEventRecord&&)>;
   using StateSink = std::function<void(std::uint32_t, const pb::VehicleState&)>;
-  // A state as its wire bytes (empty: larger than kEncodedStateBytes).
-  using EncodedStateSink = std::function<void(std::uint32_t, std::span<const std::uint8_t>)>;
 
   Session(std::shared_ptr<const World> world, SessionConfig config, EventSink on_event);
 
@@ -226,8 +236,8 @@ class Session {
   // states come out in the same order and with the same content for any number of threads.
   void Step(const StateSink& on_state = {});
   // Step, with each state message also encoded on the pool (protobuf wire bytes, the costly part
-  // of publishing it): on_state gets the bytes, in the same order.
-  void StepEncoded(const EncodedStateSink& on_state);
+  // of publishing it) straight into `frames`: vehicle i of the id order into frame i.
+  void StepInto(StateFrames& frames);
   int step_threads() const { return pool_.threads(); }
   // The pool's workers get the loop's scheduling (StepPool::SetRealtimePriority).
   std::string SetStepThreadsPriority(int priority) { return pool_.SetRealtimePriority(priority); }
@@ -285,7 +295,7 @@ class Session {
   // Phase 2 of Step for the vehicles [begin, end) of order_ (on any of the pool's threads).
   enum class Fill : std::uint8_t { kNone, kMessage, kEncoded };
   void StepPart(std::size_t begin, std::size_t end, Fill fill);
-  void StepPhases(const StateSink* on_state, const EncodedStateSink* on_encoded);
+  void StepPhases(const StateSink* on_state, StateFrames* frames);
 
   std::shared_ptr<const World> world_;
   SessionConfig config_;
@@ -303,6 +313,8 @@ class Session {
   // max_vehicles) only when the set of vehicles changed.
   std::vector<Vehicle*> order_;
   bool order_stale_ = true;
+  StateFrames* frames_ = nullptr;  // StepInto's, during its step
+  std::size_t frames_open_ = 0;    // how many of them
   StepPool pool_;
 };
 
