@@ -12,10 +12,18 @@
 // server's loop thread (its SCHED_FIFO thread, /proc/PID/task/TID/stat) and whole process over the
 // one-vehicle client's window. Medians over the runs; the load average is printed with each run.
 //
-// Usage: follow_bench [seconds=10] [runs=3] [counts=1,16,64,256]
+// With a list of stepping thread counts (`--step-threads`, runtime/step_pool.h), each vehicle
+// count runs once per thread count in every run (the peer of a pool: the same server stepping on
+// one thread, in the same run): the loop thread (the SCHED_FIFO thread that is not a stepping
+// worker `vdyn-step-K`), the workers together, the whole server, and from the server's
+// --stats-out over its whole life: steps lost (due by the end, never run), schedule rebases, tick
+// lateness p50 / p99 / p99.9 / max, and states the state writer refused (queue full).
+//
+// Usage: follow_bench [seconds=10] [runs=3] [counts=1,16,64,256] [step_threads=1]
 #include <signal.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -66,6 +74,17 @@ int AllReader(std::uint32_t domain, double seconds) {
   return 0;
 }
 
+// A thread's name (/proc/PID/task/TID/comm).
+std::string ThreadName(pid_t pid, const std::string& tid) {
+  std::string name = vdyn::bench::Slurp(fmt::format("/proc/{}/task/{}/comm", pid, tid));
+  while (!name.empty() && (name.back() == '\n')) name.pop_back();
+  return name;
+}
+
+bool IsStepWorker(pid_t pid, const std::string& tid) {
+  return ThreadName(pid, tid).rfind("vdyn-step-", 0) == 0;
+}
+
 // utime + stime of one thread, and its scheduling policy (field 41; 1 = SCHED_FIFO).
 bool ThreadStat(pid_t pid, const std::string& tid, double& cpu_s, int& policy) {
   std::FILE* file = std::fopen(fmt::format("/proc/{}/task/{}/stat", pid, tid).c_str(), "r");
@@ -86,18 +105,27 @@ bool ThreadStat(pid_t pid, const std::string& tid, double& cpu_s, int& policy) {
   return true;
 }
 
-// The server's 1 kHz loop: its SCHED_FIFO thread, else its main thread (ServerNode::Run runs the
-// loop on the thread that calls it, and sets SCHED_FIFO when it is permitted).
+// The server's 1 kHz loop: its SCHED_FIFO thread that is not a stepping worker, else its main
+// thread (ServerNode::Run runs the loop on the thread that calls it, and sets SCHED_FIFO when it
+// is permitted; the workers share it).
 std::string LoopThread(pid_t pid) {
   const std::string dir = fmt::format("/proc/{}/task", pid);
   for (const auto& e : std::filesystem::directory_iterator(dir)) {
+    const std::string tid = e.path().filename().string();
     double cpu = 0;
     int policy = 0;
-    if (ThreadStat(pid, e.path().filename().string(), cpu, policy) && policy == 1) {
-      return e.path().filename().string();
-    }
+    if (ThreadStat(pid, tid, cpu, policy) && policy == 1 && !IsStepWorker(pid, tid)) return tid;
   }
   return std::to_string(pid);
+}
+
+std::vector<std::string> StepWorkers(pid_t pid) {
+  std::vector<std::string> tids;
+  for (const auto& e : std::filesystem::directory_iterator(fmt::format("/proc/{}/task", pid))) {
+    const std::string tid = e.path().filename().string();
+    if (IsStepWorker(pid, tid)) tids.push_back(tid);
+  }
+  return tids;
 }
 
 double ThreadCpu(pid_t pid, const std::string& tid) {
@@ -105,6 +133,12 @@ double ThreadCpu(pid_t pid, const std::string& tid) {
   int policy = 0;
   if (tid.empty() || !ThreadStat(pid, tid, cpu, policy)) return -1;
   return cpu;
+}
+
+double ThreadsCpu(pid_t pid, const std::vector<std::string>& tids) {
+  double sum = 0;
+  for (const std::string& tid : tids) sum += std::max(0.0, ThreadCpu(pid, tid));
+  return sum;
 }
 
 double LoadAverage() {
@@ -124,12 +158,14 @@ int main(int argc, char** argv) {
   }
   const double seconds = argc > 1 ? std::atof(argv[1]) : 10.0;
   const int runs = argc > 2 ? std::atoi(argv[2]) : 3;
-  std::vector<int> counts = {1, 16, 64, 256};
-  if (argc > 3) {
-    counts.clear();
-    std::istringstream in(argv[3]);
-    for (std::string x; std::getline(in, x, ',');) counts.push_back(std::atoi(x.c_str()));
-  }
+  auto list = [](const char* text) {
+    std::vector<int> v;
+    std::istringstream in(text);
+    for (std::string x; std::getline(in, x, ',');) v.push_back(std::atoi(x.c_str()));
+    return v;
+  };
+  const std::vector<int> counts = list(argc > 3 ? argv[3] : "1,16,64,256");
+  const std::vector<int> thread_counts = list(argc > 4 ? argv[4] : "1");
   if (std::getenv("CYCLONEDDS_URI") == nullptr) {
     setenv("CYCLONEDDS_URI",
            "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
@@ -139,77 +175,110 @@ int main(int argc, char** argv) {
   const std::string tmp = fmt::format("/tmp/vdyn-follow-bench-{}", getpid());
   const double warmup = 3.0;
   struct Figures {
-    std::vector<double> client, peer, loop, server;
+    std::vector<double> client, peer, loop, workers, server;
+    std::vector<double> lost, rebases, p50, p99, p999, max, refused;
   };
-  std::map<int, Figures> figures;
+  std::map<std::pair<int, int>, Figures> figures;  // (vehicles, stepping threads)
   for (int run = 0; run < runs; ++run) {
     for (int n : counts) {
-      const std::uint32_t domain = 150 + static_cast<std::uint32_t>(getpid() + run * 7 + n) % 60;
-      const std::string dom = std::to_string(domain);
-      std::string ids;
-      for (int i = 1; i <= n; ++i) {
-        if (i > 1) ids += ',';
-        ids += std::to_string(i);
+      for (int threads : thread_counts) {
+        const std::uint32_t domain =
+            150 + static_cast<std::uint32_t>(getpid() + run * 7 + n + threads * 13) % 60;
+        const std::string dom = std::to_string(domain);
+        std::string ids;
+        for (int i = 1; i <= n; ++i) {
+          if (i > 1) ids += ',';
+          ids += std::to_string(i);
+        }
+        const double server_s = 2 * (warmup + seconds) + 20;
+        const std::string stats = fmt::format("{}-stats-{}-{}-{}.txt", tmp, n, threads, run);
+        const pid_t server = Spawn(
+            {VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status",
+             "--max-vehicles", "256", "--vehicle-ids", ids, "--duration", std::to_string(server_s),
+             "--step-threads", std::to_string(threads), "--stats-out", stats},
+            fmt::format("{}-server-{}-{}-{}.log", tmp, n, threads, run));
+        vdyn::base::SleepUntil(MonotonicNow() + Secs(2.0));
+        const std::string loop_tid = LoopThread(server);
+        const std::vector<std::string> workers = StepWorkers(server);
+        // The one-vehicle client, with the server's loop and process over its window.
+        const pid_t client = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "5", "--wait",
+                                    "30", "play", "demo", "--clock", "wall", "--loop"},
+                                   fmt::format("{}-client-{}-{}.log", tmp, n, run));
+        vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
+        const double c0 = ProcessCpuSeconds(client), l0 = ThreadCpu(server, loop_tid),
+                     w0 = ThreadsCpu(server, workers), s0 = ProcessCpuSeconds(server);
+        const auto t0 = MonotonicNow();
+        vdyn::base::SleepUntil(t0 + Secs(seconds));
+        const double wall = (MonotonicNow() - t0).seconds();
+        const double c1 = ProcessCpuSeconds(client), l1 = ThreadCpu(server, loop_tid),
+                     w1 = ThreadsCpu(server, workers), s1 = ProcessCpuSeconds(server);
+        kill(client, SIGTERM);
+        WaitPid(client);
+        // The peer: every vehicle's states.
+        const pid_t peer =
+            Spawn({argv[0], "--all-reader", dom, std::to_string(warmup + seconds + 1)},
+                  fmt::format("{}-peer-{}-{}.log", tmp, n, run));
+        vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
+        const double p0 = ProcessCpuSeconds(peer);
+        const auto tp = MonotonicNow();
+        vdyn::base::SleepUntil(tp + Secs(seconds));
+        const double pwall = (MonotonicNow() - tp).seconds();
+        const double p1 = ProcessCpuSeconds(peer);
+        WaitPid(peer);
+        kill(server, SIGTERM);
+        WaitPid(server);
+        Figures& f = figures[{n, threads}];
+        f.client.push_back(100 * (c1 - c0) / wall);
+        f.peer.push_back(100 * (p1 - p0) / pwall);
+        f.loop.push_back(loop_tid.empty() ? -1 : 100 * (l1 - l0) / wall);
+        f.workers.push_back(100 * (w1 - w0) / wall);
+        f.server.push_back(100 * (s1 - s0) / wall);
+        const auto st = vdyn::bench::ReadStats(stats);
+        auto num = [&st](const char* key) {
+          const auto it = st.find(key);
+          return it == st.end() ? -1.0 : std::atof(it->second.c_str());
+        };
+        f.lost.push_back(num("steps_due") - num("steps"));
+        f.rebases.push_back(num("schedule_rebases"));
+        f.p50.push_back(num("lateness_p50_us"));
+        f.p99.push_back(num("lateness_p99_us"));
+        f.p999.push_back(num("lateness_p999_us"));
+        f.max.push_back(num("lateness_max_us"));
+        f.refused.push_back(num("states_refused"));
+        std::printf(
+            "run %d, %3d vehicles, %d stepping thread(s) (load %.1f): one-vehicle client %.2f %%, "
+            "all-vehicles reader %.2f %%, server loop thread %.2f %%, stepping workers %.2f %%, "
+            "server %.2f %%; steps lost %.0f, rebases %.0f, lateness p50/p99/p99.9/max "
+            "%.1f/%.1f/%.1f/%.1f us, states refused %.0f\n",
+            run + 1, n, threads, LoadAverage(), f.client.back(), f.peer.back(), f.loop.back(),
+            f.workers.back(), f.server.back(), f.lost.back(), f.rebases.back(), f.p50.back(),
+            f.p99.back(), f.p999.back(), f.max.back(), f.refused.back());
+        std::fflush(stdout);
       }
-      const double server_s = 2 * (warmup + seconds) + 20;
-      const pid_t server = Spawn(
-          {VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status", "--max-vehicles",
-           "256", "--vehicle-ids", ids, "--duration", std::to_string(server_s)},
-          fmt::format("{}-server-{}-{}.log", tmp, n, run));
-      vdyn::base::SleepUntil(MonotonicNow() + Secs(2.0));
-      const std::string loop_tid = LoopThread(server);
-      // The one-vehicle client, with the server's loop and process over its window.
-      const pid_t client = Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--strength", "5", "--wait",
-                                  "30", "play", "demo", "--clock", "wall", "--loop"},
-                                 fmt::format("{}-client-{}-{}.log", tmp, n, run));
-      vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
-      const double c0 = ProcessCpuSeconds(client), l0 = ThreadCpu(server, loop_tid),
-                   s0 = ProcessCpuSeconds(server);
-      const auto t0 = MonotonicNow();
-      vdyn::base::SleepUntil(t0 + Secs(seconds));
-      const double wall = (MonotonicNow() - t0).seconds();
-      const double c1 = ProcessCpuSeconds(client), l1 = ThreadCpu(server, loop_tid),
-                   s1 = ProcessCpuSeconds(server);
-      kill(client, SIGTERM);
-      WaitPid(client);
-      // The peer: every vehicle's states.
-      const pid_t peer = Spawn({argv[0], "--all-reader", dom, std::to_string(warmup + seconds + 1)},
-                               fmt::format("{}-peer-{}-{}.log", tmp, n, run));
-      vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
-      const double p0 = ProcessCpuSeconds(peer);
-      const auto tp = MonotonicNow();
-      vdyn::base::SleepUntil(tp + Secs(seconds));
-      const double pwall = (MonotonicNow() - tp).seconds();
-      const double p1 = ProcessCpuSeconds(peer);
-      WaitPid(peer);
-      kill(server, SIGTERM);
-      WaitPid(server);
-      Figures& f = figures[n];
-      f.client.push_back(100 * (c1 - c0) / wall);
-      f.peer.push_back(100 * (p1 - p0) / pwall);
-      f.loop.push_back(loop_tid.empty() ? -1 : 100 * (l1 - l0) / wall);
-      f.server.push_back(100 * (s1 - s0) / wall);
-      std::printf(
-          "run %d, %3d vehicles (load %.1f): one-vehicle client %.2f %%, all-vehicles reader "
-          "%.2f %%, server loop thread %.2f %%, server %.2f %%\n",
-          run + 1, n, LoadAverage(), f.client.back(), f.peer.back(), f.loop.back(),
-          f.server.back());
-      std::fflush(stdout);
     }
   }
   std::printf("\nmedians of %d runs, %% of one core:\n", runs);
   std::printf(
-      "| vehicles | one-vehicle client | all-vehicles reader (peer) | server loop thread | "
-      "server |\n| --- | --- | --- | --- | --- |\n");
+      "| vehicles | stepping threads | one-vehicle client | all-vehicles reader (peer) | server "
+      "loop thread | stepping workers | server | steps lost | rebases | lateness p50 / p99 / "
+      "p99.9 / max, us | states refused |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (int n : counts) {
-    const Figures& f = figures[n];
-    std::printf("| %d | %.2f | %.2f | %.2f | %.2f |\n", n, Median(f.client), Median(f.peer),
-                Median(f.loop), Median(f.server));
+    for (int threads : thread_counts) {
+      const Figures& f = figures[{n, threads}];
+      std::printf(
+          "| %d | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.0f | %.0f | %.1f / %.1f / %.1f / %.1f "
+          "| %.0f |\n",
+          n, threads, Median(f.client), Median(f.peer), Median(f.loop), Median(f.workers),
+          Median(f.server), Median(f.lost), Median(f.rebases), Median(f.p50), Median(f.p99),
+          Median(f.p999), Median(f.max), Median(f.refused));
+    }
   }
-  const double c1 = Median(figures[counts.front()].client);
+  const int t0 = thread_counts.front();
+  const double c1 = Median(figures[{counts.front(), t0}].client);
   for (int n : counts) {
-    std::printf("one-vehicle client at %d vehicles / at %d: %.2fx\n", n, counts.front(),
-                Median(figures[n].client) / c1);
+    std::printf("one-vehicle client at %d vehicles / at %d (%d stepping thread(s)): %.2fx\n", n,
+                counts.front(), t0, Median(figures[{n, t0}].client) / c1);
   }
   return 0;
 }

@@ -176,6 +176,11 @@ INSTANTIATE_TEST_SUITE_P(
                   "--max-vehicles: vehicles per server must be in [1, 256], got 257"},
         BadOption{"--max-vehicles abc", "--max-vehicles: 'abc' is not a number"},
         BadOption{"--max-vehicles 2.5", "--max-vehicles: '2.5' is not a whole number"},
+        BadOption{"--step-threads 0", "--step-threads: stepping threads must be in [1, 16], got 0"},
+        BadOption{"--step-threads 17",
+                  "--step-threads: stepping threads must be in [1, 16], got 17"},
+        BadOption{"--step-threads 1.5", "--step-threads: '1.5' is not a whole number"},
+        BadOption{"--step-threads two", "--step-threads: 'two' is not a number"},
         BadOption{"--rt-priority abc", "--rt-priority: 'abc' is not a number"},
         BadOption{"--world-scale inf", "--world-scale: 'inf' is not a finite number"},
         BadOption{"--heightmap-cell 0", "height-map cell, m must be in (0, 10000], got 0"}));

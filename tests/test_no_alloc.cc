@@ -1,12 +1,16 @@
 // The 1 kHz thread allocates nothing: every heap allocation made by the stepping thread is
 // counted, through operator new and (outside the sanitizer build, which owns malloc) malloc
 // itself. Two paths: the simulator's step, and the server's real loop - a ServerNode running in
-// this process, its loop on a thread of this test, while driver input changes every millisecond
-// (an analog wheel), a subscriber in another process takes the states, and control requests of
-// every kind arrive: the request thread makes them ready, the loop only swaps them in.
+// this process, its loop on a thread of this test and its vehicles stepped by the loop and two
+// workers (StepPool, also counted), while driver input changes every millisecond (an analog
+// wheel), a subscriber in another process takes the states, and control requests of every kind
+// arrive: the request thread makes them ready, the loop only swaps them in.
+#include <sys/prctl.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
+#include <cstring>
 #include <new>
 #include <thread>
 
@@ -21,18 +25,29 @@
 #include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
 #include "vdyn/runtime/server_node.h"
+#include "vdyn/runtime/step_pool.h"
 #include "vdyn/transport/control_client.h"
 #include "vdyn/transport/dds.h"
 
 namespace {
 // Counting is per thread: DDS's own threads, the server's other threads, allocate as they please.
-// t_counting: this thread, now; t_loop and g_count_loop: the server's loop thread, while set.
+// t_counting: this thread, now; t_loop and g_count_loop: the server's loop thread and its
+// stepping workers (threads named vdyn-step-K, runtime/step_pool.h), while set.
 thread_local bool t_counting = false;
 thread_local bool t_loop = false;
+thread_local int t_step_worker = -1;  // unknown yet; then 0 or 1 (a worker names itself first)
 std::atomic<bool> g_count_loop{false};
 std::atomic<long> g_allocations{0};
+bool IsStepWorker() {
+  if (t_step_worker < 0) {
+    char name[16] = {};
+    prctl(PR_GET_NAME, name, 0, 0, 0);
+    t_step_worker = std::strncmp(name, "vdyn-step-", 10) == 0 ? 1 : 0;
+  }
+  return t_step_worker == 1;
+}
 void Count() {
-  if (t_counting || (t_loop && g_count_loop.load(std::memory_order_relaxed))) {
+  if (t_counting || (g_count_loop.load(std::memory_order_relaxed) && (t_loop || IsStepWorker()))) {
     g_allocations.fetch_add(1);
   }
 }
@@ -135,6 +150,30 @@ TEST(NoAllocation, StepsOnFacilityAllocateNothing) {
   ExpectCounterWorks();
 }
 
+// The server test below counts its stepping workers by their name: a worker's allocations are
+// seen (a vector and its elements for each item of the worker's part of the job, each counted in
+// operator new and again in malloc where malloc is counted; part 0 runs here, on a thread that is
+// neither the loop nor a worker, and is not counted).
+TEST(NoAllocation, AnAllocationOnAStepWorkerIsCounted) {
+  StepPool pool(2);
+  std::vector<int>* made[5] = {};
+  auto part = [&made](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) made[i] = new std::vector<int>(10);
+  };
+  g_allocations = 0;
+  g_count_loop = true;
+  pool.Run(5, part);
+  g_count_loop = false;
+  const auto on_worker = static_cast<long>(5 - StepPool::Begin(5, 2, 1));
+  ASSERT_GE(on_worker, 1);
+#if defined(VDYN_ASAN)
+  EXPECT_EQ(g_allocations.load(), 2 * on_worker);
+#else
+  EXPECT_EQ(g_allocations.load(), 4 * on_worker);
+#endif
+  for (std::vector<int>* v : made) delete v;
+}
+
 // Requests of every kind, each answered: spawns (one where a removed vehicle lived), teleports,
 // a reset, new parameters, a restore of a new vehicle, a pause, steps while paused, a resume, a
 // removal. `round` keeps ids and poses apart between calls.
@@ -223,6 +262,8 @@ TEST(NoAllocation, TheServerLoopAllocatesNothingWhileRequestsArriveAndInputChang
   options.session.server_id = "no-alloc";
   options.session.default_params = DefaultVehicleParams();
   options.session.watchdog_s = 0.5;
+  // Three stepping threads: the loop and two workers, the vehicles (2 to 7) cut unevenly.
+  options.session.step_threads = 3;
   ServerNode node(world, options);
   std::atomic<bool> stop{false};
   int code = -1;
@@ -282,7 +323,7 @@ TEST(NoAllocation, TheServerLoopAllocatesNothingWhileRequestsArriveAndInputChang
   EXPECT_EQ(code, 0);
   EXPECT_EQ(answered - answered_before, 2 * 17);
   EXPECT_EQ(accepted, 3 * 17);
-  EXPECT_EQ(loop_allocations, 0) << "allocations on the server's loop thread";
+  EXPECT_EQ(loop_allocations, 0) << "allocations on the server's loop thread or stepping workers";
   ExpectCounterWorks();
 }
 

@@ -1,8 +1,12 @@
 // Session rules without the network: requests, input latching, the watchdog, events and the
 // bit-exact re-simulation of a session from its events.
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <span>
+#include <stdexcept>
+#include <thread>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -14,6 +18,7 @@
 #include "vdyn/runtime/claim.h"
 #include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
+#include "vdyn/runtime/step_pool.h"
 
 namespace vdyn {
 namespace {
@@ -463,6 +468,224 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
     ++compared;
   }
   EXPECT_EQ(compared, 390 - 100);  // both lives, from the checkpoint at step 100
+}
+
+// The pool's fixed partition: every item once, by one thread, in contiguous parts in order, the
+// first (the smaller) on the calling thread; and Run returns only when every part is done (checked
+// right after each of many jobs).
+TEST(StepPool, EachItemOnceInContiguousPartsAndRunWaitsForEveryPart) {
+  for (const int threads : {1, 2, 3, 5}) {
+    StepPool pool(threads);
+    for (const std::size_t n : {0u, 1u, 2u, 3u, 7u, 256u}) {
+      SCOPED_TRACE(std::to_string(threads) + " threads, " + std::to_string(n) + " items");
+      std::vector<int> visits(n, 0);
+      std::vector<std::thread::id> by(n);
+      for (int job = 1; job <= 300; ++job) {
+        auto part = [&](std::size_t begin, std::size_t end) {
+          for (std::size_t i = begin; i < end; ++i) {
+            ++visits[i];
+            by[i] = std::this_thread::get_id();
+          }
+        };
+        pool.Run(n, part);
+        for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(visits[i], job) << "item " << i;
+      }
+      // Part k starts at n W(k) / W(T) with W(0) = 0, W(k) = 2 + 3 (k - 1): the calling thread's
+      // part weighs 2, a worker's 3. The same thread for each part, another for the next.
+      const auto w = [](int k) { return k == 0 ? 0 : 2 + 3 * (k - 1); };
+      for (int k = 0; k < threads; ++k) {
+        const std::size_t b = n * w(k) / w(threads), e = n * w(k + 1) / w(threads);
+        for (std::size_t i = b; i < e; ++i) EXPECT_EQ(by[i], by[b]) << "item " << i;
+        if (k == 0 && e > 0) {
+          EXPECT_EQ(by[0], std::this_thread::get_id());
+        }
+        if (b > 0 && b < e) {
+          EXPECT_NE(by[b], by[b - 1]) << "part " << k;
+        }
+      }
+    }
+  }
+}
+
+TEST(StepPool, AThreadCountOutsideItsRangeIsRefusedWithTheReason) {
+  for (const int threads : {0, -1, 17}) {
+    try {
+      StepPool pool(threads);
+      ADD_FAILURE() << threads << " threads accepted";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_THAT(e.what(), HasSubstr("stepping threads must be in [1, 16]"));
+    }
+  }
+  SessionConfig c = Config();
+  c.step_threads = 0;
+  EXPECT_THROW(Session(testing::SharedWorld("flat"), c, nullptr), std::invalid_argument);
+}
+
+// State frames in memory (the outbox's part): the states of each step, in frame order, as
+// "id:bytes" when the step's frames are closed; opened and closed on the caller's thread (else
+// counted).
+class CollectedFrames final : public StateFrames {
+ public:
+  CollectedFrames(std::vector<std::string>& states, int& elsewhere)
+      : states_(states), elsewhere_(elsewhere) {}
+  std::size_t Open(std::size_t n) override {
+    elsewhere_ += std::this_thread::get_id() != caller;
+    frames_.resize(n);
+    return n;
+  }
+  std::span<std::uint8_t> Buffer(std::size_t i) override { return frames_[i].bytes; }
+  void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) override {
+    frames_[i].key = key;
+    frames_[i].size = size;
+    frames_[i].too_large = too_large;
+  }
+  void Close(std::size_t n) override {
+    elsewhere_ += std::this_thread::get_id() != caller;
+    EXPECT_EQ(n, frames_.size());
+    for (const Frame& f : frames_) {
+      EXPECT_FALSE(f.too_large);
+      if (f.size == 0) continue;  // a contained step: no state
+      states_.push_back(std::to_string(f.key) + ":" +
+                        std::string(f.bytes.begin(), f.bytes.begin() + f.size));
+    }
+  }
+  std::thread::id caller;
+
+ private:
+  struct Frame {
+    std::uint32_t key = 0;
+    std::size_t size = 0;
+    bool too_large = false;
+    std::array<std::uint8_t, 8192> bytes{};
+  };
+  std::vector<Frame> frames_;
+  std::vector<std::string>& states_;
+  int& elsewhere_;
+};
+
+// What a session says - its events and every published state, byte for byte and in order - is
+// the same stepped by 1 or 3 threads (and encoded on the pool or serialised by the caller), over a
+// drive of several vehicles whose input changes every step, with spawns, a removal, a teleport, a
+// contained divergence and a respawn in the middle.
+TEST(Session, EventsAndStatesAreTheSameByteForByteForOneAndThreeSteppingThreads) {
+  const auto world = testing::SharedWorld("facility");
+  struct Output {
+    std::vector<std::string> events, states;
+    std::uint64_t nonfinite = 0;
+    int elsewhere = 0;  // events and states handed out on another thread than the caller's
+  };
+  auto run = [&world](int threads, bool encoded) {
+    Output out;
+    CollectedFrames frames(out.states, out.elsewhere);
+    SessionConfig c = Config();
+    c.step_threads = threads;
+    const std::uint64_t terrain = TerrainHash(world->terrain);
+    const std::thread::id caller = std::this_thread::get_id();
+    Session s(world, c, [&out, terrain, caller](SessionEventRecord&& r) {
+      out.elsewhere += std::this_thread::get_id() != caller;
+      out.events.push_back(ToMessage(r, "test", terrain, 1'000'000).SerializeAsString());
+    });
+    const auto pose = [&world](double lateral) {
+      Pose2 p = world->spawn;
+      p.y += lateral;
+      return p;
+    };
+    for (std::uint32_t id = 1; id <= 7; ++id) {
+      s.Spawn(id, pose(4.0 * id), 5.0 + id, pb::VehicleParams());
+    }
+    const auto apply = [&s](pb::ControlRequest r) {
+      const pb::ControlReply reply = s.Apply(r);
+      EXPECT_TRUE(reply.accepted()) << reply.reason();
+    };
+    for (int step = 0; step < 2500; ++step) {
+      s.ForEachVehicle([&](std::uint32_t id) {
+        // Vehicles 1..3 change their input every step, the others now and then.
+        const double k = id <= 3 ? step : step / 300;
+        std::string why;
+        EXPECT_TRUE(s.OfferInput(
+            Input(id, 0.3 + 0.05 * std::sin(0.01 * k + id), 0.02 * std::sin(0.003 * k * id)), &why))
+            << why;
+      });
+      if (step == 600) {
+        for (std::uint32_t id : {20u, 21u}) {
+          pb::ControlRequest spawn = Request(id);
+          spawn.set_server_id("test");
+          spawn.mutable_spawn()->mutable_pose()->set_x(world->spawn.x + 10.0);
+          spawn.mutable_spawn()->mutable_pose()->set_y(world->spawn.y + 3.0 * id);
+          apply(spawn);
+        }
+      }
+      if (step == 900) {
+        pb::ControlRequest remove = Request(3);
+        remove.mutable_remove();
+        apply(remove);
+        pb::ControlRequest teleport = Request(5);
+        teleport.mutable_teleport()->mutable_pose()->set_x(world->spawn.x + 30.0);
+        teleport.mutable_teleport()->mutable_pose()->set_y(world->spawn.y + 20.0);
+        teleport.mutable_teleport()->set_speed(12.0);
+        apply(teleport);
+      }
+      if (step == 1300) {  // drag ~ v^2 overflows at once: contained in the serial phase
+        State wild = s.simulator(6).state();
+        SetVelocity(wild.x, Eigen::Vector3d(1e300, 0.0, 0.0));
+        s.SetStateForTesting(6, wild);
+      }
+      if (step == 1700) {
+        pb::ControlRequest spawn = Request(3);
+        spawn.set_server_id("test");
+        spawn.mutable_spawn()->mutable_pose()->set_x(world->spawn.x + 50.0);
+        spawn.mutable_spawn()->mutable_pose()->set_y(world->spawn.y + 12.0);
+        apply(spawn);
+      }
+      if (encoded) {  // as the server publishes them: encoded on the pool into frames
+        frames.caller = caller;
+        s.StepInto(frames);
+      } else {
+        s.Step([&out, caller](std::uint32_t id, const pb::VehicleState& st) {
+          out.elsewhere += std::this_thread::get_id() != caller;
+          out.states.push_back(std::to_string(id) + ":" + st.SerializeAsString());
+        });
+      }
+    }
+    s.FlushEvents();
+    s.ForEachVehicle([&](std::uint32_t id) { out.nonfinite += s.simulator(id).nonfinite_steps(); });
+    return out;
+  };
+  // One thread with the messages serialised here; three with the states encoded on the pool into
+  // frames, as the server sends them: the same bytes.
+  const Output one = run(1, false), three = run(3, true);
+  // The drive did what it says: every kind of event, and the divergence was contained.
+  int spawned = 0, removed = 0, checkpoints = 0, batches = 0;
+  for (const std::string& bytes : one.events) {
+    pb::SessionEvent e;
+    ASSERT_TRUE(e.ParseFromString(bytes));
+    spawned += e.has_spawned();
+    removed += e.has_removed();
+    checkpoints += e.has_checkpoint();
+    batches += e.has_input_batch();
+  }
+  // At the start, two spawns, the teleport, the wild state set, its containment, the respawn.
+  EXPECT_EQ(spawned, 7 + 2 + 1 + 1 + 1 + 1);
+  EXPECT_EQ(removed, 1);
+  EXPECT_GT(checkpoints, 30);
+  EXPECT_GT(batches, 200);
+  EXPECT_GE(one.nonfinite, 1u);
+  EXPECT_EQ(one.states.size(), 7u * 600 + 9u * 300 + 8u * 800 + 9u * 800 - 1u);
+  ASSERT_EQ(one.events.size(), three.events.size());
+  for (std::size_t i = 0; i < one.events.size(); ++i) {
+    ASSERT_TRUE(one.events[i] == three.events[i]) << "event " << i << " differs";
+  }
+  ASSERT_EQ(one.states.size(), three.states.size());
+  for (std::size_t i = 0; i < one.states.size(); ++i) {
+    // "id:bytes": the vehicle is named when they differ, not the bytes.
+    const std::string& a = one.states[i];
+    const std::string& b = three.states[i];
+    ASSERT_TRUE(a == b) << "state " << i << ": vehicle " << a.substr(0, a.find(':')) << " vs "
+                        << b.substr(0, b.find(':'));
+  }
+  EXPECT_EQ(one.nonfinite, three.nonfinite);
+  // Handed out in the serial phase, on the caller's thread (the server's loop), never a worker's.
+  EXPECT_EQ(three.elsewhere, 0);
 }
 
 // An analog wheel changes the input every step. Ten minutes of it at 1 kHz (one under the

@@ -75,7 +75,6 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
       participant_, drops_,
       std::max<std::size_t>(
           512, 32 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)));
-  state_sink_ = [this](std::uint32_t id, const pb::VehicleState& s) { states_->Push(id, s); };
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
@@ -201,7 +200,7 @@ bool ServerNode::Boundary() {
 }
 
 void ServerNode::StepOnce() {
-  session_->Step(state_sink_);
+  session_->StepInto(*states_);  // each state encoded into its frame by its stepping thread
   states_->Send();
   sim_time_ns_.store(session_->steps() * session_->step_ns(), std::memory_order_relaxed);
   if (session_->paused() && session_->pending_steps() > 0) {
@@ -343,7 +342,14 @@ void ServerNode::PushReport(base::MonoTime now) {
 }
 
 int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
-  scheduling_ = SetUpRealtimeScheduling(options_.rt_priority);
+  std::string scheduling = SetUpRealtimeScheduling(options_.rt_priority);
+  // The stepping workers wait on the loop and the loop on them: they share its scheduling.
+  if (session_->step_threads() > 1 && scheduling.rfind("SCHED_FIFO", 0) == 0) {
+    const std::string refused = session_->SetStepThreadsPriority(options_.rt_priority);
+    if (!refused.empty()) scheduling += "; stepping workers: " + refused;
+  }
+  scheduling_ =
+      scheduling + "; " + std::to_string(session_->step_threads()) + " stepping thread(s)";
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
       options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
@@ -426,6 +432,10 @@ void ServerNode::WriteStats(base::MonoTime start, base::MonoTime end, base::Nano
   std::fprintf(f, "cpu_percent %.2f\n",
                100.0 * (base::ProcessCpuTime() - start_cpu).seconds() / wall_s);
   std::fprintf(f, "scheduling %s\n", scheduling_.c_str());
+  // Every state a step made: handed to the state writer, or refused there (queue full).
+  std::fprintf(f, "states_pushed %llu\n", static_cast<unsigned long long>(states_->pushed()));
+  std::fprintf(f, "states_refused %llu\n", static_cast<unsigned long long>(states_->refused()));
+  std::fprintf(f, "step_threads %d\n", session_->step_threads());
   // The boundaries that applied requests, and how long the requests held each.
   std::fprintf(f, "request_boundaries %llu\n",
                static_cast<unsigned long long>(request_boundaries_.count()));

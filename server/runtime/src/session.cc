@@ -163,13 +163,15 @@ Session::Session(std::shared_ptr<const World> world, SessionConfig config, Event
     : world_(std::move(world)),
       config_(std::move(config)),
       on_event_(std::move(on_event)),
-      terrain_hash_(TerrainHash(world_->terrain)) {
+      terrain_hash_(TerrainHash(world_->terrain)),
+      pool_(config_.step_threads) {
   const auto issues = ValidateVehicleParams(config_.default_params);
   if (!issues.empty()) {
     throw std::invalid_argument("default vehicle parameters: " + FormatIssues(issues));
   }
   batch_steps_ = std::clamp<std::int64_t>(config_.input_batch_ns / config_.step_ns, 1,
                                           SessionEventRecord::kMaxBatchSamples);
+  order_.reserve(std::max<std::size_t>(config_.max_vehicles, 1));
 }
 
 SessionEventRecord& Session::Begin(SessionEventRecord::Kind kind, std::uint32_t vehicle_id,
@@ -249,6 +251,7 @@ void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
     v.sim->SetState(s);
   }
   auto [it, inserted] = vehicles_.emplace(vehicle_id, std::move(v));
+  order_stale_ = true;
   EmitSpawned(it->second);
 }
 
@@ -330,6 +333,7 @@ RequestOutcome Session::Commit(PreparedRequest& p) {
           sim.SetState(s);
         }
         const auto ins = vehicles_.insert(std::move(p.vehicle));
+        order_stale_ = true;
         EmitSpawned(ins.position->second);
         return Accept(r);
       }
@@ -346,6 +350,7 @@ RequestOutcome Session::Commit(PreparedRequest& p) {
           retired_steps_.insert(std::move(p.retired));
         }
         p.vehicle = vehicles_.extract(it);
+        order_stale_ = true;
         return o;
       }
       case Op::kSetParams: {
@@ -379,6 +384,7 @@ RequestOutcome Session::Commit(PreparedRequest& p) {
           old = vehicles_.extract(it);
         }
         const auto ins = vehicles_.insert(std::move(p.vehicle));
+        order_stale_ = true;
         p.vehicle = std::move(old);
         EmitSpawned(ins.position->second, r);
         return Accept(r);
@@ -478,37 +484,85 @@ void Session::LatchInput(Vehicle& v) {
   }
 }
 
-void Session::Step(const StateSink& on_state) {
-  for (auto& [id, v] : vehicles_) {
-    LatchInput(v);
-    if (v.sim->Step() != StepStatus::kOk) {
-      // Contained by the simulator (state kept at x_n, its last finite state); put the vehicle
-      // back at rest where it is so the session goes on, and say so in the event stream. Where it
-      // cannot rest (no ground below, inside a wall), it is stopped where it was: x_n at rest.
-      const Eigen::Vector3d p = Position(v.sim->state().x);
-      const double yaw = RollPitchYaw(Orientation(v.sim->state().x)).z();
-      const std::int64_t step = v.sim->state().step;
-      State last = v.sim->state();
-      try {
-        v.sim->Spawn({p.x(), p.y(), yaw}, 0.0);
-      } catch (const std::exception&) {
-        SetVelocity(last.x, Eigen::Vector3d::Zero());
-        SetAngularVelocityB(last.x, Eigen::Vector3d::Zero());
-        last.cruise_integral = 0.0;
-        v.sim->SetState(last);
-      }
-      State s = v.sim->state();
-      s.step = step + 1;
-      v.sim->SetState(s);
-      EmitSpawned(v);
+void Session::ContainNonFinite(Vehicle& v) {
+  // Contained by the simulator (state kept at x_n, its last finite state); put the vehicle back
+  // at rest where it is so the session goes on, and say so in the event stream. Where it cannot
+  // rest (no ground below, inside a wall), it is stopped where it was: x_n at rest.
+  const Eigen::Vector3d p = Position(v.sim->state().x);
+  const double yaw = RollPitchYaw(Orientation(v.sim->state().x)).z();
+  const std::int64_t step = v.sim->state().step;
+  State last = v.sim->state();
+  try {
+    v.sim->Spawn({p.x(), p.y(), yaw}, 0.0);
+  } catch (const std::exception&) {
+    SetVelocity(last.x, Eigen::Vector3d::Zero());
+    SetAngularVelocityB(last.x, Eigen::Vector3d::Zero());
+    last.cruise_integral = 0.0;
+    v.sim->SetState(last);
+  }
+  State s = v.sim->state();
+  s.step = step + 1;
+  v.sim->SetState(s);
+  EmitSpawned(v);
+}
+
+void Session::StepPart(std::size_t begin, std::size_t end, Fill fill) {
+  // Only the vehicle's own simulator and messages are written, and the world is only read: a
+  // vehicle's result does not depend on the thread that steps it.
+  const std::int64_t time_ns = steps_ * config_.step_ns;
+  for (std::size_t i = begin; i < end; ++i) {
+    Vehicle& v = *order_[i];
+    v.step_status = v.sim->Step();
+    const bool frame = fill == Fill::kEncoded && i < frames_open_;
+    if (fill == Fill::kNone || v.step_status != StepStatus::kOk) {
+      if (frame) frames_->Fill(i, v.id, 0, false);
       continue;
     }
     const StepRecord& r = v.sim->last_step();
-    if (on_state) {
-      FillVehicleState(id, config_.server_id, config_.step_ns, steps_ * config_.step_ns, r,
-                       v.applied_msg, v.safe_state, r.derived.steering_torque, v.state_msg);
-      on_state(id, v.state_msg);
+    FillVehicleState(v.id, config_.server_id, config_.step_ns, time_ns, r, v.applied_msg,
+                     v.safe_state, r.derived.steering_torque, v.state_msg);
+    if (!frame) continue;
+    const std::span<std::uint8_t> buffer = frames_->Buffer(i);
+    const std::size_t size = v.state_msg.ByteSizeLong();
+    const bool fits = size <= buffer.size();
+    if (fits) v.state_msg.SerializeWithCachedSizesToArray(buffer.data());
+    frames_->Fill(i, v.id, fits ? size : 0, !fits);
+  }
+}
+
+void Session::Step(const StateSink& on_state) {
+  StepPhases(on_state ? &on_state : nullptr, nullptr);
+}
+
+void Session::StepInto(StateFrames& frames) {
+  StepPhases(nullptr, &frames);
+}
+
+void Session::StepPhases(const StateSink* on_state, StateFrames* frames) {
+  if (order_stale_) {
+    order_.clear();  // within its reserve: the vehicles are at most max_vehicles
+    for (auto& [id, v] : vehicles_) order_.push_back(&v);
+    order_stale_ = false;
+  }
+  // 1. Serial, in id order: inputs latched (a full batch of input changes goes out as an event).
+  for (Vehicle* v : order_) LatchInput(*v);
+  // 2. The pool: each vehicle's step and its own state message (encoded into its frame).
+  const Fill fill = frames != nullptr     ? Fill::kEncoded
+                    : on_state != nullptr ? Fill::kMessage
+                                          : Fill::kNone;
+  frames_ = frames;
+  frames_open_ = frames != nullptr ? frames->Open(order_.size()) : 0;
+  auto part = [this, fill](std::size_t begin, std::size_t end) { StepPart(begin, end, fill); };
+  pool_.Run(order_.size(), part);
+  // 3. Serial, in id order: what goes out (events, states), as if one thread had done it all.
+  for (Vehicle* vp : order_) {
+    Vehicle& v = *vp;
+    const std::uint32_t id = v.id;
+    if (v.step_status != StepStatus::kOk) {
+      ContainNonFinite(v);
+      continue;
     }
+    if (on_state != nullptr) (*on_state)(id, v.state_msg);
     const std::int64_t step = v.sim->state().step;
     if (v.n_pending > 0 && step - v.pending[0].step >= batch_steps_) FlushInputs(v);
     if (config_.checkpoint_every_steps > 0 && step % config_.checkpoint_every_steps == 0) {
@@ -525,6 +579,9 @@ void Session::Step(const StateSink& on_state) {
       c.params.reset();
     }
   }
+  // The frames go out after the events of the step (as the states did before them).
+  if (frames != nullptr) frames->Close(order_.size());
+  frames_ = nullptr;
   ++steps_;
 }
 

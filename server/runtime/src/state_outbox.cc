@@ -1,5 +1,7 @@
 #include "vdyn/runtime/state_outbox.h"
 
+#include <algorithm>
+
 namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
@@ -17,23 +19,40 @@ StateOutbox::~StateOutbox() {
   if (thread_.joinable()) thread_.join();
 }
 
-bool StateOutbox::Push(std::uint32_t key, const pb::VehicleState& s) {
-  const std::size_t size = s.ByteSizeLong();
-  if (size > kFrameBytes) {
-    drops_.Count(drop_large_);
-    return false;
-  }
-  Frame* f = frames_.Reserve();
-  if (f == nullptr) {
-    drops_.Count(drop_full_);
-    return false;
-  }
+std::size_t StateOutbox::Open(std::size_t n) {
+  open_ = std::min(n, frames_.Room());
+  empty_.store(0, std::memory_order_relaxed);
+  return open_;
+}
+
+std::span<std::uint8_t> StateOutbox::Buffer(std::size_t i) {
+  return frames_.Slot(i)->bytes;
+}
+
+void StateOutbox::Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) {
+  Frame* f = frames_.Slot(i);
   f->key = key;
   f->size = static_cast<std::uint32_t>(size);
-  s.SerializeWithCachedSizesToArray(f->bytes.data());
-  frames_.Commit();
-  pushed_.fetch_add(1, std::memory_order_relaxed);
-  return true;
+  if (size > 0) return;
+  empty_.fetch_add(1, std::memory_order_relaxed);
+  if (too_large) {
+    drops_.Count(drop_large_);
+    refused_.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void StateOutbox::Close(std::size_t n) {
+  // What the stepping threads wrote is visible here (the step's barrier); the release in Commit
+  // passes it on to the writer.
+  frames_.Commit(open_);
+  pushed_.store(
+      pushed_.load(std::memory_order_relaxed) + open_ - empty_.load(std::memory_order_relaxed),
+      std::memory_order_relaxed);
+  for (std::size_t k = open_; k < n; ++k) {
+    drops_.Count(drop_full_);
+    refused_.fetch_add(1, std::memory_order_relaxed);
+  }
+  open_ = 0;
 }
 
 void StateOutbox::Send() { bell_.Ring(); }
@@ -53,6 +72,10 @@ void StateOutbox::WriterLoop() {
     const std::uint32_t token = bell_.Token();
     std::uint64_t written = 0;
     while (Frame* f = frames_.Front()) {
+      if (f->size == 0) {  // a vehicle without a state this step (contained, or too large)
+        frames_.Pop();
+        continue;
+      }
       if (writer_.WriteBytes(f->key, {f->bytes.data(), f->size})) {
         ++written;
       } else {

@@ -117,6 +117,8 @@ inline constexpr Range kKeyRatePerS{0.1, 100.0, false, false, "keyboard ramp, fu
 inline constexpr Range kDomainId{0, 232, false, false, "DDS domain id"};
 // Vehicles one server runs (vdyn-server --max-vehicles): 256 at 1 kHz on two cores (bench/).
 inline constexpr Range kMaxVehicles{1, 256, false, false, "vehicles per server"};
+// Threads that step a server's vehicles (vdyn-server --step-threads; runtime/step_pool.h).
+inline constexpr Range kStepThreads{1, 16, false, false, "stepping threads"};
 inline constexpr Range kStepMs{0.01, 100.0, false, false, "integration step, ms"};
 inline constexpr Range kWatchdogMs{1.0, 60000.0, false, false, "watchdog, ms"};
 inline constexpr Range kLockstepTimeoutS{0.1, 86400.0, false, false, "lockstep timeout, s"};

@@ -45,6 +45,21 @@ class SpscQueue {
     return &slots_[head & mask_];
   }
   void Commit() { head_.store(head_.load(std::memory_order_relaxed) + 1, std::memory_order_release); }
+  // Producer only: how many items fit now.
+  [[nodiscard]] std::size_t Room() {
+    const std::size_t head = head_.load(std::memory_order_relaxed);
+    tail_cache_ = tail_.load(std::memory_order_acquire);
+    return mask_ + 1 - (head - tail_cache_);
+  }
+  // Producer only: the slot `k` places after the next one to fill (k < Room()). The producer may
+  // hand such slots to other threads to fill in place; once they are done (and that is visible
+  // to the producer), Commit(n) publishes the next n.
+  [[nodiscard]] T* Slot(std::size_t k) {
+    return &slots_[(head_.load(std::memory_order_relaxed) + k) & mask_];
+  }
+  void Commit(std::size_t n) {
+    head_.store(head_.load(std::memory_order_relaxed) + n, std::memory_order_release);
+  }
 
   // Consumer only. False when empty.
   [[nodiscard]] bool TryPop(T& out) {

@@ -5,8 +5,10 @@
 //  requests   makes each request ready (RequestPlanner: parameters validated and converted, a new
 //             vehicle built at rest, a teleport's state found), or refuses it with the reason
 //  loop       (SCHED_FIFO where permitted) at each step boundary: the inputs, at most 16 ready
-//             requests (Session::Commit: a swap each), then Session::Step and each state
-//             serialised into the state outbox; no lock, no allocation, nothing logged
+//             requests (Session::Commit: a swap each), then Session::StepInto - its part of the
+//             vehicles, the other parts on the session's stepping workers (step_pool.h, the same
+//             scheduling), each state encoded into its frame of the state outbox - and the frames
+//             handed to the writer; no lock, no allocation, nothing logged
 //  states     the state outbox's writer: vdyn/state, best effort (state_outbox.h)
 //  publisher  replies, parameters, world, events, diagnostics and the status line: every reliable
 //             write, and every log line
@@ -166,7 +168,6 @@ class ServerNode {
   transport::Reader<pb::DriverInput> input_reader_;
   transport::Reader<pb::ControlRequest> control_reader_;
   std::unique_ptr<Session> session_;
-  Session::StateSink state_sink_;
 
   // The request path (every request gets one reply, or is counted unanswered with the reason):
   //   receiver -> incoming_ -> request thread (RequestPlanner) -> prepared_ -> loop (Commit)

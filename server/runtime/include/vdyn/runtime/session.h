@@ -19,12 +19,14 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "vdyn/control.pb.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/physics/simulator.h"
+#include "vdyn/runtime/step_pool.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/vehicle_params.pb.h"
@@ -42,6 +44,9 @@ struct SessionConfig {
   // kMaxBatchSamples per event): an analog wheel changing every step costs ~40 events a second.
   std::int64_t input_batch_ns = 25'000'000;
   std::size_t max_vehicles = 64;  // spawn requests beyond are refused
+  // Threads that step the vehicles (the calling thread and step_threads - 1 workers of a
+  // StepPool, limits::kStepThreads). Results are bit for bit the same for any count.
+  int step_threads = 1;
   pb::VehicleParams default_params;  // complete; spawn requests merge over it
 };
 
@@ -85,6 +90,24 @@ struct SessionEventRecord {
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns);
 
+// Where Session::StepInto puts a step's states: one frame per vehicle, in id order, each filled
+// with the vehicle's encoded state message (protobuf wire bytes) on the thread that stepped it -
+// the state outbox (state_outbox.h), so the loop thread copies nothing.
+class StateFrames {
+ public:
+  virtual ~StateFrames() = default;
+  // Loop thread, before the parallel phase: frames for up to n states; how many it has (the
+  // states beyond are refused, and counted, by Close).
+  virtual std::size_t Open(std::size_t n) = 0;
+  // A stepping thread, i < Open's count: frame i's buffer, filled in place.
+  virtual std::span<std::uint8_t> Buffer(std::size_t i) = 0;
+  // The same thread: frame i holds vehicle `key`'s state, `size` bytes (0: none - its step was
+  // contained - or `too_large` for the buffer).
+  virtual void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) = 0;
+  // Loop thread, after the step: hands the frames on; `n` as asked of Open.
+  virtual void Close(std::size_t n) = 0;
+};
+
 // One vehicle of a session: its simulator, parameters, spawn pose and input state. Built off the
 // stepping thread (RequestPlanner) and handed to the session whole.
 struct SessionVehicle {
@@ -103,6 +126,7 @@ struct SessionVehicle {
   bool applied_valid = false;
   pb::DriverInput applied_msg;  // the message form of what was applied
   pb::VehicleState state_msg;   // reused for every step
+  StepStatus step_status = StepStatus::kOk;  // of the last step (written by a stepping thread)
   // Input changes not yet sent (an InputBatch event).
   std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
   int n_pending = 0;
@@ -205,8 +229,18 @@ class Session {
   // unknown vehicle or a value out of range. Non-finite values never get here (transport).
   bool OfferInput(const pb::DriverInput& input, std::string* reason);
 
-  // One step of every vehicle; calls on_state for each vehicle after its step.
+  // One step of every vehicle, in three phases: (1) serial, in id order: each vehicle's input
+  // latched (its input events); (2) on the step pool, each vehicle in one thread's contiguous
+  // part of the id order: its step and, with on_state, its own state message; (3) serial, in id
+  // order: a non-finite step contained, on_state, input flushes and checkpoints. So events and
+  // states come out in the same order and with the same content for any number of threads.
   void Step(const StateSink& on_state = {});
+  // Step, with each state message also encoded on the pool (protobuf wire bytes, the costly part
+  // of publishing it) straight into `frames`: vehicle i of the id order into frame i.
+  void StepInto(StateFrames& frames);
+  int step_threads() const { return pool_.threads(); }
+  // The pool's workers get the loop's scheduling (StepPool::SetRealtimePriority).
+  std::string SetStepThreadsPriority(int priority) { return pool_.SetRealtimePriority(priority); }
   // Sends the input changes still gathered (at shutdown, before a recorder is told to stop).
   void FlushEvents();
   // Tests only: sets a vehicle's state as it is (no checks), announced like a teleport.
@@ -257,6 +291,11 @@ class Session {
   RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r, RequestOutcome::Why why,
                         std::int64_t n1 = 0, std::int64_t n2 = 0);
   void LatchInput(Vehicle& v);
+  void ContainNonFinite(Vehicle& v);
+  // Phase 2 of Step for the vehicles [begin, end) of order_ (on any of the pool's threads).
+  enum class Fill : std::uint8_t { kNone, kMessage, kEncoded };
+  void StepPart(std::size_t begin, std::size_t end, Fill fill);
+  void StepPhases(const StateSink* on_state, StateFrames* frames);
 
   std::shared_ptr<const World> world_;
   SessionConfig config_;
@@ -270,6 +309,13 @@ class Session {
   std::uint64_t event_sequence_ = 0;
   std::uint64_t terrain_hash_ = 0;
   SessionEventRecord scratch_;  // the record being filled (reused: no allocation)
+  // The vehicles in id order, the pool's partition cut from it: rebuilt (within its reserve of
+  // max_vehicles) only when the set of vehicles changed.
+  std::vector<Vehicle*> order_;
+  bool order_stale_ = true;
+  StateFrames* frames_ = nullptr;  // StepInto's, during its step
+  std::size_t frames_open_ = 0;    // how many of them
+  StepPool pool_;
 };
 
 // Checks a driver input's ranges (the table of limits); empty when valid, else the reason.

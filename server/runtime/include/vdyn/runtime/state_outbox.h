@@ -1,26 +1,29 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
-// serialised sample, an instance lookup), so the loop serialises each state into a preallocated
-// frame of a lock-free queue and a writer thread of its own puts the frames on vdyn/state (best
-// effort, keep last 1), batched: a step's states leave together. A vehicle's state also goes to
-// its own partition while someone reads there (transport/state_writers.h). The loop neither
-// allocates nor blocks; a full queue drops the state and counts it.
+// serialised sample, an instance lookup), so each state is encoded, by the thread that stepped
+// its vehicle, into a preallocated frame of a lock-free queue and a writer thread of its own puts
+// the frames on vdyn/state (best effort, keep last 1), batched: a step's states leave together. A
+// vehicle's state also goes to its own partition while someone reads there
+// (transport/state_writers.h). The loop neither allocates nor blocks; a full queue drops the state
+// and counts it.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <span>
 #include <thread>
 
 #include "vdyn/base/doorbell.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/base/spsc_queue.h"
+#include "vdyn/runtime/session.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/transport/state_writers.h"
 
 namespace vdyn {
 
-class StateOutbox {
+class StateOutbox final : public StateFrames {
  public:
   StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
               std::size_t frames = 512);
@@ -28,9 +31,14 @@ class StateOutbox {
   StateOutbox(const StateOutbox&) = delete;
   StateOutbox& operator=(const StateOutbox&) = delete;
 
-  // Loop thread: serialises `s` into a free frame for the writer. False (and counted) when the
-  // queue is full or the state is larger than a frame.
-  bool Push(std::uint32_t key, const pb::VehicleState& s);
+  // A step's states (Session::StepInto): the loop thread opens frames for them, the stepping
+  // threads encode each state into its frame, the loop thread closes them (publishes them to the
+  // writer, and counts the states there was no room for). An empty frame (a contained step, a
+  // state larger than a frame, counted) is skipped by the writer.
+  std::size_t Open(std::size_t n) override;
+  std::span<std::uint8_t> Buffer(std::size_t i) override;
+  void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) override;
+  void Close(std::size_t n) override;
   // Loop thread, after a step's pushes: wakes the writer, which writes every frame pushed so far
   // and then sends them together (several states per datagram; one sendmsg per datagram and
   // reader, not per state).
@@ -40,6 +48,9 @@ class StateOutbox {
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
+  // States handed over by Push, and those Push refused (queue full, larger than a frame).
+  std::uint64_t pushed() const { return pushed_.load(std::memory_order_relaxed); }
+  std::uint64_t refused() const { return refused_.load(std::memory_order_relaxed); }
 
   static constexpr std::size_t kFrameBytes = 8192;
 
@@ -60,6 +71,9 @@ class StateOutbox {
   std::atomic<std::uint64_t> written_{0};
   std::atomic<std::uint64_t> failures_{0};
   std::atomic<std::uint64_t> pushed_{0};
+  std::atomic<std::uint64_t> refused_{0};
+  std::size_t open_ = 0;               // frames opened for this step
+  std::atomic<std::size_t> empty_{0};  // of them, left empty
   std::thread thread_;
 };
 
