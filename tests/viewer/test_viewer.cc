@@ -756,6 +756,31 @@ TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
   }
 }
 
+// In a window 640 px wide the HUD's status panel ends before the compass in the top right corner:
+// a long line (here the server's name) wraps instead of running under it.
+TEST_F(ViewerTest, TheStatusPanelStaysClearOfTheCompassInANarrowWindow) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  TestVehicle t;
+  t.server = "the-simulation-server-of-the-driving-lab-upstairs";
+  ASSERT_TRUE(pub.World(MakeWorld(t.server, kPi / 2)));
+  ViewerOptions o = Options(domain);
+  ASSERT_TRUE(o.hud);
+  Viewer v(o);
+  Show(v, pub, {MakeState(t)});
+  // A few frames more: ImGui sizes a panel that fits its contents from the frame before.
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(v.Frame());
+  Keep(v.Screenshot());
+  const std::vector<viewer::LabelBox>& boxes = v.hud_boxes();
+  ASSERT_GE(boxes.size(), 2u);
+  const viewer::LabelBox& status = boxes.front();
+  const viewer::LabelBox& compass = boxes.back();
+  EXPECT_LT(status.x0, 20) << "not the status panel at the top left";
+  EXPECT_GT(compass.x0, kW / 2) << "not the compass at the top right";
+  EXPECT_FALSE(viewer::Overlap(status, compass))
+      << "the status panel reaches x = " << status.x1 << ", the compass starts at " << compass.x0;
+}
+
 // --- the wheels turn with the published wheel speed ---------------------------------------------
 
 // The test car's geometry, as the test world describes it.
