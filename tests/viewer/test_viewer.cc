@@ -18,6 +18,7 @@
 #include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/lighting.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
@@ -670,6 +671,114 @@ TEST_F(ViewerTest, TheSkyIsDeeperBlueOverheadThanTowardsTheHorizon) {
   for (const Band& s : {top, low}) EXPECT_GT(s.b, s.r + 15) << "not sky blue";
   EXPECT_GT(top.b - top.r, low.b - low.r + 30) << "no deeper blue overhead";
   EXPECT_LT(top.r + top.g + top.b, low.r + low.g + low.b - 60) << "not paler at the horizon";
+}
+
+// Fog: the ground fades to the horizon's colour with distance. In linear light a pixel of ground
+// at distance d is mixed with the fog colour H as C = H + (G - H) exp(-(d/F)^2), G the lit grass
+// (clients/vr_viewer/README.md: fog thickening towards the horizon, to its colour; F the fog's
+// depth, 0.55 of the far plane's distance). Seen from 20 m up, each ground pixel's distance
+// follows from its view ray; pixels are grouped by distance, and |C - H| of each group's mean over
+// that of the nearest group must fall as exp(-(d/F)^2) does: nearly clear at 0.2 F, about a third
+// at F. Without fog the far grass keeps the near grass's colour.
+TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.quality = viewer::Quality::kLow;
+  o.hud = false;
+  o.camera.mode = CameraMode::kOrbit;
+  o.camera.orbit_distance = 50;
+  o.camera.orbit_pitch = viewer::Rad(24);  // the eye about 20 m up
+  o.camera.orbit_yaw = viewer::Rad(90);    // north of the car, looking south across the road
+  Viewer v(o);
+  TestVehicle t;
+  const Image img = Show(v, pub, {MakeState(t)});
+  const viewer::CameraView& cam = v.last_camera();
+  ASSERT_FALSE(cam.orthographic);
+  const viewer::Mat4 inv = viewer::Inverse(cam.proj * cam.view);
+  // The fog's depth: 0.55 of the far plane's distance (from the projection: -(far + near) /
+  // (far - near) and -2 far near / (far - near) in its third row).
+  const double far_m = cam.proj(2, 3) / (cam.proj(2, 2) + 1.0);
+  const double kFogM = 0.55 * far_m;
+  const viewer::Vec3 H = viewer::SceneLighting().horizon_rgb;
+  struct Group {
+    double lo_m, hi_m;
+    viewer::Vec3 sum;      // linear colour
+    double fog_clear = 0;  // sum of exp(-(d/F)^2)
+    int n = 0;
+  };
+  // Out to 1.5 F (the far hills stand at 0.9 of the far plane, 1.6 F, and hide the ground
+  // beyond).
+  std::vector<Group> groups;
+  for (auto [lo, hi] : {std::pair{0.14, 0.2}, {0.45, 0.55}, {0.9, 1.1}, {1.3, 1.5}}) {
+    groups.push_back({lo * kFogM, hi * kFogM, {}});
+  }
+  const auto decode = [](std::uint8_t c) {
+    const double u = c / 255.0;
+    return u <= 0.04045 ? u / 12.92 : std::pow((u + 0.055) / 1.055, 2.4);
+  };
+  for (int y = 0; y < kH; ++y) {
+    for (int x = 0; x < kW; ++x) {
+      const double nx = 2.0 * (x + 0.5) / kW - 1, ny = 1 - 2.0 * (y + 0.5) / kH;
+      const viewer::Vec3 a = inv.TransformPoint({nx, ny, -1}), b = inv.TransformPoint({nx, ny, 1});
+      const viewer::Vec3 dir = viewer::Normalized(b - a);
+      if (dir.z > -1e-4) continue;            // the sky
+      if (x > kW - 150 && y < 150) continue;  // the compass
+      const double s = -cam.eye_W.z / dir.z;  // to the ground, z = 0
+      const viewer::Vec3 g = cam.eye_W + dir * s;
+      if (std::abs(g.y) < 8) continue;  // the road and its kerbs (8 m wide along X at y = 0)
+      for (Group& gr : groups) {
+        if (s < gr.lo_m || s >= gr.hi_m) continue;
+        const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+        gr.sum = gr.sum + viewer::Vec3{decode(p[0]), decode(p[1]), decode(p[2])};
+        gr.fog_clear += std::exp(-(s / kFogM) * (s / kFogM));
+        ++gr.n;
+      }
+    }
+  }
+  for (const Group& gr : groups) ASSERT_GT(gr.n, 200) << "too few ground pixels at " << gr.lo_m;
+  // The grass's own colour from the nearest group (there the fog takes 0.4 % at most).
+  const Group& near = groups.front();
+  const viewer::Vec3 grass = H + (near.sum / near.n - H) / (near.fog_clear / near.n);
+  const double grass_from_fog = viewer::Norm(grass - H);
+  ASSERT_GT(grass_from_fog, 0.2) << "the grass is the fog's colour even nearby";
+  double last = 2;
+  for (const Group& gr : groups) {
+    const double seen = viewer::Norm(gr.sum / gr.n - H) / grass_from_fog;
+    const double expected = gr.fog_clear / gr.n;
+    std::printf(
+        "ground %4.0f-%4.0f m: |C - H| / |G - H| %.3f, exp(-(d/F)^2) %.3f (%d pixels, F %.0f m)\n",
+        gr.lo_m, gr.hi_m, seen, expected, gr.n, kFogM);
+    EXPECT_NEAR(seen, expected, 0.07) << "at " << gr.lo_m << "-" << gr.hi_m << " m";
+    EXPECT_LT(seen, last) << "not fading with distance at " << gr.lo_m << " m";
+    last = seen;
+  }
+}
+
+// In a window 640 px wide the HUD's status panel ends before the compass in the top right corner:
+// a long line (here the server's name) wraps instead of running under it.
+TEST_F(ViewerTest, TheStatusPanelStaysClearOfTheCompassInANarrowWindow) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  TestVehicle t;
+  t.server = "the-simulation-server-of-the-driving-lab-upstairs";
+  ASSERT_TRUE(pub.World(MakeWorld(t.server, kPi / 2)));
+  ViewerOptions o = Options(domain);
+  ASSERT_TRUE(o.hud);
+  Viewer v(o);
+  Show(v, pub, {MakeState(t)});
+  // A few frames more: ImGui sizes a panel that fits its contents from the frame before.
+  for (int i = 0; i < 4; ++i) ASSERT_TRUE(v.Frame());
+  Keep(v.Screenshot());
+  const std::vector<viewer::LabelBox>& boxes = v.hud_boxes();
+  ASSERT_GE(boxes.size(), 2u);
+  const viewer::LabelBox& status = boxes.front();
+  const viewer::LabelBox& compass = boxes.back();
+  EXPECT_LT(status.x0, 20) << "not the status panel at the top left";
+  EXPECT_GT(compass.x0, kW / 2) << "not the compass at the top right";
+  EXPECT_FALSE(viewer::Overlap(status, compass))
+      << "the status panel reaches x = " << status.x1 << ", the compass starts at " << compass.x0;
 }
 
 // --- the wheels turn with the published wheel speed ---------------------------------------------

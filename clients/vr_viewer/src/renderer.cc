@@ -4,6 +4,7 @@
 #include <stb_image_write.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdio>
@@ -170,6 +171,7 @@ RenderSettings SettingsFor(Quality q) {
     s.clouds = false;
     s.high_shading = false;
     s.texture_px = 256;
+    s.srgb_textures = false;
   }
   return s;
 }
@@ -340,6 +342,18 @@ void UploadLayer(GLenum target, int layer, const TextureImage& img) {
   }
 }
 
+// The image's colour (not its alpha) from sRGB to linear light, rounded to 8 bits.
+void ToLinearBytes(TextureImage& img) {
+  std::array<std::uint8_t, 256> table{};
+  for (int i = 0; i < 256; ++i) {
+    table[static_cast<std::size_t>(i)] =
+        static_cast<std::uint8_t>(std::lround(255 * ToLinear(static_cast<std::uint8_t>(i))));
+  }
+  for (std::size_t k = 0; k < img.rgba.size(); ++k) {
+    if (k % 4 != 3) img.rgba[k] = table[img.rgba[k]];
+  }
+}
+
 }  // namespace
 
 Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
@@ -424,12 +438,16 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   const int px = settings_.texture_px;
   glGenTextures(1, &surfaces_tex_);
   glBindTexture(GL_TEXTURE_2D_ARRAY, surfaces_tex_);
-  glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, GL_SRGB8_ALPHA8, px, px, 5, 0, GL_RGBA, GL_UNSIGNED_BYTE,
-               nullptr);
+  glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, settings_.srgb_textures ? GL_SRGB8_ALPHA8 : GL_RGBA8, px, px,
+               5, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
   const TextureLayer layers[] = {TextureLayer::kGrass, TextureLayer::kAsphalt,
                                  TextureLayer::kConcrete, TextureLayer::kDirt,
                                  TextureLayer::kMacro};
-  for (int i = 0; i < 5; ++i) UploadLayer(GL_TEXTURE_2D_ARRAY, i, MakeTexture(layers[i], px));
+  for (int i = 0; i < 5; ++i) {
+    TextureImage img = MakeTexture(layers[i], px);
+    if (!settings_.srgb_textures) ToLinearBytes(img);
+    UploadLayer(GL_TEXTURE_2D_ARRAY, i, img);
+  }
   glGenerateMipmap(GL_TEXTURE_2D_ARRAY);
   // Low: one mip level a pixel (half the texels of trilinear filtering).
   glTexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER,
@@ -743,7 +761,7 @@ const Renderer::Program& Renderer::TerrainProgram(SurfaceStyle style, bool grid,
     o.grid = grid;
     o.style = static_cast<int>(style);
     it = terrain_
-             .emplace(key, std::make_unique<Program>(shaders::Vertex(shaders::kTerrainVs),
+             .emplace(key, std::make_unique<Program>(shaders::VertexLit(o, shaders::kTerrainVs),
                                                      shaders::Fragment(o, shaders::kTerrainFs),
                                                      "terrain"))
              .first;
@@ -916,15 +934,12 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(target_fbo));
   glViewport(viewport[0], viewport[1], viewport[2], viewport[3]);
 
-  const Vec3 horizon = SceneLighting().horizon_rgb;
-  glClearColor(static_cast<float>(ToSrgb(horizon.x)) / 255.0f,
-               static_cast<float>(ToSrgb(horizon.y)) / 255.0f,
-               static_cast<float>(ToSrgb(horizon.z)) / 255.0f, 1.0f);
+  // No colour clear: the sky, drawn at the far plane, covers every pixel nothing else does.
   glClearDepth(1.0);
   glDepthMask(GL_TRUE);
   glClearStencil(0);
   glStencilMask(0xFF);
-  glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT);
+  glClear(GL_DEPTH_BUFFER_BIT | GL_STENCIL_BUFFER_BIT);
   glEnable(GL_DEPTH_TEST);
   glDepthFunc(GL_LEQUAL);
   glActiveTexture(GL_TEXTURE0);
@@ -992,16 +1007,20 @@ void Renderer::PresentToWindow(const RenderTarget& t, int window_width, int wind
   glBindFramebuffer(GL_READ_FRAMEBUFFER, t.resolve_framebuffer());
   glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
   glViewport(0, 0, window_width, window_height);
-  glClearColor(0, 0, 0, 1);
-  glClear(GL_COLOR_BUFFER_BIT);
-  // Fit the image into the window, keeping its aspect ratio.
+  // Fit the image into the window, keeping its aspect ratio; black bars where it does not fill
+  // it (a clear of the whole window costs a software renderer half a millisecond).
   const double sx = static_cast<double>(window_width) / t.width();
   const double sy = static_cast<double>(window_height) / t.height();
   const double s = std::min(sx, sy);
   const int w = static_cast<int>(t.width() * s), h = static_cast<int>(t.height() * s);
   const int x0 = (window_width - w) / 2, y0 = (window_height - h) / 2;
+  if (w != window_width || h != window_height) {
+    glClearColor(0, 0, 0, 1);
+    glClear(GL_COLOR_BUFFER_BIT);
+  }
+  // 1:1 (the usual case) by nearest texels: the same image, no filtering.
   glBlitFramebuffer(0, 0, t.width(), t.height(), x0, y0, x0 + w, y0 + h, GL_COLOR_BUFFER_BIT,
-                    GL_LINEAR);
+                    w == t.width() && h == t.height() ? GL_NEAREST : GL_LINEAR);
   glBindFramebuffer(GL_FRAMEBUFFER, 0);
 }
 

@@ -64,10 +64,12 @@ vec3 SkyRadiance(vec3 d) {
   if (d.z < 0.0) return mix(kHorizonRgb, kGroundRgb * 2.0, clamp(-d.z * 4.0, 0.0, 1.0));
   return mix(kHorizonRgb, kZenithRgb, sqrt(d.z));
 }
+// The fog between the eye and a point r fog distances away (r: the point from the eye over
+// u_fog_m; linear in the point, so a vertex shader's r interpolates exactly).
+float FogOver(vec3 r) { return 1.0 - exp(-dot(r, r)); }
+vec3 FogVector(vec3 p) { return u_fog_m > 0.0 ? (p - u_eye) / u_fog_m : vec3(0.0); }
 float FogAmount(vec3 p) {
-  if (u_fog_m <= 0.0) return 0.0;
-  float d = length(p - u_eye) / u_fog_m;
-  return 1.0 - exp(-d * d);
+  return FogOver(FogVector(p));
 }
 // Fogged towards the horizon's colour, encoded for the screen.
 vec3 Finish(vec3 c, vec3 p) { return Encode(mix(c, kHorizonRgb, FogAmount(p))); }
@@ -131,17 +133,33 @@ std::string Fragment(const Options& o, const char* body) {
   return s;
 }
 
+std::string VertexLit(const Options& o, const char* body) {
+  return Fragment(o, body);
+}
+
 // --- terrain -----------------------------------------------------------------------------------
 
+// Per vertex what is linear or constant over a face: the fog's vector and, without the shadow
+// map, the diffuse light (the same at every point of a flat face: a software renderer shades
+// each pixel, so what a vertex can do is taken off every pixel).
 const char* const kTerrainVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 uniform mat4 u_view_proj;
 out vec3 v_pos;
 out vec3 v_normal;
+out vec3 v_fog;
+#ifndef SHADOWS
+out vec3 v_light;
+#endif
 void main() {
   v_pos = a_pos;
   v_normal = a_normal;
+  v_fog = FogVector(a_pos);
+#ifndef SHADOWS
+  vec3 n = normalize(a_normal);
+  v_light = Diffuse(n * sign(dot(n, u_eye - a_pos) + 1e-9), 1.0);
+#endif
   gl_Position = u_view_proj * vec4(a_pos, 1.0);
 }
 )";
@@ -153,6 +171,10 @@ void main() {
 const char* const kTerrainFs = R"(
 in vec3 v_pos;
 in vec3 v_normal;
+in vec3 v_fog;
+#ifndef SHADOWS
+in vec3 v_light;
+#endif
 uniform sampler2DArray u_surfaces;
 uniform vec4 u_frame;        // the mesh's strip frame: centre x, y; its long axis x, y
 uniform vec2 u_half_size;    // from the centre along and across, m
@@ -235,14 +257,18 @@ void main() {
 #else
   vec3 albedo = Tex(0.0, tc, 4.0) * Variation(xy);  // grass
 #endif
+#ifdef SHADOWS
   vec3 c = albedo * Diffuse(n, SunVisibility(v_pos, n)) + add;
+#else
+  vec3 c = albedo * v_light + add;
+#endif
 #ifdef GRID
   vec2 g = xy / u_grid;
   vec2 w = fwidth(g);
   vec2 gd = abs(fract(g - 0.5) - 0.5) / max(w, vec2(1e-6));
   c *= 1.0 - 0.35 * (1.0 - clamp(min(gd.x, gd.y), 0.0, 1.0));
 #endif
-  o_colour = vec4(Finish(c, v_pos), alpha);
+  o_colour = vec4(Encode(mix(c, kHorizonRgb, FogOver(v_fog))), alpha);
 }
 )";
 
@@ -356,11 +382,16 @@ void main() {
 
 // --- sky ---------------------------------------------------------------------------------------
 
+// The view ray through a point of the screen, from the near plane to the far one: linear over
+// the screen (perspective or orthographic), so the vertices' rays interpolate exactly.
 const char* const kSkyVs = R"(
-out vec2 v_ndc;
+uniform mat4 u_inv_view_proj;
+out vec3 v_ray;
 void main() {
   vec2 p = vec2((gl_VertexID == 1) ? 3.0 : -1.0, (gl_VertexID == 2) ? 3.0 : -1.0);
-  v_ndc = p;
+  vec4 a = u_inv_view_proj * vec4(p, -1.0, 1.0);
+  vec4 b = u_inv_view_proj * vec4(p, 1.0, 1.0);
+  v_ray = b.xyz / b.w - a.xyz / a.w;
   gl_Position = vec4(p, 1.0, 1.0);
 }
 )";
@@ -368,17 +399,17 @@ void main() {
 // The gradient from the horizon's haze to the zenith, the sun and its glow, a band of far hills
 // in the haze, and (quality high) clouds.
 const char* const kSkyFs = R"(
-in vec2 v_ndc;
-uniform mat4 u_inv_view_proj;
+in vec3 v_ray;
 uniform sampler2D u_clouds;
 out vec4 o_colour;
 void main() {
-  vec4 a = u_inv_view_proj * vec4(v_ndc, -1.0, 1.0);
-  vec4 b = u_inv_view_proj * vec4(v_ndc, 1.0, 1.0);
-  vec3 dir = normalize(b.xyz / b.w - a.xyz / a.w);
+  vec3 dir = normalize(v_ray);
   vec3 c = SkyRadiance(dir);
+  // The glow's powers by squaring (s^8, and s^200 = (s^64)^3 s^8): cheaper than pow.
   float s = max(dot(dir, kSunDir), 0.0);
-  c += kSunRgb * (0.18 * pow(s, 8.0) + 0.5 * pow(s, 200.0)) + vec3(6.0) * smoothstep(0.99955, 0.9997, s);
+  float s2 = s * s, s4 = s2 * s2, s8 = s4 * s4, s16 = s8 * s8, s32 = s16 * s16, s64 = s32 * s32;
+  float s200 = s64 * s64 * s64 * s8;
+  c += kSunRgb * (0.18 * s8 + 0.5 * s200) + vec3(6.0) * smoothstep(0.99955, 0.9997, s);
 #ifdef CLOUDS
   if (dir.z > 0.0) {
     vec2 uv = dir.xy / (dir.z + 0.08) * 0.35 + vec2(0.13, 0.41);

@@ -17,6 +17,8 @@ struct Options {
 // A fragment shader: the version line, the options as #defines, the common part, the body.
 std::string Fragment(const Options& o, const char* body);
 std::string Vertex(const char* body);
+// A vertex shader with the fragment shaders' common part (the lighting and the fog).
+std::string VertexLit(const Options& o, const char* body);
 
 extern const char* const kTerrainVs;
 extern const char* const kTerrainFs;

@@ -235,7 +235,7 @@ struct Viewer::Impl {
 
   // Parts of the stages.
   void NoteMissingFollow();
-  void HudStatus(const FrameScene& f);
+  void HudStatus(const FrameScene& f, float right_px);  // its lines wrap before right_px
   void HudLabels(const FrameScene& f);
   void Line(const std::string& text, const ImVec4* colour = nullptr);
   void Occupied();
@@ -479,6 +479,10 @@ const std::vector<std::string>& Viewer::hud_text() const {
 
 const std::vector<Viewer::ShownLabel>& Viewer::labels() const {
   return impl_->shown_labels;
+}
+
+const std::vector<LabelBox>& Viewer::hud_boxes() const {
+  return impl_->hud_boxes;
 }
 
 void Viewer::RecentreHeadset() {
@@ -921,7 +925,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
     ImGui::Render();
     return;
   }
-  HudStatus(f);
+  HudStatus(f, compass.x - 60 * scale - 10);  // clear of the compass (a narrow window)
   // The forces legend, at the bottom left: collapsed to its title until L (or a click on its
   // arrow) opens it.
   ImGui::SetNextWindowPos(ImVec2(10, static_cast<float>(o.height) - 10), ImGuiCond_Always,
@@ -985,14 +989,16 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
   ImGui::Render();
 }
 
-// The HUD's status panel.
-void Viewer::Impl::HudStatus(const FrameScene& f) {
+// The HUD's status panel, its lines wrapped before right_px.
+void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
   const ViewerOptions& o = owner.options_;
   const ViewerStats& stats = owner.stats_;
   ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
   ImGui::SetNextWindowBgAlpha(0.7f);
   ImGui::Begin("vdyn-viewer", nullptr,
                ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
+  ImGui::PushTextWrapPos(
+      std::max(right_px - ImGui::GetWindowPos().x - ImGui::GetStyle().WindowPadding.x, 200.0f));
   // LIVE or PLAYBACK: a player says what it is on vdyn/diagnostics (mode "playback", the
   // recording, the servers it replays); --playback says so whatever it says.
   const pb::Diagnostics* player = nullptr;
@@ -1080,6 +1086,7 @@ void Viewer::Impl::HudStatus(const FrameScene& f) {
       ImGui::EndTooltip();
     }
   }
+  ImGui::PopTextWrapPos();
   Occupied();
   ImGui::End();
 }

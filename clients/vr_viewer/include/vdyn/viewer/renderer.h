@@ -79,8 +79,8 @@ struct LandmarkView {
 };
 
 // Quality presets (`--quality`). Low draws no shadow map, no clouds, no glossy highlights and no
-// large-scale variation of the grass, with smaller textures: on a software renderer it costs no
-// more than the plain viewer before it. High is everything.
+// large-scale variation of the grass, with smaller textures kept in linear light: on a software
+// renderer it costs no more than the plain viewer before it. High is everything.
 enum class Quality { kLow, kHigh };
 std::string_view QualityName(Quality q);
 std::optional<Quality> QualityFromName(std::string_view name);
@@ -93,6 +93,10 @@ struct RenderSettings {
   bool clouds = true;
   bool high_shading = true;  // glossy paint, glass and chrome; the grass's large-scale variation
   int texture_px = 512;      // surface textures' size
+  // The surface textures stored as sRGB (decoded per texel when sampled) or already in linear
+  // light (8 bits: coarser steps in the dark, unseen in the textures' grain; a software
+  // renderer samples them faster).
+  bool srgb_textures = true;
 };
 RenderSettings SettingsFor(Quality q);
 

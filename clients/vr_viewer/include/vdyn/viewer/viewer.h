@@ -122,6 +122,8 @@ class Viewer {
     float alpha = 1;
   };
   const std::vector<ShownLabel>& labels() const;
+  // The HUD's boxes as the last frame drew them (pixels, y down): its panels, the compass last.
+  const std::vector<LabelBox>& hud_boxes() const;
   // Headset: the place's origin moves to where the head is now, facing where it looks (key R).
   void RecentreHeadset();
   // The camera of the last desktop frame.
