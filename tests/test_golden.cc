@@ -58,15 +58,6 @@ TEST(Golden, PaperYawModeWithTheLinearTireEndsOnTheStoredHash) {
   EXPECT_EQ(DemoDriveHash(testing::ParamsWith(PaperYawLinearTire)), kPaperYawLinearTireHash);
 }
 
-// GCC names AddressSanitizer with a macro, clang with a feature.
-#if defined(__SANITIZE_ADDRESS__)
-#define VDYN_ASAN 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define VDYN_ASAN 1
-#endif
-#endif
-
 // The same three drives as vehicles of one Session, their input through the session's input
 // path (a driver-input message each step, as a rig sends it), stepped by a pool of 1, 2 and 4
 // threads: each vehicle ends on its stored hash whatever thread stepped it. Three vehicles cut
@@ -89,7 +80,7 @@ TEST(Golden, TheDrivesAsOneSessionEndOnTheStoredHashesWith1And2And4SteppingThrea
     int threads;
     std::vector<Drive> drives;
   };
-#if defined(VDYN_ASAN)
+#if defined(VDYN_TEST_ASAN)  // (test_support.h)
   const Run runs[] = {
       {1, {drives[0], drives[1]}}, {2, {drives[1], drives[2]}}, {4, {drives[2], drives[0]}}};
 #else

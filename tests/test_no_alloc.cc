@@ -166,7 +166,7 @@ TEST(NoAllocation, AnAllocationOnAStepWorkerIsCounted) {
   g_count_loop = false;
   const auto on_worker = static_cast<long>(5 - StepPool::Begin(5, 2, 1));
   ASSERT_GE(on_worker, 1);
-#if defined(VDYN_ASAN)
+#if defined(VDYN_TEST_ASAN)
   EXPECT_EQ(g_allocations.load(), 2 * on_worker);
 #else
   EXPECT_EQ(g_allocations.load(), 4 * on_worker);
