@@ -1,5 +1,7 @@
 #include "vdyn/runtime/state_outbox.h"
 
+#include <pthread.h>
+
 #include <algorithm>
 
 namespace vdyn {
@@ -68,6 +70,10 @@ bool StateOutbox::Drain(base::Nanos timeout) {
 }
 
 void StateOutbox::WriterLoop() {
+  // Ordinary scheduling on purpose: a SCHED_FIFO writer (one below the loop) measured worse at
+  // 256 vehicles on 2 cores. With the loop and the stepping worker it passed the kernel's
+  // real-time budget (sched_rt_runtime_us: 95 % of the CPUs), and the throttled loop lost steps.
+  pthread_setname_np(pthread_self(), "vdyn-states");
   while (true) {
     const std::uint32_t token = bell_.Token();
     std::uint64_t written = 0;
