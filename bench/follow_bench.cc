@@ -8,6 +8,10 @@
 //    1 kHz (it reads vehicle 1's states in its partition, SessionView::Topics::only_vehicle),
 //  - the peer: the same 1 kHz client loop reading every vehicle's states (a SessionView without
 //    only_vehicle, as vdyn-input read before; this binary with --all-reader),
+//  - `vdyn-recorder record` of everything, alone, and then with 8 one-vehicle rigs
+//    (`vdyn-input play demo` on vehicles 1..8, at most N) driving meanwhile: the recorder's CPU,
+//    and the states it lost before they reached it plus the samples its full buffer dropped
+//    (its own summary line),
 // each process's CPU (user + system, /proc/PID/stat) over `seconds` after a 3 s warm-up, and the
 // server's loop thread (its SCHED_FIFO thread, /proc/PID/task/TID/stat) and whole process over the
 // one-vehicle client's window. Medians over the runs; the load average is printed with each run.
@@ -19,6 +23,9 @@
 // --stats-out over its whole life: steps lost (due by the end, never run), schedule rebases, tick
 // lateness p50 / p99 / p99.9 / max, and states the state writer refused (queue full).
 //
+// With VDYN_BENCH_PLOT=DIR the medians go to DIR/follow_bench.dat and gnuplot draws them into
+// DIR/follow_bench.png (CPU and tick lateness against the vehicle count).
+//
 // Usage: follow_bench [seconds=10] [runs=3] [counts=1,16,64,256] [step_threads=1]
 #include <signal.h>
 #include <unistd.h>
@@ -27,6 +34,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
+#include <fstream>
 #include <map>
 #include <optional>
 #include <sstream>
@@ -150,6 +159,62 @@ double LoadAverage() {
   return l;
 }
 
+// The medians against the vehicle count, one data block per stepping-thread count, in
+// DIR/follow_bench.dat, drawn by gnuplot into DIR/follow_bench.png: CPU (clients, server, loop,
+// recorder) and tick lateness (log scale).
+void Plot(const std::string& dir, const std::vector<int>& counts, const std::vector<int>& threads,
+          const std::function<std::vector<double>(int, int)>& row) {
+  std::filesystem::create_directories(dir);
+  const std::string dat = dir + "/follow_bench.dat", png = dir + "/follow_bench.png";
+  {
+    std::ofstream out(dat);
+    out << "# vehicles client peer loop workers server lateness_p50_us p99 p999 max "
+           "recorder recorder_8_rigs recorder_lost recorder_8_rigs_lost steps_lost states_refused\n";
+    for (int t : threads) {
+      out << "# stepping threads " << t << "\n";
+      for (int n : counts) {
+        out << n;
+        for (double v : row(n, t)) out << ' ' << v;
+        out << '\n';
+      }
+      out << "\n\n";
+    }
+  }
+  const std::string gp = dir + "/follow_bench.gp";
+  {
+    std::ofstream g(gp);
+    g << "set terminal pngcairo size 1400,560 font ',10'\nset output '" << png << "'\n"
+      << "set multiplot layout 1,2 title 'vdyn-server at 1 kHz on flat: medians of runs against "
+         "the vehicle count'\n"
+      << "set logscale x 2\nset xlabel 'vehicles'\nset key top left\nset grid\n"
+      << "set ylabel '% of one core'\nset title 'CPU'\nplot ";
+    for (std::size_t i = 0; i < threads.size(); ++i) {
+      const std::string t = std::to_string(threads[i]);
+      const std::string idx = "'" + dat + "' index " + std::to_string(i);
+      if (i > 0) g << ", ";
+      g << idx << " using 1:4 with linespoints title 'server loop thread (" << t << " thr)', "
+        << idx << " using 1:6 with linespoints title 'server (" << t << " thr)', "
+        << idx << " using 1:2 with linespoints title 'one-vehicle client (" << t << " thr)', "
+        << idx << " using 1:3 with linespoints title 'all-vehicles reader (" << t << " thr)', "
+        << idx << " using 1:11 with linespoints title 'recorder (" << t << " thr)', "
+        << idx << " using 1:12 with linespoints title 'recorder, 8 rigs (" << t << " thr)'";
+    }
+    g << "\nset logscale y 10\nset ylabel 'us'\nset title 'tick lateness'\nplot ";
+    for (std::size_t i = 0; i < threads.size(); ++i) {
+      const std::string t = std::to_string(threads[i]);
+      const std::string idx = "'" + dat + "' index " + std::to_string(i);
+      if (i > 0) g << ", ";
+      g << idx << " using 1:7 with linespoints title 'p50 (" << t << " thr)', "
+        << idx << " using 1:8 with linespoints title 'p99 (" << t << " thr)', "
+        << idx << " using 1:9 with linespoints title 'p99.9 (" << t << " thr)', "
+        << idx << " using 1:10 with linespoints title 'max (" << t << " thr)'";
+    }
+    g << "\nunset multiplot\n";
+  }
+  const int rc = std::system(("gnuplot '" + gp + "'").c_str());
+  std::printf("%s: %s\n", rc == 0 ? "plot" : "gnuplot failed; data", rc == 0 ? png.c_str() : dat.c_str());
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -177,6 +242,9 @@ int main(int argc, char** argv) {
   struct Figures {
     std::vector<double> client, peer, loop, workers, server;
     std::vector<double> lost, rebases, p50, p99, p999, max, refused;
+    // The recorder alone with the server, then with 8 one-vehicle rigs driving vehicles 1..8:
+    // its CPU, and the states lost before it plus the samples its full buffer dropped.
+    std::vector<double> rec_cpu[2], rec_lost[2], rec_messages[2];
   };
   std::map<std::pair<int, int>, Figures> figures;  // (vehicles, stepping threads)
   for (int run = 0; run < runs; ++run) {
@@ -190,7 +258,7 @@ int main(int argc, char** argv) {
           if (i > 1) ids += ',';
           ids += std::to_string(i);
         }
-        const double server_s = 2 * (warmup + seconds) + 20;
+        const double server_s = 4 * (warmup + seconds) + 20;  // client, peer, recorder twice
         const std::string stats = fmt::format("{}-stats-{}-{}-{}.txt", tmp, n, threads, run);
         const pid_t server = Spawn(
             {VDYN_SERVER_BINARY, "--domain", dom, "--world", "flat", "--no-status",
@@ -225,6 +293,43 @@ int main(int argc, char** argv) {
         const double pwall = (MonotonicNow() - tp).seconds();
         const double p1 = ProcessCpuSeconds(peer);
         WaitPid(peer);
+        Figures& fr = figures[{n, threads}];
+        for (int rigs_on = 0; rigs_on < 2; ++rigs_on) {
+          std::vector<pid_t> rigs;
+          for (int k = 1; rigs_on == 1 && k <= std::min(n, 8); ++k) {
+            rigs.push_back(Spawn({VDYN_INPUT_BINARY, "--domain", dom, "--vehicle-id",
+                                  std::to_string(k), "--strength", "5", "--wait", "30", "play",
+                                  "demo", "--clock", "wall", "--loop"},
+                                 fmt::format("{}-rig-{}-{}-{}.log", tmp, n, k, run)));
+          }
+          const std::string rec_log = fmt::format("{}-recorder-{}-{}-{}.log", tmp, n, rigs_on, run);
+          const std::string rec_file = fmt::format("{}-{}-{}.mcap", tmp, n, rigs_on);
+          const pid_t rec = Spawn({VDYN_RECORDER_BINARY, "record", "--domain", dom, "--no-status",
+                                   "--duration", fmt::format("{:.1f}", warmup + seconds), rec_file},
+                                  rec_log);
+          vdyn::base::SleepUntil(MonotonicNow() + Secs(warmup));
+          const double r0 = ProcessCpuSeconds(rec);
+          const auto tr = MonotonicNow();
+          vdyn::base::SleepUntil(tr + Secs(seconds));
+          const double r1 = ProcessCpuSeconds(rec);
+          const double rwall = (MonotonicNow() - tr).seconds();
+          WaitPid(rec);
+          for (pid_t r : rigs) kill(r, SIGTERM);
+          for (pid_t r : rigs) WaitPid(r);
+          // "recorded N messages in ...; lost L, dropped D; ..."
+          double messages = -1, lost = -1, dropped = -1;
+          const std::string log = vdyn::bench::Slurp(rec_log);
+          if (const auto at = log.rfind("recorded "); at != std::string::npos) {
+            std::sscanf(log.c_str() + at, "recorded %lf messages", &messages);
+            if (const auto l = log.find("lost ", at); l != std::string::npos) {
+              std::sscanf(log.c_str() + l, "lost %lf, dropped %lf", &lost, &dropped);
+            }
+          }
+          fr.rec_cpu[rigs_on].push_back(100 * (r1 - r0) / rwall);
+          fr.rec_lost[rigs_on].push_back(lost < 0 || dropped < 0 ? -1 : lost + dropped);
+          fr.rec_messages[rigs_on].push_back(messages);
+          std::filesystem::remove(rec_file);
+        }
         kill(server, SIGTERM);
         WaitPid(server);
         Figures& f = figures[{n, threads}];
@@ -253,6 +358,11 @@ int main(int argc, char** argv) {
             run + 1, n, threads, LoadAverage(), f.client.back(), f.peer.back(), f.loop.back(),
             f.workers.back(), f.server.back(), f.lost.back(), f.rebases.back(), f.p50.back(),
             f.p99.back(), f.p999.back(), f.max.back(), f.refused.back());
+        std::printf("  recorder alone %.2f %% (lost or dropped %.0f of %.0f recorded), with %d rigs "
+                    "%.2f %% (lost or dropped %.0f of %.0f)\n",
+                    f.rec_cpu[0].back(), f.rec_lost[0].back(), f.rec_messages[0].back(),
+                    std::min(n, 8), f.rec_cpu[1].back(), f.rec_lost[1].back(),
+                    f.rec_messages[1].back());
         std::fflush(stdout);
       }
     }
@@ -261,18 +371,30 @@ int main(int argc, char** argv) {
   std::printf(
       "| vehicles | stepping threads | one-vehicle client | all-vehicles reader (peer) | server "
       "loop thread | stepping workers | server | steps lost | rebases | lateness p50 / p99 / "
-      "p99.9 / max, us | states refused |\n"
-      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
+      "p99.9 / max, us | states refused | recorder, alone / with 8 rigs | recorder lost or dropped, alone / with 8 rigs |\n"
+      "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |\n");
   for (int n : counts) {
     for (int threads : thread_counts) {
       const Figures& f = figures[{n, threads}];
       std::printf(
           "| %d | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.0f | %.0f | %.1f / %.1f / %.1f / %.1f "
-          "| %.0f |\n",
+          "| %.0f | %.2f / %.2f | %.0f / %.0f |\n",
           n, threads, Median(f.client), Median(f.peer), Median(f.loop), Median(f.workers),
           Median(f.server), Median(f.lost), Median(f.rebases), Median(f.p50), Median(f.p99),
-          Median(f.p999), Median(f.max), Median(f.refused));
+          Median(f.p999), Median(f.max), Median(f.refused), Median(f.rec_cpu[0]),
+          Median(f.rec_cpu[1]), Median(f.rec_lost[0]), Median(f.rec_lost[1]));
     }
+  }
+  if (const char* dir = std::getenv("VDYN_BENCH_PLOT"); dir != nullptr && *dir != '\0') {
+    Plot(dir, counts, thread_counts, [&](int n, int t) {
+      const Figures& f = figures[{n, t}];
+      return std::vector<double>{Median(f.client), Median(f.peer), Median(f.loop),
+                                 Median(f.workers), Median(f.server), Median(f.p50),
+                                 Median(f.p99), Median(f.p999), Median(f.max),
+                                 Median(f.rec_cpu[0]), Median(f.rec_cpu[1]),
+                                 Median(f.rec_lost[0]), Median(f.rec_lost[1]), Median(f.lost),
+                                 Median(f.refused)};
+    });
   }
   const int t0 = thread_counts.front();
   const double c1 = Median(figures[{counts.front(), t0}].client);
