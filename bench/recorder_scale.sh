@@ -6,21 +6,22 @@
 # lost before they reached it, samples dropped from its full buffer).
 #   bench/recorder_scale.sh [VEHICLES=128] [STEP_THREADS=2] [SECONDS=10] [recorder options...]
 # e.g. bench/recorder_scale.sh 128 2 10 --compression lz4
-# CYCLONEDDS_URI in the environment goes to both programs.
+# CYCLONEDDS_URI in the environment goes to both programs; VDYN_RECORDER names another recorder
+# binary (a peer: an earlier build).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 n="${1:-128}"; threads="${2:-2}"; seconds="${3:-10}"; shift $(( $# < 3 ? $# : 3 ))
 bin=build/release
 tmp=$(mktemp -d)
-trap 'rm -rf "$tmp"' EXIT
+trap '[ -n "${KEEP:-}" ] || rm -rf "$tmp"' EXIT
 domain=$(( 150 + $$ % 60 ))
 "$bin/server/vdyn-server" --domain "$domain" --world flat --no-status --max-vehicles 256 \
-  --vehicle-ids "$(seq -s, 1 "$n")" --duration $(( seconds + 6 )) --step-threads "$threads" \
+  --vehicle-ids "$(seq -s, 1 "$n")" --duration $(( seconds + 11 )) --step-threads "$threads" \
   --stats-out "$tmp/stats.txt" > "$tmp/server.log" 2>&1 &
 server=$!
 sleep 1
-"$bin/clients/recorder/vdyn-recorder" record --domain "$domain" --no-status \
-  --duration $(( seconds + 3 )) "$@" "$tmp/rec.mcap" > "$tmp/recorder.log" 2>&1 &
+"${VDYN_RECORDER:-$bin/clients/recorder/vdyn-recorder}" record --domain "$domain" --no-status \
+  --duration $(( seconds + 8 )) "$@" "$tmp/rec.mcap" > "$tmp/recorder.log" 2>&1 &
 recorder=$!
 sleep 2
 ticks() { awk '{print $14 + $15}' "$1"; }  # utime + stime, fields 14-15 (proc(5))
@@ -30,9 +31,9 @@ snapshot() {
   done | sort
 }
 hz=$(getconf CLK_TCK)
-snapshot > "$tmp/a"; r0=$(ticks /proc/"$recorder"/stat)
+r0=$(ticks /proc/"$recorder"/stat); snapshot > "$tmp/a"
 sleep "$seconds"
-snapshot > "$tmp/b"; r1=$(ticks /proc/"$recorder"/stat)
+r1=$(ticks /proc/"$recorder"/stat); snapshot > "$tmp/b"
 echo "load average $(cut -d' ' -f1-3 /proc/loadavg); $n vehicles, $threads stepping thread(s), $seconds s"
 join "$tmp/a" "$tmp/b" | awk -v s="$seconds" -v hz="$hz" \
   '{ d = 100 * ($5 - $3) / hz / s; if (d >= 0.5) printf "  server thread %s %s: %.1f %%\n", $1, $2, d }'
