@@ -35,6 +35,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <functional>
+#include <initializer_list>
 #include <fstream>
 #include <map>
 #include <optional>
@@ -187,29 +188,24 @@ void Plot(const std::string& dir, const std::vector<int>& counts, const std::vec
       << "set multiplot layout 1,2 title 'vdyn-server at 1 kHz on flat: medians of runs against "
          "the vehicle count'\n"
       << "set logscale x 2\nset xlabel 'vehicles'\nset key top left\nset grid\n"
-      << "set ylabel '% of one core'\nset title 'CPU'\nplot ";
-    for (std::size_t i = 0; i < threads.size(); ++i) {
-      const std::string t = std::to_string(threads[i]);
-      const std::string idx = "'" + dat + "' index " + std::to_string(i);
-      if (i > 0) g << ", ";
-      g << idx << " using 1:4 with linespoints title 'server loop thread (" << t << " thr)', "
-        << idx << " using 1:6 with linespoints title 'server (" << t << " thr)', "
-        << idx << " using 1:2 with linespoints title 'one-vehicle client (" << t << " thr)', "
-        << idx << " using 1:3 with linespoints title 'all-vehicles reader (" << t << " thr)', "
-        << idx << " using 1:11 with linespoints title 'recorder (" << t << " thr)', "
-        << idx << " using 1:12 with linespoints title 'recorder, 8 rigs (" << t << " thr)'";
-    }
-    g << "\nset logscale y 10\nset ylabel 'us'\nset title 'tick lateness'\nplot ";
-    for (std::size_t i = 0; i < threads.size(); ++i) {
-      const std::string t = std::to_string(threads[i]);
-      const std::string idx = "'" + dat + "' index " + std::to_string(i);
-      if (i > 0) g << ", ";
-      g << idx << " using 1:7 with linespoints title 'p50 (" << t << " thr)', "
-        << idx << " using 1:8 with linespoints title 'p99 (" << t << " thr)', "
-        << idx << " using 1:9 with linespoints title 'p99.9 (" << t << " thr)', "
-        << idx << " using 1:10 with linespoints title 'max (" << t << " thr)'";
-    }
-    g << "\nunset multiplot\n";
+      << "set ylabel '% of one core'\nset title 'CPU'\n";
+    // One curve per (data column, name) and stepping-thread count.
+    const auto plot = [&](std::initializer_list<std::pair<int, const char*>> curves) {
+      g << "plot ";
+      for (std::size_t i = 0; i < threads.size(); ++i) {
+        for (const auto& [column, name] : curves) {
+          if (i > 0 || column != curves.begin()->first) g << ", ";
+          g << "'" << dat << "' index " << i << " using 1:" << column
+            << " with linespoints title '" << name << " (" << threads[i] << " thr)'";
+        }
+      }
+      g << "\n";
+    };
+    plot({{4, "server loop thread"}, {6, "server"}, {2, "one-vehicle client"},
+          {3, "all-vehicles reader"}, {11, "recorder"}, {12, "recorder, 8 rigs"}});
+    g << "set logscale y 10\nset ylabel 'us'\nset title 'tick lateness'\n";
+    plot({{7, "p50"}, {8, "p99"}, {9, "p99.9"}, {10, "max"}});
+    g << "unset multiplot\n";
   }
   const int rc = std::system(("gnuplot '" + gp + "'").c_str());
   std::printf("%s: %s\n", rc == 0 ? "plot" : "gnuplot failed; data", rc == 0 ? png.c_str() : dat.c_str());
