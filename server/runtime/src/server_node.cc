@@ -68,13 +68,15 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   }
   session_ = std::make_unique<Session>(world_, options_.session,
                                        [this](SessionEventRecord&& r) { OnEvent(std::move(r)); });
-  // 32 steps of as many vehicles as it may run (at least 512 frames): the writer thread may
-  // stall for tens of ms while a session starts (discovery, the world, every vehicle's
-  // parameters, the vehicles' own state writers).
+  // 64 steps of as many vehicles as it may run (at least 512 frames of a page each): the writer
+  // thread may stall for tens of ms while a session starts (discovery, the world, every
+  // vehicle's parameters), and at 256 vehicles on two cores the stepping threads (real-time
+  // scheduling) leave it little CPU while they catch up after a late tick (up to ~15 steps).
   states_ = std::make_unique<StateOutbox>(
       participant_, drops_,
       std::max<std::size_t>(
-          512, 32 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)));
+          512, 64 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)),
+      options_.vehicle_ids);
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
@@ -399,7 +401,10 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
                steps_caught_up_,
                (static_cast<double>(session_->steps() * session_->step_ns()) -
                 static_cast<double>((end - start).ns)) * 1e-6);
-  if (!options_.stats_out.empty()) WriteStats(start, end, start_cpu);
+  if (!options_.stats_out.empty()) {
+    (void)states_->Drain(base::Milliseconds(500));  // so that states_written is complete
+    WriteStats(start, end, start_cpu);
+  }
   return 0;
 }
 
@@ -435,6 +440,11 @@ void ServerNode::WriteStats(base::MonoTime start, base::MonoTime end, base::Nano
   // Every state a step made: handed to the state writer, or refused there (queue full).
   std::fprintf(f, "states_pushed %llu\n", static_cast<unsigned long long>(states_->pushed()));
   std::fprintf(f, "states_refused %llu\n", static_cast<unsigned long long>(states_->refused()));
+  // Of those handed over, written on vdyn/state by the time of this summary, and writes that
+  // failed.
+  std::fprintf(f, "states_written %llu\n", static_cast<unsigned long long>(states_->written()));
+  std::fprintf(f, "state_write_failures %llu\n",
+               static_cast<unsigned long long>(states_->write_failures()));
   std::fprintf(f, "step_threads %d\n", session_->step_threads());
   // The boundaries that applied requests, and how long the requests held each.
   std::fprintf(f, "request_boundaries %llu\n",

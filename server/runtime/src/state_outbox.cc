@@ -7,8 +7,9 @@
 namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
-                         std::size_t frames)
+                         std::size_t frames, std::span<const std::uint32_t> vehicles)
     : writer_(participant, drops), drops_(drops), frames_(frames) {
+  for (const std::uint32_t key : vehicles) writer_.Prepare(key);
   drop_full_ = drops_.Register("state queue full, state not sent");
   drop_large_ = drops_.Register("state larger than a frame, not sent");
   drop_write_ = drops_.Register("write failed on vdyn/state");
