@@ -214,7 +214,7 @@ int main(int argc, char** argv) {
   std::uint64_t last_seq = 0;
   bool measuring = false;
   states->OnDataAvailable([&] {
-    states->Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+    (void)states->Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
       const std::int64_t now = MonotonicNow().ns;
       if (s.vehicle_id() != 1 || s.input().source_id() != "input_bench") return;
       std::lock_guard<std::mutex> lock(mu);

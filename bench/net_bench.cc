@@ -2,14 +2,15 @@
 // DDS). One run, on one machine, over loopback:
 //  - the server in real time on `facility` for N s: tick lateness distribution (p50, p99, p99.9,
 //    max), steps that never ran, drift of simulation time against the wall clock, its CPU;
-//  - three subscriber processes on the state topic (this one and two children);
+//  - subscriber processes on the state topic: this one and SUBSCRIBERS - 1 children (default 3;
+//    1 is ddsperf's shape: one writer, one reader);
 //  - one-way state latency (DDS source timestamp to the subscriber's hand, same clock);
 //  - latency from a driver input to the first state that applied it (the input's monotonic stamp
 //    travels back in the state);
 //  - Cyclone's own ddsperf ping/pong at 1 kHz with a payload of the state's size, in the same run:
 //    its round trip / 2 is the one-way peer figure.
 //
-// Usage: net_bench [seconds=60] [ddsperf_seconds=20]
+// Usage: net_bench [seconds=60] [ddsperf_seconds=20] [subscribers=3]
 #include <signal.h>
 #include <unistd.h>
 
@@ -49,7 +50,7 @@ int Subscriber(std::uint32_t domain, double seconds) {
   const std::int64_t end = vdyn::base::MonotonicNow().ns + static_cast<std::int64_t>(seconds * 1e9);
   std::uint64_t n = 0;
   while (vdyn::base::MonotonicNow().ns < end) {
-    states.Wait(std::chrono::milliseconds(10));
+    (void)states.Wait(std::chrono::milliseconds(10));
     n += static_cast<std::uint64_t>(
         states.Take([](const vdyn::pb::VehicleState&, const vdyn::transport::SampleInfo&) {}));
   }
@@ -84,6 +85,11 @@ int main(int argc, char** argv) {
   }
   const double seconds = argc > 1 ? std::atof(argv[1]) : 60.0;
   const double ddsperf_seconds = argc > 2 ? std::atof(argv[2]) : 20.0;
+  const int subscribers = argc > 3 ? std::atoi(argv[3]) : 3;
+  if (seconds <= 0 || ddsperf_seconds <= 0 || subscribers < 1 || subscribers > 16) {
+    std::fprintf(stderr, "usage: net_bench [seconds > 0] [ddsperf_seconds > 0] [subscribers 1-16]\n");
+    return 2;
+  }
   if (std::getenv("CYCLONEDDS_URI") == nullptr) {
     setenv("CYCLONEDDS_URI",
            "<General><Interfaces><NetworkInterface name=\"lo\"/></Interfaces></General>"
@@ -100,7 +106,7 @@ int main(int argc, char** argv) {
                               tmp + "-stats.txt", "--watchdog-ms", "100"},
                              tmp + "-server.log");
   std::vector<pid_t> subs;
-  for (int i = 0; i < 2; ++i) {
+  for (int i = 0; i + 1 < subscribers; ++i) {
     subs.push_back(Spawn({argv[0], "--subscriber", std::to_string(domain),
                           std::to_string(seconds + warmup)},
                          tmp + "-sub" + std::to_string(i) + ".log"));
@@ -131,7 +137,7 @@ int main(int argc, char** argv) {
     }
   });
 
-  vdyn::Histogram one_way, input_to_state;
+  vdyn::Histogram one_way, to_listener, input_to_state;
   std::uint64_t received = 0, last_seq = 0;
   const std::int64_t t0 = vdyn::base::MonotonicNow().ns;
   const std::int64_t measure_from = t0 + static_cast<std::int64_t>(warmup * 1e9);
@@ -141,7 +147,8 @@ int main(int argc, char** argv) {
   std::mutex mu;  // the histograms are read by the main thread at the end
   // Take on DDS's receive thread (a listener): the lowest-latency way to read, as ddsperf does.
   states.OnDataAvailable([&] {
-    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
+    const std::int64_t arrived_wall = dds_time();  // the listener's call: before take and decode
+    (void)states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo& info) {
       const std::int64_t now_wall = dds_time();
       const std::int64_t now_mono = vdyn::base::MonotonicNow().ns;
       if (!measuring) return;
@@ -149,6 +156,7 @@ int main(int argc, char** argv) {
       state_bytes = s.ByteSizeLong();
       ++received;
       one_way.Add(static_cast<double>(now_wall - info.source_timestamp_ns) * 1e-3);
+      to_listener.Add(static_cast<double>(arrived_wall - info.source_timestamp_ns) * 1e-3);
       if (s.input().sequence() > last_seq && s.input().stamp_ns() > 0) {
         last_seq = s.input().sequence();
         input_to_state.Add(static_cast<double>(now_mono - s.input().stamp_ns()) * 1e-3);
@@ -182,8 +190,8 @@ int main(int argc, char** argv) {
   const auto [rtt50, rtt99] = ParseDdsperf(tmp + "-ping.log");
 
   const double cpu = 100.0 * (cpu1 - cpu0) / seconds;
-  std::printf("net_bench: %.0f s of the real-time server on facility, 3 state subscribers, input at 1 kHz\n",
-              seconds);
+  std::printf("net_bench: %.0f s of the real-time server on facility, %d state subscriber(s), input at 1 kHz\n",
+              seconds, subscribers);
   std::printf("server exit code %d, scheduling: %s\n", server_code, stats["scheduling"].c_str());
   std::printf("tick lateness: p50 %s us, p99 %s us, p99.9 %s us, max %s us; under 1 ms: %.3f %%\n",
               stats["lateness_p50_us"].c_str(), stats["lateness_p99_us"].c_str(),
@@ -196,11 +204,13 @@ int main(int argc, char** argv) {
               stats["schedule_rebases"].c_str());
   std::printf("drift of simulation time against the wall clock at the end: %s ms over %s s\n",
               stats["drift_ms"].c_str(), stats["wall_s"].c_str());
-  std::printf("server CPU with 3 subscribers: %.1f %% of one core (whole run: %s %%)\n", cpu,
+  std::printf("server CPU with %d subscriber(s): %.1f %% of one core (whole run: %s %%)\n", subscribers, cpu,
               stats["cpu_percent"].c_str());
   std::printf("state one-way latency (%llu states, %zu B): p50 %.1f us, p99 %.1f us, max %.1f us\n",
               static_cast<unsigned long long>(received), state_bytes.load(),
               one_way.Percentile(50), one_way.Percentile(99), one_way.Max());
+  std::printf("  of which to the listener's call (before take and decode): p50 %.1f us, p99 %.1f us\n",
+              to_listener.Percentile(50), to_listener.Percentile(99));
   if (input_write_failures > 0) {
     std::printf("input writes that failed: %llu\n",
                 static_cast<unsigned long long>(input_write_failures.load()));

@@ -56,7 +56,7 @@ int Subscribe(std::uint32_t domain, double seconds) {
   long n = 0;
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
   while (std::chrono::steady_clock::now() < end) {
-    states.Wait(std::chrono::milliseconds(100));
+    (void)states.Wait(std::chrono::milliseconds(100));
     n += states.Take([](const vdyn::pb::VehicleState&, const vdyn::transport::SampleInfo&) {});
   }
   std::printf("received %ld\n", n);

@@ -66,7 +66,7 @@ Run RunOnce(const std::string& server, std::uint32_t domain, double seconds, boo
     vdyn::transport::Reader<vdyn::pb::ControlReply> replies(p, TopicId::kControlReply, &drops);
     std::map<std::uint64_t, int> answered;
     auto take = [&] {
-      replies.Take([&](const vdyn::pb::ControlReply& r, const vdyn::transport::SampleInfo&) {
+      (void)replies.Take([&](const vdyn::pb::ControlReply& r, const vdyn::transport::SampleInfo&) {
         if (r.client_id() != "request_bench") return;
         if (++answered[r.request_id()] > 1) ++run.duplicates;
         if (!r.accepted()) {
@@ -106,13 +106,13 @@ Run RunOnce(const std::string& server, std::uint32_t domain, double seconds, boo
         ++burst;
       }
       while (std::chrono::steady_clock::now() < next) {
-        replies.Wait(std::chrono::milliseconds(10));
+        (void)replies.Wait(std::chrono::milliseconds(10));
         take();
       }
     }
     const auto wait_end = std::chrono::steady_clock::now() + std::chrono::seconds(5);
     while (answered.size() < run.sent && std::chrono::steady_clock::now() < wait_end) {
-      replies.Wait(std::chrono::milliseconds(10));
+      (void)replies.Wait(std::chrono::milliseconds(10));
       take();
     }
     run.replies = answered.size();

@@ -90,17 +90,17 @@ topics() { for t in "$@"; do printf '<topic>vdyn/%s</topic>' "$t"; done; }
 # without it a client that follows one vehicle would fall back to reading every vehicle's states.
 parts='<partitions><partition></partition><partition>vdyn.vehicle.*</partition></partitions>'
 
-all=(state input control control_reply params world events diagnostics)
+all=(state states input control control_reply params world events diagnostics)
 for spec in "$@"; do
   name=${spec%%:*}
   role=${spec#*:}
   case "$role" in
-    server) pub=(state params world events diagnostics control_reply)
+    server) pub=(state states params world events diagnostics control_reply)
             sub=(input control world diagnostics state) ;;
     rig) pub=(input control); sub=(state params world control_reply diagnostics) ;;
     operator) pub=(control); sub=("${all[@]}") ;;
     observer) pub=(); sub=("${all[@]}") ;;
-    player) pub=(state params world diagnostics input events); sub=(control "${all[@]}") ;;
+    player) pub=(state states params world diagnostics input events); sub=(control "${all[@]}") ;;
     *) echo "$0: unknown role '$role' for $name (server, rig, operator, observer, player)" >&2; exit 2 ;;
   esac
   if [ ! -f "$name.pem" ]; then

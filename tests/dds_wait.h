@@ -13,8 +13,8 @@ bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout, 
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   while (!done()) {
     if (std::chrono::steady_clock::now() >= deadline) return false;
-    reader.Wait(std::chrono::milliseconds(50));
-    reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
+    (void)reader.Wait(std::chrono::milliseconds(50));
+    (void)reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
   }
   return true;
 }

@@ -77,8 +77,8 @@ int main(int argc, char** argv) {
       write_failures += !input->Write(1, in);
       matched = std::max(matched, input->MatchedReaders());
     }
-    states.Wait(10ms);
-    states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
+    (void)states.Wait(10ms);
+    (void)states.Take([&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
       ++received;
       if (s.input().source_id() == source) ++driven;
     });

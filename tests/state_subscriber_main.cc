@@ -53,7 +53,7 @@ int main(int argc, char** argv) {
   long n = 0;
   const auto end = std::chrono::steady_clock::now() + seconds;
   while (n < want && std::chrono::steady_clock::now() < end) {
-    states.Wait(std::chrono::milliseconds(100));
+    (void)states.Wait(std::chrono::milliseconds(100));
     n += states.Take([print](const vdyn::pb::VehicleState& s,
                              const vdyn::transport::SampleInfo& info) {
       if (!print) return;

@@ -28,6 +28,8 @@
 #include "vdyn/replay/resim.h"
 #include "vdyn/transport/control_client.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/transport/state_writers.h"
+#include "vdyn/base/limits.h"
 #include "vdyn/world.pb.h"
 #include "vdyn_envelope.h"
 
@@ -201,9 +203,9 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   while (std::chrono::steady_clock::now() < deadline &&
          !(at_all.size() == 3 && count(at_own, 2) >= 500 && count(at_view, 3) >= 500)) {
-    all.Wait(20ms);
-    all.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_all[i.key]; });
-    own.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_own[i.key]; });
+    (void)all.Wait(20ms);
+    (void)all.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_all[i.key]; });
+    (void)own.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_own[i.key]; });
     view.Poll();
   }
   EXPECT_EQ(at_all.size(), 3u) << server->Log();
@@ -238,6 +240,145 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   ASSERT_TRUE(all) << steps.size() << " vehicles seen\n" << server->Log();
   EXPECT_EQ(steps.begin()->first, 1u);
   EXPECT_EQ(steps.rbegin()->first, 256u);
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+// A server sends a step's states of every vehicle as one vdyn/states sample (what a recorder
+// reads): each sample holds one state of each vehicle, all of the same step.
+TEST_F(Net, AServerSendsAStepsStatesOfEveryVehicleAsOneSample) {
+  auto server = StartServer({"--vehicle-ids", "1,2,3", "--server-id", "batcher"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleStates> batches(p, TopicId::kStates, &drops,
+                                               transport::ReaderRole::kRecorder);
+  int samples = 0, whole = 0;
+  const bool got = ReadUntil<pb::VehicleStates>(
+      batches, 60s,
+      [&](const pb::VehicleStates& b) {
+        ++samples;
+        std::set<std::uint32_t> ids;
+        std::set<std::uint64_t> steps;
+        for (const pb::VehicleState& s : b.states()) {
+          ids.insert(s.vehicle_id());
+          steps.insert(s.step());
+          EXPECT_EQ(s.server_id(), "batcher");
+        }
+        if (b.states_size() == 3 && ids == std::set<std::uint32_t>{1, 2, 3} && steps.size() == 1) {
+          ++whole;
+        }
+      },
+      [&] { return samples >= 500; });
+  ASSERT_TRUE(got) << samples << " samples\n" << server->Log();
+  // The loop may hand a late step over together with the next one (two states of a vehicle in
+  // one sample); nearly every sample is exactly one step.
+  EXPECT_GE(whole, samples * 9 / 10) << whole << " of " << samples;
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+// The writers' side, in this process: a round's states go out as one sample on vdyn/states; a
+// round larger than a sample may be is split over several; vdyn/state in the default partition
+// is written only while someone reads it there.
+TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::StateWriters writers(p, drops, transport::StateWriters::Options{.states_key = 77});
+  transport::Reader<pb::VehicleStates> batches(p, TopicId::kStates, &drops,
+                                               transport::ReaderRole::kRecorder);
+  std::vector<std::string> encoded;
+  auto round = [&](std::uint64_t step, int vehicles, int wheels) {
+    for (int v = 1; v <= vehicles; ++v) {
+      pb::VehicleState s;
+      s.set_vehicle_id(static_cast<std::uint32_t>(v));
+      s.set_step(step);
+      for (int w = 0; w < wheels; ++w) {
+        pb::WheelState* ws = s.add_wheels();
+        ws->set_fp(1000.0 + v);
+        ws->set_omega(0.5 * w + 0.25);
+      }
+      const std::string b = s.SerializeAsString();
+      ASSERT_TRUE(writers.WriteBytes(
+          static_cast<std::uint32_t>(v),
+          {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()}));
+    }
+    ASSERT_TRUE(writers.Flush());
+  };
+  // Until the reader has matched: rounds of 3 vehicles.
+  std::vector<pb::VehicleStates> got;
+  std::vector<std::uint32_t> got_keys;
+  auto take = [&] {
+    (void)batches.Take([&](const pb::VehicleStates& b, const transport::SampleInfo& i) {
+      got.push_back(b);
+      got_keys.push_back(i.key);
+    });
+  };
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  for (std::uint64_t step = 1; got.empty() && std::chrono::steady_clock::now() < deadline; ++step) {
+    round(step, 3, 4);
+    (void)batches.Wait(10ms);
+    take();
+  }
+  ASSERT_FALSE(got.empty());
+  ASSERT_EQ(got.back().states_size(), 3);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(got.back().states(i).vehicle_id(), static_cast<std::uint32_t>(i + 1));
+    EXPECT_EQ(got.back().states(i).step(), got.back().states(0).step());
+    EXPECT_EQ(got.back().states(i).wheels_size(), 4);
+  }
+  EXPECT_EQ(got_keys.back(), 77u);
+  // Nobody reads vdyn/state in the default partition: not one state was written there.
+  EXPECT_EQ(writers.all_states_written(), 0u);
+
+  // A round larger than one sample may be: split, every state delivered once, in order.
+  got.clear();
+  const std::uint64_t before = writers.batches_written();
+  const int many = 1500;  // ~1 KB each with 40 wheels: about 1.5 MB in all
+  round(1'000'000, many, 40);
+  EXPECT_GE(writers.batches_written() - before, 2u);
+  int states = 0;
+  bool in_order = true;
+  const auto until = std::chrono::steady_clock::now() + 30s;
+  while (states < many && std::chrono::steady_clock::now() < until) {
+    (void)batches.Wait(10ms);
+    got.clear();
+    take();
+    for (const pb::VehicleStates& b : got) {
+      EXPECT_LE(b.ByteSizeLong(), vdyn::limits::kMaxStatesBytes);
+      for (const pb::VehicleState& s : b.states()) {
+        in_order = in_order && s.vehicle_id() == static_cast<std::uint32_t>(states + 1);
+        ++states;
+      }
+    }
+  }
+  EXPECT_EQ(states, many);
+  EXPECT_TRUE(in_order);
+
+  // A recorder's reader of vdyn/state, marked as one that reads vdyn/states: nothing is written
+  // there for it.
+  transport::Reader<pb::VehicleState> marked(p, TopicId::kState, &drops,
+                                             transport::ReaderRole::kBatchRecorder);
+  const auto until1 = std::chrono::steady_clock::now() + 30s;
+  while ((marked.MatchedWriters() == 0 || writers.state_readers() == 0) &&
+         std::chrono::steady_clock::now() < until1) {
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(marked.MatchedWriters(), 1u);
+  ASSERT_EQ(writers.state_readers(), 1u);  // the writer knows the reader is there
+  for (std::uint64_t step = 1'500'000; step < 1'500'020; ++step) round(step, 3, 4);
+  EXPECT_EQ(writers.all_states_written(), 0u);
+  EXPECT_EQ(marked.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}), 0);
+
+  // Once an unmarked reader of vdyn/state has matched, states go there as well.
+  transport::Reader<pb::VehicleState> single(p, TopicId::kState, &drops);
+  int singles = 0;
+  const auto until2 = std::chrono::steady_clock::now() + 30s;
+  for (std::uint64_t step = 2'000'000; singles == 0 && std::chrono::steady_clock::now() < until2;
+       ++step) {
+    round(step, 3, 4);
+    (void)single.Wait(10ms);
+    singles += single.Take([](const pb::VehicleState&, const transport::SampleInfo&) {});
+  }
+  EXPECT_GT(singles, 0);
+  EXPECT_GT(writers.all_states_written(), 0u);
   EXPECT_EQ(drops.Total(), 0u);
 }
 
@@ -562,9 +703,9 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
   std::size_t n_states = 0;
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   while (n_states < 3000 && std::chrono::steady_clock::now() < deadline) {
-    states.Wait(20ms);
-    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
-    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+    (void)states.Wait(20ms);
+    (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
+    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       hashes[s.vehicle_id()][s.step()] = s.state_hash();
       ++n_states;
     });
@@ -576,7 +717,7 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
   ASSERT_GE(n_states, 3000u) << server->Log();
   server->Signal(SIGTERM);
   ASSERT_TRUE(server->Wait(20s).has_value());
-  events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
+  (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
   // Keep the events from the resets on (the first Spawned of each vehicle after them).
   std::sort(captured.begin(), captured.end(),
             [](const auto& x, const auto& y) { return x.sequence() < y.sequence(); });
@@ -809,13 +950,13 @@ TEST_F(Net, TwoServersStartedInOneInstantNeverBothRunAVehicle) {
     // Every state seen from here: which servers published which vehicles.
     std::map<std::string, std::set<std::uint32_t>> published;
     auto take = [&] {
-      states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
+      (void)states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
         published[st.server_id()].insert(st.vehicle_id());
       });
     };
     const auto deadline = std::chrono::steady_clock::now() + 30s;
     while (a.running() && b.running() && std::chrono::steady_clock::now() < deadline) {
-      states.Wait(20ms);
+      (void)states.Wait(20ms);
       take();
     }
     ASSERT_NE(a.running(), b.running()) << "both still run or both stopped\n" << a.Log() << b.Log();
@@ -1021,7 +1162,7 @@ struct Burst {
     for (int tries = 0; !writer.Write(r.vehicle_id(), r); ++tries) {
       ASSERT_LT(tries, 5000) << writer.last_error();
       std::this_thread::sleep_for(1ms);  // the writer's history is full: the server is reading
-      replies.Take([&](const pb::ControlReply& reply, const auto&) { Note(reply); });
+      (void)replies.Take([&](const pb::ControlReply& reply, const auto&) { Note(reply); });
     }
   }
   void Note(const pb::ControlReply& reply) {

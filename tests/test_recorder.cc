@@ -282,8 +282,8 @@ TEST_F(RecorderTest, AKilledRecordingIsRefusedThenRecoveredAndItStillVerifies) {
   std::uint64_t step = 0;
   const auto deadline = std::chrono::steady_clock::now() + 60s;
   while (step < 4000 && std::chrono::steady_clock::now() < deadline) {
-    states.Wait(50ms);
-    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { step = std::max<std::uint64_t>(step, s.step()); });
+    (void)states.Wait(50ms);
+    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { step = std::max<std::uint64_t>(step, s.step()); });
   }
   ASSERT_GE(step, 4000u);
   recorder->Signal(SIGKILL);
@@ -441,15 +441,15 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
     std::uint64_t presses = 0;
     const auto deadline = std::chrono::steady_clock::now() + 120s;
     while (play->running() && std::chrono::steady_clock::now() < deadline) {
-      states.Wait(20ms);
+      (void)states.Wait(20ms);
       const std::int64_t now = base::MonotonicNow().ns;
-      states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { got.push_back({s.step(), now}); });
-      inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) { presses += in.buttons() & 1u; });
+      (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { got.push_back({s.step(), now}); });
+      (void)inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) { presses += in.buttons() & 1u; });
       own_states += static_cast<std::uint64_t>(
           own.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}));
     }
     ASSERT_EQ(play->Wait(10s), 0) << play->Log();
-    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       got.push_back({s.step(), base::MonotonicNow().ns});
     });
     // In order, (nearly) all of them, the paddle presses with them.
@@ -496,8 +496,8 @@ TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
   transport::Reader<pb::WorldDescription> world(p, TopicId::kWorld, &drops);
   bool got_world = false;
   for (int i = 0; i < 200 && !got_world; ++i) {
-    world.Wait(50ms);
-    world.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { got_world = w.name() == "square"; });
+    (void)world.Wait(50ms);
+    (void)world.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { got_world = w.name() == "square"; });
   }
   EXPECT_TRUE(got_world);
   auto request = [&](const std::function<void(pb::ControlRequest&)>& fill) {
@@ -512,8 +512,8 @@ TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
     std::vector<std::uint64_t> steps;
     const auto until = std::chrono::steady_clock::now() + within;
     while (steps.size() < want && std::chrono::steady_clock::now() < until) {
-      states.Wait(25ms);
-      states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { steps.push_back(s.step()); });
+      (void)states.Wait(25ms);
+      (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) { steps.push_back(s.step()); });
     }
     return steps;
   };
@@ -552,8 +552,8 @@ TEST_F(RecorderTest, PlayRefusesADomainWithALiveServer) {
     bool up = false;
     const auto deadline = std::chrono::steady_clock::now() + 60s;
     while (!up && std::chrono::steady_clock::now() < deadline) {
-      world.Wait(50ms);
-      world.Take([&](const pb::WorldDescription&, const transport::SampleInfo&) { up = true; });
+      (void)world.Wait(50ms);
+      (void)world.Take([&](const pb::WorldDescription&, const transport::SampleInfo&) { up = true; });
     }
     ASSERT_TRUE(up) << server->Log();
   }
@@ -601,8 +601,8 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
   std::optional<std::uint64_t> branch;
   const auto deadline = std::chrono::steady_clock::now() + 120s;
   while (!branch && std::chrono::steady_clock::now() < deadline && takeover->running()) {
-    events.Wait(50ms);
-    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
+    (void)events.Wait(50ms);
+    (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
       if (e.has_spawned() && !e.spawned().branched_from().empty()) branch = e.step();
     });
   }

@@ -243,7 +243,7 @@ TEST_F(Security, ForgedPermissionsAndAForeignCaCannotDriveOrChangeParametersAndA
   }, [&] { return !forged->running() && !intruder->running(); });
   EXPECT_GT(seen, 0);
   EXPECT_EQ(foreign, 0);
-  params.Take([&](const pb::VehicleParams& m, const transport::SampleInfo&) {
+  (void)params.Take([&](const pb::VehicleParams& m, const transport::SampleInfo&) {
     EXPECT_NE(m.mass(), 2345.0);
   });
   for (auto* peer : {forged.get(), intruder.get()}) {
@@ -265,8 +265,8 @@ TEST_F(Security, ForgedPermissionsAndAForeignCaCannotDriveOrChangeParametersAndA
   const auto deadline = std::chrono::steady_clock::now() + 15s;
   while (server->Log().find("CN=intruder") == std::string::npos &&
          std::chrono::steady_clock::now() < deadline) {
-    diag.Wait(100ms);  // the server logs its counters once a second, with its diagnostics
-    diag.Take([](const pb::Diagnostics&, const transport::SampleInfo&) {});
+    (void)diag.Wait(100ms);  // the server logs its counters once a second, with its diagnostics
+    (void)diag.Take([](const pb::Diagnostics&, const transport::SampleInfo&) {});
   }
   EXPECT_THAT(server->Log(), HasSubstr("dropped: DDS Security: remote identity refused"));
   EXPECT_THAT(server->Log(), HasSubstr("CN=intruder"));
@@ -288,7 +288,7 @@ TEST_F(Security, AParticipantWithoutSecuritySeesNothingAndDrivesNothing) {
   }, [&] { return !plain->running(); });
   EXPECT_GT(seen, 0);
   EXPECT_EQ(foreign, 0);
-  params.Take([&](const pb::VehicleParams& m, const transport::SampleInfo&) {
+  (void)params.Take([&](const pb::VehicleParams& m, const transport::SampleInfo&) {
     EXPECT_NE(m.mass(), 2345.0);
   });
   const std::string log = Finish(*plain);

@@ -439,8 +439,8 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
   std::map<std::uint32_t, pb::VehicleState> by_ms;  // every state seen, by its packets' Time
   pb::VehicleState last;
   auto take_states = [&] {
-    states.Wait(10ms);
-    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+    (void)states.Wait(10ms);
+    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       if (s.vehicle_id() != 1) return;
       by_ms[TimeMs(s.sim_time_ns())] = s;
       last = s;

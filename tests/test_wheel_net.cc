@@ -126,8 +126,8 @@ bool StatesUntil(transport::Reader<pb::VehicleState>& states, std::chrono::milli
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   bool ok = false;
   while (!ok && std::chrono::steady_clock::now() < deadline) {
-    states.Wait(50ms);
-    states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+    (void)states.Wait(50ms);
+    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       if (s.vehicle_id() != 1 || ok) return;
       last = s;
       ok = done(s);

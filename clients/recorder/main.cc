@@ -37,8 +37,12 @@ std::string CommandLine(int argc, char** argv) {
 
 std::optional<vdyn::transport::TopicId> TopicByName(const std::string& name) {
   const std::string full = name.rfind("vdyn/", 0) == 0 ? name : "vdyn/" + name;
-  if (const auto* s = vdyn::transport::SpecByName(full)) return s->id;
-  return std::nullopt;
+  const auto* s = vdyn::transport::SpecByName(full);
+  if (s == nullptr) return std::nullopt;
+  // vdyn/states carries the same states as vdyn/state, a step's in one sample; both are recorded
+  // as vdyn/state.
+  if (s->id == vdyn::transport::TopicId::kStates) return vdyn::transport::TopicId::kState;
+  return s->id;
 }
 
 CLI::Validator TopicNames() {
@@ -47,6 +51,7 @@ CLI::Validator TopicNames() {
         if (TopicByName(text)) return {};
         std::vector<std::string> names;
         for (const auto& spec : vdyn::transport::AllTopics()) {
+          if (spec.id == vdyn::transport::TopicId::kStates) continue;  // recorded as vdyn/state
           const std::string name = spec.name;
           names.push_back(name.rfind("vdyn/", 0) == 0 ? name.substr(5) : name);
         }

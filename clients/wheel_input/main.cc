@@ -86,7 +86,7 @@ std::vector<std::uint32_t> VehiclesOnDomain(vdyn::transport::Participant& partic
                     .only_vehicle = std::nullopt});
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
   while (std::chrono::steady_clock::now() < deadline) {
-    view.Wait(std::chrono::milliseconds(100));
+    (void)view.Wait(std::chrono::milliseconds(100));
     view.Poll();
   }
   std::vector<std::uint32_t> ids;
@@ -160,7 +160,7 @@ int Play(const Common& c, const PlayOptions& o) {
         std::chrono::steady_clock::now() + std::chrono::duration<double>(c.wait_s);
     spdlog::info("vdyn-input: waiting up to {} s for a state of {}", c.wait_s, where);
     while (sim_ns < 0 && !g_stop && std::chrono::steady_clock::now() < deadline) {
-      states.Wait(std::chrono::milliseconds(50));
+      (void)states.Wait(std::chrono::milliseconds(50));
       poll_states();
     }
     if (g_stop) return 0;

@@ -69,7 +69,7 @@ bool WaitForServer(std::uint32_t domain, std::uint32_t vehicle, int seconds) {
   client::SessionView view(p, {});
   const auto deadline = base::MonotonicNow() + base::Seconds(seconds);
   while (base::MonotonicNow() < deadline) {
-    view.Wait(std::chrono::milliseconds(100));
+    (void)view.Wait(std::chrono::milliseconds(100));
     view.Poll();
     if (view.vehicle(vehicle) != nullptr && view.vehicle(vehicle)->states > 0) return true;
   }
@@ -240,7 +240,7 @@ TEST_F(ViewerProcess, TheArrowsOfAWheelAddUpToTheWheelForceTheServerComputed) {
     in.set_brake(std::fmod(t, 6.0) < 4.0 ? 0.0 : 0.4);
     in.set_steer(0.04 * std::sin(t));
     ASSERT_TRUE(rig.Publish(in));
-    view.Wait(std::chrono::milliseconds(5));
+    (void)view.Wait(std::chrono::milliseconds(5));
     view.Poll();
     const auto* sv = view.vehicle(1);
     if (sv == nullptr || sv->states == 0 || std::abs(sv->state.v_wt_b().x()) < 1.0) continue;
@@ -816,8 +816,8 @@ TEST_F(ViewerProcess, AfterARestoreTheHudsTimeAndStepAgree) {
   std::optional<pb::SessionEvent> checkpoint;
   const auto deadline = base::MonotonicNow() + base::Seconds(60);
   while (!checkpoint && base::MonotonicNow() < deadline) {
-    events.Wait(std::chrono::milliseconds(100));
-    events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
+    (void)events.Wait(std::chrono::milliseconds(100));
+    (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
       if (e.vehicle_id() == 1 && e.has_checkpoint() && e.step() >= 1000) checkpoint = e;
     });
   }

@@ -14,7 +14,7 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
       last_error_ = "no server matched within " + std::to_string(timeout.count()) + " ms";
       return false;
     }
-    reader_.Wait(std::chrono::milliseconds(20));
+    (void)reader_.Wait(std::chrono::milliseconds(20));
   }
   return true;
 }
@@ -30,7 +30,7 @@ std::optional<pb::ControlReply> ControlClient::Call(pb::ControlRequest request,
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   std::optional<pb::ControlReply> reply;
   while (!reply) {
-    reader_.Take([&](const pb::ControlReply& r, const SampleInfo&) {
+    (void)reader_.Take([&](const pb::ControlReply& r, const SampleInfo&) {
       if (r.client_id() == client_id_ && r.request_id() == request.request_id()) reply = r;
     });
     if (reply) break;
@@ -46,7 +46,7 @@ std::optional<pb::ControlReply> ControlClient::Call(pb::ControlRequest request,
       }
       return std::nullopt;
     }
-    reader_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
+    (void)reader_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
   }
   return reply;
 }

@@ -217,11 +217,12 @@ RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownershi
     parent = publisher_;
   }
   // The listener is set with the writer, so no match is missed between creation and setting it.
-  dds_listener_t* l = dds_create_listener(&matched_);
+  dds_listener_t* l = dds_create_listener(&match_);
   if (l == nullptr) throw TransportError("dds_create_listener failed");
   dds_lset_publication_matched(l, [](dds_entity_t, dds_publication_matched_status_t st, void* arg) {
-    static_cast<std::atomic<std::uint32_t>*>(arg)->store(st.current_count,
-                                                         std::memory_order_relaxed);
+    auto* m = static_cast<Match*>(arg);
+    m->count.store(st.current_count, std::memory_order_relaxed);
+    m->changes.fetch_add(1, std::memory_order_release);
   });
   dds_qos_t* q = WriterQos(id, ownership_strength);
   writer_ = dds_create_writer(parent, participant.Topic(id), q, l);
@@ -281,6 +282,41 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
     return false;
   }
   return true;
+}
+
+std::uint32_t RawWriter::UnmarkedReaders() {
+  const std::uint64_t changes = match_.changes.load(std::memory_order_acquire);
+  if (changes == counted_changes_) return unmarked_;
+  counted_changes_ = changes;  // a change from here on is counted at the next call
+  std::vector<dds_instance_handle_t> handles(64);
+  dds_return_t n = dds_get_matched_subscriptions(writer_, handles.data(), handles.size());
+  if (n > static_cast<dds_return_t>(handles.size())) {
+    handles.resize(static_cast<std::size_t>(n));
+    n = dds_get_matched_subscriptions(writer_, handles.data(), handles.size());
+  }
+  if (n < 0) {
+    last_error_ = DdsError("dds_get_matched_subscriptions", n);
+    unmarked_ = match_.count.load(std::memory_order_relaxed);  // every reader, to be safe
+    return unmarked_;
+  }
+  std::uint32_t unmarked = 0;
+  const std::size_t mark_len = sizeof kReadsStatesMark - 1;
+  for (dds_return_t i = 0; i < std::min<dds_return_t>(n, static_cast<dds_return_t>(handles.size())); ++i) {
+    dds_builtintopic_endpoint_t* ep = dds_get_matched_subscription_data(writer_, handles[static_cast<std::size_t>(i)]);
+    bool marked = false;
+    if (ep != nullptr && ep->qos != nullptr) {
+      void* data = nullptr;
+      std::size_t size = 0;
+      if (dds_qget_userdata(ep->qos, &data, &size) && data != nullptr) {
+        marked = size == mark_len && std::memcmp(data, kReadsStatesMark, mark_len) == 0;
+      }
+      dds_free(data);
+    }
+    if (ep != nullptr) dds_builtintopic_free_endpoint(ep);
+    if (!marked) ++unmarked;
+  }
+  unmarked_ = unmarked;
+  return unmarked_;
 }
 
 void RawWriter::Flush() {

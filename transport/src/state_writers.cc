@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "vdyn/base/limits.h"
+
 namespace vdyn::transport {
 
 StateWriters::StateWriters(Participant& participant, DropCounters& drops, Options options)
@@ -11,6 +13,16 @@ StateWriters::StateWriters(Participant& participant, DropCounters& drops, Option
       all_(participant, TopicId::kState, 0, options.sending) {
   drop_create_ = drops_.Register("cannot create a vehicle's state writer (its partition)");
   drop_write_ = drops_.Register("write failed on vdyn/state in a vehicle partition");
+  drop_batch_ = drops_.Register("cannot create the vdyn/states writer (states go on vdyn/state only)");
+  try {
+    batch_ = std::make_unique<RawWriter>(participant, TopicId::kStates, 0, Sending::kEach);
+  } catch (const TransportError& e) {
+    // E.g. DDS Security permissions without vdyn/states: readers of every vehicle read
+    // vdyn/state instead (a recorder falls back to it).
+    drops_.Count(drop_batch_, e.what());
+  }
+  batched_.reserve(limits::kMaxStatesBytes);
+  all_read_ = AllRead();
   vehicles_.reserve(512);
   pending_.reserve(512);
   round_ = base::MonotonicNow();
@@ -18,7 +30,27 @@ StateWriters::StateWriters(Participant& participant, DropCounters& drops, Option
 }
 
 bool StateWriters::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload) {
-  const bool ok = all_.WriteBytes(key, payload);
+  bool ok = true;
+  if (batch_ && batch_->HasReaders()) {
+    // VehicleStates field 1 (length-delimited): tag, varint length, the state's bytes.
+    std::uint8_t head[6] = {0x0A};
+    std::size_t n = 1;
+    for (std::uint64_t v = payload.size(); ; v >>= 7) {
+      head[n++] = static_cast<std::uint8_t>((v & 0x7F) | (v >= 0x80 ? 0x80 : 0));
+      if (v < 0x80) break;
+    }
+    if (batched_.size() + n + payload.size() > limits::kMaxStatesBytes) ok = WriteBatch() && ok;
+    batched_.insert(batched_.end(), head, head + n);
+    batched_.insert(batched_.end(), payload.begin(), payload.end());
+  }
+  if (all_read_) {
+    if (all_.WriteBytes(key, payload)) {
+      ++all_written_;
+    } else {
+      last_error_ = all_.last_error();
+      ok = false;
+    }
+  }
   auto it = vehicles_.find(key);
   if (it == vehicles_.end()) {
     it = vehicles_.emplace(key, Vehicle{}).first;
@@ -36,8 +68,28 @@ bool StateWriters::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> p
   return ok;
 }
 
-void StateWriters::Flush() {
+bool StateWriters::AllRead() {
+  // A recorder's vdyn/state reader is marked: it takes these states from vdyn/states. Without a
+  // vdyn/states writer every reader gets them here.
+  return batch_ ? all_.UnmarkedReaders() > 0 : all_.HasReaders();
+}
+
+bool StateWriters::WriteBatch() {
+  if (batched_.empty()) return true;
+  const bool ok = batch_->WriteBytes(options_.states_key, batched_);
+  batched_.clear();
+  if (!ok) {
+    last_error_ = batch_->last_error();
+    return false;
+  }
+  ++batches_written_;
+  return true;
+}
+
+bool StateWriters::Flush() {
+  const bool ok = WriteBatch();
   all_.Flush();
+  all_read_ = AllRead();  // for the next round
   int created = 0;
   while (!pending_.empty() && created < options_.new_writers_per_flush) {
     const std::uint32_t key = pending_.back();
@@ -49,7 +101,7 @@ void StateWriters::Flush() {
   }
   const base::MonoTime now = base::MonotonicNow();
   round_ = now;
-  if (now < next_sweep_) return;
+  if (now < next_sweep_) return ok;
   next_sweep_ = now + base::Seconds(1);
   for (auto it = vehicles_.begin(); it != vehicles_.end();) {
     if (now - it->second.last_written > options_.idle) {
@@ -58,6 +110,7 @@ void StateWriters::Flush() {
       ++it;
     }
   }
+  return ok;
 }
 
 void StateWriters::Create(std::uint32_t key, Vehicle& v) {

@@ -15,7 +15,7 @@ constexpr std::int64_t kMs = 1'000'000;
 // clang-format off
 // name, payload, reliable, depth (0 = all), transient-local, exclusive, deadline, liveliness,
 // largest payload (vdyn/base/limits.h)
-constexpr std::array<TopicSpec, 8> kTopics = {{
+constexpr std::array<TopicSpec, 9> kTopics = {{
   // State every step: the newest sample is all that matters; never block the 1 kHz loop.
   {TopicId::kState, "vdyn/state", "vdyn.pb.VehicleState", false, 1, false, false, 0, 0, limits::kMaxStateBytes},
   // Driver input: shared ownership, so the server sees every source and itself lets the
@@ -33,6 +33,9 @@ constexpr std::array<TopicSpec, 8> kTopics = {{
   // Session events: every one delivered (a re-simulation needs all of them).
   {TopicId::kEvents, "vdyn/events", "vdyn.pb.SessionEvent", true, 0, false, false, 0, 0, limits::kMaxEventBytes},
   {TopicId::kDiagnostics, "vdyn/diagnostics", "vdyn.pb.Diagnostics", true, 1, false, false, 0, 0, limits::kMaxDiagnosticsBytes},
+  // A step's states of every vehicle of a server in one sample (keyed by the server), for the
+  // readers of every vehicle: one sample a step to receive and take instead of one per vehicle.
+  {TopicId::kStates, "vdyn/states", "vdyn.pb.VehicleStates", false, 1, false, false, 0, 0, limits::kMaxStatesBytes},
 }};
 // clang-format on
 
@@ -102,7 +105,10 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role) {
   const TopicSpec& s = Spec(id);
   dds_qos_t* q = BaseQos(s);
-  if (role == ReaderRole::kRecorder && s.history_depth > 0 && id != TopicId::kWorld) {
+  if (role == ReaderRole::kBatchRecorder && id == TopicId::kState) {
+    dds_qset_userdata(q, kReadsStatesMark, sizeof kReadsStatesMark - 1);
+  }
+  if (role != ReaderRole::kDefault && s.history_depth > 0 && id != TopicId::kWorld) {
     // A recorder takes every sample: a deeper (bounded) history per instance absorbs a late take
     // instead of overwriting samples. History is the reader's own business: it matches the
     // same writers.

@@ -78,7 +78,7 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                          Seconds(timeout_s) +
                          (seen.empty() ? std::string() : " (worlds seen: " + seen + ")"));
     }
-    view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+    (void)view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
   }
   const pb::WorldDescription& w = view_.worlds().at(server_id_);
   if (w.step_ns() > 0) step_ns_ = w.step_ns();
@@ -114,7 +114,7 @@ std::string Client::ParamsBytes(std::uint32_t vehicle_id, double timeout_s) {
       throw TimeoutError("no parameters of vehicle " + std::to_string(vehicle_id) +
                          " arrived on vdyn/params within " + Seconds(timeout_s));
     }
-    view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+    (void)view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
   }
 }
 
@@ -169,7 +169,7 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     const std::int64_t first = reply.sim_time_ns - static_cast<std::int64_t>(chunk) * step_ns_;
     std::map<std::uint32_t, std::uint32_t> got;
     auto take = [&] {
-      states_.Take([&](const pb::VehicleState& s) {
+      (void)states_.Take([&](const pb::VehicleState& s) {
         if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last)
           return;
         out[s.vehicle_id()].Append(s);
@@ -204,7 +204,7 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
             Seconds(timeout_s) + " of the server's reply: missing " + missing +
             " (states lost by this reader so far: " + std::to_string(states_.Lost()) + ")");
       }
-      states_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
+      (void)states_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
       take();
     }
     done += chunk;
@@ -270,7 +270,7 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
                          " arrived on vdyn/state within " + Seconds(timeout_s) +
                          " (a lockstep server publishes states only while it steps)");
     }
-    latest_->Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+    (void)latest_->Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
   }
 }
 
@@ -365,7 +365,7 @@ void Subscription::Run() {
   while (!stop_.load()) {
     if (!source_.Wait(std::chrono::milliseconds(50))) continue;
     std::lock_guard lock(mutex_);
-    source_.Take([&](const pb::VehicleState& s) {
+    (void)source_.Take([&](const pb::VehicleState& s) {
       received_.fetch_add(1);
       if (last_step_ && s.step() > *last_step_ + 1) missing_.fetch_add(s.step() - *last_step_ - 1);
       last_step_ = s.step();

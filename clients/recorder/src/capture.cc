@@ -257,6 +257,11 @@ struct Capture::Impl {
 
   Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {
     o.writer.live = true;  // a killed recorder leaves its file for `recover`
+    // Room for the whole buffer in each arena from the start (address space; pages are touched
+    // as they fill): a growing arena was copied to a new one, into fresh pages, each time it
+    // outgrew its capacity - a third of the recorder's CPU once it fell behind at 128 vehicles,
+    // which made it fall further behind.
+    pending.bytes.reserve(o.queue_bytes);
   }
 
   std::uint64_t LogNow() const {
@@ -269,7 +274,34 @@ struct Capture::Impl {
 
   // --- taker ----------------------------------------------------------------------------------
 
+  // A step's states of every vehicle (vdyn/states): each is recorded as the vdyn/state message
+  // of its vehicle, exactly as if it had come alone (the file does not change).
+  void OnStates(const transport::RawSample& s, std::uint64_t now) {
+    transport::RawSample one;
+    one.info = s.info;
+    one.type_name = transport::Spec(TopicId::kState).payload;
+    const bool framed = wire::ForEachField(s.payload, [&](const wire::Field& f) {
+      if (f.number != 1 || f.type != 2) return true;  // not a state (a later field): skipped
+      one.info.key = 0;  // proto3 leaves vehicle 0 out
+      (void)wire::ForEachField(f.bytes, [&](const wire::Field& g) {
+        if (g.number == 1 && g.type == 0 && g.value <= UINT32_MAX) {
+          one.info.key = static_cast<std::uint32_t>(g.value);
+          return false;
+        }
+        return true;
+      });
+      one.payload = f.bytes;
+      OnSample(TopicId::kState, one, now);
+      return true;
+    });
+    if (!framed) {
+      ++counts[TopicId::kState].malformed;
+      drops.Count("malformed payload on vdyn/states");
+    }
+  }
+
   void OnSample(TopicId topic, const transport::RawSample& s, std::uint64_t now) {
+    if (topic == TopicId::kStates) return OnStates(s, now);
     TopicCounts& c = counts[topic];
     const std::uint32_t key = s.info.key;
     if (!o.vehicles.empty() && !ServerKeyed(topic) && topic != TopicId::kEvents && key != 0 &&
@@ -394,7 +426,7 @@ struct Capture::Impl {
     m["host"] = host;
     std::string topics;
     for (const transport::TopicSpec& s : transport::AllTopics()) {
-      if (Wanted(s.id)) topics += (topics.empty() ? "" : ",") + std::string(s.name);
+      if (s.id != TopicId::kStates && Wanted(s.id)) topics += (topics.empty() ? "" : ",") + std::string(s.name);
     }
     m["topics"] = topics;
     std::string vehicles;
@@ -525,6 +557,7 @@ struct Capture::Impl {
 
   void WriterLoop() {
     Batch work;
+    work.bytes.reserve(o.queue_bytes);  // as `pending` (they swap)
     try {
       OpenFile(LogNow());
       while (true) {
@@ -572,11 +605,26 @@ struct Capture::Impl {
 Capture::Capture(transport::Participant& participant, RecordOptions options)
     : impl_(std::make_unique<Impl>(participant, std::move(options))) {
   for (const transport::TopicSpec& s : transport::AllTopics()) {
-    if (!impl_->Wanted(s.id)) continue;
-    impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
-                                          participant, s.id, &impl_->drops,
-                                          transport::ReaderRole::kRecorder));
+    if (s.id == TopicId::kStates || !impl_->Wanted(s.id)) continue;
     impl_->counts[s.id];
+    transport::ReaderRole role = transport::ReaderRole::kRecorder;
+    if (s.id == TopicId::kState) {
+      // Every vehicle's states: from vdyn servers and players a step's in one sample on
+      // vdyn/states; its vdyn/state reader is marked as such, so they send it nothing there,
+      // and it hears any other writer of vdyn/state. Where vdyn/states is not permitted (DDS
+      // Security), everything on vdyn/state.
+      try {
+        impl_->readers.emplace_back(TopicId::kStates, std::make_unique<transport::RawReader>(
+                                                          participant, TopicId::kStates, &impl_->drops,
+                                                          transport::ReaderRole::kRecorder));
+        role = transport::ReaderRole::kBatchRecorder;
+      } catch (const transport::TransportError& e) {
+        spdlog::warn("vdyn-recorder: cannot read vdyn/states ({}); every state on vdyn/state",
+                     e.what());
+      }
+    }
+    impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
+                                          participant, s.id, &impl_->drops, role));
   }
   if (const std::string advice = ReceiveBufferAdvice(KernelReceiveBufferMax()); !advice.empty()) {
     spdlog::warn("vdyn-recorder: {}", advice);
@@ -587,10 +635,11 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
 Capture::~Capture() = default;
 
 std::uint32_t Capture::MatchedWriters(TopicId topic) const {
+  std::uint32_t n = 0;  // vdyn/state's: with vdyn/states'
   for (auto& [t, reader] : impl_->readers) {
-    if (t == topic) return reader->MatchedWriters();
+    if (t == topic || (topic == TopicId::kState && t == TopicId::kStates)) n += reader->MatchedWriters();
   }
-  return 0;
+  return n;
 }
 
 std::map<TopicId, TopicCounts> Capture::Counts() const {
@@ -624,7 +673,7 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
     return any;
   };
   while (!stop.load() && !m.writer_failed.load()) {
-    waitset.Wait(std::chrono::milliseconds(100));
+    (void)waitset.Wait(std::chrono::milliseconds(100));
     // While samples flow, take at most every kTakePeriod: a wake-up per arriving datagram (and
     // the writer's, which each take signals) cost this thread a context switch each, about a
     // quarter of the recorder's CPU at 64 vehicles. The readers' histories (limits.h,

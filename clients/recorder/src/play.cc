@@ -85,6 +85,8 @@ class Player {
   void PublishLatched(std::uint64_t pos_ns);
   // `latched`: a world or parameters republished at a seek (a copy may stand in for them).
   void Publish(const mcap::Message& m, bool latched = false);
+  // Sends the states published since the last call (vdyn/states: one sample).
+  void FlushStates();
   void Step(int n);
   void HandleKeys(const std::string& keys, bool& quit);
   void HandleRequests();
@@ -250,6 +252,7 @@ void Player::PublishLatched(std::uint64_t pos) {
     m.data = l->data;
     Publish(m, /*latched=*/true);
   }
+  FlushStates();
 }
 
 void Player::Publish(const mcap::Message& m, bool latched) {
@@ -259,10 +262,11 @@ void Player::Publish(const mcap::Message& m, bool latched) {
     if (!states_) {
       states_ = std::make_unique<transport::StateWriters>(
           *participant_, drops_,
-          transport::StateWriters::Options{.sending = transport::Sending::kEach});
+          transport::StateWriters::Options{.sending = transport::Sending::kEach,
+                                           .states_key = transport::ServerKey(o_.server_id)});
     }
+    // Sent at FlushStates(): the states published together go out as one vdyn/states sample.
     const bool ok = states_->WriteBytes(it->second.key, m.data);
-    states_->Flush();  // creates a new vehicle's own writer
     if (!ok) {
       drops_.Count("write failed on vdyn/state", states_->last_error());
       return;
@@ -272,11 +276,18 @@ void Player::Publish(const mcap::Message& m, bool latched) {
   }
   auto& w = writers_[it->second.topic];
   if (!w) w = std::make_unique<transport::RawWriter>(*participant_, it->second.topic);
+  if (states_) FlushStates();  // what went before goes first
   if (!w->WriteBytes(it->second.key, m.data)) {
     drops_.Count("write failed on " + std::string(transport::Spec(it->second.topic).name), w->last_error());
     return;
   }
   ++sent_;
+}
+
+void Player::FlushStates() {
+  if (!states_) return;
+  // Also creates the own writers of vehicles seen since the last call.
+  if (!states_->Flush()) drops_.Count("write failed on vdyn/states", states_->last_error());
 }
 
 // Publishes every message up to and including the n-th next state of the lead vehicle.
@@ -302,6 +313,7 @@ void Player::Step(int n) {
     const auto it = channels_.find(m.channel_id);
     if (it != channels_.end() && it->second.topic == TopicId::kState && it->second.key == lead_vehicle_) ++states;
   }
+  FlushStates();
   Anchor(pos);
 }
 
@@ -350,7 +362,7 @@ void Player::HandleKeys(const std::string& keys, bool& quit) {
 }
 
 void Player::HandleRequests() {
-  control_->Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
+  (void)control_->Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
     const bool player_command = r.has_pause() || r.has_resume() || r.has_step() || r.has_playback();
     if (!player_command) return;  // for a server
     if (!r.server_id().empty() && r.server_id() != o_.server_id) return;
@@ -438,7 +450,8 @@ int Player::Run(const std::atomic<bool>& stop) {
       if (!states_) {
         states_ = std::make_unique<transport::StateWriters>(
             *participant_, drops_,
-            transport::StateWriters::Options{.sending = transport::Sending::kEach});
+            transport::StateWriters::Options{.sending = transport::Sending::kEach,
+                                           .states_key = transport::ServerKey(o_.server_id)});
       }
       // The vehicle's own writer now: one-vehicle readers match it before the first state.
       states_->Prepare(ch.key);
@@ -452,8 +465,8 @@ int Player::Run(const std::atomic<bool>& stop) {
     std::string live;
     const auto deadline = base::MonotonicNow() + base::Nanos{static_cast<std::int64_t>(o_.server_check_s * 1e9)};
     while (live.empty() && base::MonotonicNow() < deadline && !stop.load()) {
-      worlds.Wait(std::chrono::milliseconds(50));
-      worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { live = w.server_id(); });
+      (void)worlds.Wait(std::chrono::milliseconds(50));
+      (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { live = w.server_id(); });
     }
     if (!live.empty()) {
       out_ << "vdyn-recorder play: server '" << live << "' is live on domain " << o_.domain
@@ -487,7 +500,7 @@ int Player::Run(const std::atomic<bool>& stop) {
     Status(false);
     Announce(false);
     if (paused_) {
-      control_->Wait(std::chrono::milliseconds(20));
+      (void)control_->Wait(std::chrono::milliseconds(20));
       continue;
     }
     // Publish everything that is due; then sleep until the next message (or 20 ms at most).
@@ -511,6 +524,7 @@ int Player::Run(const std::atomic<bool>& stop) {
       Publish(m);
       ++next_;
     }
+    FlushStates();
     if (at_end_) {
       if (loop_) {
         Seek(from_);

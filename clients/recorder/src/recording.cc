@@ -44,12 +44,13 @@ const google::protobuf::Descriptor* PayloadDescriptor(TopicId topic) {
     case TopicId::kWorld: return pb::WorldDescription::descriptor();
     case TopicId::kEvents: return pb::SessionEvent::descriptor();
     case TopicId::kDiagnostics: return pb::Diagnostics::descriptor();
+    case TopicId::kStates: return pb::VehicleStates::descriptor();  // never recorded as such
   }
   return nullptr;
 }
 
 bool ServerKeyed(TopicId topic) {
-  return topic == TopicId::kWorld || topic == TopicId::kDiagnostics;
+  return topic == TopicId::kWorld || topic == TopicId::kDiagnostics || topic == TopicId::kStates;
 }
 
 namespace {

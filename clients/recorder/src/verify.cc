@@ -780,8 +780,8 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
     transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
     while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
-      worlds.Wait(std::chrono::milliseconds(100));
-      worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      (void)worlds.Wait(std::chrono::milliseconds(100));
+      (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
         if (w.terrain_hash() == bp.terrain_hash) {
           live = w;
         } else {

@@ -99,7 +99,7 @@ void Bridge::Run(const std::atomic<bool>& stop, const std::function<void(const s
   bool fresh = false, ever = false;
   const double stale_s = config_.stale_after.seconds();
   while (!stop) {
-    view_.Wait(std::chrono::milliseconds(50));
+    (void)view_.Wait(std::chrono::milliseconds(50));
     view_.Poll();
     const client::SessionView::Vehicle* v = view_.vehicle(config_.vehicle_id);
     const base::MonoTime now = base::MonotonicNow();

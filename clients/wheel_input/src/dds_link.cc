@@ -60,7 +60,7 @@ bool DdsLink::WaitForParams(std::chrono::nanoseconds timeout) {
   while (params() == nullptr) {
     const auto now = std::chrono::steady_clock::now();
     if (now >= deadline) return false;
-    view_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
+    (void)view_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
     view_.Poll();
   }
   return true;

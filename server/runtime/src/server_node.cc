@@ -73,7 +73,7 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   // vehicle's parameters), and at 256 vehicles on two cores the stepping threads (real-time
   // scheduling) leave it little CPU while they catch up after a late tick (up to ~15 steps).
   states_ = std::make_unique<StateOutbox>(
-      participant_, drops_,
+      participant_, drops_, transport::ServerKey(options_.session.server_id),
       std::max<std::size_t>(
           512, 64 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)),
       options_.vehicle_ids);
@@ -505,7 +505,10 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
   const int code = options_.mode == ServerOptions::Mode::kRealtime ? RunRealtime(stop)
                                                                     : RunLockstep(stop);
   session_->FlushEvents();
-  states_->Drain(base::Milliseconds(500));
+  if (!states_->Drain(base::Milliseconds(500))) {
+    spdlog::warn("server '{}': stopping with {} state(s) not yet written on vdyn/state",
+                 options_.session.server_id, states_->pushed() - states_->written() - states_->write_failures());
+  }
   // The receiver takes what is still in the control reader, and the request thread answers it
   // (the server is stopping); what never reached the loop, and the steps it owes, are answered
   // here. Then the publisher drains (replies, events, diagnostics) for at most the deadline,
@@ -607,21 +610,21 @@ void ServerNode::ReceiverLoop() {
     if (backlog) {
       receiver_bell_.Wait(room_token, base::Milliseconds(1));
     } else if (!stopping) {
-      waitset.Wait(std::chrono::milliseconds(50));
+      (void)waitset.Wait(std::chrono::milliseconds(50));
     }
     const base::MonoTime now = base::MonotonicNow();
     bool handed = false;
     got = 0;
     // What the other servers run, first: a spawn below is checked against it.
-    diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+    (void)diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
       if (d.server_id() == me) return;
       for (const auto& v : d.vehicles()) others_[v.vehicle_id()] = {d.server_id(), now};
     });
-    worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
       if (w.server_id() == me) return;
       for (const auto& v : w.vehicles()) others_[v.vehicle_id()] = {w.server_id(), now};
     });
-    input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
+    (void)input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
       if (info.key != in.vehicle_id()) {
         const std::string why = "envelope key " + std::to_string(info.key) + " vs vehicle_id " +
                                 std::to_string(in.vehicle_id());
@@ -664,7 +667,7 @@ void ServerNode::ReceiverLoop() {
     });
     // As many requests as the request thread has room for: the rest wait in the reader.
     if (const auto room = static_cast<int>(incoming_.capacity() - incoming_.size()); room > 0) {
-      control_reader_.Take(
+      (void)control_reader_.Take(
           [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
             if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
             requests_received_.fetch_add(1, std::memory_order_relaxed);
@@ -840,16 +843,16 @@ std::string ServerNode::FindClash() {
     const bool others =
         !claims.empty() || foreign(worlds) || foreign(diagnostics) || foreign(states);
     if (now >= end || (!others && now >= quiet_end)) break;
-    waitset.Wait(std::chrono::milliseconds(20));  // an error is counted in drops_
-    worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+    (void)waitset.Wait(std::chrono::milliseconds(20));  // an error is counted in drops_
+    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
       for (const auto& v : w.vehicles()) note(w.server_id(), v.vehicle_id());
       if (w.server_id() == me) same_id = true;
     });
-    diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+    (void)diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
       for (const auto& v : d.vehicles()) note(d.server_id(), v.vehicle_id());
       if (d.server_id() == me) same_id = true;
     });
-    states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
+    (void)states.Take([&](const pb::VehicleState& st, const transport::SampleInfo&) {
       note(st.server_id(), st.vehicle_id());
     });
     // Decided as soon as a clash is certain.

@@ -7,12 +7,16 @@
 namespace vdyn {
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
-                         std::size_t frames, std::span<const std::uint32_t> vehicles)
-    : writer_(participant, drops), drops_(drops), frames_(frames) {
+                         std::uint32_t states_key, std::size_t frames,
+                         std::span<const std::uint32_t> vehicles)
+    : writer_(participant, drops, transport::StateWriters::Options{.states_key = states_key}),
+      drops_(drops),
+      frames_(frames) {
   for (const std::uint32_t key : vehicles) writer_.Prepare(key);
   drop_full_ = drops_.Register("state queue full, state not sent");
   drop_large_ = drops_.Register("state larger than a frame, not sent");
   drop_write_ = drops_.Register("write failed on vdyn/state");
+  drop_batch_ = drops_.Register("write failed on vdyn/states");
   thread_ = std::thread([this] { WriterLoop(); });
 }
 
@@ -91,9 +95,9 @@ void StateOutbox::WriterLoop() {
       }
       frames_.Pop();
     }
-    // Whatever the loop handed over so far goes out together: one step's states of many
-    // vehicles share datagrams (a frame the loop commits meanwhile waits for the next round).
-    writer_.Flush();
+    // Whatever the loop handed over so far goes out together: one vdyn/states sample, and on
+    // vdyn/state shared datagrams (a frame the loop commits meanwhile waits for the next round).
+    if (!writer_.Flush()) drops_.Count(drop_batch_, writer_.last_error());
     written_.fetch_add(written, std::memory_order_relaxed);
     if (stop_.load()) return;
     bell_.Wait(token, base::Milliseconds(200));

@@ -58,6 +58,9 @@ inline constexpr std::size_t kMaxReasonBytes = 1024;  // a reply's reason
 inline constexpr std::size_t kMaxNameBytes = 256;     // mesh, landmark and world names
 // Serialised payload sizes per topic, bytes (a larger sample is refused and counted).
 inline constexpr std::size_t kMaxStateBytes = 64 * 1024;
+// A step's states of many vehicles (vdyn/states): 256 vehicles of the largest state (~2.2 KB)
+// fit; a writer with more splits them over several samples.
+inline constexpr std::size_t kMaxStatesBytes = 1024 * 1024;
 inline constexpr std::size_t kMaxInputBytes = 4 * 1024;
 inline constexpr std::size_t kMaxControlBytes = 64 * 1024;
 inline constexpr std::size_t kMaxReplyBytes = 16 * 1024;

@@ -91,7 +91,7 @@ class Participant {
   dds_entity_t participant_ = 0;
   std::uint32_t domain_id_ = 0;
   Guid guid_{};
-  dds_entity_t topics_[8] = {};
+  dds_entity_t topics_[9] = {};  // one per TopicId
   std::string last_error_;
 };
 
@@ -114,7 +114,7 @@ class ParticipantReader {
   [[nodiscard]] bool Take(std::vector<Peer>& out);
   // Blocks until a change is available or the timeout passes; true when one is. A DDS error is
   // false, with last_error() set.
-  bool Wait(std::chrono::nanoseconds timeout);
+  [[nodiscard]] bool Wait(std::chrono::nanoseconds timeout);
   const std::string& last_error() const { return last_error_; }
 
  private:
@@ -155,7 +155,11 @@ class RawWriter {
   std::uint32_t MatchedReaders();
   // Whether a reader is matched, as a publication-matched listener last set it: an atomic load,
   // no DDS call (for a hot thread that writes only while someone reads).
-  bool HasReaders() const { return matched_.load(std::memory_order_relaxed) > 0; }
+  bool HasReaders() const { return match_.count.load(std::memory_order_relaxed) > 0; }
+  // Matched readers without kReadsStatesMark in their user data (topics.h): those that get
+  // states only here. Asks DDS only after the matches changed (the writing thread; allocates
+  // then); otherwise an atomic load.
+  std::uint32_t UnmarkedReaders();
   const std::string& last_error() const { return last_error_; }
   dds_entity_t handle() const { return writer_; }
   TopicId topic() const { return id_; }
@@ -167,7 +171,13 @@ class RawWriter {
   Sending sending_ = Sending::kEach;
   dds_entity_t publisher_ = 0;  // with a partition
   dds_entity_t writer_ = 0;
-  std::atomic<std::uint32_t> matched_{0};
+  struct Match {
+    std::atomic<std::uint32_t> count{0};
+    std::atomic<std::uint64_t> changes{0};
+  };
+  Match match_;  // kept by the publication-matched listener
+  std::uint64_t counted_changes_ = ~std::uint64_t{0};
+  std::uint32_t unmarked_ = 0;
   std::string buffer_;
   std::string last_error_;
 };
@@ -202,7 +212,7 @@ class RawReader {
   RawReader& operator=(const RawReader&) = delete;
 
   // Blocks until data is available or the timeout passes; true when data is available.
-  bool Wait(std::chrono::nanoseconds timeout);
+  [[nodiscard]] bool Wait(std::chrono::nanoseconds timeout);
   // Calls fn from DDS's receive thread as soon as data arrives (the lowest latency: no hand-over
   // to another thread). Take from inside fn, and then from nowhere else: Take is not reentrant.
   void OnDataAvailable(std::function<void()> fn);
@@ -229,7 +239,7 @@ class RawReader {
   // Returns how many were handed over.
   // Samples DDS reports lost to this reader so far (best-effort gaps, overwritten history).
   std::uint64_t SamplesLost();
-  int TakeRaw(const std::function<void(const RawSample&)>& fn,
+  [[nodiscard]] int TakeRaw(const std::function<void(const RawSample&)>& fn,
               int max_samples = std::numeric_limits<int>::max());
 
  protected:
@@ -274,7 +284,7 @@ class Waitset {
   void Attach(RawReader& reader);
   // Blocks until one of the readers has data or the timeout passes; true when one has. An error
   // is false, with last_error() set and counted.
-  bool Wait(std::chrono::nanoseconds timeout);
+  [[nodiscard]] bool Wait(std::chrono::nanoseconds timeout);
   const std::string& last_error() const { return last_error_; }
   std::uint64_t errors() const { return errors_; }
 
@@ -301,7 +311,7 @@ class Reader : public RawReader {
   // Calls fn(const M&, const SampleInfo&) for every valid sample available now (at most
   // max_samples taken); returns how many valid ones.
   template <class F>
-  int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
+  [[nodiscard]] int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
     return TakeInto(
         scratch_,
         [&](const google::protobuf::Message&, const SampleInfo& info) {

@@ -1,12 +1,17 @@
-// The writers of vdyn/state in a process that publishes states (a server's state writer thread,
-// a player of a recording): a reader pays only for what it reads.
+// The writers of vdyn/state and vdyn/states in a process that publishes states (a server's state
+// writer thread, a player of a recording): a reader pays only for what it reads, and so does the
+// writer.
 //
-// Every state goes to one all-vehicles writer in the default partition (what recorders, viewers
-// and any DDS tool with our IDL read); with Sending::kBatched a step's states share datagrams.
-// Each vehicle also has a writer of its own in its partition (VehiclePartition(id)), and its
-// states go there too, but only while a reader is matched there (an atomic flag a
-// publication-matched listener keeps: no DDS call per state). A client that follows one vehicle
-// reads in that partition and receives that vehicle's states and no others.
+// A step's states of every vehicle go out as one sample on vdyn/states (VehicleStates, keyed by
+// the server): what a recorder reads, one sample a step to receive and take instead of one per
+// vehicle. Each state also goes to one all-vehicles writer of vdyn/state in the default
+// partition (what viewers and any DDS tool with our IDL read; with Sending::kBatched a round's
+// states share datagrams), and each vehicle has a writer of its own in its partition
+// (VehiclePartition(id)). Those two write only while a reader is matched (an atomic flag a
+// publication-matched listener keeps: no DDS call per state otherwise); a recorder's vdyn/state
+// reader, marked as one that reads vdyn/states (topics.h, ReaderRole::kBatchRecorder), does not
+// count. A client that follows one vehicle reads in that partition and receives that vehicle's
+// states and no others.
 //
 // Not thread-safe: one thread writes. Vehicle writers are created by Flush() (a few per call, so
 // a burst of new vehicles does not hold up a round of states) and deleted when their vehicle has
@@ -32,6 +37,7 @@ class StateWriters {
     Sending sending = Sending::kBatched;   // of the all-vehicles writer
     int new_writers_per_flush = 8;         // vehicle writers created per Flush() at most
     base::Nanos idle = base::Seconds(10);  // a vehicle writer unused this long is deleted
+    std::uint32_t states_key = 0;          // the vdyn/states key: ServerKey(the writer's id)
   };
   StateWriters(Participant& participant, DropCounters& drops, Options options);
   StateWriters(Participant& participant, DropCounters& drops)
@@ -39,13 +45,14 @@ class StateWriters {
   StateWriters(const StateWriters&) = delete;
   StateWriters& operator=(const StateWriters&) = delete;
 
-  // Writes one serialised VehicleState of vehicle `key`: to everyone, and to the vehicle's
-  // readers when it has any. False when the all-vehicles write failed (last_error()); a failed
-  // vehicle write is counted in the drops.
-  bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
-  // Sends what the all-vehicles writer gathered, then creates vehicle writers for vehicles seen
-  // since (at most Options::new_writers_per_flush) and deletes idle ones.
-  void Flush();
+  // Writes one serialised VehicleState of vehicle `key`: into this round's vdyn/states sample,
+  // and on vdyn/state to everyone and to the vehicle's readers while they have any. False when a
+  // write failed (last_error()); a failed vehicle write is counted in the drops.
+  [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  // Writes this round's vdyn/states sample and sends what the all-vehicles writer gathered; then
+  // creates vehicle writers for vehicles seen since (at most Options::new_writers_per_flush) and
+  // deletes idle ones. False when the vdyn/states write failed (last_error()).
+  [[nodiscard]] bool Flush();
   // Creates vehicle `key`'s own writer now (a player that knows its vehicles beforehand, so
   // one-vehicle readers have matched it by the first state).
   void Prepare(std::uint32_t key);
@@ -54,9 +61,14 @@ class StateWriters {
   // tests; the count walks the map).
   std::size_t vehicle_writers() const { return vehicles_.size(); }
   std::size_t vehicle_writers_read() const;
-  // States written to vehicle partitions so far.
+  // States written to vehicle partitions so far; to vdyn/state in the default partition; and
+  // vdyn/states samples.
   std::uint64_t vehicle_states_written() const { return vehicle_written_; }
-  const std::string& last_error() const { return all_.last_error(); }
+  std::uint64_t all_states_written() const { return all_written_; }
+  std::uint64_t batches_written() const { return batches_written_; }
+  // Readers of vdyn/state in the default partition matched now, marked or not (asks DDS).
+  std::uint32_t state_readers() { return all_.MatchedReaders(); }
+  const std::string& last_error() const { return last_error_; }
 
  private:
   struct Vehicle {
@@ -65,17 +77,23 @@ class StateWriters {
     bool failed = false;
   };
   void Create(std::uint32_t key, Vehicle& v);
+  bool WriteBatch();
+  bool AllRead();
 
   Participant& participant_;
   DropCounters& drops_;
   Options options_;
   RawWriter all_;
+  std::unique_ptr<RawWriter> batch_;   // vdyn/states; null when it cannot be created
+  std::vector<std::uint8_t> batched_;  // this round's VehicleStates, encoded
+  bool all_read_ = false;              // someone reads vdyn/state here (not from vdyn/states)
   std::unordered_map<std::uint32_t, Vehicle> vehicles_;
   std::vector<std::uint32_t> pending_;  // seen, no writer yet
   base::MonoTime round_;                // when Flush() last ran: the time of the writes since
   base::MonoTime next_sweep_;
-  std::uint64_t vehicle_written_ = 0;
-  int drop_create_ = -1, drop_write_ = -1;
+  std::uint64_t vehicle_written_ = 0, all_written_ = 0, batches_written_ = 0;
+  std::string last_error_;
+  int drop_create_ = -1, drop_write_ = -1, drop_batch_ = -1;
 };
 
 }  // namespace vdyn::transport

@@ -19,6 +19,7 @@ enum class TopicId {
   kWorld,         // WorldDescription, per server
   kEvents,        // SessionEvent: what a re-simulation needs
   kDiagnostics,   // Diagnostics, per server, 1 Hz
+  kStates,        // VehicleStates: a step's states of every vehicle of a server, one sample
 };
 
 struct TopicSpec {
@@ -43,7 +44,12 @@ std::span<const TopicSpec> AllTopics();
 // Who reads: a client or the server (the newest sample of a keep-last topic is what matters), or
 // a recorder (every sample matters: keep-last topics keep limits::kRecorderHistoryDepth samples
 // per instance, world descriptions one).
-enum class ReaderRole { kDefault, kRecorder };
+// kBatchRecorder: a recorder that reads vdyn/states besides vdyn/state. Its vdyn/state reader
+// carries kReadsStatesMark in its user data, and a writer that batches (StateWriters) sends it
+// nothing there: it gets those states on vdyn/states. Writers that do not batch (any DDS tool)
+// still reach it on vdyn/state.
+enum class ReaderRole { kDefault, kRecorder, kBatchRecorder };
+inline constexpr char kReadsStatesMark[] = "vdyn: reads vdyn/states";
 
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength = 0);
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role = ReaderRole::kDefault);

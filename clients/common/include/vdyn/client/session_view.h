@@ -51,7 +51,7 @@ class SessionView {
   // Takes every sample that has arrived; returns how many.
   int Poll();
   // Waits up to `timeout` for a state (or, without states, anything) to arrive.
-  bool Wait(std::chrono::nanoseconds timeout);
+  [[nodiscard]] bool Wait(std::chrono::nanoseconds timeout);
 
   // Called by Poll() for every state, as it is taken (e.g. force feedback's lowest latency path).
   std::function<void(const pb::VehicleState&, const transport::SampleInfo&)> on_state;

@@ -29,8 +29,10 @@ class StateOutbox final : public StateFrames {
   // created here, before the writer thread starts, so a session that starts with many vehicles
   // does not spend its first rounds creating writers while its states queue up (256 vehicles:
   // 32 rounds of 8 writers, thousands of states refused at the start).
+  // `states_key`: the key of this server's vdyn/states samples (transport::ServerKey).
   StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
-              std::size_t frames = 512, std::span<const std::uint32_t> vehicles = {});
+              std::uint32_t states_key, std::size_t frames = 512,
+              std::span<const std::uint32_t> vehicles = {});
   ~StateOutbox();
   StateOutbox(const StateOutbox&) = delete;
   StateOutbox& operator=(const StateOutbox&) = delete;
@@ -44,11 +46,11 @@ class StateOutbox final : public StateFrames {
   void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) override;
   void Close(std::size_t n) override;
   // Loop thread, after a step's pushes: wakes the writer, which writes every frame pushed so far
-  // and then sends them together (several states per datagram; one sendmsg per datagram and
-  // reader, not per state).
+  // and then sends them together (one vdyn/states sample; on vdyn/state several states per
+  // datagram).
   void Send();
   // Waits until every frame handed over has been written (or `timeout`); true when drained.
-  bool Drain(base::Nanos timeout);
+  [[nodiscard]] bool Drain(base::Nanos timeout);
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
@@ -69,9 +71,9 @@ class StateOutbox final : public StateFrames {
   static_assert(sizeof(Frame) == 4096);
   void WriterLoop();
 
-  transport::StateWriters writer_;  // all vehicles batched; a vehicle's partition while read
+  transport::StateWriters writer_;  // a step's states in one sample; vdyn/state while read
   transport::DropCounters& drops_;
-  int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1;
+  int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1, drop_batch_ = -1;
   base::SpscQueue<Frame> frames_;
   base::Doorbell bell_;
   std::atomic<bool> stop_{false};
