@@ -382,6 +382,73 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
   EXPECT_EQ(drops.Total(), 0u);
 }
 
+// A client's view of every vehicle (the viewer's) reads a step as one sample: the writers send
+// nothing on vdyn/state for it, and it still sees every vehicle and a writer that does not batch.
+TEST_F(Net, AViewOfEveryVehicleReadsBatchesAndCostsTheWriterNoSingleStates) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::StateWriters writers(p, drops, transport::StateWriters::Options{.states_key = 5});
+  client::SessionView view(p, client::SessionView::Topics{.params = false, .world = false,
+                                                          .diagnostics = false,
+                                                          .only_vehicle = std::nullopt});
+  std::uint64_t step = 1;
+  auto round = [&] {
+    for (std::uint32_t v = 1; v <= 4; ++v) {
+      pb::VehicleState s;
+      s.set_vehicle_id(v);
+      s.set_step(step);
+      const std::string b = s.SerializeAsString();
+      ASSERT_TRUE(writers.WriteBytes(v, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()}));
+    }
+    ASSERT_TRUE(writers.Flush());
+    ++step;
+  };
+  auto all_seen = [&](std::uint64_t after) {
+    for (std::uint32_t v = 1; v <= 4; ++v) {
+      const client::SessionView::Vehicle* seen = view.vehicle(v);
+      if (!seen || seen->state.step() <= after) return false;
+    }
+    return true;
+  };
+  // Rounds until the view has matched the writers and seen a step of every vehicle.
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (!all_seen(0) && std::chrono::steady_clock::now() < deadline) {
+    round();
+    (void)view.Wait(10ms);
+    view.Poll();
+  }
+  ASSERT_TRUE(all_seen(0));
+  // The writer knows the view's vdyn/state reader is there, and writes it nothing.
+  const auto until = std::chrono::steady_clock::now() + 30s;
+  while (writers.state_readers() == 0 && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(10ms);
+  }
+  ASSERT_EQ(writers.state_readers(), 1u);
+  const std::uint64_t from = step;
+  for (int i = 0; i < 20; ++i) round();
+  const auto until1 = std::chrono::steady_clock::now() + 30s;
+  while (!all_seen(from) && std::chrono::steady_clock::now() < until1) {
+    (void)view.Wait(10ms);
+    view.Poll();
+  }
+  EXPECT_TRUE(all_seen(from));
+  EXPECT_EQ(writers.all_states_written(), 0u);
+  // A writer that does not batch (any DDS tool writing vdyn/state) still reaches the view.
+  transport::Writer<pb::VehicleState> tool(p, TopicId::kState);
+  pb::VehicleState s;
+  s.set_vehicle_id(9);
+  s.set_step(42);
+  const auto until2 = std::chrono::steady_clock::now() + 30s;
+  while (!view.vehicle(9) && std::chrono::steady_clock::now() < until2) {
+    ASSERT_TRUE(tool.Write(9, s)) << tool.last_error();
+    (void)view.Wait(10ms);
+    view.Poll();
+  }
+  ASSERT_NE(view.vehicle(9), nullptr);
+  EXPECT_EQ(view.vehicle(9)->state.step(), 42u);
+  EXPECT_EQ(drops.Total() + view.drops().Total(), 0u);
+}
+
 TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   auto server = StartServer({});
   transport::Participant p(domain_);

@@ -105,10 +105,16 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role) {
   const TopicSpec& s = Spec(id);
   dds_qos_t* q = BaseQos(s);
-  if (role == ReaderRole::kBatchRecorder && id == TopicId::kState) {
+  const bool batch_reader = role == ReaderRole::kBatchRecorder || role == ReaderRole::kBatchLatest;
+  if (batch_reader && id == TopicId::kState) {
     dds_qset_userdata(q, kReadsStatesMark, sizeof kReadsStatesMark - 1);
   }
-  if (role != ReaderRole::kDefault && s.history_depth > 0 && id != TopicId::kWorld) {
+  if (id == TopicId::kStates && (role == ReaderRole::kDefault || role == ReaderRole::kBatchLatest)) {
+    // The newest step, in as many samples as a step of the largest states can split into
+    // (StateWriters splits at limits::kMaxStatesBytes; frames of a step hold at most 4 KB a state).
+    dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 2);
+  } else if ((role == ReaderRole::kRecorder || role == ReaderRole::kBatchRecorder) &&
+             s.history_depth > 0 && id != TopicId::kWorld) {
     // A recorder takes every sample: a deeper (bounded) history per instance absorbs a late take
     // instead of overwriting samples. History is the reader's own business: it matches the
     // same writers.

@@ -17,11 +17,24 @@ SessionView::SessionView(transport::Participant& participant, Topics topics) {
         filter_vehicle_ = topics.only_vehicle;
       }
     }
+    transport::ReaderRole role = transport::ReaderRole::kDefault;
+    if (!topics.only_vehicle) {
+      // Every vehicle: a server's step in one sample on vdyn/states, and vdyn/state marked as
+      // such a reader (states of writers that do not batch, e.g. other DDS tools).
+      try {
+        batches_ = std::make_unique<transport::Reader<pb::VehicleStates>>(
+            participant, TopicId::kStates, &drops_);
+        role = transport::ReaderRole::kBatchLatest;
+      } catch (const transport::TransportError&) {
+        // Not permitted (DDS Security): every state on vdyn/state.
+      }
+    }
     if (!states_) {
       states_ = std::make_unique<transport::Reader<pb::VehicleState>>(participant, TopicId::kState,
-                                                                      &drops_);
+                                                                      &drops_, role);
     }
     waitset_->Attach(*states_);
+    if (batches_) waitset_->Attach(*batches_);
   }
   if (topics.params) {
     params_ = std::make_unique<transport::Reader<pb::VehicleParams>>(participant, TopicId::kParams,
@@ -78,19 +91,32 @@ int SessionView::Poll() {
       if (on_input) on_input(in, info);
     });
   }
+  if (batches_) {
+    n += batches_->Take([&](const pb::VehicleStates& b, const transport::SampleInfo& info) {
+      for (const pb::VehicleState& s : b.states()) {
+        transport::SampleInfo one = info;
+        one.key = s.vehicle_id();
+        OnState(s, one);
+      }
+    });
+  }
   if (states_) {
     n += states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
       if (info.key != s.vehicle_id()) return;
       if (filter_vehicle_ && s.vehicle_id() != *filter_vehicle_) return;
-      Vehicle& v = vehicles_[s.vehicle_id()];
-      v.state = s;
-      v.received = base::MonotonicNow();
-      v.source_timestamp_ns = info.source_timestamp_ns;
-      ++v.states;
-      if (on_state) on_state(s, info);
+      OnState(s, info);
     });
   }
   return n;
+}
+
+void SessionView::OnState(const pb::VehicleState& s, const transport::SampleInfo& info) {
+  Vehicle& v = vehicles_[s.vehicle_id()];
+  v.state = s;
+  v.received = base::MonotonicNow();
+  v.source_timestamp_ns = info.source_timestamp_ns;
+  ++v.states;
+  if (on_state) on_state(s, info);
 }
 
 }  // namespace vdyn::client

@@ -47,8 +47,9 @@ std::span<const TopicSpec> AllTopics();
 // kBatchRecorder: a recorder that reads vdyn/states besides vdyn/state. Its vdyn/state reader
 // carries kReadsStatesMark in its user data, and a writer that batches (StateWriters) sends it
 // nothing there: it gets those states on vdyn/states. Writers that do not batch (any DDS tool)
-// still reach it on vdyn/state.
-enum class ReaderRole { kDefault, kRecorder, kBatchRecorder };
+// still reach it on vdyn/state. kBatchLatest: the same mark with a client's history (a viewer
+// that reads every vehicle's newest state).
+enum class ReaderRole { kDefault, kRecorder, kBatchRecorder, kBatchLatest };
 inline constexpr char kReadsStatesMark[] = "vdyn: reads vdyn/states";
 
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength = 0);

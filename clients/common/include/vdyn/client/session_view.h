@@ -75,8 +75,11 @@ class SessionView {
   const std::string& one_vehicle_fallback() const { return one_vehicle_fallback_; }
 
  private:
+  void OnState(const pb::VehicleState& s, const transport::SampleInfo& info);
+
   transport::DropCounters drops_;
   std::unique_ptr<transport::Reader<pb::VehicleState>> states_;
+  std::unique_ptr<transport::Reader<pb::VehicleStates>> batches_;  // every vehicle: vdyn/states
   std::unique_ptr<transport::Reader<pb::VehicleParams>> params_;
   std::unique_ptr<transport::Reader<pb::WorldDescription>> world_;
   std::unique_ptr<transport::Reader<pb::Diagnostics>> diagnostics_reader_;
