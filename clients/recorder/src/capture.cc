@@ -1,5 +1,6 @@
 #include "vdyn/recorder/capture.h"
 
+#include <pthread.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -556,6 +557,7 @@ struct Capture::Impl {
   }
 
   void WriterLoop() {
+    pthread_setname_np(pthread_self(), "vdyn-rec-write");  // for top -H and perf
     Batch work;
     work.bytes.reserve(o.queue_bytes);  // as `pending` (they swap)
     try {
