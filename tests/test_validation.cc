@@ -3,10 +3,13 @@
 // it was the only model; the full model's validation is in test_full_model.cc. Every expected
 // value here comes from a formula and the parameters, never from earlier output.
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <numbers>
 #include <cstdio>
 #include <cstring>
+#include <random>
+#include <string>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -15,6 +18,7 @@
 #include "vdyn/bridge/convert.h"
 #include "vdyn/runtime/batch.h"
 #include "vdyn/physics/drivers.h"
+#include "vdyn/io/csv.h"
 #include "vdyn/io/maneuver.h"
 #include "test_support.h"
 
@@ -427,6 +431,42 @@ TEST(Validation, DemoDriveStableAtTheDocumentedLargestStep) {
 }
 
 // --- determinism --------------------------------------------------------------------------------
+// A CSV cell is the shortest decimal form that reads back exactly (as std::to_chars writes it),
+// whole numbers without a decimal point, no "-0"; and each cell reads back.
+TEST(Validation, CsvNumbersAreTheShortestExactForm) {
+  auto cell = [](double v) {
+    char buf[64];
+    return std::string(buf, CsvNumber(buf, buf + sizeof buf, v));
+  };
+  auto reference = [](double v) {
+    char buf[64];
+    return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+  };
+  int checked = 0;
+  for (int i = -120'000; i <= 120'000; ++i) {
+    for (double v : {static_cast<double>(i), i + 0.5, i * 0.001}) {
+      if (v == 0.0) continue;
+      ASSERT_EQ(cell(v), reference(v)) << v;
+      ++checked;
+    }
+  }
+  EXPECT_EQ(cell(0.0), "0");
+  EXPECT_EQ(cell(-0.0), "0");  // no "-0" in a spreadsheet
+  EXPECT_EQ(cell(100000.0), "1e+05");
+  EXPECT_EQ(cell(-99999.0), "-99999");
+  EXPECT_EQ(cell(std::nextafter(1e5, 0.0)), reference(std::nextafter(1e5, 0.0)));
+  std::mt19937_64 rng(19);
+  std::uniform_real_distribution<double> mantissa(-1.0, 1.0);
+  std::uniform_int_distribution<int> exponent(-30, 30);
+  for (int k = 0; k < 200'000; ++k) {
+    const double v = std::ldexp(mantissa(rng), exponent(rng));
+    const std::string c = cell(v);
+    ASSERT_EQ(c, v == 0.0 ? std::string("0") : reference(v)) << v;
+    ASSERT_EQ(std::strtod(c.c_str(), nullptr), v) << c;
+  }
+  EXPECT_EQ(checked, 3 * 240'001 - 2);  // 0 and 0 * 0.001 skipped
+}
+
 // The demo drive twice, once on another thread with its own world: byte-identical CSV files.
 TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
   testing::TempDir dir;

@@ -191,14 +191,18 @@ CsvWriter::~CsvWriter() {
   if (file_ != nullptr) std::fclose(file_);
 }
 
+char* CsvNumber(char* p, char* end, double v) {
+  if (v == 0.0) v = 0.0;  // no "-0"
+  return std::to_chars(p, end, v).ptr;
+}
+
 void CsvWriter::WriteRow(const State& s) {
   // Shortest round-trip decimal form (std::to_chars): exact, locale-free and deterministic.
   std::array<char, 64 * kNumValues> line;
   char* p = line.data();
   char* const end = line.data() + line.size();
   auto put = [&](double v) {
-    if (v == 0.0) v = 0.0;  // no "-0"
-    p = std::to_chars(p, end, v).ptr;
+    p = CsvNumber(p, end, v);
     *p++ = ',';
   };
   for (const Column& c : kColumns) put(c.get(s));

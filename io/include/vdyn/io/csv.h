@@ -18,6 +18,10 @@ std::vector<std::string> CsvColumns();
 // The values of one row, in column order (what WriteRow prints).
 void CsvRowValues(const pb::VehicleState& s, std::vector<double>& out);
 
+// Writes v at p as a CSV cell writes it, returns the end: the shortest decimal form that reads
+// back exactly (std::to_chars), "0" for either zero. `end - p` must be at least 32.
+char* CsvNumber(char* p, char* end, double v);
+
 class CsvWriter {
  public:
   // Opens `path` for writing (creating parent folders). Throws std::runtime_error with the reason.
