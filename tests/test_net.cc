@@ -546,7 +546,10 @@ TEST_F(Net, ABackupTakesOverBeforeTheWatchdogBrakes) {
               static_cast<unsigned long long>(failover_ms), h.braked ? "yes" : "no");
   EXPECT_FALSE(h.braked) << "the vehicle braked in the watchdog's safe state before the backup drove";
   EXPECT_LT(failover_ms, 150u);  // before the watchdog
-  EXPECT_GE(failover_ms, 56u);   // not at once: half the lease (a loaded server counts fewer steps)
+  // Not at once (without the lease the backup drives within a few steps): a quarter of the lease.
+  // The lease runs on the server's wall clock and this counts simulated steps, which a loaded
+  // server runs late: the ASan build on a busy 2-core machine counted 49 ms.
+  EXPECT_GE(failover_ms, 28u);
 }
 
 TEST_F(Net, MalformedPayloadsAndInvalidRequestsAreRefusedAndCounted) {
