@@ -862,6 +862,59 @@ TEST_F(RecorderTest, TheRecorderTracksTheGapsOfAtMost4096VehiclesAndKeepsRecordi
   EXPECT_GT(recorded, 4096u) << info.substr(0, 2000);
 }
 
+// A vdyn/states sample is split into one vdyn/state record per vehicle; one that is not a
+// VehicleStates (broken framing) is refused and counted, and the recorder records what follows.
+TEST_F(RecorderTest, AStepBatchIsRecordedVehicleByVehicleAndABrokenOneIsCounted) {
+  const auto file = dir_ / "batches.mcap";
+  auto recorder = Recorder(
+      {"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  transport::Participant p(domain_);
+  transport::RawWriter batches(p, TopicId::kStates);
+  auto matched = [&] {
+    return recorder->Log().find("hearing 1 writer(s) on vdyn/states") != std::string::npos &&
+           batches.MatchedReaders() >= 1;
+  };
+  ASSERT_TRUE(WaitWhileRunning(*recorder, matched)) << recorder->Log();
+  auto batch = [](std::uint64_t step) {
+    pb::VehicleStates b;
+    for (std::uint32_t id : {7u, 8u}) {
+      pb::VehicleState* st = b.add_states();
+      st->set_vehicle_id(id);
+      st->set_server_id("fake");
+      st->set_step(step);
+    }
+    return b.SerializeAsString();
+  };
+  auto write = [&](const std::string& bytes) {
+    ASSERT_TRUE(batches.WriteBytes(42, {reinterpret_cast<const std::uint8_t*>(bytes.data()),
+                                        bytes.size()}))
+        << batches.last_error();
+    std::this_thread::sleep_for(20ms);  // paced: a best-effort topic
+  };
+  write(batch(1));
+  write(std::string("\x0a\xff\xff\xff\x0f broken", 10));  // field 1 longer than the sample
+  write(batch(2));
+  auto taken = [&] {  // its status line: 4 states and the broken sample taken
+    const std::string log = recorder->Log();
+    return log.find("| state 4 ") != std::string::npos && log.find("1 malformed") != std::string::npos;
+  };
+  ASSERT_TRUE(WaitWhileRunning(*recorder, taken)) << recorder->Log();
+  Stop(*recorder);
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  // Both vehicles, each with both steps, as vdyn/state channels of their own.
+  EXPECT_THAT(info, ::testing::HasSubstr("vdyn/state/7")) << info;
+  EXPECT_THAT(info, ::testing::HasSubstr("vdyn/state/8")) << info;
+  EXPECT_EQ(info.find("vdyn/states"), std::string::npos) << info;
+  std::size_t both = 0;
+  for (std::size_t at = info.find(" steps 1..2 "); at != std::string::npos;
+       at = info.find(" steps 1..2 ", at + 1)) {
+    ++both;
+  }
+  EXPECT_EQ(both, 2u) << info;
+  EXPECT_THAT(info, ::testing::HasSubstr("counted 1 malformed on vdyn/state")) << info;  // the broken one
+}
+
 // --- damaged recordings: verify, play, outputs
 // ----------------------------------------------------
 
