@@ -236,6 +236,31 @@ TEST(McapWire, TopLevelFieldsWithoutParsing) {
   EXPECT_FALSE(recorder::wire::ForEachField(bad, [](const auto&) { return true; }));
 }
 
+// Written the other way: states appended as elements of VehicleStates (field 1) parse back
+// with protobuf as the same states, and the sizes foretold are the sizes written.
+TEST(McapWire, StatesAppendedAsFieldsParseAsVehicleStates) {
+  std::vector<std::uint8_t> out;
+  std::size_t foretold = 0;
+  std::vector<std::string> states;
+  for (std::uint64_t step : {1ull, 300ull, 70000ull}) {
+    pb::VehicleState s = StateAt(step);
+    for (std::uint64_t k = 0; k < step / 10; ++k) s.add_wheels()->set_fp(1.0 * k);  // longer ones
+    states.push_back(s.SerializeAsString());
+    const auto& b = states.back();
+    foretold += recorder::wire::BytesFieldSize(1, b.size());
+    recorder::wire::AppendBytesField(out, 1, {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()});
+  }
+  EXPECT_EQ(out.size(), foretold);
+  EXPECT_GT(states.back().size(), 16384u);  // a three-byte length
+  pb::VehicleStates batch;
+  ASSERT_TRUE(batch.ParseFromArray(out.data(), static_cast<int>(out.size())));
+  ASSERT_EQ(batch.states_size(), 3);
+  for (int i = 0; i < 3; ++i) EXPECT_EQ(batch.states(i).SerializeAsString(), states[static_cast<std::size_t>(i)]);
+  EXPECT_EQ(recorder::wire::BytesFieldSize(1, 127), 129u);
+  EXPECT_EQ(recorder::wire::BytesFieldSize(1, 128), 131u);
+  EXPECT_EQ(recorder::wire::BytesFieldSize(16, 0), 3u);  // field 16: a two-byte tag
+}
+
 // --- bad files ---------------------------------------------------------------------------------
 
 TEST(McapBadFiles, EmptyForeignAndMissingFilesAreRefusedWithTheReason) {

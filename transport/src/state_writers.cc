@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "vdyn/base/limits.h"
+#include "vdyn/messages/wire.h"
 
 namespace vdyn::transport {
 
@@ -32,16 +33,11 @@ StateWriters::StateWriters(Participant& participant, DropCounters& drops, Option
 bool StateWriters::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload) {
   bool ok = true;
   if (batch_ && batch_->HasReaders()) {
-    // VehicleStates field 1 (length-delimited): tag, varint length, the state's bytes.
-    std::uint8_t head[6] = {0x0A};
-    std::size_t n = 1;
-    for (std::uint64_t v = payload.size(); ; v >>= 7) {
-      head[n++] = static_cast<std::uint8_t>((v & 0x7F) | (v >= 0x80 ? 0x80 : 0));
-      if (v < 0x80) break;
+    // VehicleStates field 1: the state's bytes as they are.
+    if (batched_.size() + messages::wire::BytesFieldSize(1, payload.size()) > limits::kMaxStatesBytes) {
+      ok = WriteBatch() && ok;
     }
-    if (batched_.size() + n + payload.size() > limits::kMaxStatesBytes) ok = WriteBatch() && ok;
-    batched_.insert(batched_.end(), head, head + n);
-    batched_.insert(batched_.end(), payload.begin(), payload.end());
+    messages::wire::AppendBytesField(batched_, 1, payload);
   }
   if (all_read_) {
     if (all_.WriteBytes(key, payload)) {

@@ -283,14 +283,8 @@ struct Capture::Impl {
     one.type_name = transport::Spec(TopicId::kState).payload;
     const bool framed = wire::ForEachField(s.payload, [&](const wire::Field& f) {
       if (f.number != 1 || f.type != 2) return true;  // not a state (a later field): skipped
-      one.info.key = 0;  // proto3 leaves vehicle 0 out
-      (void)wire::ForEachField(f.bytes, [&](const wire::Field& g) {
-        if (g.number == 1 && g.type == 0 && g.value <= UINT32_MAX) {
-          one.info.key = static_cast<std::uint32_t>(g.value);
-          return false;
-        }
-        return true;
-      });
+      const std::optional<std::uint64_t> id = wire::Number(f.bytes, 1);  // absent: vehicle 0
+      one.info.key = id && *id <= UINT32_MAX ? static_cast<std::uint32_t>(*id) : 0;
       one.payload = f.bytes;
       OnSample(TopicId::kState, one, now);
       return true;

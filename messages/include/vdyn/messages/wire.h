@@ -8,6 +8,7 @@
 #include <optional>
 #include <span>
 #include <string_view>
+#include <vector>
 
 namespace vdyn::messages::wire {
 
@@ -98,6 +99,29 @@ inline std::optional<std::string_view> Bytes(std::span<const std::uint8_t> p, st
     return true;
   });
   return out;
+}
+
+// Writing: a length-delimited field (tag, varint length, the bytes) appended to `out`, e.g. an
+// encoded message as an element of a repeated message field; and how many bytes that takes.
+inline std::size_t VarintSize(std::uint64_t v) {
+  std::size_t n = 1;
+  for (; v >= 0x80; v >>= 7) ++n;
+  return n;
+}
+
+inline std::size_t BytesFieldSize(std::uint32_t field, std::size_t n) {
+  return VarintSize((static_cast<std::uint64_t>(field) << 3) | 2) + VarintSize(n) + n;
+}
+
+inline void AppendBytesField(std::vector<std::uint8_t>& out, std::uint32_t field,
+                             std::span<const std::uint8_t> bytes) {
+  auto varint = [&](std::uint64_t v) {
+    for (; v >= 0x80; v >>= 7) out.push_back(static_cast<std::uint8_t>((v & 0x7F) | 0x80));
+    out.push_back(static_cast<std::uint8_t>(v));
+  };
+  varint((static_cast<std::uint64_t>(field) << 3) | 2);
+  varint(bytes.size());
+  out.insert(out.end(), bytes.begin(), bytes.end());
 }
 
 }  // namespace vdyn::messages::wire
