@@ -1,7 +1,9 @@
 // Batch real-time factor (simulated time / wall time) of vdyn::RunBatch: the demo maneuver on
 // `facility` for its full length, without output and with the full-rate CSV (every step, to a
-// temporary file, flushed and closed inside the timing). Five runs of each, interleaved so both see
-// the same machine; medians printed. All runs must end on the same state hash (determinism).
+// temporary file, flushed and closed inside the timing; formatted and written on a second thread,
+// which the stepping thread helps when it falls behind: the share is printed). Five runs of each,
+// interleaved so both see the same machine; medians printed. All runs must end on the same state
+// hash (determinism).
 // Usage: batch_rtf [runs]   (default 5)
 #include <algorithm>
 #include <chrono>
@@ -26,6 +28,7 @@ namespace {
 
 struct Result {
   double rtf = 0;
+  double stepper_share = 0;  // of the CSV rows, formatted on the stepping thread
   std::uint64_t hash = 0;
   std::uintmax_t csv_bytes = 0;
 };
@@ -46,7 +49,11 @@ Result RunOnce(const std::shared_ptr<const vdyn::World>& world, const vdyn::Mane
     std::fprintf(stderr, "batch_rtf: %s\n", s.error.c_str());
     std::exit(1);
   }
-  Result r{s.sim_time / wall, s.final_hash, 0};
+  Result r{s.sim_time / wall, 0, s.final_hash, 0};
+  if (s.csv_rows > 0) {
+    r.stepper_share = static_cast<double>(s.csv_rows_formatted_by_stepper) /
+                      static_cast<double>(s.csv_rows);
+  }
   if (csv_path != nullptr) r.csv_bytes = std::filesystem::file_size(*csv_path);
   return r;
 }
@@ -71,7 +78,7 @@ int main(int argc, char** argv) {
                                          ("vdyn-batch-rtf-" + std::to_string(::getpid()) + ".csv");
   std::printf("demo maneuver on facility: %.1f s simulated per run (h = 1 ms), %d runs each\n",
               maneuver.end_time(), runs);
-  std::vector<double> none, full;
+  std::vector<double> none, full, share;
   std::uint64_t hash = 0;
   bool deterministic = true;
   std::uintmax_t bytes = 0;
@@ -83,14 +90,17 @@ int main(int argc, char** argv) {
     bytes = b.csv_bytes;
     none.push_back(a.rtf);
     full.push_back(b.rtf);
-    std::printf("run %d: no output %7.1fx   full-rate CSV %7.1fx\n", i + 1, a.rtf, b.rtf);
+    share.push_back(b.stepper_share);
+    std::printf("run %d: no output %7.1fx   full-rate CSV %7.1fx (%2.0f %% of rows formatted on the "
+                "stepping thread)\n",
+                i + 1, a.rtf, b.rtf, 100.0 * b.stepper_share);
   }
   std::filesystem::remove(csv_path);
   std::printf(
       "median: no output %.1fx real time, full-rate CSV %.1fx real time (%.1f MB per run)\n",
       Median(none), Median(full), static_cast<double>(bytes) / 1e6);
-  std::printf("targets: no output >= 300x %s, full-rate CSV >= 100x %s\n",
-              Median(none) >= 300.0 ? "met" : "NOT met", Median(full) >= 100.0 ? "met" : "NOT met");
+  std::printf("targets: no output >= 300x %s, full-rate CSV >= 200x %s (issue 19)\n",
+              Median(none) >= 300.0 ? "met" : "NOT met", Median(full) >= 200.0 ? "met" : "NOT met");
   std::printf("final state hash %016llx, %s\n", static_cast<unsigned long long>(hash),
               deterministic ? "identical in every run" : "DIFFERS between runs");
   return deterministic ? 0 : 1;

@@ -3,6 +3,8 @@
 // it was the only model; the full model's validation is in test_full_model.cc. Every expected
 // value here comes from a formula and the parameters, never from earlier output.
 #include <algorithm>
+#include <bit>
+#include <limits>
 #include <charconv>
 #include <cmath>
 #include <numbers>
@@ -11,6 +13,7 @@
 #include <random>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
@@ -19,6 +22,8 @@
 #include "vdyn/runtime/batch.h"
 #include "vdyn/physics/drivers.h"
 #include "vdyn/io/csv.h"
+#include "vdyn/io/shortest_double.h"
+#include "vdyn/runtime/csv_pipe.h"
 #include "vdyn/io/maneuver.h"
 #include "test_support.h"
 
@@ -467,28 +472,110 @@ TEST(Validation, CsvNumbersAreTheShortestExactForm) {
   EXPECT_EQ(checked, 3 * 240'001 - 2);  // 0 and 0 * 0.001 skipped
 }
 
-// The demo drive twice, once on another thread with its own world: byte-identical CSV files.
+// WriteShortestDouble writes what std::to_chars writes (the shortest form that reads back, fixed
+// or scientific whichever is shorter, every digit of a whole number beyond 2^53), over random bit
+// patterns and where formatters go wrong: powers of two and ten and their neighbours, subnormals,
+// the extremes, whole numbers, halves, thousandths; and writes nothing past kShortestDoubleBytes.
+TEST(Validation, ShortestDoubleWritesWhatStdToCharsWrites) {
+  std::vector<double> values = {0.0, -0.0, std::numeric_limits<double>::max(),
+                                -std::numeric_limits<double>::max(),
+                                std::numeric_limits<double>::min(),
+                                std::numeric_limits<double>::denorm_min(),
+                                std::numeric_limits<double>::infinity(),
+                                -std::numeric_limits<double>::infinity(),
+                                std::numeric_limits<double>::quiet_NaN(), 9007199254740993.0,
+                                1e23, 5e-324, 0.1, 0.3, 2.0 / 3.0};
+  auto with_neighbours = [&values](double v) {
+    values.push_back(v);
+    values.push_back(std::nextafter(v, 0.0));
+    values.push_back(std::nextafter(v, std::numeric_limits<double>::infinity()));
+  };
+  for (int e = -1074; e <= 1023; ++e) with_neighbours(std::ldexp(1.0, e));
+  for (int e = -323; e <= 308; ++e) with_neighbours(std::strtod(("1e" + std::to_string(e)).c_str(), nullptr));
+  for (int i = -100'000; i <= 100'000; ++i) {
+    for (double v : {static_cast<double>(i), i + 0.5, i * 0.001, i * 1e-7, i * 1e12}) values.push_back(v);
+  }
+  std::mt19937_64 rng(2026);
+  for (int k = 0; k < 2'000'000; ++k) values.push_back(std::bit_cast<double>(rng()));
+  int differ = 0;
+  for (const double v : values) {
+    char ours[kShortestDoubleBytes + 16], reference[64];
+    std::memset(ours, '#', sizeof ours);
+    const std::string a(ours, WriteShortestDouble(ours, v));
+    const std::string b(reference, std::to_chars(reference, reference + sizeof reference, v).ptr);
+    if (a != b && ++differ <= 10) ADD_FAILURE() << "wrote " << a << ", std::to_chars " << b;
+    for (int i = kShortestDoubleBytes; i < kShortestDoubleBytes + 16; ++i) {
+      ASSERT_EQ(ours[i], '#') << "wrote past kShortestDoubleBytes for " << b;
+    }
+  }
+  EXPECT_EQ(differ, 0) << "of " << values.size();
+  EXPECT_GT(values.size(), 3'000'000u);
+}
+
+// The demo drive twice, once on another thread with its own world, once with the CSV written on a
+// second thread and once all on the stepping thread: byte-identical CSV files.
 TEST(Validation, SameManeuverGivesByteIdenticalCsv) {
   testing::TempDir dir;
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
-  auto run = [&m](const std::filesystem::path& out, std::uint64_t* hash) {
+  auto run = [&m](const std::filesystem::path& out, bool csv_thread, std::uint64_t* hash) {
     std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
     Simulator sim(world, PaperDefaults());
     CsvWriter csv(out);
     BatchOptions o;
     o.duration = m.end_time();
+    o.csv_thread = csv_thread;
     const BatchSummary s = RunBatch(sim, m, o, &csv);
     csv.Close();
     *hash = s.final_hash;
   };
   std::uint64_t h1 = 0, h2 = 0;
-  run(dir / "a.csv", &h1);
-  std::thread other([&] { run(dir / "b.csv", &h2); });
+  run(dir / "a.csv", true, &h1);
+  std::thread other([&] { run(dir / "b.csv", false, &h2); });
   other.join();
   const std::string a = testing::ReadFile(dir / "a.csv"), b = testing::ReadFile(dir / "b.csv");
   EXPECT_GT(a.size(), 1000000u);
   EXPECT_TRUE(a == b) << "the two CSV files differ";
   EXPECT_EQ(h1, h2);
+}
+
+// The CSV's second thread writes the bytes one thread writes, in order, whoever formats the rows:
+// the writer alone, the stepping thread alone (format_here_from 0) or both sharing (the default).
+TEST(Validation, CsvPipeWritesTheSameBytesWhoeverFormatsTheRows) {
+  testing::TempDir dir;
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  Simulator sim(SharedWorld("facility"), PaperDefaults());
+  std::vector<StepRecord> records;
+  Drive(sim, 3000, [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
+        [&](const StepRecord& r) {
+          records.push_back(r);
+          return false;
+        });
+  ASSERT_EQ(records.size(), 3000u);
+  {
+    CsvWriter csv(dir / "serial.csv");
+    CsvRowFormatter rows(sim.step_ns());
+    std::vector<char> line(CsvRowMaxBytes());
+    for (const StepRecord& r : records) csv.WriteFormattedRow(line.data(), rows.Format(r, line.data()));
+    csv.Close();
+  }
+  const std::string serial = testing::ReadFile(dir / "serial.csv");
+  ASSERT_GT(serial.size(), 3000u * 1000u);
+  const std::uint64_t writer_only = CsvPipe::kSlots + 1;  // the ring never holds more than kSlots
+  for (const std::uint64_t from : {std::uint64_t{0}, CsvPipe::kSlots / 2, writer_only}) {
+    const std::filesystem::path path = dir / ("pipe-" + std::to_string(from) + ".csv");
+    CsvWriter csv(path);
+    CsvPipe pipe(csv, sim.step_ns(), from);
+    for (const StepRecord& r : records) pipe.Push(r);
+    pipe.Finish();
+    csv.Close();
+    EXPECT_EQ(csv.rows(), records.size()) << "format_here_from " << from;
+    EXPECT_TRUE(testing::ReadFile(path) == serial) << "format_here_from " << from;
+    if (from == 0) {
+      EXPECT_EQ(pipe.rows_formatted_by_pusher(), records.size());
+    } else if (from == writer_only) {
+      EXPECT_EQ(pipe.rows_formatted_by_pusher(), 0u);
+    }
+  }
 }
 
 // --- friction circle, paper yaw mode, containment -----------------------------------------------

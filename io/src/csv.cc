@@ -8,6 +8,8 @@
 #include <stdexcept>
 #include <string_view>
 
+#include "vdyn/io/shortest_double.h"
+
 namespace vdyn {
 namespace {
 
@@ -169,7 +171,8 @@ void CsvRowValues(const State& s, std::vector<double>& out) {
   }
 }
 
-CsvWriter::CsvWriter(const std::filesystem::path& path) : path_(path), buffer_(1 << 20) {
+CsvWriter::CsvWriter(const std::filesystem::path& path)
+    : path_(path), buffer_(1 << 20), row_(CsvRowMaxBytes()) {
   std::error_code ec;
   if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
   file_ = std::fopen(path.c_str(), "wb");
@@ -193,14 +196,16 @@ CsvWriter::~CsvWriter() {
 
 char* CsvNumber(char* p, char* end, double v) {
   if (v == 0.0) v = 0.0;  // no "-0"
+  if (end - p >= kShortestDoubleBytes) return WriteShortestDouble(p, v);
   return std::to_chars(p, end, v).ptr;
 }
 
-void CsvWriter::WriteRow(const State& s) {
-  // Shortest round-trip decimal form (std::to_chars): exact, locale-free and deterministic.
-  std::array<char, 64 * kNumValues> line;
-  char* p = line.data();
-  char* const end = line.data() + line.size();
+std::size_t CsvRowMaxBytes() { return kShortestDoubleBytes * kNumValues; }
+
+std::size_t FormatCsvRow(const State& s, char* out) {
+  // Shortest round-trip decimal form (as std::to_chars writes it): exact, locale-free, deterministic.
+  char* p = out;
+  char* const end = out + CsvRowMaxBytes();
   auto put = [&](double v) {
     p = CsvNumber(p, end, v);
     *p++ = ',';
@@ -214,7 +219,13 @@ void CsvWriter::WriteRow(const State& s) {
     for (const WheelColumn& c : kExtraWheelColumns) put(c.get(WheelOf(s, w)));
   }
   p[-1] = '\n';
-  std::fwrite(line.data(), 1, static_cast<std::size_t>(p - line.data()), file_);
+  return static_cast<std::size_t>(p - out);
+}
+
+void CsvWriter::WriteRow(const State& s) { WriteFormattedRow(row_.data(), FormatCsvRow(s, row_.data())); }
+
+void CsvWriter::WriteFormattedRow(const char* row, std::size_t length) {
+  std::fwrite(row, 1, length, file_);
   ++rows_;
 }
 

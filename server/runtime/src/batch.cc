@@ -2,8 +2,11 @@
 
 #include <chrono>
 #include <cmath>
+#include <optional>
+#include <vector>
 
 #include "vdyn/bridge/convert.h"
+#include "vdyn/runtime/csv_pipe.h"
 
 namespace vdyn {
 
@@ -15,14 +18,21 @@ BatchSummary RunBatch(Simulator& sim, const Maneuver& maneuver, const BatchOptio
   const std::int64_t progress_every = std::max<std::int64_t>(1, n_steps / 100);
   const int every = std::max(1, options.csv_every);
   Eigen::Vector3d last_p = Position(sim.state().x);
-  // Rows are written from the state message, as the recorder's export writes them.
-  pb::VehicleState row;
-  pb::DriverInput input_msg;
+  std::optional<CsvRowFormatter> serial;
+  std::vector<char> serial_line;
+  std::optional<CsvPipe> pipe;
+  if (csv != nullptr && options.csv_thread) {
+    pipe.emplace(*csv, sim.step_ns());
+  } else if (csv != nullptr) {
+    serial.emplace(sim.step_ns());
+    serial_line.resize(CsvRowMaxBytes());
+  }
   auto write_row = [&](const StepRecord& r) {
-    ToProto(r.input, input_msg);
-    FillVehicleState(1, "batch", sim.step_ns(), r.step * sim.step_ns(), r, input_msg, false,
-                     r.derived.steering_torque, row);
-    csv->WriteRow(row);
+    if (pipe) {
+      pipe->Push(r);
+    } else {
+      csv->WriteFormattedRow(serial_line.data(), serial->Format(r, serial_line.data()));
+    }
   };
 
   for (std::int64_t i = 0; i < n_steps; ++i) {
@@ -63,6 +73,10 @@ BatchSummary RunBatch(Simulator& sim, const Maneuver& maneuver, const BatchOptio
     sim.Forward(last.derived, &last.control);
     last.hash_after = StateHash(sim.state());
     write_row(last);
+  }
+  if (pipe) {
+    pipe->Finish();
+    s.csv_rows_formatted_by_stepper = pipe->rows_formatted_by_pusher();
   }
   s.sim_time = sim.time();
   s.final_hash = StateHash(sim.state());

@@ -14,6 +14,9 @@ namespace vdyn {
 struct BatchOptions {
   double duration = 0;   // s of simulated time
   int csv_every = 1;     // write every Nth step
+  // Format and write the CSV on a second thread while the simulation steps (the same bytes as
+  // on one thread: rows keep their order). Off: everything on the calling thread.
+  bool csv_thread = true;
 };
 
 struct BatchSummary {
@@ -29,6 +32,7 @@ struct BatchSummary {
   double max_wall_penetration = 0;  // m
   std::uint64_t final_hash = 0;
   std::size_t csv_rows = 0;
+  std::uint64_t csv_rows_formatted_by_stepper = 0;  // with csv_thread: the share it took (CsvPipe)
 };
 
 // Runs `sim` for options.duration with the maneuver as input. The CSV (if any) gets the row of
