@@ -1,7 +1,10 @@
 // The bottom layer: the one hash against answers computed independently from its specification
 // (docs/hash.md's Python reference, and FNV's published test vectors), the table of limits, and
 // numbers as a person reads and writes them.
+#include <sys/resource.h>
+
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -14,6 +17,7 @@
 
 #include "vdyn/base/hash.h"
 #include "vdyn/base/limits.h"
+#include "vdyn/base/memory.h"
 #include "vdyn/base/spsc_queue.h"
 #include "vdyn/base/text.h"
 #include "vdyn/vehicle_params.pb.h"
@@ -22,6 +26,39 @@ namespace vdyn {
 namespace {
 
 using ::testing::HasSubstr;
+
+// After KeepFreedMemory a large block freed and allocated again keeps its pages: no page faults
+// the second time (glibc's default maps such a block afresh, or trims it off the heap, and the
+// next one faults every page in again). The sanitizers' allocator ignores mallopt: skipped there.
+TEST(Memory, AFreedLargeBlockComesBackWithoutFaultingItsPagesAgain) {
+#if defined(__SANITIZE_ADDRESS__)
+  GTEST_SKIP() << "AddressSanitizer's allocator ignores mallopt";
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+  GTEST_SKIP() << "AddressSanitizer's allocator ignores mallopt";
+#endif
+#endif
+  ASSERT_TRUE(base::KeepFreedMemory());
+  constexpr std::size_t kBytes = std::size_t{8} << 20;
+  auto faults = [] {
+    rusage u{};
+    getrusage(RUSAGE_THREAD, &u);
+    return u.ru_minflt + u.ru_majflt;
+  };
+  auto touch_and_free = [&] {
+    auto* p = static_cast<volatile char*>(std::malloc(kBytes));
+    if (p == nullptr) return -1L;
+    const long before = faults();
+    for (std::size_t i = 0; i < kBytes; i += 4096) p[i] = 1;
+    const long n = faults() - before;
+    std::free(const_cast<char*>(p));
+    return n;
+  };
+  const long first = touch_and_free();
+  const long second = touch_and_free();
+  EXPECT_GT(first, 0) << "the first block's pages were new";
+  EXPECT_LT(second, 64) << "faults the second time, of " << kBytes / 4096 << " pages";
+}
 
 TEST(Hash, Fnv1a64MatchesThePublishedTestVectors) {
   EXPECT_EQ(base::Fnv1a64(""), 0xcbf29ce484222325ull);

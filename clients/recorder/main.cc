@@ -11,6 +11,7 @@
 #include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
 
+#include "vdyn/base/memory.h"
 #include "vdyn/cli/errors.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
@@ -70,6 +71,9 @@ CLI::Validator TopicNames() {
 
 int main(int argc, char** argv) {
   using namespace vdyn;
+  // Recording takes DDS samples and writes chunks at a high rate: keep freed memory rather than
+  // fault it back in (base/memory.h; a quarter less CPU at 128 vehicles).
+  (void)base::KeepFreedMemory();
   CLI::App app{"vdyn-recorder: record vdyn sessions to MCAP; info, export, plot, play, verify, takeover, recover"};
   app.require_subcommand(1);
   const limits::Range time_range = limits::kRecordingTimeS;
