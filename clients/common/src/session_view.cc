@@ -7,34 +7,9 @@ using transport::TopicId;
 SessionView::SessionView(transport::Participant& participant, Topics topics) {
   waitset_ = std::make_unique<transport::Waitset>(participant);
   if (topics.states) {
-    if (topics.only_vehicle) {
-      try {
-        states_ = std::make_unique<transport::Reader<pb::VehicleState>>(
-            participant, TopicId::kState, &drops_, transport::ReaderRole::kDefault,
-            transport::VehiclePartition(*topics.only_vehicle));
-      } catch (const transport::TransportError& e) {
-        one_vehicle_fallback_ = e.what();
-        filter_vehicle_ = topics.only_vehicle;
-      }
-    }
-    transport::ReaderRole role = transport::ReaderRole::kDefault;
-    if (!topics.only_vehicle) {
-      // Every vehicle: a server's step in one sample on vdyn/states, and vdyn/state marked as
-      // such a reader (states of writers that do not batch, e.g. other DDS tools).
-      try {
-        batches_ = std::make_unique<transport::Reader<pb::VehicleStates>>(
-            participant, TopicId::kStates, &drops_);
-        role = transport::ReaderRole::kBatchLatest;
-      } catch (const transport::TransportError&) {
-        // Not permitted (DDS Security): every state on vdyn/state.
-      }
-    }
-    if (!states_) {
-      states_ = std::make_unique<transport::Reader<pb::VehicleState>>(participant, TopicId::kState,
-                                                                      &drops_, role);
-    }
-    waitset_->Attach(*states_);
-    if (batches_) waitset_->Attach(*batches_);
+    states_ = std::make_unique<StateReader>(participant, drops_, topics.only_vehicle,
+                                            StateReader::History::kLatest);
+    states_->AttachTo(*waitset_);
   }
   if (topics.params) {
     params_ = std::make_unique<transport::Reader<pb::VehicleParams>>(participant, TopicId::kParams,
@@ -56,6 +31,11 @@ SessionView::SessionView(transport::Participant& participant, Topics topics) {
                                                                    &drops_);
     if (!topics.states) waitset_->Attach(*inputs_);
   }
+}
+
+const std::string& SessionView::one_vehicle_fallback() const {
+  static const std::string kNone;
+  return states_ ? states_->partition_fallback() : kNone;
 }
 
 const SessionView::Vehicle* SessionView::vehicle(std::uint32_t id) const {
@@ -91,21 +71,9 @@ int SessionView::Poll() {
       if (on_input) on_input(in, info);
     });
   }
-  if (batches_) {
-    n += batches_->Take([&](const pb::VehicleStates& b, const transport::SampleInfo& info) {
-      for (const pb::VehicleState& s : b.states()) {
-        transport::SampleInfo one = info;
-        one.key = s.vehicle_id();
-        OnState(s, one);
-      }
-    });
-  }
   if (states_) {
-    n += states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
-      if (info.key != s.vehicle_id()) return;
-      if (filter_vehicle_ && s.vehicle_id() != *filter_vehicle_) return;
-      OnState(s, info);
-    });
+    n += states_->Take(
+        [&](const pb::VehicleState& s, const transport::SampleInfo& info) { OnState(s, info); });
   }
   return n;
 }

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "vdyn/base/time.h"
+#include "vdyn/client/state_reader.h"
 #include "vdyn/diagnostics.pb.h"
 #include "vdyn/input.pb.h"
 #include "vdyn/state.pb.h"
@@ -72,14 +73,13 @@ class SessionView {
   // With Topics::only_vehicle: empty when the states are read in the vehicle's partition; else
   // why that reader could not be created (e.g. DDS Security permissions without the partition),
   // and every vehicle's states are read and the others' dropped here.
-  const std::string& one_vehicle_fallback() const { return one_vehicle_fallback_; }
+  const std::string& one_vehicle_fallback() const;
 
  private:
   void OnState(const pb::VehicleState& s, const transport::SampleInfo& info);
 
   transport::DropCounters drops_;
-  std::unique_ptr<transport::Reader<pb::VehicleState>> states_;
-  std::unique_ptr<transport::Reader<pb::VehicleStates>> batches_;  // every vehicle: vdyn/states
+  std::unique_ptr<StateReader> states_;
   std::unique_ptr<transport::Reader<pb::VehicleParams>> params_;
   std::unique_ptr<transport::Reader<pb::WorldDescription>> world_;
   std::unique_ptr<transport::Reader<pb::Diagnostics>> diagnostics_reader_;
@@ -89,8 +89,6 @@ class SessionView {
   std::map<std::string, pb::WorldDescription> worlds_;
   std::map<std::string, pb::Diagnostics> diagnostics_;
   std::uint64_t world_version_ = 0;
-  std::optional<std::uint32_t> filter_vehicle_;  // the fallback: drop other vehicles' states
-  std::string one_vehicle_fallback_;
 };
 
 }  // namespace vdyn::client
