@@ -276,6 +276,15 @@ TEST(Cli, DemoRunsAndSaysWhereTheCsvIs) {
   EXPECT_TRUE(std::filesystem::file_size(dir / "demo.csv") > 0);
 }
 
+// The CSV is written on a second thread; a device that takes no data still ends the run with the
+// reason and a failing exit code, not a crash or a silent short file.
+TEST(Cli, ACsvThatCannotBeWrittenEndsTheRunWithTheReason) {
+  if (!std::filesystem::exists("/dev/full")) GTEST_SKIP() << "no /dev/full here";
+  const Result r = RunServer("--batch --world flat --maneuver demo --duration 2 --csv /dev/full");
+  EXPECT_NE(r.exit_code, 0) << r.output;
+  EXPECT_THAT(r.output, HasSubstr("/dev/full: writing the CSV failed"));
+}
+
 }  // namespace
 }  // namespace vdyn
 
