@@ -222,7 +222,9 @@ std::size_t FormatCsvRow(const State& s, char* out) {
   return static_cast<std::size_t>(p - out);
 }
 
-void CsvWriter::WriteRow(const State& s) { WriteFormattedRow(row_.data(), FormatCsvRow(s, row_.data())); }
+void CsvWriter::WriteRow(const State& s) {
+  WriteFormattedRow(row_.data(), FormatCsvRow(s, row_.data()));
+}
 
 void CsvWriter::WriteFormattedRow(const char* row, std::size_t length) {
   std::fwrite(row, 1, length, file_);

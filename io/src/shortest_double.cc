@@ -144,7 +144,9 @@ inline DigitString Digits(std::uint64_t v, int n) {
   return {s >> (8 * (16 - n)), 0};
 }
 
-inline void Store16(char* p, U128 x) { std::memcpy(p, &x, 16); }
+inline void Store16(char* p, U128 x) {
+  std::memcpy(p, &x, 16);
+}
 
 // Stores the digits at p (17 bytes; the bytes after the n-th are scratch).
 inline void StoreDigits(char* p, const DigitString& d) {
@@ -202,7 +204,8 @@ char* WriteShortestDouble(char* p, double v) {
   const int scientific_length = n + (n > 1 ? 1 : 0) + 2 + (abs_e >= 100 ? 3 : 2);
   const int fixed_length = e >= 0 ? (e + 1 >= n ? e + 1 : n + 1) : n + 1 - e;
   const DigitString digits = Digits(d.digits, n);
-  // Whole-word stores (at most 34 bytes with the sign); past the end is scratch, overwritten in order.
+  // Whole-word stores (at most 34 bytes with the sign); past the end is scratch, overwritten in
+  // order.
   if (fixed_length <= scientific_length) {
     if (e < 0) {  // 0.000ddd, at most 4 zeros
       std::memcpy(p, "0.0000", 6);

@@ -22,8 +22,8 @@ StateReader::StateReader(transport::Participant& participant, transport::DropCou
     }
   } else {
     try {
-      batches_ = std::make_unique<transport::Reader<pb::VehicleStates>>(participant,
-                                                                        TopicId::kStates, &drops, plain);
+      batches_ = std::make_unique<transport::Reader<pb::VehicleStates>>(
+          participant, TopicId::kStates, &drops, plain);
       state_role = every ? ReaderRole::kBatchRecorder : ReaderRole::kBatchLatest;
     } catch (const transport::TransportError&) {
       // Not permitted (DDS Security): every state on vdyn/state.

@@ -24,7 +24,9 @@ CsvPipe::CsvPipe(CsvWriter& csv, std::int64_t step_ns, std::uint64_t format_here
       line_length_(kSlots, 0),
       thread_([this] { Run(); }) {}
 
-CsvPipe::~CsvPipe() { Join(); }
+CsvPipe::~CsvPipe() {
+  Join();
+}
 
 void CsvPipe::Push(const StepRecord& r) {
   if (failed_.load(std::memory_order_acquire)) return;  // Finish() says why

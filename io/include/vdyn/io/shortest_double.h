@@ -11,8 +11,8 @@ namespace vdyn {
 inline constexpr int kShortestDoubleBytes = 40;
 
 // Writes v at p and returns the end. Needs kShortestDoubleBytes at p: the longest form, e.g.
-// "-2.2250738585072014e-308", is 24; it stores whole 16-byte words and the rest is scratch. Infinities and NaN
-// are written by std::to_chars ("inf", "nan").
+// "-2.2250738585072014e-308", is 24; it stores whole 16-byte words and the rest is scratch.
+// Infinities and NaN are written by std::to_chars ("inf", "nan").
 char* WriteShortestDouble(char* p, double v);
 
 }  // namespace vdyn
