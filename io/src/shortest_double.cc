@@ -219,7 +219,8 @@ char* WriteShortestDouble(char* p, double v) {
       std::memcpy(p + n, "000000", 6);
     } else {  // dd.ddd: the digits, then those after the point again one place on
       Store16(p, digits.first16);
-      Store16(p + e + 2, digits.first16 >> (8 * (e + 1)));
+      // (e + 1 is 16 only for 17 digits with one after the point: the tail, below.)
+      Store16(p + e + 2, e + 1 < 16 ? digits.first16 >> (8 * (e + 1)) : U128{0});
       if (n == 17) p[17] = digits.tail;  // the 17th digit, one place on
       p[e + 1] = '.';
     }
