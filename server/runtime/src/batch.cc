@@ -3,7 +3,6 @@
 #include <chrono>
 #include <cmath>
 #include <optional>
-#include <vector>
 
 #include "vdyn/bridge/convert.h"
 #include "vdyn/runtime/csv_pipe.h"
@@ -19,19 +18,17 @@ BatchSummary RunBatch(Simulator& sim, const Maneuver& maneuver, const BatchOptio
   const int every = std::max(1, options.csv_every);
   Eigen::Vector3d last_p = Position(sim.state().x);
   std::optional<CsvRowFormatter> serial;
-  std::vector<char> serial_line;
   std::optional<CsvPipe> pipe;
   if (csv != nullptr && options.csv_thread) {
     pipe.emplace(*csv, sim.step_ns());
   } else if (csv != nullptr) {
     serial.emplace(sim.step_ns());
-    serial_line.resize(CsvRowMaxBytes());
   }
   auto write_row = [&](const StepRecord& r) {
     if (pipe) {
       pipe->Push(r);
     } else {
-      csv->WriteFormattedRow(serial_line.data(), serial->Format(r, serial_line.data()));
+      serial->Write(r, *csv);
     }
   };
 

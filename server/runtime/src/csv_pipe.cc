@@ -6,12 +6,18 @@
 
 namespace vdyn {
 
-std::size_t CsvRowFormatter::Format(const StepRecord& r, char* out) {
+const pb::VehicleState& CsvRowFormatter::Message(const StepRecord& r) {
   ToProto(r.input, input_msg_);
   FillVehicleState(1, "batch", step_ns_, r.step * step_ns_, r, input_msg_, false,
                    r.derived.steering_torque, row_);
-  return FormatCsvRow(row_, out);
+  return row_;
 }
+
+std::size_t CsvRowFormatter::Format(const StepRecord& r, char* out) {
+  return FormatCsvRow(Message(r), out);
+}
+
+void CsvRowFormatter::Write(const StepRecord& r, CsvWriter& csv) { csv.WriteRow(Message(r)); }
 
 CsvPipe::CsvPipe(CsvWriter& csv, std::int64_t step_ns, std::uint64_t format_here_from)
     : csv_(csv),

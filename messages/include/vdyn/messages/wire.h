@@ -113,14 +113,15 @@ inline std::size_t BytesFieldSize(std::uint32_t field, std::size_t n) {
   return VarintSize((static_cast<std::uint64_t>(field) << 3) | 2) + VarintSize(n) + n;
 }
 
+inline void AppendVarint(std::vector<std::uint8_t>& out, std::uint64_t v) {
+  for (; v >= 0x80; v >>= 7) out.push_back(static_cast<std::uint8_t>((v & 0x7F) | 0x80));
+  out.push_back(static_cast<std::uint8_t>(v));
+}
+
 inline void AppendBytesField(std::vector<std::uint8_t>& out, std::uint32_t field,
                              std::span<const std::uint8_t> bytes) {
-  auto varint = [&](std::uint64_t v) {
-    for (; v >= 0x80; v >>= 7) out.push_back(static_cast<std::uint8_t>((v & 0x7F) | 0x80));
-    out.push_back(static_cast<std::uint8_t>(v));
-  };
-  varint((static_cast<std::uint64_t>(field) << 3) | 2);
-  varint(bytes.size());
+  AppendVarint(out, (static_cast<std::uint64_t>(field) << 3) | 2);
+  AppendVarint(out, bytes.size());
   out.insert(out.end(), bytes.begin(), bytes.end());
 }
 

@@ -22,8 +22,12 @@ class CsvRowFormatter {
   explicit CsvRowFormatter(std::int64_t step_ns) : step_ns_(step_ns) {}
   // Writes the row of `r` at `out` (CsvRowMaxBytes()) and returns its length.
   std::size_t Format(const StepRecord& r, char* out);
+  // Writes the row of `r` to `csv` (on the calling thread).
+  void Write(const StepRecord& r, CsvWriter& csv);
 
  private:
+  const pb::VehicleState& Message(const StepRecord& r);
+
   std::int64_t step_ns_;
   pb::VehicleState row_;
   pb::DriverInput input_msg_;
