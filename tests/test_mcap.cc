@@ -307,6 +307,11 @@ TEST(McapBadFiles, ATruncatedFileIsRefusedAtTheOffsetWhereItEndsAndRecoverKeepsE
       EXPECT_THAT(e.reason(), ::testing::AnyOf(HasSubstr("truncated"), HasSubstr("ends without a data end"),
                                                HasSubstr("ends inside the MCAP magic")))
           << e.what();
+      // Past the magic, wherever the cut fell (a killed recorder's chunk half written too), the
+      // reason says what to do.
+      if (cut >= 8) {
+        EXPECT_THAT(e.reason(), HasSubstr("`vdyn-recorder recover`")) << e.what();
+      }
     }
     if (cut < 8) continue;
     // Recover: a closed, indexed file with a prefix of the messages, every one intact.

@@ -842,11 +842,15 @@ struct Frame {
   std::uint64_t end() const { return offset + 9 + content.size(); }
 };
 
+// What a file cut short still holds: every whole chunk (the same advice wherever a read finds
+// that the recorder did not finish the file).
+const std::string kRecoverAdvice = "`vdyn-recorder recover` salvages what is whole";
+
 // The frame at `pos`, or why there is none (truncation).
 std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t pos, Frame& f) {
   if (size - pos < 9) {
     return "truncated: a record starts here but the file ends " + std::to_string(size - pos) +
-           " bytes later (a record header needs 9)";
+           " bytes later (a record header needs 9); " + kRecoverAdvice;
   }
   f.op = data[pos];
   f.offset = pos;
@@ -856,7 +860,7 @@ std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t 
   if (len > size - pos - 9) {
     return std::string("truncated: a ") + OpName(f.op) + " record of " + std::to_string(len) +
            " bytes starts here but only " + std::to_string(size - pos - 9) +
-           " bytes follow (the recorder was stopped before it closed the file?)";
+           " bytes follow (the recorder was stopped before it closed the file?); " + kRecoverAdvice;
   }
   f.content = {data + pos + 9, static_cast<std::size_t>(len)};
   return {};
@@ -1041,7 +1045,7 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
     }
     if (pos == size_) {
       problem(pos, "the file ends without a data end record and footer: the recorder did not close "
-                   "it (killed?); `vdyn-recorder recover` rebuilds its index and summary");
+                   "it (killed?); " + kRecoverAdvice);
       return res;
     }
     Frame f;
@@ -1232,13 +1236,15 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
   // of it (the caller rebuilds the summary), and only says what it found.
   const std::uint64_t summary_pos = pos;
   if (size_ - pos < kFooterRecord + 8) {
-    problem(pos, "truncated: the file ends after the data end record, before its footer");
+    problem(pos, "truncated: the file ends after the data end record, before its footer; " +
+                     kRecoverAdvice);
     return res;
   }
   const std::uint64_t footer = size_ - 8 - kFooterRecord;
   if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
       Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
-    problem(footer, "truncated: the file does not end with a footer record and the MCAP magic");
+    problem(footer, "truncated: the file does not end with a footer record and the MCAP magic; " +
+                        kRecoverAdvice);
     return res;
   }
   {
