@@ -14,10 +14,21 @@
 //   trace4/vdyn/W/P one Terrain::Trace4 (the four wheels of a car as one packet);
 //                   per_ray = time / 4
 //   ray/bullet/W/P  one ray through btDefaultVehicleRaycaster (what btRaycastVehicle casts)
+//   state/encode    a step's state message (FillVehicleState, then the bytes), as a stepping thread
+//                   makes it for every vehicle of every step
+//   state/decode    what every state reader does with those bytes (transport::Reader: a fresh
+//                   message on its arena, DecodeEnvelope: the protobuf parse and the finite-number
+//                   and string checks on the wire bytes)
+//   state/wire_check  those checks alone (messages::WireClean)
+//   state/parse     the peer: protobuf's ParseFromArray alone into a reused message on the heap,
+//                   what a plain protobuf reader pays
+//   state/copy      the floor: copying the bytes
 //
 // After the run, the medians are printed as vdyn / Bullet ratios (below 1: vdyn is faster).
 // Respawning a car (cars.h) is excluded from the timed region with PauseTiming.
 #include <cstdio>
+#include <cstring>
+#include <span>
 #include <map>
 #include <memory>
 #include <string>
@@ -28,6 +39,10 @@
 
 #include "cars.h"
 #include "rays.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/messages/checks.h"
+#include "vdyn/transport/dds.h"
+#include "vdyn/state.pb.h"
 
 namespace vdyn::bench {
 namespace {
@@ -131,6 +146,97 @@ void BM_BulletRay(benchmark::State& st, const std::string& world, const std::str
   }
 }
 
+// A state of the facility course after 5 s of driving (every field a reader decodes is set).
+const std::string& StateBytes() {
+  static const std::string bytes = [] {
+    VdynCar& car = OurCar("facility");
+    for (int i = 0; i < 5000; ++i) {
+      if (!car.Step()) break;
+      if (car.NeedsRespawn()) car.Respawn();
+    }
+    pb::VehicleState msg;
+    FillVehicleState(1, "bench", 1'000'000, 5'000'000'000, car.sim().last_step(), pb::DriverInput{},
+                     false, car.sim().last_step().derived.steering_torque, msg);
+    return msg.SerializeAsString();
+  }();
+  return bytes;
+}
+
+void BM_StateEncode(benchmark::State& st) {
+  VdynCar& car = OurCar("facility");
+  (void)StateBytes();
+  const StepRecord& r = car.sim().last_step();
+  pb::VehicleState msg;
+  std::string out(StateBytes().size() * 2, '\0');
+  for (auto _ : st) {
+    FillVehicleState(1, "bench", 1'000'000, 5'000'000'000, r, pb::DriverInput{}, false,
+                     r.derived.steering_torque, msg);
+    const std::size_t size = msg.ByteSizeLong();
+    msg.SerializeWithCachedSizesToArray(reinterpret_cast<std::uint8_t*>(out.data()));
+    benchmark::DoNotOptimize(size);
+    benchmark::DoNotOptimize(out.data());
+  }
+  st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * StateBytes().size()));
+}
+
+std::span<const std::uint8_t> StateSpan() {
+  const std::string& b = StateBytes();
+  return {reinterpret_cast<const std::uint8_t*>(b.data()), b.size()};
+}
+
+// As transport::Reader does it: into a fresh message on its arena each time.
+void BM_StateDecode(benchmark::State& st) {
+  const std::span<const std::uint8_t> bytes = StateSpan();
+  transport::ArenaMessage<pb::VehicleState> scratch(128 * 1024);
+  for (auto _ : st) {
+    pb::VehicleState& msg = scratch.Fresh();
+    const transport::Decoded d = transport::DecodeEnvelope(
+        transport::TopicId::kState, transport::Spec(transport::TopicId::kState).payload, bytes,
+        msg);
+    if (d.outcome != transport::Decoded::Outcome::kOk) {
+      st.SkipWithError("the state did not decode");
+      break;
+    }
+    benchmark::DoNotOptimize(msg);
+  }
+  st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * bytes.size()));
+}
+
+void BM_StateWireCheck(benchmark::State& st) {
+  const std::span<const std::uint8_t> bytes = StateSpan();
+  for (auto _ : st) {
+    if (!messages::WireClean(*pb::VehicleState::descriptor(), bytes)) {
+      st.SkipWithError("the state is not clean");
+      break;
+    }
+  }
+  st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * bytes.size()));
+}
+
+void BM_StateParse(benchmark::State& st) {
+  const std::span<const std::uint8_t> bytes = StateSpan();
+  pb::VehicleState msg;
+  for (auto _ : st) {
+    if (!msg.ParseFromArray(bytes.data(), static_cast<int>(bytes.size()))) {
+      st.SkipWithError("the state did not parse");
+      break;
+    }
+    benchmark::DoNotOptimize(msg);
+  }
+  st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * bytes.size()));
+}
+
+void BM_StateCopy(benchmark::State& st) {
+  const std::span<const std::uint8_t> bytes = StateSpan();
+  std::vector<std::uint8_t> out(bytes.size());
+  for (auto _ : st) {
+    std::memcpy(out.data(), bytes.data(), bytes.size());
+    benchmark::DoNotOptimize(out.data());
+    benchmark::ClobberMemory();
+  }
+  st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * bytes.size()));
+}
+
 // Console output as usual; also keeps each benchmark's median (or single run) for the ratios.
 // (A reporter given to RunSpecifiedBenchmarks does not follow --benchmark_color: colour only when
 // stdout is a terminal, so result files stay plain text.)
@@ -164,6 +270,8 @@ class RatioReporter : public benchmark::ConsoleReporter {
         Ratio("ray/" + wp + " (Trace4 / 4)", "trace4/vdyn/" + wp, "ray/bullet/" + wp, 0.25);
       }
     }
+    Ratio("state: decode (checked) / plain protobuf parse", "state/decode", "state/parse");
+    Ratio("state: decode / copying the bytes", "state/decode", "state/copy");
     std::fflush(stdout);
   }
 
@@ -195,6 +303,11 @@ void Register() {
       benchmark::RegisterBenchmark(("ray/bullet/" + wp).c_str(), BM_BulletRay, world, pattern);
     }
   }
+  benchmark::RegisterBenchmark("state/encode", BM_StateEncode);
+  benchmark::RegisterBenchmark("state/decode", BM_StateDecode);
+  benchmark::RegisterBenchmark("state/wire_check", BM_StateWireCheck);
+  benchmark::RegisterBenchmark("state/parse", BM_StateParse);
+  benchmark::RegisterBenchmark("state/copy", BM_StateCopy);
 }
 
 }  // namespace

@@ -317,6 +317,25 @@ TEST(Messages, TheWireCheckPassesCleanMessagesAndLeavesEveryProblemToTheReflecti
   EXPECT_FALSE(clean(s));
   s.mutable_input()->set_source_id("rig");
   EXPECT_TRUE(clean(s));
+  // A field numbered 16 and above has a two-byte tag.
+  s.mutable_f_wall_w()->set_z(std::numeric_limits<double>::infinity());
+  EXPECT_FALSE(clean(s));
+  EXPECT_EQ(messages::CheckMessage(s).field, "f_wall_w.z");
+  s.mutable_f_wall_w()->set_z(-1.0);
+  EXPECT_TRUE(clean(s));
+  // Cut anywhere inside, the bytes are not a message: not sure.
+  const auto whole = bytes(s);
+  for (std::size_t cut = 1; cut < whole.size(); ++cut) {
+    pb::VehicleState cut_state;
+    const std::vector<std::uint8_t> head(whole.begin(), whole.begin() + static_cast<long>(cut));
+    if (!cut_state.ParseFromArray(head.data(), static_cast<int>(head.size()))) {
+      EXPECT_FALSE(messages::WireClean(*pb::VehicleState::descriptor(), head)) << cut;
+    }
+  }
+  // A group (wire type 3) is not proto3: not sure.
+  std::vector<std::uint8_t> group = whole;
+  group.push_back((2 << 3) | 3);
+  EXPECT_FALSE(messages::WireClean(*pb::VehicleState::descriptor(), group));
 
   // Packed repeated doubles: every value is looked at.
   pb::Mesh mesh;

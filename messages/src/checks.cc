@@ -12,7 +12,6 @@
 #include <google/protobuf/descriptor.h>
 
 #include "vdyn/base/limits.h"
-#include "vdyn/messages/wire.h"
 
 namespace vdyn::messages {
 
@@ -91,10 +90,6 @@ struct Plan {
   // False for a type with field numbers beyond kMaxPlannedNumber, and for a type containing one:
   // never walked (kept, not freed: a type of a cycle may point to it).
   bool usable = true;
-  const Entry& operator[](std::uint32_t n) const {
-    static const Entry ignore;
-    return n < by_number.size() ? by_number[n] : ignore;
-  }
 };
 
 // Field numbers above this make a type's table too large: such types get no plan (CheckMessage).
@@ -171,34 +166,93 @@ bool PackedFinite(std::span<const std::uint8_t> b) {
 // Nested deeper than protobuf's own parser allows: not followed.
 constexpr int kMaxDepth = 100;
 
-bool Clean(const Plan& plan, std::span<const std::uint8_t> bytes, int depth) {
+// A varint at p (at most 10 bytes, not past end); p moves past it.
+inline bool ReadVarint(const std::uint8_t*& p, const std::uint8_t* end, std::uint64_t& out) {
+  out = 0;
+  for (int shift = 0; shift < 64; shift += 7) {
+    if (p >= end) return false;
+    const std::uint8_t b = *p++;
+    out |= static_cast<std::uint64_t>(b & 0x7f) << shift;
+    if ((b & 0x80) == 0) return true;
+  }
+  return false;
+}
+
+// One message's fields, as wire::ForEachField reads them (the same framing rules: a truncated
+// varint, a length past the end, field number 0 or a wire type proto3 does not use is not clean),
+// written out here because every state a reader takes goes through it: a state's 180 fields, with
+// a one-byte tag each, cost half of the protobuf parse through the generic walker and its Field.
+bool Clean(const Plan& plan, const std::uint8_t* p, const std::uint8_t* end, int depth) {
   if (depth > kMaxDepth || !plan.usable) return false;
-  bool clean = true;
-  const bool framed = wire::ForEachField(bytes, [&](const wire::Field& f) {
-    const Plan::Entry& e = plan[f.number];
+  const Plan::Entry* entries = plan.by_number.data();
+  const std::size_t n_entries = plan.by_number.size();
+  static const Plan::Entry ignore;
+  while (p < end) {
+    std::uint64_t tag = *p;
+    if (tag < 0x80) {
+      ++p;
+    } else if (!ReadVarint(p, end, tag)) {
+      return false;
+    }
+    const auto number = static_cast<std::uint32_t>(tag >> 3);
+    if (number == 0) return false;
+    const Plan::Entry& e = number < n_entries ? entries[number] : ignore;
     // A value of a wire type its field does not have is an unknown field to the parser: the
     // message does not hold it.
-    switch (e.kind) {
-      case Plan::Kind::kIgnore:
+    switch (tag & 7) {
+      case 0: {
+        std::uint64_t v = 0;
+        if (!ReadVarint(p, end, v)) return false;
         break;
-      case Plan::Kind::kDouble:
-        if (f.type == 1) clean = Finite<double, std::uint64_t>(f.value);
-        if (f.type == 2) clean = PackedFinite<double, std::uint64_t>(f.bytes);
+      }
+      case 1: {
+        if (end - p < 8) return false;
+        if (e.kind == Plan::Kind::kDouble) {
+          std::uint64_t bits;
+          std::memcpy(&bits, p, sizeof bits);  // little-endian on the wire and here
+          if (!Finite<double, std::uint64_t>(bits)) return false;
+        }
+        p += 8;
         break;
-      case Plan::Kind::kFloat:
-        if (f.type == 5) clean = Finite<float, std::uint32_t>(f.value);
-        if (f.type == 2) clean = PackedFinite<float, std::uint32_t>(f.bytes);
+      }
+      case 5: {
+        if (end - p < 4) return false;
+        if (e.kind == Plan::Kind::kFloat) {
+          std::uint32_t bits;
+          std::memcpy(&bits, p, sizeof bits);
+          if (!Finite<float, std::uint32_t>(bits)) return false;
+        }
+        p += 4;
         break;
-      case Plan::Kind::kString:
-        if (f.type == 2) clean = f.bytes.size() <= e.max_bytes;
+      }
+      case 2: {
+        std::uint64_t n = 0;
+        if (!ReadVarint(p, end, n) || n > static_cast<std::uint64_t>(end - p)) return false;
+        const std::span<const std::uint8_t> b(p, static_cast<std::size_t>(n));
+        switch (e.kind) {
+          case Plan::Kind::kIgnore:
+            break;
+          case Plan::Kind::kDouble:
+            if (!PackedFinite<double, std::uint64_t>(b)) return false;
+            break;
+          case Plan::Kind::kFloat:
+            if (!PackedFinite<float, std::uint32_t>(b)) return false;
+            break;
+          case Plan::Kind::kString:
+            if (n > e.max_bytes) return false;
+            break;
+          case Plan::Kind::kMessage:
+            if (!Clean(*e.message, p, p + n, depth + 1)) return false;
+            break;
+        }
+        p += n;
         break;
-      case Plan::Kind::kMessage:
-        if (f.type == 2) clean = Clean(*e.message, f.bytes, depth + 1);
-        break;
+      }
+      default:
+        return false;  // groups (3, 4) are not used by proto3; anything else is not protobuf
     }
-    return clean;
-  });
-  return framed && clean;
+  }
+  return true;
 }
 
 Plans& AllPlans() {
@@ -211,8 +265,15 @@ Plans& AllPlans() {
 bool WireClean(const gp::Descriptor& type, std::span<const std::uint8_t> bytes) {
   static_assert(std::endian::native == std::endian::little,
                 "the wire's fixed-width values are little-endian");
-  const Plan* plan = AllPlans().Get(type);
-  return plan != nullptr && Clean(*plan, bytes, 0);
+  // The plan of the type this thread checked last, without the lock (plans live as long as the
+  // process, like the map's keys: a reader checks one type over and over).
+  thread_local const gp::Descriptor* last_type = nullptr;
+  thread_local const Plan* last_plan = nullptr;
+  if (&type != last_type) {
+    last_plan = AllPlans().Get(type);
+    last_type = &type;
+  }
+  return last_plan != nullptr && Clean(*last_plan, bytes.data(), bytes.data() + bytes.size(), 0);
 }
 
 std::size_t MaxStringBytes(const std::string& name) {

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include <dds/dds.h>
+#include <google/protobuf/arena.h>
 #include <google/protobuf/message.h>
 
 #include "vdyn/transport/drops.h"
@@ -243,9 +244,10 @@ class RawReader {
               int max_samples = std::numeric_limits<int>::max());
 
  protected:
-  // Takes every available sample; for each valid one parses into `scratch` and calls fn.
-  template <class F>
-  int TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples);
+  // Takes every available sample; for each valid one parses into next() (a message to parse into,
+  // empty) and calls fn with it.
+  template <class Next, class F>
+  int TakeInto(Next&& next, F&& fn, int max_samples);
 
  private:
   static constexpr int kBatch = 64;
@@ -304,30 +306,72 @@ class Writer : public RawWriter {
   [[nodiscard]] bool Write(std::uint32_t key, const M& msg) { return RawWriter::Write(key, msg); }
 };
 
+// A message to parse into, over and over, on an arena whose first block is ours. A proto3
+// message's Clear() deletes its sub-messages and the next parse allocates them again (a state has
+// 30 of them: a quarter of its parse was malloc and free); here each Fresh() resets the arena and
+// makes the message anew, which costs a pointer bump per sub-message and frees nothing while it
+// fits the first block. Fresh() ends the life of the message it returned before.
+template <class M>
+class ArenaMessage {
+ public:
+  explicit ArenaMessage(std::size_t first_block_bytes)
+      : block_(std::make_unique<char[]>(first_block_bytes)),
+        arena_(Options(block_.get(), first_block_bytes)),
+        msg_(google::protobuf::Arena::CreateMessage<M>(&arena_)) {}
+  ArenaMessage(const ArenaMessage&) = delete;
+  ArenaMessage& operator=(const ArenaMessage&) = delete;
+
+  M& Fresh() {
+    arena_.Reset();
+    msg_ = google::protobuf::Arena::CreateMessage<M>(&arena_);
+    return *msg_;
+  }
+  const M& get() const { return *msg_; }
+
+ private:
+  static google::protobuf::ArenaOptions Options(char* block, std::size_t bytes) {
+    google::protobuf::ArenaOptions o;
+    o.initial_block = block;
+    o.initial_block_size = bytes;
+    return o;
+  }
+  std::unique_ptr<char[]> block_;
+  google::protobuf::Arena arena_;
+  M* msg_;
+};
+
 template <class M>
 class Reader : public RawReader {
  public:
-  using RawReader::RawReader;
+  Reader(Participant& participant, TopicId id, DropCounters* drops,
+         ReaderRole role = ReaderRole::kDefault, const std::string& partition = {})
+      : RawReader(participant, id, drops, role, partition), scratch_(FirstBlockBytes(id)) {}
   // Calls fn(const M&, const SampleInfo&) for every valid sample available now (at most
-  // max_samples taken); returns how many valid ones.
+  // max_samples taken); returns how many valid ones. The message lives until fn returns.
   template <class F>
   [[nodiscard]] int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
     return TakeInto(
-        scratch_,
+        [this]() -> google::protobuf::Message& { return scratch_.Fresh(); },
         [&](const google::protobuf::Message&, const SampleInfo& info) {
-          fn(static_cast<const M&>(scratch_), info);
+          fn(scratch_.get(), info);
         },
         max_samples);
   }
 
  private:
-  M scratch_;
+  // Twice the largest payload of the topic (a parsed message takes more room than its bytes),
+  // between 16 KiB and 2 MiB: a larger message (a world's meshes) takes further blocks, freed
+  // at the next sample.
+  static std::size_t FirstBlockBytes(TopicId id) {
+    return std::clamp<std::size_t>(2 * Spec(id).max_payload_bytes, 16 * 1024, 2 * 1024 * 1024);
+  }
+  ArenaMessage<M> scratch_;
 };
 
 // --- implementation of the template part -------------------------------------------------------
 
-template <class F>
-int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samples) {
+template <class Next, class F>
+int RawReader::TakeInto(Next&& next, F&& fn, int max_samples) {
   int delivered = 0;
   int taken = 0;
   Batch b;
@@ -339,6 +383,7 @@ int RawReader::TakeInto(google::protobuf::Message& scratch, F&& fn, int max_samp
       if (!b.infos[i].valid_data) continue;
       RawSample raw;
       if (!Envelope(b.samples[i], b.infos[i], raw)) continue;
+      google::protobuf::Message& scratch = next();
       if (!Decode(raw, scratch)) continue;
       fn(scratch, raw.info);
       ++delivered;
