@@ -565,7 +565,7 @@ struct Capture::Impl {
           std::swap(work, pending);
           writer_bytes = work.bytes.size();
         }
-        const auto split_ns = static_cast<std::uint64_t>(o.split_s * 1e9);
+        const auto split_ns = static_cast<std::uint64_t>(base::FromSeconds(o.split_s).ns);
         for (const Entry& e : work.entries) {
           // A new part before this message when the current one is full or old enough.
           const bool split_size = o.split_bytes > 0 && file.own_messages > 0 &&
@@ -656,7 +656,7 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
   std::vector<std::uint32_t> matched(m.readers.size(), 0);
   std::uint64_t last_dropped = 0;
   base::MonoTime last_warning{0};
-  const auto end_ns = static_cast<std::int64_t>(m.o.duration_s * 1e9);
+  const auto end_ns = base::FromSeconds(m.o.duration_s).ns;
   auto take_all = [&] {
     bool any = false;
     for (auto& [topic, reader] : m.readers) {

@@ -7,6 +7,7 @@
 #include <memory>
 #include <set>
 
+#include "vdyn/base/time.h"
 #include "vdyn/io/csv.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/output_file.h"
@@ -72,8 +73,8 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
     writers[id] = std::make_unique<CsvWriter>(f->temp());
   }
   const std::uint64_t start = FirstLogTime(reader);
-  const auto from = start + static_cast<std::uint64_t>(o.from_s * 1e9);
-  const auto to = o.to_s ? start + static_cast<std::uint64_t>(*o.to_s * 1e9) : ~0ull;
+  const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
+  const auto to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
   const auto every = static_cast<std::uint64_t>(std::max(1, o.every));
   pb::VehicleState state;
   std::uint64_t malformed = 0, unchecked = 0;

@@ -183,8 +183,8 @@ bool Player::Load() {
     return false;
   }
   lead_vehicle_ = *vehicles.begin();
-  from_ = static_cast<std::uint64_t>(o_.from_s * 1e9);
-  to_ = o_.to_s ? static_cast<std::uint64_t>(*o_.to_s * 1e9) : last_ - first_;
+  from_ = static_cast<std::uint64_t>(base::FromSeconds(o_.from_s).ns);
+  to_ = o_.to_s ? static_cast<std::uint64_t>(base::FromSeconds(*o_.to_s).ns) : last_ - first_;
   to_ = std::min(to_, last_ - first_);
   if (from_ > to_) {
     out_ << "vdyn-recorder play: --from is after the end of the recording ("
@@ -463,7 +463,7 @@ int Player::Run(const std::atomic<bool>& stop) {
     // A live server on this domain would get our states and (worse) our driver inputs.
     transport::Reader<pb::WorldDescription> worlds(*participant_, TopicId::kWorld, &drops_);
     std::string live;
-    const auto deadline = base::MonotonicNow() + base::Nanos{static_cast<std::int64_t>(o_.server_check_s * 1e9)};
+    const auto deadline = base::MonotonicNow() + base::FromSeconds(o_.server_check_s);
     while (live.empty() && base::MonotonicNow() < deadline && !stop.load()) {
       (void)worlds.Wait(std::chrono::milliseconds(50));
       (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { live = w.server_id(); });

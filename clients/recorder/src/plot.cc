@@ -22,6 +22,7 @@
 #include <set>
 #include <sstream>
 
+#include "vdyn/base/time.h"
 #include "vdyn/io/csv.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/output_file.h"
@@ -386,8 +387,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
 
   // The data: every stride-th state of the vehicle in the time range.
   const std::uint64_t start = FirstLogTime(reader);
-  const auto from = start + static_cast<std::uint64_t>(o.from_s * 1e9);
-  const auto to = o.to_s ? start + static_cast<std::uint64_t>(*o.to_s * 1e9) : ~0ull;
+  const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
+  const auto to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
   std::ofstream data(work.path() / "states.dat");
   data << "#";
   for (int c : data_cols) data << " " << names[static_cast<std::size_t>(c)];

@@ -15,6 +15,7 @@
 #include <google/protobuf/message.h>
 #include <google/protobuf/reflection.h>
 
+#include "vdyn/base/time.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/physics/world.h"
 #include "vdyn/recorder/capture.h"
@@ -665,7 +666,7 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
                             std::optional<std::uint32_t> vehicle) {
   mcap::Reader reader(file);
   const std::uint64_t first = FirstLogTime(reader);
-  const auto at = first + static_cast<std::uint64_t>(at_s * 1e9);
+  const auto at = first + static_cast<std::uint64_t>(base::FromSeconds(at_s).ns);
   // The vehicle and its step at that time, and the recorded hash of the step before.
   std::optional<std::uint32_t> chosen = vehicle;
   std::optional<std::uint64_t> step;

@@ -6,6 +6,7 @@
 //   Nanos      a duration
 #pragma once
 
+#include <cmath>
 #include <compare>
 #include <cstdint>
 
@@ -22,6 +23,9 @@ struct Nanos {
 };
 constexpr Nanos Milliseconds(std::int64_t ms) { return {ms * 1'000'000}; }
 constexpr Nanos Seconds(std::int64_t s) { return {s * 1'000'000'000}; }
+// A time given in seconds (a command line's), to the nearest nanosecond: 0.541000567 s is
+// 541000567 ns, where a cast would truncate the double's 541000566.99... to 541000566.
+inline Nanos FromSeconds(double s) { return {std::llround(s * 1e9)}; }
 
 struct MonoTime {
   std::int64_t ns = 0;
