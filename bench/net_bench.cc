@@ -8,10 +8,18 @@
 //  - latency from a driver input to the first state that applied it (the input's monotonic stamp
 //    travels back in the state);
 //  - Cyclone's own ddsperf ping/pong at 1 kHz with a payload of the state's size, in the same run:
-//    its round trip / 2 is the one-way peer figure.
+//    its round trip / 2 is the one-way peer figure;
+//  - the floor under both, without DDS: bare UDP datagrams of that size over loopback between two
+//    processes at 1 kHz, measured both ways: one-way (a stamp in the datagram, as the state's
+//    latency is measured) and round trip / 2 (as ddsperf's is). On a virtual machine whose idle
+//    vCPUs halt, waking a receiver that slept for a millisecond costs more than waking one that
+//    sent a moment ago, which a round trip's second half does: the two differ before any DDS.
 //
 // Usage: net_bench [seconds=60] [ddsperf_seconds=20] [subscribers=3]
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -19,6 +27,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -58,6 +67,116 @@ int Subscriber(std::uint32_t domain, double seconds) {
   return 0;
 }
 
+// --- bare UDP over loopback: the floor without DDS ---------------------------------------------
+
+constexpr int kUdpDatagrams = 5000;  // 5 s at 1 kHz
+
+int UdpSocket(std::uint16_t port, sockaddr_in& addr) {
+  const int fd = socket(AF_INET, SOCK_DGRAM, 0);
+  addr = {};
+  addr.sin_family = AF_INET;
+  addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  addr.sin_port = htons(port);
+  if (fd < 0 || bind(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+    std::perror("net_bench: udp socket");
+    std::exit(1);
+  }
+  timeval tv{2, 0};  // a lost datagram ends the probe instead of hanging it
+  setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+  return fd;
+}
+
+sockaddr_in Loopback(std::uint16_t port) {
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  a.sin_port = htons(port);
+  return a;
+}
+
+// The child: binds `port`, says so to `reply_port`, then per datagram either records its one-way
+// latency (the sender's monotonic stamp in its first 8 bytes) or echoes it back.
+int UdpPeer(std::uint16_t port, std::uint16_t reply_port, bool echo) {
+  sockaddr_in self;
+  const int fd = UdpSocket(port, self);
+  const sockaddr_in back = Loopback(reply_port);
+  std::vector<std::uint8_t> buf(65536);
+  buf[0] = 0;
+  sendto(fd, buf.data(), 1, 0, reinterpret_cast<const sockaddr*>(&back), sizeof back);  // ready
+  vdyn::Histogram one_way;
+  for (int i = 0; i < kUdpDatagrams; ++i) {
+    const ssize_t n = recv(fd, buf.data(), buf.size(), 0);
+    const std::int64_t now = vdyn::base::MonotonicNow().ns;
+    if (n < 8) break;
+    if (echo) {
+      sendto(fd, buf.data(), static_cast<std::size_t>(n), 0,
+             reinterpret_cast<const sockaddr*>(&back), sizeof back);
+      continue;
+    }
+    std::int64_t stamp;
+    std::memcpy(&stamp, buf.data(), sizeof stamp);
+    one_way.Add(static_cast<double>(now - stamp) * 1e-3);
+  }
+  if (!echo) {
+    std::printf("udp_one_way %llu %.1f %.1f\n", static_cast<unsigned long long>(one_way.count()),
+                one_way.Percentile(50), one_way.Percentile(99));
+  }
+  return 0;
+}
+
+struct UdpFloor {
+  std::uint64_t one_way_n = 0, rtt_n = 0;
+  double one_way50 = 0, one_way99 = 0, rtt50 = 0, rtt99 = 0;
+};
+
+// One-way, then round trip, each kUdpDatagrams at 1 kHz against a child process.
+UdpFloor MeasureUdpFloor(const char* self, std::size_t size, const std::string& tmp) {
+  const auto base_port = static_cast<std::uint16_t>(40000 + getpid() % 10000 * 2);
+  UdpFloor r;
+  for (const bool echo : {false, true}) {
+    sockaddr_in mine;
+    const int fd = UdpSocket(static_cast<std::uint16_t>(base_port + 1), mine);
+    const std::string log = tmp + (echo ? "-udp-echo.log" : "-udp-oneway.log");
+    const pid_t child = Spawn({self, "--udp-peer", std::to_string(base_port),
+                               std::to_string(base_port + 1), echo ? "echo" : "oneway"},
+                              log);
+    std::vector<std::uint8_t> buf(std::max<std::size_t>(size, 8));
+    if (recv(fd, buf.data(), buf.size(), 0) < 1) {  // the child is bound
+      std::fprintf(stderr, "net_bench: the UDP peer did not start\n");
+      kill(child, SIGTERM);
+    }
+    const sockaddr_in to = Loopback(base_port);
+    vdyn::Histogram rtt;
+    std::int64_t next = vdyn::base::MonotonicNow().ns;
+    for (int i = 0; i < kUdpDatagrams; ++i) {
+      vdyn::base::SleepUntil({next += 1'000'000});
+      const std::int64_t t0 = vdyn::base::MonotonicNow().ns;
+      std::memcpy(buf.data(), &t0, sizeof t0);
+      sendto(fd, buf.data(), buf.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+      if (echo) {
+        if (recv(fd, buf.data(), buf.size(), 0) < 8) break;
+        rtt.Add(static_cast<double>(vdyn::base::MonotonicNow().ns - t0) * 1e-3);
+      }
+    }
+    WaitPid(child);
+    close(fd);
+    if (echo) {
+      r.rtt_n = rtt.count();
+      r.rtt50 = rtt.Percentile(50);
+      r.rtt99 = rtt.Percentile(99);
+    } else {
+      const std::string out = vdyn::bench::Slurp(log);
+      const auto at = out.find("udp_one_way ");
+      unsigned long long n = 0;
+      if (at != std::string::npos) {
+        std::sscanf(out.c_str() + at, "udp_one_way %llu %lf %lf", &n, &r.one_way50, &r.one_way99);
+      }
+      r.one_way_n = n;
+    }
+  }
+  return r;
+}
+
 // Median of the per-second "50%" and "99%" round trips that ddsperf ping prints.
 std::pair<double, double> ParseDdsperf(const std::string& log) {
   std::ifstream in(log);
@@ -80,6 +199,10 @@ std::pair<double, double> ParseDdsperf(const std::string& log) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (argc >= 5 && std::string(argv[1]) == "--udp-peer") {
+    return UdpPeer(static_cast<std::uint16_t>(std::atoi(argv[2])),
+                   static_cast<std::uint16_t>(std::atoi(argv[3])), std::string(argv[4]) == "echo");
+  }
   if (argc >= 4 && std::string(argv[1]) == "--subscriber") {
     return Subscriber(static_cast<std::uint32_t>(std::atoi(argv[2])), std::atof(argv[3]));
   }
@@ -188,6 +311,7 @@ int main(int argc, char** argv) {
   kill(pong, SIGTERM);
   WaitPid(pong);
   const auto [rtt50, rtt99] = ParseDdsperf(tmp + "-ping.log");
+  const UdpFloor udp = MeasureUdpFloor(argv[0], size, tmp);
 
   const double cpu = 100.0 * (cpu1 - cpu0) / seconds;
   std::printf("net_bench: %.0f s of the real-time server on facility, %d state subscriber(s), input at 1 kHz\n",
@@ -224,6 +348,20 @@ int main(int argc, char** argv) {
   if (rtt50 > 0) {
     std::printf("ratio vdyn state one-way / ddsperf one-way: p50 %.2f, p99 %.2f\n",
                 one_way.Percentile(50) / (rtt50 / 2.0), one_way.Percentile(99) / (rtt99 / 2.0));
+  }
+  std::printf("bare UDP over loopback, %zu B at 1 kHz, same run (no DDS): one-way (%llu) p50 %.1f us, "
+              "p99 %.1f us; round trip / 2 (%llu) p50 %.1f us, p99 %.1f us\n",
+              size, static_cast<unsigned long long>(udp.one_way_n), udp.one_way50, udp.one_way99,
+              static_cast<unsigned long long>(udp.rtt_n), udp.rtt50 / 2.0, udp.rtt99 / 2.0);
+  if (udp.rtt50 > 0) {
+    std::printf("ratio bare UDP one-way / bare UDP round trip / 2: p50 %.2f (the machine's part of "
+                "the ratio above)\n",
+                udp.one_way50 / (udp.rtt50 / 2.0));
+  }
+  if (udp.one_way50 > 0) {
+    std::printf("ratio vdyn state one-way / bare UDP one-way: p50 %.2f (what DDS, the server's state "
+                "writer, the take and the decode add to the same wake-up)\n",
+                one_way.Percentile(50) / udp.one_way50);
   }
   return server_code;
 }

@@ -10,11 +10,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
 #include <optional>
 #include <set>
+#include <sstream>
 #include <thread>
 
 #include <gmock/gmock.h>
@@ -242,6 +245,43 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   EXPECT_EQ(steps.begin()->first, 1u);
   EXPECT_EQ(steps.rbegin()->first, 256u);
   EXPECT_EQ(drops.Total(), 0u);
+}
+
+// The real-time server's state writer runs ahead of the machine's ordinary threads (nice -10), or
+// says why not; what it says is what the thread has (/proc/PID/task/TID/stat, field 19).
+TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
+  auto server = StartServer({"--vehicle-ids", "1"});
+  std::string log;
+  for (int i = 0; i < 600 && log.find("state writer nice") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(50ms);  // polls the log for the start line, at most 30 s
+    log = server->Log();
+  }
+  const auto at = log.find("state writer nice ");
+  ASSERT_NE(at, std::string::npos) << log;
+  const int reported = std::atoi(log.c_str() + at + std::strlen("state writer nice "));
+  if (log.find("refused: ", at) == std::string::npos) {
+    EXPECT_EQ(reported, -10) << log;
+  }
+  std::optional<int> nice;
+  for (const auto& t : std::filesystem::directory_iterator(
+           "/proc/" + std::to_string(server->pid()) + "/task")) {
+    std::ifstream comm(t.path() / "comm");
+    std::string name;
+    std::getline(comm, name);
+    if (name != "vdyn-states") continue;
+    std::ifstream stat(t.path() / "stat");
+    std::string line;
+    std::getline(stat, line);
+    // After the command name's closing parenthesis: field 3 (state) onwards; nice is field 19.
+    std::istringstream rest(line.substr(line.rfind(')') + 2));
+    std::string field;
+    for (int k = 3; k < 19; ++k) rest >> field;
+    int value = 0;
+    rest >> value;
+    nice = value;
+  }
+  ASSERT_TRUE(nice.has_value()) << "no vdyn-states thread";
+  EXPECT_EQ(*nice, reported) << log;
 }
 
 // A server sends a step's states of every vehicle as one vdyn/states sample (what a recorder

@@ -1,8 +1,14 @@
 #include "vdyn/runtime/state_outbox.h"
 
 #include <pthread.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <string>
 
 namespace vdyn {
 
@@ -74,11 +80,26 @@ bool StateOutbox::Drain(base::Nanos timeout) {
   return true;
 }
 
+std::string StateOutbox::SetWriterNice(int nice) {
+  writer_tid_.wait(0, std::memory_order_acquire);  // the thread runs from construction on
+  const auto tid = static_cast<id_t>(writer_tid_.load(std::memory_order_acquire));
+  if (setpriority(PRIO_PROCESS, tid, nice) == 0) return "state writer nice " + std::to_string(nice);
+  const std::string why = std::strerror(errno);
+  errno = 0;
+  const int now = getpriority(PRIO_PROCESS, tid);
+  return "state writer nice " + std::to_string(errno == 0 ? now : 0) + " (nice " +
+         std::to_string(nice) + " refused: " + why + ")";
+}
+
 void StateOutbox::WriterLoop() {
   // Ordinary scheduling on purpose: a SCHED_FIFO writer (one below the loop) measured worse at
   // 256 vehicles on 2 cores. With the loop and the stepping worker it passed the kernel's
   // real-time budget (sched_rt_runtime_us: 95 % of the CPUs), and the throttled loop lost steps.
+  // The real-time server gives it a lower nice value instead (ServerNode::RunRealtime), so that
+  // the machine's other ordinary threads (rigs, recorders, builds) do not starve it.
   pthread_setname_np(pthread_self(), "vdyn-states");
+  writer_tid_.store(static_cast<int>(syscall(SYS_gettid)), std::memory_order_release);
+  writer_tid_.notify_all();
   while (true) {
     const std::uint32_t token = bell_.Token();
     std::uint64_t written = 0;

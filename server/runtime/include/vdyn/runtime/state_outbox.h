@@ -51,6 +51,9 @@ class StateOutbox final : public StateFrames {
   void Send();
   // Waits until every frame handed over has been written (or `timeout`); true when drained.
   [[nodiscard]] bool Drain(base::Nanos timeout);
+  // Gives the writer thread the nice value `nice` (setpriority); what it has now, in words (the
+  // server's "scheduling" line), with the reason when the system refused (no CAP_SYS_NICE).
+  std::string SetWriterNice(int nice);
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
@@ -83,6 +86,7 @@ class StateOutbox final : public StateFrames {
   std::atomic<std::uint64_t> refused_{0};
   std::size_t open_ = 0;               // frames opened for this step
   std::atomic<std::size_t> empty_{0};  // of them, left empty
+  std::atomic<int> writer_tid_{0};     // set by the writer thread as it starts
   std::thread thread_;
 };
 
