@@ -28,9 +28,9 @@
 // Respawning a car (cars.h) is excluded from the timed region with PauseTiming.
 #include <cstdio>
 #include <cstring>
-#include <span>
 #include <map>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -41,8 +41,8 @@
 #include "rays.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/messages/checks.h"
-#include "vdyn/transport/dds.h"
 #include "vdyn/state.pb.h"
+#include "vdyn/transport/dds.h"
 
 namespace vdyn::bench {
 namespace {
@@ -190,9 +190,9 @@ void BM_StateDecode(benchmark::State& st) {
   transport::ArenaMessage<pb::VehicleState> scratch(128 * 1024);
   for (auto _ : st) {
     pb::VehicleState& msg = scratch.Fresh();
-    const transport::Decoded d = transport::DecodeEnvelope(
-        transport::TopicId::kState, transport::Spec(transport::TopicId::kState).payload, bytes,
-        msg);
+    const transport::Decoded d =
+        transport::DecodeEnvelope(transport::TopicId::kState,
+                                  transport::Spec(transport::TopicId::kState).payload, bytes, msg);
     if (d.outcome != transport::Decoded::Outcome::kOk) {
       st.SkipWithError("the state did not decode");
       break;

@@ -349,19 +349,22 @@ int main(int argc, char** argv) {
     std::printf("ratio vdyn state one-way / ddsperf one-way: p50 %.2f, p99 %.2f\n",
                 one_way.Percentile(50) / (rtt50 / 2.0), one_way.Percentile(99) / (rtt99 / 2.0));
   }
-  std::printf("bare UDP over loopback, %zu B at 1 kHz, same run (no DDS): one-way (%llu) p50 %.1f us, "
-              "p99 %.1f us; round trip / 2 (%llu) p50 %.1f us, p99 %.1f us\n",
-              size, static_cast<unsigned long long>(udp.one_way_n), udp.one_way50, udp.one_way99,
-              static_cast<unsigned long long>(udp.rtt_n), udp.rtt50 / 2.0, udp.rtt99 / 2.0);
+  std::printf(
+      "bare UDP over loopback, %zu B at 1 kHz, same run (no DDS): one-way (%llu) p50 %.1f us, "
+      "p99 %.1f us; round trip / 2 (%llu) p50 %.1f us, p99 %.1f us\n",
+      size, static_cast<unsigned long long>(udp.one_way_n), udp.one_way50, udp.one_way99,
+      static_cast<unsigned long long>(udp.rtt_n), udp.rtt50 / 2.0, udp.rtt99 / 2.0);
   if (udp.rtt50 > 0) {
-    std::printf("ratio bare UDP one-way / bare UDP round trip / 2: p50 %.2f (the machine's part of "
-                "the ratio above)\n",
-                udp.one_way50 / (udp.rtt50 / 2.0));
+    std::printf(
+        "ratio bare UDP one-way / bare UDP round trip / 2: p50 %.2f (the machine's part of "
+        "the ratio above)\n",
+        udp.one_way50 / (udp.rtt50 / 2.0));
   }
   if (udp.one_way50 > 0) {
-    std::printf("ratio vdyn state one-way / bare UDP one-way: p50 %.2f (what DDS, the server's state "
-                "writer, the take and the decode add to the same wake-up)\n",
-                one_way.Percentile(50) / udp.one_way50);
+    std::printf(
+        "ratio vdyn state one-way / bare UDP one-way: p50 %.2f (what DDS, the server's state "
+        "writer, the take and the decode add to the same wake-up)\n",
+        one_way.Percentile(50) / udp.one_way50);
   }
   return server_code;
 }

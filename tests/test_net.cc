@@ -263,8 +263,8 @@ TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
     EXPECT_EQ(reported, -10) << log;
   }
   std::optional<int> nice;
-  for (const auto& t : std::filesystem::directory_iterator(
-           "/proc/" + std::to_string(server->pid()) + "/task")) {
+  for (const auto& t :
+       std::filesystem::directory_iterator("/proc/" + std::to_string(server->pid()) + "/task")) {
     std::ifstream comm(t.path() / "comm");
     std::string name;
     std::getline(comm, name);

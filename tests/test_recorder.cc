@@ -37,6 +37,7 @@ namespace vdyn {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 using namespace std::chrono_literals;
 using testing::Process;
 using transport::TopicId;
@@ -265,6 +266,63 @@ TEST_F(RecorderTest, VerifyIsBitExactOnALiveSessionAndPinpointsAnInjectedDiverge
   EXPECT_EQ(ecode, 1) << edited;
   EXPECT_THAT(edited, HasSubstr("DIVERGES at vehicle 1, step " + std::to_string(step) + " "));
   EXPECT_THAT(edited, HasSubstr("input.throttle"));
+}
+
+// Rewrites a recording without its session events past `after_step` (the tail lost: no later
+// sequence number shows the hole); returns how many were left out.
+int DropEventsAfter(const std::filesystem::path& in, const std::filesystem::path& out,
+                    std::uint64_t after_step) {
+  mcap::Reader reader(in);
+  mcap::Writer writer(out, {});
+  std::map<std::uint16_t, std::uint16_t> schemas, channels;
+  std::map<std::uint16_t, bool> events;
+  int dropped = 0;
+  mcap::Visitor v;
+  v.on_schema = [&](const mcap::Schema& s) {
+    schemas[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
+  };
+  v.on_channel = [&](const mcap::Channel& c) {
+    channels[c.id] =
+        writer.AddChannel(schemas.at(c.schema_id), c.topic, c.message_encoding, c.metadata);
+    events[c.id] = c.metadata.at("dds_topic") == "vdyn/events";
+  };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+    writer.WriteMetadata(m.name, m.values);
+  };
+  v.on_message = [&](const mcap::Message& m, std::uint64_t) {
+    if (events[m.channel_id]) {
+      pb::SessionEvent e;
+      EXPECT_TRUE(e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size())));
+      if (e.step() > after_step) {
+        ++dropped;
+        return;
+      }
+    }
+    writer.WriteMessage(channels.at(m.channel_id), m.sequence, m.log_time, m.publish_time, m.data);
+  };
+  reader.Scan(v);
+  writer.Close();
+  return dropped;
+}
+
+// A recording whose last events never arrived (the server left, or the recorder stopped, before
+// they did) lacks the inputs of its last steps: verify says so and verifies the steps before,
+// instead of calling the session diverged.
+TEST_F(RecorderTest, VerifySaysARecordingsLastEventsAreMissingInsteadOfDiverging) {
+  const auto a = dir_ / "a.mcap";
+  LockstepSession(domain_, a, 2500, InputAt);
+  if (HasFatalFailure()) return;
+  const auto cut = dir_ / "cut.mcap";
+  ASSERT_GT(DropEventsAfter(a, cut, 1500), 0);
+  auto [code, out] = Run({"verify", cut.string()});
+  EXPECT_EQ(code, 1) << out;  // not all of it verified
+  EXPECT_THAT(out, HasSubstr("PARTLY verified"));
+  EXPECT_THAT(out, HasSubstr("the recording's events end at step "));
+  EXPECT_THAT(out, Not(HasSubstr("DIVERGES")));
+  const auto compared = NumberAfter(out, "bit-exact over ");
+  ASSERT_TRUE(compared.has_value()) << out;
+  EXPECT_GE(*compared, 1500u) << out;
+  EXPECT_LT(*compared, 2500u) << out;
 }
 
 TEST_F(RecorderTest, AKilledRecordingIsRefusedThenRecoveredAndItStillVerifies) {

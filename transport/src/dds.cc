@@ -323,6 +323,13 @@ void RawWriter::Flush() {
   if (sending_ == Sending::kBatched) dds_write_flush(writer_);
 }
 
+bool RawWriter::WaitForAcks(std::chrono::nanoseconds timeout) {
+  const dds_return_t rc = dds_wait_for_acks(writer_, timeout.count());
+  if (rc == DDS_RETCODE_OK) return true;
+  last_error_ = DdsError(std::string("dds_wait_for_acks on ") + Spec(id_).name, rc);
+  return false;
+}
+
 std::uint64_t RawWriter::InstanceHandle() const {
   dds_instance_handle_t h = 0;
   if (dds_get_instance_handle(writer_, &h) != DDS_RETCODE_OK) return 0;

@@ -439,6 +439,28 @@ VerifyResult Verify(const VerifyOptions& o) {
       res.Unverified(m.key, step, seg->why);
       return;
     }
+    if (slot.second != hash && step > run.last_event_step && fresh_step &&
+        seg->replayer->simulator() != nullptr &&
+        static_cast<std::uint64_t>(seg->replayer->simulator()->last_step().step) == step &&
+        recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+      // Past the vehicle's last recorded event, the server applied an input that no recorded
+      // event gives: the recording's last events never reached it (the server or the recorder
+      // stopped first, or they were lost at the end, where no later sequence number shows the
+      // hole). The replay lacks them; it has not diverged.
+      std::vector<FieldDiff> fields;
+      Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
+      const bool input_differs = std::any_of(fields.begin(), fields.end(), [](const FieldDiff& f) {
+        return f.field.rfind("input.", 0) == 0;
+      });
+      if (input_differs) {
+        seg->Lose(step, "the recording's events end at step " +
+                            std::to_string(run.last_event_step) +
+                            " and this state's input is in none of them (the last events never "
+                            "reached the recording)");
+        res.Unverified(m.key, step, seg->why);
+        return;
+      }
+    }
     ++res.compared;
     if (compare_next && compare_next->first == m.key && compare_next->second == step) {
       compare_next.reset();

@@ -1154,6 +1154,20 @@ void ServerNode::PublisherLoop() {
       publisher_bell_.Wait(token, base::Milliseconds(500));
     }
   }
+  // What was written reaches its reliable readers before the server leaves, within the same
+  // deadline: a recorder that lost a datagram of the last events gets it again (a server that
+  // left at once took the session's last input events with it, and a verify of the recording
+  // could not re-simulate its last half second).
+  const std::int64_t deadline = publisher_deadline_ns_.load(std::memory_order_relaxed);
+  for (TopicId t : kReliableTopics) {
+    if (deadline == 0) break;  // set before every stop; never 0 here
+    const std::int64_t left = deadline - base::MonotonicNow().ns;
+    transport::RawWriter& w = *writers_[static_cast<int>(t)];
+    if (left <= 0 || !w.WaitForAcks(std::chrono::nanoseconds(left))) {
+      spdlog::warn("server '{}': {} not acknowledged by every reader by the shutdown deadline{}",
+                   server_id, transport::Spec(t).name, left <= 0 ? "" : ": " + w.last_error());
+    }
+  }
   drops_.Report();
 }
 

@@ -152,6 +152,9 @@ class RawWriter {
   [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
   // Sends what a kBatched writer has gathered (nothing to do for kEach).
   void Flush();
+  // Waits until every matched reliable reader has acknowledged what was written, at most
+  // `timeout`; false on timeout or error (last_error() says which).
+  [[nodiscard]] bool WaitForAcks(std::chrono::nanoseconds timeout);
   // Number of readers matched right now (0 when the status cannot be read; last_error() says).
   std::uint32_t MatchedReaders();
   // Whether a reader is matched, as a publication-matched listener last set it: an atomic load,
@@ -315,7 +318,7 @@ template <class M>
 class ArenaMessage {
  public:
   explicit ArenaMessage(std::size_t first_block_bytes)
-      : block_(std::make_unique<char[]>(first_block_bytes)),
+      : block_(std::make_unique_for_overwrite<char[]>(first_block_bytes)),  // untouched until used
         arena_(Options(block_.get(), first_block_bytes)),
         msg_(google::protobuf::Arena::CreateMessage<M>(&arena_)) {}
   ArenaMessage(const ArenaMessage&) = delete;
@@ -352,9 +355,7 @@ class Reader : public RawReader {
   [[nodiscard]] int Take(F&& fn, int max_samples = std::numeric_limits<int>::max()) {
     return TakeInto(
         [this]() -> google::protobuf::Message& { return scratch_.Fresh(); },
-        [&](const google::protobuf::Message&, const SampleInfo& info) {
-          fn(scratch_.get(), info);
-        },
+        [&](const google::protobuf::Message&, const SampleInfo& info) { fn(scratch_.get(), info); },
         max_samples);
   }
 
