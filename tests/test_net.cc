@@ -247,10 +247,11 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   EXPECT_EQ(drops.Total(), 0u);
 }
 
-// The real-time server's state writer runs ahead of the machine's ordinary threads (nice -10), or
-// says why not; what it says is what the thread has (/proc/PID/task/TID/stat, field 19).
+// Asked to, the real-time server's state writer runs ahead of the machine's ordinary threads
+// (nice -10), or says why not; what it says is what the thread has (/proc/PID/task/TID/stat,
+// field 19).
 TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
-  auto server = StartServer({"--vehicle-ids", "1"});
+  auto server = StartServer({"--vehicle-ids", "1", "--state-writer-nice", "-10"});
   std::string log;
   for (int i = 0; i < 600 && log.find("state writer nice") == std::string::npos; ++i) {
     std::this_thread::sleep_for(50ms);  // polls the log for the start line, at most 30 s

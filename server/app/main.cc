@@ -65,6 +65,7 @@ struct Options {
   double watchdog_ms = 100.0;
   double lockstep_timeout_s = 10.0;
   int rt_priority = 50;
+  int state_writer_nice = 0;
   bool status = false;
   bool no_status = false;
   std::string stats_out;
@@ -131,6 +132,7 @@ int RunNetworked(const Options& o) {
   so.duration_s = o.duration.value_or(0.0);
   so.lockstep_timeout_s = o.lockstep_timeout_s;
   so.rt_priority = o.rt_priority;
+  so.state_writer_nice = o.state_writer_nice;
   so.status_line = o.status || (!o.no_status && isatty(STDERR_FILENO) == 1 && !o.lockstep);
   so.stats_out = o.stats_out;
   std::signal(SIGINT, OnSignal);
@@ -270,6 +272,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--rt-priority", o.rt_priority, "SCHED_FIFO priority of the 1 kHz loop")
       ->check(vdyn::cli::WholeInRange({1, 99, false, false, "SCHED_FIFO priority"}))
+      ->capture_default_str();
+  app.add_option("--state-writer-nice", o.state_writer_nice,
+                 "Real time: nice value of the state writer thread (-20 to 19; below 0 needs "
+                 "CAP_SYS_NICE): below 0 it runs ahead of the machine's other ordinary threads")
+      ->check(vdyn::cli::WholeInRange({-20, 19, false, false, "nice value"}))
       ->capture_default_str();
   app.add_flag("--status", o.status, "Print the status line (default: on a terminal)");
   app.add_flag("--no-status", o.no_status, "No status line");

@@ -25,10 +25,6 @@ constexpr TopicId kReliableTopics[] = {TopicId::kControlReply, TopicId::kParams,
                                        TopicId::kEvents, TopicId::kDiagnostics};
 // Step requests waiting for their steps; more wait in the queue until some are done.
 constexpr std::size_t kMaxDeferred = 256;
-// The state writer's nice value in real time: ahead of the machine's ordinary threads, without a
-// real-time budget to pass. 128 vehicles with a recorder and 8 rigs on 2 vCPUs: the writer at nice
-// 0 refused 0.49-0.70 M states (queue full), at -10 none (bench/README.md).
-constexpr int kStateWriterNice = -10;
 // The most events one request makes (a restore: input changes, removed, spawned, applied): a
 // request waits rather than lose one (a re-simulation needs them all).
 constexpr std::size_t kEventsPerRequest = 4;
@@ -355,7 +351,9 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
     if (!refused.empty()) scheduling += "; stepping workers: " + refused;
   }
   scheduling_ = scheduling + "; " + std::to_string(session_->step_threads()) +
-                " stepping thread(s); " + states_->SetWriterNice(kStateWriterNice);
+                " stepping thread(s); " +
+                (options_.state_writer_nice != 0 ? states_->SetWriterNice(options_.state_writer_nice)
+                                                 : std::string("state writer nice 0"));
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
       options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;

@@ -95,8 +95,8 @@ void StateOutbox::WriterLoop() {
   // Ordinary scheduling on purpose: a SCHED_FIFO writer (one below the loop) measured worse at
   // 256 vehicles on 2 cores. With the loop and the stepping worker it passed the kernel's
   // real-time budget (sched_rt_runtime_us: 95 % of the CPUs), and the throttled loop lost steps.
-  // The real-time server gives it a lower nice value instead (ServerNode::RunRealtime), so that
-  // the machine's other ordinary threads (rigs, recorders, builds) do not starve it.
+  // A lower nice value instead puts it ahead of the machine's other ordinary threads (rigs,
+  // recorders, builds): `vdyn-server --state-writer-nice`, off by default.
   pthread_setname_np(pthread_self(), "vdyn-states");
   writer_tid_.store(static_cast<int>(syscall(SYS_gettid)), std::memory_order_release);
   writer_tid_.notify_all();
