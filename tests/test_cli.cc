@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdio>
 #include <sstream>
+#include <thread>
 #include <tuple>
 
 #include <gmock/gmock.h>
@@ -248,6 +249,25 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --duration 1" + domain);
   EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
   EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
+}
+
+// Without --step-threads the server steps up to 128 --max-vehicles on its loop thread alone (a
+// second thread costs more than it saves on a shared machine: bench/README.md), and one more
+// thread per 128 above, where the machine has the cores. Its log line says what it chose.
+TEST(Cli, ServerChoosesOneSteppingThreadPer128Vehicles) {
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const Result one = RunServer("--max-vehicles 128 --duration 0.05 --no-status" + domain);
+  EXPECT_EQ(one.exit_code, 0) << one.output;
+  EXPECT_THAT(one.output, HasSubstr("; 1 stepping thread(s);"));
+  if (std::thread::hardware_concurrency() >= 2) {
+    const Result two = RunServer("--max-vehicles 129 --duration 0.05 --no-status" + domain);
+    EXPECT_EQ(two.exit_code, 0) << two.output;
+    EXPECT_THAT(two.output, HasSubstr("; 2 stepping thread(s);"));
+  }
+  const Result asked = RunServer("--step-threads 3 --duration 0.05 --no-status" + domain);
+  EXPECT_EQ(asked.exit_code, 0) << asked.output;
+  EXPECT_THAT(asked.output, HasSubstr("; 3 stepping thread(s);"));
 }
 
 // A server id goes into every message the server sends: empty, longer than an id may be (64

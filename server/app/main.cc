@@ -107,13 +107,14 @@ std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
   return world;
 }
 
-// Without --step-threads: one thread up to 64 vehicles (the loop thread needs about 46 % of a
-// core for 64 on the 2-vCPU machine of bench/README.md, under issue 19's 60 %), else one per 64
-// vehicles, at most one per hardware thread: 2 for 256 on two cores.
+// Without --step-threads: one thread per 128 vehicles, at most one per hardware thread (2 for 256
+// on two cores). A second stepping thread costs more than it parallelises while other processes
+// share the cores: at 128 vehicles one thread takes 58 % of a core against 70 % for two (the loop
+// and the worker each wake the other every step), and beside a recorder and 8 rigs 97 % against
+// 116 %, with a quarter of the lateness (bench/README.md, "One stepping thread up to 128").
 int DefaultStepThreads(int max_vehicles) {
-  if (max_vehicles <= 64) return 1;
   const int hardware = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
-  return std::clamp((max_vehicles + 63) / 64, 1, hardware);
+  return std::clamp((max_vehicles + 127) / 128, 1, hardware);
 }
 
 int RunNetworked(const Options& o) {
@@ -258,8 +259,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--step-threads", o.step_threads,
                  "Threads that step the vehicles, the loop's included (results are the same for "
-                 "any count); default: 1 up to 64 --max-vehicles, else one per 64, at most one "
-                 "per hardware thread")
+                 "any count); default: one per 128 --max-vehicles, at most one per hardware "
+                 "thread")
       ->check(vdyn::cli::WholeInRange(vdyn::limits::kStepThreads));
   app.add_option("--watchdog-ms", o.watchdog_ms,
                  "Without live input for this long a vehicle brakes to a safe state (a live backup "
