@@ -14,6 +14,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 n="${1:-128}"; threads="${2:-default}"; seconds="${3:-10}"; nrigs="${4:-8}"
+[ "$nrigs" -ge 1 ] && [ "$nrigs" -le "$n" ] || { echo "RIGS must be 1 to VEHICLES ($n)" >&2; exit 2; }
 bin=build/release
 tmp=$(mktemp -d)
 pids=()
@@ -66,5 +67,5 @@ wait "$recorder" || true
 kill "${rigs[@]}" 2>/dev/null || true
 wait "$server" || true
 grep -E "^(steps|steps_due|lateness_p50_us|lateness_p99_us|lateness_max_us|states_refused|states_written) " \
-  "$tmp/stats.txt" | sed 's/^/  server: /'
-grep -E "^recorded " "$tmp/recorder.log" | sed 's/^/  /'
+  "$tmp/stats.txt" 2>/dev/null | sed 's/^/  server: /' || echo "  server: no run summary (see $tmp/server.log with KEEP=1)"
+grep -E "^recorded " "$tmp/recorder.log" | sed 's/^/  /' || echo "  recorder: no summary line (see $tmp/recorder.log with KEEP=1)"

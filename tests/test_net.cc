@@ -4,6 +4,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -247,25 +248,11 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   EXPECT_EQ(drops.Total(), 0u);
 }
 
-// Asked to, the real-time server's state writer runs ahead of the machine's ordinary threads
-// (nice -10), or says why not; what it says is what the thread has (/proc/PID/task/TID/stat,
-// field 19).
-TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
-  auto server = StartServer({"--vehicle-ids", "1", "--state-writer-nice", "-10"});
-  std::string log;
-  for (int i = 0; i < 600 && log.find("state writer nice") == std::string::npos; ++i) {
-    std::this_thread::sleep_for(50ms);  // polls the log for the start line, at most 30 s
-    log = server->Log();
-  }
-  const auto at = log.find("state writer nice ");
-  ASSERT_NE(at, std::string::npos) << log;
-  const int reported = std::atoi(log.c_str() + at + std::strlen("state writer nice "));
-  if (log.find("refused: ", at) == std::string::npos) {
-    EXPECT_EQ(reported, -10) << log;
-  }
+// The nice value of a server's state writer thread (vdyn-states) in /proc/PID/task/TID/stat
+// (field 19), if it has one.
+std::optional<int> StateWriterNice(pid_t pid) {
   std::optional<int> nice;
-  for (const auto& t :
-       std::filesystem::directory_iterator("/proc/" + std::to_string(server->pid()) + "/task")) {
+  for (const auto& t : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/task")) {
     std::ifstream comm(t.path() / "comm");
     std::string name;
     std::getline(comm, name);
@@ -281,8 +268,48 @@ TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
     rest >> value;
     nice = value;
   }
-  ASSERT_TRUE(nice.has_value()) << "no vdyn-states thread";
-  EXPECT_EQ(*nice, reported) << log;
+  return nice;
+}
+
+// The server's log up to its "state writer nice N" (the start line), polled for at most 30 s.
+std::string LogWithWriterNice(Process& server) {
+  std::string log;
+  for (int i = 0; i < 600 && log.find("state writer nice") == std::string::npos; ++i) {
+    std::this_thread::sleep_for(50ms);
+    log = server.Log();
+  }
+  return log;
+}
+
+// Asked to, the real-time server's state writer runs ahead of the machine's ordinary threads
+// (nice -10), or says why not; what it says is what the thread has. Not asked, it says what the
+// thread inherited: a server started under `nice -n 5` says 5 more than this process has.
+TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
+  {
+    auto server = StartServer({"--vehicle-ids", "1", "--state-writer-nice", "-10"});
+    const std::string log = LogWithWriterNice(*server);
+    const auto at = log.find("state writer nice ");
+    ASSERT_NE(at, std::string::npos) << log;
+    const int reported = std::atoi(log.c_str() + at + std::strlen("state writer nice "));
+    if (log.find("refused: ", at) == std::string::npos) {
+      EXPECT_EQ(reported, -10) << log;
+    }
+    const std::optional<int> nice = StateWriterNice(server->pid());
+    ASSERT_TRUE(nice.has_value()) << "no vdyn-states thread";
+    EXPECT_EQ(*nice, reported) << log;
+  }
+  errno = 0;
+  const int own = getpriority(PRIO_PROCESS, 0);
+  ASSERT_EQ(errno, 0);
+  std::vector<std::string> argv = {"/usr/bin/nice", "-n", "5"};
+  for (const std::string& a : ServerArgv({"--vehicle-ids", "1"})) argv.push_back(a);
+  Process niced(argv, dir_ / "niced.log");  // nice runs the server in its own process
+  const std::string log = LogWithWriterNice(niced);
+  const int expected = std::min(own + 5, 19);
+  EXPECT_THAT(log, HasSubstr("state writer nice " + std::to_string(expected) + "\n"));
+  const std::optional<int> nice = StateWriterNice(niced.pid());
+  ASSERT_TRUE(nice.has_value()) << "no vdyn-states thread\n" << log;
+  EXPECT_EQ(*nice, expected) << log;
 }
 
 // A server sends a step's states of every vehicle as one vdyn/states sample (what a recorder

@@ -137,10 +137,12 @@ class RecorderTest : public ::testing::Test {
     ASSERT_EQ(*code, 0) << recorder.Log();
   }
   // A lockstep session of vehicle 1 driven step by step with InputAt(step), from a reset at
-  // step 0 (so the recording holds the spawn) to `steps`; recorded to `out`.
+  // step 0 (so the recording holds the spawn) to `steps`; recorded to `out`. From `input_steps`
+  // on, the rest is one step request without input (the vehicle keeps the last).
   void LockstepSession(std::uint32_t domain, const std::filesystem::path& out, std::uint64_t steps,
                        const std::function<pb::DriverInput(std::uint64_t)>& input,
-                       const std::vector<std::string>& recorder_options = {}) {
+                       const std::vector<std::string>& recorder_options = {},
+                       std::uint64_t input_steps = ~0ull) {
     std::vector<std::string> args{"record", out.string(), "--domain", std::to_string(domain), "--status"};
     args.insert(args.end(), recorder_options.begin(), recorder_options.end());
     auto recorder = Recorder(args, out.filename().string() + ".log");
@@ -158,7 +160,12 @@ class RecorderTest : public ::testing::Test {
       pb::ControlRequest step;
       step.set_vehicle_id(1);
       step.mutable_step()->set_steps(1);
-      *step.mutable_step()->mutable_input() = input(k);
+      if (k < input_steps) {
+        *step.mutable_step()->mutable_input() = input(k);
+      } else {
+        step.mutable_step()->set_steps(static_cast<std::uint32_t>(steps - k));
+        k = steps - 1;
+      }
       reply = control.Call(step, 60s);
       ASSERT_TRUE(reply && reply->accepted())
           << "step " << k << ": " << control.last_error() << "\nserver:\n"
@@ -1009,6 +1016,46 @@ TEST_F(RecorderTest, VerifySaysARecordingsLastEventsAreMissingInsteadOfDiverging
   ASSERT_TRUE(compared.has_value()) << out;
   EXPECT_GE(*compared, 1500u) << out;
   EXPECT_LT(*compared, 2500u) << out;
+}
+
+// Past the last recorded event, a state that disagrees with the replay while its input agrees is
+// a divergence, not a lost tail: the input comes with the step requests up to step 1500, the
+// last 1,000 steps are one request, and one state after the recording's last event is edited
+// (its position and hash).
+TEST_F(RecorderTest, VerifyStillSaysDivergesPastTheLastEventWhenTheInputAgrees) {
+  const auto a = dir_ / "a.mcap";
+  LockstepSession(domain_, a, 2500, InputAt, {}, /*input_steps=*/1500);
+  if (HasFatalFailure()) return;
+  auto [whole_code, whole] = Run({"verify", a.string()});
+  ASSERT_EQ(whole_code, 0) << whole;
+  std::uint64_t last_event = 0;
+  CopyRecording(a, dir_ / "copy.mcap", /*chunk_crc=*/true, [&](const std::string& topic, std::string& data) {
+    if (topic.rfind("vdyn/events", 0) != 0) return;
+    pb::SessionEvent e;
+    ASSERT_TRUE(e.ParseFromString(data));
+    last_event = std::max<std::uint64_t>(last_event, e.step());
+    for (const auto& sample : e.input_batch().samples()) {
+      last_event = std::max<std::uint64_t>(last_event, sample.step());
+    }
+  });
+  ASSERT_LT(last_event + 10, 2500u) << "events up to step " << last_event;
+  const auto edited = dir_ / "edited.mcap";
+  std::uint64_t edited_step = 0;
+  CopyRecording(a, edited, /*chunk_crc=*/true, [&](const std::string& topic, std::string& data) {
+    if (topic.rfind("vdyn/state", 0) != 0 || edited_step != 0) return;
+    pb::VehicleState s;
+    ASSERT_TRUE(s.ParseFromString(data));
+    if (s.step() <= last_event + 5) return;
+    s.mutable_p_wt_w()->set_x(s.p_wt_w().x() + 1e-3);
+    s.set_state_hash(s.state_hash() ^ 1u);
+    edited_step = s.step();
+    data = s.SerializeAsString();
+  });
+  ASSERT_GT(edited_step, last_event);
+  auto [code, out] = Run({"verify", edited.string()});
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("DIVERGES at vehicle 1, step " + std::to_string(edited_step) + " "));
+  EXPECT_THAT(out, Not(HasSubstr("the recording's events end at step")));
 }
 
 // What each chunk of a recording holds: session events, and whether a world (the first channel's,

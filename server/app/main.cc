@@ -109,9 +109,10 @@ std::shared_ptr<const vdyn::World> LoadWorldFrom(const Options& o) {
 
 // Without --step-threads: one thread per 128 vehicles, at most one per hardware thread (2 for 256
 // on two cores). A second stepping thread costs more than it parallelises while other processes
-// share the cores: at 128 vehicles one thread takes 58 % of a core against 70 % for two (the loop
-// and the worker each wake the other every step), and beside a recorder and 8 rigs 97 % against
-// 116 %, with a quarter of the lateness (bench/README.md, "One stepping thread up to 128").
+// share the cores (the loop and the worker wake each other every step): at 128 vehicles the
+// server alone took 59-61 % of a core on one thread against 72-77 % on two, and beside a recorder
+// and 8 rigs 92-103 % against 104-113 %, with about half the worst lateness (bench/README.md,
+// "One stepping thread up to 128").
 int DefaultStepThreads(int max_vehicles) {
   const int hardware = std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
   return std::clamp((max_vehicles + 127) / 128, 1, hardware);

@@ -353,7 +353,7 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
   scheduling_ = scheduling + "; " + std::to_string(session_->step_threads()) +
                 " stepping thread(s); " +
                 (options_.state_writer_nice != 0 ? states_->SetWriterNice(options_.state_writer_nice)
-                                                 : std::string("state writer nice 0"));
+                                                 : states_->WriterNice());
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
       options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
@@ -1156,14 +1156,20 @@ void ServerNode::PublisherLoop() {
   // deadline: a recorder that lost a datagram of the last events gets it again (a server that
   // left at once took the session's last input events with it, and a verify of the recording
   // could not re-simulate its last half second).
+  // The events first (a re-simulation needs every one); a topic reached after the deadline is
+  // asked without waiting (a reader that went away without a word holds up the others until its
+  // lease ends, while Cyclone goes on resending to it), and only one still unacknowledged is named.
+  constexpr TopicId kAckOrder[] = {TopicId::kEvents, TopicId::kParams, TopicId::kWorld,
+                                   TopicId::kControlReply, TopicId::kDiagnostics};
+  static_assert(std::size(kAckOrder) == std::size(kReliableTopics));
   const std::int64_t deadline = publisher_deadline_ns_.load(std::memory_order_relaxed);
-  for (TopicId t : kReliableTopics) {
+  for (TopicId t : kAckOrder) {
     if (deadline == 0) break;  // set before every stop; never 0 here
-    const std::int64_t left = deadline - base::MonotonicNow().ns;
+    const std::int64_t left = std::max<std::int64_t>(0, deadline - base::MonotonicNow().ns);
     transport::RawWriter& w = *writers_[static_cast<int>(t)];
-    if (left <= 0 || !w.WaitForAcks(std::chrono::nanoseconds(left))) {
-      spdlog::warn("server '{}': {} not acknowledged by every reader by the shutdown deadline{}",
-                   server_id, transport::Spec(t).name, left <= 0 ? "" : ": " + w.last_error());
+    if (!w.WaitForAcks(std::chrono::nanoseconds(left))) {
+      spdlog::warn("server '{}': {} not acknowledged by every reader by the shutdown deadline: {}",
+                   server_id, transport::Spec(t).name, w.last_error());
     }
   }
   drops_.Report();

@@ -85,10 +85,16 @@ std::string StateOutbox::SetWriterNice(int nice) {
   const auto tid = static_cast<id_t>(writer_tid_.load(std::memory_order_acquire));
   if (setpriority(PRIO_PROCESS, tid, nice) == 0) return "state writer nice " + std::to_string(nice);
   const std::string why = std::strerror(errno);
+  return WriterNice() + " (nice " + std::to_string(nice) + " refused: " + why + ")";
+}
+
+std::string StateOutbox::WriterNice() {
+  writer_tid_.wait(0, std::memory_order_acquire);
+  const auto tid = static_cast<id_t>(writer_tid_.load(std::memory_order_acquire));
   errno = 0;
-  const int now = getpriority(PRIO_PROCESS, tid);
-  return "state writer nice " + std::to_string(errno == 0 ? now : 0) + " (nice " +
-         std::to_string(nice) + " refused: " + why + ")";
+  const int now = getpriority(PRIO_PROCESS, tid);  // -1 is a nice value too: errno tells
+  if (errno != 0) return std::string("state writer nice unknown (") + std::strerror(errno) + ")";
+  return "state writer nice " + std::to_string(now);
 }
 
 void StateOutbox::WriterLoop() {

@@ -54,6 +54,9 @@ class StateOutbox final : public StateFrames {
   // Gives the writer thread the nice value `nice` (setpriority); what it has now, in words (the
   // server's "scheduling" line), with the reason when the system refused (no CAP_SYS_NICE).
   std::string SetWriterNice(int nice);
+  // The writer thread's nice value, in words: what it inherited (e.g. `nice -n 19 vdyn-server`)
+  // when SetWriterNice was not called.
+  std::string WriterNice();
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
