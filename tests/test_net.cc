@@ -312,6 +312,29 @@ TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
   EXPECT_EQ(*nice, expected) << log;
 }
 
+// The participant that created a domain in this process (with its configuration: a receive
+// buffer) may go first: the others on it keep working. Deleting the domain with its creator took
+// every other participant of the process with it (a Python script's second client could not read).
+TEST_F(Net, AParticipantOutlivesTheOneThatCreatedItsDomain) {
+  auto first = std::make_unique<transport::Participant>(domain_, std::size_t{1} << 20);
+  transport::Participant second(domain_);
+  first.reset();
+  transport::DropCounters drops;
+  transport::Reader<pb::Diagnostics> reader(second, TopicId::kDiagnostics, &drops);
+  transport::Writer<pb::Diagnostics> writer(second, TopicId::kDiagnostics);
+  pb::Diagnostics d;
+  d.set_server_id("alive");
+  int got = 0;
+  for (int i = 0; i < 200 && got == 0; ++i) {  // written until read: at most 200 x 50 ms
+    ASSERT_TRUE(writer.Write(0, d)) << writer.last_error();
+    (void)reader.Wait(50ms);
+    (void)reader.Take([&](const pb::Diagnostics& m, const transport::SampleInfo&) {
+      got += m.server_id() == "alive";
+    });
+  }
+  EXPECT_GT(got, 0);
+}
+
 // A server sends a step's states of every vehicle as one vdyn/states sample (what a recorder
 // reads): each sample holds one state of each vehicle, all of the same step.
 TEST_F(Net, AServerSendsAStepsStatesOfEveryVehicleAsOneSample) {

@@ -1,9 +1,14 @@
 #include "vdyn/transport/control_client.h"
 
+#include <algorithm>
+
+#include "vdyn/world.pb.h"
+
 namespace vdyn::transport {
 
 ControlClient::ControlClient(Participant& participant, std::string client_id)
-    : client_id_(std::move(client_id)),
+    : participant_(participant),
+      client_id_(std::move(client_id)),
       writer_(participant, TopicId::kControl),
       reader_(participant, TopicId::kControlReply, &drops_) {}
 
@@ -15,6 +20,19 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
       return false;
     }
     (void)reader_.Wait(std::chrono::milliseconds(20));
+  }
+  Reader<pb::WorldDescription> world(participant_, TopicId::kWorld, &drops_);
+  for (bool seen = false; !seen;) {
+    seen = world.Take([](const pb::WorldDescription&, const SampleInfo&) {}) > 0;
+    if (seen) break;
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= deadline) {
+      last_error_ = "a server matched this client but its world did not arrive within " +
+                    std::to_string(timeout.count()) +
+                    " ms (it may not know where to send its replies yet)";
+      return false;
+    }
+    (void)world.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(20)));
   }
   return true;
 }

@@ -4,6 +4,8 @@
 #include <atomic>
 #include <cstdlib>
 #include <cstring>
+#include <map>
+#include <mutex>
 
 #include "vdyn/base/text.h"
 #include "vdyn/messages/checks.h"
@@ -40,9 +42,33 @@ Participant::Participant(std::uint32_t domain_id) : Participant(domain_id, Parti
 Participant::Participant(std::uint32_t domain_id, std::size_t receive_buffer_bytes)
     : Participant(domain_id, ParticipantOptions{receive_buffer_bytes, {}}) {}
 
+namespace {
+
+// The domains this process created itself (with a configuration), and the participants on each:
+// deleting a domain deletes every participant in it, so the last participant on it deletes it,
+// not the one that created it (a Python script's second client died with its first).
+struct OwnedDomain {
+  dds_entity_t handle = 0;
+  int participants = 0;
+};
+std::mutex g_domains_mu;
+std::map<std::uint32_t, OwnedDomain> g_domains;
+
+}  // namespace
+
 Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& options)
     : domain_id_(domain_id) {
-  if (options.receive_buffer_bytes > 0) {
+  std::unique_lock domains(g_domains_mu);
+  OwnedDomain& owned = g_domains[domain_id];
+  ++owned.participants;
+  struct Leave {  // undone when the constructor throws
+    std::uint32_t id;
+    bool armed = true;
+    ~Leave() {
+      if (armed) Participant::LeaveDomain(id);
+    }
+  };
+  if (options.receive_buffer_bytes > 0 && owned.handle == 0) {
     // Ours first, then the user's configuration, so that the user's settings win.
     std::string config = "<Internal><SocketReceiveBufferSize min=\"default\" max=\"" +
                          std::to_string(options.receive_buffer_bytes) + "B\"/></Internal>";
@@ -53,8 +79,10 @@ Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& opti
     // Fails when the domain exists in this process already (another participant made it): then
     // this one joins it as it is.
     const dds_entity_t d = dds_create_domain(domain_id, config.c_str());
-    if (d > 0) domain_ = d;
+    if (d > 0) owned.handle = d;
   }
+  domains.unlock();
+  Leave leave{domain_id};
   dds_qos_t* q = nullptr;
   if (!options.user_data.empty()) {
     q = dds_create_qos();
@@ -65,7 +93,6 @@ Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& opti
   if (participant_ < 0) {
     const dds_entity_t rc = participant_;
     participant_ = 0;
-    if (domain_ > 0) dds_delete(domain_);
     throw TransportError(DdsError("cannot create the DDS participant on domain " +
                                       std::to_string(domain_id),
                                   rc));
@@ -73,10 +100,19 @@ Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& opti
   dds_guid_t g;
   if (const dds_return_t rc = dds_get_guid(participant_, &g); rc != DDS_RETCODE_OK) {
     dds_delete(participant_);
-    if (domain_ > 0) dds_delete(domain_);
+    participant_ = 0;
     throw TransportError(DdsError("dds_get_guid of the participant", rc));
   }
   std::memcpy(guid_.data(), g.v, guid_.size());
+  leave.armed = false;
+}
+
+void Participant::LeaveDomain(std::uint32_t domain_id) {
+  std::lock_guard lock(g_domains_mu);
+  const auto it = g_domains.find(domain_id);
+  if (it == g_domains.end() || --it->second.participants > 0) return;
+  if (it->second.handle > 0) dds_delete(it->second.handle);
+  g_domains.erase(it);
 }
 
 bool Participant::SetUserData(std::string_view text) {
@@ -170,7 +206,7 @@ bool ParticipantReader::Take(std::vector<Peer>& out) {
 
 Participant::~Participant() {
   if (participant_ > 0) dds_delete(participant_);  // deletes every child entity too
-  if (domain_ > 0) dds_delete(domain_);
+  LeaveDomain(domain_id_);
 }
 
 dds_entity_t Participant::Topic(TopicId id) {

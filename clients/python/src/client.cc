@@ -52,8 +52,7 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                                                       .world = true,
                                                       .diagnostics = true,
                                                       .inputs = false,
-                                                      .only_vehicle = std::nullopt}),
-      states_(participant_, std::nullopt) {
+                                                      .only_vehicle = std::nullopt}) {
   const auto timeout = Ms(timeout_s);
   const auto deadline = Clock::now() + timeout;
   const std::string who = server_id.empty() ? "no vdyn server" : "server '" + server_id + "'";
@@ -144,6 +143,7 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
   }
   const auto timeout = Ms(timeout_s);
   std::map<std::uint32_t, StateTable> out;
+  StateSource& states = StepStates(timeout_s);
   std::uint32_t done = 0;
   while (done < steps) {
     std::uint32_t chunk;
@@ -169,7 +169,7 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     const std::int64_t first = reply.sim_time_ns - static_cast<std::int64_t>(chunk) * step_ns_;
     std::map<std::uint32_t, std::uint32_t> got;
     auto take = [&] {
-      (void)states_.Take([&](const pb::VehicleState& s) {
+      (void)states.Take([&](const pb::VehicleState& s) {
         if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last)
           return;
         out[s.vehicle_id()].Append(s);
@@ -202,9 +202,9 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
             std::to_string(static_cast<double>(first) * 1e-9) + " s to " +
             std::to_string(static_cast<double>(last) * 1e-9) + " s) did not arrive within " +
             Seconds(timeout_s) + " of the server's reply: missing " + missing +
-            " (states lost by this reader so far: " + std::to_string(states_.Lost()) + ")");
+            " (states lost by this reader so far: " + std::to_string(states.Lost()) + ")");
       }
-      (void)states_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
+      (void)states.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
       take();
     }
     done += chunk;
@@ -245,21 +245,70 @@ std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneu
   return out;
 }
 
+StateSource& Client::StepStates(double timeout_s) {
+  if (states_) return *states_;
+  auto states = std::make_unique<StateSource>(participant_, std::nullopt);
+  // The server must know this reader before it steps, or it sends the states to no one. The
+  // reader's announcement and then a new reader of the world go to the server in that order (one
+  // reliable stream of this participant's readers): once the world (transient-local) arrives on
+  // the second, the server has matched the first.
+  transport::DropCounters drops;
+  transport::Reader<pb::WorldDescription> world(participant_, transport::TopicId::kWorld, &drops);
+  const auto deadline = Clock::now() + Ms(timeout_s);
+  bool seen = false;
+  while (!seen) {
+    (void)world.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      seen = seen || w.server_id() == server_id_;
+    });
+    if (seen) break;
+    const auto now = Clock::now();
+    if (now >= deadline) {
+      throw TimeoutError("server '" + server_id_ + "' did not match this client's reader of the "
+                         "states within " + Seconds(timeout_s) + " (its world did not arrive again)");
+    }
+    (void)world.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  }
+  states_ = std::move(states);
+  return *states_;
+}
+
+client::SessionView& Client::LatestView(std::uint32_t vehicle_id) {
+  if (auto it = latest_.find(vehicle_id); it != latest_.end()) return *it->second;
+  const bool own = latest_.size() < kLatestPartitions;
+  if (!own && latest_all_) return *latest_all_;
+  auto view = std::make_unique<client::SessionView>(
+      participant_, client::SessionView::Topics{.states = true,
+                                                .params = false,
+                                                .world = false,
+                                                .diagnostics = false,
+                                                .inputs = false,
+                                                .only_vehicle = own ? std::optional(vehicle_id)
+                                                                    : std::nullopt});
+  if (!own) return *(latest_all_ = std::move(view));
+  return *(latest_[vehicle_id] = std::move(view));
+}
+
+std::vector<std::string> Client::StateReaders() {
+  std::lock_guard lock(mutex_);
+  std::vector<std::string> out;
+  for (const auto& [id, view] : latest_) {
+    const std::string& fallback = view->one_vehicle_fallback();
+    out.push_back("vehicle " + std::to_string(id) +
+                  (fallback.empty() ? " (its partition)" : " (every vehicle's states: " + fallback + ")"));
+  }
+  if (latest_all_) out.push_back("every vehicle (latest, beyond " +
+                                 std::to_string(kLatestPartitions) + " vehicles)");
+  if (states_) out.push_back("every vehicle (steps)");
+  return out;
+}
+
 StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
   std::lock_guard lock(mutex_);
-  if (!latest_) {
-    latest_ = std::make_unique<client::SessionView>(
-        participant_, client::SessionView::Topics{.states = true,
-                                                  .params = false,
-                                                  .world = false,
-                                                  .diagnostics = false,
-                                                  .inputs = false,
-                                                  .only_vehicle = std::nullopt});
-  }
+  client::SessionView& view = LatestView(vehicle_id);
   const auto deadline = Clock::now() + Ms(timeout_s);
   for (;;) {
-    latest_->Poll();
-    if (const auto* v = latest_->vehicle(vehicle_id)) {
+    view.Poll();
+    if (const auto* v = view.vehicle(vehicle_id)) {
       StateTable t;
       t.Append(v->state);
       return t;
@@ -270,7 +319,7 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
                          " arrived on vdyn/state within " + Seconds(timeout_s) +
                          " (a lockstep server publishes states only while it steps)");
     }
-    (void)latest_->Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+    (void)view.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
   }
 }
 

@@ -105,6 +105,7 @@ PYBIND11_MODULE(_vdyn, m) {
       .def_property_readonly("domain", &Client::domain)
       .def("world_bytes", [](Client& c) { return py::bytes(c.WorldBytes()); })
       .def("vehicles", &Client::Vehicles, Release())
+      .def_property_readonly("state_readers", &Client::StateReaders)
       .def("params_bytes",
            [](Client& c, std::uint32_t id, double timeout) {
              std::string s;

@@ -113,6 +113,13 @@ class Client:
         plus any whose states a step delivered."""
         return self._c.vehicles()
 
+    @property
+    def state_readers(self):
+        """What states this client receives, one string per reader it holds: none until
+        latest() (that vehicle's, in its partition: the others' are not sent here) or step()
+        (every vehicle's) asks. A Subscription reads on its own."""
+        return self._c.state_readers
+
     def params(self, vehicle_id, timeout=None):
         """The vehicle's parameters in effect (vdyn.pb.VehicleParams, complete)."""
         data = self._c.params_bytes(vehicle_id, self._t(timeout))

@@ -20,11 +20,17 @@ class ControlClient {
   [[nodiscard]] std::optional<pb::ControlReply> Call(pb::ControlRequest request,
                                                      std::chrono::milliseconds timeout);
   // Waits until a server's reader has matched this client's writer (a request sent before that
-  // could be lost on a volatile topic). False after the timeout.
+  // could be lost on a volatile topic) and the server has matched this client's reply reader (a
+  // reply written before that goes to no one: under load, discovery reaches one side seconds
+  // before the other). The second is seen through a reader of the world made after the reply
+  // reader: this participant announces its readers in order, on one reliable stream, so once a
+  // server's world (transient-local) arrives there, that server knows the reply reader too. False
+  // after the timeout.
   [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout);
   const std::string& last_error() const { return last_error_; }
 
  private:
+  Participant& participant_;
   std::string client_id_;
   DropCounters drops_;
   Writer<pb::ControlRequest> writer_;

@@ -88,7 +88,8 @@ class Participant {
   const std::string& last_error() const { return last_error_; }
 
  private:
-  dds_entity_t domain_ = 0;  // when this participant created the domain itself
+  // One participant fewer on the domain; the last one deletes a domain this process created.
+  static void LeaveDomain(std::uint32_t domain_id);
   dds_entity_t participant_ = 0;
   std::uint32_t domain_id_ = 0;
   Guid guid_{};
