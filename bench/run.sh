@@ -40,6 +40,7 @@ run() {  # prints the command, then runs it
   run "$bin/follow_bench" 10 3 256 1,2   # 256 vehicles stepped by 1 and by 2 threads
   run bench/recorder_scale.sh 128 2 10
   run bench/rigs_and_recorder.sh 128 default 10   # the server, a recorder and 8 rigs together
+  run /usr/bin/python3 bench/python_reader_cost.py build/release 128 3
   # VDYN_VIEWER_PEER: an earlier vdyn-viewer built apart, measured in the same run as the peer.
   run "$bin/viewer_bench" 3 300 ${VDYN_VIEWER_PEER:+"$VDYN_VIEWER_PEER"}
   PYTHONPATH=build/release/clients/python/package run /usr/bin/python3 bench/python_bench.py build/release 60 600
