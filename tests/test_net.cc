@@ -252,7 +252,8 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
 // (field 19), if it has one.
 std::optional<int> StateWriterNice(pid_t pid) {
   std::optional<int> nice;
-  for (const auto& t : std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/task")) {
+  for (const auto& t :
+       std::filesystem::directory_iterator("/proc/" + std::to_string(pid) + "/task")) {
     std::ifstream comm(t.path() / "comm");
     std::string name;
     std::getline(comm, name);

@@ -1029,15 +1029,16 @@ TEST_F(RecorderTest, VerifyStillSaysDivergesPastTheLastEventWhenTheInputAgrees) 
   auto [whole_code, whole] = Run({"verify", a.string()});
   ASSERT_EQ(whole_code, 0) << whole;
   std::uint64_t last_event = 0;
-  CopyRecording(a, dir_ / "copy.mcap", /*chunk_crc=*/true, [&](const std::string& topic, std::string& data) {
-    if (topic.rfind("vdyn/events", 0) != 0) return;
-    pb::SessionEvent e;
-    ASSERT_TRUE(e.ParseFromString(data));
-    last_event = std::max<std::uint64_t>(last_event, e.step());
-    for (const auto& sample : e.input_batch().samples()) {
-      last_event = std::max<std::uint64_t>(last_event, sample.step());
-    }
-  });
+  CopyRecording(a, dir_ / "copy.mcap", /*chunk_crc=*/true,
+                [&](const std::string& topic, std::string& data) {
+                  if (topic.rfind("vdyn/events", 0) != 0) return;
+                  pb::SessionEvent e;
+                  ASSERT_TRUE(e.ParseFromString(data));
+                  last_event = std::max<std::uint64_t>(last_event, e.step());
+                  for (const auto& sample : e.input_batch().samples()) {
+                    last_event = std::max<std::uint64_t>(last_event, sample.step());
+                  }
+                });
   ASSERT_LT(last_event + 10, 2500u) << "events up to step " << last_event;
   const auto edited = dir_ / "edited.mcap";
   std::uint64_t edited_step = 0;

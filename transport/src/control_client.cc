@@ -32,7 +32,8 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
                     " ms (it may not know where to send its replies yet)";
       return false;
     }
-    (void)world.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(20)));
+    (void)world.Wait(
+        std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(20)));
   }
   return true;
 }

@@ -263,8 +263,10 @@ StateSource& Client::StepStates(double timeout_s) {
     if (seen) break;
     const auto now = Clock::now();
     if (now >= deadline) {
-      throw TimeoutError("server '" + server_id_ + "' did not match this client's reader of the "
-                         "states within " + Seconds(timeout_s) + " (its world did not arrive again)");
+      throw TimeoutError("server '" + server_id_ +
+                         "' did not match this client's reader of the "
+                         "states within " +
+                         Seconds(timeout_s) + " (its world did not arrive again)");
     }
     (void)world.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
   }
@@ -277,13 +279,13 @@ client::SessionView& Client::LatestView(std::uint32_t vehicle_id) {
   const bool own = latest_.size() < kLatestPartitions;
   if (!own && latest_all_) return *latest_all_;
   auto view = std::make_unique<client::SessionView>(
-      participant_, client::SessionView::Topics{.states = true,
-                                                .params = false,
-                                                .world = false,
-                                                .diagnostics = false,
-                                                .inputs = false,
-                                                .only_vehicle = own ? std::optional(vehicle_id)
-                                                                    : std::nullopt});
+      participant_,
+      client::SessionView::Topics{.states = true,
+                                  .params = false,
+                                  .world = false,
+                                  .diagnostics = false,
+                                  .inputs = false,
+                                  .only_vehicle = own ? std::optional(vehicle_id) : std::nullopt});
   if (!own) return *(latest_all_ = std::move(view));
   return *(latest_[vehicle_id] = std::move(view));
 }
@@ -293,11 +295,13 @@ std::vector<std::string> Client::StateReaders() {
   std::vector<std::string> out;
   for (const auto& [id, view] : latest_) {
     const std::string& fallback = view->one_vehicle_fallback();
-    out.push_back("vehicle " + std::to_string(id) +
-                  (fallback.empty() ? " (its partition)" : " (every vehicle's states: " + fallback + ")"));
+    out.push_back(
+        "vehicle " + std::to_string(id) +
+        (fallback.empty() ? " (its partition)" : " (every vehicle's states: " + fallback + ")"));
   }
-  if (latest_all_) out.push_back("every vehicle (latest, beyond " +
-                                 std::to_string(kLatestPartitions) + " vehicles)");
+  if (latest_all_)
+    out.push_back("every vehicle (latest, beyond " + std::to_string(kLatestPartitions) +
+                  " vehicles)");
   if (states_) out.push_back("every vehicle (steps)");
   return out;
 }

@@ -350,10 +350,10 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
     const std::string refused = session_->SetStepThreadsPriority(options_.rt_priority);
     if (!refused.empty()) scheduling += "; stepping workers: " + refused;
   }
-  scheduling_ = scheduling + "; " + std::to_string(session_->step_threads()) +
-                " stepping thread(s); " +
-                (options_.state_writer_nice != 0 ? states_->SetWriterNice(options_.state_writer_nice)
-                                                 : states_->WriterNice());
+  scheduling_ =
+      scheduling + "; " + std::to_string(session_->step_threads()) + " stepping thread(s); " +
+      (options_.state_writer_nice != 0 ? states_->SetWriterNice(options_.state_writer_nice)
+                                       : states_->WriterNice());
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
       options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
