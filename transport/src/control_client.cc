@@ -1,6 +1,7 @@
 #include "vdyn/transport/control_client.h"
 
 #include <algorithm>
+#include <memory>
 
 #include "vdyn/world.pb.h"
 
@@ -21,7 +22,13 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
     }
     (void)reader_.Wait(std::chrono::milliseconds(20));
   }
-  Reader<pb::WorldDescription> world(participant_, TopicId::kWorld, &drops_);
+  std::unique_ptr<Reader<pb::WorldDescription>> reader;
+  try {
+    reader = std::make_unique<Reader<pb::WorldDescription>>(participant_, TopicId::kWorld, &drops_);
+  } catch (const TransportError&) {
+    return true;  // not permitted to read the world (DDS Security): matched on this side only
+  }
+  Reader<pb::WorldDescription>& world = *reader;
   for (bool seen = false; !seen;) {
     seen = world.Take([](const pb::WorldDescription&, const SampleInfo&) {}) > 0;
     if (seen) break;

@@ -24,8 +24,9 @@ class ControlClient {
   // reply written before that goes to no one: under load, discovery reaches one side seconds
   // before the other). The second is seen through a reader of the world made after the reply
   // reader: this participant announces its readers in order, on one reliable stream, so once a
-  // server's world (transient-local) arrives there, that server knows the reply reader too. False
-  // after the timeout.
+  // server's world (transient-local) arrives there, that server knows the reply reader too (a
+  // participant not permitted to read the world, under DDS Security, skips this). False after the
+  // timeout.
   [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout);
   const std::string& last_error() const { return last_error_; }
 
