@@ -236,19 +236,23 @@ TEST(Cli, ASpawnInsideAWallIsRefused) {
   EXPECT_THAT(r.output, HasSubstr("the body would start inside 'glass_barrier'"));
 }
 
+// vdyn-server run with `args` exits with `code` and says `text`.
+void ExpectServerSays(const std::string& args, int code, const std::string& text) {
+  const Result r = RunServer(args);
+  EXPECT_EQ(r.exit_code, code) << args << "\n" << r.output;
+  EXPECT_THAT(r.output, HasSubstr(text)) << args;
+}
+
 // A binary that reads no options still answers a bad command line with exit code 2.
 TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   testing::UseLoopbackDds();
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
-  const Result twice = RunServer("--vehicle-ids 1,1 --duration 1" + domain);
-  EXPECT_EQ(twice.exit_code, 2) << twice.output;
-  EXPECT_THAT(twice.output, HasSubstr("vdyn-server: --vehicle-ids: vehicle 1 is listed twice"));
-  const Result over = RunServer("--max-vehicles 2 --vehicle-ids 1,2,3 --duration 1" + domain);
-  EXPECT_EQ(over.exit_code, 2) << over.output;
-  EXPECT_THAT(over.output, HasSubstr("this server runs its maximum of 2 vehicles"));
-  const Result nowhere = RunServer("--world facility --spawn 5000,5000,0 --duration 1" + domain);
-  EXPECT_EQ(nowhere.exit_code, 2) << nowhere.output;
-  EXPECT_THAT(nowhere.output, HasSubstr("no terrain below wheel"));
+  ExpectServerSays("--vehicle-ids 1,1 --duration 1" + domain, 2,
+                   "vdyn-server: --vehicle-ids: vehicle 1 is listed twice");
+  ExpectServerSays("--max-vehicles 2 --vehicle-ids 1,2,3 --duration 1" + domain, 2,
+                   "this server runs its maximum of 2 vehicles");
+  ExpectServerSays("--world facility --spawn 5000,5000,0 --duration 1" + domain, 2,
+                   "no terrain below wheel");
 }
 
 // Without --step-threads the server steps up to 128 --max-vehicles on its loop thread alone (a
@@ -257,17 +261,14 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
 TEST(Cli, ServerChoosesOneSteppingThreadPer128Vehicles) {
   testing::UseLoopbackDds();
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
-  const Result one = RunServer("--max-vehicles 128 --duration 0.05 --no-status" + domain);
-  EXPECT_EQ(one.exit_code, 0) << one.output;
-  EXPECT_THAT(one.output, HasSubstr("; 1 stepping thread(s);"));
+  ExpectServerSays("--max-vehicles 128 --duration 0.05 --no-status" + domain, 0,
+                   "; 1 stepping thread(s);");
   if (std::thread::hardware_concurrency() >= 2) {
-    const Result two = RunServer("--max-vehicles 129 --duration 0.05 --no-status" + domain);
-    EXPECT_EQ(two.exit_code, 0) << two.output;
-    EXPECT_THAT(two.output, HasSubstr("; 2 stepping thread(s);"));
+    ExpectServerSays("--max-vehicles 129 --duration 0.05 --no-status" + domain, 0,
+                     "; 2 stepping thread(s);");
   }
-  const Result asked = RunServer("--step-threads 3 --duration 0.05 --no-status" + domain);
-  EXPECT_EQ(asked.exit_code, 0) << asked.output;
-  EXPECT_THAT(asked.output, HasSubstr("; 3 stepping thread(s);"));
+  ExpectServerSays("--step-threads 3 --duration 0.05 --no-status" + domain, 0,
+                   "; 3 stepping thread(s);");
 }
 
 // A server id goes into every message the server sends: empty, longer than an id may be (64

@@ -313,6 +313,22 @@ TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
   EXPECT_EQ(*nice, expected) << log;
 }
 
+// A peer that matches a client's request writer and reply reader but never publishes a world
+// (so nothing shows it knows the reply reader): WaitForServer says so within its timeout, instead
+// of letting the first reply go to no one.
+TEST_F(Net, WaitForServerSaysWhenNoWorldShowsTheServerKnowsTheClient) {
+  transport::Participant peer(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::ControlRequest> requests(peer, TopicId::kControl, &drops);
+  transport::Writer<pb::ControlReply> replies(peer, TopicId::kControlReply);
+  transport::Participant p(domain_);
+  transport::ControlClient control(p, "test");
+  const auto t0 = std::chrono::steady_clock::now();
+  EXPECT_FALSE(control.WaitForServer(1500ms));
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 30s);  // bounded (generous on a loaded machine)
+  EXPECT_THAT(control.last_error(), HasSubstr("its world did not arrive within 1500 ms"));
+}
+
 // The participant that created a domain in this process (with its configuration: a receive
 // buffer) may go first: the others on it keep working. Deleting the domain with its creator took
 // every other participant of the process with it (a Python script's second client could not read).

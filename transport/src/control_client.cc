@@ -7,6 +7,28 @@
 
 namespace vdyn::transport {
 
+bool WaitUntilServerKnowsReaders(Participant& participant, std::chrono::milliseconds timeout,
+                                 const std::string& server_id) {
+  DropCounters drops;
+  std::unique_ptr<Reader<pb::WorldDescription>> world;
+  try {
+    world = std::make_unique<Reader<pb::WorldDescription>>(participant, TopicId::kWorld, &drops);
+  } catch (const TransportError&) {
+    return true;  // not permitted to read the world (DDS Security): nothing to wait on
+  }
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    bool seen = false;
+    (void)world->Take([&](const pb::WorldDescription& w, const SampleInfo&) {
+      seen = seen || server_id.empty() || w.server_id() == server_id;
+    });
+    if (seen) return true;
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= deadline) return false;
+    (void)world->Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(20)));
+  }
+}
+
 ControlClient::ControlClient(Participant& participant, std::string client_id)
     : participant_(participant),
       client_id_(std::move(client_id)),
@@ -22,25 +44,13 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
     }
     (void)reader_.Wait(std::chrono::milliseconds(20));
   }
-  std::unique_ptr<Reader<pb::WorldDescription>> reader;
-  try {
-    reader = std::make_unique<Reader<pb::WorldDescription>>(participant_, TopicId::kWorld, &drops_);
-  } catch (const TransportError&) {
-    return true;  // not permitted to read the world (DDS Security): matched on this side only
-  }
-  Reader<pb::WorldDescription>& world = *reader;
-  for (bool seen = false; !seen;) {
-    seen = world.Take([](const pb::WorldDescription&, const SampleInfo&) {}) > 0;
-    if (seen) break;
-    const auto now = std::chrono::steady_clock::now();
-    if (now >= deadline) {
-      last_error_ = "a server matched this client but its world did not arrive within " +
-                    std::to_string(timeout.count()) +
-                    " ms (it may not know where to send its replies yet)";
-      return false;
-    }
-    (void)world.Wait(
-        std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(20)));
+  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::max(deadline - std::chrono::steady_clock::now(), std::chrono::steady_clock::duration{}));
+  if (!WaitUntilServerKnowsReaders(participant_, left)) {
+    last_error_ = "a server matched this client but its world did not arrive within " +
+                  std::to_string(timeout.count()) +
+                  " ms (it may not know where to send its replies yet)";
+    return false;
   }
   return true;
 }

@@ -248,27 +248,10 @@ std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneu
 StateSource& Client::StepStates(double timeout_s) {
   if (states_) return *states_;
   auto states = std::make_unique<StateSource>(participant_, std::nullopt);
-  // The server must know this reader before it steps, or it sends the states to no one. The
-  // reader's announcement and then a new reader of the world go to the server in that order (one
-  // reliable stream of this participant's readers): once the world (transient-local) arrives on
-  // the second, the server has matched the first.
-  transport::DropCounters drops;
-  transport::Reader<pb::WorldDescription> world(participant_, transport::TopicId::kWorld, &drops);
-  const auto deadline = Clock::now() + Ms(timeout_s);
-  bool seen = false;
-  while (!seen) {
-    (void)world.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
-      seen = seen || w.server_id() == server_id_;
-    });
-    if (seen) break;
-    const auto now = Clock::now();
-    if (now >= deadline) {
-      throw TimeoutError("server '" + server_id_ +
-                         "' did not match this client's reader of the "
-                         "states within " +
-                         Seconds(timeout_s) + " (its world did not arrive again)");
-    }
-    (void)world.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  // The server must know this reader before it steps, or it sends the states to no one.
+  if (!transport::WaitUntilServerKnowsReaders(participant_, Ms(timeout_s), server_id_)) {
+    throw TimeoutError("server '" + server_id_ + "' did not match this client's reader of the states within " +
+                       Seconds(timeout_s) + " (its world did not arrive again)");
   }
   states_ = std::move(states);
   return *states_;

@@ -11,6 +11,17 @@
 
 namespace vdyn::transport {
 
+// Waits until a server (the one named `server_id`, or any) has matched every reader this
+// participant made before the call: a sample written to a reader it does not know yet goes to no
+// one, and under load discovery reaches one side seconds before the other. Seen through a new
+// reader of the world: this participant announces its readers in order, on one reliable stream,
+// so once that server's world (transient-local) arrives there, it knows the earlier readers too.
+// True then, or at once when the participant may not read the world (DDS Security); false after
+// the timeout.
+[[nodiscard]] bool WaitUntilServerKnowsReaders(Participant& participant,
+                                               std::chrono::milliseconds timeout,
+                                               const std::string& server_id = {});
+
 class ControlClient {
  public:
   ControlClient(Participant& participant, std::string client_id);
@@ -20,13 +31,8 @@ class ControlClient {
   [[nodiscard]] std::optional<pb::ControlReply> Call(pb::ControlRequest request,
                                                      std::chrono::milliseconds timeout);
   // Waits until a server's reader has matched this client's writer (a request sent before that
-  // could be lost on a volatile topic) and the server has matched this client's reply reader (a
-  // reply written before that goes to no one: under load, discovery reaches one side seconds
-  // before the other). The second is seen through a reader of the world made after the reply
-  // reader: this participant announces its readers in order, on one reliable stream, so once a
-  // server's world (transient-local) arrives there, that server knows the reply reader too (a
-  // participant not permitted to read the world, under DDS Security, skips this). False after the
-  // timeout.
+  // could be lost on a volatile topic) and a server has matched this client's reply reader
+  // (WaitUntilServerKnowsReaders). False after the timeout.
   [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout);
   const std::string& last_error() const { return last_error_; }
 
