@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -313,10 +314,10 @@ TEST_F(Net, TheStateWriterRunsAtTheNiceValueTheServerReports) {
   EXPECT_EQ(*nice, expected) << log;
 }
 
-// A peer that matches a client's request writer and reply reader but never publishes a world
-// (so nothing shows it knows the reply reader): WaitForServer says so within its timeout, instead
-// of letting the first reply go to no one.
-TEST_F(Net, WaitForServerSaysWhenNoWorldShowsTheServerKnowsTheClient) {
+// A peer that matches a client's request writer and reply reader but answers nothing (as a
+// recorder's reader of requests matches it): WaitForServer says so within its timeout, instead of
+// letting the first request go to no server.
+TEST_F(Net, WaitForServerSaysWhenAMatchedPeerAnswersNoHello) {
   transport::Participant peer(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::ControlRequest> requests(peer, TopicId::kControl, &drops);
@@ -326,7 +327,47 @@ TEST_F(Net, WaitForServerSaysWhenNoWorldShowsTheServerKnowsTheClient) {
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_FALSE(control.WaitForServer(1500ms));
   EXPECT_LT(std::chrono::steady_clock::now() - t0, 30s);  // bounded (generous on a loaded machine)
-  EXPECT_THAT(control.last_error(), HasSubstr("its world did not arrive within 1500 ms"));
+  EXPECT_THAT(control.last_error(), HasSubstr("answered none of its"));
+  EXPECT_THAT(control.last_error(), HasSubstr("within 1500 ms"));
+}
+
+// A hello that reaches no one (the server had not discovered the client's writer yet: here, a
+// peer that ignores the first) is sent again until one is answered, and only the named server's
+// answer counts.
+TEST_F(Net, WaitForServerSendsHelloAgainUntilTheNamedServerAnswers) {
+  transport::Participant peer(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::ControlRequest> requests(peer, TopicId::kControl, &drops);
+  transport::Writer<pb::ControlReply> replies(peer, TopicId::kControlReply);
+  std::atomic<bool> stop{false};
+  std::atomic<int> hellos{0};
+  std::thread answerer([&] {
+    const auto give_up = std::chrono::steady_clock::now() + 60s;
+    while (!stop.load() && std::chrono::steady_clock::now() < give_up) {
+      (void)requests.Wait(20ms);
+      (void)requests.Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
+        if (!r.has_hello() || r.server_id() != "lab-b") return;
+        if (hellos.fetch_add(1) == 0) return;  // the first is lost
+        pb::ControlReply other;                // another server's answer does not count
+        other.set_request_id(r.request_id());
+        other.set_client_id(r.client_id());
+        other.set_server_id("lab-a");
+        other.set_accepted(true);
+        (void)replies.Write(0, other);
+        pb::ControlReply reply = other;
+        reply.set_server_id("lab-b");
+        (void)replies.Write(0, reply);
+      });
+    }
+  });
+  transport::Participant p(domain_);
+  transport::ControlClient control(p, "test");
+  const bool answered = control.WaitForServer(30s, "lab-b");
+  stop.store(true);
+  answerer.join();
+  ASSERT_TRUE(answered) << control.last_error();
+  EXPECT_GE(hellos.load(), 2);
+  EXPECT_EQ(control.answering_server(), "lab-b");
 }
 
 // The participant that created a domain in this process (with its configuration: a receive

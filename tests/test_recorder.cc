@@ -499,7 +499,8 @@ TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
                         "--no-status", "--server-id", "player-1"},
                        "play.log");
   transport::ControlClient control(p, "viewer");
-  ASSERT_TRUE(control.WaitForServer(60s)) << play->Log();
+  ASSERT_TRUE(control.WaitForServer(60s)) << control.last_error() << play->Log();
+  EXPECT_EQ(control.answering_server(), "player-1");  // the player answers a hello too
   // A late joiner gets the world and parameters at once (they are republished as recorded).
   transport::Reader<pb::WorldDescription> world(p, TopicId::kWorld, &drops);
   bool got_world = false;

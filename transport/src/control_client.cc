@@ -35,24 +35,57 @@ ControlClient::ControlClient(Participant& participant, std::string client_id)
       writer_(participant, TopicId::kControl),
       reader_(participant, TopicId::kControlReply, &drops_) {}
 
-bool ControlClient::WaitForServer(std::chrono::milliseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
+bool ControlClient::WaitForServer(std::chrono::milliseconds timeout, const std::string& server_id) {
+  using Clock = std::chrono::steady_clock;
+  const auto deadline = Clock::now() + timeout;
   while (writer_.MatchedReaders() == 0 || reader_.MatchedWriters() == 0) {
-    if (std::chrono::steady_clock::now() >= deadline) {
+    if (Clock::now() >= deadline) {
       last_error_ = "no server matched within " + std::to_string(timeout.count()) + " ms";
       return false;
     }
     (void)reader_.Wait(std::chrono::milliseconds(20));
   }
-  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-      std::max(deadline - std::chrono::steady_clock::now(), std::chrono::steady_clock::duration{}));
-  if (!WaitUntilServerKnowsReaders(participant_, left)) {
-    last_error_ = "a server matched this client but its world did not arrive within " +
-                  std::to_string(timeout.count()) +
-                  " ms (it may not know where to send its replies yet)";
-    return false;
+  // Matching shows only this side's view (and a recorder's reader of requests matches too): a
+  // hello, sent again until one is answered, shows both ways work from the server's side.
+  pb::ControlRequest hello;
+  hello.mutable_hello();
+  hello.set_client_id(client_id_);
+  hello.set_server_id(server_id);
+  const std::uint64_t first_id = next_id_;
+  int sent = 0;
+  auto send_at = Clock::now();
+  for (;;) {
+    auto now = Clock::now();
+    if (now >= send_at && now < deadline) {
+      hello.set_request_id(next_id_++);
+      if (!writer_.Write(0, hello)) {
+        last_error_ = writer_.last_error();
+        return false;
+      }
+      ++sent;
+      send_at = now + kHelloInterval;
+    }
+    bool answered = false;
+    (void)reader_.Take([&](const pb::ControlReply& r, const SampleInfo&) {
+      if (answered || r.client_id() != client_id_ || r.request_id() < first_id ||
+          r.request_id() >= next_id_ || (!server_id.empty() && r.server_id() != server_id)) {
+        return;
+      }
+      answered = true;
+      answering_server_ = r.server_id();
+    });
+    if (answered) return true;
+    now = Clock::now();
+    if (now >= deadline) {
+      last_error_ = std::string(server_id.empty() ? "a server" : "server '" + server_id + "'") +
+                    " matched this client but answered none of its " + std::to_string(sent) +
+                    " hello request(s) within " + std::to_string(timeout.count()) +
+                    " ms (it may not have discovered this client yet, or it is not a vdyn "
+                    "server)";
+      return false;
+    }
+    (void)reader_.Wait(std::max<Clock::duration>(std::min(deadline, send_at) - now, {}));
   }
-  return true;
 }
 
 std::optional<pb::ControlReply> ControlClient::Call(pb::ControlRequest request,

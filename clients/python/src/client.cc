@@ -57,13 +57,7 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
   const auto deadline = Clock::now() + timeout;
   const std::string who = server_id.empty() ? "no vdyn server" : "server '" + server_id + "'";
   const std::string where = " on DDS domain " + std::to_string(domain);
-  if (!control_.WaitForServer(timeout)) {
-    throw TimeoutError(
-        who + where + " answered within " + Seconds(timeout_s) +
-        ": no reader of vdyn/control matched (is vdyn-server running with --domain " +
-        std::to_string(domain) + "?)");
-  }
-  // The world is transient-local: a server's arrives at once after matching.
+  // The world is transient-local: a server's arrives as soon as its writer and this reader match.
   for (;;) {
     view_.Poll();
     const auto& worlds = view_.worlds();
@@ -73,11 +67,20 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
     if (now >= deadline) {
       std::string seen;
       for (const auto& [id, w] : worlds) seen += (seen.empty() ? "" : ", ") + id;
-      throw TimeoutError("no world description from " + who + where + " arrived within " +
-                         Seconds(timeout_s) +
-                         (seen.empty() ? std::string() : " (worlds seen: " + seen + ")"));
+      throw TimeoutError(
+          who + where + " answered within " + Seconds(timeout_s) +
+          ": no world description arrived" +
+          (seen.empty() ? " (is vdyn-server running with --domain " + std::to_string(domain) + "?)"
+                        : " (worlds seen: " + seen + ")"));
     }
     (void)view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  }
+  // Then a request's round trip: that server takes this client's requests and reaches its replies.
+  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::max<Clock::duration>(deadline - Clock::now(), std::chrono::milliseconds(1)));
+  if (!control_.WaitForServer(left, server_id_)) {
+    throw TimeoutError("server '" + server_id_ + "'" + where + " did not answer within " +
+                       Seconds(timeout_s) + ": " + control_.last_error());
   }
   const pb::WorldDescription& w = view_.worlds().at(server_id_);
   if (w.step_ns() > 0) step_ns_ = w.step_ns();

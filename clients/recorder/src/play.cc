@@ -363,7 +363,8 @@ void Player::HandleKeys(const std::string& keys, bool& quit) {
 
 void Player::HandleRequests() {
   (void)control_->Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
-    const bool player_command = r.has_pause() || r.has_resume() || r.has_step() || r.has_playback();
+    const bool player_command =
+        r.has_pause() || r.has_resume() || r.has_step() || r.has_playback() || r.has_hello();
     if (!player_command) return;  // for a server
     if (!r.server_id().empty() && r.server_id() != o_.server_id) return;
     pb::ControlReply reply;
@@ -372,7 +373,9 @@ void Player::HandleRequests() {
     reply.set_vehicle_id(r.vehicle_id());
     reply.set_server_id(o_.server_id);
     reply.set_accepted(true);
-    if (r.has_pause()) {
+    if (r.has_hello()) {
+      // accepted: nothing to do
+    } else if (r.has_pause()) {
       Anchor(Position());
       paused_ = true;
     } else if (r.has_resume()) {

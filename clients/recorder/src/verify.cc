@@ -856,7 +856,8 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   transport::ControlClient control(participant, "vdyn-recorder takeover");
-  if (!control.WaitForServer(std::chrono::milliseconds(static_cast<std::int64_t>(o.wait_s * 1000)))) {
+  if (!control.WaitForServer(std::chrono::milliseconds(static_cast<std::int64_t>(o.wait_s * 1000)),
+                             live->server_id())) {
     out << "vdyn-recorder takeover: " << control.last_error() << "\n";
     return finish(1);
   }

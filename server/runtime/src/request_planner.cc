@@ -118,6 +118,9 @@ RequestPlanner::Plan RequestPlanner::Prepare(std::shared_ptr<const pb::ControlRe
     case pb::ControlRequest::kPlayback:
       why = "playback requests are for a player (vdyn-recorder play), not a server";
       break;
+    case pb::ControlRequest::kHello:
+      plan.hello = true;
+      return plan;
     case pb::ControlRequest::COMMAND_NOT_SET:
       why = "the request names no command";
       break;

@@ -882,14 +882,16 @@ bool ServerNode::ForThisServer(const pb::ControlRequest& r) const {
   // The receiver passes requests for this server by name, and those for whichever server owns
   // the vehicle: a vehicle command of that kind is for another server unless this one has it.
   if (!r.server_id().empty()) return true;
-  const bool server_wide = r.has_pause() || r.has_resume() || r.has_step() || r.has_spawn();
+  const bool server_wide =
+      r.has_pause() || r.has_resume() || r.has_step() || r.has_spawn() || r.has_hello();
   return server_wide || planner_->Knows(r.vehicle_id());
 }
 
 void ServerNode::AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, std::string why) {
   RequestOutcome o;
   o.request = r;
-  o.why = RequestOutcome::Why::kText;
+  o.accepted = why.empty();
+  o.why = why.empty() ? RequestOutcome::Why::kNone : RequestOutcome::Why::kText;
   o.text = std::move(why);
   o.sim_time_ns = sim_time_ns_.load(std::memory_order_relaxed);
   if (!answers_.TryPush(std::move(o))) NoRoomToAnswer();  // room checked before
@@ -945,6 +947,10 @@ void ServerNode::RequestLoop() {
       }
       RequestPlanner::Plan plan = planner_->Prepare(request);
       if (!plan.bad_step_input.empty()) drops_.Count(drop_step_input_, plan.bad_step_input);
+      if (plan.hello) {
+        AnswerHere(request, {});  // accepted, at once: nothing to apply
+        continue;
+      }
       if (!plan.prepared) {
         AnswerHere(request, std::move(plan.refusal));
         continue;

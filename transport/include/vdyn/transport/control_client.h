@@ -30,10 +30,16 @@ class ControlClient {
   // the reply. Without a reply in time: nullopt and last_error() says so.
   [[nodiscard]] std::optional<pb::ControlReply> Call(pb::ControlRequest request,
                                                      std::chrono::milliseconds timeout);
-  // Waits until a server's reader has matched this client's writer (a request sent before that
-  // could be lost on a volatile topic) and a server has matched this client's reply reader
-  // (WaitUntilServerKnowsReaders). False after the timeout.
-  [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout);
+  // Waits until a server (the one named `server_id`, or any) answers a hello request, sent again
+  // every kHelloInterval until one is answered: then that server takes this client's requests
+  // and reaches its reply reader. Matching alone does not show it: a request or reply written
+  // before the other side has discovered its writer's peer reaches no one, and a recorder's
+  // reader of requests matches this client's writer as a server's does. False after the timeout.
+  [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout,
+                                   const std::string& server_id = {});
+  // The server that answered the last successful WaitForServer.
+  const std::string& answering_server() const { return answering_server_; }
+  static constexpr std::chrono::milliseconds kHelloInterval{250};
   const std::string& last_error() const { return last_error_; }
 
  private:
@@ -44,6 +50,7 @@ class ControlClient {
   Reader<pb::ControlReply> reader_;
   std::uint64_t next_id_ = 1;
   std::string last_error_;
+  std::string answering_server_;
 };
 
 }  // namespace vdyn::transport

@@ -35,6 +35,8 @@ class RequestPlanner {
     // A step request's input that cannot be applied (its vehicle, its ranges): the steps run
     // without it; the caller counts it.
     std::string bad_step_input;
+    // A hello: nothing to plan or apply; the caller answers it (accepted).
+    bool hello = false;
   };
   // Plans a request; the request is shared with the outcome and the events that name it.
   [[nodiscard]] Plan Prepare(std::shared_ptr<const pb::ControlRequest> request);

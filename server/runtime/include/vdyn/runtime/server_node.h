@@ -152,6 +152,7 @@ class ServerNode {
   // Request thread.
   void RequestLoop();
   bool ForThisServer(const pb::ControlRequest& r) const;
+  // Answers `r` from the request thread: refused with `why`, or accepted when `why` is empty.
   void AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, std::string why);
   // Publisher thread.
   void PublisherLoop();
