@@ -663,6 +663,44 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
 
 // --- bad input and back pressure -------------------------------------------------------------------
 
+// "recording world" means the server knows every reader of the recorder (WaitForWorld above
+// relies on it): a participant announces its readers in order, and the recorder announces its
+// world reader after all the others. Seen here in the order of their announcements' timestamps.
+TEST_F(RecorderTest, TheRecorderAnnouncesItsWorldReaderAfterEveryOtherReader) {
+  auto recorder = Recorder(
+      {"record", (dir_ / "order.mcap").string(), "--domain", std::to_string(domain_)}, "rec.log");
+  transport::Participant p(domain_);
+  const dds_entity_t subscriptions =
+      dds_create_reader(p.handle(), DDS_BUILTIN_TOPIC_DCPSSUBSCRIPTION, nullptr, nullptr);
+  ASSERT_GT(subscriptions, 0) << dds_strretcode(subscriptions);
+  std::map<std::string, dds_time_t> announced;  // topic name -> its reader's announcement time
+  const std::size_t want = transport::AllTopics().size();
+  const auto deadline = std::chrono::steady_clock::now() + 60s;
+  while (announced.size() < want && std::chrono::steady_clock::now() < deadline &&
+         recorder->running()) {
+    void* samples[16] = {};
+    dds_sample_info_t infos[16];
+    const dds_return_t n = dds_take(subscriptions, samples, infos, 16, 16);
+    ASSERT_GE(n, 0) << dds_strretcode(n);
+    for (int i = 0; i < n; ++i) {
+      if (!infos[i].valid_data) continue;
+      const auto* ep = static_cast<const dds_builtintopic_endpoint_t*>(samples[i]);
+      const std::string topic = ep->topic_name;
+      if (topic.rfind("vdyn/", 0) == 0) announced[topic] = infos[i].source_timestamp;
+    }
+    if (n > 0) (void)dds_return_loan(subscriptions, samples, n);
+    if (n == 0) std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_EQ(announced.size(), want) << recorder->Log();
+  const dds_time_t world = announced.at("vdyn/world");
+  for (const auto& [topic, t] : announced) {
+    if (topic != "vdyn/world") {
+      EXPECT_LT(t, world) << topic;
+    }
+  }
+  dds_delete(subscriptions);
+}
+
 TEST_F(RecorderTest, ARecorderThatCannotKeepUpSaysSoAndCountsWhatItDropped) {
   // A buffer of 1 MiB cannot hold the 2 MB world description: it is dropped and counted (and the
   // buffer never grows past its bound); the states still fit.

@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <exception>
+#include <optional>
 #include <thread>
 #include <tuple>
 #include <unordered_map>
@@ -600,8 +601,18 @@ struct Capture::Impl {
 
 Capture::Capture(transport::Participant& participant, RecordOptions options)
     : impl_(std::make_unique<Impl>(participant, std::move(options))) {
+  // The world's reader is made last, and put back in its place among the others: a server's
+  // world reaching it ("recording world ...") then shows that server has matched every reader
+  // made before it (a participant announces its readers in order, on one reliable stream), so
+  // nothing it writes afterwards is lost to a reader it did not know yet.
+  std::optional<std::size_t> world_at;
   for (const transport::TopicSpec& s : transport::AllTopics()) {
     if (s.id == TopicId::kStates || !impl_->Wanted(s.id)) continue;
+    if (s.id == TopicId::kWorld) {
+      impl_->counts[s.id];
+      world_at = impl_->readers.size();
+      continue;
+    }
     impl_->counts[s.id];
     transport::ReaderRole role = transport::ReaderRole::kRecorder;
     if (s.id == TopicId::kState) {
@@ -621,6 +632,12 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
     }
     impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
                                           participant, s.id, &impl_->drops, role));
+  }
+  if (world_at) {
+    auto world = std::make_unique<transport::RawReader>(participant, TopicId::kWorld, &impl_->drops,
+                                                        transport::ReaderRole::kRecorder);
+    impl_->readers.emplace(impl_->readers.begin() + static_cast<std::ptrdiff_t>(*world_at),
+                           TopicId::kWorld, std::move(world));
   }
   if (const std::string advice = ReceiveBufferAdvice(KernelReceiveBufferMax()); !advice.empty()) {
     spdlog::warn("vdyn-recorder: {}", advice);
