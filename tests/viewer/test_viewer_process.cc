@@ -828,7 +828,7 @@ TEST_F(ViewerProcess, AfterARestoreTheHudsTimeAndStepAgree) {
   ASSERT_TRUE(WaitForServer(db, 2, 60)) << b.Log();
   transport::Participant pb_(db);
   transport::ControlClient client(pb_, "test-takeover");
-  ASSERT_TRUE(client.WaitForServer(std::chrono::seconds(30)));
+  ASSERT_TRUE(client.WaitForServer(std::chrono::seconds(30), "b")) << client.last_error();
   pb::ControlRequest r;
   r.set_vehicle_id(1);
   r.set_server_id("b");
