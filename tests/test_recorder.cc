@@ -621,7 +621,21 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
     });
   }
   ASSERT_TRUE(branch.has_value()) << takeover->Log() << server->Log();
-  ASSERT_EQ(*branch, 1200u) << takeover->Log();
+  ASSERT_EQ(*branch, 1200u) << takeover->Log() << "at " << at << " s; states around it:\n"
+                            <<
+      [&] {
+        std::ostringstream around;  // what chose the branch point: each state's step and log time
+        mcap::Reader reader(a);
+        recorder::RecordingVisitor v;
+        v.wants = [](TopicId t) { return t == TopicId::kState; };
+        v.on_message = [&](const recorder::RecordedMessage& m) {
+          const std::uint64_t s = recorder::wire::Number(m.data, 3).value_or(0);
+          if (s >= 1180 && s <= 1210)
+            around << "  step " << s << " key " << m.key << " log " << m.log_time - first << "\n";
+        };
+        recorder::ScanRecording(reader, v);
+        return around.str();
+      }();
   for (int i = 0; i < 500 && takeover->Log().find("at step 1200") == std::string::npos; ++i) {
     std::this_thread::sleep_for(20ms);  // its reply may come a moment after the event
   }
@@ -965,6 +979,60 @@ TEST_F(RecorderTest, AStepBatchIsRecordedVehicleByVehicleAndABrokenOneIsCounted)
   }
   EXPECT_EQ(both, 2u) << info;
   EXPECT_THAT(info, ::testing::HasSubstr("counted 1 malformed on vdyn/state")) << info;  // the broken one
+}
+
+// A participant that sends a state on vdyn/states and, not heeding the recorder's mark, on
+// vdyn/state too: the recorder records it once (from vdyn/states) and says why it drops the
+// copies; another participant's vdyn/state (a tool of its own) is recorded as before.
+TEST_F(RecorderTest, AStateAlsoSentOnVdynStateByItsBatchWritersParticipantIsRecordedOnce) {
+  const auto file = dir_ / "once.mcap";
+  auto recorder = Recorder(
+      {"record", file.string(), "--domain", std::to_string(domain_), "--status"}, "rec.log");
+  transport::Participant server(domain_);
+  transport::RawWriter batches(server, TopicId::kStates);
+  transport::Writer<pb::VehicleState> copies(server, TopicId::kState);
+  transport::Participant tool(domain_);
+  transport::Writer<pb::VehicleState> own(tool, TopicId::kState);
+  auto matched = [&] {
+    const std::string log = recorder->Log();
+    return log.find("hearing 1 writer(s) on vdyn/states") != std::string::npos &&
+           log.find("hearing 2 writer(s) on vdyn/state\n") != std::string::npos &&
+           batches.MatchedReaders() >= 1 && copies.MatchedReaders() >= 1 &&
+           own.MatchedReaders() >= 1;
+  };
+  ASSERT_TRUE(WaitWhileRunning(*recorder, matched)) << recorder->Log();
+  for (std::uint64_t step = 1; step <= 5; ++step) {
+    pb::VehicleState st;
+    st.set_server_id("fake");
+    st.set_vehicle_id(7);
+    st.set_step(step);
+    pb::VehicleStates b;
+    *b.add_states() = st;
+    const std::string bytes = b.SerializeAsString();
+    ASSERT_TRUE(batches.WriteBytes(
+        42, {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()}));
+    ASSERT_TRUE(copies.Write(7, st)) << copies.last_error();
+    st.set_server_id("tool");
+    st.set_vehicle_id(9);
+    ASSERT_TRUE(own.Write(9, st)) << own.last_error();
+    std::this_thread::sleep_for(20ms);  // paced: a best-effort topic
+  }
+  auto taken = [&] {
+    const std::string log = recorder->Log();
+    return log.find("| state 10 ") != std::string::npos &&
+           log.find("its vdyn/state samples are copies") != std::string::npos;
+  };
+  ASSERT_TRUE(WaitWhileRunning(*recorder, taken)) << recorder->Log();
+  Stop(*recorder);
+  auto [code, info] = Run({"info", file.string()});
+  ASSERT_EQ(code, 0) << info;
+  std::size_t five = 0;
+  for (std::size_t at = info.find(" steps 1..5 "); at != std::string::npos;
+       at = info.find(" steps 1..5 ", at + 1)) {
+    ++five;
+    EXPECT_EQ(info.compare(info.find(", ", at) + 2, 9, "5 states,"), 0) << info;
+  }
+  EXPECT_EQ(five, 2u) << info;  // vehicles 7 and 9
 }
 
 // --- damaged recordings: verify, play, outputs

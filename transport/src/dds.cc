@@ -322,7 +322,8 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
 
 std::uint32_t RawWriter::UnmarkedReaders() {
   const std::uint64_t changes = match_.changes.load(std::memory_order_acquire);
-  if (changes == counted_changes_) return unmarked_;
+  if (changes == counted_changes_ && !recount_) return unmarked_;
+  recount_ = false;
   counted_changes_ = changes;  // a change from here on is counted at the next call
   std::vector<dds_instance_handle_t> handles(64);
   dds_return_t n = dds_get_matched_subscriptions(writer_, handles.data(), handles.size());
@@ -348,7 +349,11 @@ std::uint32_t RawWriter::UnmarkedReaders() {
       }
       dds_free(data);
     }
-    if (ep != nullptr) dds_builtintopic_free_endpoint(ep);
+    if (ep != nullptr) {
+      dds_builtintopic_free_endpoint(ep);
+    } else {
+      recount_ = true;  // unmatched meanwhile, or not known yet: counted again next time
+    }
     if (!marked) ++unmarked;
   }
   unmarked_ = unmarked;
@@ -540,6 +545,17 @@ std::int32_t RawReader::WriterStrength(std::uint64_t publication_handle) {
   if (ep->qos == nullptr || !dds_qget_ownership_strength(ep->qos, &strength)) strength = 0;
   dds_builtintopic_free_endpoint(ep);
   return strength;
+}
+
+std::optional<std::array<std::uint8_t, 16>> RawReader::WriterParticipant(
+    std::uint64_t publication_handle) {
+  dds_builtintopic_endpoint_t* ep = dds_get_matched_publication_data(reader_, publication_handle);
+  if (ep == nullptr) return std::nullopt;
+  std::array<std::uint8_t, 16> guid{};
+  static_assert(sizeof ep->participant_key.v == 16);
+  std::memcpy(guid.data(), ep->participant_key.v, guid.size());
+  dds_builtintopic_free_endpoint(ep);
+  return guid;
 }
 
 int RawReader::TakeBatch(Batch& b, int max_samples) {

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <exception>
 #include <optional>
+#include <set>
 #include <thread>
 #include <tuple>
 #include <unordered_map>
@@ -231,6 +232,44 @@ struct Capture::Impl {
   std::unordered_map<std::uint32_t, StepGaps> step_gaps;  // of each vehicle's states
   std::uint64_t untracked_vehicles = 0;
   std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
+
+  // vdyn/state writers whose participant also sends this recorder vdyn/states (taker only):
+  // their samples are copies of states recorded from vdyn/states (a writer that did not see this
+  // reader's mark), dropped and counted, never recorded twice. Worked out again whenever the
+  // number of vdyn/states writers changes.
+  transport::RawReader* states_reader = nullptr;  // vdyn/states
+  transport::RawReader* state_reader = nullptr;   // vdyn/state
+  std::unordered_map<std::uint64_t, bool> copies_of_batched;
+  std::set<std::uint64_t> said_copies;  // writers the log named (the first 16)
+  std::uint32_t batch_writers = 0;
+  int drop_state_copy = 0;
+
+  bool CopyOfBatched(std::uint64_t publication_handle) {
+    if (states_reader == nullptr || state_reader == nullptr) return false;
+    const std::uint32_t n = states_reader->MatchedWriters();
+    if (n != batch_writers || copies_of_batched.size() > 4096) {
+      copies_of_batched.clear();
+      batch_writers = n;
+    }
+    if (n == 0) return false;
+    const auto known = copies_of_batched.find(publication_handle);
+    if (known != copies_of_batched.end()) return known->second;
+    bool copy = false;
+    std::vector<std::uint64_t> handles;
+    const auto writer_participant = state_reader->WriterParticipant(publication_handle);
+    if (writer_participant && states_reader->MatchedWriterHandles(handles)) {
+      for (std::uint64_t h : handles) {
+        copy = copy || states_reader->WriterParticipant(h) == writer_participant;
+      }
+    }
+    if (copy && said_copies.size() < 16 && said_copies.insert(publication_handle).second) {
+      spdlog::info(
+          "vdyn-recorder: a writer of vdyn/state also sends vdyn/states from its participant: "
+          "its vdyn/state samples are copies and are not recorded");
+    }
+    copies_of_batched.emplace(publication_handle, copy);
+    return copy;
+  }
 
   // Writer side.
   struct File {
@@ -633,6 +672,12 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
     impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
                                           participant, s.id, &impl_->drops, role));
   }
+  for (auto& [t, reader] : impl_->readers) {
+    if (t == TopicId::kStates) impl_->states_reader = reader.get();
+    if (t == TopicId::kState) impl_->state_reader = reader.get();
+  }
+  impl_->drop_state_copy =
+      impl_->drops.Register("vdyn/state copies of states received on vdyn/states (not recorded)");
   if (world_at) {
     auto world = std::make_unique<transport::RawReader>(participant, TopicId::kWorld, &impl_->drops,
                                                         transport::ReaderRole::kRecorder);
@@ -679,7 +724,13 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
     for (auto& [topic, reader] : m.readers) {
       const TopicId t = topic;
       std::unique_lock<std::mutex> counts_lock(m.counts_mu);
-      const int n = reader->TakeRaw([&](const transport::RawSample& s) { m.OnSample(t, s, m.LogNow()); });
+      const int n = reader->TakeRaw([&](const transport::RawSample& s) {
+        if (t == TopicId::kState && m.CopyOfBatched(s.info.publication_handle)) {
+          m.drops.Count(m.drop_state_copy);
+          return;
+        }
+        m.OnSample(t, s, m.LogNow());
+      });
       any = any || n > 0;
     }
     if (any) m.cv.notify_one();

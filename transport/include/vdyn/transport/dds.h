@@ -12,6 +12,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -183,6 +184,7 @@ class RawWriter {
   Match match_;  // kept by the publication-matched listener
   std::uint64_t counted_changes_ = ~std::uint64_t{0};
   std::uint32_t unmarked_ = 0;
+  bool recount_ = false;  // a matched reader's data could not be read: count again
   std::string buffer_;
   std::string last_error_;
 };
@@ -228,6 +230,8 @@ class RawReader {
   // The ownership strength a matched writer declared in its QoS (0 when it declared none or is
   // not matched).
   std::int32_t WriterStrength(std::uint64_t publication_handle);
+  // The GUID of the participant a matched writer belongs to; nullopt when it is not matched.
+  std::optional<std::array<std::uint8_t, 16>> WriterParticipant(std::uint64_t publication_handle);
   dds_entity_t handle() const { return reader_; }
   TopicId topic() const { return id_; }
   const std::string& last_error() const { return last_error_; }
