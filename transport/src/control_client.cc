@@ -30,8 +30,7 @@ bool WaitUntilServerKnowsReaders(Participant& participant, std::chrono::millisec
 }
 
 ControlClient::ControlClient(Participant& participant, std::string client_id)
-    : participant_(participant),
-      client_id_(std::move(client_id)),
+    : client_id_(std::move(client_id)),
       writer_(participant, TopicId::kControl),
       reader_(participant, TopicId::kControlReply, &drops_) {}
 

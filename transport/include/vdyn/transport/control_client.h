@@ -43,7 +43,6 @@ class ControlClient {
   const std::string& last_error() const { return last_error_; }
 
  private:
-  Participant& participant_;
   std::string client_id_;
   DropCounters drops_;
   Writer<pb::ControlRequest> writer_;
