@@ -4,11 +4,12 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <condition_variable>
 #include <cstdio>
 #include <exception>
+#include <map>
 #include <optional>
-#include <set>
 #include <thread>
 #include <tuple>
 #include <unordered_map>
@@ -233,42 +234,71 @@ struct Capture::Impl {
   std::uint64_t untracked_vehicles = 0;
   std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
 
-  // vdyn/state writers whose participant also sends this recorder vdyn/states (taker only):
-  // their samples are copies of states recorded from vdyn/states (a writer that did not see this
-  // reader's mark), dropped and counted, never recorded twice. Worked out again whenever the
-  // number of vdyn/states writers changes.
+  // Each state once (taker only). One participant may send this recorder a vehicle's states on
+  // vdyn/states and on vdyn/state too: a server writes vdyn/state to every matched reader once
+  // any reader that is not a recorder's reads it (a viewer, a DDS tool), the recorder's included.
+  // Both are best effort, so either copy may come first or alone: the file holds the union, and a
+  // state already recorded from the other topic (same participant, vehicle and step) is a copy,
+  // not recorded again. A state repeated on the same topic (a player seeking back) is recorded.
+  static constexpr std::uint64_t kCopyWindow = 4096;  // steps behind the newest that are checked
+  struct SeenSteps {
+    std::uint64_t newest = 0;
+    std::vector<std::uint8_t> from;  // per step % kCopyWindow: 1 vdyn/states, 2 vdyn/state
+  };
   transport::RawReader* states_reader = nullptr;  // vdyn/states
   transport::RawReader* state_reader = nullptr;   // vdyn/state
-  std::unordered_map<std::uint64_t, bool> copies_of_batched;
-  std::set<std::uint64_t> said_copies;  // writers the log named (the first 16)
-  std::uint32_t batch_writers = 0;
-  int drop_state_copy = 0;
+  std::unordered_map<std::uint64_t, std::uint32_t> participant_of;  // writer -> participant index
+  std::map<std::array<std::uint8_t, 16>, std::uint32_t> participants;
+  std::unordered_map<std::uint64_t, SeenSteps> seen_steps;  // (participant, vehicle)
+  std::uint64_t state_copies = 0;
 
-  bool CopyOfBatched(std::uint64_t publication_handle) {
-    if (states_reader == nullptr || state_reader == nullptr) return false;
-    const std::uint32_t n = states_reader->MatchedWriters();
-    if (n != batch_writers || copies_of_batched.size() > 4096) {
-      copies_of_batched.clear();
-      batch_writers = n;
-    }
-    if (n == 0) return false;
-    const auto known = copies_of_batched.find(publication_handle);
-    if (known != copies_of_batched.end()) return known->second;
-    bool copy = false;
-    std::vector<std::uint64_t> handles;
-    const auto writer_participant = state_reader->WriterParticipant(publication_handle);
-    if (writer_participant && states_reader->MatchedWriterHandles(handles)) {
-      for (std::uint64_t h : handles) {
-        copy = copy || states_reader->WriterParticipant(h) == writer_participant;
+  // True when this state was recorded already from the other topic; else notes it.
+  bool StateCopy(bool batch, std::uint64_t writer, std::uint32_t vehicle, std::uint64_t step) {
+    transport::RawReader* reader = batch ? states_reader : state_reader;
+    if (reader == nullptr) return false;
+    auto p = participant_of.find(writer);
+    if (p == participant_of.end()) {
+      if (participant_of.size() >= 4096) participant_of.clear();
+      std::uint32_t index = UINT32_MAX;  // not matched (any more): not told apart
+      if (const auto guid = reader->WriterParticipant(writer)) {
+        if (participants.size() >= 4096) {
+          participants.clear();
+          seen_steps.clear();
+        }
+        index = participants.try_emplace(*guid, static_cast<std::uint32_t>(participants.size()))
+                    .first->second;
       }
+      p = participant_of.emplace(writer, index).first;
     }
-    if (copy && said_copies.size() < 16 && said_copies.insert(publication_handle).second) {
-      spdlog::info(
-          "vdyn-recorder: a writer of vdyn/state also sends vdyn/states from its participant: "
-          "its vdyn/state samples are copies and are not recorded");
+    if (p->second == UINT32_MAX) return false;
+    if (seen_steps.size() >= 8192 &&
+        seen_steps.count((std::uint64_t{p->second} << 32) | vehicle) == 0) {
+      seen_steps.clear();  // bounded: at worst a few copies are recorded
     }
-    copies_of_batched.emplace(publication_handle, copy);
-    return copy;
+    SeenSteps& seen = seen_steps[(std::uint64_t{p->second} << 32) | vehicle];
+    const std::uint8_t mine = batch ? 1 : 2, other = batch ? 2 : 1;
+    if (seen.from.empty()) {
+      seen.from.assign(kCopyWindow, 0);
+      seen.newest = step;
+    } else if (step > seen.newest) {
+      for (std::uint64_t s = seen.newest + 1; s <= step && s <= seen.newest + kCopyWindow; ++s) {
+        seen.from[s % kCopyWindow] = 0;
+      }
+      seen.newest = step;
+    } else if (seen.newest - step >= kCopyWindow) {
+      return false;  // too old to tell: recorded
+    }
+    std::uint8_t& from = seen.from[step % kCopyWindow];
+    if ((from & other) != 0) {
+      if (state_copies++ == 0) {
+        spdlog::info(
+            "vdyn-recorder: states arrive on both vdyn/state and vdyn/states from one "
+            "participant: each is recorded once");
+      }
+      return true;
+    }
+    from |= mine;
+    return false;
   }
 
   // Writer side.
@@ -326,6 +356,10 @@ struct Capture::Impl {
       const std::optional<std::uint64_t> id = wire::Number(f.bytes, 1);  // absent: vehicle 0
       one.info.key = id && *id <= UINT32_MAX ? static_cast<std::uint32_t>(*id) : 0;
       one.payload = f.bytes;
+      if (StateCopy(true, one.info.publication_handle, one.info.key,
+                    wire::Number(f.bytes, 3).value_or(0))) {
+        return true;
+      }
       OnSample(TopicId::kState, one, now);
       return true;
     });
@@ -676,8 +710,6 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
     if (t == TopicId::kStates) impl_->states_reader = reader.get();
     if (t == TopicId::kState) impl_->state_reader = reader.get();
   }
-  impl_->drop_state_copy =
-      impl_->drops.Register("vdyn/state copies of states received on vdyn/states (not recorded)");
   if (world_at) {
     auto world = std::make_unique<transport::RawReader>(participant, TopicId::kWorld, &impl_->drops,
                                                         transport::ReaderRole::kRecorder);
@@ -725,8 +757,8 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       const TopicId t = topic;
       std::unique_lock<std::mutex> counts_lock(m.counts_mu);
       const int n = reader->TakeRaw([&](const transport::RawSample& s) {
-        if (t == TopicId::kState && m.CopyOfBatched(s.info.publication_handle)) {
-          m.drops.Count(m.drop_state_copy);
+        if (t == TopicId::kState && m.StateCopy(false, s.info.publication_handle, s.info.key,
+                                                wire::Number(s.payload, 3).value_or(0))) {
           return;
         }
         m.OnSample(t, s, m.LogNow());
