@@ -1029,9 +1029,9 @@ TEST_F(RecorderTest, AStateSentOnBothStateTopicsIsRecordedOnceAndEitherCopyAlone
   };
   ASSERT_TRUE(WaitWhileRunning(*recorder, taken)) << recorder->Log();
   Stop(*recorder);
-  auto [code, info] = Run({"info", file.string()});
+  const auto [code, info] = Run({"info", file.string()});
   ASSERT_EQ(code, 0) << info;
-  auto states = [&](const std::string& steps) -> std::string {
+  auto states = [&info = info](const std::string& steps) -> std::string {
     const std::size_t at = info.find(steps);
     if (at == std::string::npos) return "none";
     const std::size_t from = info.find(", ", at) + 2;
