@@ -245,8 +245,8 @@ struct Capture::Impl {
     std::uint64_t newest = 0;
     std::vector<std::uint8_t> from;  // per step % kCopyWindow: 1 vdyn/states, 2 vdyn/state
   };
-  transport::RawReader* states_reader = nullptr;  // vdyn/states
-  transport::RawReader* state_reader = nullptr;   // vdyn/state
+  transport::RawReader* states_reader = nullptr;                    // vdyn/states
+  transport::RawReader* state_reader = nullptr;                     // vdyn/state
   std::unordered_map<std::uint64_t, std::uint32_t> participant_of;  // writer -> participant index
   std::map<std::array<std::uint8_t, 16>, std::uint32_t> participants;
   std::unordered_map<std::uint64_t, SeenSteps> seen_steps;  // (participant, vehicle)
