@@ -547,12 +547,11 @@ std::int32_t RawReader::WriterStrength(std::uint64_t publication_handle) {
   return strength;
 }
 
-std::optional<std::array<std::uint8_t, 16>> RawReader::WriterParticipant(
-    std::uint64_t publication_handle) {
+std::optional<Guid> RawReader::WriterParticipant(std::uint64_t publication_handle) {
   dds_builtintopic_endpoint_t* ep = dds_get_matched_publication_data(reader_, publication_handle);
   if (ep == nullptr) return std::nullopt;
-  std::array<std::uint8_t, 16> guid{};
-  static_assert(sizeof ep->participant_key.v == 16);
+  Guid guid{};
+  static_assert(sizeof ep->participant_key.v == sizeof guid);
   std::memcpy(guid.data(), ep->participant_key.v, guid.size());
   dds_builtintopic_free_endpoint(ep);
   return guid;

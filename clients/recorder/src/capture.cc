@@ -245,11 +245,11 @@ struct Capture::Impl {
     std::uint64_t newest = 0;
     std::vector<std::uint8_t> from;  // per step % kCopyWindow: 1 vdyn/states, 2 vdyn/state
   };
-  transport::RawReader* states_reader = nullptr;                    // vdyn/states
-  transport::RawReader* state_reader = nullptr;                     // vdyn/state
-  std::unordered_map<std::uint64_t, std::uint32_t> participant_of;  // writer -> participant index
-  std::map<std::array<std::uint8_t, 16>, std::uint32_t> participants;
-  std::unordered_map<std::uint64_t, SeenSteps> seen_steps;  // (participant, vehicle)
+  transport::RawReader* states_reader = nullptr;  // vdyn/states
+  transport::RawReader* state_reader = nullptr;   // vdyn/state
+  // Each writer's participant (none: not matched any more, not told apart), asked of DDS once.
+  std::unordered_map<std::uint64_t, std::optional<transport::Guid>> participant_of;
+  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps> seen_steps;  // (participant, vehicle)
   std::uint64_t state_copies = 0;
 
   // True when this state was recorded already from the other topic; else notes it.
@@ -259,23 +259,14 @@ struct Capture::Impl {
     auto p = participant_of.find(writer);
     if (p == participant_of.end()) {
       if (participant_of.size() >= 4096) participant_of.clear();
-      std::uint32_t index = UINT32_MAX;  // not matched (any more): not told apart
-      if (const auto guid = reader->WriterParticipant(writer)) {
-        if (participants.size() >= 4096) {
-          participants.clear();
-          seen_steps.clear();
-        }
-        index = participants.try_emplace(*guid, static_cast<std::uint32_t>(participants.size()))
-                    .first->second;
-      }
-      p = participant_of.emplace(writer, index).first;
+      p = participant_of.emplace(writer, reader->WriterParticipant(writer)).first;
     }
-    if (p->second == UINT32_MAX) return false;
-    if (seen_steps.size() >= 8192 &&
-        seen_steps.count((std::uint64_t{p->second} << 32) | vehicle) == 0) {
+    if (!p->second) return false;
+    const auto key = std::make_pair(*p->second, vehicle);
+    if (seen_steps.size() >= 8192 && seen_steps.count(key) == 0) {
       seen_steps.clear();  // bounded: at worst a few copies are recorded
     }
-    SeenSteps& seen = seen_steps[(std::uint64_t{p->second} << 32) | vehicle];
+    SeenSteps& seen = seen_steps[key];
     const std::uint8_t mine = batch ? 1 : 2, other = batch ? 2 : 1;
     if (seen.from.empty()) {
       seen.from.assign(kCopyWindow, 0);

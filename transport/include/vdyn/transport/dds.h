@@ -231,7 +231,7 @@ class RawReader {
   // not matched).
   std::int32_t WriterStrength(std::uint64_t publication_handle);
   // The GUID of the participant a matched writer belongs to; nullopt when it is not matched.
-  std::optional<std::array<std::uint8_t, 16>> WriterParticipant(std::uint64_t publication_handle);
+  std::optional<Guid> WriterParticipant(std::uint64_t publication_handle);
   dds_entity_t handle() const { return reader_; }
   TopicId topic() const { return id_; }
   const std::string& last_error() const { return last_error_; }
