@@ -585,23 +585,33 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
   const States original = ReadStates(a);
   ASSERT_GE(original.hash.size(), 2400u);
 
-  // The recording's time of step 1200: halfway between its state and the one before.
-  std::uint64_t t1199 = 0, t1200 = 0, first = 0;
+  // The branch point: the first state from step 1200 on whose log time differs from the one
+  // before's (a late writer sends several steps in one vdyn/states sample, logged at one time,
+  // and no time tells those apart); the time asked is halfway between the two.
+  std::map<std::uint64_t, std::uint64_t> logged;  // step -> log time
+  std::uint64_t first = 0;
   {
     mcap::Reader reader(a);
     first = recorder::FirstLogTime(reader);
     recorder::RecordingVisitor v;
     v.wants = [](TopicId t) { return t == TopicId::kState; };
     v.on_message = [&](const recorder::RecordedMessage& m) {
-      const std::uint64_t s = recorder::wire::Number(m.data, 3).value_or(0);
-      if (s == 1199) t1199 = m.log_time;
-      if (s == 1200) t1200 = m.log_time;
+      logged.emplace(recorder::wire::Number(m.data, 3).value_or(0), m.log_time);
     };
     recorder::ScanRecording(reader, v);
   }
-  ASSERT_TRUE(t1199 != 0 && t1200 != 0) << "the recording lost state 1199 or 1200";
+  std::uint64_t want = 0, t_before = 0, t_want = 0;
+  for (std::uint64_t s = 1200; s < 1400 && want == 0; ++s) {
+    const auto it = logged.find(s), before = logged.find(s - 1);
+    if (it != logged.end() && before != logged.end() && it->second > before->second) {
+      want = s;
+      t_before = before->second;
+      t_want = it->second;
+    }
+  }
+  ASSERT_NE(want, 0u) << "no two states from step 1200 on with distinct log times";
   char at[32];
-  std::snprintf(at, sizeof at, "%.9f", static_cast<double>((t1199 + t1200) / 2 - first) * 1e-9);
+  std::snprintf(at, sizeof at, "%.9f", static_cast<double>((t_before + t_want) / 2 - first) * 1e-9);
   // A fresh server elsewhere; the recorder restores it at that time of the recording and records.
   const std::uint32_t live = testing::FreshDomain();
   auto server = Server({"--lockstep", "--lockstep-timeout", "300"}, live, "live.log");
@@ -621,7 +631,7 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
     });
   }
   ASSERT_TRUE(branch.has_value()) << takeover->Log() << server->Log();
-  ASSERT_EQ(*branch, 1200u) << takeover->Log() << "at " << at << " s; states around it:\n"
+  ASSERT_EQ(*branch, want) << takeover->Log() << "at " << at << " s; states around it:\n"
                             <<
       [&] {
         std::ostringstream around;  // what chose the branch point: each state's step and log time
@@ -636,10 +646,11 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
         recorder::ScanRecording(reader, v);
         return around.str();
       }();
-  for (int i = 0; i < 500 && takeover->Log().find("at step 1200") == std::string::npos; ++i) {
+  const std::string at_step = "at step " + std::to_string(want);
+  for (int i = 0; i < 500 && takeover->Log().find(at_step) == std::string::npos; ++i) {
     std::this_thread::sleep_for(20ms);  // its reply may come a moment after the event
   }
-  EXPECT_THAT(takeover->Log(), HasSubstr("at step 1200: drive it now"));
+  EXPECT_THAT(takeover->Log(), HasSubstr(at_step + ": drive it now"));
   // The driver: the recorded session's own inputs, step by step, from the branch point on.
   transport::ControlClient control(p, "test");
   ASSERT_TRUE(control.WaitForServer(60s));
@@ -672,7 +683,7 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
   EXPECT_EQ(vcode, 0) << verify;
   auto [icode, info] = Run({"info", b.string()});
   EXPECT_THAT(info, HasSubstr("branched    from a.mcap@"));
-  EXPECT_THAT(info, HasSubstr("(vehicle 1, step 1200)"));
+  EXPECT_THAT(info, HasSubstr("(vehicle 1, step " + std::to_string(want) + ")"));
 }
 
 // --- bad input and back pressure -------------------------------------------------------------------
