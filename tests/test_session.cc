@@ -246,6 +246,17 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   pb::ControlRequest none = Request(1);
   EXPECT_THAT(s.Apply(none).reason(), HasSubstr("no command"));
 
+  // A hello changes nothing and is accepted, for a vehicle or none (as the server answers it).
+  const std::size_t events_before = rec.events.size();
+  pb::ControlRequest hello = Request(1);
+  hello.mutable_hello();
+  r = s.Apply(hello);
+  EXPECT_TRUE(r.accepted()) << r.reason();
+  EXPECT_EQ(r.request_id(), hello.request_id());
+  hello.set_vehicle_id(0);
+  EXPECT_TRUE(s.Apply(hello).accepted());
+  EXPECT_EQ(rec.events.size(), events_before);
+
   pb::ControlRequest step = Request(1);
   step.mutable_step()->set_steps(0);
   EXPECT_FALSE(s.Apply(step).accepted());

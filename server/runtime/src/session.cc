@@ -413,6 +413,13 @@ pb::ControlReply Session::Apply(const pb::ControlRequest& request) {
   RequestPlanner planner(world_, config_);
   planner.Sync(*this);
   RequestPlanner::Plan plan = planner.Prepare(std::make_shared<const pb::ControlRequest>(request));
+  if (plan.hello) {  // as the server answers it: accepted, nothing applied
+    RequestOutcome o;
+    o.request = std::make_shared<const pb::ControlRequest>(request);
+    o.accepted = true;
+    o.sim_time_ns = steps_ * config_.step_ns;
+    return ToReply(o, config_.server_id);
+  }
   if (!plan.prepared) return Reject(request, plan.refusal);
   const RequestOutcome o = Commit(*plan.prepared);
   planner.Settle(std::move(plan.prepared));
