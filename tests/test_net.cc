@@ -30,6 +30,7 @@
 #include "test_support.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/client/session_view.h"
+#include "vdyn/runtime/state_outbox.h"
 #include "vdyn/diagnostics.pb.h"
 #include "vdyn/replay/resim.h"
 #include "vdyn/transport/control_client.h"
@@ -539,6 +540,87 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
   }
   EXPECT_GT(singles, 0);
   EXPECT_GT(writers.all_states_written(), 0u);
+  EXPECT_EQ(drops.Total(), 0u);
+}
+
+// A server's state writer that fell behind (a loaded machine, a sanitizer build) has many steps
+// waiting when it wakes. It sends them as several vdyn/states samples of whole steps, each closed
+// once it holds StateWriters::Options::sample_bytes, not as one sample of everything waiting: a
+// best-effort sample is lost whole when one of its datagrams is, and a 1 MB sample of three
+// vehicles is 200 steps (a multihost run lost 500 steps of vdyn/states that way).
+TEST_F(Net, ALaggingStateWriterSendsWholeStepsInSamplesOfBoundedSize) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  StateOutbox outbox(p, drops, 77);
+  transport::Reader<pb::VehicleStates> batches(p, TopicId::kStates, &drops,
+                                               transport::ReaderRole::kRecorder);
+  constexpr int kVehicles = 3;
+  std::size_t largest_state = 0;
+  auto push_step = [&](std::uint64_t step) {
+    const std::size_t open = outbox.Open(kVehicles);
+    for (std::size_t i = 0; i < open; ++i) {
+      pb::VehicleState s;
+      s.set_vehicle_id(static_cast<std::uint32_t>(i + 1));
+      s.set_step(step);
+      for (int w = 0; w < 40; ++w) s.add_wheels()->set_fp(1000.0 + w);  // about 1 KB
+      const std::span<std::uint8_t> buffer = outbox.Buffer(i);
+      const std::size_t size = s.ByteSizeLong();
+      ASSERT_LE(size, buffer.size());
+      ASSERT_TRUE(s.SerializeToArray(buffer.data(), static_cast<int>(buffer.size())));
+      largest_state = std::max(largest_state, size);
+      outbox.Fill(i, s.vehicle_id(), size, false);
+    }
+    outbox.Close(kVehicles);
+  };
+  std::vector<pb::VehicleStates> got;
+  auto take = [&] {
+    (void)batches.Take([&](const pb::VehicleStates& b, const transport::SampleInfo&) {
+      got.push_back(b);
+    });
+  };
+  // Until the writer knows the reader: a step at a time, as a server that keeps up.
+  std::uint64_t step = 1;
+  const auto deadline = std::chrono::steady_clock::now() + 30s;
+  while (got.empty() && std::chrono::steady_clock::now() < deadline) {
+    push_step(step++);
+    outbox.Send();
+    (void)batches.Wait(10ms);
+    take();
+  }
+  ASSERT_FALSE(got.empty());
+  ASSERT_TRUE(outbox.Drain(base::Seconds(30)));
+  (void)batches.Wait(100ms);
+  take();
+  got.clear();
+
+  // 150 steps handed over before the writer is woken: about 450 KB waiting.
+  const std::uint64_t first = step;
+  constexpr int kSteps = 150;
+  for (int k = 0; k < kSteps; ++k) push_step(step++);
+  outbox.Send();
+  ASSERT_TRUE(outbox.Drain(base::Seconds(30)));
+  int states = 0;
+  const auto until = std::chrono::steady_clock::now() + 30s;
+  while (states < kSteps * kVehicles && std::chrono::steady_clock::now() < until) {
+    (void)batches.Wait(10ms);
+    const std::size_t had = got.size();
+    take();
+    for (std::size_t b = had; b < got.size(); ++b) states += got[b].states_size();
+  }
+  ASSERT_EQ(states, kSteps * kVehicles) << drops.Total() << " drops";
+  const std::size_t bound = 64 * 1024 + kVehicles * (largest_state + 4);
+  EXPECT_GE(got.size(), 4u);  // 450 KB in samples of 64 KB and one step at most
+  int n = 0;
+  for (const pb::VehicleStates& b : got) {
+    EXPECT_LE(b.ByteSizeLong(), bound);
+    EXPECT_EQ(b.states_size() % kVehicles, 0) << "a sample holds whole steps";
+    for (const pb::VehicleState& s : b.states()) {
+      EXPECT_EQ(s.step(), first + static_cast<std::uint64_t>(n / kVehicles));
+      EXPECT_EQ(s.vehicle_id(), static_cast<std::uint32_t>(n % kVehicles + 1));
+      ++n;
+    }
+  }
+  EXPECT_EQ(outbox.refused(), 0u);
   EXPECT_EQ(drops.Total(), 0u);
 }
 

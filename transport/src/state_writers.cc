@@ -82,6 +82,10 @@ bool StateWriters::WriteBatch() {
   return true;
 }
 
+bool StateWriters::EndStep() {
+  return batched_.size() >= options_.sample_bytes ? WriteBatch() : true;
+}
+
 bool StateWriters::Flush() {
   const bool ok = WriteBatch();
   all_.Flush();

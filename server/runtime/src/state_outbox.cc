@@ -46,6 +46,7 @@ void StateOutbox::Fill(std::size_t i, std::uint32_t key, std::size_t size, bool 
   Frame* f = frames_.Slot(i);
   f->key = key;
   f->size = static_cast<std::uint32_t>(size);
+  f->step_end = 0;
   if (size > 0) return;
   empty_.fetch_add(1, std::memory_order_relaxed);
   if (too_large) {
@@ -57,6 +58,7 @@ void StateOutbox::Fill(std::size_t i, std::uint32_t key, std::size_t size, bool 
 void StateOutbox::Close(std::size_t n) {
   // What the stepping threads wrote is visible here (the step's barrier); the release in Commit
   // passes it on to the writer.
+  if (open_ > 0) frames_.Slot(open_ - 1)->step_end = 1;
   frames_.Commit(open_);
   pushed_.store(
       pushed_.load(std::memory_order_relaxed) + open_ - empty_.load(std::memory_order_relaxed),
@@ -110,16 +112,17 @@ void StateOutbox::WriterLoop() {
     const std::uint32_t token = bell_.Token();
     std::uint64_t written = 0;
     while (Frame* f = frames_.Front()) {
-      if (f->size == 0) {  // a vehicle without a state this step (contained, or too large)
-        frames_.Pop();
-        continue;
+      // An empty frame: a vehicle without a state this step (contained, or too large).
+      if (f->size > 0) {
+        if (writer_.WriteBytes(f->key, {f->bytes.data(), f->size})) {
+          ++written;
+        } else {
+          failures_.fetch_add(1, std::memory_order_relaxed);
+          drops_.Count(drop_write_, writer_.last_error());
+        }
       }
-      if (writer_.WriteBytes(f->key, {f->bytes.data(), f->size})) {
-        ++written;
-      } else {
-        failures_.fetch_add(1, std::memory_order_relaxed);
-        drops_.Count(drop_write_, writer_.last_error());
-      }
+      // Behind, a step's states close a vdyn/states sample once it is large enough.
+      if (f->step_end != 0 && !writer_.EndStep()) drops_.Count(drop_batch_, writer_.last_error());
       frames_.Pop();
     }
     // Whatever the loop handed over so far goes out together: one vdyn/states sample, and on

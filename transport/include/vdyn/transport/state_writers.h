@@ -38,6 +38,11 @@ class StateWriters {
     int new_writers_per_flush = 8;         // vehicle writers created per Flush() at most
     base::Nanos idle = base::Seconds(10);  // a vehicle writer unused this long is deleted
     std::uint32_t states_key = 0;          // the vdyn/states key: ServerKey(the writer's id)
+    // A vdyn/states sample closes at the end of a step (EndStep) once it holds this many bytes:
+    // a writer that fell behind sends several samples of whole steps, not one of up to
+    // limits::kMaxStatesBytes. A best-effort sample is lost whole when one of its datagrams is
+    // (a receive buffer full, a lossy link): a megabyte sample of 3 vehicles is 200 steps.
+    std::size_t sample_bytes = 64 * 1024;
   };
   StateWriters(Participant& participant, DropCounters& drops, Options options);
   StateWriters(Participant& participant, DropCounters& drops)
@@ -49,6 +54,9 @@ class StateWriters {
   // and on vdyn/state to everyone and to the vehicle's readers while they have any. False when a
   // write failed (last_error()); a failed vehicle write is counted in the drops.
   [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  // The states written since the last EndStep are one step's: the vdyn/states sample is written
+  // now when it holds Options::sample_bytes or more. False when that write failed (last_error()).
+  [[nodiscard]] bool EndStep();
   // Writes this round's vdyn/states sample and sends what the all-vehicles writer gathered; then
   // creates vehicle writers for vehicles seen since (at most Options::new_writers_per_flush) and
   // deletes idle ones. False when the vdyn/states write failed (last_error()).

@@ -66,12 +66,13 @@ class StateOutbox final : public StateFrames {
 
   // A frame is one page. The largest VehicleState (every field set, four wheels, a 64-byte
   // server id) encodes to about 2.2 KB; 1.1 KB is typical.
-  static constexpr std::size_t kFrameBytes = 4096 - 8;
+  static constexpr std::size_t kFrameBytes = 4096 - 12;
 
  private:
   struct Frame {
     std::uint32_t key = 0;
     std::uint32_t size = 0;
+    std::uint32_t step_end = 0;  // the last frame of its step (Close): StateWriters::EndStep
     std::array<std::uint8_t, kFrameBytes> bytes;
   };
   static_assert(sizeof(Frame) == 4096);
