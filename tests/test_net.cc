@@ -28,15 +28,15 @@
 #include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
+#include "vdyn/base/limits.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/client/session_view.h"
-#include "vdyn/runtime/state_outbox.h"
 #include "vdyn/diagnostics.pb.h"
 #include "vdyn/replay/resim.h"
+#include "vdyn/runtime/state_outbox.h"
 #include "vdyn/transport/control_client.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/transport/state_writers.h"
-#include "vdyn/base/limits.h"
 #include "vdyn/world.pb.h"
 #include "vdyn_envelope.h"
 
@@ -574,9 +574,8 @@ TEST_F(Net, ALaggingStateWriterSendsWholeStepsInSamplesOfBoundedSize) {
   };
   std::vector<pb::VehicleStates> got;
   auto take = [&] {
-    (void)batches.Take([&](const pb::VehicleStates& b, const transport::SampleInfo&) {
-      got.push_back(b);
-    });
+    (void)batches.Take(
+        [&](const pb::VehicleStates& b, const transport::SampleInfo&) { got.push_back(b); });
   };
   // Until the writer knows the reader: a step at a time, as a server that keeps up.
   std::uint64_t step = 1;
