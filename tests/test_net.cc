@@ -328,7 +328,7 @@ TEST_F(Net, WaitForServerSaysWhenAMatchedPeerAnswersNoHello) {
   const auto t0 = std::chrono::steady_clock::now();
   EXPECT_FALSE(control.WaitForServer(1500ms));
   EXPECT_LT(std::chrono::steady_clock::now() - t0, 30s);  // bounded (generous on a loaded machine)
-  EXPECT_THAT(control.last_error(), HasSubstr("answered none of its"));
+  EXPECT_THAT(control.last_error(), HasSubstr("answered none of this client's"));
   EXPECT_THAT(control.last_error(), HasSubstr("within 1500 ms"));
 }
 

@@ -17,10 +17,12 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
+#include "vdyn/wheel_input/dds_link.h"
 
 namespace vdyn {
 namespace {
@@ -256,6 +258,26 @@ TEST_F(WheelNet, KeyboardWithoutADisplayEndsWithAMessage) {
   auto drive = StartInput({"drive"}, "drive.log");
   ASSERT_EQ(drive->Wait(60s), 2) << drive->Log();
   EXPECT_THAT(drive->Log(), HasSubstr("no wheel found, and the keyboard needs a window"));
+}
+
+// The rig's first reset follows a server's answer to a hello (a request written before the server
+// has discovered the rig's writer reaches no one); later resets go at once.
+TEST_F(WheelNet, TheFirstResetFollowsAServersAnswerToAHello) {
+  transport::Participant rig(domain_);
+  wheel_input::DdsLink link(rig, 1, "rig", 10);
+  transport::Participant server_side(domain_);
+  testing::AnsweringPeer server(server_side, "fake");
+  link.RequestReset();
+  ASSERT_TRUE(server.ServeUntil(30s, [&] { return link.resets_accepted() == 1; }));
+  ASSERT_GE(server.seen.size(), 2u);
+  EXPECT_TRUE(server.seen.front().has_hello());
+  EXPECT_TRUE(server.seen.back().has_reset());
+  EXPECT_EQ(server.seen.back().vehicle_id(), 1u);
+  const std::size_t before = server.seen.size();
+  link.RequestReset();
+  ASSERT_TRUE(server.ServeUntil(30s, [&] { return link.resets_accepted() == 2; }));
+  ASSERT_EQ(server.seen.size(), before + 1) << "no second hello to a server that answered one";
+  EXPECT_TRUE(server.seen.back().has_reset());
 }
 
 }  // namespace

@@ -9,6 +9,21 @@
 #include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
 
+namespace {
+
+const std::shared_ptr<const vdyn::World>& FlatWorld() {
+  static const std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("flat");
+  return world;
+}
+
+}  // namespace
+
+// Once before the first input, outside libFuzzer's per-input (wall-clock) timeout.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  (void)FlatWorld();
+  return 0;
+}
+
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;
   const bool json = (data[0] & 1) != 0;
@@ -16,8 +31,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     const vdyn::pb::VehicleParams p = vdyn::ParseVehicleParams(text, json, "fuzz");
     const vdyn::ValidParams valid = vdyn::ParamsFromProto(p);
-    static const std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("flat");
-    vdyn::Simulator sim(world, valid);
+    vdyn::Simulator sim(FlatWorld(), valid);
     for (int i = 0; i < 50; ++i) {
       if (sim.Step() != vdyn::StepStatus::kOk) break;  // contained, counted: allowed
     }

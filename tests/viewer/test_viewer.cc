@@ -12,6 +12,7 @@
 #include <functional>
 #include <memory>
 
+#include "../dds_wait.h"
 #include "../process.h"
 #include "../test_support.h"
 #include "vdyn/base/time.h"
@@ -975,6 +976,46 @@ TEST(ParamsEditorChanges, OnlyTheChangedFieldsAreSent) {
   EXPECT_FALSE(c.has_lf());
   ASSERT_TRUE(c.has_rf());
   EXPECT_EQ(c.rf().radius(), 0.33);
+}
+
+// The panel's first request to a server follows that server's answer to a hello (a request
+// written before the server has discovered the viewer's writer reaches no one); later requests
+// to it go at once.
+TEST(ParamsEditorRequests, TheFirstRequestToAServerFollowsItsAnswerToAHello) {
+  const std::uint32_t domain = FreshDomain();
+  transport::Participant viewer_side(domain);
+  viewer::ParamsEditor editor(viewer_side, "panel");
+  transport::Participant server_side(domain);
+  AnsweringPeer server(server_side, "fake");
+  using State = viewer::ParamsEditor::Status::State;
+  auto set_params_seen = [&] {
+    int n = 0;
+    for (const pb::ControlRequest& r : server.seen) n += r.has_set_params();
+    return n;
+  };
+  pb::VehicleParams change;
+  change.set_mass(1600);
+  ASSERT_TRUE(editor.Submit(1, "fake", change));
+  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30), [&] {
+    return editor.status().state != State::kPending;
+  }));
+  EXPECT_EQ(editor.status().state, State::kAccepted) << editor.status().text;
+  ASSERT_EQ(set_params_seen(), 1);
+  ASSERT_GE(server.seen.size(), 2u);
+  EXPECT_TRUE(server.seen.front().has_hello());
+  EXPECT_EQ(server.seen.front().server_id(), "fake");
+  EXPECT_TRUE(server.seen.back().has_set_params());
+  EXPECT_EQ(server.seen.back().set_params().params().mass(), 1600);
+
+  const std::size_t before = server.seen.size();
+  change.set_mass(1700);
+  ASSERT_TRUE(editor.Submit(1, "fake", change));
+  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30), [&] {
+    return editor.status().state != State::kPending;
+  }));
+  EXPECT_EQ(editor.status().state, State::kAccepted) << editor.status().text;
+  ASSERT_EQ(server.seen.size(), before + 1) << "no second hello to a server that answered one";
+  EXPECT_TRUE(server.seen.back().has_set_params());
 }
 
 }  // namespace

@@ -76,11 +76,13 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout, const std::
     if (answered) return true;
     now = Clock::now();
     if (now >= deadline) {
-      last_error_ = std::string(server_id.empty() ? "a server" : "server '" + server_id + "'") +
-                    " matched this client but answered none of its " + std::to_string(sent) +
+      last_error_ = std::string(server_id.empty() ? "no server" : "server '" + server_id + "'") +
+                    " answered none of this client's " + std::to_string(sent) +
                     " hello request(s) within " + std::to_string(timeout.count()) +
-                    " ms (it may not have discovered this client yet, or it is not a vdyn "
-                    "server)";
+                    " ms; its requests are read (by " +
+                    (server_id.empty() ? "a server" : "that server or another") +
+                    " that has not discovered this client yet, a recorder, or a program that "
+                    "is not a vdyn server)";
       return false;
     }
     (void)reader_.Wait(std::max<Clock::duration>(std::min(deadline, send_at) - now, {}));
