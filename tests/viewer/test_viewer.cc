@@ -996,9 +996,8 @@ TEST(ParamsEditorRequests, TheFirstRequestToAServerFollowsItsAnswerToAHello) {
   pb::VehicleParams change;
   change.set_mass(1600);
   ASSERT_TRUE(editor.Submit(1, "fake", change));
-  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30), [&] {
-    return editor.status().state != State::kPending;
-  }));
+  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30),
+                                [&] { return editor.status().state != State::kPending; }));
   EXPECT_EQ(editor.status().state, State::kAccepted) << editor.status().text;
   ASSERT_EQ(set_params_seen(), 1);
   ASSERT_GE(server.seen.size(), 2u);
@@ -1010,9 +1009,8 @@ TEST(ParamsEditorRequests, TheFirstRequestToAServerFollowsItsAnswerToAHello) {
   const std::size_t before = server.seen.size();
   change.set_mass(1700);
   ASSERT_TRUE(editor.Submit(1, "fake", change));
-  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30), [&] {
-    return editor.status().state != State::kPending;
-  }));
+  ASSERT_TRUE(server.ServeUntil(std::chrono::seconds(30),
+                                [&] { return editor.status().state != State::kPending; }));
   EXPECT_EQ(editor.status().state, State::kAccepted) << editor.status().text;
   ASSERT_EQ(server.seen.size(), before + 1) << "no second hello to a server that answered one";
   EXPECT_TRUE(server.seen.back().has_set_params());
