@@ -89,6 +89,15 @@ bool ControlClient::WaitForServer(std::chrono::milliseconds timeout, const std::
   }
 }
 
+std::optional<pb::ControlReply> ControlClient::CallGreeted(pb::ControlRequest request,
+                                                           std::chrono::milliseconds timeout) {
+  if (!greeted_.contains(request.server_id())) {
+    if (!WaitForServer(timeout, request.server_id())) return std::nullopt;
+    greeted_.insert(request.server_id());
+  }
+  return Call(std::move(request), timeout);
+}
+
 std::optional<pb::ControlReply> ControlClient::Call(pb::ControlRequest request,
                                                     std::chrono::milliseconds timeout) {
   request.set_request_id(next_id_++);

@@ -57,15 +57,9 @@ void ParamsEditor::Worker() {
     pb::ControlRequest req = std::move(*pending_);
     pending_.reset();
     lock.unlock();
-    // Before a server has discovered this client's request writer (or this client the server's
-    // reply writer) a request reaches no one: the first one to a server waits for its hello.
-    bool greeted = greeted_.contains(req.server_id());
-    if (!greeted && client_.WaitForServer(reply_timeout, req.server_id())) {
-      greeted_.insert(req.server_id());
-      greeted = true;
-    }
-    std::optional<pb::ControlReply> reply;
-    if (greeted) reply = client_.Call(req, reply_timeout);
+    // The first request to a server waits for its answer to a hello (before it has discovered
+    // this client, a request reaches no one).
+    const auto reply = client_.CallGreeted(req, reply_timeout);
     lock.lock();
     Status s;
     s.vehicle_id = req.vehicle_id();

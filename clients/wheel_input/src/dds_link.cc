@@ -84,15 +84,9 @@ void DdsLink::ResetWorker() {
     pb::ControlRequest req;
     req.set_vehicle_id(vehicle_id_);
     req.mutable_reset();
-    // The first request waits for a server's answer to a hello: before the server has
-    // discovered this client, a request reaches no one.
-    if (!greeted_) greeted_ = control_.WaitForServer(std::chrono::seconds(2));
-    if (!greeted_) {
-      spdlog::warn("vdyn-input: reset of vehicle {}: {}", vehicle_id_, control_.last_error());
-      lock.lock();
-      continue;
-    }
-    const auto reply = control_.Call(req, std::chrono::seconds(2));
+    // The first request waits for a server's answer to a hello (before the server has
+    // discovered this client, a request reaches no one).
+    const auto reply = control_.CallGreeted(req, std::chrono::seconds(2));
     if (!reply) {
       spdlog::warn("vdyn-input: reset of vehicle {}: {}", vehicle_id_, control_.last_error());
     } else if (!reply->accepted()) {

@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdint>
 #include <optional>
+#include <set>
 #include <string>
 
 #include "vdyn/transport/dds.h"
@@ -37,6 +38,12 @@ class ControlClient {
   // reader of requests matches this client's writer as a server's does. False after the timeout.
   [[nodiscard]] bool WaitForServer(std::chrono::milliseconds timeout,
                                    const std::string& server_id = {});
+  // Call, once this client's hello to the request's server (its server_id, or any server) has
+  // been answered: the first request to a server waits for that (WaitForServer, up to `timeout`
+  // more), later ones go at once. Without an answer to the hello: nullopt, last_error() says
+  // why, and the request is not sent.
+  [[nodiscard]] std::optional<pb::ControlReply> CallGreeted(pb::ControlRequest request,
+                                                            std::chrono::milliseconds timeout);
   // The server that answered the last successful WaitForServer.
   const std::string& answering_server() const { return answering_server_; }
   static constexpr std::chrono::milliseconds kHelloInterval{250};
@@ -50,6 +57,7 @@ class ControlClient {
   std::uint64_t next_id_ = 1;
   std::string last_error_;
   std::string answering_server_;
+  std::set<std::string> greeted_;  // server ids (or "" = any) whose hello was answered
 };
 
 }  // namespace vdyn::transport

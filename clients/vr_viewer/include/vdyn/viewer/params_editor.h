@@ -11,7 +11,6 @@
 #include <map>
 #include <mutex>
 #include <optional>
-#include <set>
 #include <string>
 #include <thread>
 
@@ -72,9 +71,6 @@ class ParamsEditor {
   std::optional<pb::ControlRequest> pending_;
   Status status_;
   bool stop_ = false;
-  // Servers (by the request's server_id; "" = any) that answered this client's hello: the first
-  // request to one waits for that round trip (ControlClient::WaitForServer). Worker thread only.
-  std::set<std::string> greeted_;
   std::thread worker_;
 
   // The panel's editing copy for one vehicle, and the parameters it started from (when the topic

@@ -51,7 +51,6 @@ class DdsLink : public InputSink, public VehicleFeed, public Resetter {
   std::mutex mu_;
   std::condition_variable cv_;
   bool reset_pending_ = false;
-  bool greeted_ = false;  // a server answered a hello (reset worker only)
   bool stop_ = false;
   std::atomic<std::uint64_t> resets_accepted_{0};
   std::thread worker_;
