@@ -256,21 +256,21 @@ Geometry GeometryFor(std::uint32_t vehicle_id, const pb::WorldDescription* world
 }
 
 std::string CheckState(const pb::VehicleState& s) {
-  const std::string who = "state of vehicle " + std::to_string(s.vehicle_id());
+  auto who = [&] { return "state of vehicle " + std::to_string(s.vehicle_id()); };
   if (s.wheels_size() != kWheels) {
-    return who + ": " + std::to_string(s.wheels_size()) + " wheels, expected 4";
+    return who() + ": " + std::to_string(s.wheels_size()) + " wheels, expected 4";
   }
   const pb::Quat& q = s.q_wb();
   const double qn = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
-  if (!(qn > 0.5 && qn < 2.0)) return who + ": orientation quaternion is not a rotation";
+  if (!(qn > 0.5 && qn < 2.0)) return who() + ": orientation quaternion is not a rotation";
   constexpr double kFar = 1e7;  // m: the table of limits' pose range
   auto far = [](const pb::Vec3& v) {
     return !(std::abs(v.x()) < kFar && std::abs(v.y()) < kFar && std::abs(v.z()) < kFar);
   };
-  if (far(s.p_wt_w())) return who + ": position beyond 1e7 m";
+  if (far(s.p_wt_w())) return who() + ": position beyond 1e7 m";
   for (int w = 0; w < kWheels; ++w) {
     if (far(s.wheels(w).p_a_w()) || far(s.wheels(w).p_b_w())) {
-      return who + ": wheel " + std::string(WheelName(w)) + " beyond 1e7 m";
+      return who() + ": wheel " + std::string(WheelName(w)) + " beyond 1e7 m";
     }
   }
   return {};
