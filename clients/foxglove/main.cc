@@ -161,7 +161,7 @@ int main(int argc, char** argv) {
           Print("vdyn-foxglove: " + std::to_string(c.clients) + " clients, " +
                 std::to_string(c.subscriptions) + " subscriptions, " + std::to_string(c.vehicles) +
                 " vehicles | states in " + std::to_string(c.states_in - last.states_in) +
-                "/s | out " + std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
+                "/s (DDS lost " + std::to_string(c.dds_lost) + ") | out " + std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
                 Fixed((st.bytes_written - last_bytes) / 1e6, 2) + " MB/s | dropped " +
                 std::to_string(c.dropped_messages) + " | state latency p50 " +
                 Fixed(second.PercentileMs(50), 2) + " ms p99 " + Fixed(second.PercentileMs(99), 2) +
@@ -188,8 +188,8 @@ int main(int argc, char** argv) {
     Print("vdyn-foxglove summary: " + std::to_string(st.connections) + " WebSocket clients, " +
           std::to_string(st.http_requests) + " HTTP requests, " + std::to_string(st.refused) +
           " refused, " + std::to_string(st.protocol_errors) + " closed for protocol errors\n" +
-          "  states in " + std::to_string(c.states_in) + " (" + std::to_string(c.states_refused) +
-          " not drawable" + (c.last_refusal.empty() ? "" : ": " + c.last_refusal) + "), messages out " +
+          "  states in " + std::to_string(c.states_in) + " (DDS lost " + std::to_string(c.dds_lost) +
+          " samples; " + std::to_string(c.states_refused) + " not drawable" + (c.last_refusal.empty() ? "" : ": " + c.last_refusal) + "), messages out " +
           std::to_string(c.messages_out) + ", dropped " + std::to_string(c.dropped_messages) +
           " (" + Fixed(c.dropped_bytes / 1e6, 1) + " MB) by slow clients' queues\n" +
           "  bad client messages " + std::to_string(c.bad_messages) + ", inputs " +

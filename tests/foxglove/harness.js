@@ -56,6 +56,15 @@ function stopAll() {
 }
 process.on("exit", stopAll);
 
+// SIGINT to every program still running (each prints its summary into its log), SIGKILL to any
+// still there after 5 s.
+async function stopGracefully() {
+  const running = children.filter((c) => c.exitCode === null && c.signalCode === null);
+  for (const c of running) c.kill("SIGINT");
+  await Promise.race([Promise.all(running.map((c) => c.exited)), new Promise((r) => setTimeout(r, 5000))]);
+  stopAll();
+}
+
 // Resolves with the first line (printed so far or later) for which `match` returns a value.
 function waitForLine(child, match, ms, what) {
   return new Promise((resolve, reject) => {
@@ -105,7 +114,7 @@ function demoDrive(extra = []) {
 
 // A vdyn-foxglove on a free port; resolves with the process and its ws:// address.
 async function bridge(name, extra = []) {
-  const p = start(name, bin.foxglove, ["--domain", domain, "--host", "127.0.0.1", "--port", "0", "--no-status", ...extra]);
+  const p = start(name, bin.foxglove, ["--domain", domain, "--host", "127.0.0.1", "--port", "0", ...extra]);
   const url = await waitForLine(p, (l) => (l.match(/listening on (wss?:\/\/127\.0\.0\.1:\d+)/) || [])[1], 20000, "listening line");
   return { process: p, url, port: Number(url.split(":").pop()) };
 }
@@ -164,11 +173,15 @@ class Client {
     this.client.on("message", (m) => {
       const ch = this.subs.get(m.subscriptionId);
       if (!ch) return this.errors.push(new Error(`message for unknown subscription ${m.subscriptionId}`));
-      const bytes = new Uint8Array(m.data.buffer, m.data.byteOffset, m.data.byteLength);
-      const msg = this.decoders.get(ch.id)(bytes);  // throws (and fails the test) when it does not decode
+      // Kept as bytes and decoded when first read (a client that decoded everything as it came
+      // would be a slow client itself): `msg` throws, and fails the test, when it does not decode.
+      const bytes = Uint8Array.from(new Uint8Array(m.data.buffer, m.data.byteOffset, m.data.byteLength));
+      const decode = this.decoders.get(ch.id);
       let list = this.messages.get(ch.topic);
       if (!list) this.messages.set(ch.topic, (list = []));
-      list.push({ logTime: Number(m.timestamp), msg, size: bytes.length, at: Date.now() });
+      let decoded;
+      list.push({ logTime: Number(m.timestamp), size: bytes.length, at: Date.now(),
+                  get msg() { return (decoded ??= decode(bytes)); } });
       if (list.length > this.keep) list.splice(0, list.length - this.keep);
     });
     this.opened = new Promise((resolve, reject) => {
@@ -191,4 +204,4 @@ class Client {
   }
 }
 
-module.exports = { start, stopAll, waitForLine, until, server, demoDrive, bridge, Client, bin, domain, work, decoderFor };
+module.exports = { start, stopAll, stopGracefully, waitForLine, until, server, demoDrive, bridge, Client, bin, domain, work, decoderFor };

@@ -23,9 +23,9 @@ before(async () => {
                 30000, "a second of driving above 20 km/h");
 });
 
-after(() => {
+after(async () => {
   watcher.close();
-  h.stopAll();
+  await h.stopGracefully();
 });
 
 test("both subprotocols are accepted and the chosen one is echoed", async () => {
@@ -64,14 +64,17 @@ test("server info names the capabilities, the session and nothing this bridge do
 });
 
 test("every advertised schema decodes every message", async () => {
-  // The harness decodes each message by its channel's schema as it arrives (and throws if one
-  // does not decode or verify): here, every kind of channel has delivered.
+  // Each message decoded by its channel's schema (the harness throws if one does not decode or
+  // verify), and every kind of channel has delivered.
   for (const topic of ["/vehicle/1/state", "/vehicle/1/tf", "/vehicle/1/scene", "/vdyn/world"]) {
     assert.ok(watcher.of(topic).length > 0, `${topic}: nothing arrived`);
   }
   await h.until(() => watcher.of("/vdyn/diagnostics").length > 0, 5000, "diagnostics");
   await h.until(() => watcher.of("/vdyn/events").length > 0, 5000, "session events");
   assert.deepEqual(watcher.errors, []);
+  let decoded = 0;
+  for (const list of watcher.messages.values()) for (const m of list) decoded += m.msg ? 1 : 0;
+  assert.ok(decoded > 1000, `${decoded} messages decoded`);
   const names = new Set([...watcher.channels.values()].map((c) => c.schemaName));
   for (const n of ["vdyn.pb.VehicleState", "foxglove.FrameTransforms", "foxglove.SceneUpdate", "vdyn.pb.Diagnostics", "vdyn.pb.SessionEvent"]) {
     assert.ok(names.has(n), n);

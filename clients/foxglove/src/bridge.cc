@@ -106,6 +106,7 @@ struct Bridge::Impl {
   std::uint64_t newest_sim_ns = 0;
   Bridge::Counters counters;
   std::uint64_t closed_dropped_messages = 0, closed_dropped_bytes = 0;  // of clients gone
+  std::atomic<std::uint64_t> dds_lost{0};
 
   // The source thread's.
   transport::DropCounters drops;
@@ -614,6 +615,7 @@ void Bridge::Run(const std::atomic<bool>& stop) {
     const base::MonoTime now = base::MonotonicNow();
     m.TakeOthers(now);
     m.TakeStates(now);
+    m.dds_lost = m.states.SamplesLost();
     if (now >= next_tick) {
       m.SceneTick(now);
       next_tick = next_tick + tick;
@@ -625,6 +627,7 @@ void Bridge::Run(const std::atomic<bool>& stop) {
 Bridge::Counters Bridge::counters() const {
   std::lock_guard lock(impl_->mu);
   Counters c = impl_->counters;
+  c.dds_lost = impl_->dds_lost.load();
   c.clients = static_cast<int>(impl_->clients.size());
   c.subscriptions = 0;
   c.dropped_messages = c.dropped_bytes = 0;

@@ -55,6 +55,7 @@ class Bridge final : public ClientHandler {
   struct Counters {
     int clients = 0, subscriptions = 0, vehicles = 0;
     std::uint64_t states_in = 0, states_refused = 0;  // refused: not drawable (CheckState)
+    std::uint64_t dds_lost = 0;  // samples DDS reports lost to the state readers (best effort)
     std::uint64_t messages_out = 0;                   // message data handed to the clients' queues
     std::uint64_t dropped_messages = 0, dropped_bytes = 0;  // by the queues' bounds
     std::uint64_t bad_messages = 0;                   // client messages that could not be used
