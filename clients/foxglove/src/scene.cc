@@ -351,11 +351,12 @@ void BuildVehicleScene(const pb::VehicleState& s, const Geometry& g, const Scene
   fg::SceneEntity* body = NewEntity(out, prefix + "/body", BodyFrame(id), true, stamp_ns);
   const BodyHeights h = HeightsOf(g);
   const Rgb8 paint = VehicleColour(id);
-  AddBox(body, -g.rear, g.front, g.half_width, h.At(0.30), h.At(0.86), paint, 1.0);
+  // The lower box starts at the wheels' centres, so the wheels show beneath it.
+  AddBox(body, -g.rear, g.front, g.half_width, h.At(0.42), h.At(0.95), paint, 1.0);
   const double x_front_axle = 0.5 * (g.mount_B[0].x + g.mount_B[1].x);
   const double x_rear_axle = 0.5 * (g.mount_B[2].x + g.mount_B[3].x);
-  AddBox(body, x_rear_axle - 0.25, x_front_axle - 0.55, 0.85 * g.half_width, h.At(0.86),
-         h.At(1.40), {60, 75, 95}, 0.85);
+  AddBox(body, x_rear_axle - 0.25, x_front_axle - 0.55, 0.85 * g.half_width, h.At(0.95),
+         h.At(1.42), {60, 75, 95}, 0.85);
   fg::TextPrimitive* label = body->add_texts();
   SetVec(label->mutable_pose()->mutable_position(), {0, 0, h.At(1.46) + 0.6});
   SetQuat(label->mutable_pose()->mutable_orientation(), 1, 0, 0, 0);

@@ -178,6 +178,8 @@ class Connection final : public ConnectionBase,
       body(http::status::ok, "text/javascript; charset=utf-8", web::AppJs());
     } else if (target == "/three.min.js" && !server_.three_js.empty()) {
       body(http::status::ok, "text/javascript; charset=utf-8", server_.three_js);
+    } else if (target == "/favicon.ico") {
+      body(http::status::no_content, "image/x-icon", "");
     } else if (target == "/three.min.js") {
       body(http::status::not_found, "text/plain", server_.three_js_error + "\n");
     } else {
