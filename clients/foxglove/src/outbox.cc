@@ -162,9 +162,10 @@ void Outbox::MaybeWarn(base::MonoTime now) {
   char text[320];
   std::snprintf(text, sizeof text,
                 "vdyn-foxglove: this connection reads slower than its subscriptions arrive: %llu "
-                "messages (%.1f kB) dropped, oldest first (send queue bound %.0f kB, %.0f ms); "
+                "message%s (%.1f kB) dropped, oldest first (send queue bound %.0f kB, %.0f ms); "
                 "it gets the newest",
-                static_cast<unsigned long long>(unreported_messages_), unreported_bytes_ / 1e3,
+                static_cast<unsigned long long>(unreported_messages_),
+                unreported_messages_ == 1 ? "" : "s", static_cast<double>(unreported_bytes_) / 1e3,
                 static_cast<double>(limits_.data_bytes) / 1e3, limits_.data_age.millis());
   const std::string json = protocol::StatusJson(protocol::StatusLevel::kWarning, text);
   std::string frame;

@@ -93,60 +93,68 @@ std::optional<ParameterName> ParseParameterName(const std::string& name) {
 
 std::string SetParameter(pb::VehicleParams& params, const std::string& path,
                          const protocol::ParameterValue& value) {
-  gp::Message* m = &params;
-  std::string rest = path;
-  for (;;) {
-    const std::size_t slash = rest.find('/');
-    const std::string part = rest.substr(0, slash);
-    const gp::FieldDescriptor* f = m->GetDescriptor()->FindFieldByName(part);
+  // The field first, from the descriptors alone: a name that does not resolve changes nothing.
+  std::vector<const gp::FieldDescriptor*> chain;
+  const gp::Descriptor* d = pb::VehicleParams::descriptor();
+  for (std::size_t at = 0;;) {
+    const std::size_t slash = path.find('/', at);
+    const gp::FieldDescriptor* f =
+        d == nullptr ? nullptr : d->FindFieldByName(path.substr(at, slash == std::string::npos ? std::string::npos : slash - at));
     if (f == nullptr || f->is_repeated()) return "no parameter '" + path + "'";
-    const gp::Reflection* r = m->GetReflection();
-    if (slash != std::string::npos) {
-      if (f->cpp_type() != gp::FieldDescriptor::CPPTYPE_MESSAGE) return "no parameter '" + path + "'";
-      m = r->MutableMessage(m, f);
-      rest = rest.substr(slash + 1);
-      continue;
-    }
-    const std::string wrong = "'" + path + "' takes ";
-    switch (f->cpp_type()) {
-      case gp::FieldDescriptor::CPPTYPE_DOUBLE: {
-        const auto d = Number(value);
-        if (!d) return wrong + "a number, not " + TypeName(value);
-        r->SetDouble(m, f, *d);
-        return {};
-      }
-      case gp::FieldDescriptor::CPPTYPE_UINT32: {
-        const auto d = Number(value);
-        if (!d || !(*d >= 0 && *d <= 4294967295.0) || std::floor(*d) != *d) {
-          return wrong + "a whole number in 0..4294967295";
-        }
-        r->SetUInt32(m, f, static_cast<std::uint32_t>(*d));
-        return {};
-      }
-      case gp::FieldDescriptor::CPPTYPE_BOOL: {
-        const auto* b = std::get_if<bool>(&value);
-        if (b == nullptr) return wrong + "a boolean, not " + TypeName(value);
-        r->SetBool(m, f, *b);
-        return {};
-      }
-      case gp::FieldDescriptor::CPPTYPE_ENUM: {
-        const auto* s = std::get_if<std::string>(&value);
-        const gp::EnumValueDescriptor* e =
-            s != nullptr ? f->enum_type()->FindValueByName(*s) : nullptr;
-        if (e == nullptr) {
-          std::string names;
-          for (int i = 0; i < f->enum_type()->value_count(); ++i) {
-            names += (i ? ", " : "") + f->enum_type()->value(i)->name();
-          }
-          return wrong + "one of " + names;
-        }
-        r->SetEnum(m, f, e);
-        return {};
-      }
-      default:
-        return "parameter '" + path + "' cannot be set here";
-    }
+    chain.push_back(f);
+    if (slash == std::string::npos) break;
+    d = f->cpp_type() == gp::FieldDescriptor::CPPTYPE_MESSAGE ? f->message_type() : nullptr;
+    at = slash + 1;
   }
+  const gp::FieldDescriptor* f = chain.back();
+  const std::string wrong = "'" + path + "' takes ";
+  const auto number = Number(value);
+  const gp::EnumValueDescriptor* e = nullptr;
+  switch (f->cpp_type()) {
+    case gp::FieldDescriptor::CPPTYPE_DOUBLE:
+      if (!number) return wrong + "a number, not " + TypeName(value);
+      break;
+    case gp::FieldDescriptor::CPPTYPE_UINT32:
+      if (!number || !(*number >= 0 && *number <= 4294967295.0) || std::floor(*number) != *number) {
+        return wrong + "a whole number in 0..4294967295";
+      }
+      break;
+    case gp::FieldDescriptor::CPPTYPE_BOOL:
+      if (!std::holds_alternative<bool>(value)) return wrong + "a boolean, not " + TypeName(value);
+      break;
+    case gp::FieldDescriptor::CPPTYPE_ENUM: {
+      const auto* s = std::get_if<std::string>(&value);
+      e = s != nullptr ? f->enum_type()->FindValueByName(*s) : nullptr;
+      if (e == nullptr) {
+        std::string names;
+        for (int i = 0; i < f->enum_type()->value_count(); ++i) {
+          names += (i ? ", " : "") + f->enum_type()->value(i)->name();
+        }
+        return wrong + "one of " + names;
+      }
+      break;
+    }
+    default:
+      return "parameter '" + path + "' cannot be set here";
+  }
+  gp::Message* m = &params;
+  for (std::size_t i = 0; i + 1 < chain.size(); ++i) m = m->GetReflection()->MutableMessage(m, chain[i]);
+  const gp::Reflection* r = m->GetReflection();
+  switch (f->cpp_type()) {
+    case gp::FieldDescriptor::CPPTYPE_DOUBLE:
+      r->SetDouble(m, f, *number);
+      break;
+    case gp::FieldDescriptor::CPPTYPE_UINT32:
+      r->SetUInt32(m, f, static_cast<std::uint32_t>(*number));
+      break;
+    case gp::FieldDescriptor::CPPTYPE_BOOL:
+      r->SetBool(m, f, std::get<bool>(value));
+      break;
+    default:
+      r->SetEnum(m, f, e);
+      break;
+  }
+  return {};
 }
 
 }  // namespace vdyn::foxglove
