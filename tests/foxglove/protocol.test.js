@@ -228,3 +228,33 @@ test("vehicles are advertised as they come and unadvertised as they go", async (
   await h.until(() => (watcher.unadvertised || []).includes("/vehicle/7/state"), 10000, "vehicle 7 unadvertised");
   assert.ok(watcher.byTopic.has("/vehicle/1/state"), "vehicle 1 stays");
 });
+
+test("wss:// and https:// with a certificate and key", async () => {
+  const { execFileSync } = require("child_process");
+  const path = require("path");
+  const https = require("https");
+  const key = path.join(h.work, "key.pem"), cert = path.join(h.work, "cert.pem");
+  execFileSync("openssl", ["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", key, "-out", cert,
+                           "-subj", "/CN=127.0.0.1", "-days", "2"], { stdio: "ignore" });
+  const secure = await h.bridge("bridge-tls", ["--tls-cert", cert, "--tls-key", key]);
+  assert.match(secure.url, /^wss:\/\//);
+  const c = new h.Client(secure.url, ["foxglove.sdk.v1"], { rejectUnauthorized: false });
+  await c.opened;
+  await h.until(() => c.info && c.byTopic.has("/vehicle/1/state"), 20000, "server info over wss");
+  c.subscribe("/vehicle/1/state");
+  await h.until(() => c.of("/vehicle/1/state").length > 100, 10000, "states over wss");
+  c.close();
+  const page = await new Promise((resolve, reject) => {
+    https.get(`https://127.0.0.1:${secure.port}/`, { rejectUnauthorized: false }, (res) => {
+      let body = "";
+      res.on("data", (d) => (body += d));
+      res.on("end", () => resolve({ status: res.statusCode, body }));
+    }).on("error", reject);
+  });
+  assert.equal(page.status, 200);
+  assert.match(page.body, /<script src="three\.min\.js"><\/script>/);
+  // A key that is not a key is refused at the start, naming the file.
+  const bad = h.start("bridge-badkey", h.bin.foxglove, ["--domain", h.domain, "--port", "0", "--tls-cert", cert, "--tls-key", cert]);
+  assert.equal(await bad.exited, 1);
+  assert.match(bad.lines.join("\n"), /cert\.pem: not a usable PEM private key/);
+});
