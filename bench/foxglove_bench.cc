@@ -30,10 +30,10 @@
 #include <utility>  // before Boost 1.74's asio/awaitable.hpp, which uses std::exchange without it
 #include <vector>
 
+#include <fmt/format.h>
 #include <boost/asio.hpp>
 #include <boost/beast/core.hpp>
 #include <boost/beast/websocket.hpp>
-#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "child.h"
@@ -52,7 +52,9 @@ using vdyn::bench::ProcessCpuSeconds;
 using vdyn::bench::Spawn;
 using vdyn::bench::WaitPid;
 
-void Sleep(double s) { std::this_thread::sleep_for(std::chrono::duration<double>(s)); }
+void Sleep(double s) {
+  std::this_thread::sleep_for(std::chrono::duration<double>(s));
+}
 
 // A Foxglove client that subscribes to every channel it is told of and counts what arrives.
 // stall_after_s >= 0: it stops reading that long after its first message, for stall_s.
@@ -89,9 +91,11 @@ class Client {
           const auto j = nlohmann::json::parse(beast::buffers_to_string(b.data()));
           if (j.value("op", "") != "advertise") continue;
           nlohmann::json subs = nlohmann::json::array();
-          for (const auto& c : j["channels"]) subs.push_back({{"id", next++}, {"channelId", c["id"]}});
+          for (const auto& c : j["channels"])
+            subs.push_back({{"id", next++}, {"channelId", c["id"]}});
           ws.text(true);
-          ws.write(asio::buffer(nlohmann::json{{"op", "subscribe"}, {"subscriptions", subs}}.dump()));
+          ws.write(
+              asio::buffer(nlohmann::json{{"op", "subscribe"}, {"subscriptions", subs}}.dump()));
           continue;
         }
         ++messages;
@@ -144,9 +148,10 @@ std::string Ids(int n) {
 }
 
 pid_t StartServer(const std::filesystem::path& dir, std::uint32_t domain, int n) {
-  return Spawn({VDYN_SERVER_BINARY, "--domain", std::to_string(domain), "--world", "flat",
-                "--vehicle-ids", Ids(n), "--max-vehicles", std::to_string(std::max(n, 1)), "--no-status"},
-               dir / fmt::format("server-{}.log", n));
+  return Spawn(
+      {VDYN_SERVER_BINARY, "--domain", std::to_string(domain), "--world", "flat", "--vehicle-ids",
+       Ids(n), "--max-vehicles", std::to_string(std::max(n, 1)), "--no-status"},
+      dir / fmt::format("server-{}.log", n));
 }
 
 pid_t StartBridge(const std::filesystem::path& log, std::uint32_t domain) {
@@ -223,7 +228,8 @@ void Stall(const std::filesystem::path& dir, std::uint32_t domain, double second
   const std::uint16_t port = BridgePort(log);
   vdyn::transport::Participant participant(domain);
   vdyn::transport::DropCounters drops;
-  vdyn::transport::Reader<vdyn::pb::Diagnostics> diag(participant, vdyn::transport::TopicId::kDiagnostics, &drops);
+  vdyn::transport::Reader<vdyn::pb::Diagnostics> diag(
+      participant, vdyn::transport::TopicId::kDiagnostics, &drops);
   Client reader(port);
   Sleep(3);
   Lateness none, stalled;
@@ -236,12 +242,14 @@ void Stall(const std::filesystem::path& dir, std::uint32_t domain, double second
     m0 = reader.messages;
     Collect(diag, 9.5, stalled);
     const double rate_stalled = static_cast<double>(reader.messages - m0) / 9.5;
-    std::printf("stall (16 vehicles, same run): server tick lateness p99 per second, median %.0f us "
-                "without, %.0f us with a client that stopped reading for 10 s (ratio %.2f); worst "
-                "second's max %.0f us / %.0f us; the reading client's messages %.0f/s / %.0f/s\n",
-                Median(none.p99), Median(stalled.p99), Median(stalled.p99) / std::max(Median(none.p99), 1.0),
-                *std::max_element(none.max.begin(), none.max.end()),
-                *std::max_element(stalled.max.begin(), stalled.max.end()), rate_none, rate_stalled);
+    std::printf(
+        "stall (16 vehicles, same run): server tick lateness p99 per second, median %.0f us "
+        "without, %.0f us with a client that stopped reading for 10 s (ratio %.2f); worst "
+        "second's max %.0f us / %.0f us; the reading client's messages %.0f/s / %.0f/s\n",
+        Median(none.p99), Median(stalled.p99),
+        Median(stalled.p99) / std::max(Median(none.p99), 1.0),
+        *std::max_element(none.max.begin(), none.max.end()),
+        *std::max_element(stalled.max.begin(), stalled.max.end()), rate_none, rate_stalled);
   }
   std::fflush(stdout);
 }
@@ -258,9 +266,11 @@ int main(int argc, char** argv) {
     for (std::string x; std::getline(s, x, ',');) counts.push_back(std::stoi(x));
   }
   const std::uint32_t domain = 200 + static_cast<std::uint32_t>(getpid() % 30);
-  const auto dir = std::filesystem::temp_directory_path() / fmt::format("foxglove_bench-{}", getpid());
+  const auto dir =
+      std::filesystem::temp_directory_path() / fmt::format("foxglove_bench-{}", getpid());
   std::filesystem::create_directories(dir);
-  std::printf("foxglove_bench: %.0f s windows, %d runs, domain %u, logs in %s\n", seconds, runs, domain, dir.c_str());
+  std::printf("foxglove_bench: %.0f s windows, %d runs, domain %u, logs in %s\n", seconds, runs,
+              domain, dir.c_str());
   std::vector<std::vector<Result>> all(counts.size());
   for (int run = 0; run < runs; ++run) {
     for (std::size_t i = 0; i < counts.size(); ++i) {
@@ -270,15 +280,19 @@ int main(int argc, char** argv) {
         if (std::fscanf(f, "%lf", &load) != 1) load = 0;
         std::fclose(f);
       }
-      std::printf("run %d, %3d vehicles: bridge %.1f %% (recorder %.1f %%), %.0f msg/s, %.2f MB/s, "
-                  "latency p50 %.2f ms p99 %.2f ms (load %.2f)\n",
-                  run + 1, counts[i], r.bridge_cpu, r.recorder_cpu, r.msgs, r.mbytes, r.p50, r.p99, load);
+      std::printf(
+          "run %d, %3d vehicles: bridge %.1f %% (recorder %.1f %%), %.0f msg/s, %.2f MB/s, "
+          "latency p50 %.2f ms p99 %.2f ms (load %.2f)\n",
+          run + 1, counts[i], r.bridge_cpu, r.recorder_cpu, r.msgs, r.mbytes, r.p50, r.p99, load);
       std::fflush(stdout);
       all[i].push_back(r);
     }
   }
-  std::printf("\nmedians over %d runs (one client subscribed to everything; CPU in %% of one core)\n", runs);
-  std::printf("vehicles  bridge CPU  recorder CPU (peer)  ratio  client msg/s  MB/s  latency p50  p99\n");
+  std::printf(
+      "\nmedians over %d runs (one client subscribed to everything; CPU in %% of one core)\n",
+      runs);
+  std::printf(
+      "vehicles  bridge CPU  recorder CPU (peer)  ratio  client msg/s  MB/s  latency p50  p99\n");
   for (std::size_t i = 0; i < counts.size(); ++i) {
     auto med = [&](double Result::*f) {
       std::vector<double> v;
@@ -287,8 +301,8 @@ int main(int argc, char** argv) {
     };
     std::printf("%8d  %9.1f  %19.1f  %5.2f  %11.0f  %4.1f  %8.2f ms  %.2f ms\n", counts[i],
                 med(&Result::bridge_cpu), med(&Result::recorder_cpu),
-                med(&Result::bridge_cpu) / std::max(med(&Result::recorder_cpu), 0.1), med(&Result::msgs),
-                med(&Result::mbytes), med(&Result::p50), med(&Result::p99));
+                med(&Result::bridge_cpu) / std::max(med(&Result::recorder_cpu), 0.1),
+                med(&Result::msgs), med(&Result::mbytes), med(&Result::p50), med(&Result::p99));
   }
   Stall(dir, domain, seconds);
   return 0;

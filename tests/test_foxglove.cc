@@ -29,7 +29,9 @@ std::vector<std::uint8_t> Bytes(std::initializer_list<int> b) {
   return v;
 }
 
-std::string Str(const std::vector<std::uint8_t>& v) { return {v.begin(), v.end()}; }
+std::string Str(const std::vector<std::uint8_t>& v) {
+  return {v.begin(), v.end()};
+}
 
 // A client frame: masked with `mask`, FIN as given.
 std::string ClientFrame(WsOpcode op, const std::string& payload, bool fin = true,
@@ -60,7 +62,8 @@ TEST(FoxgloveWebSocket, AcceptKeyIsRfc6455sExample) {
   // RFC 4648, section 10.
   const std::string foobar = "foobar";
   for (std::size_t n = 0; n <= 6; ++n) {
-    static const char* kExpected[] = {"", "Zg==", "Zm8=", "Zm9v", "Zm9vYg==", "Zm9vYmE=", "Zm9vYmFy"};
+    static const char* kExpected[] = {"",         "Zg==",     "Zm8=",    "Zm9v",
+                                      "Zm9vYg==", "Zm9vYmE=", "Zm9vYmFy"};
     EXPECT_EQ(pr::Base64({reinterpret_cast<const std::uint8_t*>(foobar.data()), n}), kExpected[n]);
   }
 }
@@ -75,7 +78,8 @@ TEST(FoxgloveWebSocket, SubprotocolIsTheFirstOfferedThatFoxgloveSpeaks) {
 
 TEST(FoxgloveWebSocket, ReadsRfc6455sMaskedHelloByteByByte) {
   // RFC 6455, section 5.7: a single-frame masked text message "Hello".
-  const std::string frame = Str(Bytes({0x81, 0x85, 0x37, 0xfa, 0x21, 0x3d, 0x7f, 0x9f, 0x4d, 0x51, 0x58}));
+  const std::string frame =
+      Str(Bytes({0x81, 0x85, 0x37, 0xfa, 0x21, 0x3d, 0x7f, 0x9f, 0x4d, 0x51, 0x58}));
   pr::FrameReader r(1024);
   pr::FrameReader::Event ev;
   for (std::size_t i = 0; i + 1 < frame.size(); ++i) {
@@ -91,7 +95,8 @@ TEST(FoxgloveWebSocket, ReadsRfc6455sMaskedHelloByteByByte) {
 
 TEST(FoxgloveWebSocket, PutsFragmentsTogetherAroundAPing) {
   // RFC 6455, section 5.7: "Hel" + "lo" with a ping between (control frames may interleave).
-  const std::string in = ClientFrame(WsOpcode::kText, "Hel", false) + ClientFrame(WsOpcode::kPing, "p") +
+  const std::string in = ClientFrame(WsOpcode::kText, "Hel", false) +
+                         ClientFrame(WsOpcode::kPing, "p") +
                          ClientFrame(WsOpcode::kContinuation, "lo") +
                          ClientFrame(WsOpcode::kBinary, std::string(70000, 'x'));
   pr::FrameReader r(1 << 20);
@@ -127,7 +132,8 @@ TEST(FoxgloveWebSocket, RefusesWhatAClientMustNotSendWithTheCloseCode) {
       {ClientFrame(WsOpcode::kPing, "p", false), 1002, "fragmented control frame"},
       {ClientFrame(WsOpcode::kPing, std::string(126, 'p')), 1002, "control frame over 125 bytes"},
       {ClientFrame(WsOpcode::kContinuation, "x"), 1002, "continuation frame without a message"},
-      {ClientFrame(WsOpcode::kText, "a", false) + ClientFrame(WsOpcode::kText, "b"), 1002, "new message inside"},
+      {ClientFrame(WsOpcode::kText, "a", false) + ClientFrame(WsOpcode::kText, "b"), 1002,
+       "new message inside"},
       {ClientFrame(WsOpcode::kBinary, std::string(2000, 'x')), 1009, "over 1024 bytes"},
       {ClientFrame(WsOpcode::kText, "\xc3\x28"), 1007, "not UTF-8"},
   };
@@ -148,7 +154,10 @@ TEST(FoxgloveWebSocket, RefusesWhatAClientMustNotSendWithTheCloseCode) {
 
 TEST(FoxgloveWebSocket, FrameHeadersUseTheShortestLength) {
   for (auto [n, header] : std::vector<std::pair<std::uint64_t, std::vector<std::uint8_t>>>{
-           {0, {0x82, 0}}, {125, {0x82, 125}}, {126, {0x82, 126, 0, 126}}, {65535, {0x82, 126, 0xff, 0xff}},
+           {0, {0x82, 0}},
+           {125, {0x82, 125}},
+           {126, {0x82, 126, 0, 126}},
+           {65535, {0x82, 126, 0xff, 0xff}},
            {65536, {0x82, 127, 0, 0, 0, 0, 0, 1, 0, 0}}}) {
     std::string out;
     pr::AppendFrameHeader(out, WsOpcode::kBinary, n);
@@ -159,16 +168,18 @@ TEST(FoxgloveWebSocket, FrameHeadersUseTheShortestLength) {
 
 TEST(FoxgloveWebSocket, Utf8CheckFollowsTheStandard) {
   EXPECT_TRUE(pr::ValidUtf8("vdyn \xc3\xa9\xe2\x82\xac\xf0\x9f\x9a\x97"));
-  for (const char* bad : {"\x80", "\xc0\xaf", "\xe0\x80\xaf", "\xed\xa0\x80", "\xf4\x90\x80\x80", "\xe2\x82"}) {
+  for (const char* bad :
+       {"\x80", "\xc0\xaf", "\xe0\x80\xaf", "\xed\xa0\x80", "\xf4\x90\x80\x80", "\xe2\x82"}) {
     EXPECT_FALSE(pr::ValidUtf8(bad)) << bad;
   }
 }
 
-// --- the protocol's messages ----------------------------------------------------------------------
+// --- the protocol's messages
+// ----------------------------------------------------------------------
 
 TEST(FoxgloveProtocol, ParsesTheClientMessagesFoxgloveSends) {
-  const auto s = std::get<pr::Subscribe>(
-      pr::ParseClientText(R"({"op":"subscribe","subscriptions":[{"id":0,"channelId":3},{"id":1,"channelId":5}]})"));
+  const auto s = std::get<pr::Subscribe>(pr::ParseClientText(
+      R"({"op":"subscribe","subscriptions":[{"id":0,"channelId":3},{"id":1,"channelId":5}]})"));
   ASSERT_EQ(s.subscriptions.size(), 2u);
   EXPECT_EQ(s.subscriptions[1], (std::pair<std::uint32_t, std::uint32_t>{1, 5}));
   const auto sp = std::get<pr::SetParameters>(pr::ParseClientText(
@@ -178,8 +189,9 @@ TEST(FoxgloveProtocol, ParsesTheClientMessagesFoxgloveSends) {
   EXPECT_TRUE(std::get<bool>(*sp.parameters[1].value));
   EXPECT_FALSE(sp.parameters[2].value.has_value());
   EXPECT_EQ(*sp.id, "r1");
-  EXPECT_EQ(std::get<pr::Unsupported>(pr::ParseClientText(R"({"op":"subscribeConnectionGraph"})")).op,
-            "subscribeConnectionGraph");
+  EXPECT_EQ(
+      std::get<pr::Unsupported>(pr::ParseClientText(R"({"op":"subscribeConnectionGraph"})")).op,
+      "subscribeConnectionGraph");
   const auto d = pr::ParseClientBinary(Bytes({1, 7, 0, 0, 0, 'x'}));
   EXPECT_EQ(d.channel_id, 7u);
   EXPECT_EQ(d.payload.size(), 1u);
@@ -192,11 +204,16 @@ TEST(FoxgloveProtocol, NamesWhatIsWrongWithABadMessage) {
       {R"({"op":3})", "no string 'op'"},
       {R"({"op":"subscribe"})", "'subscriptions' is missing"},
       {R"({"op":"subscribe","subscriptions":{}})", "'subscriptions' is not an array"},
-      {R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})", "subscriptions[0].id is not a whole number"},
-      {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":4294967296}]})", "channelId is not a whole number"},
-      {R"({"op":"unsubscribe","subscriptionIds":[1.5]})", "subscriptionIds[0] is not a whole number"},
-      {R"({"op":"advertise","channels":[{"id":1,"topic":2,"encoding":"json"}]})", "channels[0].topic is not a string"},
-      {R"({"op":"setParameters","parameters":[{"name":"a","value":[1,2]}]})", "only numbers, booleans and strings"},
+      {R"({"op":"subscribe","subscriptions":[{"id":-1,"channelId":1}]})",
+       "subscriptions[0].id is not a whole number"},
+      {R"({"op":"subscribe","subscriptions":[{"id":1,"channelId":4294967296}]})",
+       "channelId is not a whole number"},
+      {R"({"op":"unsubscribe","subscriptionIds":[1.5]})",
+       "subscriptionIds[0] is not a whole number"},
+      {R"({"op":"advertise","channels":[{"id":1,"topic":2,"encoding":"json"}]})",
+       "channels[0].topic is not a string"},
+      {R"({"op":"setParameters","parameters":[{"name":"a","value":[1,2]}]})",
+       "only numbers, booleans and strings"},
       {R"({"op":"getParameters","parameterNames":"mass"})", "'parameterNames' is not an array"},
   };
   for (const auto& [text, why] : cases) {
@@ -208,7 +225,9 @@ TEST(FoxgloveProtocol, NamesWhatIsWrongWithABadMessage) {
     }
   }
   for (const auto& [bytes, why] : std::vector<std::pair<std::vector<std::uint8_t>, std::string>>{
-           {{}, "empty"}, {{2, 0, 0, 0, 0}, "opcode 2 is not offered"}, {{1, 0, 0}, "shorter than"}}) {
+           {{}, "empty"},
+           {{2, 0, 0, 0, 0}, "opcode 2 is not offered"},
+           {{1, 0, 0}, "shorter than"}}) {
     EXPECT_THROW((void)pr::ParseClientBinary(bytes), pr::ProtocolError) << why;
   }
 }
@@ -223,7 +242,8 @@ TEST(FoxgloveProtocol, BinaryMessagesAreLittleEndianAsSpecified) {
   EXPECT_EQ(std::vector<std::uint8_t>(t, t + 9), Bytes({2, 5, 0, 0, 0, 0, 0, 0, 0}));
 }
 
-// --- the send queue -------------------------------------------------------------------------------
+// --- the send queue
+// -------------------------------------------------------------------------------
 
 struct Taken {
   int text = 0, data = 0, time = 0, close = 0;
@@ -238,11 +258,13 @@ Taken Parse(const std::string& frames) {
     std::uint64_t n = static_cast<std::uint8_t>(frames[i + 1]);
     std::size_t at = i + 2;
     if (n == 126) {
-      n = (std::uint64_t{static_cast<std::uint8_t>(frames[i + 2])} << 8) | static_cast<std::uint8_t>(frames[i + 3]);
+      n = (std::uint64_t{static_cast<std::uint8_t>(frames[i + 2])} << 8) |
+          static_cast<std::uint8_t>(frames[i + 3]);
       at = i + 4;
     } else if (n == 127) {
       n = 0;
-      for (int k = 0; k < 8; ++k) n = (n << 8) | static_cast<std::uint8_t>(frames[i + 2 + static_cast<std::size_t>(k)]);
+      for (int k = 0; k < 8; ++k)
+        n = (n << 8) | static_cast<std::uint8_t>(frames[i + 2 + static_cast<std::size_t>(k)]);
       at = i + 10;
     }
     const std::string payload = frames.substr(at, n);
@@ -256,7 +278,9 @@ Taken Parse(const std::string& frames) {
     } else {
       ++t.data;
       std::uint32_t sub = 0;
-      for (int k = 0; k < 4; ++k) sub |= std::uint32_t{static_cast<std::uint8_t>(payload[1 + static_cast<std::size_t>(k)])} << (8 * k);
+      for (int k = 0; k < 4; ++k)
+        sub |= std::uint32_t{static_cast<std::uint8_t>(payload[1 + static_cast<std::size_t>(k)])}
+               << (8 * k);
       t.subs.push_back(sub);
     }
     i = at + n;
@@ -290,10 +314,11 @@ TEST(FoxgloveOutbox, ABoundInBytesDropsTheOldestAndWarnsOnceASecond) {
   EXPECT_NE(t.texts[0].find("\"level\":1"), std::string::npos) << t.texts[0];
   for (std::uint32_t i = 0; i < 15; ++i) o.PushData(i, i, payload, t0 + base::Milliseconds(500));
   EXPECT_EQ(o.counters().dropped_messages, 20u);
-  EXPECT_EQ(TakeAll(o, t0 + base::Milliseconds(500)).text, 0);  // not again within the second
+  EXPECT_EQ(TakeAll(o, t0 + base::Milliseconds(500)).text, 0);    // not again within the second
   const Taken later = TakeAll(o, t0 + base::Milliseconds(1500));  // the rest, said a second on
   ASSERT_EQ(later.text, 1);
-  EXPECT_NE(later.texts[0].find("19 messages (19.0 kB) dropped"), std::string::npos) << later.texts[0];
+  EXPECT_NE(later.texts[0].find("19 messages (19.0 kB) dropped"), std::string::npos)
+      << later.texts[0];
 }
 
 TEST(FoxgloveOutbox, DataOlderThanTheAgeBoundGoesFirstAndControlIsNeverDropped) {
@@ -328,7 +353,12 @@ TEST(FoxgloveOutbox, LatestOnlyKeepsOneUnsentMessageInItsPlace) {
   EXPECT_NE(out.find("bb"), std::string::npos);  // the newer payload in the older one's place
   EXPECT_EQ(o.counters().dropped_messages, 0u);
   o.PushData(7, 3, a, t0, 0, true);  // the last was sent: a new one queues
-  EXPECT_EQ(Parse([&] { std::string x; (void)o.Take(x, 1 << 20, t0, stamps); return x; }()).subs,
+  EXPECT_EQ(Parse([&] {
+              std::string x;
+              (void)o.Take(x, 1 << 20, t0, stamps);
+              return x;
+            }())
+                .subs,
             std::vector<std::uint32_t>{7});
 }
 
@@ -351,7 +381,8 @@ TEST(FoxgloveOutbox, ControlOverItsBoundIsRefusedAndFinishEndsWithClose) {
   EXPECT_TRUE(o.finished());
 }
 
-// --- the scene ------------------------------------------------------------------------------------
+// --- the scene
+// ------------------------------------------------------------------------------------
 
 pb::VehicleState SomeState(pb::VehicleModel model) {
   pb::VehicleState s;
@@ -370,12 +401,15 @@ pb::VehicleState SomeState(pb::VehicleModel model) {
   for (int w = 0; w < 4; ++w) {
     pb::WheelState* ws = s.add_wheels();
     ws->set_contact(w != 3);
-    ws->set_fp(3500 + 100 * w), ws->set_fh(w < 2 ? 800 : 0), ws->set_fb(150 * w), ws->set_fy(-400 + 200 * w);
+    ws->set_fp(3500 + 100 * w), ws->set_fh(w < 2 ? 800 : 0), ws->set_fb(150 * w),
+        ws->set_fy(-400 + 200 * w);
     ws->set_fx(w % 2 ? -900 : 600);
     ws->set_gamma(w < 2 ? 0.1 : 0);
-    ws->mutable_p_a_w()->set_x(10 + (w < 2 ? 1 : -1.4)), ws->mutable_p_a_w()->set_y(-4 + (w % 2 ? -0.8 : 0.8));
+    ws->mutable_p_a_w()->set_x(10 + (w < 2 ? 1 : -1.4)),
+        ws->mutable_p_a_w()->set_y(-4 + (w % 2 ? -0.8 : 0.8));
     ws->mutable_p_a_w()->set_z(0.5);
-    ws->mutable_p_b_w()->set_x(10 + (w < 2 ? 1 : -1.4)), ws->mutable_p_b_w()->set_y(-4 + (w % 2 ? -0.8 : 0.8));
+    ws->mutable_p_b_w()->set_x(10 + (w < 2 ? 1 : -1.4)),
+        ws->mutable_p_b_w()->set_y(-4 + (w % 2 ? -0.8 : 0.8));
     ws->mutable_p_b_w()->set_z(-0.05 * w);
     ws->mutable_n_w()->set_x(0.05), ws->mutable_n_w()->set_z(1);
     ws->set_ls(0.25);
@@ -387,7 +421,8 @@ TEST(FoxgloveScene, ArrowsAreTheViewersForTheSameState) {
   for (pb::VehicleModel model : {pb::VEHICLE_MODEL_PAPER, pb::VEHICLE_MODEL_FULL}) {
     const pb::VehicleState s = SomeState(model);
     ASSERT_EQ(foxglove::CheckState(s), "");
-    const viewer::VehicleView v = viewer::BuildVehicleView(s, viewer::GeometryFor(3, nullptr, nullptr));
+    const viewer::VehicleView v =
+        viewer::BuildVehicleView(s, viewer::GeometryFor(3, nullptr, nullptr));
     foxglove::SceneOptions o;
     const auto arrows = foxglove::ForceArrows(s, foxglove::GeometryFor(3, nullptr, nullptr), o);
     ASSERT_EQ(v.arrows.size(), arrows.size());
@@ -441,7 +476,8 @@ TEST(FoxgloveScene, ArrowPrimitivesPointAlongTheForceWithTheScaledLength) {
     const double n = std::sqrt(f.x * f.x + f.y * f.y + f.z * f.z);
     EXPECT_NEAR(p.shaft_length() + p.head_length(), n * 0.8 / 1000, 1e-12);
     if (n < 1e-9) continue;
-    // +X turned by the orientation is the force's direction: R(q) e_x = (1-2(y²+z²), 2(xy+wz), 2(xz-wy)).
+    // +X turned by the orientation is the force's direction: R(q) e_x = (1-2(y²+z²), 2(xy+wz),
+    // 2(xz-wy)).
     const auto& q = p.pose().orientation();
     EXPECT_NEAR(1 - 2 * (q.y() * q.y() + q.z() * q.z()), f.x / n, 1e-9);
     EXPECT_NEAR(2 * (q.x() * q.y() + q.w() * q.z()), f.y / n, 1e-9);
@@ -481,7 +517,8 @@ TEST(FoxgloveScene, TerrainKeepsEveryUsableTriangle) {
   pb::Mesh* m = w.add_meshes();
   m->set_kind(pb::SURFACE_ROAD);
   for (double v : {0., 0., 0., 1., 0., 0., 0., 1., 0.}) m->add_vertices(v);
-  for (std::uint32_t i : {0u, 1u, 2u, 0u, 1u, 9u, 2u, 1u}) m->add_indices(i);  // one past the end; a part
+  for (std::uint32_t i : {0u, 1u, 2u, 0u, 1u, 9u, 2u, 1u})
+    m->add_indices(i);  // one past the end; a part
   ::foxglove::SceneUpdate u;
   foxglove::BuildWorldScene(w, 0, u);
   ASSERT_EQ(u.entities_size(), 1);
@@ -497,13 +534,15 @@ TEST(FoxgloveScene, StatesThatCannotBeDrawnAreNamed) {
   EXPECT_EQ(foxglove::CheckState(s), "state of vehicle 3: 3 wheels, expected 4");
   s = SomeState(pb::VEHICLE_MODEL_PAPER);
   s.mutable_q_wb()->Clear();
-  EXPECT_EQ(foxglove::CheckState(s), "state of vehicle 3: orientation quaternion is not a rotation");
+  EXPECT_EQ(foxglove::CheckState(s),
+            "state of vehicle 3: orientation quaternion is not a rotation");
   s = SomeState(pb::VEHICLE_MODEL_PAPER);
   s.mutable_wheels(2)->mutable_p_b_w()->set_z(2e7);
   EXPECT_EQ(foxglove::CheckState(s), "state of vehicle 3: wheel LR beyond 1e7 m");
 }
 
-// --- parameters -----------------------------------------------------------------------------------
+// --- parameters
+// -----------------------------------------------------------------------------------
 
 TEST(FoxgloveParams, NamesEveryFieldAndSetsItBack) {
   pb::VehicleParams p;
@@ -528,15 +567,19 @@ TEST(FoxgloveParams, NamesEveryFieldAndSetsItBack) {
 }
 
 TEST(FoxgloveParams, RefusesNamesAndValuesThatDoNotFit) {
-  for (const char* bad : {"mass", "vehicle/", "vehicle/x/mass", "vehicle/1", "vehicle/1/", "vehicle/99999999999/mass"}) {
+  for (const char* bad : {"mass", "vehicle/", "vehicle/x/mass", "vehicle/1", "vehicle/1/",
+                          "vehicle/99999999999/mass"}) {
     EXPECT_FALSE(foxglove::ParseParameterName(bad)) << bad;
   }
   pb::VehicleParams p;
   EXPECT_EQ(foxglove::SetParameter(p, "lf/nothing", 1.0), "no parameter 'lf/nothing'");
   EXPECT_EQ(foxglove::SetParameter(p, "mass/x", 1.0), "no parameter 'mass/x'");
   EXPECT_EQ(foxglove::SetParameter(p, "mass", true), "'mass' takes a number, not a boolean");
-  EXPECT_EQ(foxglove::SetParameter(p, "gear_count", 2.5), "'gear_count' takes a whole number in 0..4294967295");
-  EXPECT_NE(foxglove::SetParameter(p, "model", std::string("FAST")).find("one of VEHICLE_MODEL_UNSPECIFIED"), std::string::npos);
+  EXPECT_EQ(foxglove::SetParameter(p, "gear_count", 2.5),
+            "'gear_count' takes a whole number in 0..4294967295");
+  EXPECT_NE(foxglove::SetParameter(p, "model", std::string("FAST"))
+                .find("one of VEHICLE_MODEL_UNSPECIFIED"),
+            std::string::npos);
   EXPECT_EQ(p.ByteSizeLong(), 0u);
 }
 

@@ -29,7 +29,9 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
-extern "C" void OnSignal(int) { g_stop.store(true); }
+extern "C" void OnSignal(int) {
+  g_stop.store(true);
+}
 
 std::mutex g_out;
 void Print(const std::string& line) {
@@ -61,33 +63,44 @@ int main(int argc, char** argv) {
   std::int32_t strength = 10;
   bool allow_input = false, no_status = false;
   app.add_option("--domain", domain, "DDS domain id")
-      ->check(cli::WholeInRange(limits::kDomainId))->capture_default_str();
+      ->check(cli::WholeInRange(limits::kDomainId))
+      ->capture_default_str();
   app.add_option("--host", host, "Address to listen on")->capture_default_str();
   app.add_option("--port", port, "TCP port for WebSocket and HTTP (0: any free port)")
-      ->check(cli::WholeInRange(limits::kPort))->capture_default_str();
+      ->check(cli::WholeInRange(limits::kPort))
+      ->capture_default_str();
   app.add_option("--state-hz", state_hz, "States per second on each state channel (0: every state)")
-      ->check(cli::InRange(limits::kFoxgloveStateHz))->capture_default_str();
+      ->check(cli::InRange(limits::kFoxgloveStateHz))
+      ->capture_default_str();
   app.add_option("--scene-hz", scene_hz, "Scene and transforms per second (latest only)")
-      ->check(cli::InRange(limits::kFoxgloveSceneHz))->capture_default_str();
+      ->check(cli::InRange(limits::kFoxgloveSceneHz))
+      ->capture_default_str();
   app.add_option("--arrow-scale", arrow_scale, "Force arrows: metres per kN (as vdyn-viewer's)")
-      ->check(cli::InRange(limits::kArrowScale))->capture_default_str();
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
   app.add_flag("--allow-input", allow_input,
                "Let clients drive (client publish on /vehicle/<id>/input); off by default");
   app.add_option("--input-strength", strength, "Ownership strength of the clients' input")
-      ->check(cli::WholeInRange(limits::kStrength))->capture_default_str();
+      ->check(cli::WholeInRange(limits::kStrength))
+      ->capture_default_str();
   app.add_option("--tls-cert", tls_cert, "PEM certificate: serve wss:// and https://");
   app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert");
   app.add_option("--three-js", three_js, "three.js for the page (Debian's libjs-three)")
       ->capture_default_str();
-  app.add_option("--queue-kb", queue_kb, "A client's send queue: data beyond this is dropped, oldest first")
-      ->check(cli::InRange(limits::kFoxgloveQueueKb))->capture_default_str();
+  app.add_option("--queue-kb", queue_kb,
+                 "A client's send queue: data beyond this is dropped, oldest first")
+      ->check(cli::InRange(limits::kFoxgloveQueueKb))
+      ->capture_default_str();
   app.add_option("--queue-ms", queue_ms, "A client's send queue: data older than this is dropped")
-      ->check(cli::InRange(limits::kFoxgloveQueueMs))->capture_default_str();
+      ->check(cli::InRange(limits::kFoxgloveQueueMs))
+      ->capture_default_str();
   app.add_option("--max-clients", max_clients, "WebSocket clients at once")
-      ->check(cli::WholeInRange(limits::kFoxgloveClients))->capture_default_str();
+      ->check(cli::WholeInRange(limits::kFoxgloveClients))
+      ->capture_default_str();
   app.add_option("--vehicle-timeout", vehicle_timeout_s,
                  "Unadvertise a vehicle's channels after this long without a state, s")
-      ->check(cli::InRange(limits::kVehicleTimeoutS))->capture_default_str();
+      ->check(cli::InRange(limits::kVehicleTimeoutS))
+      ->capture_default_str();
   app.add_option("--duration", duration_s, "Stop after this many seconds (default: run on)")
       ->check(cli::InRange(limits::kDurationS));
   app.add_flag("--no-status", no_status, "No status line every second");
@@ -128,13 +141,14 @@ int main(int argc, char** argv) {
       std::cerr << "vdyn-foxglove: " << e.what() << "\n";
       return 1;
     }
-    bridge.SetCloser([&server](fx::ClientId id, const std::string& why) { server->Close(id, why); });
+    bridge.SetCloser(
+        [&server](fx::ClientId id, const std::string& why) { server->Close(id, why); });
     const std::string shown = host == "0.0.0.0" ? "127.0.0.1" : host;
     const std::string s = server->tls() ? "s" : "";
-    Print("vdyn-foxglove: listening on ws" + s + "://" + shown + ":" + std::to_string(server->port()) +
-          " (Foxglove/Lichtblick), the page at http" + s + "://" + shown + ":" +
-          std::to_string(server->port()) + "/ (domain " + std::to_string(domain) + ", " +
-          (allow_input ? "input allowed" : "input off") + ")");
+    Print("vdyn-foxglove: listening on ws" + s + "://" + shown + ":" +
+          std::to_string(server->port()) + " (Foxglove/Lichtblick), the page at http" + s + "://" +
+          shown + ":" + std::to_string(server->port()) + "/ (domain " + std::to_string(domain) +
+          ", " + (allow_input ? "input allowed" : "input off") + ")");
     std::thread net([&] { server->Run(); });
     const vdyn::base::MonoTime start = vdyn::base::MonotonicNow();
     const vdyn::base::Nanos cpu0 = vdyn::base::ProcessCpuTime();
@@ -146,9 +160,10 @@ int main(int argc, char** argv) {
       fx::Bridge::Counters last;
       std::uint64_t last_bytes = 0;
       vdyn::base::Nanos last_cpu = cpu0;
-      while (!g_stop && (duration_s <= 0 ||
-                         (vdyn::base::MonotonicNow() - start).seconds() < duration_s)) {
-        vdyn::base::SleepUntil(std::min(next, vdyn::base::MonotonicNow() + vdyn::base::Milliseconds(20)));
+      while (!g_stop &&
+             (duration_s <= 0 || (vdyn::base::MonotonicNow() - start).seconds() < duration_s)) {
+        vdyn::base::SleepUntil(
+            std::min(next, vdyn::base::MonotonicNow() + vdyn::base::Milliseconds(20)));
         if (vdyn::base::MonotonicNow() < next) continue;
         next = next + vdyn::base::Seconds(1);
         const fx::Bridge::Counters c = bridge.counters();
@@ -161,7 +176,8 @@ int main(int argc, char** argv) {
           Print("vdyn-foxglove: " + std::to_string(c.clients) + " clients, " +
                 std::to_string(c.subscriptions) + " subscriptions, " + std::to_string(c.vehicles) +
                 " vehicles | states in " + std::to_string(c.states_in - last.states_in) +
-                "/s (DDS lost " + std::to_string(c.dds_lost) + ") | out " + std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
+                "/s (DDS lost " + std::to_string(c.dds_lost) + ") | out " +
+                std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
                 Fixed((st.bytes_written - last_bytes) / 1e6, 2) + " MB/s | dropped " +
                 std::to_string(c.dropped_messages) + " | state latency p50 " +
                 Fixed(second.PercentileMs(50), 2) + " ms p99 " + Fixed(second.PercentileMs(99), 2) +
@@ -188,17 +204,20 @@ int main(int argc, char** argv) {
     Print("vdyn-foxglove summary: " + std::to_string(st.connections) + " WebSocket clients, " +
           std::to_string(st.http_requests) + " HTTP requests, " + std::to_string(st.refused) +
           " refused, " + std::to_string(st.protocol_errors) + " closed for protocol errors\n" +
-          "  states in " + std::to_string(c.states_in) + " (DDS lost " + std::to_string(c.dds_lost) +
-          " samples; " + std::to_string(c.states_refused) + " not drawable" + (c.last_refusal.empty() ? "" : ": " + c.last_refusal) + "), messages out " +
-          std::to_string(c.messages_out) + ", dropped " + std::to_string(c.dropped_messages) +
-          " (" + Fixed(c.dropped_bytes / 1e6, 1) + " MB) by slow clients' queues\n" +
-          "  bad client messages " + std::to_string(c.bad_messages) + ", inputs " +
-          std::to_string(c.inputs) + " (" + std::to_string(c.input_refused) + " refused), parameters " +
-          std::to_string(c.params_accepted) + " set, " + std::to_string(c.params_refused) + " refused\n" +
-          "  state latency (source stamp to written) p50 " + Fixed(total.PercentileMs(50), 3) +
-          " ms, p99 " + Fixed(total.PercentileMs(99), 3) + " ms over " + std::to_string(total.count()) +
-          " states\n  process CPU " + Fixed(wall > 0 ? 100.0 * cpu / wall : 0.0, 1) +
-          " % of one core over " + Fixed(wall, 1) + " s");
+          "  states in " + std::to_string(c.states_in) + " (DDS lost " +
+          std::to_string(c.dds_lost) + " samples; " + std::to_string(c.states_refused) +
+          " not drawable" + (c.last_refusal.empty() ? "" : ": " + c.last_refusal) +
+          "), messages out " + std::to_string(c.messages_out) + ", dropped " +
+          std::to_string(c.dropped_messages) + " (" + Fixed(c.dropped_bytes / 1e6, 1) +
+          " MB) by slow clients' queues\n" + "  bad client messages " +
+          std::to_string(c.bad_messages) + ", inputs " + std::to_string(c.inputs) + " (" +
+          std::to_string(c.input_refused) + " refused), parameters " +
+          std::to_string(c.params_accepted) + " set, " + std::to_string(c.params_refused) +
+          " refused\n" + "  state latency (source stamp to written) p50 " +
+          Fixed(total.PercentileMs(50), 3) + " ms, p99 " + Fixed(total.PercentileMs(99), 3) +
+          " ms over " + std::to_string(total.count()) + " states\n  process CPU " +
+          Fixed(wall > 0 ? 100.0 * cpu / wall : 0.0, 1) + " % of one core over " + Fixed(wall, 1) +
+          " s");
   } catch (const std::exception& e) {
     std::cerr << "vdyn-foxglove: " << e.what() << "\n";
     return 1;

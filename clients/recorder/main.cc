@@ -114,7 +114,9 @@ int main(int argc, char** argv) {
   // export
   recorder::ExportOptions eo;
   std::uint32_t vehicle = 0;
-  auto* exp = app.add_subcommand("export", "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
+  auto* exp = app.add_subcommand(
+      "export",
+      "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
   exp->add_option("file", eo.file, "A recording")->required();
   recorder::FoxgloveExportOptions fo;
   auto* exp_csv = exp->add_option("--csv", eo.csv, "The CSV file");
@@ -122,9 +124,11 @@ int main(int argc, char** argv) {
                                   "A copy of the recording with Foxglove's scene added (MCAP)");
   exp_csv->excludes(exp_fox);
   exp->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
-      ->check(cli::InRange(limits::kFoxgloveSceneHz))->capture_default_str();
+      ->check(cli::InRange(limits::kFoxgloveSceneHz))
+      ->capture_default_str();
   exp->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
-      ->check(cli::InRange(limits::kArrowScale))->capture_default_str();
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
   auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle");
   exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
   exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));

@@ -53,10 +53,10 @@ struct ClientPublish {
 
 struct ClientState {
   std::shared_ptr<Outbox> outbox;
-  std::string name;  // "client 3 (127.0.0.1, foxglove.sdk.v1)"
+  std::string name;                                      // "client 3 (127.0.0.1, foxglove.sdk.v1)"
   std::map<std::uint32_t, std::uint32_t> subscriptions;  // subscription id -> channel id
   bool all_params = false;
-  std::set<std::string> param_names;  // parameter updates subscribed to
+  std::set<std::string> param_names;                 // parameter updates subscribed to
   std::map<std::uint32_t, ClientPublish> publishes;  // the client's channel id -> its input
   base::MonoTime last_input_error{};
 };
@@ -79,7 +79,9 @@ struct SetRequest {
   std::optional<std::string> id;
 };
 
-std::string Schema(const google::protobuf::Descriptor* d) { return messages::FileDescriptorSetOf(d); }
+std::string Schema(const google::protobuf::Descriptor* d) {
+  return messages::FileDescriptorSetOf(d);
+}
 
 }  // namespace
 
@@ -111,12 +113,16 @@ struct Bridge::Impl {
   // The source thread's.
   transport::DropCounters drops;
   transport::Waitset waitset{participant, &drops};
-  client::StateReader states{participant, drops, std::nullopt, client::StateReader::History::kEvery};
-  transport::Reader<pb::VehicleParams> params_reader{participant, transport::TopicId::kParams, &drops};
-  transport::Reader<pb::WorldDescription> world_reader{participant, transport::TopicId::kWorld, &drops};
+  client::StateReader states{participant, drops, std::nullopt,
+                             client::StateReader::History::kEvery};
+  transport::Reader<pb::VehicleParams> params_reader{participant, transport::TopicId::kParams,
+                                                     &drops};
+  transport::Reader<pb::WorldDescription> world_reader{participant, transport::TopicId::kWorld,
+                                                       &drops};
   transport::Reader<pb::Diagnostics> diagnostics_reader{participant,
                                                         transport::TopicId::kDiagnostics, &drops};
-  transport::Reader<pb::SessionEvent> events_reader{participant, transport::TopicId::kEvents, &drops};
+  transport::Reader<pb::SessionEvent> events_reader{participant, transport::TopicId::kEvents,
+                                                    &drops};
   std::map<std::uint32_t, SourceVehicle> vehicles;
   std::map<std::string, pb::WorldDescription> worlds;
   pb::VehicleState scratch;
@@ -133,7 +139,8 @@ struct Bridge::Impl {
 
   Impl(transport::Participant& p, BridgeConfig c) : participant(p), cfg(std::move(c)) {}
 
-  // --- channels (mu held) -------------------------------------------------------------------------
+  // --- channels (mu held)
+  // -------------------------------------------------------------------------
   std::uint32_t ChannelFor(const std::string& topic, Kind kind, std::uint32_t vehicle,
                            const std::string& schema_name, const std::string& schema) {
     auto [it, fresh] = channel_ids.emplace(topic, next_channel);
@@ -196,7 +203,8 @@ struct Bridge::Impl {
 
   bool Subscribed(std::uint32_t channel) { return !channels[channel].subscribers.empty(); }
 
-  // --- the source thread --------------------------------------------------------------------------
+  // --- the source thread
+  // --------------------------------------------------------------------------
   SourceVehicle& VehicleFor(const pb::VehicleState& s) {
     const std::uint32_t id = s.vehicle_id();
     auto it = vehicles.find(id);
@@ -248,9 +256,11 @@ struct Bridge::Impl {
       SourceVehicle& v = VehicleFor(s);
       v.last_seen = now;
       std::lock_guard lock(mu);
-      newest_sim_ns = std::max<std::uint64_t>(newest_sim_ns, static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)));
+      newest_sim_ns = std::max<std::uint64_t>(
+          newest_sim_ns, static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)));
       // A reset vehicle's clock does not go back: forward again from its new time.
-      if (s.sim_time_ns() < v.last_forwarded_ns) v.last_forwarded_ns = std::numeric_limits<std::int64_t>::min();
+      if (s.sim_time_ns() < v.last_forwarded_ns)
+        v.last_forwarded_ns = std::numeric_limits<std::int64_t>::min();
       const bool want_state =
           Subscribed(v.state_channel) &&
           (period == 0 || v.last_forwarded_ns == std::numeric_limits<std::int64_t>::min() ||
@@ -260,8 +270,9 @@ struct Bridge::Impl {
       auto payload = std::make_shared<std::string>();
       (void)s.SerializeToString(payload.get());
       if (want_state) {
-        Deliver(v.state_channel, static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)),
-                payload, now, info.source_timestamp_ns, false);
+        Deliver(v.state_channel,
+                static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)), payload,
+                now, info.source_timestamp_ns, false);
         v.last_forwarded_ns = s.sim_time_ns();
       }
       if (want_scene) {
@@ -289,7 +300,8 @@ void Bridge::Impl::SceneTick(base::MonoTime now) {
     SourceVehicle& v = it->second;
     ++it;
     if (now - v.last_seen > cfg.vehicle_timeout) {
-      RemoveVehicle(id, "sent no state for " + std::to_string(cfg.vehicle_timeout.seconds()).substr(0, 4) + " s");
+      RemoveVehicle(id, "sent no state for " +
+                            std::to_string(cfg.vehicle_timeout.seconds()).substr(0, 4) + " s");
       continue;
     }
     if (!v.fresh || !v.latest) continue;
@@ -326,12 +338,13 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
     world_scenes[w.server_id()] = payload;
     for (const Subscriber& s : channels[world_channel].subscribers) {
       if (!s.outbox->PushControlData(s.subscription, newest_sim_ns, payload) && close) {
-        close(s.client, "vdyn-foxglove: this client has fallen too far behind (control queue full)");
+        close(s.client,
+              "vdyn-foxglove: this client has fallen too far behind (control queue full)");
       }
     }
-    log("world '" + w.name() + "' of server '" + w.server_id() + "': " +
-        std::to_string(w.meshes_size()) + " meshes, " + std::to_string(payload->size() / 1024) +
-        " KiB as a SceneUpdate on /vdyn/world");
+    log("world '" + w.name() + "' of server '" + w.server_id() +
+        "': " + std::to_string(w.meshes_size()) + " meshes, " +
+        std::to_string(payload->size() / 1024) + " KiB as a SceneUpdate on /vdyn/world");
   });
   std::set<std::uint32_t> changed;
   (void)params_reader.Take([&](const pb::VehicleParams& p, const transport::SampleInfo& info) {
@@ -343,7 +356,8 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
   (void)diagnostics_reader.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
     std::lock_guard lock(mu);
     if (!Subscribed(diagnostics_channel)) return;
-    Deliver(diagnostics_channel, static_cast<std::uint64_t>(std::max<std::int64_t>(d.sim_time_ns(), 0)),
+    Deliver(diagnostics_channel,
+            static_cast<std::uint64_t>(std::max<std::int64_t>(d.sim_time_ns(), 0)),
             std::make_shared<const std::string>(d.SerializeAsString()), now, 0, false);
   });
   std::vector<std::uint32_t> removed;
@@ -351,8 +365,8 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
     if (e.has_removed()) removed.push_back(e.vehicle_id());
     std::lock_guard lock(mu);
     if (!Subscribed(events_channel)) return;
-    Deliver(events_channel, newest_sim_ns, std::make_shared<const std::string>(e.SerializeAsString()),
-            now, 0, false);
+    Deliver(events_channel, newest_sim_ns,
+            std::make_shared<const std::string>(e.SerializeAsString()), now, 0, false);
   });
   for (std::uint32_t v : removed) RemoveVehicle(v, "was removed by its server");
 }
@@ -372,7 +386,8 @@ void Bridge::Impl::SendParameterUpdates(std::uint32_t vehicle) {
   }
 }
 
-std::vector<protocol::Parameter> Bridge::Impl::CurrentValues(const std::vector<std::string>& names) {
+std::vector<protocol::Parameter> Bridge::Impl::CurrentValues(
+    const std::vector<std::string>& names) {
   std::vector<protocol::Parameter> out;
   if (names.empty()) {
     for (const auto& [v, p] : params) {
@@ -428,13 +443,13 @@ void Bridge::Impl::HandleUnsubscribe(ClientId id, ClientState& c, const protocol
   for (std::uint32_t sub : m.subscription_ids) {
     const auto it = c.subscriptions.find(sub);
     if (it == c.subscriptions.end()) {
-      Status(id, c, StatusLevel::kWarning,
-             "unsubscribe: no subscription " + std::to_string(sub));
+      Status(id, c, StatusLevel::kWarning, "unsubscribe: no subscription " + std::to_string(sub));
       continue;
     }
     auto& subs = channels[it->second].subscribers;
-    subs.erase(std::remove_if(subs.begin(), subs.end(),
-                              [&](const Subscriber& s) { return s.client == id && s.subscription == sub; }),
+    subs.erase(std::remove_if(
+                   subs.begin(), subs.end(),
+                   [&](const Subscriber& s) { return s.client == id && s.subscription == sub; }),
                subs.end());
     c.subscriptions.erase(it);
     gone.push_back(sub);
@@ -442,7 +457,8 @@ void Bridge::Impl::HandleUnsubscribe(ClientId id, ClientState& c, const protocol
   if (!gone.empty()) c.outbox->Purge(gone);
 }
 
-void Bridge::Impl::HandleAdvertise(ClientId id, ClientState& c, const protocol::ClientAdvertise& m) {
+void Bridge::Impl::HandleAdvertise(ClientId id, ClientState& c,
+                                   const protocol::ClientAdvertise& m) {
   if (!cfg.allow_input) {
     ++counters.input_refused;
     Status(id, c, StatusLevel::kError,
@@ -454,11 +470,14 @@ void Bridge::Impl::HandleAdvertise(ClientId id, ClientState& c, const protocol::
     static constexpr std::string_view kPrefix = "/vehicle/", kSuffix = "/input";
     const std::string& t = ch.topic;
     std::uint32_t vehicle = 0;
-    bool ok = t.size() > kPrefix.size() + kSuffix.size() && t.compare(0, kPrefix.size(), kPrefix) == 0 &&
+    bool ok = t.size() > kPrefix.size() + kSuffix.size() &&
+              t.compare(0, kPrefix.size(), kPrefix) == 0 &&
               t.compare(t.size() - kSuffix.size(), kSuffix.size(), kSuffix) == 0;
     if (ok) {
-      const std::string digits = t.substr(kPrefix.size(), t.size() - kPrefix.size() - kSuffix.size());
-      ok = !digits.empty() && digits.size() <= 9 && digits.find_first_not_of("0123456789") == std::string::npos;
+      const std::string digits =
+          t.substr(kPrefix.size(), t.size() - kPrefix.size() - kSuffix.size());
+      ok = !digits.empty() && digits.size() <= 9 &&
+           digits.find_first_not_of("0123456789") == std::string::npos;
       if (ok) vehicle = static_cast<std::uint32_t>(std::stoul(digits));
     }
     if (!ok) {
@@ -482,11 +501,13 @@ void Bridge::Impl::HandleAdvertise(ClientId id, ClientState& c, const protocol::
   }
 }
 
-void Bridge::Impl::HandleGetParameters(ClientId id, ClientState& c, const protocol::GetParameters& m) {
+void Bridge::Impl::HandleGetParameters(ClientId id, ClientState& c,
+                                       const protocol::GetParameters& m) {
   PushControl(id, c, protocol::ParameterValuesJson(CurrentValues(m.names), m.id));
 }
 
-void Bridge::Impl::HandleSetParameters(ClientId id, ClientState& c, const protocol::SetParameters& m) {
+void Bridge::Impl::HandleSetParameters(ClientId id, ClientState& c,
+                                       const protocol::SetParameters& m) {
   std::map<std::uint32_t, SetRequest> by_vehicle;
   std::vector<std::string> refused;
   for (const protocol::Parameter& p : m.parameters) {
@@ -508,7 +529,8 @@ void Bridge::Impl::HandleSetParameters(ClientId id, ClientState& c, const protoc
       refused.push_back(p.name);
     }
   }
-  if (!refused.empty()) PushControl(id, c, protocol::ParameterValuesJson(CurrentValues(refused), m.id));
+  if (!refused.empty())
+    PushControl(id, c, protocol::ParameterValuesJson(CurrentValues(refused), m.id));
   std::lock_guard lock(request_mu);
   for (auto& [vehicle, r] : by_vehicle) {
     if (r.asked.empty()) continue;
@@ -564,7 +586,8 @@ void Bridge::Impl::RequestLoop() {
   }
 }
 
-// --- Bridge ---------------------------------------------------------------------------------------
+// --- Bridge
+// ---------------------------------------------------------------------------------------
 
 Bridge::Bridge(transport::Participant& participant, BridgeConfig config)
     : impl_(std::make_unique<Impl>(participant, std::move(config))) {
@@ -578,9 +601,9 @@ Bridge::Bridge(transport::Participant& participant, BridgeConfig config)
   std::lock_guard lock(m.mu);
   m.world_channel = m.ChannelFor("/vdyn/world", Kind::kWorld, 0,
                                  fg::SceneUpdate::descriptor()->full_name(), m.schema_scene);
-  m.diagnostics_channel =
-      m.ChannelFor("/vdyn/diagnostics", Kind::kDiagnostics, 0,
-                   pb::Diagnostics::descriptor()->full_name(), Schema(pb::Diagnostics::descriptor()));
+  m.diagnostics_channel = m.ChannelFor("/vdyn/diagnostics", Kind::kDiagnostics, 0,
+                                       pb::Diagnostics::descriptor()->full_name(),
+                                       Schema(pb::Diagnostics::descriptor()));
   m.events_channel =
       m.ChannelFor("/vdyn/events", Kind::kEvents, 0, pb::SessionEvent::descriptor()->full_name(),
                    Schema(pb::SessionEvent::descriptor()));
@@ -602,15 +625,17 @@ void Bridge::SetCloser(std::function<void(ClientId, const std::string&)> close) 
   impl_->close = std::move(close);
 }
 
-void Bridge::SetLog(std::function<void(const std::string&)> log) { impl_->log = std::move(log); }
+void Bridge::SetLog(std::function<void(const std::string&)> log) {
+  impl_->log = std::move(log);
+}
 
 void Bridge::Run(const std::atomic<bool>& stop) {
   Impl& m = *impl_;
   const base::Nanos tick = base::FromSeconds(1.0 / m.cfg.scene_hz);
   base::MonoTime next_tick = base::MonotonicNow();
   while (!stop.load()) {
-    const base::Nanos wait = std::clamp(next_tick - base::MonotonicNow(), base::Nanos{0},
-                                        base::Milliseconds(20));
+    const base::Nanos wait =
+        std::clamp(next_tick - base::MonotonicNow(), base::Nanos{0}, base::Milliseconds(20));
     (void)m.waitset.Wait(std::chrono::nanoseconds(wait.ns));
     const base::MonoTime now = base::MonotonicNow();
     m.TakeOthers(now);
@@ -722,10 +747,12 @@ void Bridge::OnBinary(ClientId id, std::span<const std::uint8_t> message) {
     if (!m.cfg.allow_input) {
       error = "client publish is off (vdyn-foxglove runs without --allow-input): input ignored";
     } else if (p == c.publishes.end()) {
-      error = "message data on channel " + std::to_string(d.channel_id) + ", which this client did not advertise";
+      error = "message data on channel " + std::to_string(d.channel_id) +
+              ", which this client did not advertise";
     } else {
       pb::DriverInput in;
-      const std::string_view bytes(reinterpret_cast<const char*>(d.payload.data()), d.payload.size());
+      const std::string_view bytes(reinterpret_cast<const char*>(d.payload.data()),
+                                   d.payload.size());
       const bool parsed =
           p->second.json ? google::protobuf::util::JsonStringToMessage(bytes, &in).ok()
                          : in.ParseFromArray(d.payload.data(), static_cast<int>(d.payload.size()));
@@ -734,7 +761,8 @@ void Bridge::OnBinary(ClientId id, std::span<const std::uint8_t> message) {
                 " is not a vdyn.pb.DriverInput (" + (p->second.json ? "JSON" : "protobuf") + ")";
       } else {
         client::ClampToLimits(in);
-        if (!p->second.publisher->Publish(in)) error = "input not sent: " + p->second.publisher->last_error();
+        if (!p->second.publisher->Publish(in))
+          error = "input not sent: " + p->second.publisher->last_error();
         ++m.counters.inputs;
       }
     }

@@ -11,7 +11,8 @@ namespace {
 
 namespace gp = google::protobuf;
 
-void Collect(const gp::Message& m, const std::string& prefix, std::vector<protocol::Parameter>& out) {
+void Collect(const gp::Message& m, const std::string& prefix,
+             std::vector<protocol::Parameter>& out) {
   std::vector<const gp::FieldDescriptor*> fields;
   m.GetReflection()->ListFields(m, &fields);
   const gp::Reflection* r = m.GetReflection();
@@ -85,7 +86,8 @@ std::optional<ParameterName> ParseParameterName(const std::string& name) {
     return std::nullopt;
   }
   const std::string id = name.substr(kPrefix.size(), slash - kPrefix.size());
-  if (id.size() > 10 || id.find_first_not_of("0123456789") != std::string::npos) return std::nullopt;
+  if (id.size() > 10 || id.find_first_not_of("0123456789") != std::string::npos)
+    return std::nullopt;
   const unsigned long long v = std::strtoull(id.c_str(), nullptr, 10);
   if (v > 0xffffffffull) return std::nullopt;
   return ParameterName{static_cast<std::uint32_t>(v), name.substr(slash + 1)};
@@ -99,7 +101,9 @@ std::string SetParameter(pb::VehicleParams& params, const std::string& path,
   for (std::size_t at = 0;;) {
     const std::size_t slash = path.find('/', at);
     const gp::FieldDescriptor* f =
-        d == nullptr ? nullptr : d->FindFieldByName(path.substr(at, slash == std::string::npos ? std::string::npos : slash - at));
+        d == nullptr ? nullptr
+                     : d->FindFieldByName(path.substr(
+                           at, slash == std::string::npos ? std::string::npos : slash - at));
     if (f == nullptr || f->is_repeated()) return "no parameter '" + path + "'";
     chain.push_back(f);
     if (slash == std::string::npos) break;
@@ -138,7 +142,8 @@ std::string SetParameter(pb::VehicleParams& params, const std::string& path,
       return "parameter '" + path + "' cannot be set here";
   }
   gp::Message* m = &params;
-  for (std::size_t i = 0; i + 1 < chain.size(); ++i) m = m->GetReflection()->MutableMessage(m, chain[i]);
+  for (std::size_t i = 0; i + 1 < chain.size(); ++i)
+    m = m->GetReflection()->MutableMessage(m, chain[i]);
   const gp::Reflection* r = m->GetReflection();
   switch (f->cpp_type()) {
     case gp::FieldDescriptor::CPPTYPE_DOUBLE:

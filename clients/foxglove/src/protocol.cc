@@ -29,7 +29,8 @@ const json& Field(const json& obj, const char* key, std::string_view op, const s
 }
 
 std::uint32_t U32(const json& v, std::string_view op, const std::string& what) {
-  if (v.is_number_unsigned() && v.get<std::uint64_t>() <= std::numeric_limits<std::uint32_t>::max()) {
+  if (v.is_number_unsigned() &&
+      v.get<std::uint64_t>() <= std::numeric_limits<std::uint32_t>::max()) {
     return static_cast<std::uint32_t>(v.get<std::uint64_t>());
   }
   if (v.is_number_integer() && v.get<std::int64_t>() >= 0 &&
@@ -81,7 +82,8 @@ ParameterValue ValueOf(const json& v, bool float64, std::string_view op, const s
   if (v.is_string()) return v.get<std::string>();
   if (v.is_number_float() || (v.is_number() && float64)) return v.get<double>();
   if (v.is_number_unsigned()) {
-    if (v.get<std::uint64_t>() > static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max())) {
+    if (v.get<std::uint64_t>() >
+        static_cast<std::uint64_t>(std::numeric_limits<std::int64_t>::max())) {
       return static_cast<double>(v.get<std::uint64_t>());
     }
     return static_cast<std::int64_t>(v.get<std::uint64_t>());
@@ -215,9 +217,9 @@ ClientMessage ParseClientText(std::string_view text) {
     for (std::size_t i = 0; i < a.size(); ++i) {
       const std::string at = "subscriptions[" + std::to_string(i) + "]";
       if (!a[i].is_object()) Bad(op, at + " is not an object");
-      s.subscriptions.emplace_back(U32(Field(a[i], "id", op, at + "."), op, at + ".id"),
-                                   U32(Field(a[i], "channelId", op, at + "."), op,
-                                       at + ".channelId"));
+      s.subscriptions.emplace_back(
+          U32(Field(a[i], "id", op, at + "."), op, at + ".id"),
+          U32(Field(a[i], "channelId", op, at + "."), op, at + ".channelId"));
     }
     return s;
   }
@@ -233,7 +235,8 @@ ClientMessage ParseClientText(std::string_view text) {
       ch.topic = Str(Field(a[i], "topic", op, at + "."), op, at + ".topic");
       ch.encoding = Str(Field(a[i], "encoding", op, at + "."), op, at + ".encoding");
       const auto name = a[i].find("schemaName");
-      if (name != a[i].end() && !name->is_null()) ch.schema_name = Str(*name, op, at + ".schemaName");
+      if (name != a[i].end() && !name->is_null())
+        ch.schema_name = Str(*name, op, at + ".schemaName");
       c.channels.push_back(std::move(ch));
     }
     return c;
@@ -270,7 +273,8 @@ ClientMessageData ParseClientBinary(std::span<const std::uint8_t> m) {
   }
   if (m.size() < 5) throw ProtocolError("client message data shorter than its 5-byte header");
   ClientMessageData d;
-  for (int i = 0; i < 4; ++i) d.channel_id |= std::uint32_t{m[1 + static_cast<std::size_t>(i)]} << (8 * i);
+  for (int i = 0; i < 4; ++i)
+    d.channel_id |= std::uint32_t{m[1 + static_cast<std::size_t>(i)]} << (8 * i);
   d.payload = m.subspan(5);
   return d;
 }
@@ -369,7 +373,8 @@ bool FrameReader::Next(std::string_view& in, Event& out) {
         if (len > 125) Fail(1002, "a control frame over 125 bytes");
         control_.clear();
       } else {
-        if (op == 0 && !in_message_) Fail(1002, "a continuation frame without a message to continue");
+        if (op == 0 && !in_message_)
+          Fail(1002, "a continuation frame without a message to continue");
         if (op != 0 && in_message_) Fail(1002, "a new message inside a fragmented one");
         if (op != 0) {
           in_message_ = true;
@@ -391,7 +396,8 @@ bool FrameReader::Next(std::string_view& in, Event& out) {
     const std::size_t take = static_cast<std::size_t>(std::min<std::uint64_t>(left_, in.size()));
     const std::size_t at = target.size();
     target.append(in.data(), take);
-    for (std::size_t k = 0; k < take; ++k) target[at + k] ^= static_cast<char>(mask_[(masked_ + k) & 3]);
+    for (std::size_t k = 0; k < take; ++k)
+      target[at + k] ^= static_cast<char>(mask_[(masked_ + k) & 3]);
     masked_ += take;
     left_ -= take;
     in.remove_prefix(take);

@@ -11,19 +11,31 @@ namespace {
 
 namespace fg = ::foxglove;
 
-Vec3 operator+(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-Vec3 operator-(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-Vec3 operator*(const Vec3& a, double s) { return {a.x * s, a.y * s, a.z * s}; }
-double Dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+Vec3 operator+(const Vec3& a, const Vec3& b) {
+  return {a.x + b.x, a.y + b.y, a.z + b.z};
+}
+Vec3 operator-(const Vec3& a, const Vec3& b) {
+  return {a.x - b.x, a.y - b.y, a.z - b.z};
+}
+Vec3 operator*(const Vec3& a, double s) {
+  return {a.x * s, a.y * s, a.z * s};
+}
+double Dot(const Vec3& a, const Vec3& b) {
+  return a.x * b.x + a.y * b.y + a.z * b.z;
+}
 Vec3 Cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-double Norm(const Vec3& v) { return std::sqrt(Dot(v, v)); }
+double Norm(const Vec3& v) {
+  return std::sqrt(Dot(v, v));
+}
 Vec3 Normalized(const Vec3& v, const Vec3& fallback) {
   const double n = Norm(v);
   return n > 1e-12 ? v * (1.0 / n) : fallback;
 }
-Vec3 V(const pb::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+Vec3 V(const pb::Vec3& v) {
+  return {v.x(), v.y(), v.z()};
+}
 
 // The body's axes in the world frame (columns of R_WB) from a quaternion, normalised first.
 struct Axes {
@@ -93,7 +105,8 @@ bool UsableGeometry(const pb::VehicleGeometry& d) {
   }
   for (int w = 0; w < kWheels; ++w) {
     if (!(d.wheel_radius(w) > 0 && d.wheel_radius(w) < 10) ||
-        !(d.free_length(w) >= 0 && d.free_length(w) < 10) || !(Norm(V(d.mount_points_b(w))) < 100)) {
+        !(d.free_length(w) >= 0 && d.free_length(w) < 10) ||
+        !(Norm(V(d.mount_points_b(w))) < 100)) {
       return false;
     }
   }
@@ -355,8 +368,8 @@ void BuildVehicleScene(const pb::VehicleState& s, const Geometry& g, const Scene
   AddBox(body, -g.rear, g.front, g.half_width, h.At(0.42), h.At(0.95), paint, 1.0);
   const double x_front_axle = 0.5 * (g.mount_B[0].x + g.mount_B[1].x);
   const double x_rear_axle = 0.5 * (g.mount_B[2].x + g.mount_B[3].x);
-  AddBox(body, x_rear_axle - 0.25, x_front_axle - 0.55, 0.85 * g.half_width, h.At(0.95),
-         h.At(1.42), {60, 75, 95}, 0.85);
+  AddBox(body, x_rear_axle - 0.25, x_front_axle - 0.55, 0.85 * g.half_width, h.At(0.95), h.At(1.42),
+         {60, 75, 95}, 0.85);
   fg::TextPrimitive* label = body->add_texts();
   SetVec(label->mutable_pose()->mutable_position(), {0, 0, h.At(1.46) + 0.6});
   SetQuat(label->mutable_pose()->mutable_orientation(), 1, 0, 0, 0);
@@ -366,9 +379,8 @@ void BuildVehicleScene(const pb::VehicleState& s, const Geometry& g, const Scene
   label->set_text(std::to_string(id));
   // The wheels: a cylinder each, its axis along the wheel frame's Y (a quarter turn about X).
   for (int w = 0; w < kWheels; ++w) {
-    fg::SceneEntity* e =
-        NewEntity(out, prefix + "/wheel/" + std::string(WheelName(w)), WheelFrame(id, w), true,
-                  stamp_ns);
+    fg::SceneEntity* e = NewEntity(out, prefix + "/wheel/" + std::string(WheelName(w)),
+                                   WheelFrame(id, w), true, stamp_ns);
     fg::CylinderPrimitive* c = e->add_cylinders();
     SetQuat(c->mutable_pose()->mutable_orientation(), std::sqrt(0.5), std::sqrt(0.5), 0, 0);
     const double r = g.radius[static_cast<std::size_t>(w)];
@@ -383,7 +395,8 @@ void BuildVehicleScene(const pb::VehicleState& s, const Geometry& g, const Scene
   order->set_key("arrows");
   order->set_value(
       "per wheel LF, RF, LR, RR: spring Fp, drive Fh, brake Fb, side Fy; then drag Da, wall; "
-      "length " + std::to_string(o.arrow_m_per_kn) + " m per kN");
+      "length " +
+      std::to_string(o.arrow_m_per_kn) + " m per kN");
   for (const Arrow& a : ForceArrows(s, g, o)) {
     const double f = Norm(a.force_W);
     const double length = f * o.arrow_m_per_kn / 1000.0;
@@ -399,8 +412,7 @@ void BuildVehicleScene(const pb::VehicleState& s, const Geometry& g, const Scene
   }
 }
 
-void BuildWorldScene(const pb::WorldDescription& w, std::int64_t stamp_ns,
-                     fg::SceneUpdate& out) {
+void BuildWorldScene(const pb::WorldDescription& w, std::int64_t stamp_ns, fg::SceneUpdate& out) {
   out.Clear();
   fg::SceneEntity* e = NewEntity(out, "world/" + w.server_id(), kWorldFrame, false, stamp_ns);
   fg::KeyValuePair* name = e->add_metadata();

@@ -29,7 +29,8 @@ namespace http = beast::http;
 using tcp = asio::ip::tcp;
 using protocol::WsOpcode;
 
-// --- latency histogram ----------------------------------------------------------------------------
+// --- latency histogram
+// ----------------------------------------------------------------------------
 
 void LatencyHistogram::Add(std::int64_t ns) {
   if (!bins_) bins_ = std::make_unique<std::uint32_t[]>(kBins);
@@ -61,7 +62,8 @@ void LatencyHistogram::Clear() {
   count_ = 0;
 }
 
-// --- connections ----------------------------------------------------------------------------------
+// --- connections
+// ----------------------------------------------------------------------------------
 
 class ConnectionBase {
  public:
@@ -112,7 +114,9 @@ class Connection final : public ConnectionBase,
   static constexpr bool kTls = !std::is_same_v<Stream, tcp::socket>;
 
   Connection(Server::Impl& server, Stream stream, ClientId id)
-      : server_(server), stream_(std::move(stream)), id_(id),
+      : server_(server),
+        stream_(std::move(stream)),
+        id_(id),
         reader_(server.options.max_client_message_bytes) {
     beast::error_code ec;
     peer_ = Socket(stream_).remote_endpoint(ec).address().to_string();
@@ -149,7 +153,9 @@ class Connection final : public ConnectionBase,
     parser_->body_limit(64 * 1024);
     http::async_read(stream_, buffer_, *parser_,
                      [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
-                       if (ec) return self->Drop(ec == http::error::end_of_stream ? "closed" : "HTTP: " + ec.message());
+                       if (ec)
+                         return self->Drop(
+                             ec == http::error::end_of_stream ? "closed" : "HTTP: " + ec.message());
                        self->OnRequest();
                      });
   }
@@ -229,17 +235,19 @@ class Connection final : public ConnectionBase,
     }
     auto accept = std::make_shared<std::string>(
         "HTTP/1.1 101 Switching Protocols\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
-        "Sec-WebSocket-Accept: " + protocol::AcceptKey(key) + "\r\nSec-WebSocket-Protocol: " +
-        subprotocol + "\r\nServer: vdyn-foxglove\r\n\r\n");
-    asio::async_write(stream_, asio::buffer(*accept),
-                      [self = this->shared_from_this(), accept, subprotocol](beast::error_code ec,
-                                                                             std::size_t) {
-                        if (ec) return self->Drop("handshake write: " + ec.message());
-                        self->Open(subprotocol);
-                      });
+        "Sec-WebSocket-Accept: " +
+        protocol::AcceptKey(key) + "\r\nSec-WebSocket-Protocol: " + subprotocol +
+        "\r\nServer: vdyn-foxglove\r\n\r\n");
+    asio::async_write(
+        stream_, asio::buffer(*accept),
+        [self = this->shared_from_this(), accept, subprotocol](beast::error_code ec, std::size_t) {
+          if (ec) return self->Drop("handshake write: " + ec.message());
+          self->Open(subprotocol);
+        });
   }
 
-  // --- WebSocket ----------------------------------------------------------------------------------
+  // --- WebSocket
+  // ----------------------------------------------------------------------------------
   void Open(const std::string& subprotocol) {
     outbox_ = std::make_shared<Outbox>(server_.options.limits);
     std::weak_ptr<Connection> weak = this->shared_from_this();
@@ -265,12 +273,14 @@ class Connection final : public ConnectionBase,
   }
 
   void ReadFrames() {
-    stream_.async_read_some(asio::buffer(rbuf_), [self = this->shared_from_this()](
-                                                     beast::error_code ec, std::size_t n) {
-      if (ec) return self->Drop(ec == asio::error::eof ? "closed by the client" : "read: " + ec.message());
-      if (!self->Feed({self->rbuf_.data(), n})) return;
-      if (!self->closing_) self->ReadFrames();
-    });
+    stream_.async_read_some(asio::buffer(rbuf_),
+                            [self = this->shared_from_this()](beast::error_code ec, std::size_t n) {
+                              if (ec)
+                                return self->Drop(ec == asio::error::eof ? "closed by the client"
+                                                                         : "read: " + ec.message());
+                              if (!self->Feed({self->rbuf_.data(), n})) return;
+                              if (!self->closing_) self->ReadFrames();
+                            });
   }
 
   // False when the connection is closing.
@@ -316,18 +326,18 @@ class Connection final : public ConnectionBase,
       return;
     }
     writing_ = true;
-    asio::async_write(stream_, asio::buffer(wbuf_), [self = this->shared_from_this()](
-                                                        beast::error_code ec, std::size_t n) {
-      self->writing_ = false;
-      if (ec) return self->Drop("write: " + ec.message());
-      self->server_.bytes_written += n;
-      if (!self->stamps_.empty()) {
-        const std::int64_t now = base::WallNow().ns;
-        std::lock_guard lock(self->server_.latency_mu);
-        for (std::int64_t s : self->stamps_) self->server_.latency.Add(now - s);
-      }
-      self->MaybeWrite();
-    });
+    asio::async_write(stream_, asio::buffer(wbuf_),
+                      [self = this->shared_from_this()](beast::error_code ec, std::size_t n) {
+                        self->writing_ = false;
+                        if (ec) return self->Drop("write: " + ec.message());
+                        self->server_.bytes_written += n;
+                        if (!self->stamps_.empty()) {
+                          const std::int64_t now = base::WallNow().ns;
+                          std::lock_guard lock(self->server_.latency_mu);
+                          for (std::int64_t s : self->stamps_) self->server_.latency.Add(now - s);
+                        }
+                        self->MaybeWrite();
+                      });
   }
 
   void Shutdown() {
@@ -443,9 +453,13 @@ std::uint16_t Server::port() const {
   return impl_->acceptor.local_endpoint(ec).port();
 }
 
-bool Server::tls() const { return impl_->tls.has_value(); }
+bool Server::tls() const {
+  return impl_->tls.has_value();
+}
 
-void Server::Run() { impl_->io.run(); }
+void Server::Run() {
+  impl_->io.run();
+}
 
 void Server::Stop() {
   asio::post(impl_->io, [this] {

@@ -28,9 +28,13 @@ class SceneChannels {
     if (it != channels_.end()) return it->second;
     auto s = schemas_.find(d->full_name());
     if (s == schemas_.end()) {
-      s = schemas_.emplace(d->full_name(), w_.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d))).first;
+      s = schemas_
+              .emplace(d->full_name(),
+                       w_.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d)))
+              .first;
     }
-    return channels_[topic] = w_.AddChannel(s->second, topic, "protobuf", {{"vdyn", "foxglove scene"}});
+    return channels_[topic] =
+               w_.AddChannel(s->second, topic, "protobuf", {{"vdyn", "foxglove scene"}});
   }
 
  private:
@@ -57,13 +61,14 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
   std::map<std::string, pb::WorldDescription> worlds;  // by server id
   std::map<std::uint32_t, pb::VehicleParams> params;
   std::map<std::uint32_t, std::uint64_t> last_scene;  // vehicle -> log time of its last scene
-  std::set<std::uint64_t> terrains;                    // terrain hashes written
+  std::set<std::uint64_t> terrains;                   // terrain hashes written
   std::uint64_t copied = 0, scenes = 0, malformed = 0, undrawable = 0, orphans = 0;
   pb::VehicleState state;
   fg::SceneUpdate scene;
   fg::FrameTransforms transforms;
   std::string bytes;
-  auto write = [&](std::uint16_t channel, std::uint64_t log_time, const google::protobuf::Message& m) {
+  auto write = [&](std::uint16_t channel, std::uint64_t log_time,
+                   const google::protobuf::Message& m) {
     bytes.clear();
     (void)m.SerializeToString(&bytes);
     w.WriteMessage(channel, 0, log_time, log_time,
@@ -72,7 +77,9 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
 
   Progress progress("export");
   mcap::Visitor v;
-  v.on_progress = [&](std::uint64_t at) { progress.Update(static_cast<double>(at) / static_cast<double>(reader.size())); };
+  v.on_progress = [&](std::uint64_t at) {
+    progress.Update(static_cast<double>(at) / static_cast<double>(reader.size()));
+  };
   v.on_schema = [&](const mcap::Schema& s) {
     schemas[s.id] = s;
     schema_ids[s.id] = w.AddSchema(s.name, s.encoding, s.data);
@@ -85,7 +92,9 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
       vdyn_channels[c.id] = *info;
     }
   };
-  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) { w.WriteMetadata(m.name, m.values); };
+  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+    w.WriteMetadata(m.name, m.values);
+  };
   v.on_message = [&](const mcap::Message& m, std::uint64_t) {
     const auto id = channel_ids.find(m.channel_id);
     if (id == channel_ids.end()) {
@@ -103,7 +112,8 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
         if (!world.ParseFromArray(m.data.data(), size)) return void(++malformed);
         if (terrains.insert(world.terrain_hash()).second) {
           foxglove::BuildWorldScene(world, static_cast<std::int64_t>(m.log_time), scene);
-          write(scene_channels.Get("/vdyn/world", fg::SceneUpdate::descriptor()), m.log_time, scene);
+          write(scene_channels.Get("/vdyn/world", fg::SceneUpdate::descriptor()), m.log_time,
+                scene);
         }
         worlds[world.server_id()] = std::move(world);
         return;
@@ -117,18 +127,22 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
         const auto last = last_scene.find(vehicle);
         if (last != last_scene.end() && m.log_time / period == last->second / period) return;
         if (!state.ParseFromArray(m.data.data(), size)) return void(++malformed);
-        if (state.vehicle_id() != vehicle || !foxglove::CheckState(state).empty()) return void(++undrawable);
+        if (state.vehicle_id() != vehicle || !foxglove::CheckState(state).empty())
+          return void(++undrawable);
         last_scene[vehicle] = m.log_time;
         const auto world = worlds.find(state.server_id());
         const auto p = params.find(vehicle);
-        const foxglove::Geometry g = foxglove::GeometryFor(
-            vehicle, world == worlds.end() ? nullptr : &world->second, p == params.end() ? nullptr : &p->second);
+        const foxglove::Geometry g =
+            foxglove::GeometryFor(vehicle, world == worlds.end() ? nullptr : &world->second,
+                                  p == params.end() ? nullptr : &p->second);
         const std::string prefix = "/vehicle/" + std::to_string(vehicle);
         const auto stamp = static_cast<std::int64_t>(m.log_time);
         foxglove::BuildTransforms(state, g, stamp, transforms);
-        write(scene_channels.Get(prefix + "/tf", fg::FrameTransforms::descriptor()), m.log_time, transforms);
+        write(scene_channels.Get(prefix + "/tf", fg::FrameTransforms::descriptor()), m.log_time,
+              transforms);
         foxglove::BuildVehicleScene(state, g, so, stamp, scene);
-        write(scene_channels.Get(prefix + "/scene", fg::SceneUpdate::descriptor()), m.log_time, scene);
+        write(scene_channels.Get(prefix + "/scene", fg::SceneUpdate::descriptor()), m.log_time,
+              scene);
         ++scenes;
         return;
       }
@@ -147,10 +161,14 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
     out << "vdyn-recorder export: " << scan.messages_unchecked
         << " messages came from chunks no CRC checked; they are copied as they are\n";
   }
-  if (orphans > 0) out << "vdyn-recorder export: " << orphans << " messages on undefined channels were left out\n";
-  if (undrawable > 0) out << "vdyn-recorder export: " << undrawable << " states could not be drawn (no scene for them)\n";
+  if (orphans > 0)
+    out << "vdyn-recorder export: " << orphans << " messages on undefined channels were left out\n";
+  if (undrawable > 0)
+    out << "vdyn-recorder export: " << undrawable
+        << " states could not be drawn (no scene for them)\n";
   if (malformed > 0) {
-    out << "vdyn-recorder export: " << malformed << " messages did not parse (copied, no scene from them)\n";
+    out << "vdyn-recorder export: " << malformed
+        << " messages did not parse (copied, no scene from them)\n";
     return 1;
   }
   return 0;

@@ -31,7 +31,7 @@ struct BridgeConfig {
   double state_hz = 0;  // 0: every state
   double scene_hz = 60;
   SceneOptions scene;
-  bool allow_input = false;   // client publish: driving from the browser
+  bool allow_input = false;          // client publish: driving from the browser
   std::int32_t input_strength = 10;  // the ownership strength of that input (as vdyn-input's)
   base::Nanos vehicle_timeout = base::Seconds(3);  // unadvertised after this long without a state
   std::chrono::milliseconds request_timeout{3000};
@@ -55,11 +55,11 @@ class Bridge final : public ClientHandler {
   struct Counters {
     int clients = 0, subscriptions = 0, vehicles = 0;
     std::uint64_t states_in = 0, states_refused = 0;  // refused: not drawable (CheckState)
-    std::uint64_t dds_lost = 0;  // samples DDS reports lost to the state readers (best effort)
-    std::uint64_t messages_out = 0;                   // message data handed to the clients' queues
+    std::uint64_t dds_lost = 0;      // samples DDS reports lost to the state readers (best effort)
+    std::uint64_t messages_out = 0;  // message data handed to the clients' queues
     std::uint64_t dropped_messages = 0, dropped_bytes = 0;  // by the queues' bounds
-    std::uint64_t bad_messages = 0;                   // client messages that could not be used
-    std::uint64_t inputs = 0, input_refused = 0;      // driver input from clients
+    std::uint64_t bad_messages = 0;               // client messages that could not be used
+    std::uint64_t inputs = 0, input_refused = 0;  // driver input from clients
     std::uint64_t params_accepted = 0, params_refused = 0;
     std::string last_refusal;
   };

@@ -98,7 +98,7 @@ class Outbox {
   std::size_t control_bytes_ = 0;
   std::deque<Item> data_;
   std::size_t data_bytes_ = 0;
-  std::uint64_t front_seq_ = 0;  // sequence number of data_.front()
+  std::uint64_t front_seq_ = 0;                              // sequence number of data_.front()
   std::unordered_map<std::uint32_t, std::uint64_t> latest_;  // subscription -> its queued item
   std::optional<std::uint64_t> time_ns_;
   Counters counters_;

@@ -115,9 +115,9 @@ struct UnsubscribeParameterUpdates {
 struct Unsupported {
   std::string op;
 };
-using ClientMessage =
-    std::variant<Subscribe, Unsubscribe, ClientAdvertise, ClientUnadvertise, GetParameters,
-                 SetParameters, SubscribeParameterUpdates, UnsubscribeParameterUpdates, Unsupported>;
+using ClientMessage = std::variant<Subscribe, Unsubscribe, ClientAdvertise, ClientUnadvertise,
+                                   GetParameters, SetParameters, SubscribeParameterUpdates,
+                                   UnsubscribeParameterUpdates, Unsupported>;
 
 // Parses a text message; throws ProtocolError (not JSON, not an object, no "op", a field missing
 // or of the wrong type, a number out of range).

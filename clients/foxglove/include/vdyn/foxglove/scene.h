@@ -4,7 +4,7 @@
 //
 //   frames      world -> vehicle/<id>/body (the centre of gravity T, orientation q_WB)
 //                     -> vehicle/<id>/wheel/LF|RF|LR|RR (the wheel's centre, turned by its
-//                        steering angle about the body's Z)                  foxglove.FrameTransforms
+//                        steering angle about the body's Z) foxglove.FrameTransforms
 //   entities    vehicle/<id>/body: the body as boxes in its colour, its id above the roof
 //               vehicle/<id>/wheel/LF..RR: each wheel a cylinder in its wheel frame
 //               vehicle/<id>/forces: the force arrows of the paper's Fig. 3 in the world frame,
@@ -12,9 +12,9 @@
 //               contact point B spring Fp (along the terrain normal), drive Fh and brake Fb
 //               (along the wheel's heading in the ground plane; the full model: the tire's Fx,
 //               drive where it pushes, brake where it holds back), side Fy (across it); drag
-//               ending at the nose, the wall force from above the roof              foxglove.SceneUpdate
+//               ending at the nose, the wall force from above the roof foxglove.SceneUpdate
 //   world       world/<server id>: each terrain mesh as a triangle list coloured by its surface
-//               kind, the landmarks as labels                                      foxglove.SceneUpdate
+//               kind, the landmarks as labels foxglove.SceneUpdate
 //
 // The builders fill messages the caller keeps and reuses; a state must pass CheckState first.
 #pragma once
@@ -76,7 +76,7 @@ struct SceneOptions {
   double arrow_m_per_kn = 0.5;  // the viewer's --arrow-scale default
 };
 
-std::string BodyFrame(std::uint32_t vehicle_id);            // "vehicle/1/body"
+std::string BodyFrame(std::uint32_t vehicle_id);              // "vehicle/1/body"
 std::string WheelFrame(std::uint32_t vehicle_id, int wheel);  // "vehicle/1/wheel/LF"
 inline constexpr const char* kWorldFrame = "world";
 
