@@ -194,6 +194,7 @@ int main(int argc, char** argv) {
     watch.join();
     server->Stop();
     net.join();
+    bridge.CloseAll();
     second.Clear();
     server->TakeLatencies(second);
     total.Merge(second);

@@ -246,16 +246,17 @@ struct Bridge::Impl {
     const std::int64_t period =
         cfg.state_hz > 0 ? static_cast<std::int64_t>(1e9 / cfg.state_hz) : 0;
     (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
-      ++counters.states_in;
       if (std::string why = CheckState(s); !why.empty()) {
-        ++counters.states_refused;
         std::lock_guard lock(mu);
+        ++counters.states_in;
+        ++counters.states_refused;
         counters.last_refusal = why;
         return;
       }
       SourceVehicle& v = VehicleFor(s);
       v.last_seen = now;
       std::lock_guard lock(mu);
+      ++counters.states_in;
       newest_sim_ns = std::max<std::uint64_t>(
           newest_sim_ns, static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)));
       // A reset vehicle's clock does not go back: forward again from its new time.
@@ -665,6 +666,12 @@ Bridge::Counters Bridge::counters() const {
   c.dropped_messages += impl_->closed_dropped_messages;
   c.dropped_bytes += impl_->closed_dropped_bytes;
   return c;
+}
+
+void Bridge::CloseAll() {
+  std::lock_guard lock(impl_->mu);
+  for (auto& [id, ch] : impl_->channels) ch.subscribers.clear();
+  impl_->clients.clear();
 }
 
 void Bridge::OnOpen(ClientId id, const std::shared_ptr<Outbox>& outbox,

@@ -117,12 +117,14 @@ class Connection final : public ConnectionBase,
       : server_(server),
         stream_(std::move(stream)),
         id_(id),
+        idle_(server.io),
         reader_(server.options.max_client_message_bytes) {
     beast::error_code ec;
     peer_ = Socket(stream_).remote_endpoint(ec).address().to_string();
   }
 
   void Start() override {
+    ArmIdle();
     if constexpr (kTls) {
       stream_.async_handshake(asio::ssl::stream_base::server,
                               [self = this->shared_from_this()](beast::error_code ec) {
@@ -147,7 +149,18 @@ class Connection final : public ConnectionBase,
 
  private:
   // --- HTTP -------------------------------------------------------------------------------------
+  // An HTTP connection (or a TLS handshake) that sends no whole request for 30 s is closed; a
+  // WebSocket client has no such limit.
+  void ArmIdle() {
+    idle_.expires_after(std::chrono::seconds(30));
+    idle_.async_wait([weak = this->weak_from_this()](beast::error_code ec) {
+      if (ec) return;
+      if (auto self = weak.lock(); self && !self->opened_) self->Drop("no request for 30 s");
+    });
+  }
+
   void ReadRequest() {
+    ArmIdle();
     parser_.emplace();
     parser_->header_limit(16 * 1024);
     parser_->body_limit(64 * 1024);
@@ -249,6 +262,7 @@ class Connection final : public ConnectionBase,
   // --- WebSocket
   // ----------------------------------------------------------------------------------
   void Open(const std::string& subprotocol) {
+    idle_.cancel();
     outbox_ = std::make_shared<Outbox>(server_.options.limits);
     std::weak_ptr<Connection> weak = this->shared_from_this();
     asio::io_context& io = server_.io;
@@ -351,6 +365,7 @@ class Connection final : public ConnectionBase,
     dropped_ = true;
     beast::error_code ec;
     Socket(stream_).close(ec);
+    idle_.cancel();
     if (opened_) {
       --server_.clients;
       server_.handler.OnClose(id_, why);
@@ -362,6 +377,7 @@ class Connection final : public ConnectionBase,
   Stream stream_;
   ClientId id_;
   std::string peer_;
+  asio::steady_timer idle_;
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   protocol::FrameReader reader_;

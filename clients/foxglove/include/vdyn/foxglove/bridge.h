@@ -51,6 +51,8 @@ class Bridge final : public ClientHandler {
   void SetLog(std::function<void(const std::string&)> log);
   // The source loop until `stop`.
   void Run(const std::atomic<bool>& stop);
+  // Forgets every client (after the server stopped: nothing is pushed to their queues again).
+  void CloseAll();
 
   struct Counters {
     int clients = 0, subscriptions = 0, vehicles = 0;
