@@ -229,6 +229,23 @@ test("vehicles are advertised as they come and unadvertised as they go", async (
   assert.ok(watcher.byTopic.has("/vehicle/1/state"), "vehicle 1 stays");
 });
 
+test("--state-hz decimates each state channel and --scene-hz sets the scene's rate", async () => {
+  const slow = await h.bridge("bridge-rates", ["--state-hz", "50", "--scene-hz", "10"]);
+  const c = new h.Client(slow.url);
+  await h.until(() => c.byTopic.has("/vehicle/1/state"), 20000, "vehicle 1's channels");
+  c.subscribe("/vehicle/1/state");
+  c.subscribe("/vehicle/1/tf");
+  await h.until(() => c.of("/vehicle/1/state").length > 60 && c.of("/vehicle/1/tf").length > 12, 20000, "states and transforms");
+  const gaps = (list) => list.slice(1).map((m, k) => (m.logTime - list[k].logTime) / 1e6);
+  // States 20 ms of simulation time apart (a step's tolerance), transforms about 100 ms apart:
+  // latest only, built from the newest state at each tick of the bridge's clock.
+  for (const g of gaps(c.of("/vehicle/1/state"))) assert.ok(g >= 19.5 && g <= 40, `states ${g} ms apart`);
+  const tf = gaps(c.of("/vehicle/1/tf")).sort((a, b) => a - b);
+  const median = tf[Math.floor(tf.length / 2)];
+  assert.ok(median > 80 && median < 120, `transforms ${median} ms apart (median)`);
+  c.close();
+});
+
 test("wss:// and https:// with a certificate and key", async () => {
   const { execFileSync } = require("child_process");
   const path = require("path");
