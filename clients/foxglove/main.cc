@@ -46,12 +46,50 @@ std::string Fixed(double v, int digits) {
   return b;
 }
 
+namespace fx = vdyn::foxglove;
+
+// The status line: the last second's rates.
+std::string StatusLine(const fx::Bridge::Counters& c, const fx::Bridge::Counters& last,
+                       std::uint64_t bytes, const fx::LatencyHistogram& latency,
+                       vdyn::base::Nanos cpu) {
+  return "vdyn-foxglove: " + std::to_string(c.clients) + " clients, " +
+         std::to_string(c.subscriptions) + " subscriptions, " + std::to_string(c.vehicles) +
+         " vehicles | states in " + std::to_string(c.states_in - last.states_in) + "/s (DDS lost " +
+         std::to_string(c.dds_lost) + ") | out " +
+         std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
+         Fixed(static_cast<double>(bytes) / 1e6, 2) + " MB/s | dropped " +
+         std::to_string(c.dropped_messages) + " | state latency p50 " +
+         Fixed(latency.PercentileMs(50), 2) + " ms p99 " + Fixed(latency.PercentileMs(99), 2) +
+         " ms | CPU " + Fixed(100.0 * cpu.seconds(), 1) + " %";
+}
+
+// The summary at the end: the whole run.
+std::string Summary(const fx::Bridge::Counters& c, const fx::Server::Stats& st,
+                    const fx::LatencyHistogram& latency, double wall_s, double cpu_s) {
+  return "vdyn-foxglove summary: " + std::to_string(st.connections) + " WebSocket clients, " +
+         std::to_string(st.http_requests) + " HTTP requests, " + std::to_string(st.refused) +
+         " refused, " + std::to_string(st.protocol_errors) + " closed for protocol errors\n" +
+         "  states in " + std::to_string(c.states_in) + " (DDS lost " + std::to_string(c.dds_lost) +
+         " samples; " + std::to_string(c.states_refused) + " not drawable" +
+         (c.last_refusal.empty() ? "" : ": " + c.last_refusal) + "), messages out " +
+         std::to_string(c.messages_out) + ", dropped " + std::to_string(c.dropped_messages) + " (" +
+         Fixed(static_cast<double>(c.dropped_bytes) / 1e6, 1) + " MB) by slow clients' queues\n" +
+         "  bad client messages " + std::to_string(c.bad_messages) + ", inputs " +
+         std::to_string(c.inputs) + " (" + std::to_string(c.input_refused) +
+         " refused), parameters " + std::to_string(c.params_accepted) + " set, " +
+         std::to_string(c.params_refused) + " refused\n" +
+         "  state latency (source stamp to written) p50 " + Fixed(latency.PercentileMs(50), 3) +
+         " ms, p99 " + Fixed(latency.PercentileMs(99), 3) + " ms over " +
+         std::to_string(latency.count()) + " states\n  process CPU " +
+         Fixed(wall_s > 0 ? 100.0 * cpu_s / wall_s : 0.0, 1) + " % of one core over " +
+         Fixed(wall_s, 1) + " s";
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   namespace limits = vdyn::limits;
   namespace cli = vdyn::cli;
-  namespace fx = vdyn::foxglove;
   CLI::App app{
       "vdyn-foxglove: a Foxglove WebSocket server for a running session (Foxglove, Lichtblick) and "
       "a page for any browser, on one port"};
@@ -173,15 +211,7 @@ int main(int argc, char** argv) {
         total.Merge(second);
         const vdyn::base::Nanos cpu = vdyn::base::ProcessCpuTime();
         if (!no_status) {
-          Print("vdyn-foxglove: " + std::to_string(c.clients) + " clients, " +
-                std::to_string(c.subscriptions) + " subscriptions, " + std::to_string(c.vehicles) +
-                " vehicles | states in " + std::to_string(c.states_in - last.states_in) +
-                "/s (DDS lost " + std::to_string(c.dds_lost) + ") | out " +
-                std::to_string(c.messages_out - last.messages_out) + " msg/s, " +
-                Fixed((st.bytes_written - last_bytes) / 1e6, 2) + " MB/s | dropped " +
-                std::to_string(c.dropped_messages) + " | state latency p50 " +
-                Fixed(second.PercentileMs(50), 2) + " ms p99 " + Fixed(second.PercentileMs(99), 2) +
-                " ms | CPU " + Fixed(100.0 * (cpu - last_cpu).seconds(), 1) + " %");
+          Print(StatusLine(c, last, st.bytes_written - last_bytes, second, cpu - last_cpu));
         }
         last = c;
         last_bytes = st.bytes_written;
@@ -200,25 +230,7 @@ int main(int argc, char** argv) {
     total.Merge(second);
     const double wall = (vdyn::base::MonotonicNow() - start).seconds();
     const double cpu = (vdyn::base::ProcessCpuTime() - cpu0).seconds();
-    const fx::Bridge::Counters c = bridge.counters();
-    const fx::Server::Stats st = server->stats();
-    Print("vdyn-foxglove summary: " + std::to_string(st.connections) + " WebSocket clients, " +
-          std::to_string(st.http_requests) + " HTTP requests, " + std::to_string(st.refused) +
-          " refused, " + std::to_string(st.protocol_errors) + " closed for protocol errors\n" +
-          "  states in " + std::to_string(c.states_in) + " (DDS lost " +
-          std::to_string(c.dds_lost) + " samples; " + std::to_string(c.states_refused) +
-          " not drawable" + (c.last_refusal.empty() ? "" : ": " + c.last_refusal) +
-          "), messages out " + std::to_string(c.messages_out) + ", dropped " +
-          std::to_string(c.dropped_messages) + " (" + Fixed(c.dropped_bytes / 1e6, 1) +
-          " MB) by slow clients' queues\n" + "  bad client messages " +
-          std::to_string(c.bad_messages) + ", inputs " + std::to_string(c.inputs) + " (" +
-          std::to_string(c.input_refused) + " refused), parameters " +
-          std::to_string(c.params_accepted) + " set, " + std::to_string(c.params_refused) +
-          " refused\n" + "  state latency (source stamp to written) p50 " +
-          Fixed(total.PercentileMs(50), 3) + " ms, p99 " + Fixed(total.PercentileMs(99), 3) +
-          " ms over " + std::to_string(total.count()) + " states\n  process CPU " +
-          Fixed(wall > 0 ? 100.0 * cpu / wall : 0.0, 1) + " % of one core over " + Fixed(wall, 1) +
-          " s");
+    Print(Summary(bridge.counters(), server->stats(), total, wall, cpu));
   } catch (const std::exception& e) {
     std::cerr << "vdyn-foxglove: " << e.what() << "\n";
     return 1;
