@@ -76,7 +76,7 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     dest.replace_filename(o.file.stem().string() + "-recovered" + o.file.extension().string());
   }
   CheckNotAnInput(dest, {o.file});
-  mcap::Reader reader(o.file);
+  mcap::Reader reader(o.file, mcap::Reader::Open::kSalvage);
   // First, without decompressing anything (cheap): the chunks' compression, and whether the
   // data section's CRC holds - then it vouches for the chunks that carry none of their own.
   std::map<std::string, int> compressions;
