@@ -128,7 +128,7 @@ int main(int argc, char** argv) {
   recorder::PlotOptions po;
   auto* plot = app.add_subcommand("plot", "Figures (gnuplot, PNG or SVG) and one HTML page");
   plot->add_option("file", po.file, "A recording")->required();
-  plot->add_option("--out", po.out_dir, "Folder for the figures (default: FILE-plots)");
+  plot->add_option("--out", po.out_dir, "Folder for the figures (default: beside FILE, named after it: run.mcap -> run-plots)");
   auto* plot_vehicle = plot->add_option("--vehicle", vehicle, "The vehicle (default: the first)");
   plot->add_option("--format", po.format, "png or svg")->check(CLI::IsMember({"png", "svg"}))->capture_default_str();
   plot->add_option("--from", po.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
