@@ -2,13 +2,20 @@
 // data end, summary, footer), every message back in order, compression, the schema as a
 // FileDescriptorSet that decodes a payload by itself, and bad files - truncated at every kind of
 // place, corrupted, empty, foreign - refused with the file, offset and reason; recover salvages.
+#include <fcntl.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/un.h>
 #include <unistd.h>
 
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <random>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include <gmock/gmock.h>
 #include <google/protobuf/descriptor.pb.h>
@@ -602,6 +609,146 @@ TEST(RecorderOutputs, AnOutputTakesItsNameOnlyWhenWhole) {
   }
   EXPECT_EQ(Names(dir.path()),
             (std::set<std::string>{"out.csv", "real", "alias.csv", "new.mcap", "old.mcap"}));
+}
+
+// Issue 33, item 2: an output that is not a regular file is never unlinked or replaced. A FIFO,
+// a character device and a descriptor (/dev/fd/N, as /dev/stdout) are written into as a stream
+// (a recording through a FIFO reads back whole); a block device and a socket are refused, left
+// as they were; a name ending with a slash is refused and creates no folder; a finished file is
+// not moved over a FIFO.
+std::string Drain(int fd) {
+  std::string got;
+  char b[65536];
+  for (ssize_t n; (n = ::read(fd, b, sizeof b)) > 0;) got.append(b, static_cast<std::size_t>(n));
+  ::close(fd);
+  return got;
+}
+
+TEST(RecorderOutputs, AnOutputThatIsNotARegularFileIsWrittenAsAStreamOrRefusedNeverReplaced) {
+  testing::TempDir dir;
+  auto kind = [](const fs::path& p) { return fs::symlink_status(p).type(); };
+  const fs::path fifo = dir / "pipe.mcap";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  fs::create_symlink("pipe.mcap", dir / "to-pipe.csv");
+  // A second name of the FIFO: should a writer replace "pipe.mcap" with a file, the reader
+  // waiting on the FIFO is let go through it (the test fails instead of waiting forever).
+  ASSERT_EQ(::link(fifo.c_str(), (dir / "keep").c_str()), 0);
+  auto let_go = [&] {
+    const int fd = ::open((dir / "keep").c_str(), O_WRONLY | O_NONBLOCK | O_CLOEXEC);
+    if (fd >= 0) ::close(fd);
+  };
+  // A recording (not live, live) and a CSV into the FIFO, directly and through a symlink.
+  for (const fs::path& dest : {fifo, dir / "to-pipe.csv"}) {
+    for (const bool live : {false, true}) {
+      SCOPED_TRACE(dest.string() + (live ? " live" : ""));
+      std::string got;
+      std::thread reader([&] { got = Drain(::open(fifo.c_str(), O_RDONLY | O_CLOEXEC)); });
+      {
+        mc::WriterOptions o;
+        o.live = live;
+        mc::Writer w(dest, o);
+        EXPECT_EQ(w.writing_to(), dest);
+        w.WriteMetadata("x", {{"a", "b"}});
+        w.Close();
+      }
+      let_go();
+      reader.join();
+      testing::WriteFile(dir / "copy.mcap", got);
+      EXPECT_NO_THROW(ReadAll(dir / "copy.mcap")) << got.size() << " bytes through the FIFO";
+      EXPECT_EQ(kind(fifo), fs::file_type::fifo);
+    }
+  }
+  {
+    std::string got;
+    std::thread reader([&] { got = Drain(::open(fifo.c_str(), O_RDONLY | O_CLOEXEC)); });
+    {
+      recorder::OutputFile f(dir / "to-pipe.csv", {});
+      EXPECT_EQ(::write(f.fd(), "a,b\n", 4), 4);
+      f.Commit();
+    }
+    let_go();
+    reader.join();
+    EXPECT_EQ(got, "a,b\n");
+  }
+  EXPECT_EQ(kind(fifo), fs::file_type::fifo);
+  EXPECT_TRUE(fs::is_symlink(dir / "to-pipe.csv"));
+  // A character device: written into, still a device. A null device's node of its own (never
+  // the system's /dev/null, which a regression here would replace), where this user may make
+  // one.
+  const fs::path null = dir / "null.mcap";
+  if (::mknod(null.c_str(), S_IFCHR | 0600, ::makedev(1, 3)) == 0) {
+    {
+      mc::Writer w(null, {});
+      w.Close();
+    }
+    {
+      mc::WriterOptions o;
+      o.live = true;
+      mc::Writer w(null, o);
+      w.Close();
+    }
+    EXPECT_EQ(kind(null), fs::file_type::character);
+  }
+  // A descriptor named as a file (what /dev/stdout is): written through, at its offset.
+  int fds[2];
+  ASSERT_EQ(::pipe2(fds, O_CLOEXEC), 0);
+  {
+    recorder::OutputFile f("/dev/fd/" + std::to_string(fds[1]), {});
+    EXPECT_EQ(::write(f.fd(), "through\n", 8), 8);
+    f.Commit();
+  }
+  ::close(fds[1]);
+  EXPECT_EQ(Drain(fds[0]), "through\n");
+  // Refused, and left as they were: a socket, a block device (where this user may make one).
+  // (A socket's path must be short: beside the folder, not in it.)
+  const fs::path sock = "/tmp/vdyn-sock-" + std::to_string(::getpid()) + ".mcap";
+  fs::remove(sock);
+  const int sfd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  ASSERT_LT(sock.string().size(), sizeof addr.sun_path);
+  std::strcpy(addr.sun_path, sock.c_str());
+  ASSERT_EQ(::bind(sfd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr), 0);
+  std::vector<std::pair<fs::path, std::string>> refused = {{sock, "is a socket"}};
+  const fs::path blk = dir / "disk.mcap";
+  if (::mknod(blk.c_str(), S_IFBLK | 0600, ::makedev(7, 250)) == 0) {
+    refused.push_back({blk, "is a block device"});
+  }
+  for (const auto& [dest, says] : refused) {
+    SCOPED_TRACE(dest.string());
+    const fs::file_type before = kind(dest);
+    for (const bool live : {false, true}) {
+      mc::WriterOptions o;
+      o.live = live;
+      try {
+        mc::Writer w(dest, o);
+        ADD_FAILURE() << "written";
+      } catch (const recorder::OutputError& e) {
+        EXPECT_THAT(e.what(), HasSubstr(says));
+        EXPECT_THAT(e.what(), HasSubstr("nothing was written"));
+      }
+    }
+    EXPECT_THROW(recorder::OutputFile(dest, {}), recorder::OutputError);
+    EXPECT_EQ(kind(dest), before);
+  }
+  ::close(sfd);
+  fs::remove(sock);
+  // A finished file is not moved over a FIFO (plot's figures).
+  testing::WriteFile(dir / "done.png", "png");
+  EXPECT_THROW(recorder::MoveInto(dir / "done.png", fifo, {}), recorder::OutputError);
+  EXPECT_EQ(kind(fifo), fs::file_type::fifo);
+  // A name ending with a slash: refused, and no folder of that name is left behind.
+  for (const bool live : {false, true}) {
+    mc::WriterOptions o;
+    o.live = live;
+    try {
+      mc::Writer w(dir.path().string() + "/new.mcap/", o);
+      ADD_FAILURE() << "written";
+    } catch (const recorder::OutputError& e) {
+      EXPECT_THAT(e.what(), HasSubstr("ends with a slash"));
+    }
+    EXPECT_FALSE(fs::exists(dir / "new.mcap"));
+  }
 }
 
 // Issue 33, item 3: another program truncates the file while it is read (mapped): at every

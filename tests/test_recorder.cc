@@ -5,6 +5,7 @@
 // bit for bit; a recorder that cannot keep up counting what it dropped; bad files refused.
 #include <signal.h>
 
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -1490,6 +1491,45 @@ TEST_F(RecorderTest, NoCommandWritesOverItsInput) {
   EXPECT_EQ(Bytes(file), before);
   EXPECT_FALSE(std::filesystem::exists(dir_ / "plots" / "index.html"))
       << "some figures were moved in";
+}
+
+// Issue 33, item 2, end to end: `record` over a good recording with nothing to record leaves it
+// as it was (and says so); `export --csv /dev/stdout` writes the CSV into the pipe; a name
+// ending with a slash is refused and leaves no folder.
+TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
+  const auto file = dir_ / "run.mcap";
+  WriteRecording(file);
+  const std::vector<std::uint8_t> before = Bytes(file);
+  const std::string rec = testing::RecorderBinary();
+  auto in_dir = [&](const std::string& command) {
+    const std::string log = "sh" + std::to_string(runs_++) + ".log";
+    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && " + command}, dir_ / log);
+    const auto code = p.Wait(120s);
+    return std::make_pair(code.value_or(-1), p.Log());
+  };
+  {
+    const auto [code, out] = in_dir("exec " + rec + " record run.mcap --domain " +
+                                    std::to_string(domain_) + " --duration 1");
+    EXPECT_EQ(code, 0) << out;
+    EXPECT_THAT(out, HasSubstr("nothing was recorded: run.mcap is left as it was"));
+    EXPECT_EQ(Bytes(file), before) << "an empty recording took the place of a good one";
+  }
+  {
+    const auto [code, out] = in_dir(rec + " export run.mcap --csv /dev/stdout | cat > piped.csv");
+    EXPECT_EQ(code, 0) << out;
+    const std::string csv = testing::ReadFile(dir_ / "piped.csv");
+    EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3001) << csv.substr(0, 400);  // a header
+  }
+  for (const std::string& args : {std::string("export run.mcap --csv new/"),
+                                  "record new/ --domain " + std::to_string(domain_) +
+                                      " --duration 1"}) {
+    SCOPED_TRACE(args);
+    const auto [code, out] = in_dir("exec " + rec + " " + args);
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_THAT(out, HasSubstr("ends with a slash"));
+    EXPECT_FALSE(std::filesystem::exists(dir_ / "new")) << "a folder was left behind";
+  }
+  EXPECT_EQ(Bytes(file), before);
 }
 
 // A recording for the figures: a straight drive along a long, narrow road, no steering, no

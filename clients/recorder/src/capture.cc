@@ -18,6 +18,7 @@
 
 #include "vdyn/base/time.h"
 #include "vdyn/io/vehicle_params.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/vehicle_params.pb.h"
 #include "vdyn/world.pb.h"
@@ -249,7 +250,8 @@ struct Capture::Impl {
   transport::RawReader* state_reader = nullptr;   // vdyn/state
   // Each writer's participant (none: not matched any more, not told apart), asked of DDS once.
   std::unordered_map<std::uint64_t, std::optional<transport::Guid>> participant_of;
-  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps> seen_steps;  // (participant, vehicle)
+  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps>
+      seen_steps;  // (participant, vehicle)
   std::uint64_t state_copies = 0;
 
   // True when this state was recorded already from the other topic; else notes it.
@@ -308,7 +310,7 @@ struct Capture::Impl {
   File file;
   int part = 0;
   std::vector<std::filesystem::path> files;
-  std::uint64_t bytes_closed = 0;  // bytes of files already closed
+  std::uint64_t bytes_closed = 0;            // bytes of files already closed
   std::atomic<std::uint64_t> disk_bytes{0};  // closed files and the open one, for the status
   // The newest world and parameters of each key, re-emitted at the start of each split part.
   struct Latched {
@@ -319,6 +321,13 @@ struct Capture::Impl {
 
   Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {
     o.writer.live = true;  // a killed recorder leaves its file for `recover`
+    // Before anything is joined or created: an output that cannot be written (a name ending
+    // with a slash, a block device, a socket), and parts, which need names of their own.
+    if (CheckOutputKind(o.out) == OutputKind::kStream && (o.split_bytes > 0 || o.split_s > 0)) {
+      throw OutputError(o.out.string() +
+                        " is a FIFO, a device or a descriptor: --split-mb and --split-s need a "
+                        "file name to number the parts after (nothing was written)");
+    }
     // Room for the whole buffer in each arena from the start (address space; pages are touched
     // as they fill): a growing arena was copied to a new one, into fresh pages, each time it
     // outgrew its capacity - a third of the recorder's CPU once it fell behind at 128 vehicles,
@@ -405,8 +414,8 @@ struct Capture::Impl {
     }
     if (topic == TopicId::kEvents || topic == TopicId::kInput) {
       const std::uint64_t seq = sequence.value_or(0);
-      const auto id = std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key,
-                                      s.info.publication_handle);
+      const auto id =
+          std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key, s.info.publication_handle);
       SequenceGaps& g = sequences[id];
       const std::uint64_t before = g.missing();
       g.Add(seq);
@@ -449,7 +458,8 @@ struct Capture::Impl {
     for (const auto& [topic, c] : counts) {
       if (c.messages == 0 && c.lost == 0 && c.dropped == 0) continue;
       line += " | " + TopicShort(topic) + " " + Count(c.messages);
-      if (topic == TopicId::kState || c.bytes > 1'000'000) line += " " + FormatBytes(static_cast<double>(c.bytes));
+      if (topic == TopicId::kState || c.bytes > 1'000'000)
+        line += " " + FormatBytes(static_cast<double>(c.bytes));
       if (c.lost > 0) line += " " + Count(c.lost) + " lost";
       if (c.dropped > 0) line += " " + Count(c.dropped) + " DROPPED";
       if (c.malformed > 0) line += " " + Count(c.malformed) + " malformed";
@@ -486,11 +496,13 @@ struct Capture::Impl {
     m["host"] = host;
     std::string topics;
     for (const transport::TopicSpec& s : transport::AllTopics()) {
-      if (s.id != TopicId::kStates && Wanted(s.id)) topics += (topics.empty() ? "" : ",") + std::string(s.name);
+      if (s.id != TopicId::kStates && Wanted(s.id))
+        topics += (topics.empty() ? "" : ",") + std::string(s.name);
     }
     m["topics"] = topics;
     std::string vehicles;
-    for (std::uint32_t v : o.vehicles) vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
+    for (std::uint32_t v : o.vehicles)
+      vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
     m["vehicles"] = vehicles.empty() ? "all" : vehicles;
     m["compression"] = std::string(mcap::CompressionName(o.writer.compression));
     m["rmem_max"] = std::to_string(KernelReceiveBufferMax());  // see ReceiveBufferAdvice
@@ -551,7 +563,8 @@ struct Capture::Impl {
     const std::uint64_t now = LogNow();
     m["ended_utc"] = FormatUtc(now);
     m["reason"] = reason;
-    m["duration_s"] = std::to_string(static_cast<double>(now - static_cast<std::uint64_t>(wall0.ns)) * 1e-9);
+    m["duration_s"] =
+        std::to_string(static_cast<double>(now - static_cast<std::uint64_t>(wall0.ns)) * 1e-9);
     {
       std::lock_guard<std::mutex> lock(counts_mu);
       for (const auto& [topic, c] : counts) {
@@ -563,6 +576,13 @@ struct Capture::Impl {
       }
     }
     file.w->WriteMetadata("vdyn.recording.end", m);
+    if (file.own_messages == 0 && file.w->Discard()) {
+      // Never an empty recording in the place of one that was there.
+      spdlog::warn("vdyn-recorder: nothing was recorded: {} is left as it was",
+                   PartPath().string());
+      file.w.reset();
+      return;
+    }
     file.w->Close();
     bytes_closed += file.w->bytes_written();
     disk_bytes = bytes_closed;
@@ -574,11 +594,14 @@ struct Capture::Impl {
       pb::WorldDescription w;
       if (!w.ParseFromArray(data.data(), static_cast<int>(data.size()))) return;
       std::size_t triangles = 0;
-      for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+      for (const pb::Mesh& mesh : w.meshes())
+        triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
       char hash[24];
-      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(w.terrain_hash()));
-      spdlog::info("vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
-                   w.name(), w.server_id(), hash, triangles);
+      std::snprintf(hash, sizeof hash, "%016llx",
+                    static_cast<unsigned long long>(w.terrain_hash()));
+      spdlog::info(
+          "vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
+          w.name(), w.server_id(), hash, triangles);
       file.w->WriteMetadata("vdyn.world", {{"server_id", w.server_id()},
                                            {"name", w.name()},
                                            {"terrain_hash", hash},
@@ -635,8 +658,8 @@ struct Capture::Impl {
           // A new part before this message when the current one is full or old enough.
           const bool split_size = o.split_bytes > 0 && file.own_messages > 0 &&
                                   file.w->bytes_written() >= o.split_bytes;
-          const bool split_time = o.split_s > 0 && file.own_messages > 0 &&
-                                  e.log_time >= file.first_log + split_ns;
+          const bool split_time =
+              o.split_s > 0 && file.own_messages > 0 && e.log_time >= file.first_log + split_ns;
           if (split_size || split_time) {
             CloseFile("split");
             ++part;
@@ -685,17 +708,18 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
       // and it hears any other writer of vdyn/state. Where vdyn/states is not permitted (DDS
       // Security), everything on vdyn/state.
       try {
-        impl_->readers.emplace_back(TopicId::kStates, std::make_unique<transport::RawReader>(
-                                                          participant, TopicId::kStates, &impl_->drops,
-                                                          transport::ReaderRole::kRecorder));
+        impl_->readers.emplace_back(
+            TopicId::kStates,
+            std::make_unique<transport::RawReader>(participant, TopicId::kStates, &impl_->drops,
+                                                   transport::ReaderRole::kRecorder));
         role = transport::ReaderRole::kBatchRecorder;
       } catch (const transport::TransportError& e) {
         spdlog::warn("vdyn-recorder: cannot read vdyn/states ({}); every state on vdyn/state",
                      e.what());
       }
     }
-    impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
-                                          participant, s.id, &impl_->drops, role));
+    impl_->readers.emplace_back(
+        s.id, std::make_unique<transport::RawReader>(participant, s.id, &impl_->drops, role));
   }
   for (auto& [t, reader] : impl_->readers) {
     if (t == TopicId::kStates) impl_->states_reader = reader.get();
@@ -718,7 +742,8 @@ Capture::~Capture() = default;
 std::uint32_t Capture::MatchedWriters(TopicId topic) const {
   std::uint32_t n = 0;  // vdyn/state's: with vdyn/states'
   for (auto& [t, reader] : impl_->readers) {
-    if (t == topic || (topic == TopicId::kState && t == TopicId::kStates)) n += reader->MatchedWriters();
+    if (t == topic || (topic == TopicId::kState && t == TopicId::kStates))
+      n += reader->MatchedWriters();
   }
   return n;
 }
@@ -775,7 +800,8 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       for (std::size_t i = 0; i < m.readers.size(); ++i) {
         const std::uint32_t n = m.readers[i].second->MatchedWriters();
         if (n != matched[i]) {
-          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n, transport::Spec(m.readers[i].first).name);
+          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n,
+                       transport::Spec(m.readers[i].first).name);
           matched[i] = n;
         }
       }
@@ -798,9 +824,10 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       }
       if (dropped > last_dropped && (now - last_warning).ns >= 10'000'000'000) {
         last_warning = now;
-        spdlog::warn("vdyn-recorder is falling behind: {} messages dropped so far (the buffer of {} "
-                     "is full: the disk or the compression cannot keep up)",
-                     dropped, FormatBytes(static_cast<double>(m.o.queue_bytes)));
+        spdlog::warn(
+            "vdyn-recorder is falling behind: {} messages dropped so far (the buffer of {} "
+            "is full: the disk or the compression cannot keep up)",
+            dropped, FormatBytes(static_cast<double>(m.o.queue_bytes)));
       }
       last_dropped = dropped;
       if (m.o.status_line) {

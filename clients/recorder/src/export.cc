@@ -3,6 +3,7 @@
 // so one analysis script reads both).
 #include <unistd.h>
 
+#include <iostream>
 #include <map>
 #include <memory>
 #include <set>
@@ -49,8 +50,8 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
     if (vehicles.count(*o.vehicle) == 0) {
       std::string have;
       for (std::uint32_t v : vehicles) have += (have.empty() ? "" : ", ") + std::to_string(v);
-      out << "vdyn-recorder export: no states of vehicle " << *o.vehicle << " in " << o.file.string()
-          << " (it has vehicle " << have << ")\n";
+      out << "vdyn-recorder export: no states of vehicle " << *o.vehicle << " in "
+          << o.file.string() << " (it has vehicle " << have << ")\n";
       return 2;
     }
     chosen = {*o.vehicle};
@@ -69,12 +70,17 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
   for (std::uint32_t id : chosen) {
     auto& f = files[id] = std::make_unique<OutputFile>(o.each ? VehiclePath(o.csv, id) : o.csv,
                                                        std::vector<std::filesystem::path>{o.file});
-    ::close(f->Release());  // the CSV writer opens the temporary file itself
+    // The CSV writer opens the temporary file itself; a stream (a FIFO, /dev/stdout) stays
+    // open here until the end, so its reader sees one writer from the first row to the last.
+    if (!f->stream()) ::close(f->Release());
     writers[id] = std::make_unique<CsvWriter>(f->temp());
   }
+  // With the CSV on the standard output, what export says goes to the standard error.
+  std::ostream& report = NamesStandardOutput(o.csv) ? std::cerr : out;
   const std::uint64_t start = FirstLogTime(reader);
   const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
-  const auto to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
+  const auto to =
+      o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
   const auto every = static_cast<std::uint64_t>(std::max(1, o.every));
   pb::VehicleState state;
   std::uint64_t malformed = 0, unchecked = 0;
@@ -106,15 +112,16 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
       throw OutputError(files[id]->dest().string() + ": " + e.what());
     }
     files[id]->Commit();
-    out << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
-        << " columns -> " << files[id]->dest().string() << "\n";
+    report << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
+           << " columns -> " << files[id]->dest().string() << "\n";
   }
   // No more integrity than the recording has.
   for (const std::string& line : IntegrityNotes(meta, scan, unchecked, "rows")) {
-    out << "vdyn-recorder export: " << line << "\n";
+    report << "vdyn-recorder export: " << line << "\n";
   }
   if (malformed > 0) {
-    out << "vdyn-recorder export: " << malformed << " state messages did not parse and were skipped\n";
+    report << "vdyn-recorder export: " << malformed
+           << " state messages did not parse and were skipped\n";
     return 1;
   }
   return 0;

@@ -491,7 +491,10 @@ struct Writer::Codec {
 Writer::Writer(const std::filesystem::path& path, WriterOptions options)
     : path_(path), options_(std::move(options)), codec_(std::make_unique<Codec>()) {
   recorder::CheckNotAnInput(path, options_.inputs);
-  if (options_.live) {
+  // A name ending with a slash, a block device or a socket is refused before anything (a
+  // folder) is created; a FIFO or a device is written into as a stream (recorder::OutputFile).
+  const bool stream = recorder::CheckOutputKind(path) == recorder::OutputKind::kStream;
+  if (options_.live && !stream) {
     // A new file, written where it will stay (O_EXCL: never over one that appeared meanwhile).
     std::error_code ec;
     if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
@@ -534,6 +537,14 @@ Writer::~Writer() {
   } else if (fd_ >= 0) {
     ::close(fd_);
   }
+}
+
+bool Writer::Discard() {
+  if (closed_ || !out_ || out_->stream()) return false;
+  out_->Abandon();
+  fd_ = -1;
+  closed_ = true;
+  return true;
 }
 
 std::filesystem::path Writer::writing_to() const {

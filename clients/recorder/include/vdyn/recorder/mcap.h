@@ -171,6 +171,10 @@ class Writer {
   // Flushes, then writes the data end, the summary (schemas, channels, statistics, metadata and
   // chunk indexes, summary offsets), the footer and the closing magic. Throws McapError.
   void Close();
+  // Ends a file written beside its destination (WriterOptions::live over an existing file, or
+  // not live) without giving it the destination's name: the destination stays as it was and the
+  // bytes are removed. False (and nothing done) for a file written under its own name.
+  bool Discard();
 
   std::uint64_t bytes_written() const { return offset_; }
   std::uint64_t messages() const { return stats_.message_count; }
