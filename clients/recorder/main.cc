@@ -210,7 +210,7 @@ int main(int argc, char** argv) {
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
       std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds) << " to "
                 << files << " (" << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
-      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped();
+      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped() << s.dropped_by_topic();
       std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
                   s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
                   recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());

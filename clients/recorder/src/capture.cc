@@ -39,6 +39,21 @@ std::uint64_t CaptureSummary::total_dropped() const {
   return n;
 }
 
+std::string CaptureSummary::dropped_by_topic() const {
+  std::string out;
+  for (const auto& [t, c] : topics) {
+    if (c.dropped == 0) continue;
+    out += (out.empty() ? " (" : ", ") + std::string(transport::Spec(t).name) + " " +
+           std::to_string(c.dropped);
+  }
+  return out.empty() ? out : out + ")";
+}
+
+bool Admits(TopicId topic, std::size_t in_use, std::size_t size, std::size_t queue_bytes) {
+  const std::size_t bound = topic == TopicId::kState ? queue_bytes - queue_bytes / 4 : queue_bytes;
+  return in_use + size <= bound;
+}
+
 void SequenceGaps::Add(std::uint64_t seq) {
   if (seen_ == 0) {
     low_ = high_ = seq;
@@ -424,7 +439,7 @@ struct Capture::Impl {
     {
       std::lock_guard<std::mutex> lock(mu);
       const std::size_t in_use = pending.bytes.size() + writer_bytes;
-      if (in_use + s.payload.size() > o.queue_bytes) {
+      if (!Admits(topic, in_use, s.payload.size(), o.queue_bytes)) {
         ++c.dropped;
         return;
       }
