@@ -16,6 +16,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/export_foxglove.h"
 #include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
@@ -113,9 +114,21 @@ int main(int argc, char** argv) {
   // export
   recorder::ExportOptions eo;
   std::uint32_t vehicle = 0;
-  auto* exp = app.add_subcommand("export", "States to CSV, columns as vdyn-server --batch --csv");
+  auto* exp = app.add_subcommand(
+      "export",
+      "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
   exp->add_option("file", eo.file, "A recording")->required();
-  exp->add_option("--csv", eo.csv, "The CSV file")->required();
+  recorder::FoxgloveExportOptions fo;
+  auto* exp_csv = exp->add_option("--csv", eo.csv, "The CSV file");
+  auto* exp_fox = exp->add_option("--foxglove", fo.out,
+                                  "A copy of the recording with Foxglove's scene added (MCAP)");
+  exp_csv->excludes(exp_fox);
+  exp->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
+      ->check(cli::InRange(limits::kFoxgloveSceneHz))
+      ->capture_default_str();
+  exp->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
   auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle");
   exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
   exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
@@ -218,6 +231,14 @@ int main(int argc, char** argv) {
     }
     if (info->parsed()) return recorder::RunInfo(file, std::cout);
     if (exp->parsed()) {
+      if (*exp_fox) {
+        fo.file = eo.file;
+        return recorder::RunExportFoxglove(fo, std::cout);
+      }
+      if (!*exp_csv) {
+        std::cerr << "vdyn-recorder export: give --csv OUT.csv or --foxglove OUT.mcap\n";
+        return 2;
+      }
       if (*exp_vehicle) eo.vehicle = vehicle;
       return recorder::RunExport(eo, std::cout);
     }

@@ -21,19 +21,6 @@ namespace vdyn::recorder {
 
 using transport::TopicId;
 
-std::string FileDescriptorSetOf(const google::protobuf::Descriptor* d) {
-  google::protobuf::FileDescriptorSet set;
-  std::set<std::string> done;
-  std::function<void(const google::protobuf::FileDescriptor*)> add =
-      [&](const google::protobuf::FileDescriptor* f) {
-        if (!done.insert(f->name()).second) return;
-        for (int i = 0; i < f->dependency_count(); ++i) add(f->dependency(i));
-        f->CopyTo(set.add_file());
-      };
-  add(d->file());
-  return set.SerializeAsString();
-}
-
 const google::protobuf::Descriptor* PayloadDescriptor(TopicId topic) {
   switch (topic) {
     case TopicId::kState:

@@ -25,6 +25,7 @@
 
 #include <google/protobuf/descriptor.h>
 
+#include "vdyn/messages/descriptor_set.h"
 #include "vdyn/messages/wire.h"
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/transport/topics.h"
@@ -34,9 +35,8 @@ namespace vdyn::recorder {
 inline constexpr const char* kRecorderVersion = "0.1.0";
 inline constexpr const char* kFormatVersion = "vdyn-recording 1";
 
-// The FileDescriptorSet (binary) of a message type: its .proto file and every file it imports,
-// each after its imports (what `protoc --include_imports --descriptor_set_out` writes).
-std::string FileDescriptorSetOf(const google::protobuf::Descriptor* d);
+// The FileDescriptorSet (binary) of a message type (vdyn/messages/descriptor_set.h).
+using messages::FileDescriptorSetOf;
 // The descriptor of a topic's payload type.
 const google::protobuf::Descriptor* PayloadDescriptor(transport::TopicId topic);
 
