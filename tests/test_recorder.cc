@@ -3,7 +3,10 @@
 // -9, recover, verify; export against a batch run of the same drive, column for column; play into
 // a subscriber in order and in time, with pause, seek and step as requests; takeover continuing
 // bit for bit; a recorder that cannot keep up counting what it dropped; bad files refused.
+#include <fcntl.h>
 #include <signal.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
@@ -1532,6 +1535,47 @@ TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
     EXPECT_FALSE(std::filesystem::exists(dir_ / "new")) << "a folder was left behind";
   }
   EXPECT_EQ(Bytes(file), before);
+}
+
+// Issue 33, item 9: `export` (and every command that reads a whole file) ignored SIGTERM.
+// Deterministic: the CSV goes into a FIFO the test reads one byte of, so export cannot finish
+// (20000 rows are 6 MB: past its 1 MiB buffer, the pipe holds 64 KiB) until the test drains it
+// after the signal; it then stops at the next record, says so and exits 1 with most rows
+// unwritten.
+TEST_F(RecorderTest, ASignalStopsAReadingCommandWithinARecord) {
+  const auto file = dir_ / "many-chunks.mcap";
+  {
+    mcap::WriterOptions o;
+    o.chunk_bytes = 16 << 10;
+    mcap::Writer w(file, o);
+    const std::uint16_t state = AddChannel(w, TopicId::kState, 1);
+    for (std::uint64_t k = 0; k < 20000; ++k) {
+      pb::VehicleState st;
+      st.set_vehicle_id(1);
+      st.set_step(k);
+      st.set_step_ns(1'000'000);
+      Put(w, state, 1'800'000'000'000'000'000ull + k * 1'000'000, st);
+    }
+    w.Close();
+  }
+  const auto fifo = dir_ / "rows.csv";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  auto p = Recorder({"export", file.string(), "--csv", fifo.string()}, "export.log");
+  const int fd = ::open(fifo.c_str(), O_RDONLY | O_CLOEXEC);  // export opens the other end
+  ASSERT_GE(fd, 0);
+  char b[65536];
+  ASSERT_EQ(::read(fd, b, 1), 1) << p->Log();  // export is writing rows
+  p->Signal(SIGTERM);
+  std::size_t lines = 0;
+  for (ssize_t n; (n = ::read(fd, b, sizeof b)) > 0;) {
+    lines += static_cast<std::size_t>(std::count(b, b + n, '\n'));
+  }
+  ::close(fd);
+  const auto code = p->Wait(120s);
+  ASSERT_TRUE(code.has_value()) << "export ignored SIGTERM\n" << p->Log();
+  EXPECT_EQ(*code, 1) << p->Log();
+  EXPECT_THAT(p->Log(), HasSubstr("interrupted (Ctrl-C or SIGTERM)"));
+  EXPECT_LT(lines, 15000u) << "it went on to the end";
 }
 
 // A recording for the figures: a straight drive along a long, narrow road, no steering, no

@@ -198,6 +198,11 @@ int main(int argc, char** argv) {
   if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
+  if (!rec->parsed() && !play->parsed() && !take->parsed()) {
+    // The commands that only read a file stop at the next record on a signal (record, play
+    // and takeover stop on g_stop themselves).
+    mcap::StopReadsWhen(&g_stop);
+  }
   const bool tty = isatty(STDERR_FILENO) == 1;
   const bool show_status = status || (!no_status && tty);
   try {
@@ -269,6 +274,9 @@ int main(int argc, char** argv) {
       return recorder::RunTakeover(to, g_stop, std::cout);
     }
     if (recov->parsed()) return recorder::RunRecover(co, std::cout);
+  } catch (const mcap::Interrupted& e) {
+    std::cerr << "vdyn-recorder: " << e.what() << ": stopped before the end; no output was completed (an unfinished file is removed)\n";
+    return 1;
   } catch (const mcap::McapError& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;

@@ -883,7 +883,19 @@ void Reader::CheckMagic() {
   if (size_ < 8) throw McapError(path_, size_, "truncated: the file ends inside the MCAP magic");
 }
 
+namespace {
+std::atomic<const std::atomic<bool>*> g_stop_reads{nullptr};
+}  // namespace
+
+void StopReadsWhen(const std::atomic<bool>* flag) {
+  g_stop_reads.store(flag);
+}
+
 void Reader::CheckIntact() const {
+  if (const std::atomic<bool>* stop = g_stop_reads.load(std::memory_order_relaxed);
+      stop != nullptr && stop->load(std::memory_order_relaxed)) {
+    throw Interrupted(path_.string() + ": interrupted (Ctrl-C or SIGTERM) while it was read");
+  }
   if (!map_) return;
   if (const std::optional<std::uint64_t> at = map_->fault()) {
     Fail(*at, "the file changed while it was read: it no longer reaches this offset (it held " +

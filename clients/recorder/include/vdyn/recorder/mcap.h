@@ -10,6 +10,8 @@
 // `recover` keeps what came before.
 #pragma once
 
+#include <atomic>
+
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -49,6 +51,17 @@ enum Op : std::uint8_t {
 };
 
 // A bad file: which one, where, and why. what() reads "FILE: offset N: REASON".
+// A read stopped because the command was asked to stop (Ctrl-C, SIGTERM): see StopReadsWhen.
+class Interrupted : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// From now on every Reader's scan and chunk read checks `*flag` at each record and throws
+// Interrupted once it is set (a signal handler sets it): a command that reads a whole file stops
+// within a record, and its outputs, never committed, are removed as they unwind. nullptr: never.
+void StopReadsWhen(const std::atomic<bool>* flag);
+
 class McapError : public std::runtime_error {
  public:
   McapError(const std::filesystem::path& file, std::uint64_t offset, const std::string& reason);
