@@ -315,7 +315,9 @@ struct Capture::Impl {
     std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> channels;
     // The copies of worlds and parameters (RepeatChannelMetadata), and which are due.
     std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> repeat_channels;
-    std::set<std::pair<TopicId, std::uint32_t>> repeats_due;
+    // Due copies: the file offset from which each may be written (none yet: its original's chunk
+    // is still open).
+    std::map<std::pair<TopicId, std::uint32_t>, std::optional<std::uint64_t>> repeats_due;
     std::uint64_t last_log = 0;
     std::map<TopicId, std::uint16_t> schemas;
     std::map<std::uint16_t, std::uint32_t> sequence;
@@ -534,13 +536,28 @@ struct Capture::Impl {
     }
   }
 
-  // A world or parameters message is written once more, in a chunk of its own right after the
-  // chunk that holds it (a world is a megabyte on disk: one copy, not one a minute). Any one chunk
-  // can then be lost (a damaged file, `recover`) and the world the recording ran on is still in it.
-  void WriteRepeats() {
+  // A world or parameters message is written once more, in a chunk of its own at least
+  // kRepeatGap bytes after the chunk that holds it (a world is a megabyte on disk: one copy, not
+  // one a minute). Any one chunk, or any damaged region smaller than the gap, can then be lost
+  // (a damaged file, `recover`) and the world the recording ran on is still in it. A file that
+  // closes sooner gets the copy at its close (then nearer).
+  static constexpr std::uint64_t kRepeatGap = 64 << 10;
+  void WriteRepeats(bool closing) {
     if (file.repeats_due.empty()) return;
+    bool flushed = false;
+    std::vector<std::pair<TopicId, std::uint32_t>> ready;
+    for (auto& [id, at] : file.repeats_due) {
+      if (!at) {
+        if (!flushed) file.w->Flush();  // the original's chunk ends here
+        flushed = true;
+        at = file.w->bytes_written() + kRepeatGap;
+      }
+      if (closing || *at <= file.w->bytes_written()) ready.push_back(id);
+    }
+    if (ready.empty()) return;
     file.w->Flush();
-    for (const auto& id : file.repeats_due) {
+    for (const auto& id : ready) {
+      file.repeats_due.erase(id);
       const auto l = latched.find(id);
       if (l == latched.end()) continue;
       auto ch = file.repeat_channels.find(id);
@@ -556,7 +573,6 @@ struct Capture::Impl {
           std::span<const std::uint8_t>(l->second.data.data(), l->second.data.size()));
     }
     file.w->Flush();
-    file.repeats_due.clear();
   }
 
   std::uint16_t Schema(TopicId topic) {
@@ -573,7 +589,7 @@ struct Capture::Impl {
 
   void CloseFile(const std::string& reason) {
     if (!file.w) return;
-    WriteRepeats();
+    WriteRepeats(/*closing=*/true);
     mcap::StringMap m;
     const std::uint64_t now = LogNow();
     m["ended_utc"] = FormatUtc(now);
@@ -649,7 +665,7 @@ struct Capture::Impl {
       Latched& l = latched[{topic, key}];
       l.publish_time = publish_time;
       l.data.assign(data.begin(), data.end());
-      file.repeats_due.insert({topic, key});
+      file.repeats_due[{topic, key}].reset();  // due once its chunk has ended
     }
   }
 
@@ -684,7 +700,7 @@ struct Capture::Impl {
                        std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
           ++file.own_messages;
         }
-        WriteRepeats();
+        WriteRepeats(/*closing=*/false);
         file.w->FlushIfOlder(LogNow());
         disk_bytes = bytes_closed + file.w->bytes_written();
         {
