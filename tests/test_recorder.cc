@@ -1597,6 +1597,42 @@ TEST_F(RecorderTest, ASignalStopsAReadingCommandWithinARecord) {
   EXPECT_LT(lines, 15000u) << "it went on to the end";
 }
 
+// Issue 33, item 9: `export --each` of a file with many vehicles opened a CSV (and its 1 MiB
+// buffer) for every vehicle at once: 65,535 claimed vehicles took 15 GB and ran out of
+// descriptors. It now writes them in batches, so 300 vehicles export whole under a limit of 100
+// open files.
+TEST_F(RecorderTest, ExportEachKeepsFewFilesOpenWhateverTheVehicles) {
+  const auto file = dir_ / "crowd.mcap";
+  {
+    mcap::Writer w(file, {});
+    for (std::uint32_t id = 1; id <= 300; ++id) {
+      pb::VehicleState st;
+      st.set_vehicle_id(id);
+      st.set_step(7);
+      st.set_step_ns(1'000'000);
+      Put(w, AddChannel(w, TopicId::kState, id), 1'800'000'000'000'000'000ull + id, st);
+    }
+    w.Close();
+  }
+  std::filesystem::create_directories(dir_ / "csv");
+  const std::string log = "each.log";
+  Process p({"/bin/sh", "-c",
+             "ulimit -n 100 && exec " + testing::RecorderBinary() + " export " + file.string() +
+                 " --each --csv " + (dir_ / "csv" / "v.csv").string()},
+            dir_ / log);
+  const auto code = p.Wait(300s);
+  ASSERT_TRUE(code.has_value()) << p.Log();
+  EXPECT_EQ(*code, 0) << p.Log().substr(0, 2000);
+  std::size_t files = 0, whole = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir_ / "csv")) {
+    ++files;
+    const std::string csv = testing::ReadFile(e.path());
+    whole += std::count(csv.begin(), csv.end(), '\n') == 2 ? 1 : 0;  // the header and a row
+  }
+  EXPECT_EQ(files, 300u) << "partial or missing files";
+  EXPECT_EQ(whole, 300u);
+}
+
 // A recording for the figures: a straight drive along a long, narrow road, no steering, no
 // pedals, and one brake force of 0.3 N at one step (numerical noise, not braking).
 void WriteRoadDrive(const std::filesystem::path& path) {
