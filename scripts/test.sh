@@ -75,7 +75,9 @@ await() {  # await: waits for the background job; fails (its log shown) when it 
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_string_checks=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 # The long soaks carry the ctest label "full": left out of the default run.
-ctest_args=(--output-on-failure --timeout 900 -j "$(nproc)")
+# Two tests a core: most of a test's time is waiting (servers in real time, discovery, processes
+# starting), and the long programs run as shards (tests/CMakeLists.txt, vdyn_test ... SHARDS).
+ctest_args=(--output-on-failure --timeout 900 -j "$(($(nproc) * 2))")
 if [ "$full" -eq 0 ]; then ctest_args+=(-LE full); fi
 fuzz_seconds="${VDYN_FUZZ_SECONDS:-$([ "$full" -eq 1 ] && echo 120 || echo 10)}"
 mkdir -p build
