@@ -101,8 +101,10 @@ test("time messages carry the simulation clock", async () => {
   // arrive after it (on a loaded machine seconds later), so wait for them, then find that very step.
   const last = t.at(-1);
   await h.until(() => watcher.of("/vehicle/1/state").at(-1).logTime >= last, 30000, `a state at ${last} ns`);
-  const steps = new Set(watcher.of("/vehicle/1/state").map((s) => s.logTime));
-  assert.ok(steps.has(last), `time ${last} ns is the simulation time of a state`);
+  // Within 0.2 s of a received state (the one at exactly that time may have been dropped from a
+  // slow client's queue); a wall-clock time would be 1.7e18 ns away.
+  const near = watcher.of("/vehicle/1/state").some((s) => Math.abs(s.logTime - last) < 0.2e9);
+  assert.ok(near, `time ${last} ns is the simulation time of a received state`);
   assert.ok(t.every((x) => x % 1000000 === 0), "times are on the 1 kHz step grid");
 });
 
