@@ -16,6 +16,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/export_foxglove.h"
 #include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
@@ -113,9 +114,21 @@ int main(int argc, char** argv) {
   // export
   recorder::ExportOptions eo;
   std::uint32_t vehicle = 0;
-  auto* exp = app.add_subcommand("export", "States to CSV, columns as vdyn-server --batch --csv");
+  auto* exp = app.add_subcommand(
+      "export",
+      "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
   exp->add_option("file", eo.file, "A recording")->required();
-  exp->add_option("--csv", eo.csv, "The CSV file")->required();
+  recorder::FoxgloveExportOptions fo;
+  auto* exp_csv = exp->add_option("--csv", eo.csv, "The CSV file");
+  auto* exp_fox = exp->add_option("--foxglove", fo.out,
+                                  "A copy of the recording with Foxglove's scene added (MCAP)");
+  exp_csv->excludes(exp_fox);
+  exp->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
+      ->check(cli::InRange(limits::kFoxgloveSceneHz))
+      ->capture_default_str();
+  exp->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
   auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle");
   exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
   exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
@@ -128,7 +141,7 @@ int main(int argc, char** argv) {
   recorder::PlotOptions po;
   auto* plot = app.add_subcommand("plot", "Figures (gnuplot, PNG or SVG) and one HTML page");
   plot->add_option("file", po.file, "A recording")->required();
-  plot->add_option("--out", po.out_dir, "Folder for the figures (default: FILE-plots)");
+  plot->add_option("--out", po.out_dir, "Folder for the figures (default: beside FILE, named after it: run.mcap -> run-plots)");
   auto* plot_vehicle = plot->add_option("--vehicle", vehicle, "The vehicle (default: the first)");
   plot->add_option("--format", po.format, "png or svg")->check(CLI::IsMember({"png", "svg"}))->capture_default_str();
   plot->add_option("--from", po.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
@@ -185,6 +198,11 @@ int main(int argc, char** argv) {
   if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
+  if (!rec->parsed() && !play->parsed() && !take->parsed()) {
+    // The commands that only read a file stop at the next record on a signal (record, play
+    // and takeover stop on g_stop themselves).
+    mcap::StopReadsWhen(&g_stop);
+  }
   const bool tty = isatty(STDERR_FILENO) == 1;
   const bool show_status = status || (!no_status && tty);
   try {
@@ -210,7 +228,7 @@ int main(int argc, char** argv) {
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
       std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds) << " to "
                 << files << " (" << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
-      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped();
+      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped() << s.dropped_by_topic();
       std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
                   s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
                   recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
@@ -218,6 +236,14 @@ int main(int argc, char** argv) {
     }
     if (info->parsed()) return recorder::RunInfo(file, std::cout);
     if (exp->parsed()) {
+      if (*exp_fox) {
+        fo.file = eo.file;
+        return recorder::RunExportFoxglove(fo, std::cout);
+      }
+      if (!*exp_csv) {
+        std::cerr << "vdyn-recorder export: give --csv OUT.csv or --foxglove OUT.mcap\n";
+        return 2;
+      }
       if (*exp_vehicle) eo.vehicle = vehicle;
       return recorder::RunExport(eo, std::cout);
     }
@@ -248,6 +274,9 @@ int main(int argc, char** argv) {
       return recorder::RunTakeover(to, g_stop, std::cout);
     }
     if (recov->parsed()) return recorder::RunRecover(co, std::cout);
+  } catch (const mcap::Interrupted& e) {
+    std::cerr << "vdyn-recorder: " << e.what() << ": stopped before the end; no output was completed (an unfinished file is removed)\n";
+    return 1;
   } catch (const mcap::McapError& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;

@@ -176,4 +176,17 @@ inline constexpr Range kTelemetryRateHz{1.0, 1000.0, false, false, "telemetry pa
 inline constexpr Range kStaleMs{10.0, 60000.0, false, false, "stale-state limit, ms"};
 inline constexpr Range kTelemetryId{1.0, 2147483647.0, false, false, "telemetry packet ID"};
 
+// vdyn-foxglove: the state channels' rate (0: every state), the scene's and transforms' rate, a
+// client's send queue (its data bound in KiB and ms: past either the oldest goes), the TCP port
+// (0: any free one), the clients at once, and how long a vehicle may send nothing before its
+// channels are unadvertised.
+inline constexpr Range kFoxgloveStateHz{0.0, 100000.0, false, false,
+                                        "state channel rate, Hz (0: every state)"};
+inline constexpr Range kFoxgloveSceneHz{1.0, 1000.0, false, false, "scene rate, Hz"};
+inline constexpr Range kFoxgloveQueueKb{16.0, 1048576.0, false, false, "client send queue, KiB"};
+inline constexpr Range kFoxgloveQueueMs{10.0, 60000.0, false, false, "client send queue age, ms"};
+inline constexpr Range kPort{0.0, 65535.0, false, false, "TCP port"};
+inline constexpr Range kFoxgloveClients{1.0, 1024.0, false, false, "clients"};
+inline constexpr Range kVehicleTimeoutS{0.1, 3600.0, false, false, "vehicle timeout, s"};
+
 }  // namespace vdyn::limits
