@@ -115,6 +115,13 @@ class RecorderTest : public ::testing::Test {
     const auto code = p->Wait(timeout);
     return {code.value_or(-1), p->Log()};
   }
+  // Runs a shell command in the test's folder to its end (at most 120 s): exit code and output.
+  std::pair<int, std::string> RunInDir(const std::string& command) {
+    const std::string log = "sh" + std::to_string(runs_++) + ".log";
+    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && " + command}, dir_ / log);
+    const auto code = p.Wait(120s);
+    return {code.value_or(-1), p.Log()};
+  }
   // Waits (bounded) until `done` says so while `recorder` runs; false on the timeout or its end.
   static bool WaitWhileRunning(Process& recorder, const std::function<bool()>& done,
                                std::chrono::seconds timeout = 60s) {
@@ -1476,13 +1483,7 @@ TEST_F(RecorderTest, NoCommandWritesOverItsInput) {
   std::filesystem::create_symlink(file, dir_ / "link.mcap");
   std::filesystem::create_hard_link(file, dir_ / "hard.mcap");
   const std::string rec = testing::RecorderBinary();
-  auto in_dir = [&](const std::string& command) {
-    const std::string log = "sh" + std::to_string(runs_++) + ".log";
-    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && exec " + command},
-              dir_ / log);
-    const auto code = p.Wait(120s);
-    return std::make_pair(code.value_or(-1), p.Log());
-  };
+  auto in_dir = [&](const std::string& command) { return RunInDir("exec " + command); };
   const std::vector<std::pair<std::string, std::string>> attempts = {
       {"export run.mcap --csv run.mcap", "is the input itself"},
       {"export run.mcap --csv ./run.mcap", "is the input itself"},
@@ -1525,12 +1526,7 @@ TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
   WriteRecording(file);
   const std::vector<std::uint8_t> before = Bytes(file);
   const std::string rec = testing::RecorderBinary();
-  auto in_dir = [&](const std::string& command) {
-    const std::string log = "sh" + std::to_string(runs_++) + ".log";
-    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && " + command}, dir_ / log);
-    const auto code = p.Wait(120s);
-    return std::make_pair(code.value_or(-1), p.Log());
-  };
+  auto in_dir = [&](const std::string& command) { return RunInDir(command); };
   {
     const auto [code, out] = in_dir("exec " + rec + " record run.mcap --domain " +
                                     std::to_string(domain_) + " --duration 1");
@@ -1685,12 +1681,7 @@ TEST_F(RecorderTest, PlotWorksWithRelativePathsAndDrawsWhatMatters) {
   std::filesystem::create_directories(dir_ / "out");
   WriteRoadDrive(dir_ / "out" / "live.mcap");
   const std::string rec = testing::RecorderBinary();
-  auto in_dir = [&](const std::string& command) {
-    const std::string log = "sh" + std::to_string(runs_++) + ".log";
-    Process p({"/bin/sh", "-c", "cd '" + dir_.path().string() + "' && " + command}, dir_ / log);
-    const auto code = p.Wait(120s);
-    return std::make_pair(code.value_or(-1), p.Log());
-  };
+  auto in_dir = [&](const std::string& command) { return RunInDir(command); };
   auto [code, out] = in_dir("exec " + rec + " plot out/live.mcap");
   ASSERT_EQ(code, 0) << out;
   EXPECT_TRUE(std::filesystem::exists(dir_ / "out" / "live-plots" / "trajectory.png")) << out;
