@@ -701,6 +701,75 @@ TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
   }
 }
 
+// Every program that takes a vehicle id refuses 0 (no vehicle in a message) with the range of ids,
+// as the table of limits writes it (issue 31: `vdyn-input --vehicle-id 0` was accepted).
+TEST(CliPrograms, EachProgramRefusesVehicleIdZeroWithTheRange) {
+  // Were an id taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string file = (dir / "x.mcap").string();
+  const std::string range = "vehicle id must be in [1, 4294967295], got 0";
+  struct Case {
+    Result (*run)(const std::string&);
+    std::string args;
+    std::string message;
+  };
+  for (const Case& c : std::vector<Case>{
+           {RunServer, "--vehicle-ids 0 --duration 1" + domain, "--vehicle-ids: " + range},
+           {RunServer, "--vehicle-ids 1,0..3 --duration 1" + domain, "--vehicle-ids: " + range},
+           {RunInput, "--vehicle-id 0 play demo --clock wall" + domain, "--vehicle-id: " + range},
+           {RunTelemetry, "--vehicle-id 0 --outsim 127.0.0.1:4123 --duration 1" + domain,
+            "--vehicle-id: " + range},
+           {RunViewer, "--follow 0 --hidden --frames 1 --wait 0" + domain, "--follow: " + range},
+           {RunRecorder, "record " + file + " --duration 1 --vehicles 1,0" + domain,
+            "--vehicles: " + range},
+           {RunRecorder, "export " + file + " --csv x.csv --vehicle 0", "--vehicle: " + range},
+           {RunRecorder, "plot " + file + " --vehicle 0", "--vehicle: " + range},
+           {RunRecorder, "play " + file + " --vehicle 0", "--vehicle: " + range},
+           {RunRecorder, "verify " + file + " --vehicle 0", "--vehicle: " + range},
+           {RunRecorder, "takeover " + file + " --at 1 --vehicle 0", "--vehicle: " + range},
+           {RunRecorder, "takeover " + file + " --at 1 --as 0", "--as: " + range}}) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+  }
+}
+
+// vdyn-server --vehicle-ids takes ranges (1..256): each entry an id or an ascending range of at
+// most as many ids as a server runs; a range that goes down or holds more is refused, with why.
+TEST(Cli, ServerVehicleIdsTakeRanges) {
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  ExpectServerSays("--vehicle-ids 5..1 --duration 1" + domain, 2,
+                   "--vehicle-ids: the range '5..1' goes down; write it as 1..5");
+  ExpectServerSays("--vehicle-ids 1..300 --duration 1" + domain, 2,
+                   "--vehicle-ids: the range '1..300' holds 300 ids; a server runs at most 256");
+  ExpectServerSays("--vehicle-ids 1..x --duration 1" + domain, 2,
+                   "--vehicle-ids: 'x' is not a number");
+  ExpectServerSays("--vehicle-ids 1..3,2 --duration 1" + domain, 2,
+                   "--vehicle-ids: vehicle 2 is listed twice");
+  ExpectServerSays("--vehicle-ids 1..3,7,10..11 --duration 0.2" + domain, 0, "6 vehicle(s)");
+}
+
+// As many vehicles as a server may run start on facility's free ground (issue 31: --vehicle-ids
+// 1..256 was refused, "the body would start inside 'glass_barrier'"), and a world too small for
+// the vehicles asked for says how many fit.
+TEST(Cli, ServerPlacesItsVehiclesOnFreeGroundOrSaysHowManyFit) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  ExpectServerSays("--world facility --vehicle-ids 1..256 --max-vehicles 256 --duration 0.2 "
+                   "--no-status" + domain,
+                   0, "256 vehicle(s)");
+  WriteFile(dir / "square.obj", "v -6 -6 0\nv 6 -6 0\nv 6 6 0\nv -6 6 0\nf 1 2 3\nf 1 3 4\n");
+  ExpectServerSays("--world " + (dir / "square.obj").string() +
+                       " --spawn 0,0,0 --vehicle-ids 1..5 --duration 0.2 --no-status" + domain,
+                   2,
+                   "only 3 of the 5 vehicles fit on the free ground of world 'square.obj' within "
+                   "400 m of its spawn");
+}
+
 // Each program's choices, ranges and lists said the same way: a choice mistyped comes with the
 // nearest, a device index with its range as the table of limits writes it, a vehicle listed twice
 // as a slip in the list.

@@ -228,12 +228,7 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
 // --max-vehicles 256: a server starts 256 vehicles and publishes every one's states (functional,
 // not timed: on a loaded machine some steps may be late).
 TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
-  std::string ids;
-  for (int i = 1; i <= 256; ++i) {
-    if (i > 1) ids += ',';
-    ids += std::to_string(i);
-  }
-  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", ids});
+  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", "1..256"});
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
@@ -247,6 +242,20 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   ASSERT_TRUE(all) << steps.size() << " vehicles seen\n" << server->Log();
   EXPECT_EQ(steps.begin()->first, 1u);
   EXPECT_EQ(steps.rbegin()->first, 256u);
+  // The diagnostics name every vehicle (issue 32: a report held room for 64, and the vehicles past
+  // the 64th were left out of the diagnostics and the status line without a word).
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  std::set<std::uint32_t> diagnosed;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 20s,
+      [&](const pb::Diagnostics& d) {
+        diagnosed.clear();
+        for (const auto& v : d.vehicles()) diagnosed.insert(v.vehicle_id());
+      },
+      [&] { return diagnosed.size() == 256; }))
+      << diagnosed.size() << " vehicles diagnosed";
+  EXPECT_EQ(*diagnosed.begin(), 1u);
+  EXPECT_EQ(*diagnosed.rbegin(), 256u);
   EXPECT_EQ(drops.Total(), 0u);
 }
 

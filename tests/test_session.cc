@@ -15,7 +15,9 @@
 #include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
+#include "vdyn/physics/mesh.h"
 #include "vdyn/runtime/claim.h"
+#include "vdyn/runtime/placement.h"
 #include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/runtime/step_pool.h"
@@ -234,6 +236,16 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   spawn.mutable_spawn()->mutable_params()->mutable_lf()->set_radius(0.0);
   EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("lf.radius"));
   spawn.mutable_spawn()->clear_params();
+  // 0 names no vehicle in a message: a spawn or restore of it is refused with the range.
+  spawn.set_vehicle_id(0);
+  EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("vehicle id must be in [1, 4294967295], got 0"));
+  pb::ControlRequest restore = spawn;
+  *restore.mutable_restore()->mutable_state() = ToExactState(s.simulator(1).state());
+  EXPECT_THAT(s.Apply(restore).reason(),
+              HasSubstr("restore: vehicle id must be in [1, 4294967295], got 0"));
+  EXPECT_THROW(s.Spawn(0, {0, 20, 0}, 0.0, pb::VehicleParams()), std::invalid_argument);
+  EXPECT_FALSE(s.HasVehicle(0));
+  spawn.set_vehicle_id(2);
   EXPECT_TRUE(s.Apply(spawn).accepted());
   EXPECT_EQ(s.vehicle_count(), 2u);
 
@@ -479,6 +491,55 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
     ++compared;
   }
   EXPECT_EQ(compared, 390 - 100);  // both lives, from the checkpoint at step 100
+}
+
+// A server's vehicles start on the world's free ground (issue 31: 256 on facility were refused,
+// "the body would start inside 'glass_barrier'"): the first at the spawn, every other one resting
+// where its body meets nothing, none nearer another than the grid's 5 m, the same poses every
+// time; a world too small for them says how many fit.
+TEST(Placement, AsManyVehiclesAsTheServerRunsStartOnFreeGroundOrItSaysHowManyFit) {
+  const auto facility = testing::SharedWorld("facility");
+  const Params p = ParamsFromProto(DefaultVehicleParams()).get();
+  const std::vector<Pose2> poses = StartPoses(*facility, p, 256);
+  ASSERT_EQ(poses.size(), 256u);
+  EXPECT_EQ(poses[0].x, facility->spawn.x);
+  EXPECT_EQ(poses[0].y, facility->spawn.y);
+  double nearest = 1e300;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    double misfit = 0;
+    const State s = RestingState(p, facility->terrain, poses[i], 0.0, &misfit);
+    EXPECT_EQ(SpawnObstruction(p, facility->terrain, s, misfit), "") << "vehicle " << i + 1;
+    EXPECT_EQ(poses[i].yaw, facility->spawn.yaw);
+    for (std::size_t j = 0; j < i; ++j) {
+      nearest = std::min(nearest, std::hypot(poses[i].x - poses[j].x, poses[i].y - poses[j].y));
+    }
+  }
+  EXPECT_NEAR(nearest, 5.0, 1e-9);
+  const std::vector<Pose2> again = StartPoses(*facility, p, 256);
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_EQ(again[i].x, poses[i].x);
+    EXPECT_EQ(again[i].y, poses[i].y);
+  }
+  // A 12 m square: the spawn and one on each side (5 m apart); a row ahead or behind is 8 m off.
+  TriangleMesh square;
+  square.name = "square";
+  square.AddQuad({-6, -6, 0}, {6, -6, 0}, {6, 6, 0}, {-6, 6, 0});
+  const std::shared_ptr<const World> small = WorldFromMesh(std::move(square), {0, 0, 0});
+  EXPECT_EQ(StartPoses(*small, p, 3).size(), 3u);
+  try {
+    (void)StartPoses(*small, p, 5);
+    ADD_FAILURE() << "5 vehicles placed on a 12 m square";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("only 3 of the 5 vehicles fit on the free ground of world "
+                                    "'square'"));
+  }
+  // The first vehicle goes where the world says (or --spawn), or not at all: the reason is the
+  // spawn's, not a place found elsewhere.
+  TriangleMesh off;
+  off.name = "off";
+  off.AddQuad({-6, -6, 0}, {6, -6, 0}, {6, 6, 0}, {-6, 6, 0});
+  const std::shared_ptr<const World> away = WorldFromMesh(std::move(off), {100, 100, 0});
+  EXPECT_THROW((void)StartPoses(*away, p, 1), WorldError);
 }
 
 // The pool's fixed partition: every item once, by one thread, in contiguous parts in order, the

@@ -595,7 +595,9 @@ int main(int argc, char** argv) {
   app.add_option("--domain", c.domain, "DDS domain id")
       ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
       ->capture_default_str();
-  app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")->capture_default_str();
+  app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")
+      ->check(vdyn::cli::VehicleId())
+      ->capture_default_str();
   app.add_option("--source-id", c.source_id, "This source's name (shown in the state)")
       ->check(vdyn::cli::Id("source id"))
       ->capture_default_str();

@@ -14,7 +14,9 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/text.h"
 #include "vdyn/bridge/convert.h"
+#include "vdyn/bridge/params.h"
 #include "vdyn/messages/checks.h"
+#include "vdyn/runtime/placement.h"
 
 namespace vdyn {
 
@@ -80,17 +82,21 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
-  const double lateral = 5.0;  // several vehicles start side by side
+  // Side by side on the free ground around the spawn (placement.h).
+  const std::vector<Pose2> poses =
+      StartPoses(*world_, ParamsFromProto(options_.session.default_params).get(),
+                 options_.vehicle_ids.size());
   for (std::size_t i = 0; i < options_.vehicle_ids.size(); ++i) {
-    Pose2 pose = world_->spawn;
-    pose.x -= std::sin(pose.yaw) * lateral * static_cast<double>(i);
-    pose.y += std::cos(pose.yaw) * lateral * static_cast<double>(i);
-    session_->Spawn(options_.vehicle_ids[i], pose, 0.0, pb::VehicleParams());
+    session_->Spawn(options_.vehicle_ids[i], poses[i], 0.0, pb::VehicleParams());
     *world_msg->add_vehicles() =
         DescribeVehicle(options_.vehicle_ids[i], session_->simulator(options_.vehicle_ids[i]).params());
   }
   Send(TopicId::kWorld, transport::ServerKey(options_.session.server_id), std::move(world_msg));
   deferred_step_replies_.reserve(kMaxDeferred);
+  // Each report slot holds room for the most vehicles the session may run: the loop fills one in
+  // place, allocating nothing and leaving no vehicle out.
+  const std::size_t most = std::max(options_.vehicle_ids.size(), options_.session.max_vehicles);
+  for (std::size_t k = 0; k < reports_.capacity(); ++k) reports_.Slot(k)->vehicles.resize(most);
   planner_ = std::make_unique<RequestPlanner>(world_, options_.session);
   planner_->Sync(*session_);
   // Last: if anything above throws, no thread is left running.
@@ -319,8 +325,9 @@ void ServerNode::PushReport(base::MonoTime now) {
     r->lateness = lateness_;
     r->n_vehicles = 0;
     session_->ForEachVehicle([&](std::uint32_t id) {
-      if (r->n_vehicles >= static_cast<int>(r->vehicles.size())) return;
-      VehicleReport& v = r->vehicles[static_cast<std::size_t>(r->n_vehicles++)];
+      // Room for the most vehicles the session may run (made in the constructor).
+      if (r->n_vehicles >= r->vehicles.size()) return;
+      VehicleReport& v = r->vehicles[r->n_vehicles++];
       const Simulator& sim = session_->simulator(id);
       v.id = id;
       v.safe_state = session_->in_safe_state(id);
@@ -991,6 +998,34 @@ bool ServerNode::PublishOne(TopicId topic, std::uint32_t key, const google::prot
   }
 }
 
+namespace {
+// The vehicles' part of the status line: each one's speed, up to four; beyond, how many there are,
+// their speeds' range and how many brake without input.
+std::string StatusOfVehicles(const ServerNode::WindowReport& r) {
+  std::string out;
+  char buf[128];
+  if (r.n_vehicles <= 4) {
+    for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+      const ServerNode::VehicleReport& v = r.vehicles[i];
+      std::snprintf(buf, sizeof buf, "  v%u %5.1f km/h%s", v.id, v.speed_kmh,
+                    v.safe_state ? " (no input: braking)" : "");
+      out += buf;
+    }
+    return out;
+  }
+  double lo = r.vehicles[0].speed_kmh, hi = lo;
+  std::size_t braking = 0;
+  for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+    lo = std::min(lo, r.vehicles[i].speed_kmh);
+    hi = std::max(hi, r.vehicles[i].speed_kmh);
+    braking += r.vehicles[i].safe_state ? 1 : 0;
+  }
+  std::snprintf(buf, sizeof buf, "  %zu vehicles %.1f-%.1f km/h, %zu without input (braking)",
+                r.n_vehicles, lo, hi, braking);
+  return buf;
+}
+}  // namespace
+
 void ServerNode::PublishReport(WindowReport& r) {
   const std::string& server_id = options_.session.server_id;
   const double wall_s = static_cast<double>(r.wall_ns) * 1e-9;
@@ -1014,8 +1049,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     dc->set_kind(kind);
     dc->set_count(count);
   }
-  for (int i = 0; i < r.n_vehicles; ++i) {
-    const VehicleReport& v = r.vehicles[static_cast<std::size_t>(i)];
+  for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+    const VehicleReport& v = r.vehicles[i];
     pb::VehicleDiagnostics* vd = d.add_vehicles();
     vd->set_vehicle_id(v.id);
     vd->set_watchdog_safe_state(v.safe_state);
@@ -1052,14 +1087,7 @@ void ServerNode::PublishReport(WindowReport& r) {
   const std::int64_t now = base::MonotonicNow().ns;
   if (!options_.status_line || (!tty && now - last_status_ns_ < 5'000'000'000)) return;
   last_status_ns_ = now;
-  std::string vehicles;
-  for (int i = 0; i < r.n_vehicles; ++i) {
-    const VehicleReport& v = r.vehicles[static_cast<std::size_t>(i)];
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "  v%u %5.1f km/h%s", v.id, v.speed_kmh,
-                  v.safe_state ? " (no input: braking)" : "");
-    vehicles += buf;
-  }
+  const std::string vehicles = StatusOfVehicles(r);
   std::fprintf(stderr, "%st %7.2f s%s | %6.0f steps/s | late p50 %4.0f p99 %5.0f max %6.0f us  %s",
                tty ? "\r" : "", static_cast<double>(r.sim_time_ns) * 1e-9, vehicles.c_str(), rate,
                p50, p99, max_us, tty ? "" : "\n");

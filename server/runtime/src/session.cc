@@ -230,6 +230,9 @@ void Session::EmitSpawned(Vehicle& v, std::shared_ptr<const pb::ControlRequest> 
 
 void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
                     const pb::VehicleParams& params_update) {
+  if (std::string bad = limits::Check(limits::kVehicleId, vehicle_id); !bad.empty()) {
+    throw std::invalid_argument(bad);
+  }
   if (vehicles_.count(vehicle_id) != 0) {
     throw std::invalid_argument("vehicle " + std::to_string(vehicle_id) + " exists already");
   }

@@ -118,6 +118,9 @@ inline constexpr Range kKeyRatePerS{0.1, 100.0, false, false, "keyboard ramp, fu
 
 // --- Command-line options -------------------------------------------------------------------
 inline constexpr Range kDomainId{0, 232, false, false, "DDS domain id"};
+// A vehicle id (every program's --vehicle-id, --vehicle-ids, --vehicle, --follow, --as; spawn
+// and restore requests): a message's uint32, whose 0 means "no vehicle".
+inline constexpr Range kVehicleId{1, 4294967295.0, false, false, "vehicle id"};
 // Vehicles one server runs (vdyn-server --max-vehicles): 256 at 1 kHz on two cores (bench/).
 inline constexpr Range kMaxVehicles{1, 256, false, false, "vehicles per server"};
 // Threads that step a server's vehicles (vdyn-server --step-threads; runtime/step_pool.h).

@@ -81,7 +81,9 @@ class ServerNode {
 
   transport::DropCounters& drops() { return drops_; }
 
-  // One reporting window of the loop, handed to the publisher (plain data, no allocation).
+  // One reporting window of the loop, handed to the publisher (plain data, no allocation: each
+  // slot of the report queue holds room for as many vehicles as the server may run, made at
+  // construction).
   struct VehicleReport {
     std::uint32_t id = 0;
     bool safe_state = false;
@@ -100,8 +102,8 @@ class ServerNode {
     std::uint64_t steps_caught_up = 0;
     std::uint64_t max_lag_steps = 0;
     LatenessWindow lateness;
-    int n_vehicles = 0;
-    std::array<VehicleReport, 64> vehicles{};
+    std::size_t n_vehicles = 0;            // the first n of `vehicles` hold this window's
+    std::vector<VehicleReport> vehicles;  // sized once, to the most vehicles the server runs
   };
 
  private:
