@@ -68,6 +68,10 @@ inline constexpr std::size_t kMaxParamsBytes = 64 * 1024;
 inline constexpr std::size_t kMaxWorldBytes = 512ull * 1024 * 1024;
 inline constexpr std::size_t kMaxEventBytes = 1024 * 1024;
 inline constexpr std::size_t kMaxDiagnosticsBytes = 1024 * 1024;
+// A terrain vertex's coordinate (a world description's meshes, a world file): the terrain drops
+// every triangle with a vertex beyond it, and the world description leaves it out; a viewer
+// refuses a description holding one (floats hold it; a grid cell index of it fits 64 bits).
+inline constexpr Range kWorldCoordinateM{-1e9, 1e9, true, true, "terrain vertex coordinate, m"};
 
 // --- Files -----------------------------------------------------------------------------------
 // A maneuver (CSV, docs/formats.md): a million rows is 1000 s at a row a millisecond (rows are
