@@ -611,6 +611,31 @@ TEST(WheelReader, CombinedPedalsSplitAtRest) {
   EXPECT_THAT(ValidateMapping(m), ::testing::Contains(HasSubstr("opposite sides of rest")));
 }
 
+// Two controls on one axis of one device are refused, naming both and the axis (issue 33: throttle
+// and brake on one axis were accepted, and every press drove and braked at once); the same index
+// on the wheel and on the pedal device are two axes.
+TEST(WheelMapping, TwoControlsOnOneAxisAreRefused) {
+  pb::WheelMapping m = GenericWheel(0x1234, 2, 4);  // steer 0, throttle 1, brake 2
+  ASSERT_THAT(ValidateMapping(m), ::testing::IsEmpty());
+  m.mutable_brake()->set_axis(1);
+  EXPECT_THAT(ValidateMapping(m),
+              ::testing::Contains(HasSubstr("throttle and brake are both on axis 1 of the wheel: "
+                                            "each control needs an axis of its own")));
+  m.mutable_brake()->set_axis(2);
+  m.mutable_clutch()->set_axis(0);
+  m.mutable_clutch()->set_rest(-32768);
+  m.mutable_clutch()->set_full(32767);
+  EXPECT_THAT(ValidateMapping(m),
+              ::testing::Contains(HasSubstr("steer and clutch are both on axis 0 of the wheel")));
+  // The brake on axis 1 of a pedal device, the throttle on axis 1 of the wheel: two axes.
+  m.clear_clutch();
+  m.set_pedal_vendor_id(0x1111);
+  m.set_pedal_product_id(0x2222);
+  m.mutable_brake()->set_axis(1);
+  m.mutable_brake()->set_on_pedal_device(true);
+  EXPECT_THAT(ValidateMapping(m), ::testing::IsEmpty());
+}
+
 // Raw values at the int32 extremes are refused by their range, and the spans between them are
 // computed without overflow (issue 20: the report showed a wrapped difference). The sanitizer
 // build traps a signed overflow here.
