@@ -146,9 +146,10 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
     };
     std::vector<Use> uses;
     if (s.has_axis()) uses.push_back({"steer", false, s.axis()});
-    const std::pair<const char*, const pb::PedalAxis*> pedals[] = {
-        {"throttle", &m.throttle()}, {"brake", &m.brake()}, {"clutch", &m.clutch()},
-        {"handbrake", &m.handbrake()}};
+    const std::pair<const char*, const pb::PedalAxis*> pedals[] = {{"throttle", &m.throttle()},
+                                                                   {"brake", &m.brake()},
+                                                                   {"clutch", &m.clutch()},
+                                                                   {"handbrake", &m.handbrake()}};
     for (const auto& [name, p] : pedals) {
       if (p->has_axis()) uses.push_back({name, p->on_pedal_device(), p->axis()});
     }
