@@ -972,6 +972,49 @@ TEST_F(Net, StepRepliesAreAnsweredEachAtItsOwnStepsOrCancelled) {
   EXPECT_THAT(long_reply->reason(), HasSubstr("cancelled by a pause"));
 }
 
+// In real time a pause lasts while the client that paused is there: when it leaves without a
+// resume, the server resumes (issue 33: the session stayed paused for good). A pause whose client
+// stays holds.
+TEST_F(Net, APauseEndsWhenTheClientThatPausedLeaves) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  pb::ControlRequest pause;
+  pause.set_vehicle_id(1);
+  pause.mutable_pause();
+  std::uint64_t seen = 0;
+  auto advancing = [&](std::chrono::seconds within) {
+    const std::uint64_t from = seen;
+    return ReadUntil<pb::VehicleState>(states, within, [&](const auto& s) { seen = s.step(); },
+                                       [&] { return seen > from + 200; });
+  };
+  // Paused: no new state in 0.5 s of wall time after 0.5 s to take those already sent.
+  auto paused = [&] {
+    auto drain = [&] {
+      std::uint64_t last = seen;
+      (void)ReadUntil<pb::VehicleState>(states, 500ms, [&](const auto& s) { last = s.step(); },
+                                        [] { return false; });
+      return last;
+    };
+    const std::uint64_t before = drain(), after = drain();
+    seen = after;
+    return before == after;
+  };
+  {
+    transport::Participant client_p(domain_);
+    transport::ControlClient client(client_p, "pauser");
+    ASSERT_TRUE(client.WaitForServer(20s)) << client.last_error() << server->Log();
+    ASSERT_TRUE(advancing(20s));
+    ASSERT_TRUE(client.Call(pause, 10s).value_or(pb::ControlReply()).accepted());
+    ASSERT_TRUE(paused()) << "not paused";
+    // Still there: still paused, a second later.
+    ASSERT_TRUE(paused()) << "resumed while the client that paused is there";
+  }  // the client leaves without a resume
+  EXPECT_TRUE(advancing(20s)) << "still paused after its client left\n" << server->Log();
+  EXPECT_THAT(server->Log(), HasSubstr("the client that paused the session left; resuming"));
+}
+
 TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   auto server = StartServer({"--watchdog-ms", "2000"});
   auto backup = StartRig("backup", "0.2", 5);

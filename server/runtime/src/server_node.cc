@@ -557,6 +557,10 @@ void ServerNode::ReceiverLoop() {
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
   std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
   std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
+  // In real time, the writer whose pause is the last pause, resume or step request passed on (0:
+  // none): a pause lasts while its client is there (docs/topics.md).
+  std::uint64_t pause_writer = 0;
+  const bool real_time = options_.mode != ServerOptions::Mode::kLockstep;
   int got = 0;                                       // requests taken in the last round
   base::MonoTime next_housekeeping = base::MonotonicNow();
   // Every bit a Button names (vdyn/input.proto).
@@ -700,6 +704,8 @@ void ServerNode::ReceiverLoop() {
               }
             }
             control_writers[info.publication_handle] = 0;
+            if (r.has_pause()) pause_writer = info.publication_handle;
+            if (r.has_resume() || r.has_step()) pause_writer = 0;
             Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
             if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
           },
@@ -721,6 +727,7 @@ void ServerNode::ReceiverLoop() {
           it->second = present ? 0 : it->second + 1;
           if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
             // The loop cancels the steps it still owed that client; the publisher says so.
+            if (real_time && it->first == pause_writer) ResumeForGoneClient(pause_writer);
             it = control_writers.erase(it);
             handed = true;
           } else {
@@ -902,6 +909,23 @@ void ServerNode::AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, 
   o.text = std::move(why);
   o.sim_time_ns = sim_time_ns_.load(std::memory_order_relaxed);
   if (!answers_.TryPush(std::move(o))) NoRoomToAnswer();  // room checked before
+}
+
+void ServerNode::ResumeForGoneClient(std::uint64_t& pause_writer) {
+  // A real-time session paused by a client that then left would stay paused for good (issue 33):
+  // the server resumes it, through the request path as any resume (an event is recorded; the
+  // reply goes to no one). Without room now, at the next check.
+  if (incoming_.size() == incoming_.capacity()) return;
+  auto r = std::make_shared<pb::ControlRequest>();
+  r->set_server_id(options_.session.server_id);
+  r->set_client_id("vdyn-server: the client that paused left");
+  r->mutable_resume();
+  spdlog::info("server '{}': the client that paused the session left; resuming",
+               options_.session.server_id);
+  if (incoming_.TryPush(Incoming{std::move(r), 0, {}})) {
+    pause_writer = 0;
+    request_bell_.Ring();
+  }
 }
 
 void ServerNode::RequestLoop() {

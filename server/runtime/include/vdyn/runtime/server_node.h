@@ -137,6 +137,8 @@ class ServerNode {
   void SendDueStepReplies();
   void CancelStepReplies(RequestOutcome::Why why);
   void ClientGone(std::uint64_t writer);
+  // Receiver thread: a real-time session's pausing client has gone; resume (clears pause_writer).
+  void ResumeForGoneClient(std::uint64_t& pause_writer);
   // After the loop: what is still waiting is answered (the server stops).
   void AnswerWhatIsLeft();
   void PushReport(base::MonoTime now);
