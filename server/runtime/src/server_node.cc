@@ -798,12 +798,10 @@ std::string ServerNode::FindClash() {
     }
     return false;
   };
-  // Other servers' claims that clash with ours, by participant; the ones this server wins against
-  // are named once in the log.
+  // Other servers' claims, by participant: all of them, since whether a claim that clashes with
+  // ours runs may depend on one that does not (ChooseRunners).
   std::map<transport::Guid, ServerClaim> claims;
-  std::set<transport::Guid> told;
   std::vector<transport::ParticipantReader::Peer> changes;
-  std::string lost;  // why this server gives way to a claim, when it does
   auto first_common = [&](const ServerClaim& c) -> std::string {
     for (std::uint32_t v : mine.vehicle_ids) {
       if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
@@ -819,41 +817,21 @@ std::string ServerNode::FindClash() {
     for (const auto& peer : changes) {
       if (peer.guid == own_guid) continue;
       const std::optional<ServerClaim> c = ServerClaim::Decode(peer.user_data);
-      if (peer.alive && c && mine.Clashes(*c)) {
+      if (peer.alive && c) {
         claims[peer.guid] = *c;
       } else {
         claims.erase(peer.guid);
       }
     }
+    // A running server never gives way: a clash with one is certain at once.
     for (const auto& [guid, c] : claims) {
-      const std::string vehicle = first_common(c);
-      if (c.running) {
-        lost = c.server_id == me
-                   ? "another server with the id '" + me + "' runs on domain " + domain +
-                         ": give this one another --server-id, or another --domain"
-                   : "vehicle " + vehicle + " is already run by server '" + c.server_id +
-                         "' on domain " + domain +
-                         ": choose other --vehicle-ids, or another --domain";
-      } else if (guid < own_guid) {
-        lost = c.server_id == me
-                   ? "another server with the id '" + me +
-                         "' started at the same moment on "
-                         "domain " +
-                         domain +
-                         " and keeps the id (a tie goes to the lower "
-                         "participant GUID): give this one another --server-id, or another --domain"
-                   : "vehicle " + vehicle + " is claimed by server '" + c.server_id +
-                         "', started at the same moment on domain " + domain +
-                         "; that server keeps it (a tie goes to the lower participant GUID): "
-                         "choose other --vehicle-ids, or another --domain";
-      } else if (told.insert(guid).second) {
-        spdlog::info(
-            "server '{}': server '{}' started at the same moment and claims {}; this "
-            "server keeps {} (a tie goes to the lower participant GUID)",
-            me, c.server_id, c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
-            c.server_id == me ? "it" : "the vehicle");
-      }
-      if (!lost.empty()) return lost;
+      if (!c.running || !mine.Clashes(c)) continue;
+      return c.server_id == me ? "another server with the id '" + me + "' runs on domain " +
+                                     domain +
+                                     ": give this one another --server-id, or another --domain"
+                               : "vehicle " + first_common(c) + " is already run by server '" +
+                                     c.server_id + "' on domain " + domain +
+                                     ": choose other --vehicle-ids, or another --domain";
     }
     const base::MonoTime now = base::MonotonicNow();
     const bool others =
@@ -876,6 +854,8 @@ std::string ServerNode::FindClash() {
     for (std::uint32_t id : options_.vehicle_ids) clash = clash || taken.count(id) != 0;
     if (clash) break;
   }
+  // The claims of servers started at the same moment, decided once every claim of the wait is in.
+  if (std::string why = SettleClaims(mine, own_guid, claims); !why.empty()) return why;
   for (const auto& [vehicle, server] : taken) others_[vehicle] = {server, base::MonotonicNow()};
   if (same_id) {
     return "another server with the id '" + me + "' runs on domain " + domain +
@@ -885,6 +865,61 @@ std::string ServerNode::FindClash() {
     if (const auto it = taken.find(id); it != taken.end()) {
       return "vehicle " + std::to_string(id) + " is already run by server '" + it->second +
              "' on domain " + domain + ": choose other --vehicle-ids, or another --domain";
+    }
+  }
+  return {};
+}
+
+std::string ServerNode::SettleClaims(const ServerClaim& mine, const transport::Guid& own_guid,
+                                     const std::map<transport::Guid, ServerClaim>& claims) const {
+  const std::string& me = options_.session.server_id;
+  const std::string domain = std::to_string(options_.domain_id);
+  std::vector<const ServerClaim*> by_guid;
+  std::vector<transport::Guid> guids;
+  bool mine_in = false;
+  for (const auto& [guid, c] : claims) {
+    if (!mine_in && own_guid < guid) {
+      by_guid.push_back(&mine);
+      guids.push_back(own_guid);
+      mine_in = true;
+    }
+    by_guid.push_back(&c);
+    guids.push_back(guid);
+  }
+  if (!mine_in) {
+    by_guid.push_back(&mine);
+    guids.push_back(own_guid);
+  }
+  const std::vector<bool> runs = ChooseRunners(by_guid);
+  const auto own = static_cast<std::size_t>(
+      std::find(guids.begin(), guids.end(), own_guid) - guids.begin());
+  auto common = [&](const ServerClaim& c) {
+    if (c.server_id == me) return std::string("the id '") + me + "'";
+    for (std::uint32_t v : mine.vehicle_ids) {
+      if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
+        return "vehicle " + std::to_string(v);
+      }
+    }
+    return std::string();
+  };
+  for (std::size_t i = 0; i < by_guid.size(); ++i) {
+    if (i == own || !mine.Clashes(*by_guid[i])) continue;
+    const ServerClaim& c = *by_guid[i];
+    if (!runs[own] && runs[i]) {
+      return c.server_id == me
+                 ? "another server with the id '" + me + "' started at the same moment on domain " +
+                       domain +
+                       " and keeps the id (claims are settled in the order of the participants' "
+                       "GUIDs): give this one another --server-id, or another --domain"
+                 : common(c) + " is claimed by server '" + c.server_id +
+                       "', started at the same moment on domain " + domain +
+                       "; that server keeps it (claims are settled in the order of the "
+                       "participants' GUIDs): choose other --vehicle-ids, or another --domain";
+    }
+    if (runs[own]) {
+      spdlog::info("server '{}': server '{}' started at the same moment and claims {} too; this "
+                   "server keeps it (claims are settled in the order of the participants' GUIDs)",
+                   me, c.server_id, common(c));
     }
   }
   return {};

@@ -148,6 +148,10 @@ class ServerNode {
 
   // Start: another server on the domain that runs one of our vehicles, or has our id, or claims
   // them at the same moment and wins the tie (claim.h). Empty when this server may run.
+  // FindClash's last word on the claims of servers started at the same moment (claim.h): the
+  // reason this server gives way, or empty when it runs.
+  std::string SettleClaims(const ServerClaim& mine, const transport::Guid& own_guid,
+                           const std::map<transport::Guid, ServerClaim>& claims) const;
   std::string FindClash();
   ServerClaim Claim(bool running) const;
   // Receiver thread.
