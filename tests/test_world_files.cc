@@ -264,6 +264,38 @@ INSTANTIATE_TEST_SUITE_P(WorldFiles, NonFiniteVertex,
                          ::testing::Values("nan 0 0", "0 nan 0", "0 0 nan", "inf 0 0", "0 -inf 0",
                                            "0 0 inf", "nan nan nan", "1e30 0 0"));
 
+// A PNG's size is read from its header and refused before anything is decoded (issue 33: a
+// 389 KB PNG took 3.5 GB before its pixel limit was checked). Here the
+// file is a header alone: the size is all there is to read.
+TEST(WorldFiles, AHugeHeightMapIsRefusedFromItsHeader) {
+  auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16),
+                       static_cast<char>(v >> 8), static_cast<char>(v)};
+  };
+  auto crc32 = [](const std::string& bytes) {
+    std::uint32_t c = 0xffffffffu;
+    for (unsigned char b : bytes) {
+      c ^= b;
+      for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+    }
+    return c ^ 0xffffffffu;
+  };
+  auto chunk = [&](const std::string& type, const std::string& data) {
+    return be32(static_cast<std::uint32_t>(data.size())) + type + data + be32(crc32(type + data));
+  };
+  // IHDR: width, height, bit depth 8, colour type 0 (grey), compression, filter, interlace 0.
+  const std::string ihdr = be32(30000) + be32(30000) + std::string{8, 0, 0, 0, 0};
+  const std::string png = std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IEND", "");
+  try {
+    (void)LoadWorldFromBytes(png, "huge.png", WorldFileOptions{});
+    ADD_FAILURE() << "accepted";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr(
+                              "huge.png: a 30000 x 30000 height map is larger than 64 million "
+                              "pixels"));
+  }
+}
+
 TEST(WorldFiles, BadOptionsAreRefused) {
   TempDir dir;
   WriteFile(dir / "g.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
