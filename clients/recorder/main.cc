@@ -132,10 +132,9 @@ int main(int argc, char** argv) {
   auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
   exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
   exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
-  auto* exp_to = exp->add_option("--to", eo.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
+  exp->add_option("--to", eo.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
   exp->add_option("--every", eo.every, "Rows whose step is a multiple of N (as --csv-every)")
       ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
-  (void)exp_to;
 
   // plot
   recorder::PlotOptions po;

@@ -94,7 +94,6 @@ struct ParamChoice {
   std::string_view path;  // "model", "lf"
   std::string_view what;  // "vehicle model (the equations)"
 };
-std::span<const ParamChoice> ParamChoices();
 // What every field of vdyn.pb.VehicleParams is, in words with its unit ("vehicle mass, kg";
 // "lf.radius": "wheel radius, m"): the `what` of its limit above, or of its choice. Empty for a
 // path that names no field. The viewer's parameters panel labels its fields with it, and
