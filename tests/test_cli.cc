@@ -417,6 +417,23 @@ Result RunViewer(const std::string& args) {
   return Run(VDYN_VIEWER_BINARY, args);
 }
 
+// A command line a program refuses as a usage error: exit code 2, `message` in its output.
+struct UsageCase {
+  Result (*run)(const std::string&);
+  std::string args;
+  std::string message;
+};
+// Runs each case; `never`: words no refusal may hold (CLI11's own wording, say).
+void ExpectUsageErrors(const std::vector<UsageCase>& cases,
+                       const std::vector<std::string>& never = {}) {
+  for (const UsageCase& c : cases) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+    for (const std::string& n : never) EXPECT_THAT(r.output, Not(HasSubstr(n))) << c.args;
+  }
+}
+
 TEST(CliErrors, EditDistanceCountsASwapOfNeighboursAsOne) {
   EXPECT_EQ(cli::EditDistance("kitten", "sitting"), 3);  // Levenshtein's example
   EXPECT_EQ(cli::EditDistance("wrold", "world"), 1);     // a swap
@@ -614,34 +631,24 @@ TEST(CliErrors, AValueOutsideTheChoicesIsToldWithTheNearest) {
 
 // The programs themselves: each uses the shared layer.
 TEST(CliPrograms, EachProgramNamesTheNearestOptionOrCommand) {
-  struct Case {
-    Result (*run)(const std::string&);
-    const char* args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--wrold facility",
-            "vdyn-server: unknown option '--wrold'; did you mean '--world'?"},
-           {RunRecorder, "recrod x.mcap",
-            "vdyn-recorder: unknown command 'recrod'; did you mean 'record'? (the commands: "
-            "record, info, export, plot, play, verify, takeover, recover)"},
-           {RunRecorder, "", "vdyn-recorder: choose a command: record, info, export, plot, play,"},
-           {RunRecorder, "info x.mcap --rate 2",
-            "vdyn-recorder info: option '--rate' is not one of 'vdyn-recorder info'; it belongs to "
-            "'vdyn-recorder play'"},
-           {RunInput, "plya demo", "vdyn-input: unknown command 'plya'; did you mean 'play'?"},
-           {RunInput, "play demo --clokc wall",
-            "vdyn-input play: unknown option '--clokc'; did you mean '--clock'?"},
-           {RunTelemetry, "--outsim 127.0.0.1:4123 --outsim-hx 50",
-            "vdyn-telemetry: unknown option '--outsim-hx'; did you mean '--outsim-hz'?"},
-           {RunViewer, "--camra map",
-            "vdyn-viewer: unknown option '--camra'; did you mean '--camera'?"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("were not expected"))) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("unexpected argument"))) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--wrold facility",
+        "vdyn-server: unknown option '--wrold'; did you mean '--world'?"},
+       {RunRecorder, "recrod x.mcap",
+        "vdyn-recorder: unknown command 'recrod'; did you mean 'record'? (the commands: "
+        "record, info, export, plot, play, verify, takeover, recover)"},
+       {RunRecorder, "", "vdyn-recorder: choose a command: record, info, export, plot, play,"},
+       {RunRecorder, "info x.mcap --rate 2",
+        "vdyn-recorder info: option '--rate' is not one of 'vdyn-recorder info'; it belongs to "
+        "'vdyn-recorder play'"},
+       {RunInput, "plya demo", "vdyn-input: unknown command 'plya'; did you mean 'play'?"},
+       {RunInput, "play demo --clokc wall",
+        "vdyn-input play: unknown option '--clokc'; did you mean '--clock'?"},
+       {RunTelemetry, "--outsim 127.0.0.1:4123 --outsim-hx 50",
+        "vdyn-telemetry: unknown option '--outsim-hx'; did you mean '--outsim-hz'?"},
+       {RunViewer, "--camra map",
+        "vdyn-viewer: unknown option '--camra'; did you mean '--camera'?"}},
+      {"were not expected", "unexpected argument"});
 }
 
 TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
@@ -650,26 +657,17 @@ TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
   TempDir dir;
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const std::string out = (dir / "x.mcap").string();
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
-            "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
-           {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
-            "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
-           {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
-            "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
-           {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
-            "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
-           {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
-            "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
+        "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
+       {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
+        "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
+       {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
+        "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
+       {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
+        "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
+       {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
+        "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}});
 }
 
 // An id the receivers would refuse in every message (empty or blank, longer than
@@ -679,26 +677,17 @@ TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
   // Were an id taken, each program would stop soon and on a domain of its own.
   testing::UseLoopbackDds();
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    std::string message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunInput, "--source-id '' play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is empty"},
-           {RunInput, "--source-id ' ' play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is empty"},
-           {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
-           {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
-           {RunRecorder, "play x.mcap --server-id ''",
-            "vdyn-recorder play: --server-id: the server id is empty"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunInput, "--source-id '' play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is empty"},
+       {RunInput, "--source-id ' ' play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is empty"},
+       {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
+       {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
+       {RunRecorder, "play x.mcap --server-id ''",
+        "vdyn-recorder play: --server-id: the server id is empty"}});
 }
 
 // Every program that takes a vehicle id refuses 0 (no vehicle in a message) with the range of ids,
@@ -710,30 +699,21 @@ TEST(CliPrograms, EachProgramRefusesVehicleIdZeroWithTheRange) {
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const std::string file = (dir / "x.mcap").string();
   const std::string range = "vehicle id must be in [1, 4294967295], got 0";
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    std::string message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--vehicle-ids 0 --duration 1" + domain, "--vehicle-ids: " + range},
-           {RunServer, "--vehicle-ids 1,0..3 --duration 1" + domain, "--vehicle-ids: " + range},
-           {RunInput, "--vehicle-id 0 play demo --clock wall" + domain, "--vehicle-id: " + range},
-           {RunTelemetry, "--vehicle-id 0 --outsim 127.0.0.1:4123 --duration 1" + domain,
-            "--vehicle-id: " + range},
-           {RunViewer, "--follow 0 --hidden --frames 1 --wait 0" + domain, "--follow: " + range},
-           {RunRecorder, "record " + file + " --duration 1 --vehicles 1,0" + domain,
-            "--vehicles: " + range},
-           {RunRecorder, "export " + file + " --csv x.csv --vehicle 0", "--vehicle: " + range},
-           {RunRecorder, "plot " + file + " --vehicle 0", "--vehicle: " + range},
-           {RunRecorder, "play " + file + " --vehicle 0", "--vehicle: " + range},
-           {RunRecorder, "verify " + file + " --vehicle 0", "--vehicle: " + range},
-           {RunRecorder, "takeover " + file + " --at 1 --vehicle 0", "--vehicle: " + range},
-           {RunRecorder, "takeover " + file + " --at 1 --as 0", "--as: " + range}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--vehicle-ids 0 --duration 1" + domain, "--vehicle-ids: " + range},
+       {RunServer, "--vehicle-ids 1,0..3 --duration 1" + domain, "--vehicle-ids: " + range},
+       {RunInput, "--vehicle-id 0 play demo --clock wall" + domain, "--vehicle-id: " + range},
+       {RunTelemetry, "--vehicle-id 0 --outsim 127.0.0.1:4123 --duration 1" + domain,
+        "--vehicle-id: " + range},
+       {RunViewer, "--follow 0 --hidden --frames 1 --wait 0" + domain, "--follow: " + range},
+       {RunRecorder, "record " + file + " --duration 1 --vehicles 1,0" + domain,
+        "--vehicles: " + range},
+       {RunRecorder, "export " + file + " --csv x.csv --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "plot " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "play " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "verify " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "takeover " + file + " --at 1 --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "takeover " + file + " --at 1 --as 0", "--as: " + range}});
 }
 
 // vdyn-server --vehicle-ids takes ranges (1..256): each entry an id or an ascending range of at
@@ -779,38 +759,29 @@ TEST(CliPrograms, EachProgramNamesTheNearestChoice) {
   TempDir dir;
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const std::string out = (dir / "x.mcap").string();
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--model Paper --dump-vehicle",
-            "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
-            "'paper'?"},
-           {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
-           {RunInput, "play demo --clock Wall" + domain,
-            "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
-            "'wall'?"},
-           {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
-            "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
-            "you mean 'zstd'?"},
-           {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
-            "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
-            "(the topics: state, input, control, control_reply, params, world, events, "
-            "diagnostics)"},
-           {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
-            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map', "
-            "'north' or 'beside'; did you mean 'map'?"},
-           {RunInput, "calibrate --device 300 --timeout 1",
-            "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
-           {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
-            "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("not in {"))) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--model Paper --dump-vehicle",
+        "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
+        "'paper'?"},
+       {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
+       {RunInput, "play demo --clock Wall" + domain,
+        "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
+        "'wall'?"},
+       {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
+        "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
+        "you mean 'zstd'?"},
+       {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
+        "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
+        "(the topics: state, input, control, control_reply, params, world, events, "
+        "diagnostics)"},
+       {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
+        "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map', "
+        "'north' or 'beside'; did you mean 'map'?"},
+       {RunInput, "calibrate --device 300 --timeout 1",
+        "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
+       {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
+        "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}},
+      {"not in {"});
   // The help shows whole numbers as such and ranges as the table of limits writes them.
   const Result help = RunInput("drive --help");
   EXPECT_THAT(help.output, HasSubstr("--device INT:[0, 255]"));
