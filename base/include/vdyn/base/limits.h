@@ -43,6 +43,9 @@ inline constexpr Range kHandbrake{0.0, 1.0, false, false, "handbrake"};
 inline constexpr Range kGear{-1.0, 10.0, false, false, "gear"};
 
 // --- Control requests (vdyn.pb.ControlRequest) -----------------------------------------------
+// A vehicle's id: 0 is no vehicle in a message (a request for the whole server, a lockstep step
+// with no input), so ids start at 1.
+inline constexpr Range kVehicleId{1.0, 4294967295.0, false, false, "vehicle id"};
 inline constexpr Range kPoseXY{-1e7, 1e7, false, false, "pose position, m"};
 inline constexpr Range kPoseYaw{-1e3, 1e3, false, false, "pose yaw, rad"};
 inline constexpr Range kSpawnSpeed{0.0, 110.0, false, false, "speed, m/s"};
