@@ -12,6 +12,7 @@
 #include <spdlog/spdlog.h>
 
 #include "vdyn/base/limits.h"
+#include "vdyn/base/scheduling.h"
 #include "vdyn/base/text.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
@@ -351,7 +352,7 @@ void ServerNode::PushReport(base::MonoTime now) {
 }
 
 int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
-  std::string scheduling = SetUpRealtimeScheduling(options_.rt_priority);
+  std::string scheduling = base::SetUpRealtimeScheduling(options_.rt_priority);
   // The stepping workers wait on the loop and the loop on them: they share its scheduling.
   if (session_->step_threads() > 1 && scheduling.rfind("SCHED_FIFO", 0) == 0) {
     const std::string refused = session_->SetStepThreadsPriority(options_.rt_priority);

@@ -43,6 +43,10 @@ inline constexpr Range kHandbrake{0.0, 1.0, false, false, "handbrake"};
 inline constexpr Range kGear{-1.0, 10.0, false, false, "gear"};
 
 // --- Control requests (vdyn.pb.ControlRequest) -----------------------------------------------
+// A vehicle's id: 0 is no vehicle in a message (a request for the whole server, a lockstep step
+// with no input), so ids start at 1 (every program's --vehicle-id, --vehicle-ids, --vehicle,
+// --follow, --as; spawn and restore requests; the Python client).
+inline constexpr Range kVehicleId{1.0, 4294967295.0, false, false, "vehicle id"};
 inline constexpr Range kPoseXY{-1e7, 1e7, false, false, "pose position, m"};
 inline constexpr Range kPoseYaw{-1e3, 1e3, false, false, "pose yaw, rad"};
 inline constexpr Range kSpawnSpeed{0.0, 110.0, false, false, "speed, m/s"};
@@ -121,9 +125,6 @@ inline constexpr Range kKeyRatePerS{0.1, 100.0, false, false, "keyboard ramp, fu
 
 // --- Command-line options -------------------------------------------------------------------
 inline constexpr Range kDomainId{0, 232, false, false, "DDS domain id"};
-// A vehicle id (every program's --vehicle-id, --vehicle-ids, --vehicle, --follow, --as; spawn
-// and restore requests): a message's uint32, whose 0 means "no vehicle".
-inline constexpr Range kVehicleId{1, 4294967295.0, false, false, "vehicle id"};
 // Vehicles one server runs (vdyn-server --max-vehicles): 256 at 1 kHz on two cores (bench/).
 inline constexpr Range kMaxVehicles{1, 256, false, false, "vehicles per server"};
 // Threads that step a server's vehicles (vdyn-server --step-threads; runtime/step_pool.h).
