@@ -412,6 +412,61 @@ TEST(InputBuilder, PaddlesCountGearsCruiseFollowsButtonsAndBrake) {
   EXPECT_FALSE(b.TakeResetRequest());
 }
 
+// A paddle shift that would turn the engine past its limit, or go into or out of reverse while
+// moving, is refused with the reason; a reset returns to automatic (issue 31: E from automatic took
+// 1st at 87 km/h, 8,482 rpm against 6,800; Q passed into reverse at 40-70 km/h with cruise on;
+// reverse survived a reset). The engine speed from the closed form: v / r * ratio * final drive.
+TEST(InputBuilder, AShiftThatWouldOverRevOrReverseWhileMovingIsRefused) {
+  InputBuilder b;
+  VehicleInfo v;
+  pb::VehicleParams p = DefaultVehicleParams();
+  p.set_model(pb::VEHICLE_MODEL_FULL);
+  ApplyParams(p, v);
+  ASSERT_GT(v.gear_count, 2);
+  pb::DriverInput out;
+  MonoTime t{};
+  auto press = [&](std::uint32_t bits) {
+    WheelControls c;
+    c.buttons = bits;
+    b.Build(t, c, v, out);
+    c.buttons = 0;
+    b.Build(t, c, v, out);
+  };
+  auto rpm_in = [&](int gear, double kmh) {
+    const double step = std::pow(v.gear_ratio_top / v.gear_ratio_first, 1.0 / (v.gear_count - 1));
+    const double ratio = v.gear_ratio_first * std::pow(step, gear - 1);
+    return kmh / 3.6 / v.wheel_radius_m * ratio * v.final_drive_ratio * 60 / (2 * std::numbers::pi);
+  };
+  v.speed_known = true;
+  v.speed_kmh = 87;
+  ASSERT_GT(rpm_in(1, 87), v.engine_rpm_limit);  // the issue's case
+  press(pb::BUTTON_PADDLE_RIGHT);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_EQ(b.shifts_refused(), 1u);
+  char want[96];
+  std::snprintf(want, sizeof want, "1st at 87 km/h: the engine at %.0f rpm, past its %.0f limit",
+                rpm_in(1, 87), v.engine_rpm_limit);
+  EXPECT_EQ(b.shift_refusal(), want);
+  // At 20 km/h 1st is within the limit: taken; then down to automatic and, moving, not reverse.
+  v.speed_kmh = 20;
+  ASSERT_LT(rpm_in(1, 20), v.engine_rpm_limit);
+  press(pb::BUTTON_PADDLE_RIGHT);
+  EXPECT_EQ(out.gear(), 1);
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), 0);
+  v.speed_kmh = 45;
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_EQ(b.shift_refusal(), "reverse while moving at 45 km/h: stop first");
+  // Standing: reverse; a reset brings automatic back.
+  v.speed_kmh = 0.5;
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), -1);
+  press(pb::BUTTON_RESET);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_TRUE(b.TakeResetRequest());
+}
+
 TEST(InputBuilder, EstopLatchesAndRearmsOnlyWhenHeld) {
   InputBuilder b;
   VehicleInfo v;
@@ -1139,7 +1194,8 @@ TEST_F(SdlTest, KeyboardDrivesWithRampsAndSteeringReturnsToCentre) {
             static_cast<std::uint32_t>(pb::BUTTON_PADDLE_RIGHT));
   Key(SDL_SCANCODE_E, false);
   run(0.01);
-  EXPECT_EQ(sink.last.gear(), 1);
+  // 1st at 60 km/h would over-rev the full model's engine: refused, automatic stays (issue 31).
+  EXPECT_EQ(sink.last.gear(), 0);
   Key(SDL_SCANCODE_C, true);
   run(0.01);
   Key(SDL_SCANCODE_C, false);
