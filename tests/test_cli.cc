@@ -812,5 +812,25 @@ TEST(CliInput, PlayByTheWallClockWithoutAServerSaysSo) {
                                   "' to its end (3.0 s, wall clock), but no server took it"));
 }
 
+// vdyn-input's loop asks for real-time scheduling where the system permits it and says which, as
+// vdyn-server does (issue 31: on a loaded machine the input starved); --rt-priority 0 keeps the
+// normal scheduler.
+TEST(CliInput, TheLoopsSchedulingIsAskedForAndSaid) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0.2,0,0\n0.2,0,0.2,0,0\n");
+  const std::string play = " play " + (dir / "m.csv").string() + " --clock wall";
+  const std::string domain = "--domain " + std::to_string(testing::FreshDomain());
+  const Result r = RunInput(domain + " --rt-priority 30" + play);
+  EXPECT_THAT(r.output, ::testing::AnyOf(HasSubstr("; SCHED_FIFO priority 30"),
+                                         HasSubstr("; SCHED_OTHER with 1 ns timer slack "
+                                                   "(SCHED_FIFO refused: ")))
+      << r.output;
+  EXPECT_THAT(RunInput(domain + " --rt-priority 0" + play).output,
+              HasSubstr("; SCHED_OTHER (--rt-priority 0)"));
+  EXPECT_THAT(RunInput(domain + " --rt-priority 100" + play).output,
+              HasSubstr("--rt-priority: SCHED_FIFO priority must be in [0, 99], got 100"));
+}
+
 }  // namespace
 }  // namespace vdyn
