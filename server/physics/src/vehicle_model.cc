@@ -132,7 +132,7 @@ void TireForces(const Params& p, const AppliedControl& u, int w, const BodyKinem
   const WheelParams& wp = p.wheel[w];
   const Eigen::Vector3d& n_W = o.n_W;
   const Eigen::Vector3d heading_W =
-      u.cos_gamma_W[w] * k.R_WB.col(0) + u.sin_gamma_W[w] * k.R_WB.col(1);
+      u.wheel_cos_gamma[w] * k.R_WB.col(0) + u.wheel_sin_gamma[w] * k.R_WB.col(1);
   Eigen::Vector3d t_long = heading_W - heading_W.dot(n_W) * n_W;
   const double t_norm = t_long.norm();
   t_long = t_norm > 1e-9 ? Eigen::Vector3d(t_long / t_norm) : k.R_WB.col(0);
@@ -146,8 +146,8 @@ void TireForces(const Params& p, const AppliedControl& u, int w, const BodyKinem
   o.slip_angle = report_all ? std::atan(tan_alpha) : 0.0;
   double Fy = TireLateralForce(p.tire_law, tan_alpha, wp.cornering_stiffness, p.mu, o.Fp);
   const double roll_sign = SoftSign(o.v_long, 0.1 * p.tire_slip_speed);
-  double Fh = u.drive_W[w];
-  double Fb = u.brake_W[w] * roll_sign;  // opposes rolling; fades out at standstill
+  double Fh = u.wheel_drive[w];
+  double Fb = u.wheel_brake[w] * roll_sign;  // opposes rolling; fades out at standstill
   double Frr = p.rolling_resistance * o.Fp * roll_sign;
   // Friction circle: the tangential force never exceeds mu * Fp.
   double Fx = Fh - Fb - Frr;
@@ -255,7 +255,7 @@ void Derivatives(const Params& p, const BodyKinematics& k, const BodyLoads& load
   std::array<TraceHit, kNumWheels> hits;
   SenseTerrain(p, terrain, u, x, k, hits, out);
   for (int w = 0; w < kNumWheels; ++w) {
-    out.wheel[w].gamma = u.gamma_W[w];
+    out.wheel[w].gamma = u.wheel_gamma[w];
     Suspension(p.wheel[w], k, hits[w], out.wheel[w]);
     TireForces(p, u, w, k, report_all, out.wheel[w]);
   }
@@ -518,7 +518,7 @@ void DrivetrainFull(const Params& p, const AppliedControl& u, const StateVector&
     WheelOutputs& o = out.wheel[w];
     const double omega = x[sx::kWheelSpin + w];
     const double T_drive = p.drivetrain_efficiency * u.gearbox_ratio * d.drive_share[w] * clutch.torque;
-    const StickSlip brake = LuGre(x[sx::kBrake + w], omega, u.brake_torque_W[w],
+    const StickSlip brake = LuGre(x[sx::kBrake + w], omega, u.wheel_brake_torque[w],
                                   p.brake_stick_angle, p.stick_damping_time);
     xdot[sx::kBrake + w] = brake.rate;
     const double T_roll = o.contact ? p.rolling_resistance * o.Fp * wp.radius *
