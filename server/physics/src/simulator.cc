@@ -14,6 +14,32 @@
 
 namespace vdyn {
 
+namespace {
+
+// The horizontal traces held for a step, at x: the walls (both models) and the kerb edges (the
+// full model). Returns whether the wall traces were cast (near a steep surface).
+bool FindHeldContacts(const Params& p, const Terrain& terrain, const StateVector& x,
+                      WallPlanes& walls, WheelEdges& edges) {
+  const bool traced = FindWalls(p, terrain, x, walls);
+  if (p.model == VehicleModel::kFull) FindWheelEdges(p, terrain, x, edges);
+  return traced;
+}
+
+// xdot = f(x) of the parameters' model, with the controls and the held contacts: the one place
+// the paper's and the full model's equations are chosen, shared by Step and Forward (as MuJoCo's
+// mj_forward serves mj_step).
+void EvaluateModel(const Params& p, const Terrain& terrain, const AppliedControl& u,
+                   const WallPlanes& walls, const WheelEdges& edges, const StateVector& x,
+                   StateVector& xdot, Derived& out, bool report_all) {
+  if (p.model == VehicleModel::kFull) {
+    EvaluateDerivativeFull(p, terrain, u, walls, edges, x, xdot, out, report_all);
+  } else {
+    EvaluateDerivative(p, terrain, u, walls, x, xdot, out, report_all);
+  }
+}
+
+}  // namespace
+
 State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed,
                    double* max_misfit) {
   const Eigen::Matrix3d R_yaw =
@@ -227,30 +253,20 @@ StepStatus Simulator::Step() {
   const Terrain& terrain = world_->terrain;
   ws_.start = state_;
 
-  // Stage: controls (latched input, speed control) and walls, held for the whole step.
+  // Stage: controls (latched input, speed control) and the horizontal traces, held for the step.
   record_.input = input_;
   record_.control = ComputeControls(params_.get(), input_, h_, state_);
-  if (FindWalls(params_.get(), terrain, state_.x, ws_.walls)) ++wall_traced_steps_;
+  if (FindHeldContacts(params_.get(), terrain, state_.x, ws_.walls, ws_.edges)) {
+    ++wall_traced_steps_;
+  }
 
   // Stage: RK4 over the equations of motion; stage 0 is evaluated at x_n and is what we report.
   const AppliedControl& u = record_.control;
-  const bool full = params_->model == VehicleModel::kFull;
-  if (full) {
-    // The wheel-level horizontal traces (kerb edges), held for the step like the walls.
-    if (FindWheelEdges(params_.get(), terrain, state_.x, ws_.edges)) ++edge_traced_steps_;
-    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
-      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-      EvaluateDerivativeFull(params_.get(), terrain, u, ws_.walls, ws_.edges, x, xdot, d,
-                             stage == 0);
-    };
-    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
-  } else {
-    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
-      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-      EvaluateDerivative(params_.get(), terrain, u, ws_.walls, x, xdot, d, stage == 0);
-    };
-    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
-  }
+  auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
+    Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
+    EvaluateModel(params_.get(), terrain, u, ws_.walls, ws_.edges, x, xdot, d, stage == 0);
+  };
+  Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
 
   // Stage: post-step.
   StateVector& x = state_.x;
@@ -261,7 +277,8 @@ StepStatus Simulator::Step() {
     return StepStatus::kNonFinite;
   }
   x.segment<4>(sx::kQ) /= qn;
-  if (!full && params_->yaw_mode == YawMode::kPaper && ws_.stage_derived.any_contact) {
+  if (params_->model == VehicleModel::kPaper && params_->yaw_mode == YawMode::kPaper &&
+      ws_.stage_derived.any_contact) {
     // The yaw rate is eq. 6 of the new state (contact as seen by the last stage).
     const Eigen::Matrix3d R_WB = Orientation(x).toRotationMatrix();
     x[sx::kW + 2] = R_WB.col(0).dot(Velocity(x)) * std::sin(u.gamma) / params_->wheelbase;
@@ -282,15 +299,10 @@ void Simulator::Forward(Derived& out, AppliedControl* control) const {
   const AppliedControl u = ComputeControls(params_.get(), input_, h_, s);
   if (control != nullptr) *control = u;
   WallPlanes walls;
-  FindWalls(params_.get(), world_->terrain, state_.x, walls);
+  WheelEdges edges;
+  FindHeldContacts(params_.get(), world_->terrain, state_.x, walls, edges);
   StateVector xdot;
-  if (params_->model == VehicleModel::kFull) {
-    WheelEdges edges;
-    FindWheelEdges(params_.get(), world_->terrain, state_.x, edges);
-    EvaluateDerivativeFull(params_.get(), world_->terrain, u, walls, edges, state_.x, xdot, out);
-  } else {
-    EvaluateDerivative(params_.get(), world_->terrain, u, walls, state_.x, xdot, out);
-  }
+  EvaluateModel(params_.get(), world_->terrain, u, walls, edges, state_.x, xdot, out, true);
 }
 
 }  // namespace vdyn

@@ -87,8 +87,6 @@ class Simulator {
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
-  // Full model: steps whose wheel-level horizontal traces (kerb edges) were cast.
-  std::uint64_t edge_traced_steps() const { return edge_traced_steps_; }
 
  private:
   struct Workspace {
@@ -110,7 +108,6 @@ class Simulator {
   std::uint64_t nonfinite_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
-  std::uint64_t edge_traced_steps_ = 0;
 };
 
 // Invariants of a step the model guarantees by construction, checked after every step in debug and
