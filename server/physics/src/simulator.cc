@@ -212,6 +212,32 @@ void SetInvariantHandler(InvariantHandler handler) {
   g_invariant_handler.store(handler != nullptr ? handler : &AssertionFailure);
 }
 
+bool CheckStepDemands(const StepRecord& r, const State& after, char* why, std::size_t n) {
+  constexpr double kUnitTolerance = 1e-9;
+  if (!r.state.x.allFinite()) {
+    std::snprintf(why, n, "demand: the starting state is not finite");
+    return false;
+  }
+  const State* states[] = {&r.state, &after};
+  const char* names[] = {"starting", "new"};
+  for (int i = 0; i < 2; ++i) {
+    const double q = states[i]->x.segment<4>(sx::kQ).norm();
+    if (!(std::abs(q - 1.0) <= kUnitTolerance)) {
+      std::snprintf(why, n, "demand: the %s state's quaternion has norm %.9g, not 1", names[i], q);
+      return false;
+    }
+  }
+  for (int w = 0; w < kNumWheels; ++w) {
+    const double Fp = r.derived.wheel[w].Fp;
+    if (!(Fp >= 0.0)) {
+      std::snprintf(why, n, "demand: wheel %s: spring force Fp = %g N, not >= 0",
+                    kWheelNames[static_cast<std::size_t>(w)].data(), Fp);
+      return false;
+    }
+  }
+  return true;
+}
+
 std::string CheckStepInvariants(const StepRecord& r, const State& after) {
   std::string why = UnitQuaternion("starting", r.state);
   if (why.empty()) why = UnitQuaternion("new", after);
@@ -288,6 +314,9 @@ StepStatus Simulator::Step() {
   record_.state = ws_.start;
   state_.step = ws_.start.step + 1;
   record_.hash_after = StateHash(state_);
+  if (!CheckStepDemands(record_, state_, last_invariant_failure_, sizeof last_invariant_failure_)) {
+    ++invariant_failures_;
+  }
   if constexpr (kCheckInvariants) {
     if (std::string why = CheckStepInvariants(record_, state_); !why.empty()) InvariantFailed(why);
   }

@@ -332,6 +332,9 @@ void ServerNode::PushReport(base::MonoTime now) {
       v.source[n] = '\0';
       v.nonfinite_steps = sim.nonfinite_steps();
       v.sanitized_inputs = sim.sanitized_inputs();
+      v.invariant_failures = sim.invariant_failures();
+      std::snprintf(v.last_invariant_failure, sizeof v.last_invariant_failure, "%s",
+                    sim.last_invariant_failure());
       v.speed_kmh = Velocity(sim.state().x).norm() * 3.6;
     });
     reports_.Commit();
@@ -1023,6 +1026,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     vd->set_input_source(v.source);
     vd->set_nonfinite_steps(v.nonfinite_steps);
     vd->set_sanitized_inputs(v.sanitized_inputs);
+    vd->set_invariant_failures(v.invariant_failures);
+    vd->set_last_invariant_failure(v.last_invariant_failure);
     std::lock_guard<std::mutex> lock(sources_mu_);
     const base::MonoTime now = base::MonotonicNow();
     for (const InputArbiter::Source& src : sources_copy_) {
