@@ -216,6 +216,10 @@ bool ParamsEditor::EditFields(gp::Message& m, const std::string& prefix) {
         }
         break;
       }
+      case gp::FieldDescriptor::CPPTYPE_STRING:  // read only, where given: a tyre's file name
+        if (r->HasField(m, f))
+          ImGui::Text("%s: %s", FieldLabel(path).c_str(), r->GetString(m, f).c_str());
+        break;
       case gp::FieldDescriptor::CPPTYPE_MESSAGE:
         open = ImGui::TreeNode(label.c_str());
         break;

@@ -72,7 +72,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
     if (p.model == VehicleModel::kFull) {
       // The full model's wheel hangs on its spring (within its travel) and its tire is
       // compressed by the load.
-      lS = std::clamp(lS, wp.min_length, wp.max_length) - F / p.tire_vertical_stiffness;
+      lS = std::clamp(lS, wp.min_length, wp.max_length) - F / p.full.tire_vertical_stiffness[w];
     }
     A(w, 0) = 1.0;
     A(w, 1) = -p.p_TA_B[w].x();
@@ -252,13 +252,23 @@ std::string CheckStepInvariants(const StepRecord& r, const State& after) {
                     wheel, o.Fp);
       why = buf;
     }
-    const std::pair<const char*, double> scalars[] = {
-        {"Fp", o.Fp},           {"Fh", o.Fh},
-        {"Fb", o.Fb},           {"Fy", o.Fy},
-        {"Frr", o.Frr},         {"lS", o.lS},
-        {"lS_rate", o.lS_rate}, {"slip_angle", o.slip_angle},
-        {"omega", o.omega},     {"slip_ratio", o.slip_ratio},
-        {"Fx", o.Fx},           {"Mz", o.Mz}};
+    const std::pair<const char*, double> scalars[] = {{"Fp", o.Fp},
+                                                      {"Fh", o.Fh},
+                                                      {"Fb", o.Fb},
+                                                      {"Fy", o.Fy},
+                                                      {"Frr", o.Frr},
+                                                      {"lS", o.lS},
+                                                      {"lS_rate", o.lS_rate},
+                                                      {"slip_angle", o.slip_angle},
+                                                      {"omega", o.omega},
+                                                      {"slip_ratio", o.slip_ratio},
+                                                      {"Fx", o.Fx},
+                                                      {"Mz", o.Mz},
+                                                      {"kappa_law", o.kappa_law},
+                                                      {"alpha_law", o.alpha_law},
+                                                      {"camber", o.camber},
+                                                      {"Mx", o.Mx},
+                                                      {"My", o.My}};
     for (const auto& [name, v] : scalars) Finite(why, wheel, name, v);
     Finite(why, wheel, "F_W", o.F_W);
   }
