@@ -29,6 +29,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "vdyn/base/scheduling.h"
 #include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
 #include "vdyn/cli/options.h"
@@ -67,7 +68,15 @@ struct Common {
   double rate_hz = 1000.0;
   double wait_s = 10.0;
   bool status = false;
+  int rt_priority = 0;  // 0: the normal scheduler; 1..99: SCHED_FIFO where permitted
 };
+
+// The 1 kHz loop's scheduling, as the server says it (issue 31: on a busy machine the loop at
+// the normal scheduler starved and the server's watchdog took over). Off by default.
+std::string Scheduling(const Common& c) {
+  if (c.rt_priority <= 0) return "SCHED_OTHER (no --rt-priority)";
+  return vdyn::base::SetUpRealtimeScheduling(c.rt_priority);
+}
 
 Nanos Period(double hz) {
   return Nanos{static_cast<std::int64_t>(1e9 / hz)};
@@ -77,13 +86,12 @@ Nanos Period(double hz) {
 // they arrive soon after the reader matches, not always together), gathered for 1 s; empty where
 // no server runs.
 std::vector<std::uint32_t> VehiclesOnDomain(vdyn::transport::Participant& participant) {
-  vdyn::client::SessionView view(
-      participant, {.states = false,
-                    .params = true,
-                    .world = false,
-                    .diagnostics = false,
-                    .inputs = false,
-                    .only_vehicle = std::nullopt});
+  vdyn::client::SessionView view(participant, {.states = false,
+                                               .params = true,
+                                               .world = false,
+                                               .diagnostics = false,
+                                               .inputs = false,
+                                               .only_vehicle = std::nullopt});
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(1);
   while (std::chrono::steady_clock::now() < deadline) {
     (void)view.Wait(std::chrono::milliseconds(100));
@@ -137,6 +145,10 @@ int Play(const Common& c, const PlayOptions& o) {
   // The vehicle's newest simulation time (clock=server) and what its states say about this input.
   std::int64_t sim_ns = -1;
   std::uint64_t states_seen = 0, states_ours = 0;
+  // Times the server's watchdog took the vehicle from this input (a state of ours, then one in
+  // the watchdog's safe state): this input arrived too late (issue 31, bench/input_starvation.sh).
+  std::uint64_t watchdog_takeovers = 0;
+  bool was_ours = false;
   std::string other_source;  // the newest other source that drove the vehicle
   MonoTime last_state_at{};
   states.on_state = [&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
@@ -144,15 +156,15 @@ int Play(const Common& c, const PlayOptions& o) {
     sim_ns = s.sim_time_ns();
     ++states_seen;
     last_state_at = MonotonicNow();
-    if (s.input().source_id() == c.source_id) {
+    if (was_ours && s.control().watchdog_safe_state()) ++watchdog_takeovers;
+    was_ours = s.input().source_id() == c.source_id;
+    if (was_ours) {
       ++states_ours;
     } else if (!s.input().source_id().empty()) {
       other_source = s.input().source_id();
     }
   };
-  auto poll_states = [&] {
-    states.Poll();
-  };
+  auto poll_states = [&] { states.Poll(); };
   const std::string where =
       "vehicle " + std::to_string(c.vehicle_id) + " on domain " + std::to_string(c.domain);
   if (server_clock) {
@@ -170,8 +182,10 @@ int Play(const Common& c, const PlayOptions& o) {
       return 1;
     }
   }
-  spdlog::info("vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {})",
-               o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength);
+  spdlog::info(
+      "vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {}); {}",
+      o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength,
+      Scheduling(c));
 
   const MonoTime wall_start = MonotonicNow();
   const std::int64_t sim_start = sim_ns;
@@ -231,7 +245,8 @@ int Play(const Common& c, const PlayOptions& o) {
   }
   std::string outcome = "vdyn-input: " + played + "; " + std::to_string(states_ours) + " of " +
                         std::to_string(states_seen) + " states of vehicle " +
-                        std::to_string(c.vehicle_id) + " applied this input";
+                        std::to_string(c.vehicle_id) + " applied this input; watchdog took over " +
+                        std::to_string(watchdog_takeovers) + " times";
   if (states_ours == 0 && !other_source.empty()) {
     outcome += " ('" + other_source + "' drove it: a stronger source than --strength " +
                std::to_string(c.strength) + ")";
@@ -297,8 +312,8 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
     std::cerr << "vdyn-input: " << e.what() << "\n";
     return 2;
   }
-  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz",
-               rig.device_name(), c.vehicle_id, c.source_id, c.strength, c.rate_hz);
+  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz; {}",
+               rig.device_name(), c.vehicle_id, c.source_id, c.strength, c.rate_hz, Scheduling(c));
   const MonoTime start = MonotonicNow();
   vdyn::client::FixedRateLoop clock(Period(c.rate_hz), start);
   MonoTime next_status = start + vdyn::base::Seconds(1);
@@ -594,6 +609,10 @@ int main(int argc, char** argv) {
   Common c;
   app.add_option("--domain", c.domain, "DDS domain id")
       ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
+      ->capture_default_str();
+  app.add_option("--rt-priority", c.rt_priority,
+                 "SCHED_FIFO priority of the 1 kHz loop where permitted (0: normal scheduler)")
+      ->check(vdyn::cli::WholeInRange({0, 99, false, false, "SCHED_FIFO priority"}))
       ->capture_default_str();
   app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")
       ->check(vdyn::cli::VehicleId())
