@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # input_starvation.sh: issue 31's starved driver. One real-time vdyn-server (vehicle 1 on `flat`),
 # HOGS busy-looping processes at the normal scheduler (nice 0) on this machine, and `vdyn-input
-# play demo --clock wall --loop` (1 kHz) driving vehicle 1 for SECONDS, RUNS times without and
+# play demo --clock wall --loop` (1 kHz) driving vehicle 1 for SECONDS, RUNS times with `--rt-priority 0` and
 # RUNS times with `--rt-priority 20` (alternating, so both see the same machine). Each run prints
 # the times the server's watchdog took the vehicle from the input (vdyn-input's own count: a state
 # that applied its input followed by one in the watchdog's safe state); then the medians.
@@ -39,7 +39,7 @@ one_run() {  # $1: label, rest: extra vdyn-input options
 }
 : > "$tmp/results"
 for r in $(seq 1 "$runs"); do
-  one_run normal | tee -a "$tmp/results"
+  one_run normal --rt-priority 0 | tee -a "$tmp/results"
   one_run rt --rt-priority 20 | tee -a "$tmp/results"
 done
 median() { grep "^$1 " "$tmp/results" | awk '{print $2}' | sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
