@@ -68,10 +68,10 @@ struct Common {
   double rate_hz = 1000.0;
   double wait_s = 10.0;
   bool status = false;
-  // The 1 kHz loop's SCHED_FIFO priority (0: the normal scheduler): below the server's 50, above
-  // everything a busy desktop runs (issue 31: on a loaded machine the input starved and the
-  // watchdog took over 25 times in a 30 s drive).
-  int rt_priority = 40;
+  // The 1 kHz loop's SCHED_FIFO priority where permitted (0: the normal scheduler, the default:
+  // under busy-looping hogs SCHED_FIFO did not reduce the watchdog's take-overs, 2026-12-05,
+  // bench/input_starvation.sh).
+  int rt_priority = 0;
 };
 
 // Real-time scheduling for the calling (loop) thread where the system permits it; the line that
