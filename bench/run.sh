@@ -43,6 +43,7 @@ run() {  # prints the command, then runs it
   run /usr/bin/python3 bench/python_reader_cost.py build/release 128 3
   # VDYN_VIEWER_PEER: an earlier vdyn-viewer built apart, measured in the same run as the peer.
   run "$bin/viewer_bench" 3 300 ${VDYN_VIEWER_PEER:+"$VDYN_VIEWER_PEER"}
+  run "$bin/foxglove_bench" 10 3
   PYTHONPATH=build/release/clients/python/package run /usr/bin/python3 bench/python_bench.py build/release 60 600
 } 2>&1 | grep -v 'is not multicast-capable' | tee "$out"
 echo "results written to $out"

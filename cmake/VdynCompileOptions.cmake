@@ -15,6 +15,10 @@ target_compile_options(vdyn_options INTERFACE
 # GCC's reading is the project's, checked in the release build.
 if(CMAKE_CXX_COMPILER_ID MATCHES "Clang")
   target_compile_options(vdyn_options INTERFACE -Wno-double-promotion)
+else()
+  # GCC warns when a class defined outside the main file has a member of a file-local type: in a
+  # unity build every source is "outside the main file", while each stays one file's own.
+  target_compile_options(vdyn_options INTERFACE $<$<COMPILE_LANGUAGE:CXX>:-Wno-subobject-linkage>)
 endif()
 if(VDYN_SANITIZE)
   target_compile_options(vdyn_options INTERFACE

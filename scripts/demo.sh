@@ -23,14 +23,22 @@ rec="$bin/clients/recorder/vdyn-recorder"
 mkdir -p out
 # The recorder's socket needs room for the world description the server sends in one burst (2 MB):
 # Debian caps a socket's receive buffer at 208 KiB (net.core.rmem_max), and the kernel then drops
-# a few states at the start of the recording. As root (a fresh machine), raise the cap.
-if [ "$(id -u)" = 0 ] && [ "$(cat /proc/sys/net/core/rmem_max 2>/dev/null || echo 0)" -lt 16777216 ]; then
-  sysctl -qw net.core.rmem_max=16777216 || echo "demo.sh: cannot raise net.core.rmem_max (a container?)" >&2
+# a few states at the start of the recording. As root (a fresh machine), raise the cap. Whether it
+# took is read back: sysctl exits 0 in some containers where the write changed nothing.
+rmem_max() { cat /proc/sys/net/core/rmem_max 2>/dev/null || echo 0; }
+if [ "$(rmem_max)" -lt 16777216 ]; then
+  if [ "$(id -u)" = 0 ]; then sysctl -qw net.core.rmem_max=16777216 2>/dev/null || true; fi
+  if [ "$(rmem_max)" -lt 16777216 ]; then
+    echo "demo.sh: net.core.rmem_max is $(rmem_max) bytes: the recording may miss a few states at" \
+         "the start; as root: sysctl -w net.core.rmem_max=16777216 (on a container, on its host)" >&2
+  fi
 fi
 # The recorder first, so it has the whole session: every topic, raw, into MCAP.
 "$rec" record out/live.mcap --domain "$domain" --no-status &
 recorder=$!
-"$bin/server/vdyn-server" --domain "$domain" --world facility --duration 44 --status \
+# The server runs until the drive ends (then Ctrl-C, as a user would): a fixed duration outlasted
+# the drive, and its last seconds were the watchdog's braking without a driver.
+"$bin/server/vdyn-server" --domain "$domain" --world facility --status \
   --stats-out out/live-stats.txt &
 server=$!
 viewer=""
@@ -44,6 +52,7 @@ if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${VDYN_VIEWER:-1}" != 0 ]; th
   echo "vdyn-viewer open on domain $domain (log in out/viewer.log)"
 fi
 "$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30
+kill -INT "$server"
 wait "$server"
 kill -INT "$recorder"
 wait "$recorder"

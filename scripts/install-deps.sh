@@ -18,9 +18,13 @@ build_packages=(
   clang libclang-rt-14-dev
   python3 python3-dev pybind11-dev python3-numpy python3-protobuf python3-pytest
   python3-pandas python3-matplotlib python3-venv python3-setuptools python3-pip
+  libboost-dev libssl-dev nlohmann-json3-dev libjs-three chromium
 )
-# The recorder's independent-reader test also needs Node.js with npm (it installs @mcap/core from
-# the npm registry); these machines come with Node.js 20.
+# vdyn-foxglove: Boost.Asio and Beast (header-only), OpenSSL (wss), nlohmann's JSON, three.js for
+# its page; Chromium for the page's test (tests/foxglove/page.test.js drives it headless).
+# The recorder's independent-reader test and vdyn-foxglove's tests also need Node.js with npm
+# (they install @mcap/core, @foxglove/ws-protocol and playwright-core from the npm registry); these
+# machines come with Node.js 20.
 
 # The shared libraries the vdyn programs load (what the -dev packages above bring for them), and
 # openssl for scripts/lab-pki.sh, gnuplot for `vdyn-recorder plot`; libgl1 and Mesa for the viewer (libepoxy and SDL load OpenGL at run
@@ -28,7 +32,7 @@ build_packages=(
 runtime_packages=(
   libembree3-3 libassimp5 libprotobuf32 libspdlog1.10 libfmt9 libddsc0debian
   libsdl2-2.0-0 libepoxy0 libopenxr-loader1 libx11-6 libgl1 libgl1-mesa-dri
-  libstb0 libzstd1 liblz4-1 zlib1g openssl ca-certificates gnuplot-nox
+  libstb0 libzstd1 liblz4-1 zlib1g openssl ca-certificates gnuplot-nox libssl3 libjs-three
 )
 
 case "${1:-}" in

@@ -75,6 +75,9 @@ await() {  # await: waits for the background job; fails (its log shown) when it 
 export ASAN_OPTIONS="detect_leaks=0:abort_on_error=1:strict_string_checks=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
 # The long soaks carry the ctest label "full": left out of the default run.
+# One test a core; the long programs run as shards (tests/CMakeLists.txt, vdyn_test ... SHARDS)
+# so that their parts fill both. Two tests a core was tried (2026-12-05): load 19, and the
+# Foxglove bridge's rate tests failed in the release suite.
 ctest_args=(--output-on-failure --timeout 900 -j "$(nproc)")
 if [ "$full" -eq 0 ]; then ctest_args+=(-LE full); fi
 fuzz_seconds="${VDYN_FUZZ_SECONDS:-$([ "$full" -eq 1 ] && echo 120 || echo 10)}"

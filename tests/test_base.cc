@@ -15,6 +15,8 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "vdyn/base/deadline.h"
+#include "vdyn/base/gearbox.h"
 #include "vdyn/base/hash.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/base/memory.h"
@@ -59,6 +61,78 @@ TEST(Memory, AFreedLargeBlockComesBackWithoutFaultingItsPagesAgain) {
   const long second = touch_and_free();
   EXPECT_GT(first, 0) << "the first block's pages were new";
   EXPECT_LT(second, 64) << "faults the second time, of " << kBytes / 4096 << " pages";
+}
+
+// A deadline from a timeout of any size: 1e10 s from now is past the int64 nanoseconds' end (the
+// sum wrapped round into the past, and a Python call with timeout=1e10 failed at once: "no server
+// answered"); it and every longer time never pass. Shorter ones pass when they are due.
+TEST(Deadline, ATimeoutBeyondTheClocksRangeNeverPassesInsteadOfWrapping) {
+  const base::MonoTime now = base::MonotonicNow();
+  for (const double s : {1e10, 3e11, 1e300, std::numeric_limits<double>::infinity()}) {
+    const base::Deadline d = base::Deadline::AfterSeconds(s, now);
+    EXPECT_TRUE(d.never()) << s;
+    EXPECT_FALSE(d.Passed(now + base::Seconds(1'000'000'000))) << s;
+    EXPECT_GT(d.Left(now).seconds(), 1e9) << s;
+  }
+  EXPECT_TRUE(
+      base::Deadline::After(base::Nanos{std::numeric_limits<std::int64_t>::max()}, now).never());
+  const base::Deadline d = base::Deadline::AfterSeconds(2.5, now);
+  EXPECT_FALSE(d.never());
+  EXPECT_FALSE(d.Passed(now + base::Milliseconds(2499)));
+  EXPECT_TRUE(d.Passed(now + base::Milliseconds(2500)));
+  EXPECT_EQ(d.Left(now + base::Seconds(1)).ns, 1'500'000'000);
+  EXPECT_EQ(d.Left(now + base::Seconds(9)).ns, 0);
+  for (const double s : {0.0, -1.0, std::nan("")}) {
+    EXPECT_TRUE(base::Deadline::AfterSeconds(s, now).Passed(now)) << s;
+  }
+}
+
+// PollUntil: looks once more after its last wait (what arrived in the last slice counts), waits
+// at most the time left, and ends false when the deadline passes.
+TEST(Deadline, PollUntilLooksAfterItsLastWaitAndNeverWaitsPastTheDeadline) {
+  int looks = 0;
+  std::vector<base::Nanos> waits;
+  const base::Deadline d = base::Deadline::After(base::Milliseconds(30));
+  const bool got = base::PollUntil(
+      d, base::Milliseconds(20), [&] { return ++looks == 3; },
+      [&](base::Nanos slice) {
+        waits.push_back(slice);
+        std::this_thread::sleep_for(base::Chrono(slice));
+      });
+  // Two waits: 20 ms, then at most the 10 ms left; the third look, after the second wait, succeeds
+  // (or the deadline passed first on a machine too loaded to wake within 30 ms).
+  ASSERT_GE(waits.size(), 1u);
+  EXPECT_EQ(waits[0].ns, 20'000'000);
+  for (const base::Nanos w : waits) EXPECT_LE(w.ns, 20'000'000);
+  if (waits.size() == 2) {
+    EXPECT_TRUE(got);
+    EXPECT_EQ(looks, 3);
+  }
+  looks = 0;
+  EXPECT_FALSE(base::PollUntil(
+      base::Deadline::After(base::Milliseconds(5)), base::Milliseconds(1),
+      [&] { return ++looks < 0; },
+      [](base::Nanos slice) { std::this_thread::sleep_for(base::Chrono(slice)); }));
+  EXPECT_GE(looks, 2);
+}
+
+// The gearbox's ratios against their closed form (docs/model.md, section 8): geometric from the
+// first to the top gear, each step the same ratio, the top gear exactly as given.
+TEST(Gearbox, RatiosRunInGeometricProgressionFromFirstToTop) {
+  const double first = 3.5, top = 0.8;
+  const int n = 6;
+  const double q = std::pow(top / first, 1.0 / 5.0);
+  EXPECT_DOUBLE_EQ(base::GearRatioStep(first, top, n), q);
+  EXPECT_DOUBLE_EQ(base::ForwardGearRatio(first, top, n, 1), 3.5);
+  EXPECT_DOUBLE_EQ(base::ForwardGearRatio(first, top, n, 3), 3.5 * q * q);
+  EXPECT_EQ(base::ForwardGearRatio(first, top, n, 6), 0.8);
+  for (int g = 2; g <= n; ++g) {
+    EXPECT_NEAR(
+        base::ForwardGearRatio(first, top, n, g) / base::ForwardGearRatio(first, top, n, g - 1), q,
+        1e-12);
+  }
+  EXPECT_EQ(base::GearRatioStep(first, top, 1), 1.0);
+  EXPECT_EQ(base::ForwardGearRatio(first, top, 1, 1), top);
 }
 
 // A time typed as decimal seconds names a nanosecond exactly: every one of these, written with

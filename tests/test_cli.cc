@@ -417,6 +417,23 @@ Result RunViewer(const std::string& args) {
   return Run(VDYN_VIEWER_BINARY, args);
 }
 
+// A command line a program refuses as a usage error: exit code 2, `message` in its output.
+struct UsageCase {
+  Result (*run)(const std::string&);
+  std::string args;
+  std::string message;
+};
+// Runs each case; `never`: words no refusal may hold (CLI11's own wording, say).
+void ExpectUsageErrors(const std::vector<UsageCase>& cases,
+                       const std::vector<std::string>& never = {}) {
+  for (const UsageCase& c : cases) {
+    const Result r = c.run(c.args);
+    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
+    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
+    for (const std::string& n : never) EXPECT_THAT(r.output, Not(HasSubstr(n))) << c.args;
+  }
+}
+
 TEST(CliErrors, EditDistanceCountsASwapOfNeighboursAsOne) {
   EXPECT_EQ(cli::EditDistance("kitten", "sitting"), 3);  // Levenshtein's example
   EXPECT_EQ(cli::EditDistance("wrold", "world"), 1);     // a swap
@@ -614,34 +631,24 @@ TEST(CliErrors, AValueOutsideTheChoicesIsToldWithTheNearest) {
 
 // The programs themselves: each uses the shared layer.
 TEST(CliPrograms, EachProgramNamesTheNearestOptionOrCommand) {
-  struct Case {
-    Result (*run)(const std::string&);
-    const char* args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--wrold facility",
-            "vdyn-server: unknown option '--wrold'; did you mean '--world'?"},
-           {RunRecorder, "recrod x.mcap",
-            "vdyn-recorder: unknown command 'recrod'; did you mean 'record'? (the commands: "
-            "record, info, export, plot, play, verify, takeover, recover)"},
-           {RunRecorder, "", "vdyn-recorder: choose a command: record, info, export, plot, play,"},
-           {RunRecorder, "info x.mcap --rate 2",
-            "vdyn-recorder info: option '--rate' is not one of 'vdyn-recorder info'; it belongs to "
-            "'vdyn-recorder play'"},
-           {RunInput, "plya demo", "vdyn-input: unknown command 'plya'; did you mean 'play'?"},
-           {RunInput, "play demo --clokc wall",
-            "vdyn-input play: unknown option '--clokc'; did you mean '--clock'?"},
-           {RunTelemetry, "--outsim 127.0.0.1:4123 --outsim-hx 50",
-            "vdyn-telemetry: unknown option '--outsim-hx'; did you mean '--outsim-hz'?"},
-           {RunViewer, "--camra map",
-            "vdyn-viewer: unknown option '--camra'; did you mean '--camera'?"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("were not expected"))) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("unexpected argument"))) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--wrold facility",
+        "vdyn-server: unknown option '--wrold'; did you mean '--world'?"},
+       {RunRecorder, "recrod x.mcap",
+        "vdyn-recorder: unknown command 'recrod'; did you mean 'record'? (the commands: "
+        "record, info, export, plot, play, verify, takeover, recover)"},
+       {RunRecorder, "", "vdyn-recorder: choose a command: record, info, export, plot, play,"},
+       {RunRecorder, "info x.mcap --rate 2",
+        "vdyn-recorder info: option '--rate' is not one of 'vdyn-recorder info'; it belongs to "
+        "'vdyn-recorder play'"},
+       {RunInput, "plya demo", "vdyn-input: unknown command 'plya'; did you mean 'play'?"},
+       {RunInput, "play demo --clokc wall",
+        "vdyn-input play: unknown option '--clokc'; did you mean '--clock'?"},
+       {RunTelemetry, "--outsim 127.0.0.1:4123 --outsim-hx 50",
+        "vdyn-telemetry: unknown option '--outsim-hx'; did you mean '--outsim-hz'?"},
+       {RunViewer, "--camra map",
+        "vdyn-viewer: unknown option '--camra'; did you mean '--camera'?"}},
+      {"were not expected", "unexpected argument"});
 }
 
 TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
@@ -650,26 +657,17 @@ TEST(CliPrograms, EachProgramRefusesAListWithAnEmptyEntry) {
   TempDir dir;
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const std::string out = (dir / "x.mcap").string();
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
-            "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
-           {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
-            "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
-           {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
-            "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
-           {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
-            "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
-           {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
-            "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--vehicle-ids 1,,2 --duration 1" + domain,
+        "vdyn-server: --vehicle-ids '1,,2': entry 2 of the list is empty"},
+       {RunServer, "--batch --maneuver demo --duration 1 --spawn 1,2,",
+        "vdyn-server: --spawn '1,2,': entry 3 of the list is empty"},
+       {RunRecorder, "record " + out + " --duration 1 --vehicles 1,,2" + domain,
+        "vdyn-recorder: --vehicles '1,,2': entry 2 of the list is empty"},
+       {RunRecorder, "record " + out + " --duration 1 --topics state,,events" + domain,
+        "vdyn-recorder: --topics 'state,,events': entry 2 of the list is empty"},
+       {RunViewer, "--orbit 10,,5 --hidden --frames 1 --wait 0" + domain,
+        "vdyn-viewer: --orbit '10,,5': entry 2 of the list is empty"}});
 }
 
 // An id the receivers would refuse in every message (empty or blank, longer than
@@ -679,26 +677,77 @@ TEST(CliPrograms, AnIdTheReceiversWouldRefuseIsRefused) {
   // Were an id taken, each program would stop soon and on a domain of its own.
   testing::UseLoopbackDds();
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    std::string message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunInput, "--source-id '' play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is empty"},
-           {RunInput, "--source-id ' ' play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is empty"},
-           {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
-           {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
-            "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
-           {RunRecorder, "play x.mcap --server-id ''",
-            "vdyn-recorder play: --server-id: the server id is empty"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunInput, "--source-id '' play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is empty"},
+       {RunInput, "--source-id ' ' play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is empty"},
+       {RunInput, "--source-id " + std::string(65, 'x') + " play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id is 65 bytes long; at most 64"},
+       {RunInput, "--source-id \"$(printf 'rig\\ta')\" play demo --clock wall" + domain,
+        "vdyn-input play: --source-id: the source id holds a control character: 'rig\\ta'"},
+       {RunRecorder, "play x.mcap --server-id ''",
+        "vdyn-recorder play: --server-id: the server id is empty"}});
+}
+
+// Every program that takes a vehicle id refuses 0 (no vehicle in a message) with the range of ids,
+// as the table of limits writes it (issue 31: `vdyn-input --vehicle-id 0` was accepted).
+TEST(CliPrograms, EachProgramRefusesVehicleIdZeroWithTheRange) {
+  // Were an id taken, each program would stop soon and on a domain of its own.
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  const std::string file = (dir / "x.mcap").string();
+  const std::string range = "vehicle id must be in [1, 4294967295], got 0";
+  ExpectUsageErrors(
+      {{RunServer, "--vehicle-ids 0 --duration 1" + domain, "--vehicle-ids: " + range},
+       {RunServer, "--vehicle-ids 1,0..3 --duration 1" + domain, "--vehicle-ids: " + range},
+       {RunInput, "--vehicle-id 0 play demo --clock wall" + domain, "--vehicle-id: " + range},
+       {RunTelemetry, "--vehicle-id 0 --outsim 127.0.0.1:4123 --duration 1" + domain,
+        "--vehicle-id: " + range},
+       {RunViewer, "--follow 0 --hidden --frames 1 --wait 0" + domain, "--follow: " + range},
+       {RunRecorder, "record " + file + " --duration 1 --vehicles 1,0" + domain,
+        "--vehicles: " + range},
+       {RunRecorder, "export " + file + " --csv x.csv --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "plot " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "play " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "verify " + file + " --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "takeover " + file + " --at 1 --vehicle 0", "--vehicle: " + range},
+       {RunRecorder, "takeover " + file + " --at 1 --as 0", "--as: " + range}});
+}
+
+// vdyn-server --vehicle-ids takes ranges (1..256): each entry an id or an ascending range of at
+// most as many ids as a server runs; a range that goes down or holds more is refused, with why.
+TEST(Cli, ServerVehicleIdsTakeRanges) {
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  ExpectServerSays("--vehicle-ids 5..1 --duration 1" + domain, 2,
+                   "--vehicle-ids: the range '5..1' goes down; write it as 1..5");
+  ExpectServerSays("--vehicle-ids 1..300 --duration 1" + domain, 2,
+                   "--vehicle-ids: the range '1..300' holds 300 ids; a server runs at most 256");
+  ExpectServerSays("--vehicle-ids 1..x --duration 1" + domain, 2,
+                   "--vehicle-ids: 'x' is not a number");
+  ExpectServerSays("--vehicle-ids 1..3,2 --duration 1" + domain, 2,
+                   "--vehicle-ids: vehicle 2 is listed twice");
+  ExpectServerSays("--vehicle-ids 1..3,7,10..11 --duration 0.2" + domain, 0, "6 vehicle(s)");
+}
+
+// As many vehicles as a server may run start on facility's free ground (issue 31: --vehicle-ids
+// 1..256 was refused, "the body would start inside 'glass_barrier'"), and a world too small for
+// the vehicles asked for says how many fit.
+TEST(Cli, ServerPlacesItsVehiclesOnFreeGroundOrSaysHowManyFit) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  ExpectServerSays("--world facility --vehicle-ids 1..256 --max-vehicles 256 --duration 0.2 "
+                   "--no-status" + domain,
+                   0, "256 vehicle(s)");
+  WriteFile(dir / "square.obj", "v -6 -6 0\nv 6 -6 0\nv 6 6 0\nv -6 6 0\nf 1 2 3\nf 1 3 4\n");
+  ExpectServerSays("--world " + (dir / "square.obj").string() +
+                       " --spawn 0,0,0 --vehicle-ids 1..5 --duration 0.2 --no-status" + domain,
+                   2,
+                   "only 3 of the 5 vehicles fit on the free ground of world 'square.obj' within "
+                   "400 m of its spawn");
 }
 
 // Each program's choices, ranges and lists said the same way: a choice mistyped comes with the
@@ -710,38 +759,29 @@ TEST(CliPrograms, EachProgramNamesTheNearestChoice) {
   TempDir dir;
   const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
   const std::string out = (dir / "x.mcap").string();
-  struct Case {
-    Result (*run)(const std::string&);
-    std::string args;
-    const char* message;
-  };
-  for (const Case& c : std::vector<Case>{
-           {RunServer, "--model Paper --dump-vehicle",
-            "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
-            "'paper'?"},
-           {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
-           {RunInput, "play demo --clock Wall" + domain,
-            "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
-            "'wall'?"},
-           {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
-            "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
-            "you mean 'zstd'?"},
-           {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
-            "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
-            "(the topics: state, input, control, control_reply, params, world, events, "
-            "diagnostics)"},
-           {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
-            "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map', "
-            "'north' or 'beside'; did you mean 'map'?"},
-           {RunInput, "calibrate --device 300 --timeout 1",
-            "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
-           {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
-            "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}}) {
-    const Result r = c.run(c.args);
-    EXPECT_EQ(r.exit_code, 2) << c.args << "\n" << r.output;
-    EXPECT_THAT(r.output, HasSubstr(c.message)) << c.args;
-    EXPECT_THAT(r.output, Not(HasSubstr("not in {"))) << c.args;
-  }
+  ExpectUsageErrors(
+      {{RunServer, "--model Paper --dump-vehicle",
+        "vdyn-server: --model: 'Paper' is not one of 'paper' or 'full'; did you mean "
+        "'paper'?"},
+       {RunServer, "--dump-maneuver dem", "did you mean 'demo'?"},
+       {RunInput, "play demo --clock Wall" + domain,
+        "vdyn-input play: --clock: 'Wall' is not one of 'server' or 'wall'; did you mean "
+        "'wall'?"},
+       {RunRecorder, "record " + out + " --duration 1 --compression zst" + domain,
+        "vdyn-recorder record: --compression: 'zst' is not one of 'zstd', 'lz4' or 'none'; did "
+        "you mean 'zstd'?"},
+       {RunRecorder, "record " + out + " --duration 1 --topics stat" + domain,
+        "vdyn-recorder record: --topics: 'stat' is not a vdyn topic; did you mean 'state'? "
+        "(the topics: state, input, control, control_reply, params, world, events, "
+        "diagnostics)"},
+       {RunViewer, "--camera Map --hidden --frames 1 --wait 0" + domain,
+        "vdyn-viewer: --camera: 'Map' is not one of 'chase', 'driver', 'orbit', 'map', "
+        "'north' or 'beside'; did you mean 'map'?"},
+       {RunInput, "calibrate --device 300 --timeout 1",
+        "vdyn-input calibrate: --device: SDL device index must be in [0, 255], got 300"},
+       {RunServer, "--vehicle-ids 1,2,1 --duration 1" + domain,
+        "vdyn-server: --vehicle-ids: vehicle 1 is listed twice"}},
+      {"not in {"});
   // The help shows whole numbers as such and ranges as the table of limits writes them.
   const Result help = RunInput("drive --help");
   EXPECT_THAT(help.output, HasSubstr("--device INT:[0, 255]"));
@@ -770,6 +810,26 @@ TEST(CliInput, PlayByTheWallClockWithoutAServerSaysSo) {
                                   " after 2 s of playing; is vdyn-server running?"));
   EXPECT_THAT(r.output, HasSubstr("played '" + (dir / "m.csv").string() +
                                   "' to its end (3.0 s, wall clock), but no server took it"));
+}
+
+// vdyn-input's loop asks for real-time scheduling where the system permits it and says which, as
+// vdyn-server does (issue 31: on a loaded machine the input starved); --rt-priority 0 keeps the
+// normal scheduler.
+TEST(CliInput, TheLoopsSchedulingIsAskedForAndSaid) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  WriteFile(dir / "m.csv", "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0.2,0,0\n0.2,0,0.2,0,0\n");
+  const std::string play = " play " + (dir / "m.csv").string() + " --clock wall";
+  const std::string domain = "--domain " + std::to_string(testing::FreshDomain());
+  const Result r = RunInput(domain + " --rt-priority 30" + play);
+  EXPECT_THAT(r.output, ::testing::AnyOf(HasSubstr("; SCHED_FIFO priority 30"),
+                                         HasSubstr("; SCHED_OTHER with 1 ns timer slack "
+                                                   "(SCHED_FIFO refused: ")))
+      << r.output;
+  EXPECT_THAT(RunInput(domain + " --rt-priority 0" + play).output,
+              HasSubstr("; SCHED_OTHER (--rt-priority 0)"));
+  EXPECT_THAT(RunInput(domain + " --rt-priority 100" + play).output,
+              HasSubstr("--rt-priority: SCHED_FIFO priority must be in [0, 99], got 100"));
 }
 
 }  // namespace

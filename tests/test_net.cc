@@ -228,12 +228,7 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
 // --max-vehicles 256: a server starts 256 vehicles and publishes every one's states (functional,
 // not timed: on a loaded machine some steps may be late).
 TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
-  std::string ids;
-  for (int i = 1; i <= 256; ++i) {
-    if (i > 1) ids += ',';
-    ids += std::to_string(i);
-  }
-  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", ids});
+  auto server = StartServer({"--max-vehicles", "256", "--vehicle-ids", "1..256"});
   transport::Participant p(domain_);
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
@@ -247,6 +242,20 @@ TEST_F(Net, AServerRuns256VehiclesAndPublishesEach) {
   ASSERT_TRUE(all) << steps.size() << " vehicles seen\n" << server->Log();
   EXPECT_EQ(steps.begin()->first, 1u);
   EXPECT_EQ(steps.rbegin()->first, 256u);
+  // The diagnostics name every vehicle (issue 32: a report held room for 64, and the vehicles past
+  // the 64th were left out of the diagnostics and the status line without a word).
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  std::set<std::uint32_t> diagnosed;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(
+      diag, 20s,
+      [&](const pb::Diagnostics& d) {
+        diagnosed.clear();
+        for (const auto& v : d.vehicles()) diagnosed.insert(v.vehicle_id());
+      },
+      [&] { return diagnosed.size() == 256; }))
+      << diagnosed.size() << " vehicles diagnosed";
+  EXPECT_EQ(*diagnosed.begin(), 1u);
+  EXPECT_EQ(*diagnosed.rbegin(), 256u);
   EXPECT_EQ(drops.Total(), 0u);
 }
 
@@ -963,6 +972,49 @@ TEST_F(Net, StepRepliesAreAnsweredEachAtItsOwnStepsOrCancelled) {
   EXPECT_THAT(long_reply->reason(), HasSubstr("cancelled by a pause"));
 }
 
+// In real time a pause lasts while the client that paused is there: when it leaves without a
+// resume, the server resumes (issue 33: the session stayed paused for good). A pause whose client
+// stays holds.
+TEST_F(Net, APauseEndsWhenTheClientThatPausedLeaves) {
+  auto server = StartServer({});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  pb::ControlRequest pause;
+  pause.set_vehicle_id(1);
+  pause.mutable_pause();
+  std::uint64_t seen = 0;
+  auto advancing = [&](std::chrono::seconds within) {
+    const std::uint64_t from = seen;
+    return ReadUntil<pb::VehicleState>(states, within, [&](const auto& s) { seen = s.step(); },
+                                       [&] { return seen > from + 200; });
+  };
+  // Paused: no new state in 0.5 s of wall time after 0.5 s to take those already sent.
+  auto paused = [&] {
+    auto drain = [&] {
+      std::uint64_t last = seen;
+      (void)ReadUntil<pb::VehicleState>(states, 500ms, [&](const auto& s) { last = s.step(); },
+                                        [] { return false; });
+      return last;
+    };
+    const std::uint64_t before = drain(), after = drain();
+    seen = after;
+    return before == after;
+  };
+  {
+    transport::Participant client_p(domain_);
+    transport::ControlClient client(client_p, "pauser");
+    ASSERT_TRUE(client.WaitForServer(20s)) << client.last_error() << server->Log();
+    ASSERT_TRUE(advancing(20s));
+    ASSERT_TRUE(client.Call(pause, 10s).value_or(pb::ControlReply()).accepted());
+    ASSERT_TRUE(paused()) << "not paused";
+    // Still there: still paused, a second later.
+    ASSERT_TRUE(paused()) << "resumed while the client that paused is there";
+  }  // the client leaves without a resume
+  EXPECT_TRUE(advancing(20s)) << "still paused after its client left\n" << server->Log();
+  EXPECT_THAT(server->Log(), HasSubstr("the client that paused the session left; resuming"));
+}
+
 TEST_F(Net, AHungPrimaryRigHandsOverToTheBackup) {
   auto server = StartServer({"--watchdog-ms", "2000"});
   auto backup = StartRig("backup", "0.2", 5);
@@ -1236,6 +1288,59 @@ class StartGate {
   int fd_ = -1;
   std::string inode_;
 };
+
+// Three servers started in one instant, A={1}, B={2}, C={1,2}: every vehicle is run, each by one
+// server, whatever the GUIDs' order (issue 33: a vehicle was left unserved in 6 of 12 trials, B
+// giving way to C, which gave way to A). Repeated: a race.
+TEST_F(Net, ThreeServersStartedInOneInstantLeaveNoVehicleUnserved) {
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
+  constexpr int kTrials = 4;
+  for (int trial = 0; trial < kTrials; ++trial) {
+    SCOPED_TRACE("trial " + std::to_string(trial));
+    StartGate gate(dir_ / ("gate3-" + std::to_string(trial)));
+    const std::string n = std::to_string(trial);
+    std::vector<std::unique_ptr<Process>> servers;
+    // Started in a different order each trial (participant GUIDs tend to follow it): C between A
+    // and B is the order the old rule failed in.
+    std::vector<std::pair<const char*, const char*>> order = {{"a", "1"}, {"c", "1,2"}, {"b", "2"}};
+    std::rotate(order.begin(), order.begin() + trial % 3, order.end());
+    if (trial >= 3) std::swap(order[0], order[2]);
+    for (const auto& [id, vehicles] : order) {
+      servers.push_back(std::make_unique<Process>(
+          gate.Wrap(ServerArgv({"--server-id", id, "--vehicle-ids", vehicles})),
+          dir_ / (std::string(id) + n + ".log")));
+    }
+    ASSERT_TRUE(gate.Open(3, 20s)) << "the servers never reached the gate";
+    std::map<std::uint32_t, std::set<std::string>> runners;  // vehicle -> servers publishing it
+    std::map<std::uint32_t, int> counts;
+    const bool both = ReadUntil<pb::VehicleState>(
+        states, 30s,
+        [&](const pb::VehicleState& st) {
+          runners[st.vehicle_id()].insert(st.server_id());
+          ++counts[st.vehicle_id()];
+        },
+        [&] { return counts[1] >= 300 && counts[2] >= 300; });
+    std::string logs;
+    for (const auto& s : servers) logs += s->Log();
+    ASSERT_TRUE(both) << "vehicle 1: " << counts[1] << " states, vehicle 2: " << counts[2] << "\n"
+                      << logs;
+    EXPECT_EQ(runners[1].size(), 1u) << logs;
+    EXPECT_EQ(runners[2].size(), 1u) << logs;
+    for (auto& s : servers) {
+      if (s->running()) {
+        s->Signal(SIGTERM);
+        EXPECT_EQ(s->Wait(20s), 0) << s->Log();
+      } else {
+        EXPECT_EQ(s->Wait(1s), 2) << s->Log();  // gave way, with the reason
+      }
+    }
+    while (states.Wait(200ms)) {
+      (void)states.Take([](const pb::VehicleState&, const transport::SampleInfo&) {});
+    }
+  }
+}
 
 // Two servers started in one instant with a vehicle (or the id) in common: exactly one runs it,
 // the other stops with the reason before it publishes anything, whichever way the tie goes

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <numeric>
+#include <set>
 #include <span>
 #include <stdexcept>
 #include <thread>
@@ -15,7 +17,9 @@
 #include "vdyn/base/hash.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/replay/resim.h"
+#include "vdyn/physics/mesh.h"
 #include "vdyn/runtime/claim.h"
+#include "vdyn/runtime/placement.h"
 #include "vdyn/runtime/request_planner.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/runtime/step_pool.h"
@@ -234,6 +238,16 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   spawn.mutable_spawn()->mutable_params()->mutable_lf()->set_radius(0.0);
   EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("lf.radius"));
   spawn.mutable_spawn()->clear_params();
+  // 0 names no vehicle in a message: a spawn or restore of it is refused with the range.
+  spawn.set_vehicle_id(0);
+  EXPECT_THAT(s.Apply(spawn).reason(), HasSubstr("vehicle id must be in [1, 4294967295], got 0"));
+  pb::ControlRequest restore = spawn;
+  *restore.mutable_restore()->mutable_state() = ToExactState(s.simulator(1).state());
+  EXPECT_THAT(s.Apply(restore).reason(),
+              HasSubstr("restore: vehicle id must be in [1, 4294967295], got 0"));
+  EXPECT_THROW(s.Spawn(0, {0, 20, 0}, 0.0, pb::VehicleParams()), std::invalid_argument);
+  EXPECT_FALSE(s.HasVehicle(0));
+  spawn.set_vehicle_id(2);
   EXPECT_TRUE(s.Apply(spawn).accepted());
   EXPECT_EQ(s.vehicle_count(), 2u);
 
@@ -479,6 +493,55 @@ TEST(Session, ResimulationFromACheckpointAndAcrossARemoveAndRespawn) {
     ++compared;
   }
   EXPECT_EQ(compared, 390 - 100);  // both lives, from the checkpoint at step 100
+}
+
+// A server's vehicles start on the world's free ground (issue 31: 256 on facility were refused,
+// "the body would start inside 'glass_barrier'"): the first at the spawn, every other one resting
+// where its body meets nothing, none nearer another than the grid's 5 m, the same poses every
+// time; a world too small for them says how many fit.
+TEST(Placement, AsManyVehiclesAsTheServerRunsStartOnFreeGroundOrItSaysHowManyFit) {
+  const auto facility = testing::SharedWorld("facility");
+  const Params p = ParamsFromProto(DefaultVehicleParams()).get();
+  const std::vector<Pose2> poses = StartPoses(*facility, p, 256);
+  ASSERT_EQ(poses.size(), 256u);
+  EXPECT_EQ(poses[0].x, facility->spawn.x);
+  EXPECT_EQ(poses[0].y, facility->spawn.y);
+  double nearest = 1e300;
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    double misfit = 0;
+    const State s = RestingState(p, facility->terrain, poses[i], 0.0, &misfit);
+    EXPECT_EQ(SpawnObstruction(p, facility->terrain, s, misfit), "") << "vehicle " << i + 1;
+    EXPECT_EQ(poses[i].yaw, facility->spawn.yaw);
+    for (std::size_t j = 0; j < i; ++j) {
+      nearest = std::min(nearest, std::hypot(poses[i].x - poses[j].x, poses[i].y - poses[j].y));
+    }
+  }
+  EXPECT_NEAR(nearest, 5.0, 1e-9);
+  const std::vector<Pose2> again = StartPoses(*facility, p, 256);
+  for (std::size_t i = 0; i < poses.size(); ++i) {
+    EXPECT_EQ(again[i].x, poses[i].x);
+    EXPECT_EQ(again[i].y, poses[i].y);
+  }
+  // A 12 m square: the spawn and one on each side (5 m apart); a row ahead or behind is 8 m off.
+  TriangleMesh square;
+  square.name = "square";
+  square.AddQuad({-6, -6, 0}, {6, -6, 0}, {6, 6, 0}, {-6, 6, 0});
+  const std::shared_ptr<const World> small = WorldFromMesh(std::move(square), {0, 0, 0});
+  EXPECT_EQ(StartPoses(*small, p, 3).size(), 3u);
+  try {
+    (void)StartPoses(*small, p, 5);
+    ADD_FAILURE() << "5 vehicles placed on a 12 m square";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("only 3 of the 5 vehicles fit on the free ground of world "
+                                    "'square'"));
+  }
+  // The first vehicle goes where the world says (or --spawn), or not at all: the reason is the
+  // spawn's, not a place found elsewhere.
+  TriangleMesh off;
+  off.name = "off";
+  off.AddQuad({-6, -6, 0}, {6, -6, 0}, {6, 6, 0}, {-6, 6, 0});
+  const std::shared_ptr<const World> away = WorldFromMesh(std::move(off), {100, 100, 0});
+  EXPECT_THROW((void)StartPoses(*away, p, 1), WorldError);
 }
 
 // The pool's fixed partition: every item once, by one thread, in contiguous parts in order, the
@@ -794,6 +857,57 @@ TEST(ServerClaim, ReadsBackAndClashesOnTheIdOrAVehicle) {
   EXPECT_TRUE(a.Clashes({"lab a", {7}, true}));
   EXPECT_FALSE(a.Clashes({"lab b", {7, 8}, false}));
   EXPECT_FALSE(a.Clashes({"lab b", {}, false}));
+}
+
+// Servers started at the same moment settle their claims alike in every GUID order: no two
+// chosen clash, and every vehicle claimed is run by one of them (issue 33: A={1}, B={2},
+// C={1,2} left a vehicle unserved in 6 of 12 trials: B gave way to C, which gave way to A).
+// Every order of three and of four claims, with and without a running server.
+TEST(ServerClaim, ClaimsSettleSoThatEveryVehicleIsRunAndNoneTwice) {
+  const std::vector<ServerClaim> sets[] = {
+      {{"a", {1}, false}, {"b", {2}, false}, {"c", {1, 2}, false}},
+      {{"a", {1}, false}, {"b", {2}, false}, {"c", {1, 2}, false}, {"d", {2, 3}, false}},
+      {{"a", {1}, false}, {"a", {2}, false}, {"c", {2, 3}, false}, {"d", {3}, false}},
+      {{"a", {1}, true}, {"b", {2}, false}, {"c", {1, 2}, false}, {"d", {2, 4}, false}},
+  };
+  for (const auto& set : sets) {
+    std::vector<std::size_t> order(set.size());
+    std::iota(order.begin(), order.end(), 0);
+    do {
+      std::vector<const ServerClaim*> by_guid;
+      for (std::size_t i : order) by_guid.push_back(&set[i]);
+      const std::vector<bool> runs = ChooseRunners(by_guid);
+      std::set<std::uint32_t> claimed, served;
+      std::string trace;
+      for (std::size_t i = 0; i < by_guid.size(); ++i) {
+        trace += by_guid[i]->server_id + (runs[i] ? "+ " : "- ");
+        for (std::uint32_t v : by_guid[i]->vehicle_ids) claimed.insert(v);
+        if (!runs[i]) continue;
+        for (std::uint32_t v : by_guid[i]->vehicle_ids) {
+          EXPECT_TRUE(served.insert(v).second) << "vehicle " << v << " run twice: " << trace;
+        }
+        for (std::size_t j = 0; j < i; ++j) {
+          EXPECT_FALSE(runs[j] && by_guid[i]->Clashes(*by_guid[j])) << trace;
+        }
+      }
+      // A running server always runs; every claim that gives way clashes with one that runs.
+      for (std::size_t i = 0; i < by_guid.size(); ++i) {
+        if (by_guid[i]->running) {
+          EXPECT_TRUE(runs[i]) << trace;
+        }
+        if (runs[i]) continue;
+        bool beaten = false;
+        for (std::size_t j = 0; j < by_guid.size(); ++j) {
+          beaten = beaten || (runs[j] && by_guid[i]->Clashes(*by_guid[j]));
+        }
+        EXPECT_TRUE(beaten) << by_guid[i]->server_id << " gave way to no runner: " << trace;
+      }
+      // The issue's case: vehicles 1 and 2 are both run, whatever the order.
+      if (set.size() == 3) {
+        EXPECT_EQ(served, claimed) << trace;
+      }
+    } while (std::next_permutation(order.begin(), order.end()));
+  }
 }
 
 // The strongest live valid source drives; refused input never counts as live.

@@ -412,6 +412,61 @@ TEST(InputBuilder, PaddlesCountGearsCruiseFollowsButtonsAndBrake) {
   EXPECT_FALSE(b.TakeResetRequest());
 }
 
+// A paddle shift that would turn the engine past its limit, or go into or out of reverse while
+// moving, is refused with the reason; a reset returns to automatic (issue 31: E from automatic took
+// 1st at 87 km/h, 8,482 rpm against 6,800; Q passed into reverse at 40-70 km/h with cruise on;
+// reverse survived a reset). The engine speed from the closed form: v / r * ratio * final drive.
+TEST(InputBuilder, AShiftThatWouldOverRevOrReverseWhileMovingIsRefused) {
+  InputBuilder b;
+  VehicleInfo v;
+  pb::VehicleParams p = DefaultVehicleParams();
+  p.set_model(pb::VEHICLE_MODEL_FULL);
+  ApplyParams(p, v);
+  ASSERT_GT(v.gear_count, 2);
+  pb::DriverInput out;
+  MonoTime t{};
+  auto press = [&](std::uint32_t bits) {
+    WheelControls c;
+    c.buttons = bits;
+    b.Build(t, c, v, out);
+    c.buttons = 0;
+    b.Build(t, c, v, out);
+  };
+  auto rpm_in = [&](int gear, double kmh) {
+    const double step = std::pow(v.gear_ratio_top / v.gear_ratio_first, 1.0 / (v.gear_count - 1));
+    const double ratio = v.gear_ratio_first * std::pow(step, gear - 1);
+    return kmh / 3.6 / v.wheel_radius_m * ratio * v.final_drive_ratio * 60 / (2 * std::numbers::pi);
+  };
+  v.speed_known = true;
+  v.speed_kmh = 87;
+  ASSERT_GT(rpm_in(1, 87), v.engine_rpm_limit);  // the issue's case
+  press(pb::BUTTON_PADDLE_RIGHT);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_EQ(b.shifts_refused(), 1u);
+  char want[96];
+  std::snprintf(want, sizeof want, "1st at 87 km/h: the engine at %.0f rpm, past its %.0f limit",
+                rpm_in(1, 87), v.engine_rpm_limit);
+  EXPECT_EQ(b.shift_refusal(), want);
+  // At 20 km/h 1st is within the limit: taken; then down to automatic and, moving, not reverse.
+  v.speed_kmh = 20;
+  ASSERT_LT(rpm_in(1, 20), v.engine_rpm_limit);
+  press(pb::BUTTON_PADDLE_RIGHT);
+  EXPECT_EQ(out.gear(), 1);
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), 0);
+  v.speed_kmh = 45;
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_EQ(b.shift_refusal(), "reverse while moving at 45 km/h: stop first");
+  // Standing: reverse; a reset brings automatic back.
+  v.speed_kmh = 0.5;
+  press(pb::BUTTON_PADDLE_LEFT);
+  EXPECT_EQ(out.gear(), -1);
+  press(pb::BUTTON_RESET);
+  EXPECT_EQ(out.gear(), 0);
+  EXPECT_TRUE(b.TakeResetRequest());
+}
+
 TEST(InputBuilder, EstopLatchesAndRearmsOnlyWhenHeld) {
   InputBuilder b;
   VehicleInfo v;
@@ -609,6 +664,31 @@ TEST(WheelReader, CombinedPedalsSplitAtRest) {
   // Both on one side of rest is not a combined axis.
   c->set_brake_full(-1000);
   EXPECT_THAT(ValidateMapping(m), ::testing::Contains(HasSubstr("opposite sides of rest")));
+}
+
+// Two controls on one axis of one device are refused, naming both and the axis (issue 33: throttle
+// and brake on one axis were accepted, and every press drove and braked at once); the same index
+// on the wheel and on the pedal device are two axes.
+TEST(WheelMapping, TwoControlsOnOneAxisAreRefused) {
+  pb::WheelMapping m = GenericWheel(0x1234, 2, 4);  // steer 0, throttle 1, brake 2
+  ASSERT_THAT(ValidateMapping(m), ::testing::IsEmpty());
+  m.mutable_brake()->set_axis(1);
+  EXPECT_THAT(ValidateMapping(m),
+              ::testing::Contains(HasSubstr("throttle and brake are both on axis 1 of the wheel: "
+                                            "each control needs an axis of its own")));
+  m.mutable_brake()->set_axis(2);
+  m.mutable_clutch()->set_axis(0);
+  m.mutable_clutch()->set_rest(-32768);
+  m.mutable_clutch()->set_full(32767);
+  EXPECT_THAT(ValidateMapping(m),
+              ::testing::Contains(HasSubstr("steer and clutch are both on axis 0 of the wheel")));
+  // The brake on axis 1 of a pedal device, the throttle on axis 1 of the wheel: two axes.
+  m.clear_clutch();
+  m.set_pedal_vendor_id(0x1111);
+  m.set_pedal_product_id(0x2222);
+  m.mutable_brake()->set_axis(1);
+  m.mutable_brake()->set_on_pedal_device(true);
+  EXPECT_THAT(ValidateMapping(m), ::testing::IsEmpty());
 }
 
 // Raw values at the int32 extremes are refused by their range, and the spans between them are
@@ -1114,7 +1194,8 @@ TEST_F(SdlTest, KeyboardDrivesWithRampsAndSteeringReturnsToCentre) {
             static_cast<std::uint32_t>(pb::BUTTON_PADDLE_RIGHT));
   Key(SDL_SCANCODE_E, false);
   run(0.01);
-  EXPECT_EQ(sink.last.gear(), 1);
+  // 1st at 60 km/h would over-rev the full model's engine: refused, automatic stays (issue 31).
+  EXPECT_EQ(sink.last.gear(), 0);
   Key(SDL_SCANCODE_C, true);
   run(0.01);
   Key(SDL_SCANCODE_C, false);

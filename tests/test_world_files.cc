@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "test_support.h"
+#include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/world_files.h"
 #include "vdyn/physics/world.h"
 
@@ -228,6 +229,18 @@ TEST_P(NonFiniteVertex, DropsEveryTriangleThatUsesIt) {
   EXPECT_FALSE(world->terrain.Trace(Vector3d(105.0, 101.0, 100.0), -Vector3d::UnitZ(), 200.0).hit)
       << GetParam();
   EXPECT_TRUE(world->terrain.bounds_min().allFinite() && world->terrain.bounds_max().allFinite());
+  // The world description clients draw holds exactly the terrain traced: the two kept triangles
+  // and their four vertices, nothing of the bad vertex (issue 33: a viewer drew `v nan 0 0` as a
+  // slab 1e10 m high; a vertex at 1e30 overflowed its grid).
+  const pb::WorldDescription d = DescribeWorld(*world, "s", 1'000'000);
+  int triangles = 0;
+  for (const pb::Mesh& m : d.meshes()) {
+    triangles += m.indices_size() / 3;
+    EXPECT_EQ(m.vertices_size(), 3 * 4) << GetParam();
+    for (double v : m.vertices()) EXPECT_LE(std::abs(v), 50.0) << GetParam();
+    for (std::uint32_t i : m.indices()) EXPECT_LT(i, 4u) << GetParam();
+  }
+  EXPECT_EQ(triangles, 2) << GetParam();
 }
 
 // The issue's file: Assimp's vertex joining made the NaN vertex (50, 50, 0), so the triangle became
@@ -249,7 +262,39 @@ TEST(WorldFiles, ANanVertexIsNotJoinedWithARealOne) {
 
 INSTANTIATE_TEST_SUITE_P(WorldFiles, NonFiniteVertex,
                          ::testing::Values("nan 0 0", "0 nan 0", "0 0 nan", "inf 0 0", "0 -inf 0",
-                                           "0 0 inf", "nan nan nan"));
+                                           "0 0 inf", "nan nan nan", "1e30 0 0"));
+
+// A PNG's size is read from its header and refused before anything is decoded (issue 33: a
+// 389 KB PNG took 3.5 GB before its pixel limit was checked). Here the
+// file is a header alone: the size is all there is to read.
+TEST(WorldFiles, AHugeHeightMapIsRefusedFromItsHeader) {
+  auto be32 = [](std::uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16),
+                       static_cast<char>(v >> 8), static_cast<char>(v)};
+  };
+  auto crc32 = [](const std::string& bytes) {
+    std::uint32_t c = 0xffffffffu;
+    for (unsigned char b : bytes) {
+      c ^= b;
+      for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+    }
+    return c ^ 0xffffffffu;
+  };
+  auto chunk = [&](const std::string& type, const std::string& data) {
+    return be32(static_cast<std::uint32_t>(data.size())) + type + data + be32(crc32(type + data));
+  };
+  // IHDR: width, height, bit depth 8, colour type 0 (grey), compression, filter, interlace 0.
+  const std::string ihdr = be32(30000) + be32(30000) + std::string{8, 0, 0, 0, 0};
+  const std::string png = std::string("\x89PNG\r\n\x1a\n", 8) + chunk("IHDR", ihdr) + chunk("IEND", "");
+  try {
+    (void)LoadWorldFromBytes(png, "huge.png", WorldFileOptions{});
+    ADD_FAILURE() << "accepted";
+  } catch (const WorldError& e) {
+    EXPECT_THAT(e.what(), ::testing::HasSubstr(
+                              "huge.png: a 30000 x 30000 height map is larger than 64 million "
+                              "pixels"));
+  }
+}
 
 TEST(WorldFiles, BadOptionsAreRefused) {
   TempDir dir;

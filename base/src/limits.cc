@@ -160,8 +160,6 @@ const Range* ParamRange(std::string_view path) {
   return nullptr;
 }
 
-std::span<const ParamChoice> ParamChoices() { return kChoices; }
-
 std::string_view ParamWords(std::string_view path) {
   if (const Range* r = ParamRange(path)) return r->what;
   for (const ParamChoice& c : kChoices) {

@@ -16,6 +16,7 @@
 #include "vdyn/cli/options.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
+#include "vdyn/recorder/export_foxglove.h"
 #include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/recorder/verify.h"
@@ -93,7 +94,7 @@ int main(int argc, char** argv) {
       ->check(cli::InRange(limits::kDurationS));
   rec->add_option("--topics", topic_names, "Only these topics, e.g. state,events,world,params")
       ->delimiter(',')->check(TopicNames());
-  rec->add_option("--vehicles", vehicles, "Only these vehicles, e.g. 1,2 (events are kept for all)")->delimiter(',');
+  rec->add_option("--vehicles", vehicles, "Only these vehicles, e.g. 1,2 (events are kept for all)")->delimiter(',')->check(cli::VehicleId());
   rec->add_option("--split-mb", split_mb, "Start a new file after this many MiB")->check(cli::InRange(limits::kSplitMb));
   rec->add_option("--split-s", split_s, "Start a new file after this many seconds")->check(cli::InRange(limits::kSplitS));
   rec->add_option("--compression", compression, "Chunk compression: zstd, lz4 or none")
@@ -113,23 +114,34 @@ int main(int argc, char** argv) {
   // export
   recorder::ExportOptions eo;
   std::uint32_t vehicle = 0;
-  auto* exp = app.add_subcommand("export", "States to CSV, columns as vdyn-server --batch --csv");
+  auto* exp = app.add_subcommand(
+      "export",
+      "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
   exp->add_option("file", eo.file, "A recording")->required();
-  exp->add_option("--csv", eo.csv, "The CSV file")->required();
-  auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle");
+  recorder::FoxgloveExportOptions fo;
+  auto* exp_csv = exp->add_option("--csv", eo.csv, "The CSV file");
+  auto* exp_fox = exp->add_option("--foxglove", fo.out,
+                                  "A copy of the recording with Foxglove's scene added (MCAP)");
+  exp_csv->excludes(exp_fox);
+  exp->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
+      ->check(cli::InRange(limits::kFoxgloveSceneHz))
+      ->capture_default_str();
+  exp->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
+      ->check(cli::InRange(limits::kArrowScale))
+      ->capture_default_str();
+  auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
   exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
   exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
-  auto* exp_to = exp->add_option("--to", eo.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
+  exp->add_option("--to", eo.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
   exp->add_option("--every", eo.every, "Rows whose step is a multiple of N (as --csv-every)")
       ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
-  (void)exp_to;
 
   // plot
   recorder::PlotOptions po;
   auto* plot = app.add_subcommand("plot", "Figures (gnuplot, PNG or SVG) and one HTML page");
   plot->add_option("file", po.file, "A recording")->required();
-  plot->add_option("--out", po.out_dir, "Folder for the figures (default: FILE-plots)");
-  auto* plot_vehicle = plot->add_option("--vehicle", vehicle, "The vehicle (default: the first)");
+  plot->add_option("--out", po.out_dir, "Folder for the figures (default: beside FILE, named after it: run.mcap -> run-plots)");
+  auto* plot_vehicle = plot->add_option("--vehicle", vehicle, "The vehicle (default: the first)")->check(cli::VehicleId());
   plot->add_option("--format", po.format, "png or svg")->check(CLI::IsMember({"png", "svg"}))->capture_default_str();
   plot->add_option("--from", po.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
   plot->add_option("--to", po.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
@@ -148,7 +160,7 @@ int main(int argc, char** argv) {
   play->add_option("--to", pl.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
   play->add_option("--topics", play_topics, "Topics to republish (default: world,params,state,input)")
       ->delimiter(',')->check(TopicNames());
-  auto* play_vehicle = play->add_option("--vehicle", vehicle, "Only this vehicle");
+  auto* play_vehicle = play->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
   play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->check(cli::Id("server id"))->capture_default_str();
   play->add_flag("--no-keys", no_keys, "Ignore the keyboard");
   play->add_flag("--force", pl.force, "Play even where a live server runs");
@@ -159,7 +171,7 @@ int main(int argc, char** argv) {
   recorder::VerifyOptions vo;
   auto* ver = app.add_subcommand("verify", "Re-simulate from the recorded events; compare every recorded state hash");
   ver->add_option("file", vo.file, "A recording")->required();
-  auto* ver_vehicle = ver->add_option("--vehicle", vehicle, "Only this vehicle");
+  auto* ver_vehicle = ver->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
 
   // takeover
   recorder::TakeoverOptions to;
@@ -168,8 +180,8 @@ int main(int argc, char** argv) {
   take->add_option("file", to.file, "A recording")->required();
   take->add_option("--at", to.at_s, "Seconds from the recording's start")->required()->check(cli::InRange(time_range));
   take->add_option("--domain", to.domain, "DDS domain id of the live server")->check(cli::WholeInRange(limits::kDomainId))->capture_default_str();
-  auto* take_vehicle = take->add_option("--vehicle", vehicle, "The recorded vehicle (default: the first)");
-  auto* take_as = take->add_option("--as", as_vehicle, "The live vehicle id to restore into (default: the same)");
+  auto* take_vehicle = take->add_option("--vehicle", vehicle, "The recorded vehicle (default: the first)")->check(cli::VehicleId());
+  auto* take_as = take->add_option("--as", as_vehicle, "The live vehicle id to restore into (default: the same)")->check(cli::VehicleId());
   take->add_option("--out", to.out, "The new recording (default: FILE-takeover.mcap)");
   take->add_option("--duration", to.duration_s, "Stop after this many seconds (default: at Ctrl-C)")->check(cli::InRange(limits::kDurationS));
   take->add_option("--wait", to.wait_s, "Seconds to wait for the live server")->check(cli::InRange(limits::kWaitS))->capture_default_str();
@@ -185,6 +197,11 @@ int main(int argc, char** argv) {
   if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
   std::signal(SIGINT, OnSignal);
   std::signal(SIGTERM, OnSignal);
+  if (!rec->parsed() && !play->parsed() && !take->parsed()) {
+    // The commands that only read a file stop at the next record on a signal (record, play
+    // and takeover stop on g_stop themselves).
+    mcap::StopReadsWhen(&g_stop);
+  }
   const bool tty = isatty(STDERR_FILENO) == 1;
   const bool show_status = status || (!no_status && tty);
   try {
@@ -210,7 +227,7 @@ int main(int argc, char** argv) {
       for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
       std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds) << " to "
                 << files << " (" << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
-      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped();
+      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped() << s.dropped_by_topic();
       std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
                   s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
                   recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
@@ -218,6 +235,14 @@ int main(int argc, char** argv) {
     }
     if (info->parsed()) return recorder::RunInfo(file, std::cout);
     if (exp->parsed()) {
+      if (*exp_fox) {
+        fo.file = eo.file;
+        return recorder::RunExportFoxglove(fo, std::cout);
+      }
+      if (!*exp_csv) {
+        std::cerr << "vdyn-recorder export: give --csv OUT.csv or --foxglove OUT.mcap\n";
+        return 2;
+      }
       if (*exp_vehicle) eo.vehicle = vehicle;
       return recorder::RunExport(eo, std::cout);
     }
@@ -248,6 +273,9 @@ int main(int argc, char** argv) {
       return recorder::RunTakeover(to, g_stop, std::cout);
     }
     if (recov->parsed()) return recorder::RunRecover(co, std::cout);
+  } catch (const mcap::Interrupted& e) {
+    std::cerr << "vdyn-recorder: " << e.what() << ": stopped before the end; no output was completed (an unfinished file is removed)\n";
+    return 1;
   } catch (const mcap::McapError& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;

@@ -47,6 +47,7 @@ int main(int argc, char** argv) {
       ->check(cli::WholeInRange(limits::kDomainId))
       ->capture_default_str();
   app.add_option("--vehicle-id", vehicle_id, "Vehicle whose states are sent")
+      ->check(cli::VehicleId())
       ->capture_default_str();
   app.add_option("--outsim", outsim, "OutSim destination HOST:PORT (repeat for several)");
   app.add_option("--outgauge", outgauge, "OutGauge destination HOST:PORT (repeat for several)");

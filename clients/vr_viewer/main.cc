@@ -44,7 +44,8 @@ int main(int argc, char** argv) {
   app.add_option("--domain", o.domain, "DDS domain id")
       ->check(cli::WholeInRange(limits::kDomainId))
       ->capture_default_str();
-  app.add_option("--follow", follow, "Vehicle to follow (default: the lowest id on the domain)");
+  app.add_option("--follow", follow, "Vehicle to follow (default: the lowest id on the domain)")
+      ->check(cli::VehicleId());
   app.add_option("--camera", camera,
                  "chase, driver, orbit, map, north or beside (default: chase; in a headset the "
                  "driver's seat seated, beside the vehicle standing)")

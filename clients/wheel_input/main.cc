@@ -29,6 +29,7 @@
 #include <spdlog/spdlog.h>
 #include <CLI/CLI.hpp>
 
+#include "vdyn/base/scheduling.h"
 #include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
 #include "vdyn/cli/options.h"
@@ -67,7 +68,18 @@ struct Common {
   double rate_hz = 1000.0;
   double wait_s = 10.0;
   bool status = false;
+  // The 1 kHz loop's SCHED_FIFO priority where permitted (0: the normal scheduler, the default:
+  // under busy-looping hogs SCHED_FIFO did not reduce the watchdog's take-overs, 2026-12-05,
+  // bench/input_starvation.sh).
+  int rt_priority = 0;
 };
+
+// Real-time scheduling for the calling (loop) thread where the system permits it; the line that
+// says which, as vdyn-server prints it.
+std::string SetUpLoopScheduling(const Common& c) {
+  if (c.rt_priority == 0) return "SCHED_OTHER (--rt-priority 0)";
+  return vdyn::base::SetUpRealtimeScheduling(c.rt_priority);
+}
 
 Nanos Period(double hz) {
   return Nanos{static_cast<std::int64_t>(1e9 / hz)};
@@ -137,6 +149,10 @@ int Play(const Common& c, const PlayOptions& o) {
   // The vehicle's newest simulation time (clock=server) and what its states say about this input.
   std::int64_t sim_ns = -1;
   std::uint64_t states_seen = 0, states_ours = 0;
+  // Times the server's watchdog took the vehicle from this input (a state of ours, then one in
+  // the watchdog's safe state): this input arrived too late (issue 31, bench/input_starvation.sh).
+  std::uint64_t watchdog_takeovers = 0;
+  bool was_ours = false;
   std::string other_source;  // the newest other source that drove the vehicle
   MonoTime last_state_at{};
   states.on_state = [&](const vdyn::pb::VehicleState& s, const vdyn::transport::SampleInfo&) {
@@ -144,7 +160,9 @@ int Play(const Common& c, const PlayOptions& o) {
     sim_ns = s.sim_time_ns();
     ++states_seen;
     last_state_at = MonotonicNow();
-    if (s.input().source_id() == c.source_id) {
+    if (was_ours && s.control().watchdog_safe_state()) ++watchdog_takeovers;
+    was_ours = s.input().source_id() == c.source_id;
+    if (was_ours) {
       ++states_ours;
     } else if (!s.input().source_id().empty()) {
       other_source = s.input().source_id();
@@ -170,8 +188,10 @@ int Play(const Common& c, const PlayOptions& o) {
       return 1;
     }
   }
-  spdlog::info("vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {})",
-               o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength);
+  spdlog::info(
+      "vdyn-input: playing '{}' ({:.1f} s, {} clock) for vehicle {} as '{}' (strength {}); {}",
+      o.maneuver, maneuver.end_time(), o.clock, c.vehicle_id, c.source_id, c.strength,
+      SetUpLoopScheduling(c));
 
   const MonoTime wall_start = MonotonicNow();
   const std::int64_t sim_start = sim_ns;
@@ -231,7 +251,8 @@ int Play(const Common& c, const PlayOptions& o) {
   }
   std::string outcome = "vdyn-input: " + played + "; " + std::to_string(states_ours) + " of " +
                         std::to_string(states_seen) + " states of vehicle " +
-                        std::to_string(c.vehicle_id) + " applied this input";
+                        std::to_string(c.vehicle_id) + " applied this input; watchdog took over " +
+                        std::to_string(watchdog_takeovers) + " times";
   if (states_ours == 0 && !other_source.empty()) {
     outcome += " ('" + other_source + "' drove it: a stronger source than --strength " +
                std::to_string(c.strength) + ")";
@@ -297,8 +318,9 @@ int Drive(const Common& c, const RigOptions& o, wi::RigConfig::Source source) {
     std::cerr << "vdyn-input: " << e.what() << "\n";
     return 2;
   }
-  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz",
-               rig.device_name(), c.vehicle_id, c.source_id, c.strength, c.rate_hz);
+  spdlog::info("vdyn-input: {} drives vehicle {} as '{}' (strength {}) at {:.0f} Hz; {}",
+               rig.device_name(), c.vehicle_id, c.source_id, c.strength, c.rate_hz,
+               SetUpLoopScheduling(c));
   const MonoTime start = MonotonicNow();
   vdyn::client::FixedRateLoop clock(Period(c.rate_hz), start);
   MonoTime next_status = start + vdyn::base::Seconds(1);
@@ -595,7 +617,9 @@ int main(int argc, char** argv) {
   app.add_option("--domain", c.domain, "DDS domain id")
       ->check(vdyn::cli::WholeInRange(vdyn::limits::kDomainId))
       ->capture_default_str();
-  app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")->capture_default_str();
+  app.add_option("--vehicle-id", c.vehicle_id, "Vehicle to drive")
+      ->check(vdyn::cli::VehicleId())
+      ->capture_default_str();
   app.add_option("--source-id", c.source_id, "This source's name (shown in the state)")
       ->check(vdyn::cli::Id("source id"))
       ->capture_default_str();
@@ -610,6 +634,10 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::InRange(vdyn::limits::kWaitS))
       ->capture_default_str();
   app.add_flag("--status", c.status, "Print a status line every second");
+  app.add_option("--rt-priority", c.rt_priority,
+                 "SCHED_FIFO priority of the 1 kHz loop where permitted (0: the normal scheduler)")
+      ->check(vdyn::cli::WholeInRange({0, 99, false, false, "SCHED_FIFO priority"}))
+      ->capture_default_str();
   // Today's form of playback, kept: vdyn-input --maneuver M is vdyn-input play M.
   PlayOptions play_opt;
   app.add_option("--maneuver", play_opt.maneuver, "Maneuver CSV to play, or 'demo' (as 'play')");

@@ -13,7 +13,7 @@ namespace vdyn {
 namespace {
 
 constexpr double kDeg = std::numbers::pi / 180.0;
-const char* const kColumns[] = {"t_s", "steer_deg", "throttle", "brake", "cruise_kmh"};
+const char* const kManeuverColumns[] = {"t_s", "steer_deg", "throttle", "brake", "cruise_kmh"};
 constexpr int kNumColumns = 5;
 
 std::string_view Trim(std::string_view s) {
@@ -59,18 +59,18 @@ Maneuver Maneuver::Read(std::istream& in, const std::string& source) {
     const std::vector<std::string_view> fields = Split(line);
     if (!have_header) {
       for (std::size_t i = 0; i < fields.size(); ++i) {
-        const auto* it = std::find(std::begin(kColumns), std::end(kColumns), fields[i]);
-        if (it == std::end(kColumns)) {
+        const auto* it = std::find(std::begin(kManeuverColumns), std::end(kManeuverColumns), fields[i]);
+        if (it == std::end(kManeuverColumns)) {
           throw fail("unknown column '" + std::string(fields[i]) +
                      "' (the header is t_s,steer_deg,throttle,brake,cruise_kmh)");
         }
-        const auto c = static_cast<int>(it - std::begin(kColumns));
+        const auto c = static_cast<int>(it - std::begin(kManeuverColumns));
         if (column_of[c] >= 0) throw fail("column '" + std::string(fields[i]) + "' appears twice");
         column_of[c] = static_cast<int>(i);
       }
       for (int c = 0; c < 4; ++c) {
         if (column_of[c] < 0) {
-          throw fail("missing column '" + std::string(kColumns[c]) +
+          throw fail("missing column '" + std::string(kManeuverColumns[c]) +
                      "' (the header is t_s,steer_deg,throttle,brake,cruise_kmh)");
         }
       }
@@ -89,11 +89,11 @@ Maneuver Maneuver::Read(std::istream& in, const std::string& source) {
       const std::string_view f = fields[static_cast<std::size_t>(column_of[c])];
       if (f.empty()) {
         if (c == 4) continue;  // empty cruise_kmh: speed control off
-        throw fail("column '" + std::string(kColumns[c]) + "': empty value");
+        throw fail("column '" + std::string(kManeuverColumns[c]) + "': empty value");
       }
       const std::optional<double> parsed = base::ParseNumber(f);
       if (!parsed) {
-        throw fail("column '" + std::string(kColumns[c]) + "': '" + base::Quote(f, 40) +
+        throw fail("column '" + std::string(kManeuverColumns[c]) + "': '" + base::Quote(f, 40) +
                    "' is not a finite number");
       }
       v[c] = *parsed;
@@ -101,7 +101,7 @@ Maneuver Maneuver::Read(std::istream& in, const std::string& source) {
     }
     auto range = [&](int c, double lo, double hi) {
       if (v[c] < lo || v[c] > hi) {
-        throw fail("column '" + std::string(kColumns[c]) + "': " + base::FormatNumber(v[c]) +
+        throw fail("column '" + std::string(kManeuverColumns[c]) + "': " + base::FormatNumber(v[c]) +
                    " is outside [" + base::FormatNumber(lo) + ", " + base::FormatNumber(hi) + "]");
       }
     };

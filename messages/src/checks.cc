@@ -286,11 +286,4 @@ Finding CheckMessage(const gp::Message& msg) {
   return Check(msg, true);
 }
 
-bool AllFinite(const gp::Message& msg, std::string* where) {
-  const Finding f = Check(msg, false);
-  if (f.problem == Problem::kNone) return true;
-  if (where != nullptr) *where = f.field;
-  return false;
-}
-
 }  // namespace vdyn::messages

@@ -61,7 +61,8 @@ struct Options {
   bool lockstep = false;
   std::uint32_t domain = 0;
   std::string server_id = "vdyn";
-  std::vector<std::uint32_t> vehicle_ids = {1};
+  std::vector<std::string> vehicle_id_entries = {"1"};  // ids and ranges (1..256)
+  std::vector<std::uint32_t> vehicle_ids;
   int max_vehicles = 64;
   int step_threads = 0;  // 0: chosen from --max-vehicles (DefaultStepThreads)
   double watchdog_ms = 100.0;
@@ -235,7 +236,7 @@ int RunBatchMode(const Options& o) {
 int main(int argc, char** argv) {
   CLI::App app{"vdyn-server: deterministic vehicle-dynamics simulation (RK4 at a fixed step)"};
   Options o;
-  auto* batch = app.add_flag("--batch", o.batch, "Run a maneuver as fast as possible, no network");
+  app.add_flag("--batch", o.batch, "Run a maneuver as fast as possible, no network");
   app.add_flag("--demo", o.demo,
                "The built-in demo drive on facility (batch); CSV to out/demo.csv unless --csv");
   app.add_flag("--dump-vehicle", o.dump_vehicle,
@@ -283,7 +284,6 @@ int main(int argc, char** argv) {
       ->check(vdyn::cli::InRange(vdyn::limits::kSpeedKmh))
       ->capture_default_str();
   app.add_flag("--quiet", o.quiet, "Print no summary");
-  (void)batch;
   app.add_flag("--lockstep", o.lockstep,
                "Networked, advancing only when a client asks for steps (ControlRequest.step)");
   app.add_option("--domain", o.domain, "DDS domain id")
@@ -292,8 +292,11 @@ int main(int argc, char** argv) {
   app.add_option("--server-id", o.server_id, "This server's id (several may share a domain)")
       ->check(vdyn::cli::Id("server id"))
       ->capture_default_str();
-  app.add_option("--vehicle-ids", o.vehicle_ids, "Vehicles to spawn at start, e.g. 1,2")
+  app.add_option("--vehicle-ids", o.vehicle_id_entries,
+                 "Vehicles to spawn at start, e.g. 1,2 or 1..256 (ids from 1), side by side on "
+                 "the free ground around the world's spawn")
       ->delimiter(',')
+      ->check(vdyn::cli::VehicleIds())
       ->capture_default_str();
   app.add_option("--max-vehicles", o.max_vehicles,
                  "Vehicles this server runs at most (started and spawned); spawns beyond are "
@@ -330,6 +333,7 @@ int main(int argc, char** argv) {
 
   // --help is a success; every parse error is a usage error (exit code 2).
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
+  o.vehicle_ids = vdyn::cli::ExpandVehicleIds(o.vehicle_id_entries);
   // A vehicle listed twice is a slip in the list, said as one (not "vehicle 1 exists already").
   for (auto id = o.vehicle_ids.begin(); id != o.vehicle_ids.end(); ++id) {
     if (std::find(o.vehicle_ids.begin(), id, *id) != id) {

@@ -7,6 +7,7 @@
 #include <SDL.h>
 
 #include <cmath>
+#include <limits>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
@@ -892,6 +893,17 @@ TEST(TerrainChunks, LargeTilesAreSplitToChunksButAHugePlaneStaysBounded) {
   EXPECT_GE(finest, 32u * 64u) << "not split at all";
   EXPECT_NEAR(t.min_W.x, -2000, 1e-6);
   EXPECT_NEAR(t.max_W.y, 2000, 1e-6);
+
+  // A vertex the server's terrain would never hold (beyond 1e9 m, or not finite) is refused with
+  // where it is, before anything converts it (issue 33: 1e30 overflowed the grid's cell index).
+  for (double bad : {1e30, -2e9, std::numeric_limits<double>::quiet_NaN()}) {
+    pb::WorldDescription far = huge;
+    far.mutable_meshes(0)->set_vertices(4, bad);
+    EXPECT_NE(viewer::CheckWorld(far).find(
+                  "mesh 'ground' (0): vertex 1: terrain vertex coordinate, m must be"),
+              std::string::npos)
+        << bad << ": " << viewer::CheckWorld(far);
+  }
 }
 
 // --- a car model from a file -------------------------------------------------------------------

@@ -4,22 +4,34 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/client/loop.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/messages/input_checks.h"
 
 namespace vdyn::python {
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-std::chrono::milliseconds Ms(double seconds) {
+// A call's deadline from its timeout in seconds (finite and >= 0; a time beyond the clock's range,
+// 1e10 s and more, waits without end instead of wrapping round into the past).
+base::Deadline DeadlineIn(double seconds) {
   if (!std::isfinite(seconds) || seconds < 0) {
     throw std::invalid_argument("a timeout must be a finite number of seconds >= 0, got " +
                                 std::to_string(seconds));
   }
-  return std::chrono::milliseconds(static_cast<std::int64_t>(std::ceil(seconds * 1e3)));
+  return base::Deadline::AfterSeconds(seconds);
 }
+
+// What a transport call may wait of a deadline: the time left, at most a century (the control
+// client adds it to the clock in nanoseconds, which a longer time would overflow).
+std::chrono::milliseconds ForTransport(const base::Deadline& d) {
+  constexpr std::int64_t kCenturyMs = 100LL * 365 * 24 * 3600 * 1000;
+  return std::chrono::milliseconds(std::min(kCenturyMs, (d.Left().ns + 999'999) / 1'000'000));
+}
+
+// A bounded wait's slice: a reader's Wait returns early when data arrives.
+constexpr base::Nanos kSlice = base::Milliseconds(20);
 
 std::string Seconds(double s) {
   char buf[32];
@@ -53,31 +65,29 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                                                       .diagnostics = true,
                                                       .inputs = false,
                                                       .only_vehicle = std::nullopt}) {
-  const auto timeout = Ms(timeout_s);
-  const auto deadline = Clock::now() + timeout;
+  const base::Deadline deadline = DeadlineIn(timeout_s);
   const std::string who = server_id.empty() ? "no vdyn server" : "server '" + server_id + "'";
   const std::string where = " on DDS domain " + std::to_string(domain);
   // The world is transient-local: a server's arrives as soon as its writer and this reader match.
-  for (;;) {
-    view_.Poll();
-    const auto& worlds = view_.worlds();
-    if (server_id_.empty() && !worlds.empty()) server_id_ = worlds.begin()->first;
-    if (!server_id_.empty() && worlds.count(server_id_) > 0) break;
-    const auto now = Clock::now();
-    if (now >= deadline) {
-      std::string seen;
-      for (const auto& [id, w] : worlds) seen += (seen.empty() ? "" : ", ") + id;
-      throw TimeoutError(
-          who + where + " answered within " + Seconds(timeout_s) +
-          ": no world description arrived" +
-          (seen.empty() ? " (is vdyn-server running with --domain " + std::to_string(domain) + "?)"
-                        : " (worlds seen: " + seen + ")"));
-    }
-    (void)view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  const bool found = base::PollUntil(
+      deadline, kSlice,
+      [&] {
+        view_.Poll();
+        const auto& worlds = view_.worlds();
+        if (server_id_.empty() && !worlds.empty()) server_id_ = worlds.begin()->first;
+        return !server_id_.empty() && worlds.count(server_id_) > 0;
+      },
+      [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
+  if (!found) {
+    std::string seen;
+    for (const auto& [id, w] : view_.worlds()) seen += (seen.empty() ? "" : ", ") + id;
+    throw TimeoutError(
+        who + where + " answered within " + Seconds(timeout_s) + ": no world description arrived" +
+        (seen.empty() ? " (is vdyn-server running with --domain " + std::to_string(domain) + "?)"
+                      : " (worlds seen: " + seen + ")"));
   }
   // Then a request's round trip: that server takes this client's requests and reaches its replies.
-  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
-      std::max<Clock::duration>(deadline - Clock::now(), std::chrono::milliseconds(1)));
+  const auto left = std::max(ForTransport(deadline), std::chrono::milliseconds(1));
   if (!control_.WaitForServer(left, server_id_)) {
     throw TimeoutError("server '" + server_id_ + "'" + where + " did not answer within " +
                        Seconds(timeout_s) + ": " + control_.last_error());
@@ -106,18 +116,21 @@ std::vector<std::uint32_t> Client::Vehicles() {
 
 std::string Client::ParamsBytes(std::uint32_t vehicle_id, double timeout_s) {
   std::lock_guard lock(mutex_);
-  const auto deadline = Clock::now() + Ms(timeout_s);
-  for (;;) {
-    PollView();
-    const auto* v = view_.vehicle(vehicle_id);
-    if (v != nullptr && v->params) return v->params->SerializeAsString();
-    const auto now = Clock::now();
-    if (now >= deadline) {
-      throw TimeoutError("no parameters of vehicle " + std::to_string(vehicle_id) +
-                         " arrived on vdyn/params within " + Seconds(timeout_s));
-    }
-    (void)view_.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  const pb::VehicleParams* params = nullptr;
+  const bool found = base::PollUntil(
+      DeadlineIn(timeout_s), kSlice,
+      [&] {
+        PollView();
+        const auto* v = view_.vehicle(vehicle_id);
+        if (v != nullptr && v->params) params = &*v->params;
+        return params != nullptr;
+      },
+      [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
+  if (!found) {
+    throw TimeoutError("no parameters of vehicle " + std::to_string(vehicle_id) +
+                       " arrived on vdyn/params within " + Seconds(timeout_s));
   }
+  return params->SerializeAsString();
 }
 
 ReplyInfo Client::Request(pb::ControlRequest request, const std::string& what, double timeout_s) {
@@ -125,15 +138,116 @@ ReplyInfo Client::Request(pb::ControlRequest request, const std::string& what, d
   request.set_server_id(server_id_);
   const bool adds = request.has_spawn() || request.has_restore(), removes = request.has_remove();
   const std::uint32_t vehicle = request.vehicle_id();
-  auto reply = control_.Call(std::move(request), Ms(timeout_s));
+  auto reply = control_.Call(std::move(request), ForTransport(DeadlineIn(timeout_s)));
   if (!reply) throw TimeoutError(what + ": " + control_.last_error());
   if (!reply->accepted()) {
     throw RefusedError(what + " refused by server '" + reply->server_id() + "': " + reply->reason(),
                        reply->reason());
   }
-  if (adds) vehicles_.insert(vehicle);
-  if (removes) vehicles_.erase(vehicle);
+  if (adds) {
+    vehicles_.insert(vehicle);
+    removed_.erase(vehicle);
+  }
+  if (removes) {
+    vehicles_.erase(vehicle);
+    removed_.insert(vehicle);
+  }
   return {reply->server_id(), reply->applied_step(), reply->sim_time_ns()};
+}
+
+std::set<std::uint32_t> Client::KnownVehicles() {
+  std::set<std::uint32_t> known = vehicles_;
+  PollView();
+  for (const auto& [id, v] : view_.vehicles()) {
+    if (v.params && removed_.count(id) == 0) known.insert(id);
+  }
+  return known;
+}
+
+std::string Client::VehicleList(const std::set<std::uint32_t>& ids) {
+  if (ids.empty()) return "it has none";
+  std::string list;
+  for (const std::uint32_t id : ids) list += (list.empty() ? "" : ", ") + std::to_string(id);
+  return (ids.size() == 1 ? "its vehicle is " : "its vehicles are ") + list;
+}
+
+void Client::CheckStepInput(const pb::DriverInput& input) {
+  std::lock_guard lock(mutex_);
+  const std::set<std::uint32_t> known = KnownVehicles();
+  if (known.count(input.vehicle_id()) == 0) {
+    throw std::invalid_argument("no vehicle " + std::to_string(input.vehicle_id()) +
+                                " on server '" + server_id_ + "' (" + VehicleList(known) +
+                                "): nothing was stepped");
+  }
+  if (const std::string why = messages::WhyInputRefused(input); !why.empty()) {
+    throw std::invalid_argument("the input for vehicle " + std::to_string(input.vehicle_id()) +
+                                " is one the server would not apply: " + why +
+                                "; nothing was stepped");
+  }
+}
+
+std::uint32_t Client::ChunkSteps(std::uint32_t left, bool with_input) {
+  std::lock_guard lock(mutex_);
+  const auto vehicles = std::max<std::size_t>(1, vehicles_.size());
+  std::uint32_t chunk = std::min<std::uint32_t>(
+      left, std::max<std::uint32_t>(1, kOutboxFrames / static_cast<std::uint32_t>(vehicles)));
+  if (with_input) chunk = std::min(chunk, kInputRepeatSteps);
+  return chunk;
+}
+
+void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const ReplyInfo& reply,
+                            const pb::DriverInput* input, double timeout_s,
+                            std::map<std::uint32_t, StateTable>& out) {
+  std::lock_guard lock(mutex_);
+  // The states of these steps start at these simulation times (the reply: the time after).
+  const std::int64_t last = reply.sim_time_ns - step_ns_;
+  const std::int64_t first = reply.sim_time_ns - static_cast<std::int64_t>(chunk) * step_ns_;
+  std::map<std::uint32_t, std::uint32_t> got;
+  auto take = [&] {
+    (void)states.Take([&](const pb::VehicleState& s) {
+      ++received_[s.vehicle_id()];
+      if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last) return;
+      out[s.vehicle_id()].Append(s);
+      ++got[s.vehicle_id()];
+      vehicles_.insert(s.vehicle_id());
+    });
+  };
+  // A step's states of every vehicle travel together (vdyn/states): when every other vehicle's
+  // have come and none of the input's, the server has no such vehicle (removed meanwhile).
+  const std::uint32_t driven = input != nullptr ? input->vehicle_id() : 0;
+  bool driven_absent = false;
+  auto complete = [&] {
+    take();
+    if (got.empty()) return false;
+    for (std::uint32_t id : vehicles_) {
+      if (id != driven && got[id] < chunk) return false;
+    }
+    driven_absent = driven != 0 && got[driven] == 0;
+    return driven_absent || driven == 0 || got[driven] >= chunk;
+  };
+  const bool done =
+      base::PollUntil(DeadlineIn(timeout_s), base::Milliseconds(50), complete,
+                      [&](base::Nanos slice) { (void)states.Wait(base::Chrono(slice)); });
+  if (driven_absent) {
+    vehicles_.erase(driven);
+    throw std::invalid_argument("no vehicle " + std::to_string(driven) + " on server '" +
+                                server_id_ + "': " + std::to_string(chunk) +
+                                " steps ran without it (" + VehicleList(vehicles_) + ")");
+  }
+  if (done) return;
+  std::string missing;
+  for (std::uint32_t id : vehicles_) {
+    if (got[id] >= chunk) continue;
+    missing += (missing.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": " +
+               std::to_string(chunk - got[id]) + " of " + std::to_string(chunk);
+  }
+  if (got.empty() && vehicles_.empty()) missing = "no vehicle's states at all";
+  throw TimeoutError(
+      "the states of the last " + std::to_string(chunk) + " lockstep steps (simulation time " +
+      std::to_string(static_cast<double>(first) * 1e-9) + " s to " +
+      std::to_string(static_cast<double>(last) * 1e-9) + " s) did not arrive within " +
+      Seconds(timeout_s) + " of the server's reply: missing " + missing +
+      " (states lost by this reader so far: " + std::to_string(states.Lost()) + ")");
 }
 
 std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::DriverInput* input,
@@ -144,20 +258,12 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
                                 std::to_string(limits::kMaxStepsPerRequest) + ", got " +
                                 std::to_string(steps));
   }
-  const auto timeout = Ms(timeout_s);
+  (void)DeadlineIn(timeout_s);  // a bad timeout is refused before anything is sent
+  if (input != nullptr) CheckStepInput(*input);
   std::map<std::uint32_t, StateTable> out;
   StateSource& states = StepStates(timeout_s);
-  std::uint32_t done = 0;
-  while (done < steps) {
-    std::uint32_t chunk;
-    {
-      std::lock_guard lock(mutex_);
-      const auto vehicles = std::max<std::size_t>(1, vehicles_.size());
-      chunk = std::min<std::uint32_t>(
-          steps - done,
-          std::max<std::uint32_t>(1, kOutboxFrames / static_cast<std::uint32_t>(vehicles)));
-      if (input != nullptr) chunk = std::min(chunk, kInputRepeatSteps);
-    }
+  for (std::uint32_t done = 0; done < steps;) {
+    const std::uint32_t chunk = ChunkSteps(steps - done, input != nullptr);
     pb::ControlRequest request;
     request.mutable_step()->set_steps(chunk);
     if (input != nullptr) {
@@ -166,50 +272,7 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     }
     const ReplyInfo reply =
         Request(request, "step " + std::to_string(chunk) + " (lockstep)", timeout_s);
-    std::lock_guard lock(mutex_);
-    // The states of these steps start at these simulation times (the reply: the time after).
-    const std::int64_t last = reply.sim_time_ns - step_ns_;
-    const std::int64_t first = reply.sim_time_ns - static_cast<std::int64_t>(chunk) * step_ns_;
-    std::map<std::uint32_t, std::uint32_t> got;
-    auto take = [&] {
-      (void)states.Take([&](const pb::VehicleState& s) {
-        if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last)
-          return;
-        out[s.vehicle_id()].Append(s);
-        ++got[s.vehicle_id()];
-        vehicles_.insert(s.vehicle_id());
-      });
-    };
-    auto complete = [&] {
-      if (got.empty()) return false;
-      for (std::uint32_t id : vehicles_) {
-        if (got[id] < chunk) return false;
-      }
-      return true;
-    };
-    const auto deadline = Clock::now() + timeout;
-    take();
-    while (!complete()) {
-      const auto now = Clock::now();
-      if (now >= deadline) {
-        std::string missing;
-        for (std::uint32_t id : vehicles_) {
-          if (got[id] >= chunk) continue;
-          missing += (missing.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) +
-                     ": " + std::to_string(chunk - got[id]) + " of " + std::to_string(chunk);
-        }
-        if (got.empty() && vehicles_.empty()) missing = "no vehicle's states at all";
-        throw TimeoutError(
-            "the states of the last " + std::to_string(chunk) +
-            " lockstep steps (simulation time " +
-            std::to_string(static_cast<double>(first) * 1e-9) + " s to " +
-            std::to_string(static_cast<double>(last) * 1e-9) + " s) did not arrive within " +
-            Seconds(timeout_s) + " of the server's reply: missing " + missing +
-            " (states lost by this reader so far: " + std::to_string(states.Lost()) + ")");
-      }
-      (void)states.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(50)));
-      take();
-    }
+    TakeStepStates(states, chunk, reply, input, timeout_s, out);
     done += chunk;
   }
   for (auto& [id, table] : out) table.SortByStep();
@@ -217,13 +280,18 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
 }
 
 std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneuver,
-                                                        std::uint32_t vehicle_id, double duration_s,
+                                                        std::uint32_t vehicle_id,
+                                                        std::optional<double> duration_s,
                                                         const std::string& source_id,
                                                         double timeout_s) {
+  if (duration_s) {
+    if (const std::string why = limits::Check(limits::kDurationS, *duration_s); !why.empty()) {
+      throw std::invalid_argument("run_maneuver: " + why);
+    }
+  }
   const Maneuver m = Maneuver::Named(maneuver);  // ManeuverError names the file, line and column
-  if (!std::isfinite(duration_s)) throw std::invalid_argument("duration must be finite");
   const double h = static_cast<double>(step_ns_) * 1e-9;  // as the simulator computes its step
-  const double end = duration_s > 0 ? duration_s : m.end_time();
+  const double end = duration_s ? *duration_s : m.end_time();
   const auto steps = static_cast<std::uint64_t>(std::llround(end / h));
   auto input_at = [&](std::uint64_t k) {
     pb::DriverInput in;
@@ -252,8 +320,10 @@ StateSource& Client::StepStates(double timeout_s) {
   if (states_) return *states_;
   auto states = std::make_unique<StateSource>(participant_, std::nullopt);
   // The server must know this reader before it steps, or it sends the states to no one.
-  if (!transport::WaitUntilServerKnowsReaders(participant_, Ms(timeout_s), server_id_)) {
-    throw TimeoutError("server '" + server_id_ + "' did not match this client's reader of the states within " +
+  if (!transport::WaitUntilServerKnowsReaders(participant_, ForTransport(DeadlineIn(timeout_s)),
+                                              server_id_)) {
+    throw TimeoutError("server '" + server_id_ +
+                       "' did not match this client's reader of the states within " +
                        Seconds(timeout_s) + " (its world did not arrive again)");
   }
   states_ = std::move(states);
@@ -272,8 +342,16 @@ client::SessionView& Client::LatestView(std::uint32_t vehicle_id) {
                                   .diagnostics = false,
                                   .inputs = false,
                                   .only_vehicle = own ? std::optional(vehicle_id) : std::nullopt});
+  view->on_state = [this](const pb::VehicleState& s, const transport::SampleInfo&) {
+    ++received_[s.vehicle_id()];  // Poll() runs with mutex_ held
+  };
   if (!own) return *(latest_all_ = std::move(view));
   return *(latest_[vehicle_id] = std::move(view));
+}
+
+std::map<std::uint32_t, std::uint64_t> Client::StatesReceived() {
+  std::lock_guard lock(mutex_);
+  return received_;
 }
 
 std::vector<std::string> Client::StateReaders() {
@@ -295,30 +373,67 @@ std::vector<std::string> Client::StateReaders() {
 StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
   std::lock_guard lock(mutex_);
   client::SessionView& view = LatestView(vehicle_id);
-  const auto deadline = Clock::now() + Ms(timeout_s);
-  for (;;) {
-    view.Poll();
-    if (const auto* v = view.vehicle(vehicle_id)) {
-      StateTable t;
-      t.Append(v->state);
-      return t;
-    }
-    const auto now = Clock::now();
-    if (now >= deadline) {
-      throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id) +
-                         " arrived on vdyn/state within " + Seconds(timeout_s) +
-                         " (a lockstep server publishes states only while it steps)");
-    }
-    (void)view.Wait(std::min<Clock::duration>(deadline - now, std::chrono::milliseconds(20)));
+  const client::SessionView::Vehicle* v = nullptr;
+  const bool found = base::PollUntil(
+      DeadlineIn(timeout_s), kSlice,
+      [&] {
+        view.Poll();
+        v = view.vehicle(vehicle_id);
+        return v != nullptr;
+      },
+      [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
+  if (!found) {
+    throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id) +
+                       " arrived on vdyn/state within " + Seconds(timeout_s) +
+                       " (a lockstep server publishes states only while it steps)");
   }
+  StateTable t;
+  t.Append(v->state);
+  return t;
 }
 
 // --- Driver ----------------------------------------------------------------------------------
 
+namespace {
+
+// A driver's vehicle, source and strength, checked as the server checks what it receives: an id
+// it would refuse makes every input of this driver one it drops.
+const std::string& CheckedSource(std::uint32_t vehicle_id, const std::string& source_id,
+                                 std::int32_t strength) {
+  if (std::string why = limits::Check(limits::kVehicleId, vehicle_id); !why.empty()) {
+    throw std::invalid_argument("driver: " + why);
+  }
+  if (std::string why = limits::Check(limits::kStrength, strength); !why.empty()) {
+    throw std::invalid_argument("driver: " + why);
+  }
+  pb::DriverInput probe;
+  probe.set_vehicle_id(vehicle_id);
+  probe.set_source_id(source_id);
+  if (std::string why = messages::WhyInputRefused(probe); !why.empty()) {
+    throw std::invalid_argument("driver '" + source_id.substr(0, 64) +
+                                "': a server would refuse every input of it: " + why);
+  }
+  return source_id;
+}
+
+}  // namespace
+
 Driver::Driver(Client& client, std::uint32_t vehicle_id, const std::string& source_id,
                std::int32_t strength)
-    : vehicle_id_(vehicle_id), publisher_(client.participant(), vehicle_id, source_id, strength) {
+    : vehicle_id_(vehicle_id),
+      publisher_(client.participant(), vehicle_id, CheckedSource(vehicle_id, source_id, strength),
+                 strength) {
   current_.set_vehicle_id(vehicle_id);
+}
+
+void Driver::CheckInput(const pb::DriverInput& input) const {
+  // The publisher writes this driver's own source id (checked when it was made) over the input's.
+  pb::DriverInput sent = input;
+  sent.clear_source_id();
+  if (const std::string why = messages::WhyInputRefused(sent); !why.empty()) {
+    throw std::invalid_argument("the input for vehicle " + std::to_string(vehicle_id_) +
+                                " is one the server would not apply: " + why + "; not sent");
+  }
 }
 
 Driver::~Driver() {
@@ -326,6 +441,7 @@ Driver::~Driver() {
 }
 
 void Driver::Send(const pb::DriverInput& input) {
+  CheckInput(input);
   std::lock_guard lock(mutex_);
   sending_ = input;
   sending_.set_vehicle_id(vehicle_id_);
@@ -336,6 +452,7 @@ void Driver::Send(const pb::DriverInput& input) {
 }
 
 void Driver::Set(const pb::DriverInput& input) {
+  CheckInput(input);
   std::lock_guard lock(mutex_);
   current_ = input;
   current_.set_vehicle_id(vehicle_id_);
@@ -370,15 +487,14 @@ std::uint64_t Driver::sent() {
 }
 
 bool Driver::WaitForServer(double timeout_s) {
-  const auto deadline = Clock::now() + Ms(timeout_s);
-  std::unique_lock lock(mutex_);
-  while (publisher_.MatchedReaders() == 0) {
-    if (Clock::now() >= deadline) return false;
-    lock.unlock();
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));  // matching has no waitable event
-    lock.lock();
-  }
-  return true;
+  return base::PollUntil(
+      DeadlineIn(timeout_s), base::Milliseconds(10),
+      [&] {
+        std::lock_guard lock(mutex_);
+        return publisher_.MatchedReaders() > 0;
+      },
+      // Matching has no waitable event.
+      [](base::Nanos slice) { std::this_thread::sleep_for(base::Chrono(slice)); });
 }
 
 // --- Subscription -----------------------------------------------------------------------------
@@ -444,8 +560,13 @@ std::size_t Subscription::queued() {
 }
 
 StateTable Subscription::Next(double timeout_s) {
+  const base::Deadline deadline = DeadlineIn(timeout_s);
   std::unique_lock lock(mutex_);
-  if (!ready_.wait_for(lock, Ms(timeout_s), [&] { return queue_.rows() > head_; })) {
+  // In slices: a condition variable's wait_for adds its time to the clock, which 1e10 s overflows.
+  const bool ready = base::PollUntil(
+      deadline, base::Milliseconds(100), [&] { return queue_.rows() > head_; },
+      [&](base::Nanos slice) { ready_.wait_for(lock, base::Chrono(slice)); });
+  if (!ready) {
     throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id_) +
                        " arrived on vdyn/state within " + Seconds(timeout_s));
   }

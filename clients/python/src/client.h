@@ -58,17 +58,21 @@ class Client {
   ReplyInfo Request(pb::ControlRequest request, const std::string& what, double timeout_s);
 
   // Lockstep: `steps` steps, `input` (when given) applied first; the states of every vehicle at
-  // every one of those steps. Requests go in chunks the server's state outbox holds whole; with
-  // an input, in chunks of at most 50 steps, each carrying it (the server's input watchdog, 100 ms
-  // by default, replaces an input that is not renewed).
+  // every one of those steps. An input for a vehicle the server does not have, or one it would not
+  // apply (messages::WhyInputRefused: out of range, not finite, an id too long), is refused here
+  // with the reason (std::invalid_argument) before anything is stepped. Requests go in chunks the
+  // server's state outbox holds whole; with an input, in chunks of at most 50 steps, each carrying
+  // it (the server's input watchdog, 100 ms by default, replaces an input that is not renewed).
   std::map<std::uint32_t, StateTable> Step(std::uint32_t steps, const pb::DriverInput* input,
                                            double timeout_s);
   // A maneuver (a CSV file as vdyn-server --batch reads it, or "demo") driven in lockstep for
-  // `duration_s` (<= 0: to its last row) from the vehicle's step on: at each step the input the
-  // maneuver gives at that step's time from the start, as the batch runner applies it; steps
-  // whose inputs are equal go in one request. Every vehicle's states of those steps.
+  // `duration_s` (limits::kDurationS; none: to its last row) from the vehicle's step on: at each
+  // step the input the maneuver gives at that step's time from the start, as the batch runner
+  // applies it; steps whose inputs are equal go in one request. Every vehicle's states of those
+  // steps.
   std::map<std::uint32_t, StateTable> RunManeuver(const std::string& maneuver,
-                                                  std::uint32_t vehicle_id, double duration_s,
+                                                  std::uint32_t vehicle_id,
+                                                  std::optional<double> duration_s,
                                                   const std::string& source_id, double timeout_s);
   // The newest state of a vehicle (waits up to timeout_s for a first one).
   StateTable Latest(std::uint32_t vehicle_id, double timeout_s);
@@ -76,17 +80,31 @@ class Client {
   // "every vehicle (vdyn/states)"): none until Latest() or Step() asks (Subscription objects
   // have their own).
   std::vector<std::string> StateReaders();
+  // How many states of each vehicle this client's readers have taken so far (Latest() and Step()
+  // take them; a Subscription counts its own): which states arrived here.
+  std::map<std::uint32_t, std::uint64_t> StatesReceived();
 
   transport::Participant& participant() { return participant_; }
 
  private:
   void PollView();
+  // Step()'s stages: the input checked; how many steps one request asks for; that request's
+  // states taken (every vehicle's, the input's vehicle among them).
+  void CheckStepInput(const pb::DriverInput& input);
+  std::uint32_t ChunkSteps(std::uint32_t left, bool with_input);
+  void TakeStepStates(StateSource& states, std::uint32_t chunk, const ReplyInfo& reply,
+                      const pb::DriverInput* input, double timeout_s,
+                      std::map<std::uint32_t, StateTable>& out);
+  // Vehicles() and those whose parameters the server published, less those this client removed
+  // (with mutex_ held); "its vehicles are 1, 2" for a message.
+  std::set<std::uint32_t> KnownVehicles();
+  static std::string VehicleList(const std::set<std::uint32_t>& ids);
   std::string server_id_;
   double timeout_s_;
   std::mutex mutex_;
   transport::Participant participant_;
   transport::ControlClient control_;
-  client::SessionView view_;                     // world, params, diagnostics (no states)
+  client::SessionView view_;  // world, params, diagnostics (no states)
   // The states a step asked for: every vehicle's, read from the first Step() on (a client that
   // never steps receives none; before, every client read every state from its start: 13.5 % of a
   // core and a growing history of 350 MB beside a real-time server of 128 vehicles).
@@ -98,7 +116,9 @@ class Client {
   std::map<std::uint32_t, std::unique_ptr<client::SessionView>> latest_;
   std::unique_ptr<client::SessionView> latest_all_;
   std::unique_ptr<StateSource> states_;
-  std::set<std::uint32_t> vehicles_;             // see Vehicles(); a step expects states of each
+  std::set<std::uint32_t> vehicles_;  // see Vehicles(); a step expects states of each
+  std::set<std::uint32_t> removed_;   // removed by this client (and not added since)
+  std::map<std::uint32_t, std::uint64_t> received_;  // StatesReceived()
   std::int64_t step_ns_ = 1'000'000;
 };
 
@@ -108,6 +128,8 @@ class Driver {
   Driver(Client& client, std::uint32_t vehicle_id, const std::string& source_id,
          std::int32_t strength);
   ~Driver();
+  // A vehicle id, source id or strength a server would refuse throws std::invalid_argument with
+  // the reason, as does an input it would not apply (Send, Set: messages::WhyInputRefused).
   // Publishes once, now.
   void Send(const pb::DriverInput& input);
   // Publishes the current input at `rate_hz` from a thread of its own until Stop().
@@ -122,6 +144,7 @@ class Driver {
   bool WaitForServer(double timeout_s);
 
  private:
+  void CheckInput(const pb::DriverInput& input) const;
   std::mutex mutex_;
   std::uint32_t vehicle_id_;
   client::InputPublisher publisher_;

@@ -5,12 +5,16 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <map>
 #include <memory>
+#include <optional>
 
 #include "client.h"
 #include "recording_reader.h"
 #include "state_columns.h"
+#include "vdyn/base/limits.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/messages/input_checks.h"
 #include "vdyn/recorder/mcap.h"
 
 namespace py = pybind11;
@@ -70,10 +74,7 @@ pb::Pose2 Pose(double x, double y, double yaw) {
   return p;
 }
 
-}  // namespace
-
-PYBIND11_MODULE(_vdyn, m) {
-  m.doc() = "vdyn's client layer for Python (use the package vdyn, not this module)";
+void BindErrors() {
   py::register_exception_translator([](std::exception_ptr p) {
     try {
       if (p) std::rethrow_exception(p);
@@ -93,10 +94,41 @@ PYBIND11_MODULE(_vdyn, m) {
       PyErr_SetObject(cls.ptr(), py::str(e.what()).ptr());
     }
   });
+}
 
+// The limits a Python call checks its arguments against, by the argument's name: the table of
+// limits (base/limits.h) the server checks them with.
+const limits::Range* NamedLimit(const std::string& name) {
+  static const std::map<std::string, const limits::Range*> kByName = {
+      {"vehicle_id", &limits::kVehicleId}, {"domain", &limits::kDomainId},
+      {"strength", &limits::kStrength},    {"duration", &limits::kDurationS},
+      {"rate_hz", &limits::kRateHz},
+  };
+  const auto it = kByName.find(name);
+  return it == kByName.end() ? nullptr : it->second;
+}
+
+void BindChecks(py::module_& m) {
   m.def("state_columns", &StateColumns, "The state columns (the vehicle CSV's, in order).");
+  m.def(
+      "check_limit",
+      [](const std::string& name, double value) {
+        const limits::Range* r = NamedLimit(name);
+        if (r == nullptr) throw py::value_error("no limit named " + name);
+        return limits::Check(*r, value);
+      },
+      "Empty when value is within the named limit, else the reason (base/limits.h).");
+  m.def(
+      "why_input_refused",
+      [](const py::bytes& input) {
+        return messages::WhyInputRefused(Parse<pb::DriverInput>(input, "driver input"));
+      },
+      "Empty when a server applies this serialised DriverInput, else its reason.");
+}
 
-  using Release = py::call_guard<py::gil_scoped_release>;
+using Release = py::call_guard<py::gil_scoped_release>;
+
+void BindClient(py::module_& m) {
   py::class_<Client>(m, "Client")
       .def(py::init<std::uint32_t, const std::string&, double, const std::string&>(),
            py::arg("domain"), py::arg("server_id"), py::arg("timeout"), py::arg("client_id"),
@@ -106,6 +138,7 @@ PYBIND11_MODULE(_vdyn, m) {
       .def("world_bytes", [](Client& c) { return py::bytes(c.WorldBytes()); })
       .def("vehicles", &Client::Vehicles, Release())
       .def_property_readonly("state_readers", &Client::StateReaders)
+      .def_property_readonly("states_received", &Client::StatesReceived)
       .def("params_bytes",
            [](Client& c, std::uint32_t id, double timeout) {
              std::string s;
@@ -139,8 +172,8 @@ PYBIND11_MODULE(_vdyn, m) {
              return d;
            })
       .def("run_maneuver",
-           [](Client& c, const std::string& maneuver, std::uint32_t id, double duration,
-              const std::string& source_id, double timeout) {
+           [](Client& c, const std::string& maneuver, std::uint32_t id,
+              std::optional<double> duration, const std::string& source_id, double timeout) {
              std::map<std::uint32_t, StateTable> out;
              {
                py::gil_scoped_release release;
@@ -178,7 +211,9 @@ PYBIND11_MODULE(_vdyn, m) {
     }
     return py::bytes(r.SerializeAsString());
   });
+}
 
+void BindDriver(py::module_& m) {
   py::class_<Driver>(m, "Driver")
       .def(py::init<Client&, std::uint32_t, const std::string&, std::int32_t>(), py::arg("client"),
            py::arg("vehicle_id"), py::arg("source_id"), py::arg("strength"), py::keep_alive<1, 2>())
@@ -201,7 +236,9 @@ PYBIND11_MODULE(_vdyn, m) {
       .def_property_readonly("sent", &Driver::sent)
       .def_property_readonly("failed", &Driver::failed)
       .def_property_readonly("skipped_ticks", &Driver::skipped_ticks);
+}
 
+void BindSubscription(py::module_& m) {
   py::class_<Subscription>(m, "Subscription")
       .def(py::init<Client&, std::uint32_t, std::size_t>(), py::arg("client"),
            py::arg("vehicle_id"), py::arg("capacity"), py::keep_alive<1, 2>())
@@ -229,7 +266,9 @@ PYBIND11_MODULE(_vdyn, m) {
       .def_property_readonly("missing_steps", &Subscription::missing_steps)
       .def_property_readonly("dds_lost", &Subscription::dds_lost)
       .def_property_readonly("queued", &Subscription::queued);
+}
 
+void BindRecording(py::module_& m) {
   py::class_<RecordingReader>(m, "RecordingReader")
       .def(py::init([](const std::string& path) {
              py::gil_scoped_release release;
@@ -295,4 +334,16 @@ PYBIND11_MODULE(_vdyn, m) {
         }
         return Table(std::move(t));
       });
+}
+
+}  // namespace
+
+PYBIND11_MODULE(_vdyn, m) {
+  m.doc() = "vdyn's client layer for Python (use the package vdyn, not this module)";
+  BindErrors();
+  BindChecks(m);
+  BindClient(m);
+  BindDriver(m);
+  BindSubscription(m);
+  BindRecording(m);
 }

@@ -141,28 +141,151 @@ def test_a_driver_drives_and_the_subscription_loses_no_state(realtime_server, do
 
 
 def test_a_client_receives_only_the_states_it_asks_for(realtime_server, domain):
-    """A client that connects, spawns and reads parameters receives no state; latest(v) reads
-    vehicle v's states in its partition (the server sends the others' elsewhere); the first
-    step() reads every vehicle's, from then on. (Before, every client read every state from its
-    start: beside 128 vehicles, 13.5 % of a core and 350 MB of history while idle.)"""
+    """Which states arrive at a client: none while it connects, spawns and reads parameters;
+    latest(v) brings vehicle v's states only (read in its partition: the server sends the
+    others' elsewhere); latest(w) then brings w's too. (Before, every client took every state
+    from its start: beside 128 vehicles, 13.5 % of a core and 350 MB of history while idle.)"""
     sim = vdyn.Client(domain=domain, timeout=30)
-    assert sim.state_readers == []
     spawn = sim.world.spawn
     sim.spawn(2, spawn.x, spawn.y, spawn.yaw)
     assert sim.params(2).mass > 0
-    assert sim.state_readers == []
-    assert len(sim.latest(2)) == 1
-    assert sim.state_readers == ["vehicle 2 (its partition)"]
-    assert len(sim.latest(1)) == 1
-    assert sim.state_readers == ["vehicle 1 (its partition)", "vehicle 2 (its partition)"]
+    assert sim.states_received == {}
+
+    def until(vehicle, count):
+        """latest(vehicle) until `count` of its states have arrived (about count ms at 1 kHz)."""
+        for _ in range(10000):
+            sim.latest(vehicle)
+            if sim.states_received.get(vehicle, 0) >= count:
+                return
+            time.sleep(0.005)
+        raise AssertionError(f"{count} states of vehicle {vehicle} never arrived: "
+                             f"{sim.states_received}")
+
+    until(2, 200)
+    assert set(sim.states_received) == {2}, sim.states_received  # nothing of vehicle 1
+    seen_2 = sim.states_received[2]
+    until(1, 200)
+    assert set(sim.states_received) == {1, 2}
+    until(2, seen_2 + 100)  # vehicle 2's keep arriving
 
 
 def test_the_first_lockstep_step_gets_its_states_from_a_reader_made_for_it(lockstep_server, domain):
     """The reader of every vehicle's states is made by the first step(), and the server knows it
-    before it steps: not one state of that first step is missing."""
+    before it steps: not one state of that first step is missing, and none arrived before."""
     for _ in range(3):
         sim = vdyn.Client(domain=domain, timeout=30)
-        assert sim.state_readers == []
+        assert sim.states_received == {}
         first = sim.step(1)[1]
         assert len(first) == 1
-        assert sim.state_readers == ["every vehicle (steps)"]
+        assert sim.states_received == {1: 1}
+
+
+def test_an_input_the_server_would_not_apply_raises_before_stepping(lockstep_server, domain):
+    """Out of range, not a number, or for a vehicle the server does not have: a ValueError with
+    the server's own reason (its table of limits), and not one step is run. (Before, the steps ran
+    with the previous input and returned normally; only the server's log said why.)"""
+    sim = vdyn.Client(domain=domain, timeout=30)
+    before = sim.step(1, vdyn.make_input(throttle=0.3), vehicle_id=1)[1].step[0]
+
+    def refused(inp, match, vehicle_id=1):
+        with pytest.raises(ValueError, match=match):
+            sim.step(10, inp, vehicle_id=vehicle_id)
+
+    refused(vdyn.pb.DriverInput(throttle=2.0), r"throttle must be in \[-1, 1\], got 2")
+    refused(vdyn.pb.DriverInput(steer=1.6),
+            r"steer \(front road-wheel angle, rad\) must be in \[-1.5, 1.5\], got 1.6")
+    refused(vdyn.pb.DriverInput(brake=float("nan")), r"brake must be a finite number, got nan")
+    refused({"gear": 11}, r"gear must be in \[-1, 10\], got 11")
+    refused(vdyn.pb.DriverInput(source_id="s" * 65, throttle=0.1),
+            r"source_id is 65 bytes long; a server takes at most 64 bytes")
+    refused(vdyn.make_input(throttle=0.1), r"no vehicle 999 on server 'vdyn' \(its vehicle is 1\)",
+            vehicle_id=999)
+    # make_input refuses at once, with the same reason.
+    with pytest.raises(ValueError, match=r"throttle must be in \[-1, 1\], got 2"):
+        vdyn.make_input(throttle=2.0)
+    with pytest.raises(ValueError, match=r"steer \(front road-wheel angle, rad\)"):
+        vdyn.make_input(steer=1.6)
+    # Nothing was stepped: the next step is the one after the last good one, with its input.
+    after = sim.step(1)[1]
+    assert after.step[0] == before + 1 and after.throttle_in[0] == 0.3
+    # A vehicle spawned by another client is there (its parameters say so)...
+    other = vdyn.Client(domain=domain, timeout=30)
+    other.spawn(3, 0.0, 20.0)
+    assert sim.params(3).mass > 0
+    assert sim.step(5, vdyn.make_input(throttle=0.2), vehicle_id=3)[3].throttle_in[-1] == 0.2
+    refused(vdyn.make_input(), r"no vehicle 998 on server 'vdyn' \(its vehicles are 1, 3\)",
+            vehicle_id=998)
+    # ... and one it removed behind this client's back is found missing by the steps themselves.
+    other.despawn(3)
+    with pytest.raises(ValueError, match=r"no vehicle 3 on server 'vdyn': 5 steps ran without it"):
+        sim.step(5, vdyn.make_input(throttle=0.2), vehicle_id=3)
+
+
+def test_a_driver_the_server_would_refuse_raises(lockstep_server, domain):
+    sim = vdyn.Client(domain=domain, timeout=30)
+    with pytest.raises(ValueError, match="source_id is 100 bytes long; a server takes at most 64"):
+        sim.driver(1, source_id="d" * 100)
+    with pytest.raises(ValueError, match=r"vehicle id must be in \[1, 4294967295\], got 0"):
+        sim.driver(0)
+    with pytest.raises(ValueError, match=r"ownership strength must be in \[0, 1000000\]"):
+        sim.driver(1, strength=-1)
+    drv = sim.driver(1, source_id="ok")
+    with pytest.raises(ValueError, match=r"throttle must be in \[-1, 1\], got 5"):
+        drv.send(vdyn.pb.DriverInput(throttle=5.0))
+    with pytest.raises(ValueError, match=r"clutch must be a finite number"):
+        drv.set(vdyn.pb.DriverInput(clutch=float("inf")))
+    drv.send(vdyn.pb.DriverInput(throttle=0.5))
+    assert drv.sent == 1 and drv.failed == 0
+
+
+def test_timeouts_of_any_length_and_durations_beyond_the_limit(lockstep_server, domain):
+    """A timeout of 1e10 s or more waits (it failed at once: "no server answered", the deadline
+    wrapped round into the past); a duration beyond the table's limit is refused at once (1e300
+    ran for ever)."""
+    for timeout in (1e10, 1e12, 1e300):
+        sim = vdyn.Client(domain=domain, timeout=timeout)
+        assert sim.params(1, timeout=timeout).mass > 0
+        assert len(sim.step(2, timeout=timeout)[1]) == 2
+    for duration, match in ((1e300, r"duration, s must be in \(0, 1e7\], got 1e300"),
+                            (0.0, r"got 0"), (-1.0, r"got -1"), (float("nan"), "finite")):
+        t0 = time.monotonic()
+        with pytest.raises(ValueError, match=match):
+            sim.run_maneuver("demo", duration=duration)
+        assert time.monotonic() - t0 < 5.0  # refused before anything is sent
+
+
+def test_arguments_of_the_wrong_type_are_refused(lockstep_server, domain):
+    sim = vdyn.Client(domain=domain, timeout=30)
+    bad = [
+        (lambda: sim.step("10"), r"n must be a whole number, got '10' \(str\)"),
+        (lambda: sim.step(2.5), r"n must be a whole number, got 2.5 \(float\)"),
+        (lambda: sim.step(True), r"n must be a whole number, got True \(bool\)"),
+        (lambda: sim.step(1, timeout="5"), r"timeout must be a number, got '5'"),
+        (lambda: sim.step(1, vdyn.make_input(), vehicle_id="1"), "vehicle_id must be a whole"),
+        (lambda: sim.spawn("2", 0.0, 0.0), "vehicle_id must be a whole number"),
+        (lambda: sim.spawn(2, "0", 0.0), r"x must be a number, got '0' \(str\)"),
+        (lambda: sim.teleport(1, 0.0, None), "y must be a number, got None"),
+        (lambda: sim.latest(1.0), "vehicle_id must be a whole number"),
+        (lambda: sim.params([1]), "vehicle_id must be a whole number"),
+        (lambda: sim.run_maneuver(42), "maneuver must be a file name"),
+        (lambda: sim.run_maneuver("demo", duration="1"), "duration must be a number"),
+        (lambda: sim.driver(1, strength=2.5), "strength must be a whole number"),
+        (lambda: sim.driver(1, source_id=7), "source_id must be a str"),
+        (lambda: sim.subscribe(1, capacity="10"), "capacity must be a whole number"),
+        (lambda: vdyn.make_input(throttle="0.5"), "throttle must be a number"),
+        (lambda: vdyn.make_input(gear=1.5), "gear must be a whole number"),
+        (lambda: vdyn.Client(domain="0"), "domain must be a whole number"),
+        (lambda: vdyn.Client(domain=domain, server_id=1), "server_id must be a str"),
+    ]
+    for call, match in bad:
+        with pytest.raises(TypeError, match=match):
+            call()
+    for call, match in [
+            (lambda: sim.latest(0), r"vehicle id must be in \[1, 4294967295\], got 0"),
+            (lambda: sim.spawn(-1, 0.0, 0.0), r"vehicle id must be in \[1, 4294967295\]"),
+            (lambda: vdyn.Client(domain=999), r"DDS domain id must be in \[0, 232\], got 999"),
+            (lambda: sim.subscribe(1, capacity=0), "capacity must be at least 1")]:
+        with pytest.raises(ValueError, match=match):
+            call()
+    # numpy's numbers are numbers.
+    assert len(sim.step(np.int64(2), timeout=np.float64(30))[1]) == 2

@@ -134,3 +134,64 @@ def test_a_magic_formula_tyres_inputs_and_outputs_are_columns(flat_server, domai
     assert np.all(s.wheel("camber_rad")[-1] > 0.0)
     assert np.all(s.wheel("My_Nm")[-1] < 0.0)  # rolling forward, against it
     assert np.any(s.wheel("Mx_Nm")[-1] != 0.0)
+
+
+def _other_interpreters():
+    """Pythons on this machine that are not the one vdyn was built for (a pyenv interpreter first
+    on PATH, as on the development machine), at most one per version."""
+    import glob
+    import shutil
+    from vdyn import _build
+    built = os.path.realpath(_build.PYTHON)
+    found = {}
+    candidates = [shutil.which(n) for n in ("python3", "python")]
+    candidates += sorted(glob.glob(os.path.expanduser("~/.pyenv/versions/3.*/bin/python3")))
+    for path in filter(None, candidates):
+        probe = subprocess.run([path, "-c", "import sys; print(sys.executable); "
+                                "print('%d.%d' % sys.version_info[:2])"],
+                               capture_output=True, text=True, timeout=60)
+        if probe.returncode != 0:
+            continue
+        executable, version = probe.stdout.split()
+        if os.path.realpath(executable) != built:
+            found.setdefault(version, executable)
+    return list(found.values())
+
+
+def _import_vdyn(python, tmp_path):
+    env = dict(os.environ, PYENV_VERSION="")
+    return subprocess.run([python, "-c", "import vdyn"], capture_output=True, text=True,
+                          timeout=120, cwd=str(tmp_path), env=env)
+
+
+def test_another_interpreter_is_told_which_one_to_run(tmp_path):
+    """Where python3 is not Debian's (pyenv's first on PATH), `import vdyn` says which
+    interpreter this is, which one the module was built for, and what to run instead (it said
+    "No module named 'numpy'")."""
+    from vdyn import _build
+    others = _other_interpreters()
+    if not others:
+        pytest.skip("no Python on this machine but the one vdyn was built for")
+    for python in others:
+        r = _import_vdyn(python, tmp_path)
+        assert r.returncode != 0, f"{python} imported vdyn"
+        last = r.stderr.strip().splitlines()[-1]
+        assert last.startswith("ImportError: vdyn cannot be imported ("), r.stderr
+        assert f"this interpreter is {python} (Python " in last, last
+        assert f"the package was built for {_build.PYTHON} (Python {_build.PYTHON_VERSION})" in last
+        assert f"Run {_build.PYTHON} instead (for example: {_build.PYTHON} -c 'import vdyn')" in last
+        assert f"cmake -DPython3_EXECUTABLE={python}" in last
+
+
+def test_a_venv_without_the_system_site_packages_is_told_what_to_make(tmp_path):
+    """The same interpreter in a venv that cannot see Debian's numpy and protobuf."""
+    from vdyn import _build
+    venv = tmp_path / "bare"
+    subprocess.run([_build.PYTHON, "-m", "venv", "--without-pip", str(venv)], check=True,
+                   timeout=120)
+    r = _import_vdyn(str(venv / "bin" / "python"), tmp_path)
+    assert r.returncode != 0
+    last = r.stderr.strip().splitlines()[-1]
+    assert f"this interpreter is {venv / 'bin' / 'python'} (Python " in last, r.stderr
+    assert (f"a venv of {_build.PYTHON} without its site packages, where numpy and protobuf "
+            f"are: make the venv with {_build.PYTHON} -m venv --system-site-packages DIR") in last

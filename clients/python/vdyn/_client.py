@@ -1,6 +1,7 @@
 """Connect to a vdyn server: world, vehicles, control requests, lockstep, real time, driving."""
 
 import math
+import numbers
 import os
 import time
 
@@ -11,24 +12,62 @@ from ._states import States
 DEFAULT_TIMEOUT = 10.0
 
 
+def _whole(name, value, limit=None):
+    """A whole number argument (not a bool, a float or a string), within the named limit of the
+    table of limits (base/limits.h) when one is given."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise TypeError(f"{name} must be a whole number, got {value!r} ({type(value).__name__})")
+    value = int(value)
+    if limit is not None:
+        why = _vdyn.check_limit(limit, float(value))
+        if why:
+            raise ValueError(f"{name}: {why}")
+    return value
+
+
+def _real(name, value):
+    """A number argument (an int or a float, not a bool or a string)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise TypeError(f"{name} must be a number, got {value!r} ({type(value).__name__})")
+    return float(value)
+
+
+def _text(name, value):
+    if not isinstance(value, str):
+        raise TypeError(f"{name} must be a str, got {value!r} ({type(value).__name__})")
+    return value
+
+
+def _check_input(msg):
+    """Raises ValueError with a server's reason when it would not apply this input."""
+    why = _vdyn.why_input_refused(msg.SerializeToString())
+    if why:
+        raise ValueError(f"an input the server would not apply: {why}")
+    return msg
+
+
 def make_input(steer=0.0, throttle=0.0, brake=0.0, *, gear=0, buttons=0, clutch=0.0,
                handbrake=0.0, cruise_kmh=None, steer_mode="road_wheel", vehicle_id=0,
                source_id=""):
     """A driver input (vdyn.pb.DriverInput): steer in rad (the road-wheel angle, or the
     hand-wheel angle with steer_mode="hand_wheel"), throttle [-1, 1], brake [0, 1], gear (0
     automatic, -1 reverse, 1..N), buttons (vdyn.pb.Button bits), cruise_kmh (a set speed switches
-    the speed control on)."""
+    the speed control on). An input a server would not apply (a value outside the table of
+    limits, not a number, a source id over 64 bytes) raises ValueError with the server's reason."""
     modes = {"road_wheel": input_pb2.STEER_ROAD_WHEEL, "hand_wheel": input_pb2.STEER_HAND_WHEEL,
              "hands_off": input_pb2.STEER_HANDS_OFF}
     if steer_mode not in modes:
         raise ValueError(f"steer_mode must be one of {sorted(modes)}, got {steer_mode!r}")
-    msg = input_pb2.DriverInput(vehicle_id=vehicle_id, source_id=source_id, steer=steer,
-                                throttle=throttle, brake=brake, gear=gear, buttons=buttons,
-                                clutch=clutch, handbrake=handbrake, steer_mode=modes[steer_mode])
+    msg = input_pb2.DriverInput(
+        vehicle_id=_whole("vehicle_id", vehicle_id), source_id=_text("source_id", source_id),
+        steer=_real("steer", steer), throttle=_real("throttle", throttle),
+        brake=_real("brake", brake), gear=_whole("gear", gear), buttons=_whole("buttons", buttons),
+        clutch=_real("clutch", clutch), handbrake=_real("handbrake", handbrake),
+        steer_mode=modes[steer_mode])
     if cruise_kmh is not None:
         msg.cruise_on = True
-        msg.cruise_set_kmh = cruise_kmh
-    return msg
+        msg.cruise_set_kmh = _real("cruise_kmh", cruise_kmh)
+    return _check_input(msg)
 
 
 def _params_message(params):
@@ -56,7 +95,7 @@ def _input_message(inp, vehicle_id, source_id):
     msg = input_pb2.DriverInput()
     msg.CopyFrom(inp)
     if vehicle_id is not None:
-        msg.vehicle_id = vehicle_id
+        msg.vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
     if not msg.source_id:
         msg.source_id = source_id
     return msg
@@ -72,9 +111,13 @@ class Client:
     """
 
     def __init__(self, domain=0, server_id=None, timeout=DEFAULT_TIMEOUT, client_id=None):
-        self.timeout = float(timeout)
-        self.client_id = client_id or f"python-{os.getpid()}-{id(self):x}"
-        self._c = _vdyn.Client(int(domain), server_id or "", self.timeout, self.client_id)
+        self.timeout = DEFAULT_TIMEOUT
+        self.timeout = self._t(timeout)
+        self.client_id = (_text("client_id", client_id) if client_id is not None
+                          else f"python-{os.getpid()}-{id(self):x}")
+        server_id = "" if server_id is None else _text("server_id", server_id)
+        self._c = _vdyn.Client(_whole("domain", domain, "domain"), server_id, self.timeout,
+                               self.client_id)
         self._world = None
 
     # --- the world and the vehicles -----------------------------------------------------------
@@ -122,7 +165,8 @@ class Client:
 
     def params(self, vehicle_id, timeout=None):
         """The vehicle's parameters in effect (vdyn.pb.VehicleParams, complete)."""
-        data = self._c.params_bytes(vehicle_id, self._t(timeout))
+        data = self._c.params_bytes(_whole("vehicle_id", vehicle_id, "vehicle_id"),
+                                    self._t(timeout))
         return vehicle_params_pb2.VehicleParams.FromString(data)
 
     # --- control ------------------------------------------------------------------------------
@@ -130,10 +174,13 @@ class Client:
         return self._c.request(req.SerializeToString(), what, self._t(timeout))
 
     def spawn(self, vehicle_id, x, y, yaw=0.0, speed=0.0, params=None, timeout=None):
-        """Creates a vehicle at (x, y) m heading yaw rad at speed m/s, with parameters (partial:
-        merged over the server's defaults). Returns the reply (applied_step, sim_time_ns)."""
+        """Creates a vehicle at (x, y) m in the world frame, heading yaw rad (counter-clockwise
+        from the world's x axis), moving forward at speed m/s, with parameters (partial: merged
+        over the server's defaults). Returns the reply (applied_step, sim_time_ns)."""
+        vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
         p = _params_message(params)
-        data = _vdyn.pose_request("spawn", vehicle_id, x, y, yaw, speed,
+        data = _vdyn.pose_request("spawn", vehicle_id, _real("x", x), _real("y", y),
+                                  _real("yaw", yaw), _real("speed", speed),
                                   None if p is None else p.SerializeToString())
         req = control_pb2.ControlRequest.FromString(data)
         reply = self._request(req, f"spawn of vehicle {vehicle_id}", timeout)
@@ -142,18 +189,22 @@ class Client:
 
     def despawn(self, vehicle_id, timeout=None):
         """Removes a vehicle."""
-        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req = control_pb2.ControlRequest(vehicle_id=_whole("vehicle_id", vehicle_id, "vehicle_id"))
         req.remove.SetInParent()
         return self._request(req, f"removal of vehicle {vehicle_id}", timeout)
 
     def reset(self, vehicle_id, timeout=None):
         """Back to the spawn pose, at rest."""
-        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req = control_pb2.ControlRequest(vehicle_id=_whole("vehicle_id", vehicle_id, "vehicle_id"))
         req.reset.SetInParent()
         return self._request(req, f"reset of vehicle {vehicle_id}", timeout)
 
     def teleport(self, vehicle_id, x, y, yaw=0.0, speed=0.0, timeout=None):
-        data = _vdyn.pose_request("teleport", vehicle_id, x, y, yaw, speed, None)
+        """Moves a vehicle to (x, y) m in the world frame, heading yaw rad (counter-clockwise from
+        the world's x axis), moving forward at speed m/s, on the ground there."""
+        data = _vdyn.pose_request("teleport", _whole("vehicle_id", vehicle_id, "vehicle_id"),
+                                  _real("x", x), _real("y", y), _real("yaw", yaw),
+                                  _real("speed", speed), None)
         req = control_pb2.ControlRequest.FromString(data)
         return self._request(req, f"teleport of vehicle {vehicle_id}", timeout)
 
@@ -172,7 +223,7 @@ class Client:
         vehicle's current ones at a step boundary). Returns once the server accepted them and
         publishes them on vdyn/params (so params() shows them)."""
         want = _params_message(params)
-        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req = control_pb2.ControlRequest(vehicle_id=_whole("vehicle_id", vehicle_id, "vehicle_id"))
         req.set_params.params.CopyFrom(want)
         reply = self._request(req, f"parameter change of vehicle {vehicle_id}", timeout)
         self._wait_params(vehicle_id, want, timeout)
@@ -200,7 +251,7 @@ class Client:
         """Brings a vehicle back to an exact state (vdyn.pb.ExactState, e.g. from a recording's
         checkpoint event), with parameters and the input to hold until a live input arrives
         (vdyn.pb.InputSample)."""
-        req = control_pb2.ControlRequest(vehicle_id=vehicle_id)
+        req = control_pb2.ControlRequest(vehicle_id=_whole("vehicle_id", vehicle_id, "vehicle_id"))
         req.restore.state.CopyFrom(state)
         if params is not None:
             req.restore.params.CopyFrom(_params_message(params))
@@ -214,11 +265,14 @@ class Client:
         """Advances the server n steps (lockstep; a real-time server pauses its clock for them)
         with ``input`` (vdyn.make_input(...) or a dict; for ``vehicle_id``, else the input's own)
         applied first, and returns {vehicle_id: States} with every vehicle's state at each of
-        those steps. Raises vdyn.TimeoutError naming what did not arrive."""
-        msg = _input_message(input, vehicle_id, source_id)
+        those steps. An input for a vehicle the server does not have, or one it would not apply
+        (out of range, not a number), raises ValueError with the reason before anything is
+        stepped. Raises vdyn.TimeoutError naming what did not arrive."""
+        n = _whole("n", n)
+        msg = _input_message(input, vehicle_id, _text("source_id", source_id))
         if msg is not None and msg.vehicle_id == 0:
             raise ValueError("the input names no vehicle: give vehicle_id=")
-        tables = self._c.step(int(n), None if msg is None else msg.SerializeToString(),
+        tables = self._c.step(n, None if msg is None else msg.SerializeToString(),
                               self._t(timeout))
         return {vid: States(vid, t) for vid, t in tables.items()}
 
@@ -229,16 +283,26 @@ class Client:
         vehicle's present step for ``duration`` s (default: to its last row), the input at each
         step exactly as ``vdyn-server --batch`` applies it. Returns {vehicle_id: States}. Reset or
         spawn the vehicle first for a run from rest. A bad file raises ValueError naming the file,
-        line and column."""
-        tables = self._c.run_maneuver(str(maneuver), vehicle_id,
-                                      0.0 if duration is None else float(duration), source_id,
-                                      self._t(timeout))
+        line and column; a duration outside (0, 1e7] s raises ValueError."""
+        if not isinstance(maneuver, (str, os.PathLike)):
+            raise TypeError(f"maneuver must be a file name or \"demo\", got {maneuver!r}")
+        tables = self._c.run_maneuver(os.fspath(maneuver),
+                                      _whole("vehicle_id", vehicle_id, "vehicle_id"),
+                                      None if duration is None else _real("duration", duration),
+                                      _text("source_id", source_id), self._t(timeout))
         return {vid: States(vid, t) for vid, t in tables.items()}
 
     # --- real time ----------------------------------------------------------------------------
     def latest(self, vehicle_id, timeout=None):
         """The newest state of a vehicle (States of one row)."""
+        vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
         return States(vehicle_id, self._c.latest(vehicle_id, self._t(timeout)))
+
+    @property
+    def states_received(self):
+        """{vehicle_id: states this client's readers have taken} (latest() and step() take them;
+        a Subscription counts its own): which states arrived here."""
+        return self._c.states_received
 
     def subscribe(self, vehicle_id, capacity=10000):
         """Every state of a vehicle from now on (vdyn.Subscription: iterate, or take())."""
@@ -249,7 +313,7 @@ class Client:
         return Driver(self, vehicle_id, source_id, strength)
 
     def _t(self, timeout):
-        t = self.timeout if timeout is None else float(timeout)
+        t = self.timeout if timeout is None else _real("timeout", timeout)
         if not math.isfinite(t) or t < 0:
             raise ValueError(f"a timeout must be a finite number of seconds >= 0, got {timeout!r}")
         return t
@@ -266,11 +330,11 @@ class Driver:
     background thread until ``stop()`` (also a context manager)."""
 
     def __init__(self, client, vehicle_id, source_id="python", strength=10):
-        self.vehicle_id = vehicle_id
-        self.source_id = source_id
-        self.strength = strength
+        self.vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
+        self.source_id = _text("source_id", source_id)
+        self.strength = _whole("strength", strength, "strength")
         self._client = client
-        self._d = _vdyn.Driver(client._c, vehicle_id, source_id, strength)
+        self._d = _vdyn.Driver(client._c, self.vehicle_id, self.source_id, self.strength)
 
     def _bytes(self, inp):
         return _input_message(inp, self.vehicle_id, self.source_id).SerializeToString()
@@ -292,7 +356,7 @@ class Driver:
     def start(self, rate_hz=1000.0, input=None):
         if input is not None:
             self.set(input)
-        self._d.start(float(rate_hz))
+        self._d.start(_real("rate_hz", rate_hz))
         return self
 
     def stop(self):
@@ -324,9 +388,12 @@ class Subscription:
     state at once. ``missing_steps`` counts steps absent from the sequence received."""
 
     def __init__(self, client, vehicle_id, capacity=10000):
-        self.vehicle_id = vehicle_id
+        self.vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
         self._client = client
-        self._s = _vdyn.Subscription(client._c, vehicle_id, int(capacity))
+        capacity = _whole("capacity", capacity)
+        if capacity < 1:
+            raise ValueError(f"capacity must be at least 1, got {capacity}")
+        self._s = _vdyn.Subscription(client._c, self.vehicle_id, capacity)
 
     def next(self, timeout=None):
         """The next state; raises vdyn.TimeoutError when none arrives in time."""

@@ -18,6 +18,7 @@
 
 #include "vdyn/base/time.h"
 #include "vdyn/io/vehicle_params.h"
+#include "vdyn/recorder/output_file.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/vehicle_params.pb.h"
 #include "vdyn/world.pb.h"
@@ -36,6 +37,21 @@ std::uint64_t CaptureSummary::total_dropped() const {
   std::uint64_t n = 0;
   for (const auto& [t, c] : topics) n += c.dropped;
   return n;
+}
+
+std::string CaptureSummary::dropped_by_topic() const {
+  std::string out;
+  for (const auto& [t, c] : topics) {
+    if (c.dropped == 0) continue;
+    out += (out.empty() ? " (" : ", ") + std::string(transport::Spec(t).name) + " " +
+           std::to_string(c.dropped);
+  }
+  return out.empty() ? out : out + ")";
+}
+
+bool Admits(TopicId topic, std::size_t in_use, std::size_t size, std::size_t queue_bytes) {
+  const std::size_t bound = topic == TopicId::kState ? queue_bytes - queue_bytes / 4 : queue_bytes;
+  return in_use + size <= bound;
 }
 
 void SequenceGaps::Add(std::uint64_t seq) {
@@ -249,7 +265,8 @@ struct Capture::Impl {
   transport::RawReader* state_reader = nullptr;   // vdyn/state
   // Each writer's participant (none: not matched any more, not told apart), asked of DDS once.
   std::unordered_map<std::uint64_t, std::optional<transport::Guid>> participant_of;
-  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps> seen_steps;  // (participant, vehicle)
+  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps>
+      seen_steps;  // (participant, vehicle)
   std::uint64_t state_copies = 0;
 
   // True when this state was recorded already from the other topic; else notes it.
@@ -298,7 +315,9 @@ struct Capture::Impl {
     std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> channels;
     // The copies of worlds and parameters (RepeatChannelMetadata), and which are due.
     std::map<std::pair<TopicId, std::uint32_t>, std::uint16_t> repeat_channels;
-    std::set<std::pair<TopicId, std::uint32_t>> repeats_due;
+    // Due copies: the file offset from which each may be written (none yet: its original's chunk
+    // is still open).
+    std::map<std::pair<TopicId, std::uint32_t>, std::optional<std::uint64_t>> repeats_due;
     std::uint64_t last_log = 0;
     std::map<TopicId, std::uint16_t> schemas;
     std::map<std::uint16_t, std::uint32_t> sequence;
@@ -308,7 +327,7 @@ struct Capture::Impl {
   File file;
   int part = 0;
   std::vector<std::filesystem::path> files;
-  std::uint64_t bytes_closed = 0;  // bytes of files already closed
+  std::uint64_t bytes_closed = 0;            // bytes of files already closed
   std::atomic<std::uint64_t> disk_bytes{0};  // closed files and the open one, for the status
   // The newest world and parameters of each key, re-emitted at the start of each split part.
   struct Latched {
@@ -319,6 +338,13 @@ struct Capture::Impl {
 
   Impl(transport::Participant& p, RecordOptions options) : participant(p), o(std::move(options)) {
     o.writer.live = true;  // a killed recorder leaves its file for `recover`
+    // Before anything is joined or created: an output that cannot be written (a name ending
+    // with a slash, a block device, a socket), and parts, which need names of their own.
+    if (CheckOutputKind(o.out) == OutputKind::kStream && (o.split_bytes > 0 || o.split_s > 0)) {
+      throw OutputError(o.out.string() +
+                        " is a FIFO, a device or a descriptor: --split-mb and --split-s need a "
+                        "file name to number the parts after (nothing was written)");
+    }
     // Room for the whole buffer in each arena from the start (address space; pages are touched
     // as they fill): a growing arena was copied to a new one, into fresh pages, each time it
     // outgrew its capacity - a third of the recorder's CPU once it fell behind at 128 vehicles,
@@ -405,8 +431,8 @@ struct Capture::Impl {
     }
     if (topic == TopicId::kEvents || topic == TopicId::kInput) {
       const std::uint64_t seq = sequence.value_or(0);
-      const auto id = std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key,
-                                      s.info.publication_handle);
+      const auto id =
+          std::make_tuple(topic, topic == TopicId::kEvents ? 0u : key, s.info.publication_handle);
       SequenceGaps& g = sequences[id];
       const std::uint64_t before = g.missing();
       g.Add(seq);
@@ -415,7 +441,7 @@ struct Capture::Impl {
     {
       std::lock_guard<std::mutex> lock(mu);
       const std::size_t in_use = pending.bytes.size() + writer_bytes;
-      if (in_use + s.payload.size() > o.queue_bytes) {
+      if (!Admits(topic, in_use, s.payload.size(), o.queue_bytes)) {
         ++c.dropped;
         return;
       }
@@ -449,7 +475,8 @@ struct Capture::Impl {
     for (const auto& [topic, c] : counts) {
       if (c.messages == 0 && c.lost == 0 && c.dropped == 0) continue;
       line += " | " + TopicShort(topic) + " " + Count(c.messages);
-      if (topic == TopicId::kState || c.bytes > 1'000'000) line += " " + FormatBytes(static_cast<double>(c.bytes));
+      if (topic == TopicId::kState || c.bytes > 1'000'000)
+        line += " " + FormatBytes(static_cast<double>(c.bytes));
       if (c.lost > 0) line += " " + Count(c.lost) + " lost";
       if (c.dropped > 0) line += " " + Count(c.dropped) + " DROPPED";
       if (c.malformed > 0) line += " " + Count(c.malformed) + " malformed";
@@ -486,11 +513,13 @@ struct Capture::Impl {
     m["host"] = host;
     std::string topics;
     for (const transport::TopicSpec& s : transport::AllTopics()) {
-      if (s.id != TopicId::kStates && Wanted(s.id)) topics += (topics.empty() ? "" : ",") + std::string(s.name);
+      if (s.id != TopicId::kStates && Wanted(s.id))
+        topics += (topics.empty() ? "" : ",") + std::string(s.name);
     }
     m["topics"] = topics;
     std::string vehicles;
-    for (std::uint32_t v : o.vehicles) vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
+    for (std::uint32_t v : o.vehicles)
+      vehicles += (vehicles.empty() ? "" : ",") + std::to_string(v);
     m["vehicles"] = vehicles.empty() ? "all" : vehicles;
     m["compression"] = std::string(mcap::CompressionName(o.writer.compression));
     m["rmem_max"] = std::to_string(KernelReceiveBufferMax());  // see ReceiveBufferAdvice
@@ -507,13 +536,28 @@ struct Capture::Impl {
     }
   }
 
-  // A world or parameters message is written once more, in a chunk of its own right after the
-  // chunk that holds it (a world is a megabyte on disk: one copy, not one a minute). Any one chunk
-  // can then be lost (a damaged file, `recover`) and the world the recording ran on is still in it.
-  void WriteRepeats() {
+  // A world or parameters message is written once more, in a chunk of its own at least
+  // kRepeatGap bytes after the chunk that holds it (a world is a megabyte on disk: one copy, not
+  // one a minute). Any one chunk, or any damaged region smaller than the gap, can then be lost
+  // (a damaged file, `recover`) and the world the recording ran on is still in it. A file that
+  // closes sooner gets the copy at its close (then nearer).
+  static constexpr std::uint64_t kRepeatGap = 64 << 10;
+  void WriteRepeats(bool closing) {
     if (file.repeats_due.empty()) return;
+    bool flushed = false;
+    std::vector<std::pair<TopicId, std::uint32_t>> ready;
+    for (auto& [id, at] : file.repeats_due) {
+      if (!at) {
+        if (!flushed) file.w->Flush();  // the original's chunk ends here
+        flushed = true;
+        at = file.w->bytes_written() + kRepeatGap;
+      }
+      if (closing || *at <= file.w->bytes_written()) ready.push_back(id);
+    }
+    if (ready.empty()) return;
     file.w->Flush();
-    for (const auto& id : file.repeats_due) {
+    for (const auto& id : ready) {
+      file.repeats_due.erase(id);
       const auto l = latched.find(id);
       if (l == latched.end()) continue;
       auto ch = file.repeat_channels.find(id);
@@ -529,7 +573,6 @@ struct Capture::Impl {
           std::span<const std::uint8_t>(l->second.data.data(), l->second.data.size()));
     }
     file.w->Flush();
-    file.repeats_due.clear();
   }
 
   std::uint16_t Schema(TopicId topic) {
@@ -546,12 +589,13 @@ struct Capture::Impl {
 
   void CloseFile(const std::string& reason) {
     if (!file.w) return;
-    WriteRepeats();
+    WriteRepeats(/*closing=*/true);
     mcap::StringMap m;
     const std::uint64_t now = LogNow();
     m["ended_utc"] = FormatUtc(now);
     m["reason"] = reason;
-    m["duration_s"] = std::to_string(static_cast<double>(now - static_cast<std::uint64_t>(wall0.ns)) * 1e-9);
+    m["duration_s"] =
+        std::to_string(static_cast<double>(now - static_cast<std::uint64_t>(wall0.ns)) * 1e-9);
     {
       std::lock_guard<std::mutex> lock(counts_mu);
       for (const auto& [topic, c] : counts) {
@@ -563,6 +607,13 @@ struct Capture::Impl {
       }
     }
     file.w->WriteMetadata("vdyn.recording.end", m);
+    if (file.own_messages == 0 && file.w->Discard()) {
+      // Never an empty recording in the place of one that was there.
+      spdlog::warn("vdyn-recorder: nothing was recorded: {} is left as it was",
+                   PartPath().string());
+      file.w.reset();
+      return;
+    }
     file.w->Close();
     bytes_closed += file.w->bytes_written();
     disk_bytes = bytes_closed;
@@ -574,11 +625,14 @@ struct Capture::Impl {
       pb::WorldDescription w;
       if (!w.ParseFromArray(data.data(), static_cast<int>(data.size()))) return;
       std::size_t triangles = 0;
-      for (const pb::Mesh& mesh : w.meshes()) triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+      for (const pb::Mesh& mesh : w.meshes())
+        triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
       char hash[24];
-      std::snprintf(hash, sizeof hash, "%016llx", static_cast<unsigned long long>(w.terrain_hash()));
-      spdlog::info("vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
-                   w.name(), w.server_id(), hash, triangles);
+      std::snprintf(hash, sizeof hash, "%016llx",
+                    static_cast<unsigned long long>(w.terrain_hash()));
+      spdlog::info(
+          "vdyn-recorder: recording world '{}' of server '{}' (terrain hash {}, {} triangles)",
+          w.name(), w.server_id(), hash, triangles);
       file.w->WriteMetadata("vdyn.world", {{"server_id", w.server_id()},
                                            {"name", w.name()},
                                            {"terrain_hash", hash},
@@ -611,7 +665,7 @@ struct Capture::Impl {
       Latched& l = latched[{topic, key}];
       l.publish_time = publish_time;
       l.data.assign(data.begin(), data.end());
-      file.repeats_due.insert({topic, key});
+      file.repeats_due[{topic, key}].reset();  // due once its chunk has ended
     }
   }
 
@@ -635,8 +689,8 @@ struct Capture::Impl {
           // A new part before this message when the current one is full or old enough.
           const bool split_size = o.split_bytes > 0 && file.own_messages > 0 &&
                                   file.w->bytes_written() >= o.split_bytes;
-          const bool split_time = o.split_s > 0 && file.own_messages > 0 &&
-                                  e.log_time >= file.first_log + split_ns;
+          const bool split_time =
+              o.split_s > 0 && file.own_messages > 0 && e.log_time >= file.first_log + split_ns;
           if (split_size || split_time) {
             CloseFile("split");
             ++part;
@@ -646,7 +700,7 @@ struct Capture::Impl {
                        std::span<const std::uint8_t>(work.bytes.data() + e.offset, e.size));
           ++file.own_messages;
         }
-        WriteRepeats();
+        WriteRepeats(/*closing=*/false);
         file.w->FlushIfOlder(LogNow());
         disk_bytes = bytes_closed + file.w->bytes_written();
         {
@@ -685,17 +739,18 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
       // and it hears any other writer of vdyn/state. Where vdyn/states is not permitted (DDS
       // Security), everything on vdyn/state.
       try {
-        impl_->readers.emplace_back(TopicId::kStates, std::make_unique<transport::RawReader>(
-                                                          participant, TopicId::kStates, &impl_->drops,
-                                                          transport::ReaderRole::kRecorder));
+        impl_->readers.emplace_back(
+            TopicId::kStates,
+            std::make_unique<transport::RawReader>(participant, TopicId::kStates, &impl_->drops,
+                                                   transport::ReaderRole::kRecorder));
         role = transport::ReaderRole::kBatchRecorder;
       } catch (const transport::TransportError& e) {
         spdlog::warn("vdyn-recorder: cannot read vdyn/states ({}); every state on vdyn/state",
                      e.what());
       }
     }
-    impl_->readers.emplace_back(s.id, std::make_unique<transport::RawReader>(
-                                          participant, s.id, &impl_->drops, role));
+    impl_->readers.emplace_back(
+        s.id, std::make_unique<transport::RawReader>(participant, s.id, &impl_->drops, role));
   }
   for (auto& [t, reader] : impl_->readers) {
     if (t == TopicId::kStates) impl_->states_reader = reader.get();
@@ -718,7 +773,8 @@ Capture::~Capture() = default;
 std::uint32_t Capture::MatchedWriters(TopicId topic) const {
   std::uint32_t n = 0;  // vdyn/state's: with vdyn/states'
   for (auto& [t, reader] : impl_->readers) {
-    if (t == topic || (topic == TopicId::kState && t == TopicId::kStates)) n += reader->MatchedWriters();
+    if (t == topic || (topic == TopicId::kState && t == TopicId::kStates))
+      n += reader->MatchedWriters();
   }
   return n;
 }
@@ -775,7 +831,8 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       for (std::size_t i = 0; i < m.readers.size(); ++i) {
         const std::uint32_t n = m.readers[i].second->MatchedWriters();
         if (n != matched[i]) {
-          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n, transport::Spec(m.readers[i].first).name);
+          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n,
+                       transport::Spec(m.readers[i].first).name);
           matched[i] = n;
         }
       }
@@ -798,9 +855,10 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       }
       if (dropped > last_dropped && (now - last_warning).ns >= 10'000'000'000) {
         last_warning = now;
-        spdlog::warn("vdyn-recorder is falling behind: {} messages dropped so far (the buffer of {} "
-                     "is full: the disk or the compression cannot keep up)",
-                     dropped, FormatBytes(static_cast<double>(m.o.queue_bytes)));
+        spdlog::warn(
+            "vdyn-recorder is falling behind: {} messages dropped so far (the buffer of {} "
+            "is full: the disk or the compression cannot keep up)",
+            dropped, FormatBytes(static_cast<double>(m.o.queue_bytes)));
       }
       last_dropped = dropped;
       if (m.o.status_line) {

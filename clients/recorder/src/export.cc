@@ -3,9 +3,12 @@
 // so one analysis script reads both).
 #include <unistd.h>
 
+#include <functional>
+#include <iostream>
 #include <map>
 #include <memory>
 #include <set>
+#include <vector>
 
 #include "vdyn/base/time.h"
 #include "vdyn/io/csv.h"
@@ -23,6 +26,80 @@ std::filesystem::path VehiclePath(const std::filesystem::path& csv, std::uint32_
   p.replace_filename(csv.stem().string() + "-v" + std::to_string(id) + csv.extension().string());
   return p;
 }
+
+// CSV files open at once (export --each).
+constexpr std::size_t kOpenAtOnce = 64;
+
+// One pass over the recording that writes the CSV of some vehicles: each written beside its
+// name and renamed when whole, never over the recording (OutputFile).
+class ExportPass {
+ public:
+  struct Range {
+    std::uint64_t from = 0, to = ~0ull, every = 1;
+  };
+  struct Totals {
+    std::uint64_t malformed = 0, unchecked = 0;
+    std::vector<mcap::Metadata> meta;  // of the first pass
+    mcap::ScanResult scan;
+    bool first = true;
+  };
+
+  ExportPass(const ExportOptions& o, const std::vector<std::uint32_t>& vehicles) {
+    for (std::uint32_t id : vehicles) {
+      auto& f = files_[id] = std::make_unique<OutputFile>(
+          o.each ? VehiclePath(o.csv, id) : o.csv, std::vector<std::filesystem::path>{o.file});
+      // The CSV writer opens the temporary file itself; a stream (a FIFO, /dev/stdout) stays
+      // open here until the end, so its reader sees one writer from the first row to the last.
+      if (!f->stream()) ::close(f->Release());
+      writers_[id] = std::make_unique<CsvWriter>(f->temp());
+    }
+  }
+
+  void Scan(const mcap::Reader& reader, const Range& r, Totals& t,
+            const std::function<void(double)>& progress) {
+    RecordingVisitor v;
+    v.wants = [](transport::TopicId topic) { return topic == transport::TopicId::kState; };
+    v.on_progress = progress;
+    const bool first = t.first;
+    v.on_metadata = [&](const mcap::Metadata& m) {
+      if (first) t.meta.push_back(m);
+    };
+    v.on_message = [&](const RecordedMessage& m) {
+      if (m.log_time < r.from || m.log_time > r.to) return;
+      const auto w = writers_.find(m.key);
+      if (w == writers_.end()) return;
+      // The step first, without parsing: decimation skips most states cheaply.
+      if (r.every > 1 && wire::Number(m.data, 3).value_or(0) % r.every != 0) return;
+      if (!state_.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        ++t.malformed;
+        return;
+      }
+      w->second->WriteRow(state_);
+      t.unchecked += m.unchecked ? 1 : 0;
+    };
+    const mcap::ScanResult scan = ScanRecording(reader, v);
+    if (first) t.scan = scan;
+    t.first = false;
+  }
+
+  void Commit(std::ostream& report) {
+    for (auto& [id, w] : writers_) {
+      try {
+        w->Close();
+      } catch (const std::runtime_error& e) {
+        throw OutputError(files_[id]->dest().string() + ": " + e.what());
+      }
+      files_[id]->Commit();
+      report << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
+             << " columns -> " << files_[id]->dest().string() << "\n";
+    }
+  }
+
+ private:
+  std::map<std::uint32_t, std::unique_ptr<OutputFile>> files_;
+  std::map<std::uint32_t, std::unique_ptr<CsvWriter>> writers_;
+  pb::VehicleState state_;
+};
 
 }  // namespace
 
@@ -49,8 +126,8 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
     if (vehicles.count(*o.vehicle) == 0) {
       std::string have;
       for (std::uint32_t v : vehicles) have += (have.empty() ? "" : ", ") + std::to_string(v);
-      out << "vdyn-recorder export: no states of vehicle " << *o.vehicle << " in " << o.file.string()
-          << " (it has vehicle " << have << ")\n";
+      out << "vdyn-recorder export: no states of vehicle " << *o.vehicle << " in "
+          << o.file.string() << " (it has vehicle " << have << ")\n";
       return 2;
     }
     chosen = {*o.vehicle};
@@ -63,58 +140,40 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
         << ": choose one with --vehicle ID, or --each for a file per vehicle\n";
     return 2;
   }
-  // Each CSV is written beside its name and renamed when whole; never over the recording.
-  std::map<std::uint32_t, std::unique_ptr<OutputFile>> files;
-  std::map<std::uint32_t, std::unique_ptr<CsvWriter>> writers;
-  for (std::uint32_t id : chosen) {
-    auto& f = files[id] = std::make_unique<OutputFile>(o.each ? VehiclePath(o.csv, id) : o.csv,
-                                                       std::vector<std::filesystem::path>{o.file});
-    ::close(f->Release());  // the CSV writer opens the temporary file itself
-    writers[id] = std::make_unique<CsvWriter>(f->temp());
-  }
+  // With the CSV on the standard output, what export says goes to the standard error.
+  std::ostream& report = NamesStandardOutput(o.csv) ? std::cerr : out;
   const std::uint64_t start = FirstLogTime(reader);
-  const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
-  const auto to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
-  const auto every = static_cast<std::uint64_t>(std::max(1, o.every));
-  pb::VehicleState state;
-  std::uint64_t malformed = 0, unchecked = 0;
-  std::vector<mcap::Metadata> meta;
+  ExportPass::Range range;
+  range.from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
+  range.to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
+  range.every = static_cast<std::uint64_t>(std::max(1, o.every));
+  // At most kOpenAtOnce files open (each with its 1 MiB buffer): a file of many vehicles
+  // (--each) is read once per batch of them, so memory and descriptors stay bounded whatever
+  // the file holds.
+  ExportPass::Totals totals;
   Progress progress("export");
-  RecordingVisitor v;
-  v.wants = [](transport::TopicId t) { return t == transport::TopicId::kState; };
-  v.on_progress = [&](double f) { progress.Update(f); };
-  v.on_metadata = [&](const mcap::Metadata& m) { meta.push_back(m); };
-  v.on_message = [&](const RecordedMessage& m) {
-    if (m.log_time < from || m.log_time > to) return;
-    const auto w = writers.find(m.key);
-    if (w == writers.end()) return;
-    // The step first, without parsing: decimation skips most states cheaply.
-    if (every > 1 && wire::Number(m.data, 3).value_or(0) % every != 0) return;
-    if (!state.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
-      ++malformed;
-      return;
-    }
-    w->second->WriteRow(state);
-    unchecked += m.unchecked ? 1 : 0;
-  };
-  const mcap::ScanResult scan = ScanRecording(reader, v);
-  progress.Finish();
-  for (auto& [id, w] : writers) {
-    try {
-      w->Close();
-    } catch (const std::runtime_error& e) {
-      throw OutputError(files[id]->dest().string() + ": " + e.what());
-    }
-    files[id]->Commit();
-    out << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
-        << " columns -> " << files[id]->dest().string() << "\n";
+  const std::vector<std::uint32_t> all(chosen.begin(), chosen.end());
+  for (std::size_t at = 0; at < all.size(); at += kOpenAtOnce) {
+    const std::size_t n = std::min(kOpenAtOnce, all.size() - at);
+    ExportPass pass(o, {all.begin() + static_cast<std::ptrdiff_t>(at),
+                        all.begin() + static_cast<std::ptrdiff_t>(at + n)});
+    pass.Scan(reader, range, totals, [&](double f) {
+      progress.Update((static_cast<double>(at) + f * static_cast<double>(n)) /
+                      static_cast<double>(all.size()));
+    });
+    pass.Commit(report);
   }
+  progress.Finish();
+  const mcap::ScanResult& scan = totals.scan;
+  const std::vector<mcap::Metadata>& meta = totals.meta;
+  const std::uint64_t unchecked = totals.unchecked, malformed = totals.malformed;
   // No more integrity than the recording has.
   for (const std::string& line : IntegrityNotes(meta, scan, unchecked, "rows")) {
-    out << "vdyn-recorder export: " << line << "\n";
+    report << "vdyn-recorder export: " << line << "\n";
   }
   if (malformed > 0) {
-    out << "vdyn-recorder export: " << malformed << " state messages did not parse and were skipped\n";
+    report << "vdyn-recorder export: " << malformed
+           << " state messages did not parse and were skipped\n";
     return 1;
   }
   return 0;

@@ -17,6 +17,7 @@
 #include <zlib.h>
 #include <zstd.h>
 
+#include "mapped_file.h"
 #include "vdyn/recorder/output_file.h"
 
 namespace vdyn::mcap {
@@ -30,22 +31,38 @@ constexpr std::uint64_t kFooterRecord = 1 + 8 + kFooterContent;
 
 const char* OpName(std::uint8_t op) {
   switch (op) {
-    case kHeader: return "header";
-    case kFooter: return "footer";
-    case kSchema: return "schema";
-    case kChannel: return "channel";
-    case kMessage: return "message";
-    case kChunk: return "chunk";
-    case kMessageIndex: return "message index";
-    case kChunkIndex: return "chunk index";
-    case kAttachment: return "attachment";
-    case kAttachmentIndex: return "attachment index";
-    case kStatistics: return "statistics";
-    case kMetadata: return "metadata";
-    case kMetadataIndex: return "metadata index";
-    case kSummaryOffset: return "summary offset";
-    case kDataEnd: return "data end";
-    default: return op >= 0x80 ? "private" : "unknown";
+    case kHeader:
+      return "header";
+    case kFooter:
+      return "footer";
+    case kSchema:
+      return "schema";
+    case kChannel:
+      return "channel";
+    case kMessage:
+      return "message";
+    case kChunk:
+      return "chunk";
+    case kMessageIndex:
+      return "message index";
+    case kChunkIndex:
+      return "chunk index";
+    case kAttachment:
+      return "attachment";
+    case kAttachmentIndex:
+      return "attachment index";
+    case kStatistics:
+      return "statistics";
+    case kMetadata:
+      return "metadata";
+    case kMetadataIndex:
+      return "metadata index";
+    case kSummaryOffset:
+      return "summary offset";
+    case kDataEnd:
+      return "data end";
+    default:
+      return op >= 0x80 ? "private" : "unknown";
   }
 }
 
@@ -54,19 +71,33 @@ std::string Hex32(std::uint32_t v) {
   std::snprintf(b, sizeof b, "0x%08x", v);
   return b;
 }
+std::string Hex8(std::uint8_t v) {
+  char b[8];
+  std::snprintf(b, sizeof b, "0x%02x", v);
+  return b;
+}
 
-// --- serialisation (little endian, as the spec says) ----------------------------------------------
+// --- serialisation (little endian, as the spec says)
+// ----------------------------------------------
 
-void PutU8(std::string& o, std::uint8_t v) { o.push_back(static_cast<char>(v)); }
+void PutU8(std::string& o, std::uint8_t v) {
+  o.push_back(static_cast<char>(v));
+}
 template <class T>
 void PutLe(std::string& o, T v) {
   for (std::size_t i = 0; i < sizeof(T); ++i) {
     o.push_back(static_cast<char>(static_cast<std::uint8_t>(v >> (8 * i))));
   }
 }
-void PutU16(std::string& o, std::uint16_t v) { PutLe(o, v); }
-void PutU32(std::string& o, std::uint32_t v) { PutLe(o, v); }
-void PutU64(std::string& o, std::uint64_t v) { PutLe(o, v); }
+void PutU16(std::string& o, std::uint16_t v) {
+  PutLe(o, v);
+}
+void PutU32(std::string& o, std::uint32_t v) {
+  PutLe(o, v);
+}
+void PutU64(std::string& o, std::uint64_t v) {
+  PutLe(o, v);
+}
 void PutStr(std::string& o, std::string_view s) {
   PutU32(o, static_cast<std::uint32_t>(s.size()));
   o.append(s);
@@ -88,7 +119,8 @@ std::size_t OpenRecord(std::string& o, Op op) {
 }
 void CloseRecord(std::string& o, std::size_t at) {
   const std::uint64_t len = o.size() - at - 8;
-  for (int i = 0; i < 8; ++i) o[at + static_cast<std::size_t>(i)] = static_cast<char>(len >> (8 * i));
+  for (int i = 0; i < 8; ++i)
+    o[at + static_cast<std::size_t>(i)] = static_cast<char>(len >> (8 * i));
 }
 
 // Reads fields of one record's content; a field past the end is a malformed record.
@@ -102,7 +134,8 @@ class Cursor {
   T Le(const char* field) {
     Need(sizeof(T), field);
     T v = 0;
-    for (std::size_t i = 0; i < sizeof(T); ++i) v |= static_cast<T>(static_cast<T>(b_[pos_ + i]) << (8 * i));
+    for (std::size_t i = 0; i < sizeof(T); ++i)
+      v |= static_cast<T>(static_cast<T>(b_[pos_ + i]) << (8 * i));
     pos_ += sizeof(T);
     return v;
   }
@@ -272,13 +305,15 @@ unsigned long long ZstdStatedSize(std::span<const std::uint8_t> in) {
   while (at < in.size()) {
     const unsigned long long n = ZSTD_getFrameContentSize(in.data() + at, in.size() - at);
     const std::size_t frame = ZSTD_findFrameCompressedSize(in.data() + at, in.size() - at);
-    if (n == ZSTD_CONTENTSIZE_ERROR || ZSTD_isError(frame) || frame == 0) return ZSTD_CONTENTSIZE_ERROR;
+    if (n == ZSTD_CONTENTSIZE_ERROR || ZSTD_isError(frame) || frame == 0)
+      return ZSTD_CONTENTSIZE_ERROR;
     if (n == ZSTD_CONTENTSIZE_UNKNOWN) {
       known = false;
     } else {
       // Saturates just past what any chunk may claim (total <= limit + 1: no overflow).
-      total = n > kMaxUncompressedChunk ? kMaxUncompressedChunk + 1
-                                        : std::min<unsigned long long>(total + n, kMaxUncompressedChunk + 1);
+      total = n > kMaxUncompressedChunk
+                  ? kMaxUncompressedChunk + 1
+                  : std::min<unsigned long long>(total + n, kMaxUncompressedChunk + 1);
     }
     at += frame;
   }
@@ -295,7 +330,8 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
   }
   const auto gave = [uncompressed_size](const char* codec, std::size_t got) {
     return std::string(codec) + " gave " +
-           (got > uncompressed_size ? "more than " + std::to_string(uncompressed_size) : std::to_string(got)) +
+           (got > uncompressed_size ? "more than " + std::to_string(uncompressed_size)
+                                    : std::to_string(got)) +
            " bytes, the chunk claims " + std::to_string(uncompressed_size);
   };
   if (compression.empty()) {
@@ -321,11 +357,13 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
     ZSTD_DCtx_reset(ctx.get(), ZSTD_reset_session_only);
     ZSTD_inBuffer src{in.data(), in.size(), 0};
     std::size_t used = 0;
-    std::uint8_t probe = 0;  // once `out` holds all it claims: one byte more tells whether it goes on
+    std::uint8_t probe =
+        0;  // once `out` holds all it claims: one byte more tells whether it goes on
     out.clear();
     while (true) {
       const bool full = used == out.size() && !GrowDecompressed(out, used, uncompressed_size);
-      ZSTD_outBuffer dst = full ? ZSTD_outBuffer{&probe, 1, 0} : ZSTD_outBuffer{out.data(), out.size(), used};
+      ZSTD_outBuffer dst =
+          full ? ZSTD_outBuffer{&probe, 1, 0} : ZSTD_outBuffer{out.data(), out.size(), used};
       const std::size_t src_before = src.pos, dst_before = dst.pos;
       const std::size_t left = ZSTD_decompressStream(ctx.get(), &dst, &src);
       if (ZSTD_isError(left)) return std::string("zstd: ") + ZSTD_getErrorName(left);
@@ -346,7 +384,8 @@ std::string Decompress(const std::string& compression, std::span<const std::uint
       return "lz4: cannot create a decompression context";
     }
     std::size_t in_pos = 0, out_pos = 0;
-    std::uint8_t probe = 0;  // once `out` holds all it claims: one byte more tells whether it goes on
+    std::uint8_t probe =
+        0;  // once `out` holds all it claims: one byte more tells whether it goes on
     std::string why;
     out.clear();
     while (true) {
@@ -408,9 +447,12 @@ McapError::McapError(const std::filesystem::path& file, std::uint64_t offset,
 
 std::string_view CompressionName(Compression c) {
   switch (c) {
-    case Compression::kNone: return "";
-    case Compression::kZstd: return "zstd";
-    case Compression::kLz4: return "lz4";
+    case Compression::kNone:
+      return "";
+    case Compression::kZstd:
+      return "zstd";
+    case Compression::kLz4:
+      return "lz4";
   }
   return "";
 }
@@ -437,7 +479,8 @@ struct Writer::Codec {
       LZ4F_preferences_t prefs{};
       prefs.frameInfo.contentSize = in.size();
       out.resize(LZ4F_compressFrameBound(in.size(), &prefs));
-      const std::size_t n = LZ4F_compressFrame(out.data(), out.size(), in.data(), in.size(), &prefs);
+      const std::size_t n =
+          LZ4F_compressFrame(out.data(), out.size(), in.data(), in.size(), &prefs);
       if (LZ4F_isError(n) || n >= in.size()) return {};
       return {out.data(), n};
     }
@@ -448,7 +491,10 @@ struct Writer::Codec {
 Writer::Writer(const std::filesystem::path& path, WriterOptions options)
     : path_(path), options_(std::move(options)), codec_(std::make_unique<Codec>()) {
   recorder::CheckNotAnInput(path, options_.inputs);
-  if (options_.live) {
+  // A name ending with a slash, a block device or a socket is refused before anything (a
+  // folder) is created; a FIFO or a device is written into as a stream (recorder::OutputFile).
+  const bool stream = recorder::CheckOutputKind(path) == recorder::OutputKind::kStream;
+  if (options_.live && !stream) {
     // A new file, written where it will stay (O_EXCL: never over one that appeared meanwhile).
     std::error_code ec;
     if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
@@ -491,6 +537,14 @@ Writer::~Writer() {
   } else if (fd_ >= 0) {
     ::close(fd_);
   }
+}
+
+bool Writer::Discard() {
+  if (closed_ || !out_ || out_->stream()) return false;
+  out_->Abandon();
+  fd_ = -1;
+  closed_ = true;
+  return true;
 }
 
 std::filesystem::path Writer::writing_to() const {
@@ -638,7 +692,9 @@ void Writer::CloseChunk() {
   chunk_index_.clear();
 }
 
-void Writer::Flush() { CloseChunk(); }
+void Writer::Flush() {
+  CloseChunk();
+}
 
 void Writer::FlushIfOlder(std::uint64_t now_ns) {
   if (!chunk_.empty() && now_ns >= chunk_start_ && now_ns - chunk_start_ >= options_.chunk_ns) {
@@ -764,72 +820,109 @@ void Writer::Close() {
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) {
-    throw McapError(path_, offset_, std::string("closing the file failed: ") + std::strerror(errno));
+    throw McapError(path_, offset_,
+                    std::string("closing the file failed: ") + std::strerror(errno));
   }
 }
 
 // --- reader -------------------------------------------------------------------------------------
 
-Reader::Reader(const std::filesystem::path& path) : path_(path) {
+Reader::Reader(const std::filesystem::path& path, Open open) : path_(path), open_(open) {
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) {
     throw McapError(path, 0, std::string("cannot open the file: ") + std::strerror(errno));
   }
   if (S_ISDIR(st.st_mode)) throw McapError(path, 0, "a directory, not an MCAP file");
+  if (!S_ISREG(st.st_mode)) {
+    throw McapError(path, 0,
+                    "not a regular file (a FIFO, a device or a socket): a recording is read from "
+                    "a file");
+  }
   size_ = static_cast<std::uint64_t>(st.st_size);
   if (size_ == 0) throw McapError(path, 0, "empty file (0 bytes): not an MCAP recording");
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) throw McapError(path, 0, std::string("cannot open the file: ") + std::strerror(errno));
-  void* m = ::mmap(nullptr, static_cast<std::size_t>(size_), PROT_READ, MAP_PRIVATE, fd, 0);
+  if (fd < 0)
+    throw McapError(path, 0, std::string("cannot open the file: ") + std::strerror(errno));
+  map_ = std::make_unique<MappedFile>();
+  const bool mapped = map_->Map(fd, size_);
+  const int map_errno = errno;
   ::close(fd);
-  if (m == MAP_FAILED) throw McapError(path, 0, std::string("cannot map the file: ") + std::strerror(errno));
-  data_ = static_cast<const std::uint8_t*>(m);
+  if (!mapped) {
+    throw McapError(path, 0, std::string("cannot map the file: ") + std::strerror(map_errno));
+  }
+  data_ = map_->data();
+  CheckMagic();
+}
+
+Reader::Reader(std::filesystem::path name, std::span<const std::uint8_t> bytes, Open open)
+    : path_(std::move(name)), open_(open), data_(bytes.data()), size_(bytes.size()) {
+  if (size_ == 0) throw McapError(path_, 0, "empty file (0 bytes): not an MCAP recording");
+  CheckMagic();
+}
+
+Reader::~Reader() = default;
+
+void Reader::CheckMagic() {
   const std::size_t n = static_cast<std::size_t>(std::min<std::uint64_t>(size_, 8));
-  if (std::memcmp(data_, kMagic, n) != 0) {
+  int wrong = 0;
+  for (std::size_t i = 0; i < n; ++i) wrong += data_[i] != kMagic[i] ? 1 : 0;
+  CheckIntact();
+  // Salvaging: one damaged byte of eight still says MCAP (a foreign file differs in most).
+  if (wrong > 0 && !(open_ == Open::kSalvage && size_ >= 8 && wrong == 1)) {
     std::string start;
     for (std::size_t i = 0; i < n; ++i) {
       char b[8];
       std::snprintf(b, sizeof b, "%s%02x", i ? " " : "", data_[i]);
       start += b;
     }
-    ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
-    data_ = nullptr;
-    throw McapError(path, 0, "not an MCAP file: it starts with bytes " + start +
-                                 ", not the MCAP magic 89 4d 43 41 50 30 0d 0a");
+    throw McapError(path_, 0,
+                    "not an MCAP file: it starts with bytes " + start +
+                        ", not the MCAP magic 89 4d 43 41 50 30 0d 0a");
   }
-  if (size_ < 8) {
-    ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
-    data_ = nullptr;
-    throw McapError(path, size_, "truncated: the file ends inside the MCAP magic");
-  }
+  magic_damaged_ = wrong > 0;
+  if (size_ < 8) throw McapError(path_, size_, "truncated: the file ends inside the MCAP magic");
 }
 
-Reader::~Reader() {
-  if (data_ != nullptr) ::munmap(const_cast<std::uint8_t*>(data_), static_cast<std::size_t>(size_));
+namespace {
+std::atomic<const std::atomic<bool>*> g_stop_reads{nullptr};
+}  // namespace
+
+void StopReadsWhen(const std::atomic<bool>* flag) {
+  g_stop_reads.store(flag);
+}
+
+void Reader::CheckIntact() const {
+  if (const std::atomic<bool>* stop = g_stop_reads.load(std::memory_order_relaxed);
+      stop != nullptr && stop->load(std::memory_order_relaxed)) {
+    throw Interrupted(path_.string() + ": interrupted (Ctrl-C or SIGTERM) while it was read");
+  }
+  if (!map_) return;
+  if (const std::optional<std::uint64_t> at = map_->fault()) {
+    Fail(*at, "the file changed while it was read: it no longer reaches this offset (it held " +
+                  std::to_string(size_) +
+                  " bytes when it was opened); another program truncated or rewrote it - read "
+                  "it again once it is whole");
+  }
 }
 
 void Reader::Fail(std::uint64_t offset, const std::string& reason) const {
   throw McapError(path_, offset, reason);
 }
 
-std::span<const std::uint8_t> Reader::Bytes(std::uint64_t offset, std::uint64_t length) const {
-  if (offset > size_ || length > size_ - offset) {
-    Fail(offset, "a range of " + std::to_string(length) + " bytes runs past the end of the file");
-  }
-  return {data_ + offset, static_cast<std::size_t>(length)};
-}
-
 std::string Reader::header_library() const {
   if (size_ < 17 || data_[8] != kHeader) return {};
+  std::string library;
   try {
     const std::uint64_t len = Cursor({data_ + 9, 8}).U64("length");
     if (len > size_ - 17) return {};
     Cursor r({data_ + 17, static_cast<std::size_t>(len)});
     r.Str("profile");
-    return r.Str("library");
+    library = r.Str("library");
   } catch (const Malformed&) {
-    return {};
+    library.clear();
   }
+  CheckIntact();
+  return library;
 }
 
 namespace {
@@ -855,7 +948,8 @@ std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t 
   f.op = data[pos];
   f.offset = pos;
   std::uint64_t len = 0;
-  for (int i = 0; i < 8; ++i) len |= static_cast<std::uint64_t>(data[pos + 1 + static_cast<std::uint64_t>(i)]) << (8 * i);
+  for (int i = 0; i < 8; ++i)
+    len |= static_cast<std::uint64_t>(data[pos + 1 + static_cast<std::uint64_t>(i)]) << (8 * i);
   if (f.op == 0) return "opcode 0 is not a record: the file is corrupted";
   if (len > size - pos - 9) {
     return std::string("truncated: a ") + OpName(f.op) + " record of " + std::to_string(len) +
@@ -866,16 +960,35 @@ std::string FrameAt(const std::uint8_t* data, std::uint64_t size, std::uint64_t 
   return {};
 }
 
-// Whether a record's content reads as its opcode says, for resynchronising on it: every field
-// within the record, nothing left over where the format leaves nothing over.
+// An opcode the spec defines (a header only comes first).
+bool KnownOp(std::uint8_t op) {
+  return op > kHeader && op <= kDataEnd;
+}
+
+// Whether a record's content reads exactly as its opcode says: every field within the record,
+// nothing left over. A record whose length or opcode was damaged almost never does.
 bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
   try {
+    Cursor r(c);
     switch (op) {
-      case kSchema:
-        return ParseSchema(c).id != 0;
+      case kHeader:
+        r.Str("profile");
+        r.Str("library");
+        return r.done();
+      case kSchema: {
+        if (r.U16("id") == 0) return false;
+        r.Str("name");
+        r.Str("encoding");
+        r.Str("data");
+        return r.done();
+      }
       case kChannel:
-        ParseChannel(c);
-        return true;
+        r.U16("id");
+        r.U16("schema_id");
+        r.Str("topic");
+        r.Str("message_encoding");
+        r.Map("metadata");
+        return r.done();
       case kMessage:
         return c.size() >= 22;
       case kChunk: {
@@ -885,19 +998,15 @@ bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
                h.records.data() + h.records.size() == c.data() + c.size();
       }
       case kMessageIndex: {
-        Cursor r(c);
         r.U16("channel_id");
         const std::uint32_t n = r.U32("records");
         return n % 16 == 0 && r.Take(n, "records").size() == n && r.done();
       }
-      case kMetadata: {
-        Cursor r(c);
+      case kMetadata:
         r.Str("name");
         r.Map("metadata");
         return r.done();
-      }
       case kAttachment: {
-        Cursor r(c);
         r.U64("log_time");
         r.U64("create_time");
         r.Str("name");
@@ -919,22 +1028,21 @@ bool ContentReads(std::uint8_t op, std::span<const std::uint8_t> c) {
         return true;
       case kSummaryOffset:
         return c.size() == 17;
-      case kMetadataIndex: {
-        Cursor r(c);
+      case kMetadataIndex:
         r.U64("offset");
         r.U64("length");
         r.Str("name");
         return r.done();
-      }
       default:
-        return false;  // a header only comes first; unknown and private: no telling
+        return false;  // unknown and private records: no telling
     }
   } catch (const Malformed&) {
     return false;
   }
 }
 
-// Records of the summary section: met in the data section, they say its data end was lost.
+// Records of the summary section: met in the data section, they are damage (a flipped opcode)
+// or say the data end was lost.
 bool SummaryOnly(std::uint8_t op) {
   return op == kStatistics || op == kChunkIndex || op == kSummaryOffset || op == kMetadataIndex ||
          op == kAttachmentIndex || op == kFooter;
@@ -942,52 +1050,384 @@ bool SummaryOnly(std::uint8_t op) {
 
 }  // namespace
 
-std::optional<std::uint64_t> Reader::NextRecord(std::uint64_t from) const {
-  for (std::uint64_t p = from; p + 9 <= size_; ++p) {
-    const std::uint8_t op = data_[p];
-    if (op == 0 || op > kDataEnd || op == kHeader) continue;
-    Frame f;
-    if (!FrameAt(data_, size_, p, f).empty()) continue;
-    // The frame after it must be whole too (or the file ends there, or the closing magic), and
-    // its own content must read (checked last: the costlier test).
-    const std::uint64_t next = f.end();
-    Frame g;
-    const bool followed = next == size_ ||
-                          (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0) ||
-                          (FrameAt(data_, size_, next, g).empty() && g.op != 0 &&
-                           g.op <= kDataEnd && g.op != kHeader);
-    if (followed && ContentReads(op, f.content)) return p;
-  }
-  return std::nullopt;
-}
+// One scan of a file (Reader::Scan), as its stages: where a verified summary starts (lenient),
+// the data section record by record, then the summary and footer. A strict scan throws at the
+// first problem; a lenient one (`recover`) trusts a record boundary only when the record checks
+// out - a known opcode, a length that fits, a content that reads exactly, followed by another
+// record - and otherwise scans on for the next one that does. It takes the data section for
+// ended only at a data end whose CRC holds or that the footer's verified summary follows.
+class Scanner {
+ public:
+  Scanner(const Reader& reader, const Visitor& v, bool lenient)
+      : r_(reader), v_(v), lenient_(lenient), data_(reader.data_), size_(reader.size_) {}
 
-ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
-  ScanResult res;
-  std::vector<bool> schema_known(65536, false), channel_known(65536, false);
-  std::vector<std::uint8_t> scratch;
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> inner;  // a chunk's messages: offset, end
-  // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
-  std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t>
-      seen;
-  std::uint64_t pos = 8;
-  std::uint64_t last_progress = 0;
-  res.good_until = 8;
-  // Strict: throw. Lenient: record the problem (the caller decides whether to go on).
-  auto problem = [&](std::uint64_t at, const std::string& why) {
-    if (!lenient) Fail(at, why);
-    if (res.problem.empty()) {
-      res.problem = why;
-      res.problem_offset = at;
+  ScanResult Run() {
+    res_.good_until = 8;
+    if (r_.magic_damaged_) {
+      Problem(0, "the MCAP magic at the start is damaged (one byte differs)");
+      res_.damage.push_back({0, 0, res_.problem, std::nullopt, 0});
     }
-  };
-  auto damaged = [&](std::uint64_t at, std::uint64_t length, const std::string& why) -> Damage& {
-    problem(at, why);
-    res.damage.push_back({at, length, why, std::nullopt, 0});
-    return res.damage.back();
-  };
+    if (lenient_) FindVerifiedSummary();
+    if (!DataSection()) return res_;
+    SummarySection();
+    r_.CheckIntact();
+    return res_;
+  }
+
+  // The offset of the next trustworthy record at or after `from` and before `limit`.
+  std::optional<std::uint64_t> NextRecord(std::uint64_t from, std::uint64_t limit) const {
+    for (std::uint64_t p = from; p < limit && p + 9 <= size_; ++p) {
+      if (!KnownOp(data_[p])) continue;
+      Frame f;
+      if (FrameAt(data_, size_, p, f).empty() && Trusted(f)) return p;
+    }
+    return std::nullopt;
+  }
+
+ private:
+  // --- checks ---
+  // A record a lenient scan may step over by its length: its content reads exactly as its
+  // opcode says, and another record (or the end of the file, or the closing magic) follows it.
+  bool Trusted(const Frame& f) const {
+    if (f.op == kHeader ? f.offset != 8 : !KnownOp(f.op)) return false;
+    // Most records read to their last byte exactly, which a wrong length breaks; a message (its
+    // payload takes the rest) and two summary records do not: another record must follow them.
+    if (f.op == kMessage || f.op == kStatistics || f.op == kChunkIndex) {
+      const std::uint64_t next = f.end();
+      const bool followed = next == size_ || size_ - next < 9 || KnownOp(data_[next]) ||
+                            (size_ - next == 8 && std::memcmp(data_ + next, kMagic, 8) == 0);
+      if (!followed) return false;
+    }
+    return ContentReads(f.op, f.content);
+  }
+
+  // Lenient scans: where the summary starts when the footer and the closing magic read and the
+  // summary's CRC holds (the footer vouches for it). The data section cannot reach past it.
+  void FindVerifiedSummary() {
+    if (size_ < 8 + kFooterRecord + 8) return;
+    const std::uint64_t footer = size_ - 8 - kFooterRecord;
+    if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
+        Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
+      return;
+    }
+    Cursor r({data_ + footer + 9, static_cast<std::size_t>(kFooterContent)});
+    std::uint64_t start = r.U64("summary_start");
+    r.U64("summary_offset_start");
+    const std::uint32_t stored = r.U32("summary_crc");
+    if (start == 0) start = footer;  // no summary: the footer follows the data end
+    if (start < 8 + 9 || start > footer || stored == 0) return;
+    const std::uint32_t got =
+        Crc32(0, std::span<const std::uint8_t>(
+                     data_ + start, static_cast<std::size_t>(footer + 1 + 8 + 16 - start)));
+    r_.CheckIntact();
+    if (got == stored) summary_at_ = start;
+  }
+
+  // --- problems ---
+  void Problem(std::uint64_t at, const std::string& why) {
+    if (!lenient_) r_.Fail(at, why);
+    if (res_.problem.empty()) {
+      res_.problem = why;
+      res_.problem_offset = at;
+    }
+  }
+  Damage& Damaged(std::uint64_t at, std::uint64_t length, const std::string& why) {
+    Problem(at, why);
+    res_.damage.push_back({at, length, why, std::nullopt, 0});
+    return res_.damage.back();
+  }
+  // Lenient: leaves out what starts at `pos_` up to the next trustworthy record (or the verified
+  // summary, or the end of the file). False when nothing follows.
+  bool SkipToNextRecord(const std::string& why) {
+    const std::uint64_t limit = summary_at_.value_or(size_);
+    const std::optional<std::uint64_t> next = NextRecord(pos_ + 1, limit);
+    r_.CheckIntact();
+    const std::uint64_t to = next.value_or(limit);
+    ++res_.records_skipped;
+    lost_chunk_ = kNone;
+    if (!next && !summary_at_) {
+      Damaged(pos_, size_ - pos_, why);
+      return false;
+    }
+    Damaged(pos_, to - pos_,
+            why + "; skipped " + std::to_string(to - pos_) +
+                (next ? " bytes to the next valid record" : " bytes to the summary"));
+    pos_ = to;
+    return true;
+  }
+
+  // --- the data section ---
+  // False: the scan stopped (a lenient scan's result says why).
+  bool DataSection() {
+    pos_ = 8;
+    while (!data_end_) {
+      if (v_.on_progress && pos_ - last_progress_ > (16u << 20)) {
+        v_.on_progress(pos_);
+        last_progress_ = pos_;
+      }
+      r_.CheckIntact();
+      if (summary_at_ && pos_ >= *summary_at_) {
+        // The data end record is damaged or missing: the verified summary starts here.
+        Damaged(pos_, 0,
+                "the data end record is damaged or missing; the data section ends at the "
+                "summary, which the footer's CRC vouches for");
+        return false;
+      }
+      if (pos_ == size_) {
+        Problem(pos_,
+                "the file ends without a data end record and footer: the recorder did not "
+                "close it (killed?); " +
+                    kRecoverAdvice);
+        return false;
+      }
+      Frame f;
+      if (const std::string why = FrameAt(data_, size_, pos_, f); !why.empty()) {
+        if (!lenient_) r_.Fail(pos_, why);
+        if (!SkipToNextRecord(why)) return false;
+        continue;
+      }
+      if (pos_ == 8 && f.op != kHeader) {
+        Problem(pos_,
+                std::string("the first record is a ") + OpName(f.op) + " record, not the header");
+        res_.damage.push_back({pos_, 0, res_.problem, std::nullopt, 0});
+      }
+      if (lenient_ && !Trusted(f)) {
+        if (!SkipToNextRecord(Untrusted(f))) return false;
+        continue;
+      }
+      if (f.op != kMessageIndex) lost_chunk_ = kNone;
+      if (!Record(f)) continue;  // it moved pos_ itself
+      pos_ = f.end();
+      res_.good_until = pos_;
+    }
+    return !stopped_;
+  }
+
+  // Why a lenient scan does not trust a record.
+  std::string Untrusted(const Frame& f) const {
+    if (f.op == kHeader && f.offset != 8) return "a second header record (a damaged opcode?)";
+    if (!KnownOp(f.op) && f.op != kHeader) {
+      return std::string("a record of ") + (f.op >= 0x80 ? "private" : "unknown") + " opcode " +
+             Hex8(f.op) + ": a damaged opcode, or another writer's record";
+    }
+    return std::string("a malformed ") + OpName(f.op) + " record (" +
+           std::to_string(f.content.size()) +
+           " bytes): its fields do not read as one (a damaged opcode or length)";
+  }
+
+  // One record; false when it set pos_ itself (skipped).
+  bool Record(const Frame& f) {
+    try {
+      switch (f.op) {
+        case kHeader:
+          if (pos_ != 8) r_.Fail(pos_, "a second header record");  // strict only (untrusted)
+          {
+            Cursor c(f.content);
+            c.Str("profile");
+            c.Str("library");
+          }
+          return true;
+        case kSchema: {
+          const Schema s = ParseSchema(f.content);
+          if (s.id == 0) throw Malformed{"a schema with id 0"};
+          schema_known_[s.id] = true;
+          if (v_.on_schema) v_.on_schema(s);
+          return true;
+        }
+        case kChannel:
+          OnChannel(ParseChannel(f.content));
+          return true;
+        case kMessage:
+          OnLooseMessage(ParseMessage(f.content));
+          return true;
+        case kChunk:
+          OnChunk(f);
+          return true;
+        case kMessageIndex:
+          if (lost_chunk_ != kNone) {
+            Cursor c(f.content);
+            c.U16("channel_id");
+            res_.damage[lost_chunk_].messages += c.U32("records") / 16;
+          }
+          return true;
+        case kMetadata: {
+          const Metadata m = ParseMetadata(f.content);
+          r_.CheckIntact();
+          if (v_.on_metadata) v_.on_metadata(m, pos_);
+          return true;
+        }
+        case kDataEnd:
+          return OnDataEnd(f);
+        default:
+          if (SummaryOnly(f.op)) return OnSummaryRecord(f);
+          return true;  // attachments, private records: nothing to check here
+      }
+    } catch (const Malformed& e) {
+      // Strict: the file is refused. Lenient: the record checked out as a whole (Trusted), so
+      // only a field's meaning is wrong: leave it out.
+      const std::string why = std::string("a malformed ") + OpName(f.op) + " record: " + e.what;
+      if (!lenient_) r_.Fail(pos_, why);
+      Damaged(pos_, f.end() - pos_,
+              why + " (skipped " + std::to_string(f.end() - pos_) + " bytes)");
+      ++res_.records_skipped;
+      lost_chunk_ = kNone;
+      pos_ = f.end();
+      return false;
+    }
+  }
+
+  void OnChannel(const Channel& c) {
+    if (c.schema_id != 0 && !schema_known_[c.schema_id]) {
+      const std::string why = "channel " + std::to_string(c.id) + " names schema " +
+                              std::to_string(c.schema_id) + ", which no schema record defines";
+      if (!lenient_) r_.Fail(pos_, why);
+      Damaged(pos_, 0, why);
+    }
+    channel_known_[c.id] = true;
+    if (v_.on_channel) v_.on_channel(c);
+  }
+
+  void OnLooseMessage(Message m) {
+    if (!channel_known_[m.channel_id]) {
+      const std::string why = "a message on channel " + std::to_string(m.channel_id) +
+                              ", which no channel record defines";
+      if (!lenient_) r_.Fail(pos_, why);
+      // No CRC of its own and no channel before it: as likely another record whose opcode was
+      // damaged (a channel record reads as a message) as a message. Left out.
+      Damaged(pos_, 9 + m.data.size() + 22,
+              why + ", outside any chunk (a damaged opcode?): left out");
+      ++res_.records_skipped;
+      return;
+    }
+    m.unchecked = true;  // only the data section's CRC covers it
+    ++res_.messages;
+    ++res_.messages_unchecked;
+    r_.CheckIntact();
+    if (v_.on_message) v_.on_message(m, pos_);
+    r_.CheckIntact();
+  }
+
+  // A summary record in the data section: the summary itself when the footer vouches for it
+  // (strict scans: the data end is missing), else damage (a flipped opcode).
+  bool OnSummaryRecord(const Frame& f) {
+    if (!lenient_) {
+      if (f.op == kFooter) r_.Fail(pos_, "a footer before the data end record");
+      return true;
+    }
+    const std::string why = std::string("a ") + OpName(f.op) +
+                            " record inside the data section, which no verified summary follows "
+                            "(a damaged opcode, or a summary whose footer is damaged)";
+    if (!SkipToNextRecord(why)) stopped_ = data_end_ = true;
+    return false;
+  }
+
+  bool OnDataEnd(const Frame& f) {
+    Cursor c(f.content);
+    const std::uint32_t stored = c.U32("data_section_crc");
+    const bool crc_holds =
+        stored != 0 &&
+        stored == Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos_)));
+    r_.CheckIntact();
+    // Lenient: believed when its CRC holds, or the verified summary follows it, or (no verified
+    // summary) nothing of the data section's kinds follows it.
+    if (lenient_ && !crc_holds && !(summary_at_ && *summary_at_ == f.end()) &&
+        !(!summary_at_ && !DataFollows(f.end()))) {
+      const bool more = SkipToNextRecord(
+          "a data end record that neither its CRC nor the summary confirms, with records of the "
+          "data section behind it (a damaged opcode?)");
+      if (!more) stopped_ = data_end_ = true;
+      return false;
+    }
+    data_end_ = true;
+    if (stored == 0) {
+      res_.data_crc = ScanResult::DataCrc::kAbsent;
+      return true;
+    }
+    res_.data_crc = crc_holds ? ScanResult::DataCrc::kMatched : ScanResult::DataCrc::kMismatched;
+    if (!crc_holds) {
+      const std::uint32_t crc =
+          Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos_)));
+      Problem(pos_, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
+                        Hex32(crc) + "): the file is corrupted");
+      res_.damage.push_back({pos_, 0,
+                             "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
+                                 Hex32(crc) +
+                                 "): some byte before it is damaged; what no chunk CRC checks is "
+                                 "unchecked",
+                             std::nullopt, 0});
+    }
+    return true;
+  }
+
+  // Whether a record of the data section's own kinds (a chunk, a message, metadata) can be
+  // found from `from` on.
+  bool DataFollows(std::uint64_t from) const {
+    for (std::uint64_t p = from; p + 9 <= size_;) {
+      const std::optional<std::uint64_t> next = NextRecord(p, size_);
+      if (!next) return false;
+      const std::uint8_t op = data_[*next];
+      if (op == kChunk || op == kMessage || op == kMetadata || op == kAttachment) return true;
+      Frame f;
+      FrameAt(data_, size_, *next, f);
+      p = f.end();
+    }
+    return false;
+  }
+
+  void OnChunk(const Frame& f) {
+    ChunkHeader h = ParseChunk(f.content);
+    h.index.chunk_start_offset = pos_;
+    h.index.chunk_length = f.end() - pos_;
+    h.index.uncompressed_crc = h.crc;
+    if (lenient_ && IsCopy(h, f)) return;
+    if (v_.on_chunk && !v_.on_chunk(h.index)) return;
+    std::string why =
+        Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch_);
+    r_.CheckIntact();
+    if (why.empty() && h.crc != 0) {
+      const std::uint32_t got =
+          Crc32(0, std::span<const std::uint8_t>(scratch_.data(), scratch_.size()));
+      if (got != h.crc) {
+        why = "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
+              "): the file is corrupted";
+      }
+    }
+    if (why.empty()) why = InnerRecords(scratch_);
+    if (!why.empty()) {
+      if (!lenient_) r_.Fail(pos_, why);
+      // The chunk's frame is whole: drop the chunk, keep going.
+      ++res_.chunks_skipped;
+      Damaged(pos_, f.end() - pos_, why + " (chunk dropped)").chunk = h.index;
+      lost_chunk_ = res_.damage.size() - 1;
+      return;
+    }
+    DeliverInner(scratch_, h.crc == 0);
+    if (h.crc == 0) ++res_.chunks_unchecked;
+    ++res_.chunks;
+  }
+
+  // Lenient: an exact copy of an earlier chunk is dropped (its messages are kept once).
+  bool IsCopy(const ChunkHeader& h, const Frame& f) {
+    const auto key = std::make_tuple(h.crc, h.index.uncompressed_size, h.index.message_start_time,
+                                     h.records.size());
+    const auto [it, fresh] = seen_.try_emplace(key, pos_);
+    if (fresh) return false;
+    Frame first;
+    FrameAt(data_, size_, it->second, first);
+    if (first.content.size() != f.content.size() ||
+        std::memcmp(first.content.data(), f.content.data(), f.content.size()) != 0) {
+      return false;
+    }
+    Damaged(pos_, f.end() - pos_,
+            "an exact copy of the chunk at offset " + std::to_string(it->second) +
+                " (dropped: its messages are kept once)");
+    ++res_.chunks_duplicated;
+    return true;
+  }
+
   // A chunk's records: checked first (framing, ids), delivered only when all are good.
-  auto inner_records = [&](std::span<const std::uint8_t> recs) -> std::string {
-    inner.clear();
+  std::string InnerRecords(std::span<const std::uint8_t> recs) {
+    inner_.clear();
     for (std::uint64_t p = 0; p < recs.size();) {
       Frame f;
       const std::string why = FrameAt(recs.data(), recs.size(), p, f);
@@ -999,7 +1439,7 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
           ParseChannel(f.content);
         } else if (f.op == kMessage) {
           const Message m = ParseMessage(f.content);
-          if (!channel_known[m.channel_id] && !lenient) {
+          if (!channel_known_[m.channel_id] && !lenient_) {
             return "a message on channel " + std::to_string(m.channel_id) +
                    ", which no channel record defines";
           }
@@ -1007,287 +1447,125 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
       } catch (const Malformed& e) {
         return std::string("inside the chunk: a malformed ") + OpName(f.op) + " record: " + e.what;
       }
-      inner.emplace_back(p, f.end());
+      inner_.push_back(p);
       p = f.end();
     }
     return {};
-  };
-  auto deliver_inner = [&](std::span<const std::uint8_t> recs, std::uint64_t chunk_at,
-                           bool unchecked) {
-    for (const auto& [p, end] : inner) {
+  }
+
+  void DeliverInner(std::span<const std::uint8_t> recs, bool unchecked) {
+    for (const std::uint64_t p : inner_) {
       Frame f;
       FrameAt(recs.data(), recs.size(), p, f);
       if (f.op == kSchema) {
         const Schema s = ParseSchema(f.content);
-        schema_known[s.id] = true;
-        if (v.on_schema) v.on_schema(s);
+        schema_known_[s.id] = true;
+        if (v_.on_schema) v_.on_schema(s);
       } else if (f.op == kChannel) {
         const Channel c = ParseChannel(f.content);
-        channel_known[c.id] = true;
-        if (v.on_channel) v.on_channel(c);
+        channel_known_[c.id] = true;
+        if (v_.on_channel) v_.on_channel(c);
       } else if (f.op == kMessage) {
         Message m = ParseMessage(f.content);
         m.unchecked = unchecked;
-        ++res.messages;
-        if (unchecked) ++res.messages_unchecked;
-        if (v.on_message) v.on_message(m, chunk_at);
+        ++res_.messages;
+        if (unchecked) ++res_.messages_unchecked;
+        if (v_.on_message) v_.on_message(m, pos_);
       }
     }
-  };
-  // Damage to a chunk: the message indexes right after it say how many messages it held.
-  constexpr std::size_t kNone = ~std::size_t{0};
-  std::size_t lost_chunk = kNone;  // its entry in res.damage
-  bool data_end = false;
-  while (!data_end) {
-    if (v.on_progress && pos - last_progress > (16u << 20)) {
-      v.on_progress(pos);
-      last_progress = pos;
-    }
-    if (pos == size_) {
-      problem(pos, "the file ends without a data end record and footer: the recorder did not close "
-                   "it (killed?); " + kRecoverAdvice);
-      return res;
-    }
-    Frame f;
-    if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) {
-      if (!lenient) Fail(pos, why);
-      // A damaged opcode or length, or the end of a file cut short: the next valid record.
-      const std::optional<std::uint64_t> next = NextRecord(pos + 1);
-      if (!next) {
-        damaged(pos, size_ - pos, why);
-        return res;
-      }
-      damaged(pos, *next - pos,
-              why + "; skipped " + std::to_string(*next - pos) + " bytes to the next valid record");
-      ++res.records_skipped;
-      lost_chunk = kNone;
-      pos = *next;
-      continue;
-    }
-    if (pos == 8 && f.op != kHeader) {
-      problem(pos, std::string("the first record is a ") + OpName(f.op) + " record, not the header");
-      res.damage.push_back({pos, 0, res.problem, std::nullopt, 0});
-    }
-    if (lenient && SummaryOnly(f.op)) {
-      // The data end record is missing or damaged: the summary starts here.
-      damaged(pos, 0,
-              std::string("a ") + OpName(f.op) +
-                  " record of the summary before any data end record: the data end "
-                  "record is damaged or missing; the data section ends here");
-      return res;
-    }
-    if (f.op != kMessageIndex) lost_chunk = kNone;
-    try {
-      switch (f.op) {
-        case kHeader:
-          if (pos != 8) {
-            if (!lenient) Fail(pos, "a second header record");
-            damaged(pos, f.end() - pos, "a second header record (skipped)");
-            ++res.records_skipped;
-            break;
-          }
-          {
-            Cursor r(f.content);
-            r.Str("profile");
-            r.Str("library");
-          }
-          break;
-        case kSchema: {
-          const Schema s = ParseSchema(f.content);
-          if (s.id == 0) throw Malformed{"a schema with id 0"};
-          schema_known[s.id] = true;
-          if (v.on_schema) v.on_schema(s);
-          break;
-        }
-        case kChannel: {
-          const Channel c = ParseChannel(f.content);
-          if (c.schema_id != 0 && !schema_known[c.schema_id]) {
-            const std::string why = "channel " + std::to_string(c.id) + " names schema " +
-                                    std::to_string(c.schema_id) +
-                                    ", which no schema record defines";
-            if (!lenient) Fail(pos, why);
-            damaged(pos, 0, why);
-          }
-          channel_known[c.id] = true;
-          if (v.on_channel) v.on_channel(c);
-          break;
-        }
-        case kMessage: {
-          Message m = ParseMessage(f.content);
-          if (!channel_known[m.channel_id]) {
-            const std::string why = "a message on channel " + std::to_string(m.channel_id) +
-                                    ", which no channel record defines";
-            if (!lenient) Fail(pos, why);
-          }
-          m.unchecked = true;  // only the data section's CRC covers it
-          ++res.messages;
-          ++res.messages_unchecked;
-          if (v.on_message) v.on_message(m, pos);
-          break;
-        }
-        case kChunk: {
-          ChunkHeader h = ParseChunk(f.content);
-          h.index.chunk_start_offset = pos;
-          h.index.chunk_length = f.end() - pos;
-          h.index.uncompressed_crc = h.crc;
-          if (lenient) {
-            const auto key = std::make_tuple(h.crc, h.index.uncompressed_size,
-                                             h.index.message_start_time, h.records.size());
-            const auto [it, fresh] = seen.try_emplace(key, pos);
-            if (!fresh) {
-              Frame first;
-              FrameAt(data_, size_, it->second, first);
-              if (first.content.size() == f.content.size() &&
-                  std::memcmp(first.content.data(), f.content.data(), f.content.size()) == 0) {
-                damaged(pos, f.end() - pos,
-                        "an exact copy of the chunk at offset " + std::to_string(it->second) +
-                            " (dropped: its messages are kept once)");
-                ++res.chunks_duplicated;
-                break;
-              }
-            }
-          }
-          if (v.on_chunk && !v.on_chunk(h.index)) break;
-          std::string why = Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch);
-          if (why.empty() && h.crc != 0) {
-            const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
-            if (got != h.crc) {
-              why = "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
-                    "): the file is corrupted";
-            }
-          }
-          if (why.empty()) why = inner_records(scratch);
-          if (!why.empty()) {
-            if (!lenient) Fail(pos, why);
-            // The chunk's frame is whole: drop the chunk, keep going.
-            ++res.chunks_skipped;
-            damaged(pos, f.end() - pos, why + " (chunk dropped)").chunk = h.index;
-            lost_chunk = res.damage.size() - 1;
-            break;
-          }
-          deliver_inner(scratch, pos, h.crc == 0);
-          if (h.crc == 0) ++res.chunks_unchecked;
-          ++res.chunks;
-          break;
-        }
-        case kMessageIndex:
-          if (lost_chunk != kNone) {
-            Cursor r(f.content);
-            r.U16("channel_id");
-            res.damage[lost_chunk].messages += r.U32("records") / 16;
-          }
-          break;
-        case kMetadata: {
-          const Metadata m = ParseMetadata(f.content);
-          if (v.on_metadata) v.on_metadata(m, pos);
-          break;
-        }
-        case kDataEnd: {
-          Cursor r(f.content);
-          const std::uint32_t stored = r.U32("data_section_crc");
-          data_end = true;
-          if (stored == 0) {
-            res.data_crc = ScanResult::DataCrc::kAbsent;
-            break;
-          }
-          const std::uint32_t crc =
-              Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos)));
-          res.data_crc =
-              stored == crc ? ScanResult::DataCrc::kMatched : ScanResult::DataCrc::kMismatched;
-          if (stored != crc) {
-            problem(pos, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
-                             Hex32(crc) + "): the file is corrupted");
-            res.damage.push_back({pos, 0,
-                                  "data section CRC mismatch (stored " + Hex32(stored) +
-                                      ", computed " + Hex32(crc) +
-                                      "): some byte before it is damaged; what no chunk CRC "
-                                      "checks is unchecked",
-                                  std::nullopt, 0});
-          }
-          break;
-        }
-        case kFooter:
-          problem(pos, "a footer before the data end record");
-          return res;
-        default:
-          break;  // attachments, private records: nothing to check here
-      }
-    } catch (const Malformed& e) {
-      const std::string why = std::string("a malformed ") + OpName(f.op) + " record: " + e.what;
-      if (!lenient) Fail(pos, why);
-      // The frame is whole, a field inside it is not: leave the record out. When its length was
-      // the damaged field, the next record is not where it says: resynchronise.
-      std::uint64_t next = f.end();
-      Frame g;
-      const bool next_whole = next == size_ || (FrameAt(data_, size_, next, g).empty() &&
-                                                ContentReads(g.op, g.content));
-      if (!next_whole) next = NextRecord(pos + 1).value_or(size_);
-      damaged(pos, next - pos, why + " (skipped " + std::to_string(next - pos) + " bytes)");
-      ++res.records_skipped;
-      lost_chunk = kNone;
-      pos = next;
-      continue;
-    }
-    pos = f.end();
-    res.good_until = pos;
   }
+
+  // --- the summary and the footer ---
   // The footer at the end of the file (and the magic after it), whose CRC covers the summary;
   // then the summary's records between the data end and the footer. A lenient scan needs none
   // of it (the caller rebuilds the summary), and only says what it found.
-  const std::uint64_t summary_pos = pos;
-  if (size_ - pos < kFooterRecord + 8) {
-    problem(pos, "truncated: the file ends after the data end record, before its footer; " +
-                     kRecoverAdvice);
-    return res;
-  }
-  const std::uint64_t footer = size_ - 8 - kFooterRecord;
-  if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
-      Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
-    problem(footer, "truncated: the file does not end with a footer record and the MCAP magic; " +
+  void SummarySection() {
+    const std::uint64_t summary_pos = pos_;
+    if (size_ - pos_ < kFooterRecord + 8) {
+      Problem(pos_, "truncated: the file ends after the data end record, before its footer; " +
                         kRecoverAdvice);
-    return res;
-  }
-  {
+      return;
+    }
+    const std::uint64_t footer = size_ - 8 - kFooterRecord;
+    if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0 || data_[footer] != kFooter ||
+        Cursor({data_ + footer + 1, 8}).U64("length") != kFooterContent) {
+      Problem(footer, "truncated: the file does not end with a footer record and the MCAP magic; " +
+                          kRecoverAdvice);
+      return;
+    }
     Cursor r({data_ + footer + 9, static_cast<std::size_t>(kFooterContent)});
     const std::uint64_t summary_start = r.U64("summary_start");
     r.U64("summary_offset_start");
     const std::uint32_t stored = r.U32("summary_crc");
-    res.summary = summary_start != 0;
+    res_.summary = summary_start != 0;
     if (stored != 0) {
-      const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
+      const std::uint32_t got = Crc32(
+          0, std::span<const std::uint8_t>(
+                 data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
       if (got != stored) {
-        problem(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
-        return res;
+        Problem(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " +
+                            Hex32(got) + "): the file is corrupted");
+        return;
       }
     }
     if (summary_start != 0 && summary_start != summary_pos) {
-      problem(footer, "the footer places the summary at offset " + std::to_string(summary_start) +
+      Problem(footer, "the footer places the summary at offset " + std::to_string(summary_start) +
                           ", but it starts at " + std::to_string(summary_pos));
-      return res;
+      return;
     }
-  }
-  while (pos < footer) {
-    Frame f;
-    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) {
-      problem(pos, why + " (in the summary)");
-      return res;
-    }
-    if (f.op == kStatistics) {
-      try {
-        res.statistics = ParseStatistics(f.content);
-      } catch (const Malformed& e) {
-        problem(pos, std::string("a malformed statistics record: ") + e.what);
-        return res;
+    for (std::uint64_t pos = summary_pos; pos < footer;) {
+      Frame f;
+      if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) {
+        Problem(pos, why + " (in the summary)");
+        return;
       }
+      if (f.op == kStatistics) {
+        try {
+          res_.statistics = ParseStatistics(f.content);
+        } catch (const Malformed& e) {
+          Problem(pos, std::string("a malformed statistics record: ") + e.what);
+          return;
+        }
+      }
+      pos = f.end();
     }
-    pos = f.end();
+    res_.complete = res_.problem.empty();
+    if (v_.on_progress) v_.on_progress(size_);
   }
-  res.complete = res.problem.empty();
-  if (v.on_progress) v.on_progress(size_);
-  return res;
+
+  static constexpr std::size_t kNone = ~std::size_t{0};
+  const Reader& r_;
+  const Visitor& v_;
+  const bool lenient_;
+  const std::uint8_t* const data_;
+  const std::uint64_t size_;
+  ScanResult res_;
+  std::uint64_t pos_ = 8;
+  std::uint64_t last_progress_ = 0;
+  bool data_end_ = false;
+  bool stopped_ = false;  // lenient: nothing trustworthy follows (the result says why)
+  std::optional<std::uint64_t> summary_at_;  // lenient: where a verified summary starts
+  std::vector<bool> schema_known_ = std::vector<bool>(65536, false);
+  std::vector<bool> channel_known_ = std::vector<bool>(65536, false);
+  std::vector<std::uint8_t> scratch_;
+  std::vector<std::uint64_t> inner_;  // a chunk's records: their offsets
+  // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
+  std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t>
+      seen_;
+  std::size_t lost_chunk_ = kNone;  // a dropped chunk's entry in res_.damage (its indexes count)
+};
+
+ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
+  return Scanner(*this, v, lenient).Run();
 }
 
 std::optional<Reader::Summary> Reader::ReadSummary() const {
+  std::optional<Summary> s = SummaryOf();
+  CheckIntact();  // what it read was there
+  return s;
+}
+
+std::optional<Reader::Summary> Reader::SummaryOf() const {
   if (size_ < 8 + kFooterRecord + 8) return std::nullopt;
   if (std::memcmp(data_ + size_ - 8, kMagic, 8) != 0) return std::nullopt;
   const std::uint64_t footer = size_ - 8 - kFooterRecord;
@@ -1299,22 +1577,35 @@ std::optional<Reader::Summary> Reader::ReadSummary() const {
   const std::uint32_t stored = fr.U32("summary_crc");
   if (summary_start == 0 || summary_start > footer) return std::nullopt;
   if (stored != 0) {
-    const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(data_ + summary_start, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_start)));
+    const std::uint32_t got = Crc32(
+        0,
+        std::span<const std::uint8_t>(
+            data_ + summary_start, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_start)));
     if (got != stored) {
-      Fail(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) + "): the file is corrupted");
+      Fail(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) +
+                       "): the file is corrupted");
     }
   }
   Summary s;
   std::uint64_t pos = summary_start;
   while (pos < footer) {
     Frame f;
-    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty()) Fail(pos, why + " (in the summary)");
+    if (const std::string why = FrameAt(data_, footer, pos, f); !why.empty())
+      Fail(pos, why + " (in the summary)");
     try {
       switch (f.op) {
-        case kSchema: s.schemas.push_back(ParseSchema(f.content)); break;
-        case kChannel: s.channels.push_back(ParseChannel(f.content)); break;
-        case kStatistics: s.statistics = ParseStatistics(f.content); break;
-        case kChunkIndex: s.chunk_indexes.push_back(ParseChunkIndex(f.content)); break;
+        case kSchema:
+          s.schemas.push_back(ParseSchema(f.content));
+          break;
+        case kChannel:
+          s.channels.push_back(ParseChannel(f.content));
+          break;
+        case kStatistics:
+          s.statistics = ParseStatistics(f.content);
+          break;
+        case kChunkIndex:
+          s.chunk_indexes.push_back(ParseChunkIndex(f.content));
+          break;
         case kMetadataIndex: {
           Cursor r(f.content);
           const std::uint64_t off = r.U64("offset");
@@ -1322,7 +1613,8 @@ std::optional<Reader::Summary> Reader::ReadSummary() const {
           s.metadata_offsets.emplace_back(r.Str("name"), off);
           break;
         }
-        default: break;
+        default:
+          break;
       }
     } catch (const Malformed& e) {
       Fail(pos, std::string("a malformed ") + OpName(f.op) + " record in the summary: " + e.what);
@@ -1339,31 +1631,37 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
   if (pos >= size_) Fail(pos, "a chunk index points past the end of the file");
   Frame f;
   if (const std::string why = FrameAt(data_, size_, pos, f); !why.empty()) Fail(pos, why);
-  if (f.op != kChunk) Fail(pos, std::string("a chunk index points at a ") + OpName(f.op) + " record");
+  if (f.op != kChunk)
+    Fail(pos, std::string("a chunk index points at a ") + OpName(f.op) + " record");
   ChunkHeader h;
   try {
     h = ParseChunk(f.content);
   } catch (const Malformed& e) {
     Fail(pos, std::string("a malformed chunk record: ") + e.what);
   }
-  if (const std::string why = Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch); !why.empty()) {
-    Fail(pos, why);
-  }
+  const std::string why =
+      Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch);
+  CheckIntact();
+  if (!why.empty()) Fail(pos, why);
   if (h.crc != 0) {
-    const std::uint32_t got = Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
-    if (got != h.crc) Fail(pos, "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) + "): the file is corrupted");
+    const std::uint32_t got =
+        Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
+    if (got != h.crc)
+      Fail(pos, "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
+                    "): the file is corrupted");
   }
   std::uint64_t p = 0;
   while (p < scratch.size()) {
     Frame r;
-    if (const std::string why = FrameAt(scratch.data(), scratch.size(), p, r); !why.empty()) {
-      Fail(pos, "inside the chunk, byte " + std::to_string(p) + ": " + why);
+    if (const std::string bad = FrameAt(scratch.data(), scratch.size(), p, r); !bad.empty()) {
+      Fail(pos, "inside the chunk, byte " + std::to_string(p) + ": " + bad);
     }
     if (r.op == kMessage) {
       try {
         Message m = ParseMessage(r.content);
         m.unchecked = h.crc == 0;
         on_message(m);
+        CheckIntact();
       } catch (const Malformed& e) {
         Fail(pos, std::string("inside the chunk: a malformed message record: ") + e.what);
       }
@@ -1373,7 +1671,8 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
 }
 
 std::vector<ChunkIndex> Reader::Chunks() const {
-  if (auto s = ReadSummary(); s && s->statistics && s->chunk_indexes.size() == s->statistics->chunk_count) {
+  if (auto s = ReadSummary();
+      s && s->statistics && s->chunk_indexes.size() == s->statistics->chunk_count) {
     return s->chunk_indexes;
   }
   // No summary: walk the record frames (chunk contents are not read), up to the first problem.
@@ -1395,6 +1694,7 @@ std::vector<ChunkIndex> Reader::Chunks() const {
     }
     pos = f.end();
   }
+  CheckIntact();
   return out;
 }
 

@@ -6,7 +6,9 @@
 
 #include <cerrno>
 #include <cstring>
+#include <optional>
 #include <random>
+#include <string_view>
 
 namespace vdyn::recorder {
 
@@ -38,7 +40,52 @@ void SyncFolder(const fs::path& file) {
   }
 }
 
+// The descriptor a path names, when it names one: /dev/stdout, /dev/stderr, /dev/fd/N,
+// /proc/self/fd/N (as given: writing through the name would reopen, or replace, what it points
+// at).
+std::optional<int> DescriptorNamed(const fs::path& dest) {
+  const std::string s = dest.lexically_normal().string();
+  if (s == "/dev/stdout") return 1;
+  if (s == "/dev/stderr") return 2;
+  for (const char* prefix : {"/dev/fd/", "/proc/self/fd/"}) {
+    const std::string_view p(prefix);
+    if (s.rfind(p, 0) != 0 || s.size() == p.size() || s.size() > p.size() + 6) continue;
+    int n = 0;
+    for (std::size_t i = p.size(); i < s.size(); ++i) {
+      if (s[i] < '0' || s[i] > '9') return std::nullopt;
+      n = n * 10 + (s[i] - '0');
+    }
+    return n;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
+
+OutputKind CheckOutputKind(const fs::path& dest) {
+  const std::string s = dest.string();
+  if (s.empty() || s.back() == '/' || dest.filename() == "." || dest.filename() == "..") {
+    throw OutputError((s.empty() ? std::string("''") : s) +
+                      ": not a file name (it ends with a slash or names a folder); give a file "
+                      "name for the output (nothing was written)");
+  }
+  if (DescriptorNamed(dest)) return OutputKind::kStream;
+  struct stat st {};
+  if (::stat(dest.c_str(), &st) != 0 || S_ISREG(st.st_mode) || S_ISDIR(st.st_mode)) {
+    return OutputKind::kFile;  // none yet, a file to replace, or a folder (CheckNotAnInput)
+  }
+  if (S_ISFIFO(st.st_mode) || S_ISCHR(st.st_mode)) return OutputKind::kStream;
+  throw OutputError(s + " is " +
+                    (S_ISBLK(st.st_mode)    ? "a block device"
+                     : S_ISSOCK(st.st_mode) ? "a socket"
+                                            : "not a regular file") +
+                    ": an output is written to a file, a FIFO or a character device; it is left as "
+                    "it was (nothing was written)");
+}
+
+bool NamesStandardOutput(const fs::path& dest) {
+  return DescriptorNamed(dest) == 1;
+}
 
 bool SameFile(const fs::path& a, const fs::path& b) {
   struct stat sa {
@@ -77,7 +124,18 @@ fs::path WriteTarget(const fs::path& dest) {
 
 OutputFile::OutputFile(fs::path dest, std::vector<fs::path> inputs)
     : dest_(std::move(dest)), target_(WriteTarget(dest_)), inputs_(std::move(inputs)) {
+  const OutputKind kind = CheckOutputKind(dest_);
   CheckNotAnInput(dest_, inputs_);
+  if (kind == OutputKind::kStream) {
+    // Into it, as a shell's `>` would (a FIFO blocks here until someone reads it); never
+    // unlinked, never replaced.
+    stream_ = true;
+    const std::optional<int> named = DescriptorNamed(dest_);
+    fd_ = named ? ::fcntl(*named, F_DUPFD_CLOEXEC, 3)
+                : ::open(dest_.c_str(), O_WRONLY | O_NOCTTY | O_CLOEXEC);
+    if (fd_ < 0) throw OutputError(dest_.string() + ": cannot write into it: " + Errno());
+    return;
+  }
   std::error_code ec;
   if (target_.has_parent_path()) {
     fs::create_directories(target_.parent_path(), ec);
@@ -117,12 +175,21 @@ void OutputFile::Keep() {
 void OutputFile::Abandon() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
-  if (!done_ && !temp_.empty()) ::unlink(temp_.c_str());
+  if (!done_ && !stream_ && !temp_.empty()) ::unlink(temp_.c_str());
   done_ = true;
 }
 
 void OutputFile::Commit() {
   if (done_) throw OutputError(dest_.string() + ": already written");
+  if (stream_) {
+    const int fd = fd_;
+    fd_ = -1;
+    done_ = true;
+    if (fd >= 0 && ::close(fd) != 0) {
+      throw OutputError(dest_.string() + ": writing failed: " + Errno());
+    }
+    return;
+  }
   const int fd = fd_ >= 0 ? fd_ : ::open(temp_.c_str(), O_RDONLY | O_CLOEXEC);
   fd_ = -1;
   std::string why;
@@ -148,6 +215,11 @@ void OutputFile::Commit() {
 void MoveInto(const fs::path& finished, const fs::path& dest, const std::vector<fs::path>& inputs) {
   // Checked again: an input may have been put there since the output was started.
   CheckNotAnInput(dest, inputs);
+  if (CheckOutputKind(dest) != OutputKind::kFile) {
+    throw OutputError(dest.string() +
+                      " is not a regular file (a FIFO, a device or a descriptor): it is not "
+                      "replaced by a finished file; give a folder of its own");
+  }
   const fs::path target = WriteTarget(dest);
   if (::rename(finished.c_str(), target.c_str()) != 0) {
     throw OutputError(dest.string() + ": cannot give the finished file its name (rename from " +

@@ -89,7 +89,9 @@ std::vector<double> SurfaceMap(const pb::WorldDescription& w, double x0, double 
     const int nv = m.vertices_size() / 3;
     for (int t = 0; t + 2 < m.indices_size(); t += 3) {
       const std::uint32_t ia = m.indices(t), ib = m.indices(t + 1), ic = m.indices(t + 2);
-      if (ia >= static_cast<std::uint32_t>(nv) || ib >= static_cast<std::uint32_t>(nv) || ic >= static_cast<std::uint32_t>(nv)) continue;
+      if (ia >= static_cast<std::uint32_t>(nv) || ib >= static_cast<std::uint32_t>(nv) ||
+          ic >= static_cast<std::uint32_t>(nv))
+        continue;
       auto V = [&](std::uint32_t i, int k) { return m.vertices(static_cast<int>(3 * i) + k); };
       const double ax = V(ia, 0), ay = V(ia, 1), az = V(ia, 2);
       const double bx = V(ib, 0), by = V(ib, 1), bz = V(ib, 2);
@@ -138,10 +140,14 @@ std::string Escape(const std::string& s) {
 std::string Html(const std::string& s) {
   std::string o;
   for (char c : s) {
-    if (c == '<') o += "&lt;";
-    else if (c == '>') o += "&gt;";
-    else if (c == '&') o += "&amp;";
-    else o += c;
+    if (c == '<')
+      o += "&lt;";
+    else if (c == '>')
+      o += "&gt;";
+    else if (c == '&')
+      o += "&amp;";
+    else
+      o += c;
   }
   return o;
 }
@@ -307,10 +313,12 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   }
   const std::uint32_t vehicle = o.vehicle.value_or(state_counts.begin()->first);
   if (state_counts.count(vehicle) == 0) {
-    out << "vdyn-recorder plot: no states of vehicle " << vehicle << " in " << o.file.string() << "\n";
+    out << "vdyn-recorder plot: no states of vehicle " << vehicle << " in " << o.file.string()
+        << "\n";
     return 2;
   }
-  const std::uint64_t stride = std::max<std::uint64_t>(1, (state_counts[vehicle] + kMaxRows - 1) / kMaxRows);
+  const std::uint64_t stride =
+      std::max<std::uint64_t>(1, (state_counts[vehicle] + kMaxRows - 1) / kMaxRows);
 
   // The columns the figures use, by name; a figure whose columns this build lacks is left out.
   const std::vector<std::string> names = CsvColumns();
@@ -388,7 +396,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   // The data: every stride-th state of the vehicle in the time range.
   const std::uint64_t start = FirstLogTime(reader);
   const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
-  const auto to = o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
+  const auto to =
+      o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
   std::ofstream data(work.path() / "states.dat");
   data << "#";
   for (int c : data_cols) data << " " << names[static_cast<std::size_t>(c)];
@@ -425,7 +434,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     x_hi = std::max(x_hi, x);
     y_lo = std::min(y_lo, y);
     y_hi = std::max(y_hi, y);
-    const double t = static_cast<double>(state.step()) * static_cast<double>(state.step_ns()) * 1e-9;
+    const double t =
+        static_cast<double>(state.step()) * static_cast<double>(state.step_ns()) * 1e-9;
     if (!any) t_first = t;
     t_last = t;
     any = true;
@@ -505,7 +515,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
            "," + std::to_string(height) + (o.format == "png" ? "" : " dynamic") + " font 'sans,10'";
   };
   std::ofstream gp(work.path() / "plot.gp");
-  gp << "# Written by vdyn-recorder plot from " << o.file.filename().string() << "; run: gnuplot plot.gp\n";
+  gp << "# Written by vdyn-recorder plot from " << o.file.filename().string()
+     << "; run: gnuplot plot.gp\n";
   gp << "set grid\nset key outside right top\n";
   std::vector<std::string> made;
   for (const Figure& f : figures) {
@@ -552,16 +563,18 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     const double aspect = (ny * cell_y) / (nx * cell_x);
     const int height = std::clamp(static_cast<int>(740 * aspect) + 180, 360, 1100);
     gp << "set terminal " << terminal(1000, height) << "\nset output 'trajectory." << ext << "'\n";
-    gp << "set title \"Trajectory of vehicle " << vehicle << " over world '" << Escape(world->name())
-       << "'\"\n";
-    gp << "set xlabel 'x, m'\nset ylabel 'y, m'\nset size ratio -1\nset key outside bottom center horizontal\n";
+    gp << "set title \"Trajectory of vehicle " << vehicle << " over world '"
+       << Escape(world->name()) << "'\"\n";
+    gp << "set xlabel 'x, m'\nset ylabel 'y, m'\nset size ratio -1\nset key outside bottom center "
+          "horizontal\n";
     // Surface kinds (world.proto's SurfaceKind), one colour each, and the cells without one.
     // A step palette: each kind one flat colour over [k - 0.5, k + 0.5].
     gp << "set palette defined (";
     const char* colours[] = {"#74a57f", "#9a9a9a", "#e07a1f", "#8d6e63",
                              "#e9c46a", "#c1121f", "#7b2cbf", "#f4f4f4"};
     for (int k = 0; k <= kNoSurface; ++k) {
-      gp << (k ? ", " : "") << k - 0.5 << " '" << colours[k] << "', " << k + 0.5 << " '" << colours[k] << "'";
+      gp << (k ? ", " : "") << k - 0.5 << " '" << colours[k] << "', " << k + 0.5 << " '"
+         << colours[k] << "'";
     }
     gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5
        << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
@@ -573,8 +586,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
        << " with lines lw 2.5 lc rgb '#c1121f' title 'trajectory', "
        << "'states.dat' every ::0::0 using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
        << " with points pt 7 ps 1.5 lc rgb '#003049' title 'start', "
-       << "'' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
-       << " every ::" << rows - 1 << "::" << rows - 1 << " with points pt 5 ps 1.5 lc rgb '#000000' title 'end'\n";
+       << "'' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"] << " every ::" << rows - 1
+       << "::" << rows - 1 << " with points pt 5 ps 1.5 lc rgb '#000000' title 'end'\n";
     made.push_back("trajectory");
   }
   gp << "unset output\n";
@@ -585,11 +598,15 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   // One page that shows them all.
   std::ofstream html(work.path() / "index.html");
   html << "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>vdyn recording: "
-       << Html(o.file.filename().string()) << "</title>\n<style>body{font-family:sans-serif;margin:2em;"
+       << Html(o.file.filename().string())
+       << "</title>\n<style>body{font-family:sans-serif;margin:2em;"
        << "max-width:1250px}img,object{width:100%;border:1px solid #ddd;margin:0.5em 0}"
        << "td{padding:0.2em 1em 0.2em 0}</style></head><body>\n";
-  html << "<h1>" << Html(o.file.filename().string()) << ": vehicle " << vehicle << "</h1>\n<table>\n";
-  auto row = [&](const std::string& k, const std::string& val) { html << "<tr><td>" << k << "</td><td>" << Html(val) << "</td></tr>\n"; };
+  html << "<h1>" << Html(o.file.filename().string()) << ": vehicle " << vehicle
+       << "</h1>\n<table>\n";
+  auto row = [&](const std::string& k, const std::string& val) {
+    html << "<tr><td>" << k << "</td><td>" << Html(val) << "</td></tr>\n";
+  };
   row("simulation time", FormatDuration(t_first) + " .. " + FormatDuration(t_last));
   char b[64];
   std::snprintf(b, sizeof b, "%.1f m", distance);
@@ -597,7 +614,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
   std::snprintf(b, sizeof b, "%.1f km/h", top_kmh);
   row("top speed", b);
   if (world) row("world", world->name() + " (server " + world->server_id() + ")");
-  row("states plotted", std::to_string(rows) + (stride > 1 ? " (every " + std::to_string(stride) + "th)" : ""));
+  row("states plotted",
+      std::to_string(rows) + (stride > 1 ? " (every " + Ordinal(stride) + ")" : ""));
   html << "</table>\n";
   for (const std::string& f : made) {
     if (o.format == "png") {
@@ -611,7 +629,8 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     for (const std::string& s : skipped) html << " " << Html(s);
     html << "</p>\n";
   }
-  html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
+  html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a "
+          "href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
   html.close();
   outputs.push_back("index.html");
   // Into place, all checked against the recording first (none moves when one may not).

@@ -21,30 +21,26 @@ namespace vdyn::recorder {
 
 using transport::TopicId;
 
-std::string FileDescriptorSetOf(const google::protobuf::Descriptor* d) {
-  google::protobuf::FileDescriptorSet set;
-  std::set<std::string> done;
-  std::function<void(const google::protobuf::FileDescriptor*)> add =
-      [&](const google::protobuf::FileDescriptor* f) {
-        if (!done.insert(f->name()).second) return;
-        for (int i = 0; i < f->dependency_count(); ++i) add(f->dependency(i));
-        f->CopyTo(set.add_file());
-      };
-  add(d->file());
-  return set.SerializeAsString();
-}
-
 const google::protobuf::Descriptor* PayloadDescriptor(TopicId topic) {
   switch (topic) {
-    case TopicId::kState: return pb::VehicleState::descriptor();
-    case TopicId::kInput: return pb::DriverInput::descriptor();
-    case TopicId::kControl: return pb::ControlRequest::descriptor();
-    case TopicId::kControlReply: return pb::ControlReply::descriptor();
-    case TopicId::kParams: return pb::VehicleParams::descriptor();
-    case TopicId::kWorld: return pb::WorldDescription::descriptor();
-    case TopicId::kEvents: return pb::SessionEvent::descriptor();
-    case TopicId::kDiagnostics: return pb::Diagnostics::descriptor();
-    case TopicId::kStates: return pb::VehicleStates::descriptor();  // never recorded as such
+    case TopicId::kState:
+      return pb::VehicleState::descriptor();
+    case TopicId::kInput:
+      return pb::DriverInput::descriptor();
+    case TopicId::kControl:
+      return pb::ControlRequest::descriptor();
+    case TopicId::kControlReply:
+      return pb::ControlReply::descriptor();
+    case TopicId::kParams:
+      return pb::VehicleParams::descriptor();
+    case TopicId::kWorld:
+      return pb::WorldDescription::descriptor();
+    case TopicId::kEvents:
+      return pb::SessionEvent::descriptor();
+    case TopicId::kDiagnostics:
+      return pb::Diagnostics::descriptor();
+    case TopicId::kStates:
+      return pb::VehicleStates::descriptor();  // never recorded as such
   }
   return nullptr;
 }
@@ -148,7 +144,9 @@ mcap::ScanResult ScanRecording(const mcap::Reader& reader, const RecordingVisito
   };
   if (v.on_progress) {
     const double size = static_cast<double>(reader.size());
-    mv.on_progress = [&v, size](std::uint64_t at) { v.on_progress(static_cast<double>(at) / size); };
+    mv.on_progress = [&v, size](std::uint64_t at) {
+      v.on_progress(static_cast<double>(at) / size);
+    };
   }
   return reader.Scan(mv);
 }
@@ -194,12 +192,15 @@ std::vector<std::string> IntegrityNotes(const std::vector<mcap::Metadata>& meta,
     std::size_t parts = 0;
     for (const auto& [k, v] : m.values) parts += k.rfind("damage.", 0) == 0 ? 1 : 0;
     if (parts > 0 || lost != "0") {
-      out.push_back("recovered from " + get("from") + ", which was damaged: " +
-                    std::to_string(parts) + " problems found, " + left + " bytes and " + lost +
-                    " messages known lost (`vdyn-recorder info` lists them)");
+      out.push_back("recovered from " + Printable(get("from")) +
+                    ", which was damaged: " + Count(parts, "problem", "problems") + " found, " +
+                    Count(std::strtoull(left.c_str(), nullptr, 10), "byte", "bytes") + " and " +
+                    Count(std::strtoull(lost.c_str(), nullptr, 10), "message", "messages") +
+                    " known lost (`vdyn-recorder info` lists them)");
     }
     if (no_crc != "0") {
-      out.push_back(no_crc + " messages of " + get("from") +
+      out.push_back(Count(std::strtoull(no_crc.c_str(), nullptr, 10), "message", "messages") +
+                    " of " + Printable(get("from")) +
                     " had no CRC that held when it was recovered: they are unchecked");
     }
   }
@@ -234,7 +235,8 @@ std::string FormatDuration(double s) {
   if (s < 60.0) {
     std::snprintf(b, sizeof b, "%.3f s", s);
   } else if (s < 3600.0) {
-    std::snprintf(b, sizeof b, "%d min %.1f s", static_cast<int>(s / 60.0), s - 60.0 * std::floor(s / 60.0));
+    std::snprintf(b, sizeof b, "%d min %.1f s", static_cast<int>(s / 60.0),
+                  s - 60.0 * std::floor(s / 60.0));
   } else {
     std::snprintf(b, sizeof b, "%d h %d min", static_cast<int>(s / 3600.0),
                   static_cast<int>((s - 3600.0 * std::floor(s / 3600.0)) / 60.0));
@@ -264,6 +266,64 @@ std::string FormatUtc(std::uint64_t ns) {
   std::snprintf(b, sizeof b, "%04d-%02d-%02d %02d:%02d:%02d.%03d UTC", tm.tm_year + 1900,
                 tm.tm_mon + 1, tm.tm_mday, tm.tm_hour, tm.tm_min, tm.tm_sec,
                 static_cast<int>((ns / 1'000'000ull) % 1000));
+  return b;
+}
+
+std::string Count(std::uint64_t n, std::string_view one, std::string_view many) {
+  return std::to_string(n) + " " + std::string(n == 1 ? one : many);
+}
+
+std::string Ordinal(std::uint64_t n) {
+  const char* suffix = "th";
+  if (n % 100 < 11 || n % 100 > 13) {
+    suffix = n % 10 == 1 ? "st" : n % 10 == 2 ? "nd" : n % 10 == 3 ? "rd" : "th";
+  }
+  return std::to_string(n) + suffix;
+}
+
+std::string Printable(std::string_view text, std::size_t max) {
+  std::string out;
+  const std::size_t n = text.size();
+  auto escape = [&](unsigned char c) {
+    char b[8];
+    std::snprintf(b, sizeof b, "\\x%02x", c);
+    out += b;
+  };
+  std::size_t i = 0;
+  for (; i < n && out.size() < max; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c < 0x20 || c == 0x7f) {
+      escape(c);
+      continue;
+    }
+    if (c < 0x80) {
+      out += static_cast<char>(c);
+      continue;
+    }
+    // A whole UTF-8 sequence (no overlong two-byte form, no C1 control characters U+0080..9F).
+    const std::size_t len = c >= 0xc2 && c <= 0xdf   ? 2
+                            : c >= 0xe0 && c <= 0xef ? 3
+                            : c >= 0xf0 && c <= 0xf4 ? 4
+                                                     : 0;
+    bool whole = len > 0 && i + len <= n;
+    for (std::size_t k = 1; whole && k < len; ++k) {
+      whole = (static_cast<unsigned char>(text[i + k]) & 0xc0) == 0x80;
+    }
+    if (whole && c == 0xc2 && static_cast<unsigned char>(text[i + 1]) < 0xa0) whole = false;
+    if (!whole) {
+      escape(c);
+      continue;
+    }
+    out.append(text.substr(i, len));
+    i += len - 1;
+  }
+  if (i < n) out += "... (" + std::to_string(n) + " bytes)";
+  return out;
+}
+
+std::string Hex(std::uint64_t v) {
+  char b[24];
+  std::snprintf(b, sizeof b, "0x%016llx", static_cast<unsigned long long>(v));
   return b;
 }
 

@@ -76,7 +76,7 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     dest.replace_filename(o.file.stem().string() + "-recovered" + o.file.extension().string());
   }
   CheckNotAnInput(dest, {o.file});
-  mcap::Reader reader(o.file);
+  mcap::Reader reader(o.file, mcap::Reader::Open::kSalvage);
   // First, without decompressing anything (cheap): the chunks' compression, and whether the
   // data section's CRC holds - then it vouches for the chunks that carry none of their own.
   std::map<std::string, int> compressions;
@@ -262,11 +262,19 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
                   (static_cast<double>(ns) - static_cast<double>(first_log)) * 1e-9);
     return std::string(b);
   };
-  out << o.file.string() << ": recovered " << kept << " messages in " << r.chunks << " chunks";
-  if (r.chunks_skipped > 0) out << "; " << r.chunks_skipped << " damaged chunks dropped";
-  if (r.chunks_duplicated > 0) out << "; " << r.chunks_duplicated << " copies of a chunk dropped";
+  // The copy's chunks are counted as `info` counts them (the writer packs them anew).
+  out << o.file.string() << ": recovered " << Count(kept, "message", "messages") << " from "
+      << Count(r.chunks, "chunk", "chunks") << " of the source, written in "
+      << Count(writer.chunks(), "chunk", "chunks");
+  if (r.chunks_skipped > 0)
+    out << "; " << Count(r.chunks_skipped, "damaged chunk", "damaged chunks") << " dropped";
+  if (r.chunks_duplicated > 0)
+    out << "; " << Count(r.chunks_duplicated, "copy of a chunk", "copies of a chunk") << " dropped";
   if (r.records_skipped > 0)
-    out << "; " << r.records_skipped << " damaged records or runs of bytes skipped";
+    out << "; "
+        << Count(r.records_skipped, "damaged record or run of bytes",
+                 "damaged records or runs of bytes")
+        << " skipped";
   if (!closed) out << " (the file was not closed: no data end record)";
   out << "\n";
   if (!r.damage.empty()) out << "  damage found (" << r.damage.size() << "):\n";
@@ -275,7 +283,7 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     out << "    offset " << d.offset;
     if (d.length > 0) out << ", " << d.length << " bytes";
     out << ": " << d.what;
-    if (d.messages > 0) out << "; " << d.messages << " messages";
+    if (d.messages > 0) out << "; " << Count(d.messages, "message", "messages");
     if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
       out << " (log time " << at(d.chunk->message_start_time) << " .. "
           << at(d.chunk->message_end_time) << ")";

@@ -31,12 +31,6 @@ using transport::TopicId;
 
 namespace {
 
-std::string Hex(std::uint64_t v) {
-  char b[24];
-  std::snprintf(b, sizeof b, "0x%016" PRIx64, v);
-  return b;
-}
-
 // A run of a server's events that never reached the recording: the sequence numbers between
 // `before` and `after`.
 struct Hole {
@@ -66,6 +60,9 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
     if (m.topic == TopicId::kEvents) {
       pb::SessionEvent e;
       if (e.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+        // A sequence no server reaches is damage or a foreign writer: not an event, and not the
+        // end of a hole of 2^64 events.
+        if (e.sequence() >= kImpossibleSequence) return;
         servers[e.server_id()].events.push_back(std::move(e));
       }
     } else {
@@ -96,7 +93,9 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
 // Why a server's events cannot be re-simulated at all, or empty (a hole in its events stops only
 // the stretch it touches).
 std::string CheckServer(const std::string& id, const Server& s) {
-  if (!s.world) return "no world description of server '" + id + "' was recorded (vdyn/world)";
+  if (!s.world) {
+    return "no world description of server '" + Printable(id) + "' was recorded (vdyn/world)";
+  }
   return {};
 }
 
@@ -149,24 +148,28 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
       }
       case FD::CPPTYPE_BOOL:
         if (ra->GetBool(a, f) != rb->GetBool(b, f)) {
-          out.push_back({name, ra->GetBool(a, f) ? "true" : "false", rb->GetBool(b, f) ? "true" : "false"});
+          out.push_back(
+              {name, ra->GetBool(a, f) ? "true" : "false", rb->GetBool(b, f) ? "true" : "false"});
         }
         break;
       case FD::CPPTYPE_UINT64:
         if (ra->GetUInt64(a, f) != rb->GetUInt64(b, f)) {
           const bool hash = f->type() == FD::TYPE_FIXED64;
-          out.push_back({name, hash ? Hex(ra->GetUInt64(a, f)) : std::to_string(ra->GetUInt64(a, f)),
+          out.push_back({name,
+                         hash ? Hex(ra->GetUInt64(a, f)) : std::to_string(ra->GetUInt64(a, f)),
                          hash ? Hex(rb->GetUInt64(b, f)) : std::to_string(rb->GetUInt64(b, f))});
         }
         break;
       case FD::CPPTYPE_INT64:
         if (ra->GetInt64(a, f) != rb->GetInt64(b, f)) {
-          out.push_back({name, std::to_string(ra->GetInt64(a, f)), std::to_string(rb->GetInt64(b, f))});
+          out.push_back(
+              {name, std::to_string(ra->GetInt64(a, f)), std::to_string(rb->GetInt64(b, f))});
         }
         break;
       case FD::CPPTYPE_UINT32:
         if (ra->GetUInt32(a, f) != rb->GetUInt32(b, f)) {
-          out.push_back({name, std::to_string(ra->GetUInt32(a, f)), std::to_string(rb->GetUInt32(b, f))});
+          out.push_back(
+              {name, std::to_string(ra->GetUInt32(a, f)), std::to_string(rb->GetUInt32(b, f))});
         }
         break;
       case FD::CPPTYPE_INT32:
@@ -257,7 +260,7 @@ struct VehicleRun {
       const bool restarts = next < events.size();
       if (from < seg.uncertain_from) {
         seg.uncertain_from = from;
-        seg.hole = "events of server '" + server + "' were lost: " + h.Text() + "; " +
+        seg.hole = "events of server '" + Printable(server) + "' were lost: " + h.Text() + "; " +
                    (restarts ? "re-simulated again from the checkpoint at step " +
                                    std::to_string(events[next]->step())
                              : "no checkpoint after them");
@@ -331,7 +334,7 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
     const std::uint64_t hash = TerrainHash(world->terrain);
     for (const Hole& h : s.holes) {
-      res.holes.push_back("server '" + id + "': " + h.Text());
+      res.holes.push_back("server '" + Printable(id) + "': " + h.Text());
     }
     for (const pb::SessionEvent& e : s.events) {
       if (o.vehicle && e.vehicle_id() != *o.vehicle) continue;
@@ -525,7 +528,8 @@ VerifyResult Verify(const VerifyOptions& o) {
   const mcap::ScanResult scan = ScanRecording(reader, v);
   res.data_crc_checked = scan.data_crc == mcap::ScanResult::DataCrc::kMatched;
   res.resimulated = res.cannot.empty();
-  res.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  res.wall_seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
   return res;
 }
 
@@ -565,7 +569,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   };
   char line[256];
   if (!r.resimulated) {
-    out << o.file.string() << ": cannot re-simulate: " << r.cannot << "\n";
+    // The reason may quote the file (a world's name): shown as text, cut to a line.
+    out << o.file.string() << ": cannot re-simulate: " << Printable(r.cannot, 600) << "\n";
     return 1;
   }
   auto print = [&](const std::vector<FieldDiff>& fields) {
@@ -598,21 +603,24 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     for (const auto& [id, rs] : r.runs) {
       for (const StepRun& run : rs) {
         out << "    vehicle " << id << ", steps " << run.first << ".." << run.last << " ("
-            << run.count << " states): " << (run.why.empty() ? "verified bit for bit" : run.why)
+            << run.count
+            << " states): " << (run.why.empty() ? "verified bit for bit" : Printable(run.why, 600))
             << "\n";
       }
     }
   };
   if (r.first) {
     const Divergence& d = *r.first;
-    std::snprintf(line, sizeof line, "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)",
-                  d.vehicle, d.step, d.t);
+    std::snprintf(line, sizeof line,
+                  "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)", d.vehicle,
+                  d.step, d.t);
     out << o.file.string() << ": " << line << ": the state hash after the step was "
         << Hex(d.recorded_hash) << " in the recording, " << Hex(d.resimulated_hash)
         << " re-simulated\n";
     out << "  state fields that differ at that step (recorded, re-simulated):\n";
     if (print(d.fields) == 0) {
-      out << "    none: the step started from the same state with the same input; the state after it\n"
+      out << "    none: the step started from the same state with the same input; the state after "
+             "it\n"
              "    differs";
       if (!d.next_fields.empty()) {
         out << " (the next recorded state, recorded vs re-simulated):\n";
@@ -621,8 +629,9 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
         out << "\n";
       }
     }
-    out << "  " << d.matched_before << " steps of vehicle " << d.vehicle << " matched bit for bit before it; "
-        << r.mismatched << " of " << r.compared << " compared steps differ\n";
+    out << "  " << d.matched_before << " steps of vehicle " << d.vehicle
+        << " matched bit for bit before it; " << r.mismatched << " of " << r.compared
+        << " compared steps differ\n";
     unverified();
     notes();
     return 1;
@@ -654,7 +663,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
                 r.compared - r.damaged);  // as the stretches listed
   out << o.file.string() << ": " << (r.unverified > 0 ? "PARTLY verified: " : "") << line << " ("
       << ranges << ")";
-  if (r.not_resimulated > 0) out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
+  if (r.not_resimulated > 0)
+    out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
   std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n", r.sim_seconds,
                 r.wall_seconds, r.wall_seconds > 0 ? r.sim_seconds / r.wall_seconds : 0.0);
   out << line;
@@ -695,7 +705,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   std::optional<std::uint64_t> hash_before;
   std::uint64_t last_time = 0;
   {
-    std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>> last;  // vehicle -> (step, hash)
+    std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>>
+        last;  // vehicle -> (step, hash)
     RecordingVisitor v;
     v.wants = [](TopicId t) { return t == TopicId::kState; };
     v.on_message = [&](const RecordedMessage& m) {
@@ -709,7 +720,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
       const std::uint64_t h = fields->state_hash;
       if (m.log_time >= at) {
         step = s;
-        if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s) hash_before = it->second.second;
+        if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s)
+          hash_before = it->second.second;
       }
       last[m.key] = {s, h};
     };
@@ -718,8 +730,9 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   if (!chosen) throw std::runtime_error(file.string() + " holds no vehicle states");
   if (!step) {
     char b[160];
-    std::snprintf(b, sizeof b, "no state of vehicle %u at or after %.3f s: the recording ends at %.3f s", *chosen,
-                  at_s, static_cast<double>(last_time - first) * 1e-9);
+    std::snprintf(b, sizeof b,
+                  "no state of vehicle %u at or after %.3f s: the recording ends at %.3f s",
+                  *chosen, at_s, static_cast<double>(last_time - first) * 1e-9);
     throw std::runtime_error(b);
   }
   std::map<std::string, Server> servers = CollectEvents(reader, {});
@@ -733,10 +746,13 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
       }
     }
   }
-  if (server == nullptr) throw std::runtime_error("no session events of vehicle " + std::to_string(*chosen) + " were recorded");
-  if (std::string why = CheckServer(server_id, *server); !why.empty()) throw std::runtime_error(why);
+  if (server == nullptr)
+    throw std::runtime_error("no session events of vehicle " + std::to_string(*chosen) +
+                             " were recorded");
+  if (std::string why = CheckServer(server_id, *server); !why.empty())
+    throw std::runtime_error(why);
   if (!server->holes.empty()) {
-    throw std::runtime_error("events of server '" + server_id +
+    throw std::runtime_error("events of server '" + Printable(server_id) +
                              "' were lost: " + server->holes.front().Text() +
                              ": the exact state of a moment cannot be rebuilt across them");
   }
@@ -754,19 +770,24 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
     if (e.has_params_changed()) bp.params = e.params_changed().params();
   }
   std::optional<std::uint64_t> replayed_before;
-  if (!replayer.Run(*step, [&](std::uint64_t s, std::uint64_t h) {
-        if (s + 1 == *step) replayed_before = h;
-      }, &why)) {
+  if (!replayer.Run(
+          *step,
+          [&](std::uint64_t s, std::uint64_t h) {
+            if (s + 1 == *step) replayed_before = h;
+          },
+          &why)) {
     throw std::runtime_error(why);
   }
   const Simulator* sim = replayer.simulator();
   if (sim == nullptr || static_cast<std::uint64_t>(sim->state().step) != *step) {
-    throw std::runtime_error("vehicle " + std::to_string(*chosen) + " cannot be re-simulated to step " +
-                             std::to_string(*step) + " (no spawn or checkpoint before it?)");
+    throw std::runtime_error("vehicle " + std::to_string(*chosen) +
+                             " cannot be re-simulated to step " + std::to_string(*step) +
+                             " (no spawn or checkpoint before it?)");
   }
   if (hash_before && replayed_before && *hash_before != *replayed_before) {
-    throw std::runtime_error("the recording does not re-simulate up to step " + std::to_string(*step) +
-                             " (its hash differs before it): run `vdyn-recorder verify` to see where");
+    throw std::runtime_error(
+        "the recording does not re-simulate up to step " + std::to_string(*step) +
+        " (its hash differs before it): run `vdyn-recorder verify` to see where");
   }
   bp.checked = hash_before && replayed_before;
   bp.vehicle = *chosen;
@@ -793,7 +814,8 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
   CheckNotAnInput(new_file, {o.file});  // before anything happens on the network
   const BranchPoint bp = FindBranchPoint(o.file, o.at_s, o.vehicle);
   out << "branch point: " << bp.label << " on world '" << bp.world_name << "'"
-      << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "") << std::endl;
+      << (bp.checked ? "; the re-simulation up to it matches the recording bit for bit" : "")
+      << std::endl;
   transport::Participant participant(o.domain);
   // The live server, and its world: the recording must continue on the terrain it was made on.
   std::optional<pb::WorldDescription> live;
@@ -801,21 +823,24 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
   {
     transport::DropCounters drops;
     transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
+    const auto deadline =
+        std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
     while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
       (void)worlds.Wait(std::chrono::milliseconds(100));
       (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
         if (w.terrain_hash() == bp.terrain_hash) {
           live = w;
         } else {
-          others.insert("'" + w.name() + "' of server '" + w.server_id() + "'");
+          others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) +
+                        "'");
         }
       });
     }
   }
   if (!live) {
-    out << "vdyn-recorder takeover: no server on domain " << o.domain << " runs world '" << bp.world_name
-        << "' (terrain hash " << Hex(bp.terrain_hash) << ") within " << o.wait_s << " s";
+    out << "vdyn-recorder takeover: no server on domain " << o.domain << " runs world '"
+        << bp.world_name << "' (terrain hash " << Hex(bp.terrain_hash) << ") within " << o.wait_s
+        << " s";
     for (const std::string& w : others) out << "; seen: " << w;
     out << "\n";
     return 1;
@@ -845,14 +870,16 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
     recorder.join();
     if (capture_error) std::rethrow_exception(capture_error);
     if (summary) {
-      out << "recorded " << summary->messages << " messages to " << ro.out.string() << " (branched from "
-          << bp.label << ")\n";
+      out << "recorded " << summary->messages << " messages to " << ro.out.string()
+          << " (branched from " << bp.label << ")\n";
     }
     return code;
   };
   // The restore's events must reach the recording: wait until the server's writers are matched.
-  const auto match_deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
-  while (capture.MatchedWriters(TopicId::kEvents) == 0 && std::chrono::steady_clock::now() < match_deadline) {
+  const auto match_deadline =
+      std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
+  while (capture.MatchedWriters(TopicId::kEvents) == 0 &&
+         std::chrono::steady_clock::now() < match_deadline) {
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   transport::ControlClient control(participant, "vdyn-recorder takeover");
@@ -871,16 +898,17 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
   rs->set_branched_from(bp.label);
   const auto reply = control.Call(req, std::chrono::seconds(10));
   if (!reply) {
-    out << "vdyn-recorder takeover: no reply to the restore request: " << control.last_error() << "\n";
-    return finish(1);
-  }
-  if (!reply->accepted()) {
-    out << "vdyn-recorder takeover: server '" << live->server_id() << "' refused the restore: " << reply->reason()
+    out << "vdyn-recorder takeover: no reply to the restore request: " << control.last_error()
         << "\n";
     return finish(1);
   }
-  out << "vehicle " << req.vehicle_id() << " of server '" << live->server_id() << "' continues from "
-      << bp.label << " at step " << reply->applied_step()
+  if (!reply->accepted()) {
+    out << "vdyn-recorder takeover: server '" << Printable(live->server_id())
+        << "' refused the restore: " << Printable(reply->reason()) << "\n";
+    return finish(1);
+  }
+  out << "vehicle " << req.vehicle_id() << " of server '" << Printable(live->server_id())
+      << "' continues from " << bp.label << " at step " << reply->applied_step()
       << ": drive it now (a rig or vdyn-input); recording to " << ro.out.string()
       << (o.duration_s > 0 ? "" : "; Ctrl-C ends") << "\n";
   out.flush();

@@ -5,6 +5,7 @@
 #include <limits>
 #include <map>
 
+#include "vdyn/base/limits.h"
 #include "vdyn/viewer/mesh_util.h"
 #include "vdyn/viewer/textures.h"
 
@@ -24,6 +25,14 @@ std::string CheckWorld(const pb::WorldDescription& world) {
              " indices, not a multiple of 3 (three per triangle)";
     }
     const auto vertices = static_cast<std::uint64_t>(mesh.vertices_size() / 3);
+    // The server leaves out every triangle with a vertex beyond the terrain's bound (issue 33: a
+    // vertex at 1e30 overflowed the viewer's grid cells): a description holding one is foreign.
+    for (int i = 0; i < mesh.vertices_size(); ++i) {
+      if (std::string why = limits::Check(limits::kWorldCoordinateM, mesh.vertices(i));
+          !why.empty()) {
+        return where + ": vertex " + std::to_string(i / 3) + ": " + why;
+      }
+    }
     for (int i = 0; i < mesh.indices_size(); ++i) {
       if (mesh.indices(i) >= vertices) {
         return where + ": index " + std::to_string(mesh.indices(i)) + " of triangle " +

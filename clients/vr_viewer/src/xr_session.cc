@@ -2,6 +2,7 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdlib>
@@ -363,17 +364,24 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
     std::vector<std::int64_t> formats(nf);
     x.Check(xrEnumerateSwapchainFormats(x.session, nf, &nf, formats.data()),
             "xrEnumerateSwapchainFormats");
-    bool found = false;
-    for (std::int64_t want : {kGlRgba8, kGlSrgb8Alpha8}) {
-      for (std::int64_t f : formats) {
-        if (f == want && !found) {
-          x.format = f;
-          found = true;
-        }
-      }
+    // The renderer writes sRGB-encoded colour (its shaders encode; GL_FRAMEBUFFER_SRGB stays
+    // off, so the bytes are stored as written). OpenXR treats every non-sRGB format as linear
+    // and the compositor encodes it again (issue 35: washed out on Monado, the road's median 142
+    // against 69), so an sRGB format is chosen whenever the runtime offers one.
+    const auto offered = [&](std::int64_t f) {
+      return std::find(formats.begin(), formats.end(), f) != formats.end();
+    };
+    if (offered(kGlSrgb8Alpha8)) {
+      x.format = kGlSrgb8Alpha8;
+    } else if (offered(kGlRgba8)) {
+      x.format = kGlRgba8;
+      spdlog::warn(
+          "OpenXR: runtime '{}' offers no sRGB swapchain format (GL_SRGB8_ALPHA8): the "
+          "headset will show the colours lighter than the desktop window",
+          x.runtime);
+    } else {
+      throw XrError("OpenXR runtime offers neither GL_SRGB8_ALPHA8 nor GL_RGBA8 swapchains");
     }
-    if (!found)
-      throw XrError("OpenXR runtime offers neither GL_RGBA8 nor GL_SRGB8_ALPHA8 swapchains");
     for (int e = 0; e < 2; ++e) {
       const auto& cv = x.config_views[static_cast<std::size_t>(e)];
       x.CreateSwapchain(x.eyes[static_cast<std::size_t>(e)],

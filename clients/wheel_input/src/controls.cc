@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <string>
+#include <utility>
 
+#include "vdyn/base/gearbox.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/client/driver_input.h"
 
@@ -15,6 +20,54 @@ void ApplyParams(const pb::VehicleParams& p, VehicleInfo& info) {
   if (p.has_steering_ratio() && p.steering_ratio() > 0) info.steering_ratio = p.steering_ratio();
   if (p.has_steering_lock() && p.steering_lock() > 0) info.steering_lock = p.steering_lock();
   if (p.has_b() && p.has_c() && p.b() + p.c() > 0) info.wheelbase_m = p.b() + p.c();
+  if (info.model == pb::VEHICLE_MODEL_FULL) {
+    info.gear_count = static_cast<int>(p.gear_count());
+    info.gear_ratio_first = p.gear_ratio_first();
+    info.gear_ratio_top = p.gear_ratio_top();
+    info.final_drive_ratio = p.final_drive_ratio();
+    info.engine_rpm_limit = p.engine_rpm_limit();
+    info.wheel_radius_m = p.lr().has_radius() ? p.lr().radius() : p.lf().radius();
+  } else {
+    info.gear_count = 0;
+  }
+}
+
+namespace {
+std::string GearName(int gear) {
+  if (gear < 0) return "reverse";
+  if (gear == 0) return "automatic";
+  static const char* const kSuffix[] = {"th", "st", "nd", "rd"};
+  const int last = gear % 10;
+  const bool teen = gear % 100 >= 11 && gear % 100 <= 13;
+  return std::to_string(gear) + (teen || last > 3 ? "th" : kSuffix[last]);
+}
+}  // namespace
+
+std::string InputBuilder::ShiftRefusal(int to, const VehicleInfo& v) const {
+  if (!v.speed_known) return {};
+  char buf[160];
+  const double speed = v.speed_kmh;
+  // Into reverse, or out of it, only at a standstill (the car would be driven against its motion).
+  constexpr double kStandstillKmh = 2.0;
+  if ((to < 0) != (gear_ < 0) && std::abs(speed) > kStandstillKmh) {
+    std::snprintf(buf, sizeof buf, "%s while moving at %.0f km/h: stop first",
+                  to < 0 ? "reverse" : "out of reverse", std::abs(speed));
+    return buf;
+  }
+  // A forward gear that would turn the engine past its limit at this speed.
+  if (to > 0 && v.gear_count > 0 && v.wheel_radius_m > 0 && v.engine_rpm_limit > 0) {
+    const double ratio = base::ForwardGearRatio(v.gear_ratio_first, v.gear_ratio_top,
+                                                v.gear_count, std::min(to, v.gear_count));
+    const double rpm = std::abs(speed) / 3.6 / v.wheel_radius_m * ratio * v.final_drive_ratio *
+                       60.0 / (2.0 * std::numbers::pi);
+    if (rpm > v.engine_rpm_limit) {
+      std::snprintf(buf, sizeof buf,
+                    "%s at %.0f km/h: the engine at %.0f rpm, past its %.0f limit",
+                    GearName(to).c_str(), std::abs(speed), rpm, v.engine_rpm_limit);
+      return buf;
+    }
+  }
+  return {};
 }
 
 SteerCommand ToSteer(double hand_angle_rad, const VehicleInfo& v, bool road_wheel_only) {
@@ -43,8 +96,21 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
   const std::uint32_t released = previous_buttons_ & ~c.buttons;
   previous_buttons_ = c.buttons;
 
-  if (pressed & pb::BUTTON_PADDLE_RIGHT) gear_ = std::min(gear_ + 1, params_.forward_gears);
-  if (pressed & pb::BUTTON_PADDLE_LEFT) gear_ = std::max(gear_ - 1, -1);
+  // A paddle press shifts unless the shift would over-rev the engine or reverse while moving
+  // (issue 31: E from automatic took 1st at 87 km/h, 8,482 rpm; Q passed into reverse at speed).
+  for (const auto& [bit, step] : {std::pair{pb::BUTTON_PADDLE_RIGHT, 1}, {pb::BUTTON_PADDLE_LEFT, -1}}) {
+    if ((pressed & static_cast<std::uint32_t>(bit)) == 0) continue;
+    const int to = std::clamp(gear_ + step, -1, params_.forward_gears);
+    if (to == gear_) continue;
+    if (std::string why = ShiftRefusal(to, v); !why.empty()) {
+      shift_refusal_ = std::move(why);
+      shift_refused_at_ = now;
+      ++shifts_refused_;
+      continue;
+    }
+    gear_ = to;
+    if (gear_ < 0) cruise_on_ = false;  // no cruise control backwards
+  }
 
   if (pressed & pb::BUTTON_CRUISE_TOGGLE) {
     if (cruise_on_) {
@@ -72,7 +138,12 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
   }
   if (c.brake > params_.cruise_cancel_brake) cruise_on_ = false;
 
-  if (pressed & pb::BUTTON_RESET) reset_request_ = true;
+  if (pressed & pb::BUTTON_RESET) {
+    // The vehicle starts again at rest: in the starting gear mode (automatic), cruise off.
+    reset_request_ = true;
+    gear_ = 0;
+    cruise_on_ = false;
+  }
 
   // The e-stop button latches at once; holding it for estop_rearm_hold while latched re-arms.
   if (pressed & pb::BUTTON_ESTOP) {

@@ -45,22 +45,6 @@ bool NamesIds(const pb::WheelMapping& m, std::uint16_t vid, std::uint16_t pid) {
 
 }  // namespace
 
-const char* KindName(DeviceInfo::Kind k) {
-  switch (k) {
-    case DeviceInfo::Kind::kUserFile:
-      return "user mapping";
-    case DeviceInfo::Kind::kTable:
-      return "built-in table";
-    case DeviceInfo::Kind::kGeneric:
-      return "generic wheel";
-    case DeviceInfo::Kind::kBrokenFile:
-      return "broken mapping file";
-    case DeviceInfo::Kind::kNotAWheel:
-      return "not a wheel";
-  }
-  return "?";
-}
-
 SdlContext::SdlContext(bool want_video) {
   SDL_SetHint(SDL_HINT_JOYSTICK_ALLOW_BACKGROUND_EVENTS, "1");
   SDL_SetHint(SDL_HINT_NO_SIGNAL_HANDLERS, "1");

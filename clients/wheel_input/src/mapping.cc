@@ -135,6 +135,38 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
     }
     if (c.has_dead_zone()) CheckRange(why, "combined.dead_zone", limits::kDeadZone, c.dead_zone());
   }
+  // Two controls on one axis of one device would move together (issue 33: throttle and brake on
+  // one axis were accepted, so every press both drove and braked); one shared pedal axis is what
+  // `combined` describes.
+  {
+    struct Use {
+      const char* name;
+      bool pedal_device;
+      int axis;
+    };
+    std::vector<Use> uses;
+    if (s.has_axis()) uses.push_back({"steer", false, s.axis()});
+    const std::pair<const char*, const pb::PedalAxis*> pedals[] = {{"throttle", &m.throttle()},
+                                                                   {"brake", &m.brake()},
+                                                                   {"clutch", &m.clutch()},
+                                                                   {"handbrake", &m.handbrake()}};
+    for (const auto& [name, p] : pedals) {
+      if (p->has_axis()) uses.push_back({name, p->on_pedal_device(), p->axis()});
+    }
+    if (m.has_combined() && m.combined().has_axis()) {
+      uses.push_back({"combined", m.combined().on_pedal_device(), m.combined().axis()});
+    }
+    for (std::size_t i = 0; i < uses.size(); ++i) {
+      for (std::size_t j = 0; j < i; ++j) {
+        if (uses[i].axis != uses[j].axis || uses[i].pedal_device != uses[j].pedal_device) continue;
+        why.push_back(std::string(uses[j].name) + " and " + uses[i].name + " are both on axis " +
+                      std::to_string(uses[i].axis) + " of the " +
+                      (uses[i].pedal_device ? "pedal device" : "wheel") +
+                      ": each control needs an axis of its own (throttle and brake on one "
+                      "pedal axis: `combined`)");
+      }
+    }
+  }
   const bool pedal_device = m.pedal_vendor_id() != 0 || m.pedal_product_id() != 0;
   for (const pb::PedalAxis* p : {&m.throttle(), &m.brake(), &m.clutch(), &m.handbrake()}) {
     if (p->has_axis() && p->on_pedal_device() && !pedal_device) {

@@ -294,6 +294,11 @@ void RigLoop::DrawWindow() {
   v.have_state = feed_.state() != nullptr;
   v.speed_kmh = info_.speed_kmh;
   v.input = msg_;
+  // A refused shift stays on the window for 3 s: long enough to read why.
+  if (builder_.shifts_refused() > 0 &&
+      base::MonotonicNow() - builder_.shift_refused_at() < base::Seconds(3)) {
+    v.shift_refusal = builder_.shift_refusal();
+  }
   v.steer_fraction = steer_fraction_;
   v.hand_angle_deg = builder_.last_hand_angle_rad() * 180.0 / std::numbers::pi;
   v.ffb_present = ffb_ && ffb_->params().peak_torque_nm > 0;

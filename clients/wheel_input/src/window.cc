@@ -179,6 +179,10 @@ std::vector<WindowItem> LayoutWindow(const WindowView& v, int width) {
           : (in.cruise_set_kmh() > 0 ? fmt::format("OFF (SET {:.0f})", in.cruise_set_kmh())
                                      : "OFF");
   l.Line("GEAR " + gear + "   CRUISE " + cruise, white);
+  if (!v.shift_refusal.empty()) {
+    l.Line("SHIFT REFUSED:", Rgb(255, 170, 60));
+    l.Line("  " + v.shift_refusal, Rgb(255, 170, 60));
+  }
   const std::uint32_t b = in.buttons();
   std::string buttons = "PADDLES ";
   buttons += (b & pb::BUTTON_PADDLE_LEFT) ? "[L]" : " L ";

@@ -130,6 +130,18 @@ std::uint32_t Le16(const std::string& b, std::size_t at) {
 }
 std::uint32_t Le32(const std::string& b, std::size_t at) { return Le16(b, at) | Le16(b, at + 2) << 16; }
 
+// A height map's size: at least 2 x 2 pixels, at most 64 million.
+void CheckHeightMapSize(const std::string& name, int w, int h) {
+  if (w < 2 || h < 2) {
+    throw WorldError(name + ": a height map needs at least 2 x 2 pixels, got " +
+                     std::to_string(w) + " x " + std::to_string(h));
+  }
+  if (static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) > 64'000'000) {
+    throw WorldError(name + ": a " + std::to_string(w) + " x " + std::to_string(h) +
+                     " height map is larger than 64 million pixels");
+  }
+}
+
 void CheckImageData(const std::string& name, const std::string& b) {
   auto short_data = [&](std::uint64_t need, std::uint64_t have, const std::string& what) {
     throw WorldError(name + ": the image data is cut short: " + what + " need " +
@@ -226,6 +238,9 @@ TriangleMesh HeightmapFromBytes(const std::string& bytes, const std::string& nam
   const auto* data = reinterpret_cast<const stbi_uc*>(bytes.data());
   const int size = static_cast<int>(bytes.size());
   int w = 0, h = 0, channels = 0;
+  // The size from the header first: the pixel limit is checked before anything is decoded
+  // (issue 33: a 389 KB PNG of 40000 x 40000 pixels took 3.5 GB before it was refused).
+  if (stbi_info_from_memory(data, size, &w, &h, &channels) != 0) CheckHeightMapSize(name, w, h);
   std::vector<double> heights;
   if (stbi_is_16_bit_from_memory(data, size) != 0) {
     stbi_us* px = stbi_load_16_from_memory(data, size, &w, &h, &channels, 1);
@@ -244,14 +259,7 @@ TriangleMesh HeightmapFromBytes(const std::string& bytes, const std::string& nam
     for (double& v : heights) v /= 255.0;
     stbi_image_free(px);
   }
-  if (w < 2 || h < 2) {
-    throw WorldError(name + ": a height map needs at least 2 x 2 pixels, got " +
-                     std::to_string(w) + " x " + std::to_string(h));
-  }
-  if (static_cast<std::uint64_t>(w) * static_cast<std::uint64_t>(h) > 64'000'000) {
-    throw WorldError(name + ": a " + std::to_string(w) + " x " + std::to_string(h) +
-                     " height map is larger than 64 million pixels");
-  }
+  CheckHeightMapSize(name, w, h);
   // Pixel (i, j) -> x = (i - (w-1)/2) * cell, y = ((h-1)/2 - j) * cell: image up is north (+Y).
   TriangleMesh mesh;
   mesh.name = fs::path(name).filename().string();

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 
+#include "vdyn/base/gearbox.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/base/text.h"
 
@@ -127,10 +128,10 @@ void DeriveFullModel(Params& p) {
   Params::Derived& d = p.full;
   const int n = p.gear_count;
   // Gear ratios in geometric progression from the first to the top gear.
-  d.ratio_step = n > 1 ? std::pow(p.gear_ratio_top / p.gear_ratio_first, 1.0 / (n - 1)) : 1.0;
+  d.ratio_step = base::GearRatioStep(p.gear_ratio_first, p.gear_ratio_top, n);
   d.gear_ratio.fill(0.0);
   for (int g = 1; g <= n; ++g) {
-    d.gear_ratio[g] = g == n ? p.gear_ratio_top : p.gear_ratio_first * std::pow(d.ratio_step, g - 1);
+    d.gear_ratio[g] = base::ForwardGearRatio(p.gear_ratio_first, p.gear_ratio_top, n, g);
   }
   // Brush law with adhesion limit mu_0 and sliding friction mu_slide (docs/model.md): with
   // r = mu_slide / mu_0 it peaks at z* = 1 / (3 - 2 r) with F / Fz = mu_0 g(r),
@@ -293,7 +294,7 @@ void CheckFullModel(const Params& p, std::vector<ParamIssue>& out) {
   if (p.gear_count > 1 && p.gear_ratio_top <= p.gear_ratio_first) {
     // After an upshift at shift_up_rpm the engine must land above shift_down_rpm, or the
     // automatic would shift back at once.
-    const double step = std::pow(p.gear_ratio_top / p.gear_ratio_first, 1.0 / (p.gear_count - 1));
+    const double step = base::GearRatioStep(p.gear_ratio_first, p.gear_ratio_top, p.gear_count);
     need(p.shift_up_rpm * step > p.shift_down_rpm, "shift_down_rpm",
          "must be below shift_up_rpm times the ratio step between gears (" +
              FormatNumber(p.shift_up_rpm * step) + " rpm), or the automatic would hunt");

@@ -9,6 +9,8 @@
 #include <Eigen/Geometry>
 #include <embree3/rtcore.h>
 
+#include "vdyn/base/limits.h"
+
 namespace vdyn {
 
 struct Terrain::Impl {
@@ -31,7 +33,8 @@ void EmbreeError(void* user, RTCError code, const char* /*str*/) {
 // coordinate is tested on its own: a NaN compares false, and a reduction such as maxCoeff() may
 // skip it (vectorised max returns the other operand), so `v nan 0 0` must not pass as 0.
 bool UsableVertex(const Eigen::Vector3d& v) {
-  return std::abs(v.x()) < 1e9 && std::abs(v.y()) < 1e9 && std::abs(v.z()) < 1e9;
+  constexpr double kFar = limits::kWorldCoordinateM.hi;
+  return std::abs(v.x()) < kFar && std::abs(v.y()) < kFar && std::abs(v.z()) < kFar;
 }
 }  // namespace
 
@@ -55,6 +58,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
   const auto mesh_index = static_cast<std::uint32_t>(meshes_.size());
   const auto base = static_cast<std::uint32_t>(planes_.size());
   std::vector<std::array<std::uint32_t, 3>> kept_tris;
+  std::vector<bool> vertex_used(nv, false);
   for (std::size_t t = 0; t < mesh.triangles.size(); ++t) {
     const auto& tri = mesh.triangles[t];
     for (std::uint32_t i : tri) {
@@ -74,14 +78,33 @@ void Terrain::AddMesh(TriangleMesh mesh) {
       continue;
     }
     const Eigen::Vector3d un = n / len;
-    planes_.push_back({un, un.dot(a), mesh_index, static_cast<std::uint32_t>(t)});
+    planes_.push_back({un, un.dot(a), mesh_index, static_cast<std::uint32_t>(kept_tris.size())});
     kept_tris.push_back(tri);
+    for (std::uint32_t i : tri) vertex_used[i] = true;
   }
+  // The mesh kept is the terrain traced: the dropped triangles, and the vertices only they used,
+  // leave it, so a world description (convert.cc) holds exactly what the traces can hit (issue 33:
+  // a viewer drew `v nan 0 0` as a slab 1e10 m high, and a vertex at 1e30 overflowed its floats).
+  if (kept_tris.size() != mesh.triangles.size()) {
+    std::vector<std::uint32_t> new_index(nv, 0);
+    std::vector<Eigen::Vector3d> kept_vertices;
+    for (std::size_t i = 0; i < nv; ++i) {
+      if (!vertex_used[i]) continue;
+      new_index[i] = static_cast<std::uint32_t>(kept_vertices.size());
+      kept_vertices.push_back(mesh.vertices_W[i]);
+    }
+    for (auto& tri : kept_tris) {
+      for (std::uint32_t& i : tri) i = new_index[i];
+    }
+    mesh.vertices_W = std::move(kept_vertices);
+    mesh.triangles = kept_tris;
+  }
+  const std::size_t n_kept_vertices = mesh.vertices_W.size();
   if (!kept_tris.empty()) {
     RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     // Embree reads vertices as 16-byte vectors: one float of padding per vertex (stride 16 bytes).
     auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(
-        geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), nv));
+        geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 4 * sizeof(float), n_kept_vertices));
     auto* ib = static_cast<std::uint32_t*>(rtcSetNewGeometryBuffer(
         geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(std::uint32_t),
         kept_tris.size()));
@@ -89,7 +112,7 @@ void Terrain::AddMesh(TriangleMesh mesh) {
       rtcReleaseGeometry(geom);
       throw std::runtime_error("Embree could not allocate buffers for mesh '" + mesh.name + "'");
     }
-    for (std::size_t i = 0; i < nv; ++i) {
+    for (std::size_t i = 0; i < n_kept_vertices; ++i) {
       const Eigen::Vector3d& v = mesh.vertices_W[i];
       const bool ok = UsableVertex(v);
       vb[4 * i + 0] = ok ? static_cast<float>(v.x()) : 0.0f;

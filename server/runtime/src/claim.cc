@@ -59,4 +59,25 @@ bool ServerClaim::Clashes(const ServerClaim& other) const {
   });
 }
 
+std::vector<bool> ChooseRunners(const std::vector<const ServerClaim*>& by_guid) {
+  std::vector<bool> runs(by_guid.size(), false);
+  std::vector<const ServerClaim*> chosen;
+  auto free_of_chosen = [&](const ServerClaim& c) {
+    return std::none_of(chosen.begin(), chosen.end(),
+                        [&](const ServerClaim* k) { return c.Clashes(*k); });
+  };
+  for (std::size_t i = 0; i < by_guid.size(); ++i) {
+    if (by_guid[i]->running) {
+      runs[i] = true;
+      chosen.push_back(by_guid[i]);
+    }
+  }
+  for (std::size_t i = 0; i < by_guid.size(); ++i) {
+    if (runs[i] || !free_of_chosen(*by_guid[i])) continue;
+    runs[i] = true;
+    chosen.push_back(by_guid[i]);
+  }
+  return runs;
+}
+
 }  // namespace vdyn

@@ -156,6 +156,7 @@ std::string RequestPlanner::PlanMove(const pb::ControlRequest& r, Known& k, Prep
 
 std::string RequestPlanner::PlanSpawn(const pb::ControlRequest& r, PreparedRequest& p) {
   const std::uint32_t id = r.vehicle_id();
+  if (std::string bad = limits::Check(limits::kVehicleId, id); !bad.empty()) return bad;
   if (Knows(id)) return "vehicle " + std::to_string(id) + " exists already";
   if (r.server_id().empty()) {
     // Every server in the domain would take it and two vehicles would share one key.
@@ -201,6 +202,9 @@ std::string RequestPlanner::PlanSetParams(const pb::ControlRequest& r, Known& k,
 std::string RequestPlanner::PlanRestore(const pb::ControlRequest& r, PreparedRequest& p) {
   const pb::ControlRequest::Restore& rs = r.restore();
   const std::uint32_t id = r.vehicle_id();
+  if (std::string bad = limits::Check(limits::kVehicleId, id); !bad.empty()) {
+    return "restore: " + bad;
+  }
   State state;
   try {
     state = FromExactState(rs.state());

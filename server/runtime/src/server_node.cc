@@ -12,9 +12,12 @@
 #include <spdlog/spdlog.h>
 
 #include "vdyn/base/limits.h"
+#include "vdyn/base/scheduling.h"
 #include "vdyn/base/text.h"
 #include "vdyn/bridge/convert.h"
+#include "vdyn/bridge/params.h"
 #include "vdyn/messages/checks.h"
+#include "vdyn/runtime/placement.h"
 
 namespace vdyn {
 
@@ -80,17 +83,21 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
-  const double lateral = 5.0;  // several vehicles start side by side
+  // Side by side on the free ground around the spawn (placement.h).
+  const std::vector<Pose2> poses =
+      StartPoses(*world_, ParamsFromProto(options_.session.default_params).get(),
+                 options_.vehicle_ids.size());
   for (std::size_t i = 0; i < options_.vehicle_ids.size(); ++i) {
-    Pose2 pose = world_->spawn;
-    pose.x -= std::sin(pose.yaw) * lateral * static_cast<double>(i);
-    pose.y += std::cos(pose.yaw) * lateral * static_cast<double>(i);
-    session_->Spawn(options_.vehicle_ids[i], pose, 0.0, pb::VehicleParams());
+    session_->Spawn(options_.vehicle_ids[i], poses[i], 0.0, pb::VehicleParams());
     *world_msg->add_vehicles() =
         DescribeVehicle(options_.vehicle_ids[i], session_->simulator(options_.vehicle_ids[i]).params());
   }
   Send(TopicId::kWorld, transport::ServerKey(options_.session.server_id), std::move(world_msg));
   deferred_step_replies_.reserve(kMaxDeferred);
+  // Each report slot holds room for the most vehicles the session may run: the loop fills one in
+  // place, allocating nothing and leaving no vehicle out.
+  const std::size_t most = std::max(options_.vehicle_ids.size(), options_.session.max_vehicles);
+  for (std::size_t k = 0; k < reports_.capacity(); ++k) reports_.Slot(k)->vehicles.resize(most);
   planner_ = std::make_unique<RequestPlanner>(world_, options_.session);
   planner_->Sync(*session_);
   // Last: if anything above throws, no thread is left running.
@@ -319,8 +326,9 @@ void ServerNode::PushReport(base::MonoTime now) {
     r->lateness = lateness_;
     r->n_vehicles = 0;
     session_->ForEachVehicle([&](std::uint32_t id) {
-      if (r->n_vehicles >= static_cast<int>(r->vehicles.size())) return;
-      VehicleReport& v = r->vehicles[static_cast<std::size_t>(r->n_vehicles++)];
+      // Room for the most vehicles the session may run (made in the constructor).
+      if (r->n_vehicles >= r->vehicles.size()) return;
+      VehicleReport& v = r->vehicles[r->n_vehicles++];
       const Simulator& sim = session_->simulator(id);
       v.id = id;
       v.safe_state = session_->in_safe_state(id);
@@ -347,7 +355,7 @@ void ServerNode::PushReport(base::MonoTime now) {
 }
 
 int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
-  std::string scheduling = SetUpRealtimeScheduling(options_.rt_priority);
+  std::string scheduling = base::SetUpRealtimeScheduling(options_.rt_priority);
   // The stepping workers wait on the loop and the loop on them: they share its scheduling.
   if (session_->step_threads() > 1 && scheduling.rfind("SCHED_FIFO", 0) == 0) {
     const std::string refused = session_->SetStepThreadsPriority(options_.rt_priority);
@@ -553,6 +561,10 @@ void ServerNode::ReceiverLoop() {
   transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
   std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
   std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
+  // In real time, the writer whose pause is the last pause, resume or step request passed on (0:
+  // none): a pause lasts while its client is there (docs/topics.md).
+  std::uint64_t pause_writer = 0;
+  const bool real_time = options_.mode != ServerOptions::Mode::kLockstep;
   int got = 0;                                       // requests taken in the last round
   base::MonoTime next_housekeeping = base::MonotonicNow();
   // Every bit a Button names (vdyn/input.proto).
@@ -696,6 +708,8 @@ void ServerNode::ReceiverLoop() {
               }
             }
             control_writers[info.publication_handle] = 0;
+            if (r.has_pause()) pause_writer = info.publication_handle;
+            if (r.has_resume() || r.has_step()) pause_writer = 0;
             Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
             if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
           },
@@ -717,6 +731,7 @@ void ServerNode::ReceiverLoop() {
           it->second = present ? 0 : it->second + 1;
           if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
             // The loop cancels the steps it still owed that client; the publisher says so.
+            if (real_time && it->first == pause_writer) ResumeForGoneClient(pause_writer);
             it = control_writers.erase(it);
             handed = true;
           } else {
@@ -787,12 +802,10 @@ std::string ServerNode::FindClash() {
     }
     return false;
   };
-  // Other servers' claims that clash with ours, by participant; the ones this server wins against
-  // are named once in the log.
+  // Other servers' claims, by participant: all of them, since whether a claim that clashes with
+  // ours runs may depend on one that does not (ChooseRunners).
   std::map<transport::Guid, ServerClaim> claims;
-  std::set<transport::Guid> told;
   std::vector<transport::ParticipantReader::Peer> changes;
-  std::string lost;  // why this server gives way to a claim, when it does
   auto first_common = [&](const ServerClaim& c) -> std::string {
     for (std::uint32_t v : mine.vehicle_ids) {
       if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
@@ -808,41 +821,21 @@ std::string ServerNode::FindClash() {
     for (const auto& peer : changes) {
       if (peer.guid == own_guid) continue;
       const std::optional<ServerClaim> c = ServerClaim::Decode(peer.user_data);
-      if (peer.alive && c && mine.Clashes(*c)) {
+      if (peer.alive && c) {
         claims[peer.guid] = *c;
       } else {
         claims.erase(peer.guid);
       }
     }
+    // A running server never gives way: a clash with one is certain at once.
     for (const auto& [guid, c] : claims) {
-      const std::string vehicle = first_common(c);
-      if (c.running) {
-        lost = c.server_id == me
-                   ? "another server with the id '" + me + "' runs on domain " + domain +
-                         ": give this one another --server-id, or another --domain"
-                   : "vehicle " + vehicle + " is already run by server '" + c.server_id +
-                         "' on domain " + domain +
-                         ": choose other --vehicle-ids, or another --domain";
-      } else if (guid < own_guid) {
-        lost = c.server_id == me
-                   ? "another server with the id '" + me +
-                         "' started at the same moment on "
-                         "domain " +
-                         domain +
-                         " and keeps the id (a tie goes to the lower "
-                         "participant GUID): give this one another --server-id, or another --domain"
-                   : "vehicle " + vehicle + " is claimed by server '" + c.server_id +
-                         "', started at the same moment on domain " + domain +
-                         "; that server keeps it (a tie goes to the lower participant GUID): "
-                         "choose other --vehicle-ids, or another --domain";
-      } else if (told.insert(guid).second) {
-        spdlog::info(
-            "server '{}': server '{}' started at the same moment and claims {}; this "
-            "server keeps {} (a tie goes to the lower participant GUID)",
-            me, c.server_id, c.server_id == me ? "the same id" : "vehicle " + vehicle + " too",
-            c.server_id == me ? "it" : "the vehicle");
-      }
-      if (!lost.empty()) return lost;
+      if (!c.running || !mine.Clashes(c)) continue;
+      return c.server_id == me ? "another server with the id '" + me + "' runs on domain " +
+                                     domain +
+                                     ": give this one another --server-id, or another --domain"
+                               : "vehicle " + first_common(c) + " is already run by server '" +
+                                     c.server_id + "' on domain " + domain +
+                                     ": choose other --vehicle-ids, or another --domain";
     }
     const base::MonoTime now = base::MonotonicNow();
     const bool others =
@@ -865,6 +858,8 @@ std::string ServerNode::FindClash() {
     for (std::uint32_t id : options_.vehicle_ids) clash = clash || taken.count(id) != 0;
     if (clash) break;
   }
+  // The claims of servers started at the same moment, decided once every claim of the wait is in.
+  if (std::string why = SettleClaims(mine, own_guid, claims); !why.empty()) return why;
   for (const auto& [vehicle, server] : taken) others_[vehicle] = {server, base::MonotonicNow()};
   if (same_id) {
     return "another server with the id '" + me + "' runs on domain " + domain +
@@ -874,6 +869,61 @@ std::string ServerNode::FindClash() {
     if (const auto it = taken.find(id); it != taken.end()) {
       return "vehicle " + std::to_string(id) + " is already run by server '" + it->second +
              "' on domain " + domain + ": choose other --vehicle-ids, or another --domain";
+    }
+  }
+  return {};
+}
+
+std::string ServerNode::SettleClaims(const ServerClaim& mine, const transport::Guid& own_guid,
+                                     const std::map<transport::Guid, ServerClaim>& claims) const {
+  const std::string& me = options_.session.server_id;
+  const std::string domain = std::to_string(options_.domain_id);
+  std::vector<const ServerClaim*> by_guid;
+  std::vector<transport::Guid> guids;
+  bool mine_in = false;
+  for (const auto& [guid, c] : claims) {
+    if (!mine_in && own_guid < guid) {
+      by_guid.push_back(&mine);
+      guids.push_back(own_guid);
+      mine_in = true;
+    }
+    by_guid.push_back(&c);
+    guids.push_back(guid);
+  }
+  if (!mine_in) {
+    by_guid.push_back(&mine);
+    guids.push_back(own_guid);
+  }
+  const std::vector<bool> runs = ChooseRunners(by_guid);
+  const auto own = static_cast<std::size_t>(
+      std::find(guids.begin(), guids.end(), own_guid) - guids.begin());
+  auto common = [&](const ServerClaim& c) {
+    if (c.server_id == me) return std::string("the id '") + me + "'";
+    for (std::uint32_t v : mine.vehicle_ids) {
+      if (std::find(c.vehicle_ids.begin(), c.vehicle_ids.end(), v) != c.vehicle_ids.end()) {
+        return "vehicle " + std::to_string(v);
+      }
+    }
+    return std::string();
+  };
+  for (std::size_t i = 0; i < by_guid.size(); ++i) {
+    if (i == own || !mine.Clashes(*by_guid[i])) continue;
+    const ServerClaim& c = *by_guid[i];
+    if (!runs[own] && runs[i]) {
+      return c.server_id == me
+                 ? "another server with the id '" + me + "' started at the same moment on domain " +
+                       domain +
+                       " and keeps the id (claims are settled in the order of the participants' "
+                       "GUIDs): give this one another --server-id, or another --domain"
+                 : common(c) + " is claimed by server '" + c.server_id +
+                       "', started at the same moment on domain " + domain +
+                       "; that server keeps it (claims are settled in the order of the "
+                       "participants' GUIDs): choose other --vehicle-ids, or another --domain";
+    }
+    if (runs[own]) {
+      spdlog::info("server '{}': server '{}' started at the same moment and claims {} too; this "
+                   "server keeps it (claims are settled in the order of the participants' GUIDs)",
+                   me, c.server_id, common(c));
     }
   }
   return {};
@@ -898,6 +948,23 @@ void ServerNode::AnswerHere(const std::shared_ptr<const pb::ControlRequest>& r, 
   o.text = std::move(why);
   o.sim_time_ns = sim_time_ns_.load(std::memory_order_relaxed);
   if (!answers_.TryPush(std::move(o))) NoRoomToAnswer();  // room checked before
+}
+
+void ServerNode::ResumeForGoneClient(std::uint64_t& pause_writer) {
+  // A real-time session paused by a client that then left would stay paused for good (issue 33):
+  // the server resumes it, through the request path as any resume (an event is recorded; the
+  // reply goes to no one). Without room now, at the next check.
+  if (incoming_.size() == incoming_.capacity()) return;
+  auto r = std::make_shared<pb::ControlRequest>();
+  r->set_server_id(options_.session.server_id);
+  r->set_client_id("vdyn-server: the client that paused left");
+  r->mutable_resume();
+  spdlog::info("server '{}': the client that paused the session left; resuming",
+               options_.session.server_id);
+  if (incoming_.TryPush(Incoming{std::move(r), 0, {}})) {
+    pause_writer = 0;
+    request_bell_.Ring();
+  }
 }
 
 void ServerNode::RequestLoop() {
@@ -994,6 +1061,34 @@ bool ServerNode::PublishOne(TopicId topic, std::uint32_t key, const google::prot
   }
 }
 
+namespace {
+// The vehicles' part of the status line: each one's speed, up to four; beyond, how many there are,
+// their speeds' range and how many brake without input.
+std::string StatusOfVehicles(const ServerNode::WindowReport& r) {
+  std::string out;
+  char buf[128];
+  if (r.n_vehicles <= 4) {
+    for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+      const ServerNode::VehicleReport& v = r.vehicles[i];
+      std::snprintf(buf, sizeof buf, "  v%u %5.1f km/h%s", v.id, v.speed_kmh,
+                    v.safe_state ? " (no input: braking)" : "");
+      out += buf;
+    }
+    return out;
+  }
+  double lo = r.vehicles[0].speed_kmh, hi = lo;
+  std::size_t braking = 0;
+  for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+    lo = std::min(lo, r.vehicles[i].speed_kmh);
+    hi = std::max(hi, r.vehicles[i].speed_kmh);
+    braking += r.vehicles[i].safe_state ? 1 : 0;
+  }
+  std::snprintf(buf, sizeof buf, "  %zu vehicles %.1f-%.1f km/h, %zu without input (braking)",
+                r.n_vehicles, lo, hi, braking);
+  return buf;
+}
+}  // namespace
+
 void ServerNode::PublishReport(WindowReport& r) {
   const std::string& server_id = options_.session.server_id;
   const double wall_s = static_cast<double>(r.wall_ns) * 1e-9;
@@ -1017,8 +1112,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     dc->set_kind(kind);
     dc->set_count(count);
   }
-  for (int i = 0; i < r.n_vehicles; ++i) {
-    const VehicleReport& v = r.vehicles[static_cast<std::size_t>(i)];
+  for (std::size_t i = 0; i < r.n_vehicles; ++i) {
+    const VehicleReport& v = r.vehicles[i];
     pb::VehicleDiagnostics* vd = d.add_vehicles();
     vd->set_vehicle_id(v.id);
     vd->set_watchdog_safe_state(v.safe_state);
@@ -1057,14 +1152,7 @@ void ServerNode::PublishReport(WindowReport& r) {
   const std::int64_t now = base::MonotonicNow().ns;
   if (!options_.status_line || (!tty && now - last_status_ns_ < 5'000'000'000)) return;
   last_status_ns_ = now;
-  std::string vehicles;
-  for (int i = 0; i < r.n_vehicles; ++i) {
-    const VehicleReport& v = r.vehicles[static_cast<std::size_t>(i)];
-    char buf[96];
-    std::snprintf(buf, sizeof buf, "  v%u %5.1f km/h%s", v.id, v.speed_kmh,
-                  v.safe_state ? " (no input: braking)" : "");
-    vehicles += buf;
-  }
+  const std::string vehicles = StatusOfVehicles(r);
   std::fprintf(stderr, "%st %7.2f s%s | %6.0f steps/s | late p50 %4.0f p99 %5.0f max %6.0f us  %s",
                tty ? "\r" : "", static_cast<double>(r.sim_time_ns) * 1e-9, vehicles.c_str(), rate,
                p50, p99, max_us, tty ? "" : "\n");

@@ -21,24 +21,6 @@ bool SamePhysics(const DriverInput& a, const DriverInput& b) {
 
 }  // namespace
 
-std::string CheckInputRanges(const pb::DriverInput& in) {
-  if (!pb::SteerMode_IsValid(in.steer_mode())) {
-    return "steer_mode " + std::to_string(in.steer_mode()) + " is not a steer mode";
-  }
-  const limits::Range& steer =
-      in.steer_mode() == pb::STEER_HAND_WHEEL ? limits::kHandWheel : limits::kSteer;
-  for (const std::string& why : {limits::Check(steer, in.steer()),
-                                 limits::Check(limits::kThrottle, in.throttle()),
-                                 limits::Check(limits::kBrake, in.brake()),
-                                 limits::Check(limits::kCruiseSetKmh, in.cruise_set_kmh()),
-                                 limits::Check(limits::kClutch, in.clutch()),
-                                 limits::Check(limits::kHandbrake, in.handbrake()),
-                                 limits::Check(limits::kGear, in.gear())}) {
-    if (!why.empty()) return why;
-  }
-  return {};
-}
-
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
                            std::uint64_t terrain_hash, std::int64_t step_ns) {
   using Kind = SessionEventRecord::Kind;
@@ -230,6 +212,9 @@ void Session::EmitSpawned(Vehicle& v, std::shared_ptr<const pb::ControlRequest> 
 
 void Session::Spawn(std::uint32_t vehicle_id, const Pose2& pose, double speed,
                     const pb::VehicleParams& params_update) {
+  if (std::string bad = limits::Check(limits::kVehicleId, vehicle_id); !bad.empty()) {
+    throw std::invalid_argument(bad);
+  }
   if (vehicles_.count(vehicle_id) != 0) {
     throw std::invalid_argument("vehicle " + std::to_string(vehicle_id) + " exists already");
   }

@@ -17,6 +17,7 @@
 #include <stb_image_write.h>
 #include <time.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -25,6 +26,7 @@
 #include <cstring>
 #include <deque>
 #include <fstream>
+#include <iterator>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -68,7 +70,14 @@ namespace {
 
 using namespace vdyn::xrtest;
 
-constexpr std::int64_t kGlRgba8 = 0x8058, kGlSrgb8Alpha8 = 0x8C43;
+constexpr std::int64_t kGlRgba8 = 0x8058, kGlSrgb8Alpha8 = 0x8C43, kGlRgba16 = 0x805B,
+                       kGlRgba16f = 0x881A;
+// The formats, in the order Monado 25.1 offers its OpenGL swapchains (NOTES.md): a viewer that
+// takes the first, or RGBA8, gets a linear one.
+constexpr std::int64_t kFormats[] = {kGlRgba16, kGlRgba16f, kGlSrgb8Alpha8, kGlRgba8};
+bool IsSrgb(std::int64_t format) {
+  return format == kGlSrgb8Alpha8;
+}
 constexpr XrTime kPeriodNs = 11'111'111;  // 90 Hz
 
 XrTime Now() {
@@ -188,6 +197,24 @@ Image ReadTexture(GLuint tex, int width, int height) {
   for (int y = 0; y < height; ++y) {
     std::memcpy(img.rgba.data() + static_cast<std::size_t>(y) * row,
                 bottom_up.data() + static_cast<std::size_t>(height - 1 - y) * row, row);
+  }
+  return img;
+}
+
+// What a compositor shows of a swapchain image (OpenXR: a non-sRGB format holds linear values,
+// which the compositor encodes to sRGB for the display; an sRGB one is shown as it is): the image
+// as read back, its colour sRGB-encoded when the format is linear. A viewer that writes
+// sRGB-encoded values into a linear format is shown washed out here, as in a real headset.
+Image Displayed(Image img, std::int64_t format) {
+  if (IsSrgb(format)) return img;
+  std::array<std::uint8_t, 256> encode{};
+  for (int v = 0; v < 256; ++v) {
+    const double c = v / 255.0;
+    const double e = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+    encode[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(std::lround(255.0 * e));
+  }
+  for (std::size_t i = 0; i < img.rgba.size(); ++i) {
+    if (i % 4 != 3) img.rgba[i] = encode[img.rgba[i]];
   }
   return img;
 }
@@ -546,18 +573,18 @@ XrResult LocateViews(XrSession, const XrViewLocateInfo* info, XrViewState* state
 
 XrResult EnumerateSwapchainFormats(XrSession, std::uint32_t capacity, std::uint32_t* count,
                                    std::int64_t* formats) {
-  *count = 2;
+  constexpr auto n = static_cast<std::uint32_t>(std::size(kFormats));
+  *count = n;
   if (capacity == 0) return XR_SUCCESS;
-  if (capacity < 2) return XR_ERROR_SIZE_INSUFFICIENT;
-  formats[0] = kGlSrgb8Alpha8;  // what real runtimes prefer, listed first
-  formats[1] = kGlRgba8;
+  if (capacity < n) return XR_ERROR_SIZE_INSUFFICIENT;
+  std::copy(std::begin(kFormats), std::end(kFormats), formats);
   return XR_SUCCESS;
 }
 
 XrResult CreateSwapchain(XrSession, const XrSwapchainCreateInfo* info, XrSwapchain* swapchain) {
   State& s = S();
   std::lock_guard<std::mutex> lock(g_mu);
-  if (info->format != kGlRgba8 && info->format != kGlSrgb8Alpha8)
+  if (std::find(std::begin(kFormats), std::end(kFormats), info->format) == std::end(kFormats))
     return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;
   if (info->width == 0 || info->height == 0 || info->arraySize != 1 || info->faceCount != 1) {
     return XR_ERROR_VALIDATION_FAILURE;
@@ -739,8 +766,9 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
         Swapchain* sc = nullptr;
         if (!released(p->views[e].subImage.swapchain, p->views[e].subImage.imageRect, &sc))
           continue;
-        Image img = ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
-                                sc->width, sc->height);
+        Image img = Displayed(ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
+                                          sc->width, sc->height),
+                              sc->format);
         (e == 0 ? s.left : s.right) = std::move(img);
       }
       projection = true;
@@ -753,8 +781,9 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
       s.quad_pose = q->pose;
       s.quad_width_m = q->size.width;
       s.quad_height_m = q->size.height;
-      s.hud = ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)], sc->width,
-                          sc->height);
+      s.hud = Displayed(ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
+                                    sc->width, sc->height),
+                        sc->format);
       quad = true;
     } else {
       Violation("a layer of a type this runtime does not compose");

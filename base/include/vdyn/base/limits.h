@@ -43,6 +43,10 @@ inline constexpr Range kHandbrake{0.0, 1.0, false, false, "handbrake"};
 inline constexpr Range kGear{-1.0, 10.0, false, false, "gear"};
 
 // --- Control requests (vdyn.pb.ControlRequest) -----------------------------------------------
+// A vehicle's id: 0 is no vehicle in a message (a request for the whole server, a lockstep step
+// with no input), so ids start at 1 (every program's --vehicle-id, --vehicle-ids, --vehicle,
+// --follow, --as; spawn and restore requests; the Python client).
+inline constexpr Range kVehicleId{1.0, 4294967295.0, false, false, "vehicle id"};
 inline constexpr Range kPoseXY{-1e7, 1e7, false, false, "pose position, m"};
 inline constexpr Range kPoseYaw{-1e3, 1e3, false, false, "pose yaw, rad"};
 inline constexpr Range kSpawnSpeed{0.0, 110.0, false, false, "speed, m/s"};
@@ -68,6 +72,10 @@ inline constexpr std::size_t kMaxParamsBytes = 64 * 1024;
 inline constexpr std::size_t kMaxWorldBytes = 512ull * 1024 * 1024;
 inline constexpr std::size_t kMaxEventBytes = 1024 * 1024;
 inline constexpr std::size_t kMaxDiagnosticsBytes = 1024 * 1024;
+// A terrain vertex's coordinate (a world description's meshes, a world file): the terrain drops
+// every triangle with a vertex beyond it, and the world description leaves it out; a viewer
+// refuses a description holding one (floats hold it; a grid cell index of it fits 64 bits).
+inline constexpr Range kWorldCoordinateM{-1e9, 1e9, true, true, "terrain vertex coordinate, m"};
 
 // --- Files -----------------------------------------------------------------------------------
 // A maneuver (CSV, docs/formats.md): a million rows is 1000 s at a row a millisecond (rows are
@@ -90,7 +98,6 @@ struct ParamChoice {
   std::string_view path;  // "model", "lf"
   std::string_view what;  // "vehicle model (the equations)"
 };
-std::span<const ParamChoice> ParamChoices();
 // What every field of vdyn.pb.VehicleParams is, in words with its unit ("vehicle mass, kg";
 // "lf.radius": "wheel radius, m"): the `what` of its limit above, or of its choice. Empty for a
 // path that names no field. The viewer's parameters panel labels its fields with it, and
@@ -168,5 +175,18 @@ inline constexpr Range kRecordingTimeS{0.0, 1e9, false, false, "time from the re
 inline constexpr Range kTelemetryRateHz{1.0, 1000.0, false, false, "telemetry packet rate, Hz"};
 inline constexpr Range kStaleMs{10.0, 60000.0, false, false, "stale-state limit, ms"};
 inline constexpr Range kTelemetryId{1.0, 2147483647.0, false, false, "telemetry packet ID"};
+
+// vdyn-foxglove: the state channels' rate (0: every state), the scene's and transforms' rate, a
+// client's send queue (its data bound in KiB and ms: past either the oldest goes), the TCP port
+// (0: any free one), the clients at once, and how long a vehicle may send nothing before its
+// channels are unadvertised.
+inline constexpr Range kFoxgloveStateHz{0.0, 100000.0, false, false,
+                                        "state channel rate, Hz (0: every state)"};
+inline constexpr Range kFoxgloveSceneHz{1.0, 1000.0, false, false, "scene rate, Hz"};
+inline constexpr Range kFoxgloveQueueKb{16.0, 1048576.0, false, false, "client send queue, KiB"};
+inline constexpr Range kFoxgloveQueueMs{10.0, 60000.0, false, false, "client send queue age, ms"};
+inline constexpr Range kPort{0.0, 65535.0, false, false, "TCP port"};
+inline constexpr Range kFoxgloveClients{1.0, 1024.0, false, false, "clients"};
+inline constexpr Range kVehicleTimeoutS{0.1, 3600.0, false, false, "vehicle timeout, s"};
 
 }  // namespace vdyn::limits

@@ -32,9 +32,6 @@ Finding CheckMessage(const google::protobuf::Message& msg);
 // this way at a fraction of the reflective pass's cost.
 bool WireClean(const google::protobuf::Descriptor& type, std::span<const std::uint8_t> bytes);
 
-// True when every double and float field is finite; `where` gets the first bad field's path.
-bool AllFinite(const google::protobuf::Message& msg, std::string* where = nullptr);
-
 // The longest a string field may be, by its name: ids (*_id) limits::kMaxIdBytes, "reason"
 // limits::kMaxReasonBytes, anything else limits::kMaxNameBytes.
 std::size_t MaxStringBytes(const std::string& field_name);

@@ -5,8 +5,10 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -39,6 +41,15 @@ inline CLI::Validator WholeInRange(const limits::Range& r) {
       },
       limits::Describe(r));
 }
+
+// A vehicle id: a whole number in limits::kVehicleId (0 names no vehicle).
+inline CLI::Validator VehicleId() { return WholeInRange(limits::kVehicleId); }
+
+// An entry of a list of vehicle ids (vdyn-server --vehicle-ids 1,2,10..20): an id, or an ascending
+// range of them, both ends included, of at most limits::kMaxVehicles ids.
+CLI::Validator VehicleIds();
+// The ids of a list of entries VehicleIds() accepted, each range written out, in order.
+std::vector<std::uint32_t> ExpandVehicleIds(const std::vector<std::string>& entries);
 
 // An id that goes into messages (a server id): not empty or blank, at most limits::kMaxIdBytes
 // bytes (every reader refuses a longer one), no control characters. `what` names it.

@@ -30,17 +30,17 @@ namespace vdyn::recorder {
 
 struct RecordOptions {
   std::filesystem::path out;
-  double duration_s = 0;                    // 0: until stopped
-  std::set<transport::TopicId> topics;      // empty: every topic
-  std::set<std::uint32_t> vehicles;         // empty: every vehicle (events: always every one)
-  std::uint64_t split_bytes = 0;            // 0: no size split
-  double split_s = 0;                       // 0: no time split
+  double duration_s = 0;                // 0: until stopped
+  std::set<transport::TopicId> topics;  // empty: every topic
+  std::set<std::uint32_t> vehicles;     // empty: every vehicle (events: always every one)
+  std::uint64_t split_bytes = 0;        // 0: no size split
+  double split_s = 0;                   // 0: no time split
   mcap::WriterOptions writer;
   std::size_t queue_bytes = 256u << 20;
   bool status_line = false;
-  bool status_tty = false;                  // rewrite the line in place
+  bool status_tty = false;  // rewrite the line in place
   std::string command_line;
-  std::string branched_from;                // takeover: the recording this one continues
+  std::string branched_from;  // takeover: the recording this one continues
 };
 
 // What one topic brought, since the start.
@@ -63,7 +63,16 @@ struct CaptureSummary {
   std::uint64_t dds_samples_lost = 0;  // as DDS reports it
   std::uint64_t total_lost() const;
   std::uint64_t total_dropped() const;
+  // What was dropped, by topic: " (vdyn/state 1200, vdyn/world 1)", or "" when nothing was.
+  std::string dropped_by_topic() const;
 };
+
+// The buffer's admission rule, states apart: states may fill at most three quarters of it, so
+// that under overload they are dropped first and session events (checkpoints among them), inputs,
+// requests, worlds and parameters still find room (the rest of the bound); the whole never
+// exceeds `queue_bytes`.
+bool Admits(transport::TopicId topic, std::size_t in_use, std::size_t size,
+            std::size_t queue_bytes);
 
 class Capture {
  public:

@@ -10,6 +10,8 @@
 // `recover` keeps what came before.
 #pragma once
 
+#include <atomic>
+
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -49,6 +51,17 @@ enum Op : std::uint8_t {
 };
 
 // A bad file: which one, where, and why. what() reads "FILE: offset N: REASON".
+// A read stopped because the command was asked to stop (Ctrl-C, SIGTERM): see StopReadsWhen.
+class Interrupted : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// From now on every Reader's scan and chunk read checks `*flag` at each record and throws
+// Interrupted once it is set (a signal handler sets it): a command that reads a whole file stops
+// within a record, and its outputs, never committed, are removed as they unwind. nullptr: never.
+void StopReadsWhen(const std::atomic<bool>* flag);
+
 class McapError : public std::runtime_error {
  public:
   McapError(const std::filesystem::path& file, std::uint64_t offset, const std::string& reason);
@@ -171,6 +184,10 @@ class Writer {
   // Flushes, then writes the data end, the summary (schemas, channels, statistics, metadata and
   // chunk indexes, summary offsets), the footer and the closing magic. Throws McapError.
   void Close();
+  // Ends a file written beside its destination (WriterOptions::live over an existing file, or
+  // not live) without giving it the destination's name: the destination stays as it was and the
+  // bytes are removed. False (and nothing done) for a file written under its own name.
+  bool Discard();
 
   std::uint64_t bytes_written() const { return offset_; }
   std::uint64_t messages() const { return stats_.message_count; }
@@ -239,10 +256,10 @@ struct Damage {
 };
 
 struct ScanResult {
-  bool complete = false;          // reached the data end record and a valid summary and footer
-  bool summary = false;           // the footer points at a summary (a valid one when complete)
-  std::uint64_t good_until = 0;   // offset just past the last whole, valid record
-  std::string problem;            // lenient scans: the first problem (empty when none)
+  bool complete = false;         // reached the data end record and a valid summary and footer
+  bool summary = false;          // the footer points at a summary (a valid one when complete)
+  std::uint64_t good_until = 0;  // offset just past the last whole, valid record
+  std::string problem;           // lenient scans: the first problem (empty when none)
   std::uint64_t problem_offset = 0;
   std::uint64_t messages = 0;
   std::uint32_t chunks = 0;
@@ -262,10 +279,21 @@ struct ScanResult {
   std::vector<Damage> damage;            // lenient: everything left out, in file order
 };
 
+class MappedFile;
+class Scanner;
+
 class Reader {
  public:
-  // Maps the file; refuses an empty file, a foreign one (no MCAP magic) or a directory.
-  explicit Reader(const std::filesystem::path& path);
+  // kSalvage (`recover`): a magic with one damaged byte of eight is read all the same (a scan
+  // says so); a foreign file is refused either way.
+  enum class Open { kWhole, kSalvage };
+  // Maps the file; refuses an empty file, a foreign one (no MCAP magic), a folder, a FIFO or a
+  // device. Another program may truncate or rewrite the file while it is read: every read then
+  // throws McapError naming the file and the offset (never SIGBUS).
+  explicit Reader(const std::filesystem::path& path, Open open = Open::kWhole);
+  // The bytes of a file held in memory (tests, fuzzers), named `name` in messages; they must
+  // outlive the reader.
+  Reader(std::filesystem::path name, std::span<const std::uint8_t> bytes, Open open = Open::kWhole);
   ~Reader();
   Reader(const Reader&) = delete;
   Reader& operator=(const Reader&) = delete;
@@ -297,21 +325,26 @@ class Reader {
                  std::vector<std::uint8_t>& scratch) const;
   // Every chunk's place and time range, from the summary or (without one) a scan of the records.
   std::vector<ChunkIndex> Chunks() const;
-  // The bytes of the file from offset for length (a chunk's raw record, for recovery).
-  std::span<const std::uint8_t> Bytes(std::uint64_t offset, std::uint64_t length) const;
+  // Throws McapError when the file shrank under the reader since it was opened (another program
+  // truncated it): what was read since may be zeroes. Every read here checks it; a caller that
+  // keeps reading a Message's data after its callback returned checks it again.
+  void CheckIntact() const;
 
   std::uint64_t size() const { return size_; }
   const std::filesystem::path& path() const { return path_; }
   std::string header_library() const;  // the writer's name, from the header record
 
  private:
+  friend class Scanner;
+  void CheckMagic();
+  std::optional<Summary> SummaryOf() const;
   [[noreturn]] void Fail(std::uint64_t offset, const std::string& reason) const;
-  // Lenient scans: the offset of the next valid record at or after `from` (its frame and
-  // content read, and so does the frame after it), or nullopt.
-  std::optional<std::uint64_t> NextRecord(std::uint64_t from) const;
   std::filesystem::path path_;
+  Open open_ = Open::kWhole;
+  std::unique_ptr<MappedFile> map_;  // null for bytes held in memory
   const std::uint8_t* data_ = nullptr;
   std::uint64_t size_ = 0;
+  bool magic_damaged_ = false;
 };
 
 // CRC-32 (zlib) of bytes, continuing from `crc` (0 to start).

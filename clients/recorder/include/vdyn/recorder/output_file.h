@@ -9,6 +9,11 @@
 //     complete. An error or a crash leaves the destination as it was: never a half file under
 //     the final name, never a truncated input.
 //   - A symlink as destination keeps pointing where it did: its target is replaced.
+//   - A destination that is not a regular file is never replaced: a FIFO or a character device
+//     (`/dev/null`, a terminal) is written into as a stream, in place; an open descriptor named
+//     as a file (`/dev/stdout`, `/dev/stderr`, `/dev/fd/N`, `/proc/self/fd/N`) is written
+//     through that descriptor; a block device, a socket or anything else is refused. So is a
+//     name that ends with a slash (no file name: nothing is created, not even its folder).
 // One helper for every command; mcap::Writer uses it too.
 #pragma once
 
@@ -36,6 +41,16 @@ void CheckNotAnInput(const std::filesystem::path& dest,
 // Where a write to `dest` really lands: the target of a symlink (followed to the end), else dest.
 std::filesystem::path WriteTarget(const std::filesystem::path& dest);
 
+// How an output is written: beside its name then renamed (a regular file, or none yet), or into
+// it as a stream (a FIFO, a character device, an open descriptor).
+enum class OutputKind { kFile, kStream };
+// Throws OutputError for a destination that cannot be written (a name ending with a slash, a
+// block device, a socket); else how it is written. Creates nothing.
+OutputKind CheckOutputKind(const std::filesystem::path& dest);
+// True for a name of the standard output (/dev/stdout, /dev/fd/1, /proc/self/fd/1): a command
+// writing its output there says what it did on the standard error.
+bool NamesStandardOutput(const std::filesystem::path& dest);
+
 class OutputFile {
  public:
   // Checks `dest` against `inputs`, creates its folder, and opens a new temporary file beside it.
@@ -46,7 +61,9 @@ class OutputFile {
   OutputFile& operator=(const OutputFile&) = delete;
 
   const std::filesystem::path& dest() const { return dest_; }
-  const std::filesystem::path& temp() const { return temp_; }
+  // The temporary file; the destination itself for a stream.
+  const std::filesystem::path& temp() const { return stream_ ? dest_ : temp_; }
+  bool stream() const { return stream_; }
   // The temporary file, open for writing (-1 once released or committed).
   int fd() const { return fd_; }
   // Hands the descriptor to the caller (who closes it), e.g. to a FILE*; the file stays ours.
@@ -68,10 +85,12 @@ class OutputFile {
   std::vector<std::filesystem::path> inputs_;
   int fd_ = -1;
   bool done_ = false;
+  bool stream_ = false;  // written in place (OutputKind::kStream): no temporary file, no rename
 };
 
 // Moves a finished file (made by another program, e.g. gnuplot) over `dest` as Commit does:
-// checked against `inputs` first. Throws OutputError.
+// checked against `inputs` first; a `dest` that is not a regular file is refused. Throws
+// OutputError.
 void MoveInto(const std::filesystem::path& finished, const std::filesystem::path& dest,
               const std::vector<std::filesystem::path>& inputs);
 

@@ -25,6 +25,7 @@
 
 #include <google/protobuf/descriptor.h>
 
+#include "vdyn/messages/descriptor_set.h"
 #include "vdyn/messages/wire.h"
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/transport/topics.h"
@@ -34,9 +35,8 @@ namespace vdyn::recorder {
 inline constexpr const char* kRecorderVersion = "0.1.0";
 inline constexpr const char* kFormatVersion = "vdyn-recording 1";
 
-// The FileDescriptorSet (binary) of a message type: its .proto file and every file it imports,
-// each after its imports (what `protoc --include_imports --descriptor_set_out` writes).
-std::string FileDescriptorSetOf(const google::protobuf::Descriptor* d);
+// The FileDescriptorSet (binary) of a message type (vdyn/messages/descriptor_set.h).
+using messages::FileDescriptorSetOf;
 // The descriptor of a topic's payload type.
 const google::protobuf::Descriptor* PayloadDescriptor(transport::TopicId topic);
 
@@ -121,6 +121,19 @@ std::string FormatDuration(double seconds);
 std::string FormatBytes(double bytes);
 // Wall-clock ns since the epoch as "2026-01-02 03:04:05.678 UTC".
 std::string FormatUtc(std::uint64_t ns);
+// Counts as a person writes them: Count(1, "mesh", "meshes") is "1 mesh", Count(12, ...) "12
+// meshes"; Ordinal(2) is "2nd", Ordinal(11) "11th", Ordinal(23) "23rd".
+std::string Count(std::uint64_t n, std::string_view one, std::string_view many);
+std::string Ordinal(std::uint64_t n);
+// Text that came from a file (a server id, a world's name, a topic, a command line) as a
+// terminal may show it: control characters (escape sequences) and bytes that are not UTF-8
+// written as \xNN, and at most `max` bytes of it, then "... (N bytes)".
+std::string Printable(std::string_view text, std::size_t max = 160);
+// A hash or CRC: "0x" and 16 hex digits (one form wherever the recorder prints one).
+std::string Hex(std::uint64_t v);
+// A server's sequence number that no server reaches (one event a microsecond for 8 years):
+// damage or a foreign writer, never counted as events missing.
+inline constexpr std::uint64_t kImpossibleSequence = std::uint64_t{1} << 48;
 
 // The protobuf wire format, read without parsing (vdyn/messages/wire.h).
 namespace wire = messages::wire;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 #include "vdyn/base/time.h"
 #include "vdyn/input.pb.h"
@@ -21,6 +22,11 @@ struct VehicleInfo {
   double wheelbase_m = 2.7;      // b + c
   bool speed_known = false;
   double speed_kmh = 0;  // along the body's X axis (negative backwards)
+  // The full model's gearbox (zero: not known, or the paper's model, which has none).
+  int gear_count = 0;
+  double gear_ratio_first = 0, gear_ratio_top = 0, final_drive_ratio = 0;
+  double engine_rpm_limit = 0;  // rpm
+  double wheel_radius_m = 0;    // a rear wheel's
 };
 // The fields of VehicleInfo a parameter message gives (unset fields keep their defaults).
 void ApplyParams(const pb::VehicleParams& p, VehicleInfo& info);
@@ -60,6 +66,11 @@ class InputBuilder {
   void RearmEstop() { estop_ = false; }
   bool estop() const { return estop_; }
   int gear() const { return gear_; }
+  // The last gear shift refused, and why ("1st at 87 km/h: the engine at 10398 rpm, past its 6800
+  // limit"; "reverse while moving at 45 km/h: stop first"); empty when none.
+  const std::string& shift_refusal() const { return shift_refusal_; }
+  base::MonoTime shift_refused_at() const { return shift_refused_at_; }
+  std::uint64_t shifts_refused() const { return shifts_refused_; }
   bool cruise_on() const { return cruise_on_; }
   double cruise_set_kmh() const { return cruise_set_kmh_; }
   // True once per press of the reset button (the rig then asks the server for a reset).
@@ -73,7 +84,13 @@ class InputBuilder {
  private:
   InputBuilderParams params_;
   std::uint32_t previous_buttons_ = 0;
-  int gear_ = 0;
+  // A paddle press's gear, or the reason it is refused (empty: allowed).
+  std::string ShiftRefusal(int to, const VehicleInfo& v) const;
+
+  int gear_ = 0;  // -1 reverse, 0 automatic (the starting mode, again after a reset), 1..N
+  std::string shift_refusal_;
+  base::MonoTime shift_refused_at_{};
+  std::uint64_t shifts_refused_ = 0;
   bool cruise_on_ = false;
   double cruise_set_kmh_ = 0;
   bool estop_ = false;

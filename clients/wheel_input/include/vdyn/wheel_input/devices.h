@@ -54,7 +54,6 @@ struct DeviceInfo {
   std::string problem;                 // kBrokenFile: why the file cannot be used
 };
 
-const char* KindName(DeviceInfo::Kind k);
 
 // Every device SDL sees now, recognised. `mapping_file`, when given, is the mapping for every
 // device whose USB ids it names (or for any device, when it names none).

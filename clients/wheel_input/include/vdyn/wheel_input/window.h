@@ -26,6 +26,7 @@ struct WindowView {
   bool have_state = false;
   double speed_kmh = 0;
   pb::DriverInput input;      // as sent
+  std::string shift_refusal;  // a gear shift refused in the last few seconds, and why
   double steer_fraction = 0;  // of the lock (road wheel) or of the hand-wheel range, [-1, 1]
   double hand_angle_deg = 0;
   bool ffb_present = false;

@@ -1,5 +1,5 @@
-// Pacing of the real-time loop: the scheduling the process could get, and lateness statistics
-// that fill without allocating (the 1 kHz thread records, the reporter thread computes).
+// Pacing of the real-time loop: lateness statistics that fill without allocating (the 1 kHz
+// thread records, the reporter thread computes). Its scheduling: base/scheduling.h.
 #pragma once
 
 #include <array>
@@ -8,10 +8,6 @@
 #include <vector>
 
 namespace vdyn {
-
-// Asks for SCHED_FIFO at `priority` for the calling thread; falls back to SCHED_OTHER with a
-// 1 ns timer slack. Returns a line saying which (for the log and the diagnostics).
-std::string SetUpRealtimeScheduling(int priority);
 
 // Lateness samples of one reporting window (microseconds) in a fixed array; beyond its capacity
 // only the maximum is kept. Percentile() sorts in place (call it off the real-time thread).

@@ -81,7 +81,9 @@ class ServerNode {
 
   transport::DropCounters& drops() { return drops_; }
 
-  // One reporting window of the loop, handed to the publisher (plain data, no allocation).
+  // One reporting window of the loop, handed to the publisher (plain data, no allocation: each
+  // slot of the report queue holds room for as many vehicles as the server may run, made at
+  // construction).
   struct VehicleReport {
     std::uint32_t id = 0;
     bool safe_state = false;
@@ -102,8 +104,8 @@ class ServerNode {
     std::uint64_t steps_caught_up = 0;
     std::uint64_t max_lag_steps = 0;
     LatenessWindow lateness;
-    int n_vehicles = 0;
-    std::array<VehicleReport, 64> vehicles{};
+    std::size_t n_vehicles = 0;            // the first n of `vehicles` hold this window's
+    std::vector<VehicleReport> vehicles;  // sized once, to the most vehicles the server runs
   };
 
  private:
@@ -137,6 +139,8 @@ class ServerNode {
   void SendDueStepReplies();
   void CancelStepReplies(RequestOutcome::Why why);
   void ClientGone(std::uint64_t writer);
+  // Receiver thread: a real-time session's pausing client has gone; resume (clears pause_writer).
+  void ResumeForGoneClient(std::uint64_t& pause_writer);
   // After the loop: what is still waiting is answered (the server stops).
   void AnswerWhatIsLeft();
   void PushReport(base::MonoTime now);
@@ -146,6 +150,10 @@ class ServerNode {
 
   // Start: another server on the domain that runs one of our vehicles, or has our id, or claims
   // them at the same moment and wins the tie (claim.h). Empty when this server may run.
+  // FindClash's last word on the claims of servers started at the same moment (claim.h): the
+  // reason this server gives way, or empty when it runs.
+  std::string SettleClaims(const ServerClaim& mine, const transport::Guid& own_guid,
+                           const std::map<transport::Guid, ServerClaim>& claims) const;
   std::string FindClash();
   ServerClaim Claim(bool running) const;
   // Receiver thread.

@@ -25,6 +25,7 @@
 
 #include "vdyn/control.pb.h"
 #include "vdyn/input.pb.h"
+#include "vdyn/messages/input_checks.h"
 #include "vdyn/physics/simulator.h"
 #include "vdyn/runtime/step_pool.h"
 #include "vdyn/session.pb.h"
@@ -318,7 +319,8 @@ class Session {
   StepPool pool_;
 };
 
-// Checks a driver input's ranges (the table of limits); empty when valid, else the reason.
-std::string CheckInputRanges(const pb::DriverInput& input);
+// Checks a driver input's ranges (the table of limits); empty when valid, else the reason. In the
+// messages layer, so that clients check their input with the server's own check.
+using messages::CheckInputRanges;
 
 }  // namespace vdyn
