@@ -86,7 +86,7 @@ std::string Lower(std::string_view s) {
   for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return out;
 }
-std::string_view Trim(std::string_view s) {
+std::string_view TrimSpace(std::string_view s) {
   while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
   while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
   return s;
@@ -138,7 +138,7 @@ class TirParser {
 
   // The line without its comment: `$` outside quotes to the end, or a line starting with `!`.
   static std::string_view Uncommented(std::string_view raw) {
-    std::string_view s = Trim(raw);
+    std::string_view s = TrimSpace(raw);
     if (!s.empty() && s.front() == '!') return {};
     char quote = 0;
     for (std::size_t i = 0; i < s.size(); ++i) {
@@ -148,7 +148,7 @@ class TirParser {
       } else if (c == '\'' || c == '"') {
         quote = c;
       } else if (c == '$') {
-        return Trim(s.substr(0, i));
+        return TrimSpace(s.substr(0, i));
       }
     }
     return s;
@@ -160,7 +160,7 @@ class TirParser {
     if (s.front() == '[') {
       in_table_ = false;
       if (s.back() != ']') Fail("a section line " + Quoted(s) + " has no closing ]");
-      section_ = Upper(Trim(s.substr(1, s.size() - 2)));
+      section_ = Upper(TrimSpace(s.substr(1, s.size() - 2)));
       if (section_.empty()) Fail("an empty section name []");
       return;
     }
@@ -177,7 +177,7 @@ class TirParser {
       return;
     }
     in_table_ = false;
-    const std::string key = Upper(Trim(s.substr(0, eq)));
+    const std::string key = Upper(TrimSpace(s.substr(0, eq)));
     if (key.empty()) Fail("a line " + Quoted(s) + " with no key before =");
     for (char c : key) {
       if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_') {
@@ -185,7 +185,7 @@ class TirParser {
       }
     }
     if (section_.empty()) FailKey(key, "given before any [SECTION]");
-    Value(key, Trim(s.substr(eq + 1)));
+    Value(key, TrimSpace(s.substr(eq + 1)));
   }
 
   void TableRow(std::string_view s) {
@@ -228,7 +228,7 @@ class TirParser {
     }
     if (key == "TYRESIDE") {
       if (!text) FailKey(key, "must be a quoted string ('LEFT', 'RIGHT' or 'SYMMETRIC')");
-      const std::string side = Upper(Trim(*text));
+      const std::string side = Upper(TrimSpace(*text));
       if (side != "LEFT" && side != "RIGHT" && side != "SYMMETRIC") {
         FailKey(key, Quoted(*text) + " is not LEFT, RIGHT or SYMMETRIC");
       }
@@ -259,7 +259,7 @@ class TirParser {
     for (const Kind& k : kinds) {
       if (key != k.key) continue;
       if (!text || number) FailKey(key, "a unit is a quoted name, e.g. 'meter'");
-      const std::string name = Lower(Trim(*text));
+      const std::string name = Lower(TrimSpace(*text));
       for (const Unit& u : k.units) {
         if (u.name == name) {
           *k.factor = u.to_si;

@@ -7,7 +7,7 @@ namespace vdyn {
 namespace {
 
 constexpr double kRequired = MagicFormula::kRequired;
-constexpr MagicFormulaField kFields[] = {
+constexpr MagicFormulaField kMagicFormulaFields[] = {
 #define VDYN_MF_FIELD(name, fallback) {#name, &MagicFormula::name, fallback},
     VDYN_MAGIC_FORMULA_COEFFICIENTS(VDYN_MF_FIELD)
 #undef VDYN_MF_FIELD
@@ -19,7 +19,7 @@ constexpr double kPi = 3.14159265358979323846;
 constexpr double kEps = 1e-6;
 
 // The sign with sign(0) = +1, as TNO's solver takes it in the denominators and the curvature.
-double Sgn(double v) {
+double SgnPositiveAtZero(double v) {
   return v >= 0.0 ? 1.0 : -1.0;
 }
 // cos(atan(x)) without either.
@@ -41,7 +41,7 @@ LateralPure PureLateral(const MagicFormula& m, const MfLoad& L, double Kya, doub
   LateralPure r;
   const double SVyg = L.Fz * (m.pvy3 + m.pvy4 * L.dfz) * gs * m.lkyc * L.lmuy_prime;
   const double Kyg0 = L.Fz * (m.pky6 + m.pky7 * L.dfz) * (1.0 + m.ppy5 * L.dpi) * m.lkyc;
-  r.SHy = ((m.phy1 + m.phy2 * L.dfz) * m.lhy + (Kyg0 * gs - SVyg) / (Kya + kEps * Sgn(Kya))) *
+  r.SHy = ((m.phy1 + m.phy2 * L.dfz) * m.lhy + (Kyg0 * gs - SVyg) / (Kya + kEps * SgnPositiveAtZero(Kya))) *
           L.reduction;
   r.SVy = (L.Fz * (m.pvy1 + m.pvy2 * L.dfz) * m.lvy * L.lmuy_prime + SVyg) * L.reduction;
   const double alpha_y = alpha_star + r.SHy;
@@ -51,9 +51,9 @@ LateralPure PureLateral(const MagicFormula& m, const MfLoad& L, double Kya, doub
   const double Dy = r.muy * L.Fz;
   const double Ey =
       std::min((m.pey1 + m.pey2 * L.dfz) *
-                   (1.0 + m.pey5 * gs * gs - (m.pey3 + m.pey4 * gs) * Sgn(alpha_y)) * m.ley,
+                   (1.0 + m.pey5 * gs * gs - (m.pey3 + m.pey4 * gs) * SgnPositiveAtZero(alpha_y)) * m.ley,
                1.0);
-  r.By = Kya / (r.Cy * Dy + kEps * Sgn(Dy));
+  r.By = Kya / (r.Cy * Dy + kEps * SgnPositiveAtZero(Dy));
   r.Fy0 = Dy * std::sin(r.Cy * std::atan(Inner(r.By, Ey, alpha_y))) + r.SVy;
   return r;
 }
@@ -74,7 +74,7 @@ double Weight(double B, double C, double E, double x) {
 }  // namespace
 
 std::span<const MagicFormulaField> MagicFormulaFields() {
-  return kFields;
+  return kMagicFormulaFields;
 }
 
 void DeriveMagicFormula(MagicFormula& mf) {
@@ -139,12 +139,12 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
   o.mux = (m.pdx1 + m.pdx2 * L.dfz) * (1.0 + m.ppx3 * L.dpi + m.ppx4 * L.dpi * L.dpi) *
           (1.0 - m.pdx3 * gamma * gamma) * L.lmux_star;
   const double Dx = o.mux * L.Fz;
-  const double Bx = L.Kxk / (Cx * Dx + kEps * Sgn(Dx));
+  const double Bx = L.Kxk / (Cx * Dx + kEps * SgnPositiveAtZero(Dx));
   const double SHx = (m.phx1 + m.phx2 * L.dfz) * m.lhx * L.reduction;
   const double SVx = L.Fz * (m.pvx1 + m.pvx2 * L.dfz) * m.lvx * L.lmux_prime * L.reduction;
   const double kappa_x = kappa + SHx;
   const double Ex = std::min(
-      (m.pex1 + m.pex2 * L.dfz + m.pex3 * L.dfz * L.dfz) * (1.0 - m.pex4 * Sgn(kappa_x)) * m.lex,
+      (m.pex1 + m.pex2 * L.dfz + m.pex3 * L.dfz * L.dfz) * (1.0 - m.pex4 * SgnPositiveAtZero(kappa_x)) * m.lex,
       1.0);
   const double Fx0 = Dx * std::sin(Cx * std::atan(Inner(Bx, Ex, kappa_x))) + SVx;
 
@@ -170,7 +170,7 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
 
   // Aligning moment (4.E31-4.E49, 4.E71-4.E78) in the forms of TNO's solver: Bt and Dt with gamma
   // (QBZ4, QDZ3), the trail times LFZO, s with Fz0 (not Fz0'), the equivalent slips of A54/A55.
-  const double Kya_p = L.Kya + kEps * Sgn(L.Kya);                               // 4.E39
+  const double Kya_p = L.Kya + kEps * SgnPositiveAtZero(L.Kya);                               // 4.E39
   const double alpha_r = alpha_star + y.SHy + y.SVy / Kya_p;                    // 4.E37, 4.E38
   const double SHt = m.qhz1 + m.qhz2 * L.dfz + (m.qhz3 + m.qhz4 * L.dfz) * gs;  // 4.E35
   const double alpha_t = alpha_star + SHt;                                      // 4.E34
@@ -190,11 +190,11 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
       ((m.qdz6 + m.qdz7 * L.dfz) * m.lres + ((m.qdz8 + m.qdz9 * L.dfz) * (1.0 + m.ppz2 * L.dpi) +
                                              (m.qdz10 + m.qdz11 * L.dfz) * std::abs(gs)) *
                                                 gs * m.lkzc) *
-      L.lmuy_star * Sgn(s.Vx) * std::cos(alpha_star);
+      L.lmuy_star * SgnPositiveAtZero(s.Vx) * std::cos(alpha_star);
   const double k_ratio = L.Kxk / Kya_p * kappa;
   const double tr = std::tan(alpha_r), tt = std::tan(alpha_t);
-  const double alpha_r_eq = std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * Sgn(alpha_r);
-  const double alpha_t_eq = std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * Sgn(alpha_t);
+  const double alpha_r_eq = std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_r);
+  const double alpha_t_eq = std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_t);
   const double s_arm = m.unloaded_radius *
                        (m.ssz1 + m.ssz2 * (o.Fy / m.fnomin) + (m.ssz3 + m.ssz4 * L.dfz) * gamma) *
                        m.ls;
