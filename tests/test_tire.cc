@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <map>
 #include <numbers>
 #include <set>
@@ -529,6 +530,35 @@ TEST(MagicFormula, HandCheckedPointsOfTheSyntheticFile) {
   near(lateral.Kya, -72808.98876404495);
 }
 
+// The law against tests/tire/mf61_reference.csv: an evaluation of the same published equations
+// written apart from it in Python (tests/tire/mf61_reference.py, from the book and the forms of
+// TNO's solver that MFeval documents), at 450 points of loads, pressures, inclinations and combined
+// slips that the closed forms above do not reach (the camber terms of Mz, combined-slip Mz).
+TEST(MagicFormula, AgreesWithAnEvaluationWrittenApart) {
+  std::ifstream in(std::filesystem::path(VDYN_SOURCE_DIR) / "tests" / "tire" /
+                   "mf61_reference.csv");
+  ASSERT_TRUE(in) << "tests/tire/mf61_reference.csv";
+  std::string line;
+  std::getline(in, line);
+  ASSERT_EQ(line, "Fz_N,pressure_Pa,gamma_rad,kappa,alpha_rad,Fx_N,Fy_N,Mz_Nm");
+  const MagicFormula m = Tire();
+  int points = 0;
+  while (std::getline(in, line)) {
+    std::vector<double> v;
+    std::istringstream row(line);
+    std::string cell;
+    while (std::getline(row, cell, ',')) v.push_back(std::stod(cell));
+    ASSERT_EQ(v.size(), 8u) << line;
+    const MfOutput o = At(m, v[0], v[3], v[4], v[2], v[1]);
+    // The table's 12 significant digits, and Pacejka's epsilon placed alike.
+    EXPECT_NEAR(o.Fx, v[5], 1e-9 * v[0]) << line;
+    EXPECT_NEAR(o.Fy, v[6], 1e-9 * v[0]) << line;
+    EXPECT_NEAR(o.Mz, v[7], 1e-9 * v[0] * m.unloaded_radius) << line;
+    ++points;
+  }
+  EXPECT_EQ(points, 450);
+}
+
 // TNO's relaxation lengths: the slip stiffness over the carcass stiffness, which the file gives
 // with its load and pressure terms (PCFX*, PCFY*).
 TEST(MagicFormula, RelaxationLengthsAreTheSlipStiffnessesOverTheCarcassStiffnesses) {
@@ -821,8 +851,9 @@ TEST(MagicFormulaVehicle, ALockedStopLeavesNothingWoundUp) {
   };
   const double mf = LockedStopRollBack(TireParams(locked));
   const double brush = LockedStopRollBack(testing::ParamsWith(locked));
-  std::printf("locked stop from 15 m/s, then held: moved back %.4f m (the brush tyre's car %.4f m)\n",
-              mf, brush);
+  std::printf(
+      "locked stop from 15 m/s, then held: moved back %.4f m (the brush tyre's car %.4f m)\n", mf,
+      brush);
   EXPECT_LT(mf, 1.2 * brush);
   EXPECT_LT(mf, 0.1);
 }

@@ -41,7 +41,8 @@ LateralPure PureLateral(const MagicFormula& m, const MfLoad& L, double Kya, doub
   LateralPure r;
   const double SVyg = L.Fz * (m.pvy3 + m.pvy4 * L.dfz) * gs * m.lkyc * L.lmuy_prime;
   const double Kyg0 = L.Fz * (m.pky6 + m.pky7 * L.dfz) * (1.0 + m.ppy5 * L.dpi) * m.lkyc;
-  r.SHy = ((m.phy1 + m.phy2 * L.dfz) * m.lhy + (Kyg0 * gs - SVyg) / (Kya + kEps * SgnPositiveAtZero(Kya))) *
+  r.SHy = ((m.phy1 + m.phy2 * L.dfz) * m.lhy +
+           (Kyg0 * gs - SVyg) / (Kya + kEps * SgnPositiveAtZero(Kya))) *
           L.reduction;
   r.SVy = (L.Fz * (m.pvy1 + m.pvy2 * L.dfz) * m.lvy * L.lmuy_prime + SVyg) * L.reduction;
   const double alpha_y = alpha_star + r.SHy;
@@ -49,10 +50,10 @@ LateralPure PureLateral(const MagicFormula& m, const MfLoad& L, double Kya, doub
   r.muy = (m.pdy1 + m.pdy2 * L.dfz) * (1.0 + m.ppy3 * L.dpi + m.ppy4 * L.dpi * L.dpi) *
           (1.0 - m.pdy3 * gs * gs) * L.lmuy_star;
   const double Dy = r.muy * L.Fz;
-  const double Ey =
-      std::min((m.pey1 + m.pey2 * L.dfz) *
-                   (1.0 + m.pey5 * gs * gs - (m.pey3 + m.pey4 * gs) * SgnPositiveAtZero(alpha_y)) * m.ley,
-               1.0);
+  const double Ey = std::min(
+      (m.pey1 + m.pey2 * L.dfz) *
+          (1.0 + m.pey5 * gs * gs - (m.pey3 + m.pey4 * gs) * SgnPositiveAtZero(alpha_y)) * m.ley,
+      1.0);
   r.By = Kya / (r.Cy * Dy + kEps * SgnPositiveAtZero(Dy));
   r.Fy0 = Dy * std::sin(r.Cy * std::atan(Inner(r.By, Ey, alpha_y))) + r.SVy;
   return r;
@@ -143,9 +144,9 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
   const double SHx = (m.phx1 + m.phx2 * L.dfz) * m.lhx * L.reduction;
   const double SVx = L.Fz * (m.pvx1 + m.pvx2 * L.dfz) * m.lvx * L.lmux_prime * L.reduction;
   const double kappa_x = kappa + SHx;
-  const double Ex = std::min(
-      (m.pex1 + m.pex2 * L.dfz + m.pex3 * L.dfz * L.dfz) * (1.0 - m.pex4 * SgnPositiveAtZero(kappa_x)) * m.lex,
-      1.0);
+  const double Ex = std::min((m.pex1 + m.pex2 * L.dfz + m.pex3 * L.dfz * L.dfz) *
+                                 (1.0 - m.pex4 * SgnPositiveAtZero(kappa_x)) * m.lex,
+                             1.0);
   const double Fx0 = Dx * std::sin(Cx * std::atan(Inner(Bx, Ex, kappa_x))) + SVx;
 
   // Pure lateral slip (4.E19-4.E30), and at zero inclination for Mz (4.E74).
@@ -170,7 +171,7 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
 
   // Aligning moment (4.E31-4.E49, 4.E71-4.E78) in the forms of TNO's solver: Bt and Dt with gamma
   // (QBZ4, QDZ3), the trail times LFZO, s with Fz0 (not Fz0'), the equivalent slips of A54/A55.
-  const double Kya_p = L.Kya + kEps * SgnPositiveAtZero(L.Kya);                               // 4.E39
+  const double Kya_p = L.Kya + kEps * SgnPositiveAtZero(L.Kya);                 // 4.E39
   const double alpha_r = alpha_star + y.SHy + y.SVy / Kya_p;                    // 4.E37, 4.E38
   const double SHt = m.qhz1 + m.qhz2 * L.dfz + (m.qhz3 + m.qhz4 * L.dfz) * gs;  // 4.E35
   const double alpha_t = alpha_star + SHt;                                      // 4.E34
@@ -193,8 +194,10 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
       L.lmuy_star * SgnPositiveAtZero(s.Vx) * std::cos(alpha_star);
   const double k_ratio = L.Kxk / Kya_p * kappa;
   const double tr = std::tan(alpha_r), tt = std::tan(alpha_t);
-  const double alpha_r_eq = std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_r);
-  const double alpha_t_eq = std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_t);
+  const double alpha_r_eq =
+      std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_r);
+  const double alpha_t_eq =
+      std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_t);
   const double s_arm = m.unloaded_radius *
                        (m.ssz1 + m.ssz2 * (o.Fy / m.fnomin) + (m.ssz3 + m.ssz4 * L.dfz) * gamma) *
                        m.ls;
