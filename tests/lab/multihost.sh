@@ -265,7 +265,9 @@ echo "multihost: 2. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL1=$(now_ns); heal_link pb
 wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the heal"
+# A state taken after the heal (one taken before it but written after FROM_B's offset would end
+# the wait with nothing for first_taken below: "none", 2026-12-05).
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL1" 60 >/dev/null || die "states did not reach host B again after the heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL1" 'src == "primary"')"
 HEAL_PRIMARY_MS=$(ms_between "$T_HEAL1" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL1")"
@@ -324,7 +326,7 @@ echo "multihost: 6. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL2=$(now_ns); heal_link pb
 wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the second heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the second heal"
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL2" 60 >/dev/null || die "states did not reach host B again after the second heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL2" 'src == "primary"')"
 HEAL2_PRIMARY_MS=$(ms_between "$T_HEAL2" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL2")"
