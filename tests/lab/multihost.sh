@@ -241,7 +241,7 @@ fi
 echo "multihost: 1. cut host B's link with the backup live on host C"
 FROM=$(size_of "$OBS_A")
 T_CUT1=$(now_ns); cut_link pb
-wait_line "$OBS_A" "$FROM" 'src == "backup"' 60 >/dev/null || die "the backup never drove after the cut"
+wait_line "$OBS_A" "$FROM" "src == \"backup\" && pub > $T_CUT1" 60 >/dev/null || die "the backup never drove after the cut"
 T_HEAL1=$(now_ns)
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_CUT1" primary 'src == "backup"')"
 CUT_BACKUP_MS=$((EV - ANCHOR))
@@ -264,8 +264,10 @@ fi
 echo "multihost: 2. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL1=$(now_ns); heal_link pb
-wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the heal"
+wait_line "$OBS_A" "$FROM" "src == \"primary\" && pub > $T_HEAL1" 60 >/dev/null || die "the primary did not take the vehicle back after the heal"
+# A state taken after the heal (one taken before it but written after FROM_B's offset would end
+# the wait with nothing for first_taken below: "none", 2026-12-05).
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL1" 60 >/dev/null || die "states did not reach host B again after the heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL1" 'src == "primary"')"
 HEAL_PRIMARY_MS=$(ms_between "$T_HEAL1" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL1")"
@@ -279,7 +281,7 @@ echo "multihost: 3. SIGKILL the primary rig on host B"
 FROM=$(size_of "$OBS_A")
 T_KILL=$(now_ns); kill -KILL "$PRIMARY_PID"
 wait "$PRIMARY_PID" 2>/dev/null || true  # reaped quietly
-wait_line "$OBS_A" "$FROM" 'src == "backup"' 60 >/dev/null || die "the backup never drove after the primary died"
+wait_line "$OBS_A" "$FROM" "src == \"backup\" && pub > $T_KILL" 60 >/dev/null || die "the backup never drove after the primary died"
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_KILL" primary 'src == "backup"')"
 DEATH_BACKUP_MS=$((EV - ANCHOR))
 figure "primary's death -> backup driving: $DEATH_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_KILL" "$RECV") ms after the kill)"
@@ -312,7 +314,7 @@ echo "multihost: 5. cut host B's link with no backup"
 FROM=$(size_of "$OBS_A")
 wait_line "$OBS_A" "$FROM" 'src == "primary"' 30 >/dev/null || die "the primary stopped driving when host C died"
 T_CUT2=$(now_ns); cut_link pb
-wait_line "$OBS_A" "$FROM" 'safe == 1' 60 >/dev/null || die "no safe state after the cut"
+wait_line "$OBS_A" "$FROM" "safe == 1 && pub > $T_CUT2" 60 >/dev/null || die "no safe state after the cut"
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_CUT2" primary 'safe == 1')"
 CUT_SAFE_MS=$((EV - ANCHOR))
 figure "cut -> safe state (watchdog 100 ms): $CUT_SAFE_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_CUT2" "$RECV") ms after the cut)"
@@ -323,8 +325,8 @@ OTHER=$(awk -v a="$T_CUT2" -v s="$EV" "$FIELDS"' ok && pub > a && step < s && sr
 echo "multihost: 6. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL2=$(now_ns); heal_link pb
-wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the second heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the second heal"
+wait_line "$OBS_A" "$FROM" "src == \"primary\" && pub > $T_HEAL2" 60 >/dev/null || die "the primary did not take the vehicle back after the second heal"
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL2" 60 >/dev/null || die "states did not reach host B again after the second heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL2" 'src == "primary"')"
 HEAL2_PRIMARY_MS=$(ms_between "$T_HEAL2" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL2")"
