@@ -97,7 +97,6 @@ MfLoad MagicFormulaLoad(const MagicFormula& m, double Fz, double gamma, double p
   L.Kxk = L.Fz * (m.pkx1 + m.pkx2 * L.dfz) * std::exp(m.pkx3 * L.dfz) *
           (1.0 + m.ppx1 * L.dpi + m.ppx2 * L.dpi * L.dpi) * m.lkx;  // 4.E15
   L.Kya = CorneringStiffness(m, L, L.gs);
-  L.Kya0 = L.gs == 0.0 ? L.Kya : CorneringStiffness(m, L, 0.0);
   // Carcass stiffnesses and the relaxation lengths of MF 6.1 (TNO: sigma = |K| / C).
   L.Cx = m.longitudinal_stiffness * (1.0 + m.pcfx1 * L.dfz + m.pcfx2 * L.dfz * L.dfz) *
          (1.0 + m.pcfx3 * L.dpi);
@@ -108,7 +107,8 @@ MfLoad MagicFormulaLoad(const MagicFormula& m, double Fz, double gamma, double p
   return L;
 }
 
-MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, bool overturning) {
+MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, bool aligning,
+                              bool overturning) {
   MfOutput o;
   o.Kxk = L.Kxk;
   o.Kya = L.Kya;
@@ -149,10 +149,9 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
                              1.0);
   const double Fx0 = Dx * std::sin(Cx * std::atan(Inner(Bx, Ex, kappa_x))) + SVx;
 
-  // Pure lateral slip (4.E19-4.E30), and at zero inclination for Mz (4.E74).
+  // Pure lateral slip (4.E19-4.E30).
   const LateralPure y = PureLateral(m, L, L.Kya, gs, alpha_star);
   o.muy = y.muy;
-  const double Fy0_g0 = gs == 0.0 ? y.Fy0 : PureLateral(m, L, L.Kya0, 0.0, alpha_star).Fy0;
 
   // Combined slip (4.E50-4.E67).
   const double Exa = std::min(m.rex1 + m.rex2 * L.dfz, 1.0);
@@ -170,40 +169,45 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
   o.Fy = Gyk * y.Fy0 + SVyk;
 
   // Aligning moment (4.E31-4.E49, 4.E71-4.E78) in the forms of TNO's solver: Bt and Dt with gamma
-  // (QBZ4, QDZ3), the trail times LFZO, s with Fz0 (not Fz0'), the equivalent slips of A54/A55.
-  const double Kya_p = L.Kya + kEps * SgnPositiveAtZero(L.Kya);                 // 4.E39
-  const double alpha_r = alpha_star + y.SHy + y.SVy / Kya_p;                    // 4.E37, 4.E38
-  const double SHt = m.qhz1 + m.qhz2 * L.dfz + (m.qhz3 + m.qhz4 * L.dfz) * gs;  // 4.E35
-  const double alpha_t = alpha_star + SHt;                                      // 4.E34
-  const double Bt = (m.qbz1 + m.qbz2 * L.dfz + m.qbz3 * L.dfz * L.dfz) *
-                    (1.0 + m.qbz4 * gamma + m.qbz5 * std::abs(gamma)) * m.lky / L.lmuy_star;
-  const double Ct = m.qcz1;
-  const double Dt = (m.qdz1 + m.qdz2 * L.dfz) * (1.0 - m.ppz1 * L.dpi) *
-                    (1.0 + m.qdz3 * gamma + m.qdz4 * gamma * gamma) * L.Fz *
-                    (m.unloaded_radius / L.Fz0p) * m.ltr;
-  const double Et =
-      std::min((m.qez1 + m.qez2 * L.dfz + m.qez3 * L.dfz * L.dfz) *
-                   (1.0 + (m.qez4 + m.qez5 * gs) * (2.0 / kPi) * std::atan(Bt * Ct * alpha_t)),
-               1.0);
-  const double Br = m.qbz9 * m.lky / L.lmuy_star + m.qbz10 * y.By * y.Cy;
-  const double Dr =
-      L.Fz * m.unloaded_radius *
-      ((m.qdz6 + m.qdz7 * L.dfz) * m.lres + ((m.qdz8 + m.qdz9 * L.dfz) * (1.0 + m.ppz2 * L.dpi) +
-                                             (m.qdz10 + m.qdz11 * L.dfz) * std::abs(gs)) *
-                                                gs * m.lkzc) *
-      L.lmuy_star * SgnPositiveAtZero(s.Vx) * std::cos(alpha_star);
-  const double k_ratio = L.Kxk / Kya_p * kappa;
-  const double tr = std::tan(alpha_r), tt = std::tan(alpha_t);
-  const double alpha_r_eq =
-      std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_r);
-  const double alpha_t_eq =
-      std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_t);
-  const double s_arm = m.unloaded_radius *
-                       (m.ssz1 + m.ssz2 * (o.Fy / m.fnomin) + (m.ssz3 + m.ssz4 * L.dfz) * gamma) *
-                       m.ls;
-  o.Mzr = Dr * std::cos(std::atan(Br * alpha_r_eq)) * L.reduction;  // Cr = 1
-  o.t = Dt * Weight(Bt, Ct, Et, alpha_t_eq) * cos_alpha_prime * m.lfzo * L.reduction;
-  o.Mz = -o.t * Gyk * Fy0_g0 + o.Mzr + s_arm * o.Fx;
+  // (QBZ4, QDZ3), the trail times LFZO, s with Fz0 (not Fz0'), the equivalent slips of A54/A55;
+  // the trail acts on the pure side force at zero inclination (4.E74).
+  if (aligning) {
+    const double Kya0 = gs == 0.0 ? L.Kya : CorneringStiffness(m, L, 0.0);
+    const double Fy0_g0 = gs == 0.0 ? y.Fy0 : PureLateral(m, L, Kya0, 0.0, alpha_star).Fy0;
+    const double Kya_p = L.Kya + kEps * SgnPositiveAtZero(L.Kya);                 // 4.E39
+    const double alpha_r = alpha_star + y.SHy + y.SVy / Kya_p;                    // 4.E37, 4.E38
+    const double SHt = m.qhz1 + m.qhz2 * L.dfz + (m.qhz3 + m.qhz4 * L.dfz) * gs;  // 4.E35
+    const double alpha_t = alpha_star + SHt;                                      // 4.E34
+    const double Bt = (m.qbz1 + m.qbz2 * L.dfz + m.qbz3 * L.dfz * L.dfz) *
+                      (1.0 + m.qbz4 * gamma + m.qbz5 * std::abs(gamma)) * m.lky / L.lmuy_star;
+    const double Ct = m.qcz1;
+    const double Dt = (m.qdz1 + m.qdz2 * L.dfz) * (1.0 - m.ppz1 * L.dpi) *
+                      (1.0 + m.qdz3 * gamma + m.qdz4 * gamma * gamma) * L.Fz *
+                      (m.unloaded_radius / L.Fz0p) * m.ltr;
+    const double Et =
+        std::min((m.qez1 + m.qez2 * L.dfz + m.qez3 * L.dfz * L.dfz) *
+                     (1.0 + (m.qez4 + m.qez5 * gs) * (2.0 / kPi) * std::atan(Bt * Ct * alpha_t)),
+                 1.0);
+    const double Br = m.qbz9 * m.lky / L.lmuy_star + m.qbz10 * y.By * y.Cy;
+    const double Dr =
+        L.Fz * m.unloaded_radius *
+        ((m.qdz6 + m.qdz7 * L.dfz) * m.lres + ((m.qdz8 + m.qdz9 * L.dfz) * (1.0 + m.ppz2 * L.dpi) +
+                                               (m.qdz10 + m.qdz11 * L.dfz) * std::abs(gs)) *
+                                                  gs * m.lkzc) *
+        L.lmuy_star * SgnPositiveAtZero(s.Vx) * std::cos(alpha_star);
+    const double k_ratio = L.Kxk / Kya_p * kappa;
+    const double tr = std::tan(alpha_r), tt = std::tan(alpha_t);
+    const double alpha_r_eq =
+        std::atan(std::sqrt(tr * tr + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_r);
+    const double alpha_t_eq =
+        std::atan(std::sqrt(tt * tt + k_ratio * k_ratio)) * SgnPositiveAtZero(alpha_t);
+    const double s_arm = m.unloaded_radius *
+                         (m.ssz1 + m.ssz2 * (o.Fy / m.fnomin) + (m.ssz3 + m.ssz4 * L.dfz) * gamma) *
+                         m.ls;
+    o.Mzr = Dr * std::cos(std::atan(Br * alpha_r_eq)) * L.reduction;  // Cr = 1
+    o.t = Dt * Weight(Bt, Ct, Et, alpha_t_eq) * cos_alpha_prime * m.lfzo * L.reduction;
+    o.Mz = -o.t * Gyk * Fy0_g0 + o.Mzr + s_arm * o.Fx;
+  }
 
   // The slips' linear force over the peak, |(Kxk kappa / Dx, Kya tan(alpha) / Dy)|: 1 where the
   // patch's deflection (kappa sigma_kappa = Kxk kappa / Cx) would carry the peak force on the
@@ -237,7 +241,7 @@ MfOutput EvaluateMagicFormula(const MagicFormula& m, MfLoad L, const MfSlip& s, 
 
 MfOutput EvaluateMagicFormula(const MagicFormula& mf, const MfInput& in) {
   const MfLoad L = MagicFormulaLoad(mf, in.Fz, in.gamma, in.pressure);
-  return EvaluateMagicFormula(mf, L, {in.kappa, in.tan_alpha, in.Vx, in.Vc}, true);
+  return EvaluateMagicFormula(mf, L, {in.kappa, in.tan_alpha, in.Vx, in.Vc}, true, true);
 }
 
 MfPeaks MagicFormulaPeaks(const MagicFormula& mf, double Fz) {

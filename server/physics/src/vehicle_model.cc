@@ -459,7 +459,8 @@ void TireForcesMagicFormula(const Params& p, int w, const BodyKinematics& k,
   const double tan_alpha = tan_alpha_t + damp * o.v_lat / std::max(std::abs(load.Kya), 1.0);
   const double Vc = std::sqrt(o.v_long * o.v_long + o.v_lat * o.v_lat);
   const MfOutput f =
-      EvaluateMagicFormula(m, load, {kappa, mirror * tan_alpha, o.v_long, Vc}, report_all);
+      EvaluateMagicFormula(m, load, {kappa, mirror * tan_alpha, o.v_long, Vc},
+                           /*aligning=*/report_all || w == kLF || w == kRF, report_all);
   o.Fx = f.Fx;
   o.Fy = mirror * f.Fy;
   o.Mz = mirror * f.Mz;

@@ -237,8 +237,7 @@ struct MfLoad {
   double Fz = 0, gamma = 0, gs = 0, pressure = 0;  // clamped inputs; gs = sin(gamma) (4.E4)
   double Fz0p = 0, dfz = 0, dpi = 0;               // 4.E1, 4.E2
   double Kxk = 0;                                  // longitudinal slip stiffness (4.E15), N
-  double Kya = 0;  // cornering stiffness (4.E25), N/rad (< 0 with TNO's signs); Kya0 at gamma 0
-  double Kya0 = 0;
+  double Kya = 0;  // cornering stiffness (4.E25), N/rad (< 0 with TNO's signs)
   double Cx = 0, Cy = 0;                    // carcass stiffnesses, N/m
   double sigma_kappa = 0, sigma_alpha = 0;  // relaxation lengths |Kxk| / Cx, |Kya| / Cy, m
   // Set by the evaluation (they depend on the slip speed): 4.E7, 4.E8, the low-speed fade.
@@ -286,9 +285,11 @@ struct MfOutput {
 // (pneumatic trail, residual torque, the Fx moment arm s), My, and with `overturning` Mx. The
 // inputs are clamped to the file's ranges of use (KPUMIN..., ALPMIN..., CAMMIN..., FZMAX,
 // PRESMIN...); below VXLOW the shifts, the trail and the residual torque fade out as TNO's solver
-// fades them, so nothing acts at a standstill but the slips. No allocation.
+// fades them, so nothing acts at a standstill but the slips. No allocation. Without `aligning`
+// Mz is left 0 and not computed (a third of the cost: the trail, the residual torque and the
+// pure side force again at zero inclination): the vehicle reads a rear wheel's only to publish it.
 MfOutput EvaluateMagicFormula(const MagicFormula& mf, MfLoad load, const MfSlip& slip,
-                              bool overturning);
+                              bool aligning, bool overturning);
 MfOutput EvaluateMagicFormula(const MagicFormula& mf, const MfInput& in);
 
 // Where the pure-slip forces peak at load Fz (no camber, the file's INFLPRES, at LONGVL): kappa*
