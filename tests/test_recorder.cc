@@ -259,7 +259,7 @@ TEST_F(RecorderTest, VerifyIsBitExactOnALiveSessionAndPinpointsAnInjectedDiverge
       const double t =
           std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       pb::DriverInput msg = InputAt(static_cast<std::uint64_t>(t * 1000));
-      in.Publish(msg);
+      EXPECT_TRUE(in.Publish(msg));
       std::this_thread::sleep_until(start + std::chrono::microseconds(2000 * (i + 1)));
     }
   });

@@ -54,6 +54,8 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_out_of_range_ = drops_.Register("out-of-range input on vdyn/input");
   drop_rejected_ = drops_.Register("rejected control request");
   drop_step_input_ = drops_.Register("out-of-range input in a step request");
+  // Checked by the receiver or the planner before: never expected, counted should it happen.
+  drop_session_refused_input_ = drops_.Register("input the session refused after its checks");
   drop_unknown_buttons_ = drops_.Register("unknown button bits on vdyn/input (ignored)");
   drop_unanswered_gone_ = drops_.Register(
       "control request unanswered: its client went away before its steps were done");
@@ -175,7 +177,9 @@ bool ServerNode::Boundary() {
     }
     const bool step = p.op == PreparedRequest::Op::kStep;
     if (step && deferred_step_replies_.size() == kMaxDeferred) break;
-    if (step && p.step_input) session_->OfferInput(p.request->step().input(), nullptr);
+    if (step && p.step_input && !session_->OfferInput(p.request->step().input(), nullptr)) {
+      drops_.Count(drop_session_refused_input_);
+    }
     RequestOutcome o = session_->Commit(p);
     if (step && o.accepted) {
       // Answered when its steps are done: the ones pending before it, then its own.
@@ -208,7 +212,9 @@ bool ServerNode::Boundary() {
   }
   // Inputs were checked by the receiver (key, ranges); the newest of each vehicle wins.
   while (pb::DriverInput* in = inputs_.Front()) {
-    if (session_->HasVehicle(in->vehicle_id())) session_->OfferInput(*in, nullptr);
+    if (session_->HasVehicle(in->vehicle_id()) && !session_->OfferInput(*in, nullptr)) {
+      drops_.Count(drop_session_refused_input_);
+    }
     inputs_.Pop();
   }
   return applied;

@@ -242,7 +242,7 @@ class ServerNode {
   int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1, drop_inputs_full_ = -1,
       drop_key_mismatch_ = -1, drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1,
       drop_unknown_buttons_ = -1, drop_unanswered_gone_ = -1, drop_unanswered_write_ = -1,
-      drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1;
+      drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1, drop_session_refused_input_ = -1;
 
   // Loop statistics: the current window and the whole run.
   std::string scheduling_;

@@ -233,7 +233,7 @@ class Session {
 
   // Offers a live input for the next step boundary. Returns false (and why) when it is refused:
   // unknown vehicle or a value out of range. Non-finite values never get here (transport).
-  bool OfferInput(const pb::DriverInput& input, std::string* reason);
+  [[nodiscard]] bool OfferInput(const pb::DriverInput& input, std::string* reason);
 
   // One step of every vehicle, in three phases: (1) serial, in id order: each vehicle's input
   // latched (its input events); (2) on the step pool, each vehicle in one thread's contiguous
