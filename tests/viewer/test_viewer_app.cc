@@ -391,6 +391,93 @@ TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
   EXPECT_GT(FindColour(with, g.r, g.g, g.b, kTol).count, 50) << "the car ahead's springs";
 }
 
+// --- the car's lamps ------------------------------------------------------------------------
+
+// Pixels of a lit lamp in the view: saturated (a channel at 250 or more) in the lamp's hue.
+struct Lamps {
+  int red_left = 0, red_right = 0;  // brake-light red (R >= 250, G and B <= 110), each half
+  int white = 0;                    // reversing-light white (every channel >= 250)
+  std::vector<std::size_t> red_at;  // where the red ones are (pixel indices)
+};
+Lamps FindLamps(const Image& img, Rect region) {
+  Lamps l;
+  for (int y = region.y0; y < std::min(region.y1, img.height); ++y) {
+    for (int x = region.x0; x < std::min(region.x1, img.width); ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * img.width + x;
+      const std::uint8_t* p = &img.rgba[i * 4];
+      if (p[0] >= 250 && p[1] <= 110 && p[2] <= 110) {
+        (x < img.width / 2 ? l.red_left : l.red_right)++;
+        l.red_at.push_back(i);
+      }
+      if (p[0] >= 250 && p[1] >= 250 && p[2] >= 250) ++l.white;
+    }
+  }
+  return l;
+}
+
+// The mean luma (sRGB, 0..255) of some pixels.
+double MeanLuma(const Image& img, const std::vector<std::size_t>& at) {
+  double sum = 0;
+  for (std::size_t i : at) {
+    const std::uint8_t* p = &img.rgba[i * 4];
+    sum += 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+  }
+  return at.empty() ? 0.0 : sum / static_cast<double>(at.size());
+}
+
+TEST_F(ViewerApp, TheBrakeLightsLightWhileBrakingAndTheReversingLightsInReverse) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  // At both qualities (low: no glossy shading, as on a software renderer).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = Options(domain);
+    o.hud = false;
+    o.quality = q;
+    o.camera.mode = CameraMode::kChase;  // behind the car: its rear in the middle of the view
+    o.delay_ns = 0;
+    Viewer v(o);
+    TestVehicle t;
+    t.step = q == viewer::Quality::kHigh ? 1 : 1000;
+    for (auto& w : t.wheels) w.fp = 0;                            // no arrows over the rear
+    const Rect rear{kW * 3 / 8, kH / 2, kW * 5 / 8, kH * 3 / 4};  // the car's rear
+    auto state = [&](double brake, double brake_torque, int gear) {
+      ++t.step;
+      pb::VehicleState s = MakeState(t);
+      s.mutable_control()->set_brake(brake);
+      for (auto& w : *s.mutable_wheels()) w.set_brake_torque(brake_torque);
+      s.mutable_drivetrain()->set_gear(gear);
+      return s;
+    };
+    const Image off = Show(v, pub, {state(0.0, 0.0, 1)});
+    const Image braking = Show(v, pub, {state(0.6, 0.0, 1)});
+    const Image torque = Show(v, pub, {state(0.0, 400.0, 1)});  // the full model's brake torque
+    const Image reverse = Show(v, pub, {state(0.0, 0.0, -1)});
+    const Lamps l_off = FindLamps(off, rear), l_brake = FindLamps(braking, rear);
+    // The paper model (no gearbox: gear 0) driven backwards at 2 m/s.
+    t.speed = -2;
+    for (auto& w : t.wheels) w.fh = -300;
+    const Image backwards = Show(v, pub, {state(0.0, 0.0, 0)});
+    const Lamps l_torque = FindLamps(torque, rear), l_reverse = FindLamps(reverse, rear);
+    EXPECT_GT(FindLamps(backwards, rear).white, 20) << "driven backwards";
+    // Both brake lights lit while braking (by the input or by the torque), neither otherwise.
+    EXPECT_GT(l_brake.red_left, 20);
+    EXPECT_GT(l_brake.red_right, 20);
+    EXPECT_GT(l_torque.red_left, 20);
+    EXPECT_GT(l_torque.red_right, 20);
+    EXPECT_LT(l_off.red_left + l_off.red_right, 5) << "the brake lights are lit without braking";
+    EXPECT_LT(l_reverse.red_left + l_reverse.red_right, 5);
+    // Where they are, the lamps are clearly brighter braking than not.
+    const double lit = MeanLuma(braking, l_brake.red_at), unlit = MeanLuma(off, l_brake.red_at);
+    EXPECT_GT(lit, 1.5 * unlit) << "lit " << lit << ", unlit " << unlit;
+    // The reversing lights in reverse gear only.
+    EXPECT_GT(l_reverse.white, 20);
+    EXPECT_LT(l_off.white, 5);
+    EXPECT_LT(l_brake.white, 5);
+  }
+}
+
 TEST_F(ViewerApp, TheForcesLegendStartsCollapsedAndLOpensIt) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);

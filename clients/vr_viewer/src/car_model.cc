@@ -105,7 +105,8 @@ constexpr Rgb8 kUnderbody{28, 28, 30};
 constexpr Rgb8 kGlassTint{22, 28, 34};
 constexpr Rgb8 kGrille{18, 18, 20};
 constexpr Rgb8 kHeadlight{240, 240, 232};
-constexpr Rgb8 kTaillight{205, 22, 24};
+constexpr Rgb8 kTaillight{170, 18, 22};
+constexpr Rgb8 kReverseLight{215, 215, 208};
 constexpr Rgb8 kPlate{230, 230, 222};
 
 // A body cross-section at one station: 14 points around, starting at the bottom centre, up the
@@ -341,6 +342,7 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
   };
   const std::uint32_t head = soup.Look(Material::kLightFront, kHeadlight);
   const std::uint32_t tail = soup.Look(Material::kLightRear, kTaillight);
+  const std::uint32_t reverse = soup.Look(Material::kLightReverse, kReverseLight);
   const std::uint32_t grille = soup.Look(Material::kMatte, kGrille);
   const std::uint32_t plate = soup.Look(Material::kMatte, kPlate);
   const double wf = hw * Pwl(width, xf), wr = hw * Pwl(width, xr);
@@ -350,6 +352,9 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
     end_quad(xfd, std::min(y0, y1), std::max(y0, y1), H(0.53), H(0.62), head, true);
     const double t0 = side * 0.58 * wr, t1 = side * 0.88 * wr;
     end_quad(xrd, std::min(t0, t1), std::max(t0, t1), H(0.60), H(0.70), tail, false);
+    // The reversing lamp: inboard of the tail light, in its band.
+    const double r0 = side * 0.47 * wr, r1 = side * 0.56 * wr;
+    end_quad(xrd, std::min(r0, r1), std::max(r0, r1), H(0.61), H(0.69), reverse, false);
   }
   end_quad(xfd, -0.40 * wf, 0.40 * wf, H(0.38), H(0.52), grille, true);
   end_quad(xfd, -0.70 * wf, 0.70 * wf, H(0.24), H(0.33), grille, true);
@@ -529,6 +534,10 @@ ModelMesh LoadCarModel(const std::string& path) {
       named_paint[i] = any_paint = true;
     } else if (NameHas(name, {"glass", "window"}) || opacity < 0.9f) {
       looks[i] = {Material::kGlass, kGlassTint};
+    } else if (NameHas(name, {"reverse", "backup"})) {
+      looks[i] = {Material::kLightReverse, c};
+    } else if (NameHas(name, {"brake", "tail"})) {
+      looks[i] = {Material::kLightRear, c};
     } else if (NameHas(name, {"chrome", "metal"})) {
       looks[i] = {Material::kChrome, c};
     } else {

@@ -96,7 +96,7 @@ struct Uniforms {
   GLint view_proj = -1, model = -1, eye = -1, fog = -1, paint = -1, alpha = -1;
   GLint frame = -1, half_size = -1, strip = -1, grid = -1, surfaces = -1;
   GLint shadow_map = -1, shadow_mat = -1, shadow_box = -1, shadow_texel = -1;
-  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1;
+  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1, lights = -1;
 };
 
 Vec3 Linear(Rgb8 c) {
@@ -317,6 +317,7 @@ struct Renderer::Program {
     u.clouds = at("u_clouds");
     u.strength = at("u_strength");
     u.radius = at("u_radius");
+    u.lights = at("u_lights");
     // Texture units: surfaces 0, the shadow map 1, clouds 2.
     glUseProgram(id);
     if (u.surfaces >= 0) glUniform1i(u.surfaces, 0);
@@ -832,10 +833,12 @@ void Renderer::DrawModels(const Program& p, const FrameLists& lists, const Mat4&
     const GpuMesh& m = BodyMesh(b);
     SetMat(p.u.model, BodyTransform(b));
     SetVec3(p.u.paint, Linear(b.paint));
+    glUniform2f(p.u.lights, b.brake_lights ? 1.0f : 0.0f, b.reverse_lights ? 1.0f : 0.0f);
     glBindVertexArray(m.vao);
     glDrawElements(GL_TRIANGLES, m.count, GL_UNSIGNED_INT, nullptr);
   }
   SetVec3(p.u.paint, {1, 1, 1});
+  glUniform2f(p.u.lights, 0.0f, 0.0f);
   for (const WheelInstance& w : lists.wheels) {
     if (!InFrustum(view_proj, w.centre_W, w.radius)) continue;
     const GpuMesh& m = w.coarse ? wheel_coarse_ : wheel_fine_;

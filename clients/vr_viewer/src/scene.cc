@@ -263,6 +263,15 @@ VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g
     v.arrows.push_back({ForceKind::kSide, w, B, wv.t_lat_W * ws.fy(), false});
   }
   v.ground_z = ground / kWheels;
+  // The lamps.
+  double brake_torque = 0, drive = 0;
+  for (const pb::WheelState& ws : s.wheels()) {
+    brake_torque = std::max(brake_torque, ws.brake_torque());
+    drive += ws.fh() + ws.drive_torque();
+  }
+  v.braking = s.control().brake() > kBrakeLightInput || brake_torque > kBrakeLightTorqueNm;
+  const double v_forward = Dot(v_T, x_B);
+  v.reversing = s.drivetrain().gear() < 0 || (v_forward < -kReverseLightSpeed && drive < 0);
   // Drag acts against X_B (eq. 15, signed with vx): drawn pointing at the nose.
   const Vec3 nose = v.pose_WB * Vec3{g.front, 0, 0};
   v.arrows.push_back({ForceKind::kDrag, -1, nose, x_B * (-s.da()), true});

@@ -8,7 +8,9 @@
 //    glTF convention), fitted to the same box: scaled to the body's length, its lowest point on
 //    the ground. Nodes named like a wheel (wheel, tire, tyre, rim) are left out: the viewer
 //    draws its own wheels where the state puts them. The paint (materials named paint, body or
-//    carpaint, else the largest) takes the vehicle's colour.
+//    carpaint, else the largest) takes the vehicle's colour; materials named like a brake or
+//    tail light (brake, tail) light up while braking, like a reversing light (reverse, backup)
+//    in reverse.
 //  - A wheel: a tyre with a white mark on each sidewall and a five-spoke rim, radius 1, axle
 //    along Y; the renderer scales it by the wheel's radius and turns it by its spin.
 #pragma once
@@ -25,13 +27,14 @@ namespace vdyn::viewer {
 
 // How a surface of a model is shaded.
 enum class Material : std::uint8_t {
-  kMatte = 0,       // diffuse only
-  kPaint = 1,       // the vehicle's colour (times the vertex colour), glossy
-  kGlass = 2,       // dark, reflects the sky
-  kChrome = 3,      // bright metal, sharp highlights
-  kRubber = 4,      // tyres: dark, a soft sheen
-  kLightFront = 5,  // headlights: bright whatever the light
-  kLightRear = 6,   // tail lights
+  kMatte = 0,         // diffuse only
+  kPaint = 1,         // the vehicle's colour (times the vertex colour), glossy
+  kGlass = 2,         // dark, reflects the sky
+  kChrome = 3,        // bright metal, sharp highlights
+  kRubber = 4,        // tyres: dark, a soft sheen
+  kLightFront = 5,    // headlights: bright whatever the light
+  kLightRear = 6,     // tail and brake lights: lit brightly while braking
+  kLightReverse = 7,  // reversing lights: lit in reverse
 };
 
 struct ModelVertex {

@@ -59,6 +59,8 @@ struct BodyInstance {
   VehicleGeometry geometry;
   Rgb8 paint;
   bool coarse = false;
+  bool brake_lights = false;    // lit (VehicleView::braking)
+  bool reverse_lights = false;  // lit (VehicleView::reversing)
 };
 
 // A wheel to draw: the wheel mesh (radius 1, axle along Y) turned into the frame R_WW (columns:

@@ -93,7 +93,15 @@ struct VehicleView {
   double yaw = 0;
   // Ground height under the vehicle (mean of the four B), m.
   double ground_z = 0;
+  // Its lamps: the brake lights while it brakes (the applied brake input, or a brake torque at
+  // a wheel, over the thresholds below), the reversing lights in reverse gear or while the drive
+  // pushes it backwards.
+  bool braking = false;
+  bool reversing = false;
 };
+inline constexpr double kBrakeLightInput = 0.02;     // applied brake input, [0, 1]
+inline constexpr double kBrakeLightTorqueNm = 10.0;  // a wheel's brake torque (full model)
+inline constexpr double kReverseLightSpeed = 0.2;    // m/s backwards, with the drive backwards
 
 // Empty when a state can be drawn: four wheels, a usable quaternion, positions within 1e7 m;
 // else why not. (Non-finite numbers never get here: the transport drops them.)
