@@ -391,6 +391,58 @@ TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
   EXPECT_GT(FindColour(with, g.r, g.g, g.b, kTol).count, 50) << "the car ahead's springs";
 }
 
+// Switching away from the driver camera: every frame is drawn whole from one camera - the one
+// its HUD names - and none from inside the body (issue 35: one frame from the driver's seat
+// with the body drawn, a dark void with two green spring arrows, while the HUD said "driver").
+TEST_F(ViewerApp, SwitchingFromTheDriverCameraNeverDrawsAFrameFromInsideTheBody) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.camera.mode = CameraMode::kDriver;
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w = {4000, 0, 0, 0};  // 2 m spring arrows
+  Show(v, pub, {MakeState(t)});
+  const viewer::Rgb8 own = viewer::VehicleColour(1);
+  const viewer::Rgb8 spring = viewer::ForceColour(viewer::ForceKind::kSpring);
+  // Below the HUD's panels: the road from the seat, the car's rear from behind.
+  const Rect middle{kW / 4, kH / 2, kW * 3 / 4, kH};
+  for (SDL_Keycode key : {SDLK_1, SDLK_2, SDLK_3, SDLK_2, SDLK_5, SDLK_2, SDLK_6}) {
+    const bool to_driver = key == SDLK_2;
+    Key(key);
+    for (int frame = 0; frame < 3; ++frame) {
+      ASSERT_TRUE(v.Frame());
+      const Image img = Keep(v.Screenshot());
+      int dark = 0;
+      for (int y = middle.y0; y < middle.y1; ++y) {
+        for (int x = middle.x0; x < middle.x1; ++x) {
+          const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * img.width + x) * 4];
+          dark += p[0] < 40 && p[1] < 40 && p[2] < 40 ? 1 : 0;
+        }
+      }
+      const int pixels = (middle.x1 - middle.x0) * (middle.y1 - middle.y0);
+      SCOPED_TRACE("key " + std::string(SDL_GetKeyName(key)) + ", frame " + std::to_string(frame) +
+                   "\n" + Hud(v));
+      EXPECT_LT(dark, pixels / 4) << "a dark void: the inside of the body";
+      const bool hud_driver = HudHas(v, "camera driver");
+      const int body = FindColour(img, own.r, own.g, own.b, kTol, middle).count;
+      const int arrows = FindColour(img, spring.r, spring.g, spring.b, kTol, middle).count;
+      if (hud_driver) {
+        // From the seat: nothing of the own car's body paint or arrows in view.
+        EXPECT_EQ(arrows, 0) << "the own car's spring arrows from the driver's seat";
+        EXPECT_EQ(body, 0) << "the own car's body from the driver's seat";
+      } else {
+        EXPECT_GT(arrows, 0) << "the car's spring arrows from outside";
+      }
+      // The new camera within a frame or two (the HUD takes the key at the frame it arrives).
+      if (frame == 2) {
+        EXPECT_EQ(hud_driver, to_driver);
+      }
+    }
+  }
+}
+
 // --- the car's lamps ------------------------------------------------------------------------
 
 // Pixels of a lit lamp in the view: saturated (a channel at 250 or more) in the lamp's hue.
