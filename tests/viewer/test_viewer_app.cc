@@ -368,10 +368,12 @@ TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
   TestVehicle t;
   for (auto& w : t.wheels) w = {4000, 2000, 0, 1500};
   const Image img = Show(v, pub, {MakeState(t)});
-  // The lower middle of the view (where the bonnet, the front tyres and their arrows were) shows
-  // the road: none of the arrows' or the vehicle's colours, and asphalt mostly (grey: textured,
-  // its pixels are classified; its lane marking is white).
-  const Rect lower{kW / 3, kH * 6 / 10, kW * 2 / 3, kH * 95 / 100};
+  // The road ahead through the windscreen, between the horizon and the bonnet (the cockpit's
+  // dashboard and wheel fill the view below it; cockpit tests below): none of the arrows' or the
+  // vehicle's colours, and asphalt mostly (grey: textured, its pixels are classified; its lane
+  // marking is white). (Without the cockpit this was the lower middle of the view, where the
+  // front tyres and their arrows had been.)
+  const Rect lower{kW * 42 / 100, kH * 45 / 100, kW * 58 / 100, kH / 2};
   for (int k = 0; k < viewer::kForceKinds; ++k) {
     const viewer::Rgb8 c = viewer::ForceColour(static_cast<viewer::ForceKind>(k));
     EXPECT_EQ(FindColour(img, c.r, c.g, c.b, kTol, lower).count, 0)
@@ -400,6 +402,7 @@ TEST_F(ViewerApp, SwitchingFromTheDriverCameraNeverDrawsAFrameFromInsideTheBody)
   ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
   ViewerOptions o = Options(domain);
   o.camera.mode = CameraMode::kDriver;
+  o.camera.cockpit = false;  // nothing of the own car from its seat (the cockpit: tests below)
   Viewer v(o);
   TestVehicle t;
   for (auto& w : t.wheels) w = {4000, 0, 0, 0};  // 2 m spring arrows
@@ -527,6 +530,142 @@ TEST_F(ViewerApp, TheBrakeLightsLightWhileBrakingAndTheReversingLightsInReverse)
     EXPECT_GT(l_reverse.white, 20);
     EXPECT_LT(l_off.white, 5);
     EXPECT_LT(l_brake.white, 5);
+  }
+}
+
+// --- the cockpit ---------------------------------------------------------------------------
+
+// A full-model state of vehicle 1 at `kmh` (along its heading), its hand wheel at `wheel_rad`,
+// its engine at `rpm` in `gear`.
+pb::VehicleState Cockpit(std::uint64_t step, double kmh, double wheel_rad, double rpm, int gear) {
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;
+  t.step = step;
+  t.speed = kmh / 3.6;
+  pb::VehicleState s = MakeState(t);
+  s.set_model(pb::VEHICLE_MODEL_FULL);
+  s.mutable_steering()->set_hand_wheel_angle(wheel_rad);
+  s.mutable_drivetrain()->set_engine_rpm(rpm);
+  s.mutable_drivetrain()->set_gear(gear);
+  return s;
+}
+
+// Pixels of one colour (within 10 per channel) and those of an orange hue (the wheel's lit top
+// mark), in a region.
+Blob Orange(const Image& img, Rect r) {
+  Blob b;
+  for (int y = r.y0; y < std::min(r.y1, img.height); ++y) {
+    for (int x = r.x0; x < std::min(r.x1, img.width); ++x) {
+      const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * img.width + x) * 4];
+      if (p[0] > 110 && p[0] > 1.3 * p[1] && p[1] > 1.5 * p[2] && p[1] > 30) {
+        b.cx += x;
+        b.cy += y;
+        ++b.count;
+      }
+    }
+  }
+  if (b.count > 0) {
+    b.cx /= b.count;
+    b.cy /= b.count;
+  }
+  return b;
+}
+
+int ChangedPixels(const Image& a, const Image& b, Rect r) {
+  int n = 0;
+  for (int y = r.y0; y < r.y1; ++y) {
+    for (int x = r.x0; x < r.x1; ++x) {
+      const std::size_t i = (static_cast<std::size_t>(y) * a.width + x) * 4;
+      for (int c = 0; c < 3; ++c) {
+        if (std::abs(a.rgba[i + c] - b.rgba[i + c]) > 30) {
+          ++n;
+          break;
+        }
+      }
+    }
+  }
+  return n;
+}
+
+class CockpitTest : public ViewerApp {
+ protected:
+  static ViewerOptions DriverOptions(std::uint32_t domain) {
+    ViewerOptions o = Options(domain);
+    o.hud = false;
+    o.camera.mode = CameraMode::kDriver;
+    o.delay_ns = 0;
+    return o;
+  }
+};
+
+// The steering wheel turns with the published hand-wheel angle: its lower half of the view
+// changes between 0 and 90 deg (and not between two frames at the same angle), and its top mark
+// goes to the driver's left for a left turn (positive), to the right for a right one.
+TEST_F(CockpitTest, TheSteeringWheelTurnsWithTheHandWheelAngle) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  Viewer v(DriverOptions(domain));
+  const Image straight = Show(v, pub, {Cockpit(1, 0, 0, 900, 1)});
+  const Image left = Show(v, pub, {Cockpit(2, 0, viewer::Rad(90), 900, 1)});
+  const Image right = Show(v, pub, {Cockpit(3, 0, viewer::Rad(-90), 900, 1)});
+  const Image again = Show(v, pub, {Cockpit(4, 0, 0, 900, 1)});
+  const Rect wheel{0, kH * 55 / 100, kW, kH};
+  const int pixels = wheel.x1 * (wheel.y1 - wheel.y0);
+  EXPECT_GT(ChangedPixels(straight, left, wheel), pixels / 100) << "the wheel did not turn";
+  EXPECT_LT(ChangedPixels(straight, again, wheel), pixels / 1000) << "not the same at 0 deg";
+  const Blob top = Orange(straight, wheel), l = Orange(left, wheel), r = Orange(right, wheel);
+  ASSERT_GT(top.count, 20);
+  ASSERT_GT(l.count, 10);
+  ASSERT_GT(r.count, 10);
+  EXPECT_NEAR(top.cx, kW / 2, kW / 20) << "the mark is at the wheel's top, straight ahead";
+  EXPECT_LT(l.cx, top.cx - kW / 8) << "turned left: the mark on the driver's left";
+  EXPECT_GT(r.cx, top.cx + kW / 8) << "turned right: the mark on the driver's right";
+  EXPECT_GT(l.cy, top.cy + 20) << "a quarter turn: the mark down at the wheel's side";
+}
+
+// The speedometer's needle, measured from the pixels: the angle from its hub to the needle's
+// pixels on the screen, clockwise from up, is the dial's: -135 deg at 0 km/h to +135 deg at
+// 260 km/h, within 4 deg. The tachometer's needle (the right dial) turns with the engine speed;
+// the gear shows between them.
+TEST_F(CockpitTest, TheDialsNeedlesShowTheSpeedAndTheEngineSpeed) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  // At both qualities (low: as on a software renderer).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = DriverOptions(domain);
+    o.quality = q;
+    Viewer v(o);
+    auto needle_deg = [](const Image& img, Rect dial) {
+      const Blob needle = FindColour(img, 255, 80, 0, 10, dial);
+      const Blob hub = FindColour(img, 0, 160, 230, 10, dial);
+      EXPECT_GT(needle.count, 15);
+      EXPECT_GT(hub.count, 4);
+      return viewer::Deg(std::atan2(needle.cx - hub.cx, -(needle.cy - hub.cy)));
+    };
+    const Rect speedo{0, kH / 2, kW / 2, kH}, tacho{kW / 2, kH / 2, kW, kH};
+    std::uint64_t step = q == viewer::Quality::kHigh ? 1 : 1000;
+    double tacho_deg[2] = {0, 0};
+    int k = 0;
+    for (double kmh : {30.0, 100.0, 170.0}) {
+      const double rpm = kmh < 50 ? 2000 : 5000;
+      const Image img = Show(v, pub, {Cockpit(step++, kmh, 0, rpm, 3)});
+      const double expected = -135 + 270 * kmh / 260;
+      EXPECT_NEAR(needle_deg(img, speedo), expected, 4) << kmh << " km/h";
+      if (k < 2) tacho_deg[k++] = needle_deg(img, tacho);
+    }
+    EXPECT_GT(tacho_deg[1] - tacho_deg[0], 60) << "2000 -> 5000 rpm: the tachometer's needle";
+    // The gear between the dials, on seven segments: 3 lights five of them, 1 two.
+    auto lit_segments = [&](int gear) {
+      const Image img = Show(v, pub, {Cockpit(step++, 50, 0, 2000, gear)});
+      const Rect digit{kW * 46 / 100, kH / 2, kW * 54 / 100, kH};
+      return FindColour(img, 250, 250, 250, 6, digit).count;
+    };
+    const int first = lit_segments(1), third = lit_segments(3);
+    EXPECT_GT(first, 5) << "no gear shown";
+    EXPECT_GT(third, 2 * first) << "gear 3 (" << third << " px) against gear 1 (" << first << ")";
   }
 }
 

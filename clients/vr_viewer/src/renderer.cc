@@ -834,8 +834,10 @@ void Renderer::DrawModels(const Program& p, const FrameLists& lists, const Mat4&
     SetMat(p.u.model, BodyTransform(b));
     SetVec3(p.u.paint, Linear(b.paint));
     glUniform2f(p.u.lights, b.brake_lights ? 1.0f : 0.0f, b.reverse_lights ? 1.0f : 0.0f);
+    if (b.from_inside) glEnable(GL_CULL_FACE);
     glBindVertexArray(m.vao);
     glDrawElements(GL_TRIANGLES, m.count, GL_UNSIGNED_INT, nullptr);
+    glDisable(GL_CULL_FACE);
   }
   SetVec3(p.u.paint, {1, 1, 1});
   glUniform2f(p.u.lights, 0.0f, 0.0f);

@@ -116,6 +116,16 @@ std::string CheckGeometry(const pb::VehicleGeometry& g) {
 VehicleGeometry GeometryFor(std::uint32_t vehicle_id, const pb::WorldDescription* world,
                             const pb::VehicleParams* params) {
   VehicleGeometry g = DefaultGeometry();
+  if (params != nullptr) {
+    if (params->has_steering_ratio() && params->steering_ratio() > 0 &&
+        params->steering_ratio() < 100) {
+      g.steering_ratio = params->steering_ratio();
+    }
+    if (params->has_engine_rpm_limit() && params->engine_rpm_limit() > 500 &&
+        params->engine_rpm_limit() < 30000) {
+      g.engine_rpm_limit = params->engine_rpm_limit();
+    }
+  }
   if (world != nullptr) {
     for (const pb::VehicleGeometry& d : world->vehicles()) {
       if (d.vehicle_id() != vehicle_id || !CheckGeometry(d).empty()) continue;
@@ -272,6 +282,15 @@ VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g
   v.braking = s.control().brake() > kBrakeLightInput || brake_torque > kBrakeLightTorqueNm;
   const double v_forward = Dot(v_T, x_B);
   v.reversing = s.drivetrain().gear() < 0 || (v_forward < -kReverseLightSpeed && drive < 0);
+  // The cockpit's readings.
+  v.has_gearbox = s.model() == pb::VEHICLE_MODEL_FULL;
+  if (v.has_gearbox) {
+    v.hand_wheel_rad = s.steering().hand_wheel_angle();
+    v.engine_rpm = s.drivetrain().engine_rpm();
+    v.gear = s.drivetrain().gear();
+  } else {
+    v.hand_wheel_rad = s.control().gamma() * g.steering_ratio;
+  }
   // Drag acts against X_B (eq. 15, signed with vx): drawn pointing at the nose.
   const Vec3 nose = v.pose_WB * Vec3{g.front, 0, 0};
   v.arrows.push_back({ForceKind::kDrag, -1, nose, x_B * (-s.da()), true});

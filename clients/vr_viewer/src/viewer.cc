@@ -17,6 +17,7 @@
 #include <stdexcept>
 
 #include "vdyn/input.pb.h"
+#include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/world_mesh.h"
 #include "vdyn/viewer/xr_session.h"
@@ -878,9 +879,18 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
     return std::max(0.03, 1.6 * mpp);
   };
   for (const auto& [id, v] : views) {
-    // From the driver's seat nothing of the own vehicle is drawn (its body, tyres and arrows
-    // would fill the view of the road ahead); its forces show in the other cameras.
-    if (inside && owner.followed_ && id == *owner.followed_) continue;
+    // From the driver's seat the own vehicle is its cockpit and its bonnet (the body from
+    // inside); its tyres and arrows are left out (they would fill the view of the road ahead),
+    // its forces show in the other cameras.
+    if (inside && owner.followed_ && id == *owner.followed_) {
+      if (!f.camera.cockpit) continue;
+      VehicleParts parts;
+      parts.wheels = parts.arrows = false;
+      AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
+      for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
+      AppendCockpit(v, f.camera.seat_B, lists.opaque);
+      continue;
+    }
     if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
@@ -978,6 +988,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
     ImGui::TextUnformatted(
         "1-6  chase, driver, orbit, map, north, beside camera   C  next camera\n"
         "K    horizon level / with the body (chase, orbit)     R  recentre the headset\n"
+        "I    the cockpit in the driver's seat on / off\n"
         "Q/E  turn the geographic cameras left/right    N  back to north\n"
         "     (the wheel's paddle shifters do the same)\n"
         "Tab  next vehicle (Shift: previous)\n"
@@ -1150,6 +1161,7 @@ void Viewer::Impl::ApplyKeys() {
     if (k == SDLK_c)
       c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
     if (k == SDLK_k) c.horizon_locked = !c.horizon_locked;
+    if (k == SDLK_i) c.cockpit = !c.cockpit;
     if (k == SDLK_r) recentre_pending = true;
     if (k == SDLK_q) TurnGeographic(c, +1);
     if (k == SDLK_e) TurnGeographic(c, -1);

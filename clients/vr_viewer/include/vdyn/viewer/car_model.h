@@ -67,6 +67,20 @@ struct CarShape {
 // The nominal spring length is 70 % of the free length (about the static load of a car).
 CarShape CarShapeFor(const VehicleGeometry& g);
 
+// Where the built-in body's greenhouse is (body frame, m): the stations along X of the rear
+// window's base, the roof's rear and front edges and the windscreen's base (the cowl), the belt
+// line's height at the cowl and the roof's at its front edge. The cockpit is built inside it.
+struct Cabin {
+  double x_rear_window = 0, x_roof_rear = 0, x_roof_front = 0, x_cowl = 0;
+  double z_belt_cowl = 0, z_roof_front = 0;
+  double half_width = 0.9;
+  double z_ground = -0.59;
+  double scale = 1;  // heights: a saloon's on 0.32 m wheels, scaled with the wheel radius
+  bool axles_inside = true;
+  double H(double h) const { return z_ground + h * scale; }  // a saloon's height h, scaled
+};
+Cabin CabinFor(const VehicleGeometry& g);
+
 // The built-in body for a vehicle's geometry, in its body frame (`coarse`: fewer facets, for a
 // vehicle far from the eye).
 ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse = false);

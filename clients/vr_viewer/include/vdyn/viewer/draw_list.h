@@ -61,6 +61,9 @@ struct BodyInstance {
   bool coarse = false;
   bool brake_lights = false;    // lit (VehicleView::braking)
   bool reverse_lights = false;  // lit (VehicleView::reversing)
+  // Seen from its own driver's seat: drawn with its back faces culled (its bonnet shows through
+  // the windscreen; the cockpit stands for the rest).
+  bool from_inside = false;
 };
 
 // A wheel to draw: the wheel mesh (radius 1, axle along Y) turned into the frame R_WW (columns:

@@ -45,6 +45,10 @@ struct VehicleGeometry {
   std::array<double, kWheels> radius{};  // m
   std::array<double, kWheels> free_length{};
   double front = 2.2, rear = 2.5, half_width = 0.9;  // body box from T, m
+  // For the cockpit (its parameters when known): the hand wheel turns steering_ratio times the
+  // road wheels (the paper model publishes no hand-wheel angle); the rev limiter's speed.
+  double steering_ratio = 15;
+  double engine_rpm_limit = 6500;
   enum class Source { kWorld, kParams, kDefault };
   Source source = Source::kDefault;
 };
@@ -98,6 +102,13 @@ struct VehicleView {
   // pushes it backwards.
   bool braking = false;
   bool reversing = false;
+  // The cockpit's readings: the hand wheel's angle (rad, positive left: the full model's
+  // steering state, else the road wheels' steering angle times the steering ratio), the engine's
+  // speed and the engaged gear (-1 reverse, 0 neutral; the full model only).
+  double hand_wheel_rad = 0;
+  double engine_rpm = 0;
+  int gear = 0;
+  bool has_gearbox = false;
 };
 inline constexpr double kBrakeLightInput = 0.02;     // applied brake input, [0, 1]
 inline constexpr double kBrakeLightTorqueNm = 10.0;  // a wheel's brake torque (full model)
