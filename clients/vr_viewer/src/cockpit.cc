@@ -13,6 +13,7 @@ constexpr Rgb8 kDash{58, 58, 62};
 constexpr Rgb8 kTrimDark{48, 48, 52};
 constexpr Rgb8 kLining{172, 168, 158};
 constexpr Rgb8 kDoor{50, 50, 54};
+constexpr Rgb8 kFloor{26, 26, 28};
 constexpr Rgb8 kWheelRim{36, 36, 40};
 constexpr Rgb8 kWheelSpoke{62, 62, 68};
 constexpr Rgb8 kDialFace{14, 14, 16};
@@ -189,7 +190,11 @@ void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list) {
   const double x_dash = l.speedo_B.x + 0.5 * l.gauge_radius + 0.01;
   const double x_cowl = std::max(cab.x_cowl, x_dash + 0.1);
   // The dashboard, the binnacle's hood over the dials.
-  p.Box({x_dash, -0.95 * hw, dash_top - 0.42}, {x_cowl, 0.95 * hw, dash_top}, kDash);
+  // The floor (the body's underside is culled from inside: the road would show through) and
+  // the dashboard down to it.
+  const double z_floor = cab.H(0.30);
+  p.Box({seat_B.x - 0.8, -0.93 * hw, z_floor - 0.02}, {x_cowl, 0.93 * hw, z_floor}, kFloor);
+  p.Box({x_dash, -0.95 * hw, z_floor}, {x_cowl, 0.95 * hw, dash_top}, kDash);
   p.Box({x_dash - 0.05, seat_B.y - 0.21, dash_top - 0.005},
         {x_dash + 0.12, seat_B.y + 0.21, dash_top + 0.03}, kDash);
   // The dials and the gear between them.
@@ -208,8 +213,8 @@ void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list) {
                   kTrimDark, true, 8);
     // The door panel up to the belt line.
     const double y0 = side * 0.86 * hw, y1 = side * 0.93 * hw;
-    p.Box({seat_B.x - 0.8, std::min(y0, y1), dash_top - 0.5},
-          {x_cowl, std::max(y0, y1), cab.H(0.95)}, kDoor);
+    p.Box({seat_B.x - 0.8, std::min(y0, y1), z_floor}, {x_cowl, std::max(y0, y1), cab.H(0.95)},
+          kDoor);
   }
   // The roof's front edge (the header) and its lining; the rear-view mirror's housing.
   p.Box({cab.x_roof_front - 0.09, -0.75 * hw, z_roof - 0.075},

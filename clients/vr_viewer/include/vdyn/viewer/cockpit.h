@@ -1,10 +1,11 @@
 // The cockpit seen from the driver's seat (the driver camera and the seated headset): a dashboard
 // with a speedometer and a tachometer whose needles follow the state, the engaged gear on a
 // seven-segment digit between them, the steering wheel turned by the published hand-wheel angle,
-// the A-pillars, the roof's front edge and lining with the rear-view mirror's housing, and the
-// door panels. The bonnet is the body's own, drawn from inside with its back faces culled. Laid
-// out from the vehicle's geometry (the built-in body's greenhouse, CabinFor) and the driver's
-// eyes (CameraState::seat_B); built each frame as triangles in the world frame (draw_list.h).
+// the A-pillars, the roof's front edge and lining with the rear-view mirror's housing, the
+// door panels and the floor. The bonnet is the body's own, drawn from inside with its back faces
+// culled. Laid out from the vehicle's geometry (the built-in body's greenhouse, CabinFor) and the
+// driver's eyes (CameraState::seat_B); built each frame as triangles in the world frame
+// (draw_list.h).
 #pragma once
 
 #include "vdyn/viewer/math.h"
