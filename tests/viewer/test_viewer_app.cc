@@ -480,6 +480,29 @@ double MeanLuma(const Image& img, const std::vector<std::size_t>& at) {
   return at.empty() ? 0.0 : sum / static_cast<double>(at.size());
 }
 
+// One body colour per vehicle from a fixed palette of eight: vehicles 1 to 8 each their own, at
+// least 40 levels apart in some channel from each other and 60 from every force arrow's colour
+// (the arrows stay readable on any car), vehicle 9 as vehicle 1 again.
+TEST(VehicleColours, EightVehiclesEightColoursApartFromEachOtherAndTheArrows) {
+  auto distance = [](viewer::Rgb8 a, viewer::Rgb8 b) {
+    return std::max({std::abs(a.r - b.r), std::abs(a.g - b.g), std::abs(a.b - b.b)});
+  };
+  for (std::uint32_t i = 1; i <= 8; ++i) {
+    for (std::uint32_t j = i + 1; j <= 8; ++j) {
+      EXPECT_GE(distance(viewer::VehicleColour(i), viewer::VehicleColour(j)), 40)
+          << "vehicles " << i << " and " << j;
+    }
+    for (int k = 0; k < viewer::kForceKinds; ++k) {
+      EXPECT_GE(distance(viewer::VehicleColour(i),
+                         viewer::ForceColour(static_cast<viewer::ForceKind>(k))),
+                60)
+          << "vehicle " << i << " and " << viewer::ForceLabel(static_cast<viewer::ForceKind>(k));
+    }
+  }
+  const viewer::Rgb8 first = viewer::VehicleColour(1), ninth = viewer::VehicleColour(9);
+  EXPECT_EQ(distance(first, ninth), 0);
+}
+
 TEST_F(ViewerApp, TheBrakeLightsLightWhileBrakingAndTheReversingLightsInReverse) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);
