@@ -64,6 +64,11 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_unanswered_room_ = drops_.Register("control request unanswered: no room to hand it on");
 
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
+  // This start of the server: its states, events and world carry it, so that a recording of a
+  // server restarted with the same id tells the two starts apart.
+  if (options_.session.incarnation == 0) {
+    options_.session.incarnation = static_cast<std::uint64_t>(base::WallNow().ns);
+  }
   // From here on this server runs its vehicles: a server that starts later gives way to it.
   if (!participant_.SetUserData(Claim(true).Encode())) {
     spdlog::warn("server '{}': cannot announce that it runs its vehicles: {}",
@@ -83,6 +88,7 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
+  world_msg->set_incarnation(options_.session.incarnation);
   // Side by side on the free ground around the spawn (placement.h).
   const std::vector<Pose2> poses =
       StartPoses(*world_, ParamsFromProto(options_.session.default_params).get(),
@@ -340,6 +346,9 @@ void ServerNode::PushReport(base::MonoTime now) {
       v.source[n] = '\0';
       v.nonfinite_steps = sim.nonfinite_steps();
       v.sanitized_inputs = sim.sanitized_inputs();
+      v.invariant_failures = sim.invariant_failures();
+      std::snprintf(v.last_invariant_failure, sizeof v.last_invariant_failure, "%s",
+                    sim.last_invariant_failure());
       v.speed_kmh = Velocity(sim.state().x).norm() * 3.6;
     });
     reports_.Commit();
@@ -1118,6 +1127,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     vd->set_input_source(v.source);
     vd->set_nonfinite_steps(v.nonfinite_steps);
     vd->set_sanitized_inputs(v.sanitized_inputs);
+    vd->set_invariant_failures(v.invariant_failures);
+    vd->set_last_invariant_failure(v.last_invariant_failure);
     std::lock_guard<std::mutex> lock(sources_mu_);
     const base::MonoTime now = base::MonotonicNow();
     for (const InputArbiter::Source& src : sources_copy_) {
@@ -1229,7 +1240,8 @@ void ServerNode::PublisherLoop() {
     }
     // Then events, a batch at a time.
     for (int n = 0; n < 64 && events_.TryPop(rec); ++n) {
-      const pb::SessionEvent e = ToMessage(rec, server_id, terrain_hash, options_.session.step_ns);
+      const pb::SessionEvent e = ToMessage(rec, server_id, terrain_hash, options_.session.step_ns,
+                                            options_.session.incarnation);
       rec.params.reset();
       rec.request.reset();
       PublishOne(TopicId::kEvents, e.vehicle_id(), e, base::MonotonicNow() + base::Seconds(1));

@@ -91,6 +91,8 @@ class ServerNode {
     char source[72] = {};
     std::uint64_t nonfinite_steps = 0;
     std::uint64_t sanitized_inputs = 0;
+    std::uint64_t invariant_failures = 0;
+    char last_invariant_failure[160] = {};
     double speed_kmh = 0;
   };
   struct WindowReport {
