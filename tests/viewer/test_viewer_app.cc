@@ -647,6 +647,33 @@ TEST_F(CockpitTest, TheSteeringWheelTurnsWithTheHandWheelAngle) {
   EXPECT_GT(l.cy, top.cy + 20) << "a quarter turn: the mark down at the wheel's side";
 }
 
+// A car close ahead: the lower parts of its spring arrows are behind the dashboard. They are
+// hidden there, not drawn as the faint ghost that marks an arrow the terrain hides (green over
+// the dashboard, the dials and the wheel).
+TEST_F(CockpitTest, AnArrowTheDashboardHidesLeavesNoGhostOnIt) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  Viewer v(DriverOptions(domain));
+  TestVehicle own, ahead;
+  for (auto& w : own.wheels) w.fp = 0;
+  ahead.id = 2;
+  ahead.x = 5;  // its rear wheels 3.85 m ahead of the eyes, their contact 16 deg below them
+  for (auto& w : ahead.wheels) w.fp = 4000;  // 2 m arrows up
+  const Image img = Show(v, pub, {MakeState(own), MakeState(ahead)});
+  const viewer::Rgb8 g = viewer::ForceColour(viewer::ForceKind::kSpring);
+  ASSERT_GT(FindColour(img, g.r, g.g, g.b, kTol).count, 50) << "the arrows over the windscreen";
+  int greenish = 0;
+  // Below the dashboard's top edge, right of the side window.
+  for (int y = kH * 62 / 100; y < kH; ++y) {
+    for (int x = kW / 5; x < kW; ++x) {
+      const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * kW + x) * 4];
+      greenish += p[1] > p[0] + 30 && p[1] > p[2] + 30 ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(greenish, 0) << "an arrow's ghost over the dashboard";
+}
+
 // The speedometer's needle, measured from the pixels: the angle from its hub to the needle's
 // pixels on the screen, clockwise from up, is the dial's: -135 deg at 0 km/h to +135 deg at
 // 260 km/h, within 4 deg. The tachometer's needle (the right dial) turns with the engine speed;

@@ -972,6 +972,11 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   DrawContactShadows(lists, view_proj);
   DrawList(lists.opaque, Pass::kOpaque, view_proj);
   glEnable(GL_STENCIL_TEST);
+  // The cockpit marks its pixels (2): no arrow's ghost is drawn over it (an arrow of a car ahead
+  // that the dashboard hides is simply hidden).
+  glStencilFunc(GL_ALWAYS, 2, 0xFF);
+  glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+  DrawList(lists.cockpit, Pass::kOpaque, view_proj);
   glStencilFunc(GL_ALWAYS, 1, 0xFF);
   glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
   DrawList(lists.arrows, Pass::kOpaque, view_proj);
@@ -1003,7 +1008,11 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   glDepthMask(GL_TRUE);
   glDisable(GL_BLEND);
   DrawList(lists.translucent, Pass::kTranslucent, view_proj);
+  glEnable(GL_STENCIL_TEST);
+  glStencilFunc(GL_NOTEQUAL, 2, 0xFF);
+  glStencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
   DrawList(lists.arrows, Pass::kGhost, view_proj);
+  glDisable(GL_STENCIL_TEST);
   glBindVertexArray(0);
   glUseProgram(0);
 }

@@ -888,7 +888,7 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
       parts.wheels = parts.arrows = false;
       AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
       for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
-      AppendCockpit(v, f.camera.seat_B, lists.opaque);
+      AppendCockpit(v, f.camera.seat_B, lists.cockpit);
       continue;
     }
     if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
