@@ -174,8 +174,8 @@ int RunNetworked(const Options& o) {
   so.session.step_ns = std::llround(o.step_ms * 1e6);
   so.session.watchdog_s = o.watchdog_ms / 1000.0;
   so.session.default_params = LoadParams(o);
-  so.duration_s = o.duration.value_or(0.0);
-  so.lockstep_timeout_s = o.lockstep_timeout_s;
+  so.duration = vdyn::base::FromSeconds(o.duration.value_or(0.0));
+  so.lockstep_timeout = vdyn::base::FromSeconds(o.lockstep_timeout_s);
   so.rt_priority = o.rt_priority;
   so.state_writer_nice = o.state_writer_nice;
   so.status_line = o.status || (!o.no_status && isatty(STDERR_FILENO) == 1 && !o.lockstep);

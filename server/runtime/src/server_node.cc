@@ -288,7 +288,7 @@ void ServerNode::AnswerWhatIsLeft() {
   // publisher cannot take by the shutdown deadline is counted as unanswered.
   const base::MonoTime give_up =
       base::MonotonicNow() +
-      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+      options_.shutdown_deadline;
   auto answer = [&](RequestOutcome&& o) {
     while (!outcomes_.TryPush(std::move(o))) {
       publisher_bell_.Ring();
@@ -373,7 +373,9 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
                                        : states_->WriterNice());
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
-      options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
+      options_.duration.ns > 0
+          ? std::llround(static_cast<double>(options_.duration.ns) / static_cast<double>(h))
+          : 0;
   spdlog::info("server '{}': real time on domain {}, {} vehicle(s), step {} ms; {}",
                options_.session.server_id, options_.domain_id, session_->vehicle_count(),
                static_cast<double>(h) * 1e-6, scheduling_);
@@ -494,7 +496,7 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
   window_start_ = base::MonotonicNow();
   window_start_cpu_ = base::ProcessCpuTime();
   base::MonoTime last_request = base::MonotonicNow();
-  const auto timeout = base::Nanos{static_cast<std::int64_t>(options_.lockstep_timeout_s * 1e9)};
+  const base::Nanos timeout = options_.lockstep_timeout;
   while (!stop.load(std::memory_order_relaxed)) {
     const std::uint32_t token = loop_bell_.Token();
     // The client is silent only while no request comes and no steps it asked for are running.
@@ -512,7 +514,7 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
     if ((now - window_start_).ns >= 1'000'000'000) PushReport(now);
     if (now - last_request > timeout) {
       spdlog::error("lockstep: no control request for {} s; the client is gone? stopping",
-                    base::FormatNumber(options_.lockstep_timeout_s));
+                    base::FormatNumber(options_.lockstep_timeout.seconds()));
       return 3;
     }
     if (prepared_.empty() && inputs_.empty()) loop_bell_.Wait(token, base::Milliseconds(20));
@@ -540,7 +542,7 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
   AnswerWhatIsLeft();
   publisher_deadline_ns_ =
       (base::MonotonicNow() +
-       base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)}).ns;
+       options_.shutdown_deadline).ns;
   publisher_stop_ = true;
   publisher_bell_.Ring();
   if (publisher_.joinable()) publisher_.join();
@@ -625,7 +627,7 @@ void ServerNode::ReceiverLoop() {
       // at most the shutdown deadline.
       if (drain_until.ns == 0) {
         drain_until = base::MonotonicNow() +
-                      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+                      options_.shutdown_deadline;
       } else if ((!backlog && got == 0) || base::MonotonicNow() >= drain_until) {
         break;
       }
@@ -788,7 +790,7 @@ std::string ServerNode::FindClash() {
   const base::MonoTime start = base::MonotonicNow();
   const base::MonoTime quiet_end = start + base::Milliseconds(300);
   const base::MonoTime end =
-      start + base::Nanos{static_cast<std::int64_t>(options_.discovery_s * 1e9)};
+      start + options_.discovery;
   std::map<std::uint32_t, std::string> taken;  // vehicle -> server
   bool same_id = false;
   auto note = [&](const std::string& server, std::uint32_t vehicle) {
@@ -989,7 +991,7 @@ void ServerNode::RequestLoop() {
     const bool stopping = requests_stop_.load();
     if (stopping && give_up.ns == 0) {
       give_up = base::MonotonicNow() +
-                base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+                options_.shutdown_deadline;
     }
     if (stopping && base::MonotonicNow() >= give_up) {
       // The publisher took no answer for the whole deadline: what is left is counted.

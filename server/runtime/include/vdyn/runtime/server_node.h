@@ -52,8 +52,9 @@ struct ServerOptions {
   std::uint32_t domain_id = 0;
   std::vector<std::uint32_t> vehicle_ids = {1};
   SessionConfig session;
-  double duration_s = 0;          // real time: stop after this much simulated time (0: never)
-  double lockstep_timeout_s = 10;  // lockstep: give up without a request for this long
+  // Durations are base::Nanos (built with base::FromSeconds from a user's seconds).
+  base::Nanos duration{0};  // real time: stop after this much simulated time (0: never)
+  base::Nanos lockstep_timeout = base::Seconds(10);  // lockstep: give up without a request this long
   int rt_priority = 50;
   // The state writer thread's nice value in real time (0: left as it is). -10 put it ahead of
   // 8 rigs and a recorder on 2 vCPUs (no state refused, against 0.49-0.70 M at 0), and starved
@@ -62,10 +63,10 @@ struct ServerOptions {
   std::int64_t max_lag_steps = 1000;  // beyond this backlog the schedule is rebased
   bool status_line = false;       // a terminal line of speed, step rate and lateness
   std::string stats_out;          // real time: write a run summary here at the end
-  double shutdown_deadline_s = 2.0;  // how long the publisher may drain at the end
+  base::Nanos shutdown_deadline = base::Milliseconds(2000);  // the publisher's drain at the end
   // At start, how long to listen for other servers on the domain (a vehicle id or a server id
   // already in use is refused) once one has been discovered; with none, 300 ms.
-  double discovery_s = 1.5;
+  base::Nanos discovery = base::Milliseconds(1500);
 };
 
 class ServerNode {
@@ -228,7 +229,7 @@ class ServerNode {
 
   // Receiver's: input arbitration and what other servers run; copies for the publisher.
   InputArbiter arbiter_{
-      OwnershipLease(base::Nanos{static_cast<std::int64_t>(options_.session.watchdog_s * 1e9)})};
+      OwnershipLease(base::FromSeconds(options_.session.watchdog_s))};
   std::mutex sources_mu_;
   std::vector<InputArbiter::Source> sources_copy_;
   struct OtherVehicle {
