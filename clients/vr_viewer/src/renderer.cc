@@ -96,7 +96,7 @@ struct Uniforms {
   GLint view_proj = -1, model = -1, eye = -1, fog = -1, paint = -1, alpha = -1;
   GLint frame = -1, half_size = -1, strip = -1, grid = -1, surfaces = -1;
   GLint shadow_map = -1, shadow_mat = -1, shadow_box = -1, shadow_texel = -1;
-  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1;
+  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1, lights = -1;
 };
 
 Vec3 Linear(Rgb8 c) {
@@ -317,6 +317,7 @@ struct Renderer::Program {
     u.clouds = at("u_clouds");
     u.strength = at("u_strength");
     u.radius = at("u_radius");
+    u.lights = at("u_lights");
     // Texture units: surfaces 0, the shadow map 1, clouds 2.
     glUseProgram(id);
     if (u.surfaces >= 0) glUniform1i(u.surfaces, 0);
@@ -832,10 +833,14 @@ void Renderer::DrawModels(const Program& p, const FrameLists& lists, const Mat4&
     const GpuMesh& m = BodyMesh(b);
     SetMat(p.u.model, BodyTransform(b));
     SetVec3(p.u.paint, Linear(b.paint));
+    glUniform2f(p.u.lights, b.brake_lights ? 1.0f : 0.0f, b.reverse_lights ? 1.0f : 0.0f);
+    if (b.from_inside) glEnable(GL_CULL_FACE);
     glBindVertexArray(m.vao);
     glDrawElements(GL_TRIANGLES, m.count, GL_UNSIGNED_INT, nullptr);
+    glDisable(GL_CULL_FACE);
   }
   SetVec3(p.u.paint, {1, 1, 1});
+  glUniform2f(p.u.lights, 0.0f, 0.0f);
   for (const WheelInstance& w : lists.wheels) {
     if (!InFrustum(view_proj, w.centre_W, w.radius)) continue;
     const GpuMesh& m = w.coarse ? wheel_coarse_ : wheel_fine_;
@@ -967,6 +972,11 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   DrawContactShadows(lists, view_proj);
   DrawList(lists.opaque, Pass::kOpaque, view_proj);
   glEnable(GL_STENCIL_TEST);
+  // The cockpit marks its pixels (2): no arrow's ghost is drawn over it (an arrow of a car ahead
+  // that the dashboard hides is simply hidden).
+  glStencilFunc(GL_ALWAYS, 2, 0xFF);
+  glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+  DrawList(lists.cockpit, Pass::kOpaque, view_proj);
   glStencilFunc(GL_ALWAYS, 1, 0xFF);
   glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
   DrawList(lists.arrows, Pass::kOpaque, view_proj);
@@ -998,7 +1008,11 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   glDepthMask(GL_TRUE);
   glDisable(GL_BLEND);
   DrawList(lists.translucent, Pass::kTranslucent, view_proj);
+  glEnable(GL_STENCIL_TEST);
+  glStencilFunc(GL_NOTEQUAL, 2, 0xFF);
+  glStencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
   DrawList(lists.arrows, Pass::kGhost, view_proj);
+  glDisable(GL_STENCIL_TEST);
   glBindVertexArray(0);
   glUseProgram(0);
 }

@@ -59,6 +59,11 @@ struct BodyInstance {
   VehicleGeometry geometry;
   Rgb8 paint;
   bool coarse = false;
+  bool brake_lights = false;    // lit (VehicleView::braking)
+  bool reverse_lights = false;  // lit (VehicleView::reversing)
+  // Seen from its own driver's seat: drawn with its back faces culled (its bonnet shows through
+  // the windscreen; the cockpit stands for the rest).
+  bool from_inside = false;
 };
 
 // A wheel to draw: the wheel mesh (radius 1, axle along Y) turned into the frame R_WW (columns:
@@ -79,14 +84,16 @@ struct ContactShadow {
 
 // The lists of one frame: what is opaque, what is translucent (drawn after), and the force
 // arrows (drawn last, in full colour where seen and as a faint ghost where something hides them);
-// the bodies and wheels of the vehicles and their contact shadows.
+// the cockpit (opaque; no ghost of an arrow is drawn over it); the bodies and wheels of the
+// vehicles and their contact shadows.
 struct FrameLists {
-  DrawList opaque, translucent, arrows;
+  DrawList opaque, translucent, arrows, cockpit;
   std::vector<BodyInstance> bodies;
   std::vector<WheelInstance> wheels;
   std::vector<ContactShadow> contact_shadows;
   void Clear() {
     opaque.Clear();
+    cockpit.Clear();
     translucent.Clear();
     arrows.Clear();
     bodies.clear();
