@@ -152,6 +152,38 @@ class RecorderTest : public ::testing::Test {
     ASSERT_TRUE(code.has_value()) << recorder.Log();
     ASSERT_EQ(*code, 0) << recorder.Log();
   }
+  // Drives vehicle 1 of a lockstep `server` (a new participant: it knows only the live server)
+  // step by step with input(k), from a reset to `steps`; from `input_steps` on, the rest is one
+  // step request without input (the vehicle keeps the last).
+  static void DriveLockstep(std::uint32_t domain, Process& server, Process& recorder,
+                            std::uint64_t steps,
+                            const std::function<pb::DriverInput(std::uint64_t)>& input,
+                            std::uint64_t input_steps = ~0ull) {
+    transport::Participant p(domain);
+    transport::ControlClient control(p, "test");
+    ASSERT_TRUE(control.WaitForServer(60s)) << server.Log();
+    pb::ControlRequest reset;
+    reset.set_vehicle_id(1);
+    reset.mutable_reset();
+    auto reply = control.Call(reset, 60s);
+    ASSERT_TRUE(reply && reply->accepted()) << server.Log();
+    for (std::uint64_t k = 0; k < steps; ++k) {
+      pb::ControlRequest step;
+      step.set_vehicle_id(1);
+      step.mutable_step()->set_steps(1);
+      if (k < input_steps) {
+        *step.mutable_step()->mutable_input() = input(k);
+      } else {
+        step.mutable_step()->set_steps(static_cast<std::uint32_t>(steps - k));
+        k = steps - 1;
+      }
+      reply = control.Call(step, 60s);
+      ASSERT_TRUE(reply && reply->accepted())
+          << "step " << k << ": " << control.last_error() << "\nserver:\n"
+          << server.Log() << "\nrecorder:\n"
+          << recorder.Log();
+    }
+  }
   // A lockstep session of vehicle 1 driven step by step with InputAt(step), from a reset at
   // step 0 (so the recording holds the spawn) to `steps`; recorded to `out`. From `input_steps`
   // on, the rest is one step request without input (the vehicle keeps the last).
@@ -166,30 +198,8 @@ class RecorderTest : public ::testing::Test {
     auto server = Server({"--lockstep", "--lockstep-timeout", "300"}, domain,
                          out.filename().string() + ".server.log");
     ASSERT_TRUE(WaitForWorld(*recorder)) << recorder->Log() << server->Log();
-    transport::Participant p(domain);
-    transport::ControlClient control(p, "test");
-    ASSERT_TRUE(control.WaitForServer(60s)) << server->Log();
-    pb::ControlRequest reset;
-    reset.set_vehicle_id(1);
-    reset.mutable_reset();
-    auto reply = control.Call(reset, 60s);
-    ASSERT_TRUE(reply && reply->accepted()) << server->Log();
-    for (std::uint64_t k = 0; k < steps; ++k) {
-      pb::ControlRequest step;
-      step.set_vehicle_id(1);
-      step.mutable_step()->set_steps(1);
-      if (k < input_steps) {
-        *step.mutable_step()->mutable_input() = input(k);
-      } else {
-        step.mutable_step()->set_steps(static_cast<std::uint32_t>(steps - k));
-        k = steps - 1;
-      }
-      reply = control.Call(step, 60s);
-      ASSERT_TRUE(reply && reply->accepted())
-          << "step " << k << ": " << control.last_error() << "\nserver:\n"
-          << server->Log() << "\nrecorder:\n"
-          << recorder->Log();
-    }
+    DriveLockstep(domain, *server, *recorder, steps, input, input_steps);
+    if (HasFatalFailure()) return;
     server->Signal(SIGTERM);
     ASSERT_TRUE(server->Wait(60s).has_value());
     Stop(*recorder);
@@ -326,24 +336,11 @@ TEST_F(RecorderTest, AServerRestartedWithTheSameIdVerifiesEachStartOnItsOwn) {
       return Occurrences(log, "recording world") >= n &&
              Occurrences(log, "hearing 1 writer(s) on vdyn/events") >= n;
     })) << recorder->Log() << server->Log();
-    transport::Participant p(domain_);  // a new one each start: it knows only the live server
-    transport::ControlClient control(p, "test");
-    ASSERT_TRUE(control.WaitForServer(60s)) << server->Log();
-    pb::ControlRequest reset;
-    reset.set_vehicle_id(1);
-    reset.mutable_reset();
-    auto reply = control.Call(reset, 60s);
-    ASSERT_TRUE(reply && reply->accepted()) << server->Log();
     // Different inputs at the same steps: the two starts' states differ step for step.
-    for (std::uint64_t k = 0; k < kSteps; ++k) {
-      pb::ControlRequest step;
-      step.set_vehicle_id(1);
-      step.mutable_step()->set_steps(1);
-      *step.mutable_step()->mutable_input() = InputAt(k + (start == 1 ? 0 : 40'000));
-      reply = control.Call(step, 60s);
-      ASSERT_TRUE(reply && reply->accepted()) << "start " << start << ", step " << k << "\n"
-                                              << server->Log();
-    }
+    const std::uint64_t offset = start == 1 ? 0 : 40'000;
+    DriveLockstep(domain_, *server, *recorder, kSteps,
+                  [offset](std::uint64_t k) { return InputAt(k + offset); });
+    if (HasFatalFailure()) return;
     server->Signal(SIGTERM);
     ASSERT_EQ(server->Wait(60s), 0) << server->Log();
   }
