@@ -1048,26 +1048,18 @@ TEST(MagicFormulaVehicle, TopSpeedIsWhereTheDriveForceMeetsDragAndTheTyresRollin
   sim.SetInput(in);
   Drive(sim, Steps(sim, testing::kSanitized ? 30.0 : 120.0), {});
   const double v = BodyVelocity(sim.state()).x();
-  const double R = p->wheel[kLF].radius;
-  const double i_top = p->gear_ratio_top * p->final_drive_ratio;
-  const double w_p = p->engine_rpm_power_max * 2.0 * std::numbers::pi / 60.0;
-  auto excess = [&](double speed) {
-    const double rr = i_top * speed / R / w_p;
-    const double T = p->engine_power_max / w_p * (1.0 + rr - rr * rr);
+  // The tyres' rolling resistance: |My| / R of each wheel at its static load.
+  const double expect = testing::ClosedFormTopSpeed(p, [&](double speed) {
     double roll = 0.0;
     for (int w = 0; w < kNumWheels; ++w) {
       MfInput at;
       at.Fz = StaticWheelLoad(p, w);
       at.Vx = at.Vc = speed;
       at.pressure = p->wheel[w].mf.inflpres;
-      roll += std::abs(EvaluateMagicFormula(p->wheel[w].mf, at).My) / R;
+      roll += std::abs(EvaluateMagicFormula(p->wheel[w].mf, at).My) / p->wheel[w].radius;
     }
-    return p->drivetrain_efficiency * i_top * T / R - 0.5 * p->rho * p->cx * p->sx * speed * speed -
-           roll;
-  };
-  double lo = 20.0, hi = 120.0;
-  for (int i = 0; i < 100; ++i) ((excess(0.5 * (lo + hi)) > 0.0) ? lo : hi) = 0.5 * (lo + hi);
-  const double expect = 0.5 * (lo + hi);
+    return roll;
+  });
   std::printf("Magic Formula tyres, top speed %.2f km/h, closed form %.2f km/h (%+.2f %%)\n",
               3.6 * v, 3.6 * expect, 100.0 * (v / expect - 1.0));
   if (!testing::kSanitized) {
