@@ -18,6 +18,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/time.h"
 #include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/labels.h"
 #include "vdyn/viewer/motion.h"
 #include "vdyn/viewer/params_editor.h"
@@ -716,6 +717,125 @@ TEST_F(CockpitTest, TheDialsNeedlesShowTheSpeedAndTheEngineSpeed) {
     const int first = lit_segments(1), third = lit_segments(3);
     EXPECT_GT(first, 5) << "no gear shown";
     EXPECT_GT(third, 2 * first) << "gear 3 (" << third << " px) against gear 1 (" << first << ")";
+  }
+}
+
+// Where a mirror's glass is on the last frame's screen (its corners projected, a few pixels in
+// from its edges), and its centre's column.
+struct ScreenRect {
+  Rect r;
+  double centre_x = 0;
+};
+ScreenRect MirrorOnScreen(Viewer& v, int mirror, int width, int height) {
+  const viewer::VehicleView* own = v.vehicle(1);
+  EXPECT_NE(own, nullptr);
+  if (own == nullptr) return {};
+  const viewer::Mirror m =
+      viewer::MirrorsFor(own->geometry, v.camera().seat_B)[static_cast<std::size_t>(mirror)];
+  const viewer::CameraView& cam = v.last_camera();
+  double x0 = 1e9, x1 = -1e9, y0 = 1e9, y1 = -1e9;
+  for (double sx : {-1.0, 1.0}) {
+    for (double sy : {-1.0, 1.0}) {
+      const Vec3 c_B = m.centre_B + m.right_B * (sx * m.half_width) + m.up_B * (sy * m.half_height);
+      double w = 0;
+      const Vec3 ndc = (cam.proj * cam.view).TransformPoint(own->pose_WB * c_B, &w);
+      EXPECT_GT(w, 0) << "mirror " << mirror << " behind the camera";
+      const double x = (ndc.x / w * 0.5 + 0.5) * width, y = (0.5 - 0.5 * ndc.y / w) * height;
+      x0 = std::min(x0, x);
+      x1 = std::max(x1, x);
+      y0 = std::min(y0, y);
+      y1 = std::max(y1, y);
+    }
+  }
+  ScreenRect s;
+  s.r = {std::max(0, static_cast<int>(x0) + 3), std::max(0, static_cast<int>(y0) + 3),
+         std::min(width, static_cast<int>(x1) - 3), std::min(height, static_cast<int>(y1) - 3)};
+  s.centre_x = 0.5 * (x0 + x1);
+  EXPECT_GT(s.r.x1 - s.r.x0, 20) << "mirror " << mirror << " not on the screen";
+  EXPECT_GT(s.r.y1 - s.r.y0, 5) << "mirror " << mirror << " not on the screen";
+  return s;
+}
+
+// The pixels of a region that differ between two images (over 30 levels in a channel), and
+// their centroid.
+Blob Changed(const Image& a, const Image& b, Rect r) {
+  Blob d;
+  for (int y = r.y0; y < r.y1; ++y) {
+    for (int x = r.x0; x < r.x1; ++x) {
+      const std::size_t i = (static_cast<std::size_t>(y) * a.width + x) * 4;
+      for (int c = 0; c < 3; ++c) {
+        if (std::abs(a.rgba[i + c] - b.rgba[i + c]) > 30) {
+          d.cx += x;
+          d.cy += y;
+          ++d.count;
+          break;
+        }
+      }
+    }
+  }
+  if (d.count > 0) {
+    d.cx /= d.count;
+    d.cy /= d.count;
+  }
+  return d;
+}
+
+// The mirrors show the world behind. A second car 12 m behind (1.8 m to the left, then to the
+// right) shows in the rear-view mirror and not when it is far away. An interior mirror reverses
+// front and back, not left and right: a car behind on the left is on the mirror's left as the
+// driver sees it (a camera looking back would show it on its right). Each side mirror shows a
+// car 10 m along its line of sight, the other side mirror does not. A wide view (3:1, 90 deg
+// high) sees all three mirrors.
+TEST_F(CockpitTest, TheMirrorsShowWhatIsBehindReflectedAsAMirrorDoes) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  ViewerOptions o = DriverOptions(domain);
+  constexpr int kWide = 1200, kLow = 400;
+  o.width = kWide;
+  o.height = kLow;
+  o.camera.fovy = viewer::Rad(90);
+  Viewer v(o);
+  TestVehicle own, other;
+  for (auto& w : own.wheels) w.fp = 0;
+  other.id = 2;
+  for (auto& w : other.wheels) w.fp = 0;
+  std::uint64_t step = 1;
+  auto show_other_at = [&](double x, double y) {
+    own.step = other.step = step++;
+    other.x = x;
+    other.y = y;
+    return Show(v, pub, {MakeState(own), MakeState(other)});
+  };
+  const Image away = show_other_at(-12, 150);
+  const ScreenRect rear = MirrorOnScreen(v, viewer::kRearViewMirror, kWide, kLow);
+  const int rear_px = (rear.r.x1 - rear.r.x0) * (rear.r.y1 - rear.r.y0);
+  const Image behind_left = show_other_at(-12, 1.8);
+  const Image behind_right = show_other_at(-12, -1.8);
+  const Image away_again = show_other_at(-12, 150);
+  const Blob left = Changed(away, behind_left, rear.r), right = Changed(away, behind_right, rear.r);
+  EXPECT_GT(left.count, rear_px / 20) << "the car behind on the left is not in the mirror";
+  EXPECT_GT(right.count, rear_px / 20) << "the car behind on the right is not in the mirror";
+  EXPECT_LT(Changed(away, away_again, rear.r).count, rear_px / 200) << "moved away: still seen";
+  EXPECT_LT(left.cx, rear.centre_x) << "behind on the left: on the mirror's left";
+  EXPECT_GT(right.cx, rear.centre_x) << "behind on the right: on the mirror's right";
+
+  // The side mirrors: a car 10 m along each one's line of sight.
+  const auto mirrors = viewer::MirrorsFor(v.vehicle(1)->geometry, v.camera().seat_B);
+  const ScreenRect side[2] = {MirrorOnScreen(v, viewer::kLeftMirror, kWide, kLow),
+                              MirrorOnScreen(v, viewer::kRightMirror, kWide, kLow)};
+  for (int k = 0; k < 2; ++k) {
+    const viewer::Mirror& m =
+        mirrors[static_cast<std::size_t>(k == 0 ? viewer::kLeftMirror : viewer::kRightMirror)];
+    const Vec3 p = m.centre_B + m.look_B * 10.0;  // (own car at the origin, heading along X)
+    const Image seen = show_other_at(p.x, p.y);
+    const int px = (side[k].r.x1 - side[k].r.x0) * (side[k].r.y1 - side[k].r.y0);
+    const int other_px =
+        (side[1 - k].r.x1 - side[1 - k].r.x0) * (side[1 - k].r.y1 - side[1 - k].r.y0);
+    EXPECT_GT(Changed(away, seen, side[k].r).count, px / 10)
+        << (k == 0 ? "left" : "right") << " mirror: the car along its line of sight";
+    EXPECT_LT(Changed(away, seen, side[1 - k].r).count, other_px / 200)
+        << (k == 0 ? "right" : "left") << " mirror shows the car behind on the other side";
   }
 }
 

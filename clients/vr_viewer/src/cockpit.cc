@@ -22,6 +22,7 @@ constexpr Rgb8 kTick{228, 228, 228};
 constexpr Rgb8 kRedline{215, 30, 30};
 constexpr Rgb8 kSegmentOn{250, 250, 250};
 constexpr Rgb8 kSegmentOff{34, 34, 37};
+constexpr Rgb8 kMirrorHousing{30, 30, 33};
 const Vec3 kUnlit{0, 0, 0};
 
 // Triangles in the body frame, drawn in the world at the vehicle's pose.
@@ -147,6 +148,40 @@ void SteeringWheel(Painter& p, const CockpitLayout& l, double angle) {
   p.list.Cylinder(p.pose * (c - n * 0.01), p.pose * (c - n * 0.32), 0.03, kTrimDark, true, 10);
 }
 
+// The mirrors' housings: a shell behind each glass, a little larger; the rear-view mirror's stem
+// up to the windscreen, the side mirrors' arms into the doors.
+void MirrorHousings(Painter& p, const std::array<Mirror, kMirrors>& mirrors, const Cabin& cab) {
+  for (int i = 0; i < kMirrors; ++i) {
+    const Mirror& m = mirrors[static_cast<std::size_t>(i)];
+    const Vec3 back = -m.normal_B;
+    const double w = m.half_width + 0.012, h = m.half_height + 0.012, depth = 0.035;
+    auto at = [&](double x, double y, double d) {
+      return m.centre_B + m.right_B * x + m.up_B * y + back * d;
+    };
+    // The rim around the glass (its face towards the eyes) and the shell's back and sides.
+    p.Quad(at(-w, -h, 0), at(w, -h, 0), at(w, h, 0), at(-w, h, 0), m.normal_B, kMirrorHousing);
+    p.Quad(at(-w, -h, depth), at(-w, h, depth), at(w, h, depth), at(w, -h, depth), back,
+           kMirrorHousing);
+    p.Quad(at(-w, h, 0), at(w, h, 0), at(w, h, depth), at(-w, h, depth), m.up_B, kMirrorHousing);
+    p.Quad(at(-w, -h, 0), at(-w, -h, depth), at(w, -h, depth), at(w, -h, 0), -m.up_B,
+           kMirrorHousing);
+    p.Quad(at(w, -h, 0), at(w, -h, depth), at(w, h, depth), at(w, h, 0), -m.right_B,
+           kMirrorHousing);
+    p.Quad(at(-w, -h, 0), at(-w, h, 0), at(-w, h, depth), at(-w, -h, depth), m.right_B,
+           kMirrorHousing);
+    if (i == kRearViewMirror) {
+      const Vec3 top = at(0, h, 0.5 * depth);
+      p.list.Cylinder(p.pose * top, p.pose * (top + Vec3{0.06, 0, 0.06}), 0.008, kTrimDark, true,
+                      6);
+    } else {
+      const double side = m.centre_B.y > 0 ? 1.0 : -1.0;
+      const Vec3 base = at(side * 0.5 * w, -0.3 * h, depth);
+      p.list.Cylinder(p.pose * base, p.pose * Vec3{base.x, side * 0.93 * cab.half_width, base.z},
+                      0.015, kMirrorHousing, true, 6);
+    }
+  }
+}
+
 }  // namespace
 
 double DialAngle(double value, double full_scale) {
@@ -176,6 +211,77 @@ CockpitLayout CockpitFor(const VehicleGeometry& g, const Vec3& seat_B) {
   l.gear_B = {x_gauges, seat_B.y, z_gauges + 0.01};
   l.gauge_normal_B = Normalized(seat_B - Vec3{x_gauges, seat_B.y, z_gauges});
   return l;
+}
+
+std::array<Mirror, kMirrors> MirrorsFor(const VehicleGeometry& g, const Vec3& seat_B) {
+  const Cabin cab = CabinFor(g);
+  // The windscreen's inner face: x where it is at height z (from the cowl to the roof's front).
+  const double rise = std::max(cab.z_roof_front - cab.z_belt_cowl, 0.1);
+  auto x_glass = [&](double z) {
+    return cab.x_cowl + (z - cab.z_belt_cowl) / rise * (cab.x_roof_front - cab.x_cowl);
+  };
+  std::array<Mirror, kMirrors> m;
+  // The rear-view mirror hangs from the windscreen a little above the eyes, 5 cm behind the
+  // glass, a third of the way from the centre line towards the driver (so a 16:9 driver camera
+  // sees it whole); 20 x 7 cm. The side mirrors stand out of the doors' front ends above the
+  // belt line, 18 x 12 cm.
+  m[kRearViewMirror].half_width = 0.10;
+  m[kRearViewMirror].half_height = 0.035;
+  const double z_rear = seat_B.z + 0.05;
+  m[kRearViewMirror].centre_B = {std::max(x_glass(z_rear + 0.035) - 0.05, seat_B.x + 0.3),
+                                 seat_B.y / 3, z_rear};
+  m[kRearViewMirror].look_B = {-1, 0, 0};
+  for (int i : {kLeftMirror, kRightMirror}) {
+    const double side = i == kLeftMirror ? 1.0 : -1.0;
+    Mirror& s = m[static_cast<std::size_t>(i)];
+    s.half_width = 0.09;
+    s.half_height = 0.06;
+    s.centre_B = {cab.x_cowl - 0.1, side * (cab.half_width + 0.1), cab.z_belt_cowl + 0.08};
+    s.look_B = Normalized(Vec3{-1, side * 0.15, 0});
+  }
+  for (Mirror& mi : m) {
+    // The glass's normal halves the angle between the sight line (reversed) and the look.
+    const Vec3 sight = Normalized(mi.centre_B - seat_B);
+    mi.normal_B = Normalized(mi.look_B - sight);
+    mi.up_B = Normalized(Vec3{0, 0, 1} - mi.normal_B * mi.normal_B.z, Vec3{0, 0, 1});
+    mi.right_B = Cross(-mi.normal_B, mi.up_B);
+  }
+  return m;
+}
+
+void AppendMirrors(const VehicleView& v, const Vec3& seat_B, std::vector<MirrorInstance>& out) {
+  const Pose& pose = v.pose_WB;
+  const auto mirrors = MirrorsFor(v.geometry, seat_B);
+  for (int i = 0; i < kMirrors; ++i) {
+    const Mirror& m = mirrors[static_cast<std::size_t>(i)];
+    MirrorInstance mi;
+    mi.index = i;
+    mi.eye_W = pose * m.centre_B;
+    mi.look_W = pose.R * m.look_B;
+    mi.up_W = pose.R * Vec3{0, 0, 1};
+    // The image's axes: looking along `look`, its right and up.
+    const Vec3 f = m.look_B, r = Normalized(Cross(f, Vec3{0, 0, 1})), u = Cross(r, f);
+    std::array<std::array<double, 2>, 4> t{};
+    mi.tan_half_x = mi.tan_half_y = 1e-3;
+    const double sx[4] = {-1, 1, 1, -1}, sy[4] = {-1, -1, 1, 1};
+    for (std::size_t k = 0; k < 4; ++k) {
+      // The glass in front of the housing; each corner's line of sight reflected by it.
+      const Vec3 c = m.centre_B + m.normal_B * 0.004 + m.right_B * (sx[k] * m.half_width) +
+                     m.up_B * (sy[k] * m.half_height);
+      mi.glass_W[k] = pose * c;
+      const Vec3 d = Normalized(c - seat_B);
+      const Vec3 refl = d - m.normal_B * (2 * Dot(d, m.normal_B));
+      const double along = std::max(Dot(refl, f), 1e-3);
+      t[k] = {Dot(refl, r) / along, Dot(refl, u) / along};
+      mi.tan_half_x = std::max(mi.tan_half_x, std::abs(t[k][0]));
+      mi.tan_half_y = std::max(mi.tan_half_y, std::abs(t[k][1]));
+    }
+    for (std::size_t k = 0; k < 4; ++k) {
+      mi.uv[k] = {static_cast<float>(0.5 + 0.5 * t[k][0] / mi.tan_half_x),
+                  static_cast<float>(0.5 + 0.5 * t[k][1] / mi.tan_half_y)};
+    }
+    out.push_back(mi);
+  }
 }
 
 void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list) {
@@ -216,13 +322,12 @@ void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list) {
     p.Box({seat_B.x - 0.8, std::min(y0, y1), z_floor}, {x_cowl, std::max(y0, y1), cab.H(0.95)},
           kDoor);
   }
-  // The roof's front edge (the header) and its lining; the rear-view mirror's housing.
+  // The roof's front edge (the header) and its lining.
   p.Box({cab.x_roof_front - 0.09, -0.75 * hw, z_roof - 0.075},
         {cab.x_roof_front + 0.01, 0.75 * hw, z_roof - 0.01}, kTrimDark);
   p.Box({cab.x_roof_rear, -0.75 * hw, z_roof - 0.045},
         {cab.x_roof_front - 0.09, 0.75 * hw, z_roof - 0.01}, kLining);
-  p.Box({cab.x_roof_front - 0.14, -0.13, z_roof - 0.2},
-        {cab.x_roof_front - 0.1, 0.13, z_roof - 0.13}, kTrimDark);
+  MirrorHousings(p, MirrorsFor(g, seat_B), cab);
 }
 
 }  // namespace vdyn::viewer

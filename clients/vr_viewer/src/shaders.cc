@@ -476,6 +476,30 @@ void main() {
 }
 )";
 
+// --- the cockpit's mirrors --------------------------------------------------------------------
+
+const char* const kMirrorVs = R"(
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec2 a_uv;
+uniform mat4 u_view_proj;
+out vec2 v_uv;
+void main() {
+  v_uv = a_uv;
+  gl_Position = u_view_proj * vec4(a_pos, 1.0);
+}
+)";
+
+// The mirror's image, already encoded for the screen; the glass reflects 85 % of the light.
+const char* const kMirrorFs = R"(
+in vec2 v_uv;
+uniform sampler2D u_image;
+out vec4 o_colour;
+void main() {
+  vec3 c = texture(u_image, v_uv).rgb;
+  o_colour = vec4(Encode(0.85 * Decode(c)), 1.0);
+}
+)";
+
 // --- the sun's shadow map ----------------------------------------------------------------------
 
 const char* const kDepthVs = R"(

@@ -32,6 +32,8 @@ extern const char* const kHillsVs;
 extern const char* const kHillsFs;
 extern const char* const kContactVs;
 extern const char* const kContactFs;
+extern const char* const kMirrorVs;
+extern const char* const kMirrorFs;
 extern const char* const kDepthVs;
 extern const char* const kDepthFs;
 

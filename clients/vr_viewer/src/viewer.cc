@@ -845,9 +845,9 @@ Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
     const pb::VehicleParams* vp = sv != nullptr && sv->params ? &*sv->params : nullptr;
     const AcceptedWorld* own_world = WorldOf(server_id);
     views.emplace(
-        id, BuildVehicleView(
-                t.drawn, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp),
-                &t.spin));
+        id, BuildVehicleView(t.drawn,
+                             GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp),
+                             &t.spin));
   }
   f.followed = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
   f.cs.followed = f.followed;
@@ -878,6 +878,10 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
                              : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
     return std::max(0.03, 1.6 * mpp);
   };
+  // The cockpit's mirrors see what is behind: no vehicle is left out for being outside the view
+  // (the renderer culls each view's own).
+  const bool mirrors =
+      inside && f.camera.cockpit && owner.followed_ && views.find(*owner.followed_) != views.end();
   for (const auto& [id, v] : views) {
     // From the driver's seat the own vehicle is its cockpit and its bonnet (the body from
     // inside); its tyres and arrows are left out (they would fill the view of the road ahead),
@@ -889,9 +893,10 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
       AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
       for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
       AppendCockpit(v, f.camera.seat_B, lists.cockpit);
+      AppendMirrors(v, f.camera.seat_B, lists.mirrors);
       continue;
     }
-    if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
+    if (!mirrors && !InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }
@@ -1237,6 +1242,7 @@ bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
           eye.target->BeginScene();
           Renderer::View rv{eye.view, eye.proj, eye.eye_W};
           if (f.followed != nullptr) rv.focus_W = f.followed->pose_WB.t;  // the sun's shadow map
+          rv.update_mirrors = eye.index == 0;  // the left eye's mirror images serve both
           renderer->Draw(rv, lists);
           eye.target->Resolve();
         },

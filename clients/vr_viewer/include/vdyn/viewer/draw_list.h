@@ -82,15 +82,27 @@ struct ContactShadow {
   std::array<Vec3, 4> corners_W;  // counter-clockwise seen from above
 };
 
+// A mirror in the cockpit (cockpit.h): its glass in the world and the view it shows - from
+// eye_W along look_W (up_W up), the tangents of its half angles - and where each glass corner
+// (the driver's lower left, lower right, upper right, upper left) is in that image (0..1).
+struct MirrorInstance {
+  int index = 0;  // MirrorIndex: which of the renderer's images
+  std::array<Vec3, 4> glass_W;
+  std::array<std::array<float, 2>, 4> uv{};
+  Vec3 eye_W, look_W, up_W;
+  double tan_half_x = 0.2, tan_half_y = 0.1;
+};
+
 // The lists of one frame: what is opaque, what is translucent (drawn after), and the force
 // arrows (drawn last, in full colour where seen and as a faint ghost where something hides them);
 // the cockpit (opaque; no ghost of an arrow is drawn over it); the bodies and wheels of the
-// vehicles and their contact shadows.
+// vehicles and their contact shadows; the cockpit's mirrors.
 struct FrameLists {
   DrawList opaque, translucent, arrows, cockpit;
   std::vector<BodyInstance> bodies;
   std::vector<WheelInstance> wheels;
   std::vector<ContactShadow> contact_shadows;
+  std::vector<MirrorInstance> mirrors;
   void Clear() {
     opaque.Clear();
     cockpit.Clear();
@@ -99,6 +111,7 @@ struct FrameLists {
     bodies.clear();
     wheels.clear();
     contact_shadows.clear();
+    mirrors.clear();
   }
 };
 
