@@ -785,57 +785,65 @@ Blob Changed(const Image& a, const Image& b, Rect r) {
 // front and back, not left and right: a car behind on the left is on the mirror's left as the
 // driver sees it (a camera looking back would show it on its right). Each side mirror shows a
 // car 10 m along its line of sight, the other side mirror does not. A wide view (3:1, 90 deg
-// high) sees all three mirrors.
+// high) sees all three mirrors. At high and low quality.
 TEST_F(CockpitTest, TheMirrorsShowWhatIsBehindReflectedAsAMirrorDoes) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);
   ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
-  ViewerOptions o = DriverOptions(domain);
-  constexpr int kWide = 1200, kLow = 400;
-  o.width = kWide;
-  o.height = kLow;
-  o.camera.fovy = viewer::Rad(90);
-  Viewer v(o);
-  TestVehicle own, other;
-  for (auto& w : own.wheels) w.fp = 0;
-  other.id = 2;
-  for (auto& w : other.wheels) w.fp = 0;
   std::uint64_t step = 1;
-  auto show_other_at = [&](double x, double y) {
-    own.step = other.step = step++;
-    other.x = x;
-    other.y = y;
-    return Show(v, pub, {MakeState(own), MakeState(other)});
-  };
-  const Image away = show_other_at(-12, 150);
-  const ScreenRect rear = MirrorOnScreen(v, viewer::kRearViewMirror, kWide, kLow);
-  const int rear_px = (rear.r.x1 - rear.r.x0) * (rear.r.y1 - rear.r.y0);
-  const Image behind_left = show_other_at(-12, 1.8);
-  const Image behind_right = show_other_at(-12, -1.8);
-  const Image away_again = show_other_at(-12, 150);
-  const Blob left = Changed(away, behind_left, rear.r), right = Changed(away, behind_right, rear.r);
-  EXPECT_GT(left.count, rear_px / 20) << "the car behind on the left is not in the mirror";
-  EXPECT_GT(right.count, rear_px / 20) << "the car behind on the right is not in the mirror";
-  EXPECT_LT(Changed(away, away_again, rear.r).count, rear_px / 200) << "moved away: still seen";
-  EXPECT_LT(left.cx, rear.centre_x) << "behind on the left: on the mirror's left";
-  EXPECT_GT(right.cx, rear.centre_x) << "behind on the right: on the mirror's right";
+  // At both qualities (low: smaller images, the mirrors drawn in turns, one a frame).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = DriverOptions(domain);
+    o.quality = q;
+    constexpr int kWide = 1200, kLow = 400;
+    o.width = kWide;
+    o.height = kLow;
+    o.camera.fovy = viewer::Rad(90);
+    Viewer v(o);
+    TestVehicle own, other;
+    for (auto& w : own.wheels) w.fp = 0;
+    other.id = 2;
+    for (auto& w : other.wheels) w.fp = 0;
+    auto show_other_at = [&](double x, double y) {
+      own.step = other.step = step++;
+      other.x = x;
+      other.y = y;
+      Show(v, pub, {MakeState(own), MakeState(other)});
+      for (int i = 0; i < 3; ++i) EXPECT_TRUE(v.Frame());  // every mirror's turn at low
+      return Keep(v.Screenshot());
+    };
+    const Image away = show_other_at(-12, 150);
+    const ScreenRect rear = MirrorOnScreen(v, viewer::kRearViewMirror, kWide, kLow);
+    const int rear_px = (rear.r.x1 - rear.r.x0) * (rear.r.y1 - rear.r.y0);
+    const Image behind_left = show_other_at(-12, 1.8);
+    const Image behind_right = show_other_at(-12, -1.8);
+    const Image away_again = show_other_at(-12, 150);
+    const Blob left = Changed(away, behind_left, rear.r),
+               right = Changed(away, behind_right, rear.r);
+    EXPECT_GT(left.count, rear_px / 20) << "the car behind on the left is not in the mirror";
+    EXPECT_GT(right.count, rear_px / 20) << "the car behind on the right is not in the mirror";
+    EXPECT_LT(Changed(away, away_again, rear.r).count, rear_px / 200) << "moved away: still seen";
+    EXPECT_LT(left.cx, rear.centre_x) << "behind on the left: on the mirror's left";
+    EXPECT_GT(right.cx, rear.centre_x) << "behind on the right: on the mirror's right";
 
-  // The side mirrors: a car 10 m along each one's line of sight.
-  const auto mirrors = viewer::MirrorsFor(v.vehicle(1)->geometry, v.camera().seat_B);
-  const ScreenRect side[2] = {MirrorOnScreen(v, viewer::kLeftMirror, kWide, kLow),
-                              MirrorOnScreen(v, viewer::kRightMirror, kWide, kLow)};
-  for (int k = 0; k < 2; ++k) {
-    const viewer::Mirror& m =
-        mirrors[static_cast<std::size_t>(k == 0 ? viewer::kLeftMirror : viewer::kRightMirror)];
-    const Vec3 p = m.centre_B + m.look_B * 10.0;  // (own car at the origin, heading along X)
-    const Image seen = show_other_at(p.x, p.y);
-    const int px = (side[k].r.x1 - side[k].r.x0) * (side[k].r.y1 - side[k].r.y0);
-    const int other_px =
-        (side[1 - k].r.x1 - side[1 - k].r.x0) * (side[1 - k].r.y1 - side[1 - k].r.y0);
-    EXPECT_GT(Changed(away, seen, side[k].r).count, px / 10)
-        << (k == 0 ? "left" : "right") << " mirror: the car along its line of sight";
-    EXPECT_LT(Changed(away, seen, side[1 - k].r).count, other_px / 200)
-        << (k == 0 ? "right" : "left") << " mirror shows the car behind on the other side";
+    // The side mirrors: a car 10 m along each one's line of sight.
+    const auto mirrors = viewer::MirrorsFor(v.vehicle(1)->geometry, v.camera().seat_B);
+    const ScreenRect side[2] = {MirrorOnScreen(v, viewer::kLeftMirror, kWide, kLow),
+                                MirrorOnScreen(v, viewer::kRightMirror, kWide, kLow)};
+    for (int k = 0; k < 2; ++k) {
+      const viewer::Mirror& m =
+          mirrors[static_cast<std::size_t>(k == 0 ? viewer::kLeftMirror : viewer::kRightMirror)];
+      const Vec3 p = m.centre_B + m.look_B * 10.0;  // (own car at the origin, heading along X)
+      const Image seen = show_other_at(p.x, p.y);
+      const int px = (side[k].r.x1 - side[k].r.x0) * (side[k].r.y1 - side[k].r.y0);
+      const int other_px =
+          (side[1 - k].r.x1 - side[1 - k].r.x0) * (side[1 - k].r.y1 - side[1 - k].r.y0);
+      EXPECT_GT(Changed(away, seen, side[k].r).count, px / 10)
+          << (k == 0 ? "left" : "right") << " mirror: the car along its line of sight";
+      EXPECT_LT(Changed(away, seen, side[1 - k].r).count, other_px / 200)
+          << (k == 0 ? "right" : "left") << " mirror shows the car behind on the other side";
+    }
   }
 }
 
