@@ -284,6 +284,11 @@ void AppendMirrors(const VehicleView& v, const Vec3& seat_B, std::vector<MirrorI
   }
 }
 
+Mat4 MirrorViewProj(const MirrorInstance& m, double far_m) {
+  return Perspective(2 * std::atan(m.tan_half_y), m.tan_half_x / m.tan_half_y, 0.05, far_m) *
+         LookAt(m.eye_W, m.eye_W + m.look_W, m.up_W);
+}
+
 void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list) {
   const VehicleGeometry& g = v.geometry;
   const Cabin cab = CabinFor(g);

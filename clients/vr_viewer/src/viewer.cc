@@ -878,10 +878,17 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
                              : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
     return std::max(0.03, 1.6 * mpp);
   };
-  // The cockpit's mirrors see what is behind: no vehicle is left out for being outside the view
-  // (the renderer culls each view's own).
-  const bool mirrors =
-      inside && f.camera.cockpit && owner.followed_ && views.find(*owner.followed_) != views.end();
+  // The cockpit's mirrors see what is behind: a vehicle is drawn when the view or a mirror sees
+  // it.
+  std::vector<Mat4> seen_by = {view_proj};
+  if (inside && f.camera.cockpit && owner.followed_) {
+    if (auto own = views.find(*owner.followed_); own != views.end()) {
+      AppendMirrors(own->second, f.camera.seat_B, lists.mirrors);
+      for (const MirrorInstance& m : lists.mirrors) {
+        seen_by.push_back(MirrorViewProj(m, f.cs.far_m));
+      }
+    }
+  }
   for (const auto& [id, v] : views) {
     // From the driver's seat the own vehicle is its cockpit and its bonnet (the body from
     // inside); its tyres and arrows are left out (they would fill the view of the road ahead),
@@ -893,10 +900,13 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
       AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
       for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
       AppendCockpit(v, f.camera.seat_B, lists.cockpit);
-      AppendMirrors(v, f.camera.seat_B, lists.mirrors);
       continue;
     }
-    if (!mirrors && !InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
+    const double bound = BoundingRadius(v, o.arrows);
+    if (std::none_of(seen_by.begin(), seen_by.end(),
+                     [&](const Mat4& vp) { return InFrustum(vp, v.pose_WB.t, bound); })) {
+      continue;
+    }
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }

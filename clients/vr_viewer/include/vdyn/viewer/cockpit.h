@@ -64,5 +64,7 @@ void AppendCockpit(const VehicleView& v, const Vec3& seat_B, DrawList& list);
 // reflected line of sight, and each corner's place in that image - reflected as a real mirror
 // reflects (what is behind on the car's left shows on the glass's left as the driver sees it).
 void AppendMirrors(const VehicleView& v, const Vec3& seat_B, std::vector<MirrorInstance>& out);
+// The projection and view of a mirror's image (near 5 cm, far `far_m`).
+Mat4 MirrorViewProj(const MirrorInstance& m, double far_m);
 
 }  // namespace vdyn::viewer
