@@ -903,8 +903,9 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
       continue;
     }
     const double bound = BoundingRadius(v, o.arrows);
+    const auto& at = v.pose_WB.t;  // a lambda may not capture a structured binding (clang 14)
     if (std::none_of(seen_by.begin(), seen_by.end(),
-                     [&](const Mat4& vp) { return InFrustum(vp, v.pose_WB.t, bound); })) {
+                     [&](const Mat4& vp) { return InFrustum(vp, at, bound); })) {
       continue;
     }
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
