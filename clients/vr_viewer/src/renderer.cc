@@ -383,11 +383,11 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   sky_ = std::make_unique<Program>(Vs(shaders::kSkyVs), Fragment(o, shaders::kSkyFs), "sky");
   hills_ =
       std::make_unique<Program>(Vs(shaders::kHillsVs), Fragment(o, shaders::kHillsFs), "far hills");
-  contact_ = std::make_unique<Program>(Vs(shaders::kContactVs), Fragment(o, shaders::kContactFs),
+  contact_ = std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kContactFs),
                                        "contact shadows");
   depth_ = std::make_unique<Program>(Vs(shaders::kDepthVs), Vs(shaders::kDepthFs), "shadow map");
   mirror_ =
-      std::make_unique<Program>(Vs(shaders::kMirrorVs), Fragment(o, shaders::kMirrorFs), "mirrors");
+      std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kMirrorFs), "mirrors");
   glUseProgram(mirror_->id);
   glUniform1i(glGetUniformLocation(mirror_->id, "u_image"), kMirrorUnit);
   glUseProgram(0);

@@ -451,9 +451,9 @@ void main() {
 }
 )";
 
-// --- contact shadows under the vehicles ----------------------------------------------------------
+// --- contact shadows under the vehicles, and the mirrors: a textured quad in the world -----------
 
-const char* const kContactVs = R"(
+const char* const kWorldQuadVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec2 a_uv;
 uniform mat4 u_view_proj;
@@ -476,18 +476,7 @@ void main() {
 }
 )";
 
-// --- the cockpit's mirrors --------------------------------------------------------------------
-
-const char* const kMirrorVs = R"(
-layout(location = 0) in vec3 a_pos;
-layout(location = 1) in vec2 a_uv;
-uniform mat4 u_view_proj;
-out vec2 v_uv;
-void main() {
-  v_uv = a_uv;
-  gl_Position = u_view_proj * vec4(a_pos, 1.0);
-}
-)";
+// --- the cockpit's mirrors (vertex shader: kWorldQuadVs) -------------------------------------
 
 // The mirror's image, already encoded for the screen; the glass reflects 85 % of the light.
 const char* const kMirrorFs = R"(
