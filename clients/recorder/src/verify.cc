@@ -92,17 +92,16 @@ std::map<ServerStart, Server> CollectEvents(const mcap::Reader& reader,
     }
   };
   ScanRecording(reader, v);
-  // A start's number among its id's (incarnations are start times: their order is time order).
-  for (auto it = servers.begin(); it != servers.end(); ++it) {
-    auto prev = it == servers.begin() ? servers.end() : std::prev(it);
-    auto next = std::next(it);
-    const bool shared = (prev != servers.end() && prev->first.id == it->first.id) ||
-                        (next != servers.end() && next->first.id == it->first.id);
-    if (shared) {
-      it->second.start = prev != servers.end() && prev->first.id == it->first.id
-                             ? prev->second.start + 1
-                             : 1;
-    }
+  // A start's number among its id's (incarnations are start times: the map's order is time
+  // order), where the id started more than once.
+  std::map<std::string, std::uint32_t> starts_of;
+  for (const auto& [key, s] : servers) ++starts_of[key.id];
+  const std::string* last_id = nullptr;
+  std::uint32_t n = 0;
+  for (auto& [key, s] : servers) {
+    n = last_id != nullptr && *last_id == key.id ? n + 1 : 1;
+    last_id = &key.id;
+    s.start = starts_of[key.id] > 1 ? n : 0;
   }
   for (auto& [id, s] : servers) {
     std::stable_sort(s.events.begin(), s.events.end(),
