@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vdyn/client/palette.h"
 #include "vdyn/viewer/car_model.h"
 
 namespace vdyn::viewer {
@@ -79,11 +80,8 @@ std::string_view WheelName(int wheel) {
 }
 
 Rgb8 VehicleColour(std::uint32_t vehicle_id) {
-  // (Vehicle 6 graphite: the periwinkle it was lay within 30 levels of vehicle 1's blue.)
-  static constexpr Rgb8 kPalette[] = {{90, 170, 200},  {150, 110, 210}, {230, 230, 235},
-                                      {80, 190, 160},  {200, 150, 170}, {110, 110, 118},
-                                      {170, 190, 110}, {210, 170, 120}};
-  return kPalette[(vehicle_id + 7) % 8];  // vehicle 1 gets the first colour
+  const auto& c = client::VehiclePaint(vehicle_id);  // the clients' shared palette
+  return {c[0], c[1], c[2]};
 }
 
 std::string CheckGeometry(const pb::VehicleGeometry& g) {
