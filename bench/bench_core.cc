@@ -55,11 +55,15 @@ const Course& CourseNamed(const std::string& name) {
 
 // The cars live across benchmark invocations (Google Benchmark calls a function several times while
 // it sizes the run): each continues its drive instead of restarting from rest at the spawn.
-VdynCar& OurCar(const std::string& world, bool paper = false) {
+// `model`: "full" (the default car: the full model, brush tyres), "paper", or "mf" (the full model
+// on the synthetic Magic Formula tyre, tires/).
+VdynCar& OurCar(const std::string& world, const std::string& model = "full") {
   static std::map<std::string, std::unique_ptr<VdynCar>> cars;
-  auto& car = cars[world + (paper ? "/paper" : "")];
+  auto& car = cars[world + "/" + model];
   if (!car) {
-    car = std::make_unique<VdynCar>(CourseNamed(world), paper ? PaperBenchParams() : BenchParams());
+    car = std::make_unique<VdynCar>(CourseNamed(world), model == "paper" ? PaperBenchParams()
+                                                        : model == "mf"  ? MagicFormulaBenchParams()
+                                                                         : BenchParams());
   }
   return *car;
 }
@@ -86,8 +90,8 @@ void StepLoop(benchmark::State& st, Car& car) {
   }
 }
 
-void BM_StepVdyn(benchmark::State& st, const std::string& world, bool paper) {
-  StepLoop(st, OurCar(world, paper));
+void BM_StepVdyn(benchmark::State& st, const std::string& world, const std::string& model) {
+  StepLoop(st, OurCar(world, model));
 }
 void BM_StepBullet(benchmark::State& st, const std::string& world, bool chassis_box) {
   StepLoop(st, PeerCar(world, chassis_box));
@@ -264,6 +268,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
       Ratio("step/" + w + " (Bullet without box)", "step/vdyn/" + w, "step/bullet_nobox/" + w);
       Ratio("step/" + w + " (paper model)", "step/vdyn_paper/" + w, "step/bullet/" + w);
       Ratio("step/" + w + " (full / paper model)", "step/vdyn/" + w, "step/vdyn_paper/" + w);
+      Ratio("step/" + w + " (Magic Formula / brush tyre)", "step/vdyn_mf/" + w, "step/vdyn/" + w);
       for (const char* pattern : {"moving", "random"}) {
         const std::string wp = std::string(world) + "/" + pattern;
         Ratio("ray/" + wp + " (Trace)", "trace/vdyn/" + wp, "ray/bullet/" + wp);
@@ -289,8 +294,9 @@ class RatioReporter : public benchmark::ConsoleReporter {
 
 void Register() {
   for (const std::string world : {"facility", "terrain_1m"}) {
-    benchmark::RegisterBenchmark(("step/vdyn/" + world).c_str(), BM_StepVdyn, world, false);
-    benchmark::RegisterBenchmark(("step/vdyn_paper/" + world).c_str(), BM_StepVdyn, world, true);
+    benchmark::RegisterBenchmark(("step/vdyn/" + world).c_str(), BM_StepVdyn, world, "full");
+    benchmark::RegisterBenchmark(("step/vdyn_paper/" + world).c_str(), BM_StepVdyn, world, "paper");
+    benchmark::RegisterBenchmark(("step/vdyn_mf/" + world).c_str(), BM_StepVdyn, world, "mf");
     benchmark::RegisterBenchmark(("step/bullet/" + world).c_str(), BM_StepBullet, world, true);
     benchmark::RegisterBenchmark(("step/bullet_nobox/" + world).c_str(), BM_StepBullet, world,
                                  false);

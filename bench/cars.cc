@@ -10,8 +10,9 @@
 #include <BulletDynamics/Vehicle/btRaycastVehicle.h>
 #include <btBulletDynamicsCommon.h>
 
-#include "vdyn/bridge/params.h"
 #include "terrain_gen.h"
+#include "vdyn/bridge/params.h"
+#include "vdyn/io/tire_file.h"
 
 namespace vdyn::bench {
 
@@ -58,6 +59,16 @@ bool Course::Leaving(const Pose2& pose) const {
 
 ValidParams BenchParams() {
   return ParamsFromProto(DefaultVehicleParams());
+}
+
+ValidParams MagicFormulaBenchParams() {
+  pb::VehicleParams p = DefaultVehicleParams();
+  const pb::MagicFormulaTire tire = ReadTireFile(std::filesystem::path(VDYN_SOURCE_DIR) / "tires" /
+                                                 "vdyn_synthetic_205_55R16_mf61.tir");
+  for (pb::WheelParams* w : {p.mutable_lf(), p.mutable_rf(), p.mutable_lr(), p.mutable_rr()}) {
+    *w->mutable_magic_formula() = tire;
+  }
+  return ParamsFromProto(p);
 }
 
 ValidParams PaperBenchParams() {

@@ -39,6 +39,8 @@ Course TerrainCourse();
 
 ValidParams BenchParams();       // vdyn's default vehicle (the full model, the default)
 ValidParams PaperBenchParams();  // the same vehicle with the paper's model
+// The same vehicle on the synthetic Magic Formula tyre (tires/vdyn_synthetic_205_55R16_mf61.tir).
+ValidParams MagicFormulaBenchParams();
 
 class VdynCar {
  public:

@@ -458,21 +458,8 @@ TEST(FullModel, TopSpeedIsWhereTheDriveForceMeetsDragAndRollingResistance) {
   Drive(sim, 120000, {});
   const StepRecord& r = sim.last_step();
   const double v = BodyVelocity(sim.state()).x();
-  const double R = p->wheel[kLF].radius;
-  const double i_top = p->gear_ratio_top * p->final_drive_ratio;
-  const double w_p = p->engine_rpm_power_max * 2.0 * std::numbers::pi / 60.0;
-  auto excess = [&](double speed) {
-    const double rr = i_top * speed / R / w_p;
-    const double T = p->engine_power_max / w_p * (1.0 + rr - rr * rr);
-    return p->drivetrain_efficiency * i_top * T / R -
-           (0.5 * p->rho * p->cx * p->sx * speed * speed + p->rolling_resistance * p->mass * p->gravity);
-  };
-  double lo = 20.0, hi = 120.0;
-  for (int i = 0; i < 100; ++i) {
-    const double mid = 0.5 * (lo + hi);
-    (excess(mid) > 0.0 ? lo : hi) = mid;
-  }
-  const double expect = 0.5 * (lo + hi);
+  const double expect = testing::ClosedFormTopSpeed(
+      p, [&](double) { return p->rolling_resistance * p->mass * p->gravity; });
   std::printf("top speed: %.3f km/h in gear %d at %.0f rpm, closed form %.3f km/h (%+.3f %%)\n",
               3.6 * v, r.control.gear, r.derived.drivetrain.engine_speed * 30.0 / std::numbers::pi,
               3.6 * expect, 100.0 * (v / expect - 1.0));

@@ -22,6 +22,7 @@
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/io/tire_file.h"
 #include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
 #include "vdyn/runtime/server_node.h"
@@ -147,6 +148,53 @@ TEST(NoAllocation, StepsOnFacilityAllocateNothing) {
   // ramp's steep faces are near).
   EXPECT_GT(airborne_steps, 100);
   EXPECT_GT(sim.wall_traced_steps() - traced_before, 100u);
+  ExpectCounterWorks();
+}
+
+// The same stretch on Magic Formula tyres (issue 34): the law, its relaxation and its low-speed
+// handling allocate nothing either.
+TEST(NoAllocation, StepsOnMagicFormulaTyresAllocateNothing) {
+  std::shared_ptr<const World> world = BuildBuiltinWorld("facility");
+  pb::VehicleParams params = DefaultVehicleParams();
+  const pb::MagicFormulaTire tire = ReadTireFile(std::filesystem::path(VDYN_SOURCE_DIR) / "tires" /
+                                                 "vdyn_synthetic_205_55R16_mf61.tir");
+  for (pb::WheelParams* w :
+       {params.mutable_lf(), params.mutable_rf(), params.mutable_lr(), params.mutable_rr()}) {
+    *w->mutable_magic_formula() = tire;
+  }
+  Simulator sim(world, ParamsFromProto(params));
+  const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
+  const Eigen::Vector3d ramp = world->LandmarkAt("jump_ramp_a");
+  sim.Spawn({ramp.x() - 30.0, ramp.y(), 0.0}, 50.0 / 3.6);
+  for (int i = 0; i < 10; ++i) ASSERT_EQ(sim.Step(), StepStatus::kOk);
+  int airborne_steps = 0, nonfinite = 0;
+  double largest_fy = 0.0;
+  g_allocations = 0;
+  t_counting = true;
+  for (int i = 0; i < 7000; ++i) {
+    DriverInput in = FromManeuver(m.At(20.0));
+    in.steer = (i % 1000 < 500) ? 0.05 : -0.05;
+    if (i > 3000) {  // after the jump, a stop: the low-speed handling, then at rest
+      in.throttle = 0.0;
+      in.brake = 1.0;
+      in.cruise_on = false;
+    }
+    sim.SetInput(in);
+    nonfinite += sim.Step() != StepStatus::kOk;
+    bool airborne = true;
+    for (const WheelOutputs& w : sim.last_step().derived.wheel) {
+      airborne = airborne && !w.contact;
+      largest_fy = std::max(largest_fy, std::abs(w.Fy));
+    }
+    airborne_steps += airborne;
+  }
+  t_counting = false;
+  EXPECT_EQ(g_allocations.load(), 0) << "allocations in 7000 steps";
+  EXPECT_EQ(nonfinite, 0);
+  EXPECT_GT(airborne_steps, 100);
+  EXPECT_GT(largest_fy, 1000.0);                    // the tyres did corner
+  EXPECT_LT(Velocity(sim.state().x).norm(), 0.05);  // and the car stopped
+  EXPECT_TRUE(sim.params().wheel[kLF].mf.enabled);
   ExpectCounterWorks();
 }
 

@@ -3,6 +3,7 @@
 #include <fstream>
 #include <map>
 #include <mutex>
+#include <numbers>
 #include <random>
 #include <sstream>
 
@@ -75,6 +76,24 @@ ValidParams PaperParamsWith(const std::function<void(pb::VehicleParams&)>& edit)
   msg.set_model(pb::VEHICLE_MODEL_PAPER);
   edit(msg);
   return ParamsFromProto(msg);
+}
+
+double ClosedFormTopSpeed(const Params& p, const std::function<double(double)>& rolling_N) {
+  const double R = p.wheel[kLF].radius;
+  const double i_top = p.gear_ratio_top * p.final_drive_ratio;
+  const double w_p = p.engine_rpm_power_max * 2.0 * std::numbers::pi / 60.0;
+  auto excess = [&](double speed) {
+    const double r = i_top * speed / R / w_p;
+    const double T = p.engine_power_max / w_p * (1.0 + r - r * r);
+    return p.drivetrain_efficiency * i_top * T / R - 0.5 * p.rho * p.cx * p.sx * speed * speed -
+           rolling_N(speed);
+  };
+  double lo = 20.0, hi = 120.0;
+  for (int i = 0; i < 100; ++i) {
+    const double mid = 0.5 * (lo + hi);
+    (excess(mid) > 0.0 ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
 }
 
 std::int64_t Drive(Simulator& sim, std::int64_t max_steps,

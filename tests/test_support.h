@@ -70,6 +70,11 @@ ValidParams ParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
 ValidParams PaperParams();
 ValidParams PaperParamsWith(const std::function<void(pb::VehicleParams&)>& edit);
 
+// The closed-form top speed, m/s: where the top gear's drive force at full load, eta i T(i v / R)
+// / R with T the torque of P = P_max (r + r^2 - r^3) (r: engine speed over that of P_max), meets
+// aerodynamic drag 1/2 rho cx Sx v^2 plus `rolling_N(v)` (bisection between 20 and 120 m/s).
+double ClosedFormTopSpeed(const Params& p, const std::function<double(double)>& rolling_N);
+
 // Steps until `stop` returns true or `max_steps` is reached; returns the steps taken. Fails the
 // test if a step is non-finite.
 std::int64_t Drive(Simulator& sim, std::int64_t max_steps,

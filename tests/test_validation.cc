@@ -685,6 +685,62 @@ TEST(Invariants, TheStepChecksThemInDebugAndSanitizerBuilds) {
   EXPECT_THAT(tripped[0], HasSubstr("the starting state's quaternion has norm 1.5"));
 }
 
+// The always-on tier (issue 32): each demand trips on a crafted bad value, names it and writes no
+// more than its buffer; a good step passes.
+TEST(Invariants, EachDemandTripsOnACraftedBadValue) {
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 50, {});
+  const StepRecord good = sim.last_step();
+  char why[160] = "";
+  EXPECT_TRUE(CheckStepDemands(good, sim.state(), why, sizeof why));
+  EXPECT_STREQ(why, "");
+  StepRecord r = good;
+  r.state.x.segment<4>(sx::kQ) *= 1.5;
+  EXPECT_FALSE(CheckStepDemands(r, sim.state(), why, sizeof why));
+  EXPECT_THAT(why, HasSubstr("the starting state's quaternion has norm 1.5"));
+  State after = sim.state();
+  after.x.segment<4>(sx::kQ) *= 1.01;
+  EXPECT_FALSE(CheckStepDemands(good, after, why, sizeof why));
+  EXPECT_THAT(why, HasSubstr("the new state's quaternion has norm 1.01"));
+  r = good;
+  r.derived.wheel[3].Fp = -2.0;
+  EXPECT_FALSE(CheckStepDemands(r, sim.state(), why, sizeof why));
+  EXPECT_THAT(why, HasSubstr("wheel RR: spring force Fp = -2 N"));
+  r = good;
+  r.derived.wheel[0].Fp = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(CheckStepDemands(r, sim.state(), why, sizeof why));
+  EXPECT_THAT(why, HasSubstr("wheel LF: spring force Fp = nan"));
+  r = good;
+  r.state.x[sx::kP] = std::numeric_limits<double>::infinity();
+  EXPECT_FALSE(CheckStepDemands(r, sim.state(), why, sizeof why));
+  EXPECT_THAT(why, HasSubstr("the starting state is not finite"));
+  char tiny[8];
+  EXPECT_FALSE(CheckStepDemands(r, sim.state(), tiny, sizeof tiny));
+  EXPECT_EQ(std::strlen(tiny), 7u);
+}
+
+// Every build (release too) checks the demands after every step, counts a failure and keeps its
+// reason (the server's diagnostics report both): a state given with a quaternion of norm 1.5.
+TEST(Invariants, TheStepCountsADemandFailureInEveryBuild) {
+  static int handled = 0;
+  handled = 0;
+  SetInvariantHandler([](const std::string&) { ++handled; });  // debug builds: no abort
+  Simulator sim(SharedWorld("flat"), testing::DefaultParams());
+  Drive(sim, 20, {});
+  EXPECT_EQ(sim.invariant_failures(), 0u);
+  EXPECT_STREQ(sim.last_invariant_failure(), "");
+  State s = sim.state();
+  s.x.segment<4>(sx::kQ) *= 1.5;
+  sim.SetState(s);
+  EXPECT_EQ(sim.Step(), StepStatus::kOk);
+  Drive(sim, 20, {});
+  SetInvariantHandler(nullptr);
+  EXPECT_EQ(sim.invariant_failures(), 1u);
+  EXPECT_THAT(sim.last_invariant_failure(),
+              HasSubstr("the starting state's quaternion has norm 1.5"));
+  EXPECT_EQ(handled, kCheckInvariants ? 1 : 0);
+}
+
 TEST(Properties, NonFiniteStateIsContained) {
   Simulator sim(SharedWorld("flat"), PaperDefaults());
   Drive(sim, 50, {});  // a state with a history: step, cruise integral, motion all non-trivial

@@ -106,6 +106,17 @@ constexpr ParamChoice kChoices[] = {
   {"lr",           "left rear wheel (LR)"},
   {"rr",           "right rear wheel (RR)"},
 };
+// Optional fields (absent: what their words say), the per-wheel ones by their name alone.
+constexpr ParamChoice kOptional[] = {
+  {"tire_file",       "a .tir tyre file for every wheel, relative to the parameter file (files only)"},
+  {"tire_file_front", "a .tir tyre file for the front wheels (files only)"},
+  {"tire_file_rear",  "a .tir tyre file for the rear wheels (files only)"},
+};
+constexpr ParamChoice kWheelOptional[] = {
+  {"magic_formula", "Magic Formula tyre: a .tir file's coefficients (absent: the brush law)"},
+  {"camber",        "static camber, rad, within 0.3 (negative: top inboard; absent: 0)"},
+  {"tire_file",     "a .tir tyre file for this wheel, relative to the parameter file (files only)"},
+};
 // clang-format on
 
 }  // namespace
@@ -153,6 +164,14 @@ std::string_view ParamWords(std::string_view path) {
   if (const Range* r = ParamRange(path)) return r->what;
   for (const ParamChoice& c : kChoices) {
     if (c.path == path) return c.what;
+  }
+  for (const ParamChoice& c : kOptional) {
+    if (c.path == path) return c.what;
+  }
+  if (const std::size_t dot = path.find('.'); dot != std::string_view::npos) {
+    for (const ParamChoice& c : kWheelOptional) {
+      if (c.path == path.substr(dot + 1)) return c.what;
+    }
   }
   return {};
 }

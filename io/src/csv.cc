@@ -129,10 +129,20 @@ const WheelColumn kExtraWheelColumns[] = {
   {"abs",   "",      [](const pb::WheelState& w) { return w.abs_factor(); }},
   {"kerb",  "",      [](const pb::WheelState& w) { return w.kerb() ? 1.0 : 0.0; }},
 };
+// Appended for the tyre laws' inputs and outputs (issue 34), after every column above.
+const WheelColumn kTireWheelColumns[] = {
+  {"kappaLaw", "",     [](const pb::WheelState& w) { return w.kappa_law(); }},
+  {"alphaLaw", "rad",  [](const pb::WheelState& w) { return w.alpha_law(); }},
+  {"camber", "rad",    [](const pb::WheelState& w) { return w.camber(); }},
+  {"pressure", "Pa",   [](const pb::WheelState& w) { return w.pressure(); }},
+  {"Mx",    "Nm",      [](const pb::WheelState& w) { return w.mx(); }},
+  {"My",    "Nm",      [](const pb::WheelState& w) { return w.my(); }},
+};
 // clang-format on
 
 constexpr std::size_t kNumValues = std::size(kColumns) + 4 * std::size(kWheelColumns) +
-                                   std::size(kExtraColumns) + 4 * std::size(kExtraWheelColumns);
+                                   std::size(kExtraColumns) + 4 * std::size(kExtraWheelColumns) +
+                                   4 * std::size(kTireWheelColumns);
 
 void AddWheelNames(const WheelColumn* cols, std::size_t n, std::vector<std::string>& names) {
   for (std::string_view wheel : kWheels) {
@@ -156,6 +166,7 @@ std::vector<std::string> CsvColumns() {
   AddWheelNames(kWheelColumns, std::size(kWheelColumns), names);
   for (const Column& c : kExtraColumns) names.emplace_back(c.name);
   AddWheelNames(kExtraWheelColumns, std::size(kExtraWheelColumns), names);
+  AddWheelNames(kTireWheelColumns, std::size(kTireWheelColumns), names);
   return names;
 }
 
@@ -168,6 +179,9 @@ void CsvRowValues(const State& s, std::vector<double>& out) {
   for (const Column& c : kExtraColumns) out.push_back(c.get(s));
   for (int w = 0; w < 4; ++w) {
     for (const WheelColumn& c : kExtraWheelColumns) out.push_back(c.get(WheelOf(s, w)));
+  }
+  for (int w = 0; w < 4; ++w) {
+    for (const WheelColumn& c : kTireWheelColumns) out.push_back(c.get(WheelOf(s, w)));
   }
 }
 
@@ -217,6 +231,9 @@ std::size_t FormatCsvRow(const State& s, char* out) {
   for (const Column& c : kExtraColumns) put(c.get(s));
   for (int w = 0; w < 4; ++w) {
     for (const WheelColumn& c : kExtraWheelColumns) put(c.get(WheelOf(s, w)));
+  }
+  for (int w = 0; w < 4; ++w) {
+    for (const WheelColumn& c : kTireWheelColumns) put(c.get(WheelOf(s, w)));
   }
   p[-1] = '\n';
   return static_cast<std::size_t>(p - out);

@@ -1,5 +1,7 @@
 #include "vdyn/io/vehicle_params.h"
 
+#include "vdyn/io/tire_file.h"
+
 #include <fstream>
 #include <sstream>
 
@@ -28,6 +30,7 @@ pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, dou
   w.set_spin_inertia(spin_inertia);
   w.set_min_length(0.03);
   w.set_max_length(0.33);
+  w.set_camber(0.0);
   return w;
 }
 
@@ -136,12 +139,26 @@ pb::VehicleParams MergeVehicleParams(const pb::VehicleParams& base,
                                      const pb::VehicleParams& update) {
   pb::VehicleParams out = base;
   out.MergeFrom(update);  // proto3 `optional`: only fields present in `update` override
+  // A tyre with a name (a file's) replaces the wheel's whole; one without merges its coefficients
+  // (a live change of a few); an empty one removes the tyre (the wheel goes back to the brush law).
+  const pb::WheelParams* from[] = {&update.lf(), &update.rf(), &update.lr(), &update.rr()};
+  pb::WheelParams* to[] = {out.mutable_lf(), out.mutable_rf(), out.mutable_lr(), out.mutable_rr()};
+  for (int w = 0; w < 4; ++w) {
+    if (!from[w]->has_magic_formula()) continue;
+    const pb::MagicFormulaTire& tire = from[w]->magic_formula();
+    if (tire.ByteSizeLong() == 0) {
+      to[w]->clear_magic_formula();
+    } else if (!tire.name().empty()) {
+      *to[w]->mutable_magic_formula() = tire;
+    }
+  }
   return out;
 }
 
 pb::VehicleParams ParseVehicleParamsText(const std::string& text, bool json,
                                          const std::string& source_name,
-                                         const pb::VehicleParams& base) {
+                                         const pb::VehicleParams& base,
+                                         const std::filesystem::path* folder) {
   pb::VehicleParams update;
   if (json) {
     gp::util::JsonParseOptions options;
@@ -158,6 +175,13 @@ pb::VehicleParams ParseVehicleParamsText(const std::string& text, bool json,
     if (!parser.ParseFromString(text, &update)) {
       throw ParamsError(source_name + ": " +
                         (errors.text.empty() ? std::string("cannot parse") : errors.text));
+    }
+  }
+  if (folder != nullptr) {
+    try {
+      ResolveTireFiles(update, *folder);
+    } catch (const TireFileError& e) {
+      throw ParamsError(source_name + ": tire_file: " + e.what());
     }
   }
   return MergeVehicleParams(base, update);
@@ -178,7 +202,8 @@ pb::VehicleParams ReadVehicleParamsFile(const std::filesystem::path& path,
   ss << in.rdbuf();
   if (in.bad()) throw ParamsError(path.string() + ": read error");
   const bool json = path.extension() == ".json";
-  return ParseVehicleParamsText(ss.str(), json, path.string(), base);
+  const std::filesystem::path folder = path.parent_path();
+  return ParseVehicleParamsText(ss.str(), json, path.string(), base, &folder);
 }
 
 std::string DumpVehicleParamsText(const pb::VehicleParams& msg) {

@@ -25,8 +25,10 @@
 #include "vdyn/base/progress.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
+#include "vdyn/bridge/tire_curves.h"
 #include "vdyn/bridge/world_files.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/io/tire_file.h"
 #include "vdyn/runtime/batch.h"
 #include "vdyn/runtime/server_node.h"
 
@@ -70,11 +72,51 @@ struct Options {
   bool status = false;
   bool no_status = false;
   std::string stats_out;
+  // Tyres: a .tir file for every wheel, the front ones, the rear ones; the curves of one.
+  std::string tire, tire_front, tire_rear;
+  std::string tire_curves;
+  std::vector<double> fz;
 };
+
+// The tyre files of the command line on their wheels (over --vehicle's), checked.
+void ApplyTires(const Options& o, vdyn::pb::VehicleParams& p) {
+  if (o.tire.empty() && o.tire_front.empty() && o.tire_rear.empty()) return;
+  vdyn::pb::WheelParams* wheels[] = {p.mutable_lf(), p.mutable_rf(), p.mutable_lr(),
+                                     p.mutable_rr()};
+  for (int w = 0; w < vdyn::kNumWheels; ++w) {
+    const std::string& file = vdyn::IsFront(w) && !o.tire_front.empty()   ? o.tire_front
+                              : !vdyn::IsFront(w) && !o.tire_rear.empty() ? o.tire_rear
+                                                                          : o.tire;
+    if (!file.empty()) *wheels[w]->mutable_magic_formula() = vdyn::ReadTireFile(file);
+  }
+  const auto issues = vdyn::ValidateVehicleParams(p);
+  if (!issues.empty()) throw vdyn::ParamsError("--tire: " + vdyn::FormatIssues(issues));
+}
+
+// --tire-curves FILE [--fz N,..]: the tyre's characteristic curves as CSV on stdout.
+int RunTireCurves(const Options& o) {
+  const vdyn::MagicFormula mf = vdyn::MagicFormulaFromProto(vdyn::ReadTireFile(o.tire_curves));
+  std::cout << vdyn::TireCurvesCsv(mf, o.fz);
+  return 0;
+}
+
+void AddTireOptions(CLI::App& app, Options& o) {
+  app.add_option("--tire", o.tire,
+                 "A Magic Formula tyre (.tir, MF 6.1 / 6.2) on every wheel, over --vehicle's");
+  app.add_option("--tire-front", o.tire_front, "A .tir tyre on the front wheels (over --tire)");
+  app.add_option("--tire-rear", o.tire_rear, "A .tir tyre on the rear wheels (over --tire)");
+  app.add_option("--tire-curves", o.tire_curves,
+                 "Print a .tir tyre's characteristic curves as CSV (Fy, Mz over alpha; Fx over "
+                 "kappa; combined slip) and exit");
+  app.add_option("--fz", o.fz, "--tire-curves: the loads, N (default 0.5, 1, 1.5 x FNOMIN)")
+      ->delimiter(',')
+      ->check(vdyn::cli::InRange({0, 1e6, true, false, "load, N"}));
+}
 
 vdyn::pb::VehicleParams LoadParams(const Options& o) {
   vdyn::pb::VehicleParams p =
       o.vehicle.empty() ? vdyn::DefaultVehicleParams() : vdyn::LoadVehicleParamsFile(o.vehicle);
+  ApplyTires(o, p);
   if (o.model == "paper") p.set_model(vdyn::pb::VEHICLE_MODEL_PAPER);
   if (o.model == "full") p.set_model(vdyn::pb::VEHICLE_MODEL_FULL);
   if (!o.model.empty()) {
@@ -132,8 +174,8 @@ int RunNetworked(const Options& o) {
   so.session.step_ns = std::llround(o.step_ms * 1e6);
   so.session.watchdog_s = o.watchdog_ms / 1000.0;
   so.session.default_params = LoadParams(o);
-  so.duration_s = o.duration.value_or(0.0);
-  so.lockstep_timeout_s = o.lockstep_timeout_s;
+  so.duration = vdyn::base::FromSeconds(o.duration.value_or(0.0));
+  so.lockstep_timeout = vdyn::base::FromSeconds(o.lockstep_timeout_s);
   so.rt_priority = o.rt_priority;
   so.state_writer_nice = o.state_writer_nice;
   so.status_line = o.status || (!o.no_status && isatty(STDERR_FILENO) == 1 && !o.lockstep);
@@ -287,6 +329,7 @@ int main(int argc, char** argv) {
   app.add_flag("--no-status", o.no_status, "No status line");
   app.add_option("--stats-out", o.stats_out,
                  "Real time: write a run summary (lateness distribution, drift, CPU) at the end");
+  AddTireOptions(app, o);
 
   // --help is a success; every parse error is a usage error (exit code 2).
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
@@ -304,6 +347,7 @@ int main(int argc, char** argv) {
       std::cout << vdyn::DumpVehicleParamsText(LoadParams(o));
       return 0;
     }
+    if (!o.tire_curves.empty()) return RunTireCurves(o);
     if (!o.dump_maneuver.empty()) {
       std::cout << vdyn::DemoManeuverCsv();
       return 0;

@@ -244,9 +244,14 @@ test("--state-hz decimates each state channel and --scene-hz sets the scene's ra
   c.subscribe("/vehicle/1/tf");
   await h.until(() => c.of("/vehicle/1/state").length > 60 && c.of("/vehicle/1/tf").length > 12, 20000, "states and transforms");
   const gaps = (list) => list.slice(1).map((m, k) => (m.logTime - list[k].logTime) / 1e6);
-  // States 20 ms of simulation time apart (a step's tolerance), transforms about 100 ms apart:
-  // latest only, built from the newest state at each tick of the bridge's clock.
-  for (const g of gaps(c.of("/vehicle/1/state"))) assert.ok(g >= 19.5 && g <= 40, `states ${g} ms apart`);
+  // States never closer than 20 ms of simulation time (a step's tolerance) and typically 20 ms
+  // apart, transforms about 100 ms apart: latest only, built from the newest state at each tick of
+  // the bridge's clock. A tick the machine delays leaves a longer gap (300 ms at load 8 beside the
+  // sanitizer build, 2026-12-05), so the typical gap is judged by the median, not every gap.
+  const sg = gaps(c.of("/vehicle/1/state"));
+  for (const g of sg) assert.ok(g >= 19.5, `states ${g} ms apart: faster than --state-hz 50`);
+  const sMedian = [...sg].sort((a, b) => a - b)[Math.floor(sg.length / 2)];
+  assert.ok(sMedian <= 40, `states ${sMedian} ms apart (median)`);
   const tf = gaps(c.of("/vehicle/1/tf")).sort((a, b) => a - b);
   const median = tf[Math.floor(tf.length / 2)];
   assert.ok(median > 80 && median < 120, `transforms ${median} ms apart (median)`);

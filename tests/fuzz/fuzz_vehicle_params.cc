@@ -8,21 +8,9 @@
 #include "vdyn/bridge/params.h"
 #include "vdyn/physics/simulator.h"
 #include "vdyn/physics/world.h"
+#include "flat_world.h"
 
-namespace {
-
-const std::shared_ptr<const vdyn::World>& FlatWorld() {
-  static const std::shared_ptr<const vdyn::World> world = vdyn::BuildBuiltinWorld("flat");
-  return world;
-}
-
-}  // namespace
-
-// Once before the first input, outside libFuzzer's per-input (wall-clock) timeout.
-extern "C" int LLVMFuzzerInitialize(int*, char***) {
-  (void)FlatWorld();
-  return 0;
-}
+using vdyn::fuzz::FlatWorld;
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size == 0) return 0;

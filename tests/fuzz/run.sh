@@ -16,7 +16,7 @@ set -euo pipefail
 cd "$(dirname "$0")/../.."
 seconds="${1:-10}"
 seed="${VDYN_FUZZ_SEED:-1}"
-targets=(maneuver vehicle_params world_file world_description server_messages mcap recover_verify foxglove_client)
+targets=(maneuver vehicle_params tire_file world_file world_description server_messages mcap recover_verify foxglove_client)
 dir=build/asan
 libfuzzer_targets=("${targets[@]/#/fuzz_}")
 ./scripts/build.sh asan "${libfuzzer_targets[@]/%/_libfuzzer}" >/dev/null

@@ -241,11 +241,11 @@ fi
 echo "multihost: 1. cut host B's link with the backup live on host C"
 FROM=$(size_of "$OBS_A")
 T_CUT1=$(now_ns); cut_link pb
-wait_line "$OBS_A" "$FROM" 'src == "backup"' 60 >/dev/null || die "the backup never drove after the cut"
+wait_line "$OBS_A" "$FROM" "src == \"backup\" && pub > $T_CUT1" 60 >/dev/null || die "the backup never drove after the cut"
 T_HEAL1=$(now_ns)
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_CUT1" primary 'src == "backup"')"
-CUT_BACKUP_MS=$((EV - ANCHOR))
-figure "cut -> backup driving: $CUT_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_CUT1" "$RECV") ms after the cut)"
+CUT_BACKUP_MS=$((EV - ANCHOR)); CUT_BACKUP_WALL_MS=$(ms_between "$T_CUT1" "$RECV")
+figure "cut -> backup driving: $CUT_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $CUT_BACKUP_WALL_MS ms after the cut)"
 # The lease follows the watchdog (75 ms for its 100 ms): the backup, live all along, drives before
 # the watchdog would brake. Should the server's receiver run late (a loaded machine), the safe
 # state may come first for a few steps: reported, not an error. Before the backup, every step
@@ -264,8 +264,10 @@ fi
 echo "multihost: 2. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL1=$(now_ns); heal_link pb
-wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the heal"
+wait_line "$OBS_A" "$FROM" "src == \"primary\" && pub > $T_HEAL1" 60 >/dev/null || die "the primary did not take the vehicle back after the heal"
+# A state taken after the heal (one taken before it but written after FROM_B's offset would end
+# the wait with nothing for first_taken below: "none", 2026-12-05).
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL1" 60 >/dev/null || die "states did not reach host B again after the heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL1" 'src == "primary"')"
 HEAL_PRIMARY_MS=$(ms_between "$T_HEAL1" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL1")"
@@ -279,10 +281,10 @@ echo "multihost: 3. SIGKILL the primary rig on host B"
 FROM=$(size_of "$OBS_A")
 T_KILL=$(now_ns); kill -KILL "$PRIMARY_PID"
 wait "$PRIMARY_PID" 2>/dev/null || true  # reaped quietly
-wait_line "$OBS_A" "$FROM" 'src == "backup"' 60 >/dev/null || die "the backup never drove after the primary died"
+wait_line "$OBS_A" "$FROM" "src == \"backup\" && pub > $T_KILL" 60 >/dev/null || die "the backup never drove after the primary died"
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_KILL" primary 'src == "backup"')"
-DEATH_BACKUP_MS=$((EV - ANCHOR))
-figure "primary's death -> backup driving: $DEATH_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_KILL" "$RECV") ms after the kill)"
+DEATH_BACKUP_MS=$((EV - ANCHOR)); DEATH_BACKUP_WALL_MS=$(ms_between "$T_KILL" "$RECV")
+figure "primary's death -> backup driving: $DEATH_BACKUP_MS ms simulated after the primary's last sample (the server wrote it $DEATH_BACKUP_WALL_MS ms after the kill)"
 
 echo "multihost: 4. the primary rig comes back on host B; then host C dies (SIGKILL, every process)"
 FROM=$(size_of "$OBS_A")
@@ -312,7 +314,7 @@ echo "multihost: 5. cut host B's link with no backup"
 FROM=$(size_of "$OBS_A")
 wait_line "$OBS_A" "$FROM" 'src == "primary"' 30 >/dev/null || die "the primary stopped driving when host C died"
 T_CUT2=$(now_ns); cut_link pb
-wait_line "$OBS_A" "$FROM" 'safe == 1' 60 >/dev/null || die "no safe state after the cut"
+wait_line "$OBS_A" "$FROM" "safe == 1 && pub > $T_CUT2" 60 >/dev/null || die "no safe state after the cut"
 read -r EV ANCHOR RECV <<<"$(after_event "$OBS_A" "$T_CUT2" primary 'safe == 1')"
 CUT_SAFE_MS=$((EV - ANCHOR))
 figure "cut -> safe state (watchdog 100 ms): $CUT_SAFE_MS ms simulated after the primary's last sample (the server wrote it $(ms_between "$T_CUT2" "$RECV") ms after the cut)"
@@ -323,8 +325,8 @@ OTHER=$(awk -v a="$T_CUT2" -v s="$EV" "$FIELDS"' ok && pub > a && step < s && sr
 echo "multihost: 6. heal host B's link"
 FROM=$(size_of "$OBS_A"); FROM_B=$(size_of "$OBS_B")
 T_HEAL2=$(now_ns); heal_link pb
-wait_line "$OBS_A" "$FROM" 'src == "primary"' 60 >/dev/null || die "the primary did not take the vehicle back after the second heal"
-wait_line "$OBS_B" "$FROM_B" 'ok' 60 >/dev/null || die "states did not reach host B again after the second heal"
+wait_line "$OBS_A" "$FROM" "src == \"primary\" && pub > $T_HEAL2" 60 >/dev/null || die "the primary did not take the vehicle back after the second heal"
+wait_line "$OBS_B" "$FROM_B" "take > $T_HEAL2" 60 >/dev/null || die "states did not reach host B again after the second heal"
 read -r EV AT RECV <<<"$(after_time "$OBS_A" "$T_HEAL2" 'src == "primary"')"
 HEAL2_PRIMARY_MS=$(ms_between "$T_HEAL2" "$RECV")
 read -r EVB RECVB <<<"$(first_taken "$OBS_B" "$T_HEAL2")"
@@ -378,10 +380,18 @@ for _ in $(seq 1 600); do kill -0 "$SERVER_PID" 2>/dev/null || break; sleep 0.1;
 wait "$SERVER_PID" || die "the server did not stop cleanly (exit $?): $(tail -n 5 "$WORK/server.log")"
 
 # ---------------------------------------------------------------------------------------------
-# Bounds that hold on a loaded 2-core machine (the lease and the watchdog count in the server's
-# steps or its wall clock; a lagging server loop shifts them, never halves or decuples them).
-in_range "$CUT_BACKUP_MS" 37 2000 || die "cut -> backup $CUT_BACKUP_MS ms, expected 37..2000 (lease 75 ms)"
-in_range "$DEATH_BACKUP_MS" 37 2000 || die "death -> backup $DEATH_BACKUP_MS ms, expected 37..2000 (lease 75 ms)"
+# Bounds that hold on a loaded 2-core machine. The lease counts in the server's wall clock from
+# the primary's last sample's arrival: a server loop running behind real time (seconds, under
+# the sanitizers beside other tests) catches up through the lease in a few steps (3 simulated ms
+# after a kill, 2.2 s after it in wall time, CI 2026-12-05). So the backup must not have driven
+# early by either clock: at least half the lease in simulated time after the primary's last
+# sample, or in wall time after the cut or kill (the last sample left at most a tick before it).
+# Upper bound: simulated time only (the watchdog's 100 ms counts in steps).
+backup_not_early() { [[ $1 -ge 37 || $2 -ge 37 ]] && [[ $1 -le 2000 ]]; }
+backup_not_early "$CUT_BACKUP_MS" "$CUT_BACKUP_WALL_MS" ||
+  die "cut -> backup $CUT_BACKUP_MS ms simulated, $CUT_BACKUP_WALL_MS ms wall, expected 37..2000 simulated or at least 37 wall (lease 75 ms)"
+backup_not_early "$DEATH_BACKUP_MS" "$DEATH_BACKUP_WALL_MS" ||
+  die "death -> backup $DEATH_BACKUP_MS ms simulated, $DEATH_BACKUP_WALL_MS ms wall, expected 37..2000 simulated or at least 37 wall (lease 75 ms)"
 in_range "$CUT_SAFE_MS" 100 1000 || die "cut -> safe state $CUT_SAFE_MS ms, expected 100..1000 (watchdog 100 ms)"
 for v in "$HEAL_PRIMARY_MS" "$HEAL_FLOW_MS" "$HEAL2_PRIMARY_MS" "$HEAL2_FLOW_MS"; do
   in_range "$v" 0 30000 || die "a heal took $v ms to show (expected under 30 s)"

@@ -645,6 +645,8 @@ TEST_F(ViewerTest, TheSkyIsDeeperBlueOverheadThanTowardsTheHorizon) {
   o.hud = false;
   o.camera.mode = CameraMode::kDriver;
   o.camera.fovy = viewer::Rad(90);  // from the horizon in the middle to 45 deg up at the top
+  o.camera.driver_pitch = 0;        // level
+  o.camera.cockpit = false;         // (its A-pillar and roof would stand in the sky)
   Viewer v(o);
   TestVehicle t;
   const Image img = Show(v, pub, {MakeState(t)});

@@ -18,6 +18,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/time.h"
 #include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/labels.h"
 #include "vdyn/viewer/motion.h"
 #include "vdyn/viewer/params_editor.h"
@@ -368,10 +369,12 @@ TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
   TestVehicle t;
   for (auto& w : t.wheels) w = {4000, 2000, 0, 1500};
   const Image img = Show(v, pub, {MakeState(t)});
-  // The lower middle of the view (where the bonnet, the front tyres and their arrows were) shows
-  // the road: none of the arrows' or the vehicle's colours, and asphalt mostly (grey: textured,
-  // its pixels are classified; its lane marking is white).
-  const Rect lower{kW / 3, kH * 6 / 10, kW * 2 / 3, kH * 95 / 100};
+  // The road ahead through the windscreen, between the horizon and the bonnet (the cockpit's
+  // dashboard and wheel fill the view below it; cockpit tests below): none of the arrows' or the
+  // vehicle's colours, and asphalt mostly (grey: textured, its pixels are classified; its lane
+  // marking is white). (Without the cockpit this was the lower middle of the view, where the
+  // front tyres and their arrows had been.)
+  const Rect lower{kW * 42 / 100, kH * 45 / 100, kW * 58 / 100, kH / 2};
   for (int k = 0; k < viewer::kForceKinds; ++k) {
     const viewer::Rgb8 c = viewer::ForceColour(static_cast<viewer::ForceKind>(k));
     EXPECT_EQ(FindColour(img, c.r, c.g, c.b, kTol, lower).count, 0)
@@ -389,6 +392,459 @@ TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {
   const Image with = Show(v, pub, {MakeState(t), MakeState(ahead)});
   const viewer::Rgb8 g = viewer::ForceColour(viewer::ForceKind::kSpring);
   EXPECT_GT(FindColour(with, g.r, g.g, g.b, kTol).count, 50) << "the car ahead's springs";
+}
+
+// Switching away from the driver camera: every frame is drawn whole from one camera - the one
+// its HUD names - and none from inside the body (issue 35: one frame from the driver's seat
+// with the body drawn, a dark void with two green spring arrows, while the HUD said "driver").
+TEST_F(ViewerApp, SwitchingFromTheDriverCameraNeverDrawsAFrameFromInsideTheBody) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = Options(domain);
+  o.camera.mode = CameraMode::kDriver;
+  o.camera.cockpit = false;  // nothing of the own car from its seat (the cockpit: tests below)
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w = {4000, 0, 0, 0};  // 2 m spring arrows
+  Show(v, pub, {MakeState(t)});
+  const viewer::Rgb8 own = viewer::VehicleColour(1);
+  const viewer::Rgb8 spring = viewer::ForceColour(viewer::ForceKind::kSpring);
+  // Below the HUD's panels: the road from the seat, the car's rear from behind.
+  const Rect middle{kW / 4, kH / 2, kW * 3 / 4, kH};
+  for (SDL_Keycode key : {SDLK_1, SDLK_2, SDLK_3, SDLK_2, SDLK_5, SDLK_2, SDLK_6}) {
+    const bool to_driver = key == SDLK_2;
+    Key(key);
+    for (int frame = 0; frame < 3; ++frame) {
+      ASSERT_TRUE(v.Frame());
+      const Image img = Keep(v.Screenshot());
+      int dark = 0;
+      for (int y = middle.y0; y < middle.y1; ++y) {
+        for (int x = middle.x0; x < middle.x1; ++x) {
+          const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * img.width + x) * 4];
+          dark += p[0] < 40 && p[1] < 40 && p[2] < 40 ? 1 : 0;
+        }
+      }
+      const int pixels = (middle.x1 - middle.x0) * (middle.y1 - middle.y0);
+      SCOPED_TRACE("key " + std::string(SDL_GetKeyName(key)) + ", frame " + std::to_string(frame) +
+                   "\n" + Hud(v));
+      EXPECT_LT(dark, pixels / 4) << "a dark void: the inside of the body";
+      const bool hud_driver = HudHas(v, "camera driver");
+      const int body = FindColour(img, own.r, own.g, own.b, kTol, middle).count;
+      const int arrows = FindColour(img, spring.r, spring.g, spring.b, kTol, middle).count;
+      if (hud_driver) {
+        // From the seat: nothing of the own car's body paint or arrows in view.
+        EXPECT_EQ(arrows, 0) << "the own car's spring arrows from the driver's seat";
+        EXPECT_EQ(body, 0) << "the own car's body from the driver's seat";
+      } else {
+        EXPECT_GT(arrows, 0) << "the car's spring arrows from outside";
+      }
+      // The new camera within a frame or two (the HUD takes the key at the frame it arrives).
+      if (frame == 2) {
+        EXPECT_EQ(hud_driver, to_driver);
+      }
+    }
+  }
+}
+
+// --- the car's lamps ------------------------------------------------------------------------
+
+// Pixels of a lit lamp in the view: saturated (a channel at 250 or more) in the lamp's hue.
+struct Lamps {
+  int red_left = 0, red_right = 0;  // brake-light red (R >= 250, G and B <= 110), each half
+  int white = 0;                    // reversing-light white (every channel >= 250)
+  std::vector<std::size_t> red_at;  // where the red ones are (pixel indices)
+};
+Lamps FindLamps(const Image& img, Rect region) {
+  Lamps l;
+  for (int y = region.y0; y < std::min(region.y1, img.height); ++y) {
+    for (int x = region.x0; x < std::min(region.x1, img.width); ++x) {
+      const std::size_t i = static_cast<std::size_t>(y) * img.width + x;
+      const std::uint8_t* p = &img.rgba[i * 4];
+      if (p[0] >= 250 && p[1] <= 110 && p[2] <= 110) {
+        (x < img.width / 2 ? l.red_left : l.red_right)++;
+        l.red_at.push_back(i);
+      }
+      if (p[0] >= 250 && p[1] >= 250 && p[2] >= 250) ++l.white;
+    }
+  }
+  return l;
+}
+
+// The mean luma (sRGB, 0..255) of some pixels.
+double MeanLuma(const Image& img, const std::vector<std::size_t>& at) {
+  double sum = 0;
+  for (std::size_t i : at) {
+    const std::uint8_t* p = &img.rgba[i * 4];
+    sum += 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+  }
+  return at.empty() ? 0.0 : sum / static_cast<double>(at.size());
+}
+
+// One body colour per vehicle from a fixed palette of eight: vehicles 1 to 8 each their own, at
+// least 40 levels apart in some channel from each other and 60 from every force arrow's colour
+// (the arrows stay readable on any car), vehicle 9 as vehicle 1 again.
+TEST(VehicleColours, EightVehiclesEightColoursApartFromEachOtherAndTheArrows) {
+  auto distance = [](viewer::Rgb8 a, viewer::Rgb8 b) {
+    return std::max({std::abs(a.r - b.r), std::abs(a.g - b.g), std::abs(a.b - b.b)});
+  };
+  for (std::uint32_t i = 1; i <= 8; ++i) {
+    for (std::uint32_t j = i + 1; j <= 8; ++j) {
+      EXPECT_GE(distance(viewer::VehicleColour(i), viewer::VehicleColour(j)), 40)
+          << "vehicles " << i << " and " << j;
+    }
+    for (int k = 0; k < viewer::kForceKinds; ++k) {
+      EXPECT_GE(distance(viewer::VehicleColour(i),
+                         viewer::ForceColour(static_cast<viewer::ForceKind>(k))),
+                60)
+          << "vehicle " << i << " and " << viewer::ForceLabel(static_cast<viewer::ForceKind>(k));
+    }
+  }
+  const viewer::Rgb8 first = viewer::VehicleColour(1), ninth = viewer::VehicleColour(9);
+  EXPECT_EQ(distance(first, ninth), 0);
+}
+
+TEST_F(ViewerApp, TheBrakeLightsLightWhileBrakingAndTheReversingLightsInReverse) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  // At both qualities (low: no glossy shading, as on a software renderer).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = Options(domain);
+    o.hud = false;
+    o.quality = q;
+    o.camera.mode = CameraMode::kChase;  // behind the car: its rear in the middle of the view
+    o.delay_ns = 0;
+    Viewer v(o);
+    TestVehicle t;
+    t.step = q == viewer::Quality::kHigh ? 1 : 1000;
+    for (auto& w : t.wheels) w.fp = 0;                            // no arrows over the rear
+    const Rect rear{kW * 3 / 8, kH / 2, kW * 5 / 8, kH * 3 / 4};  // the car's rear
+    auto state = [&](double brake, double brake_torque, int gear) {
+      ++t.step;
+      pb::VehicleState s = MakeState(t);
+      s.mutable_control()->set_brake(brake);
+      for (auto& w : *s.mutable_wheels()) w.set_brake_torque(brake_torque);
+      s.mutable_drivetrain()->set_gear(gear);
+      return s;
+    };
+    const Image off = Show(v, pub, {state(0.0, 0.0, 1)});
+    const Image braking = Show(v, pub, {state(0.6, 0.0, 1)});
+    const Image torque = Show(v, pub, {state(0.0, 400.0, 1)});  // the full model's brake torque
+    const Image reverse = Show(v, pub, {state(0.0, 0.0, -1)});
+    const Lamps l_off = FindLamps(off, rear), l_brake = FindLamps(braking, rear);
+    // The paper model (no gearbox: gear 0) driven backwards at 2 m/s.
+    t.speed = -2;
+    for (auto& w : t.wheels) w.fh = -300;
+    const Image backwards = Show(v, pub, {state(0.0, 0.0, 0)});
+    const Lamps l_torque = FindLamps(torque, rear), l_reverse = FindLamps(reverse, rear);
+    EXPECT_GT(FindLamps(backwards, rear).white, 20) << "driven backwards";
+    // Both brake lights lit while braking (by the input or by the torque), neither otherwise.
+    EXPECT_GT(l_brake.red_left, 20);
+    EXPECT_GT(l_brake.red_right, 20);
+    EXPECT_GT(l_torque.red_left, 20);
+    EXPECT_GT(l_torque.red_right, 20);
+    EXPECT_LT(l_off.red_left + l_off.red_right, 5) << "the brake lights are lit without braking";
+    EXPECT_LT(l_reverse.red_left + l_reverse.red_right, 5);
+    // Where they are, the lamps are clearly brighter braking than not.
+    const double lit = MeanLuma(braking, l_brake.red_at), unlit = MeanLuma(off, l_brake.red_at);
+    EXPECT_GT(lit, 1.5 * unlit) << "lit " << lit << ", unlit " << unlit;
+    // The reversing lights in reverse gear only.
+    EXPECT_GT(l_reverse.white, 20);
+    EXPECT_LT(l_off.white, 5);
+    EXPECT_LT(l_brake.white, 5);
+  }
+}
+
+// --- the cockpit ---------------------------------------------------------------------------
+
+// A full-model state of vehicle 1 at `kmh` (along its heading), its hand wheel at `wheel_rad`,
+// its engine at `rpm` in `gear`.
+pb::VehicleState Cockpit(std::uint64_t step, double kmh, double wheel_rad, double rpm, int gear) {
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;
+  t.step = step;
+  t.speed = kmh / 3.6;
+  pb::VehicleState s = MakeState(t);
+  s.set_model(pb::VEHICLE_MODEL_FULL);
+  s.mutable_steering()->set_hand_wheel_angle(wheel_rad);
+  s.mutable_drivetrain()->set_engine_rpm(rpm);
+  s.mutable_drivetrain()->set_gear(gear);
+  return s;
+}
+
+// Pixels of one colour (within 10 per channel) and those of an orange hue (the wheel's lit top
+// mark), in a region.
+Blob Orange(const Image& img, Rect r) {
+  Blob b;
+  for (int y = r.y0; y < std::min(r.y1, img.height); ++y) {
+    for (int x = r.x0; x < std::min(r.x1, img.width); ++x) {
+      const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * img.width + x) * 4];
+      if (p[0] > 110 && p[0] > 1.3 * p[1] && p[1] > 1.5 * p[2] && p[1] > 30) {
+        b.cx += x;
+        b.cy += y;
+        ++b.count;
+      }
+    }
+  }
+  if (b.count > 0) {
+    b.cx /= b.count;
+    b.cy /= b.count;
+  }
+  return b;
+}
+
+int ChangedPixels(const Image& a, const Image& b, Rect r) {
+  int n = 0;
+  for (int y = r.y0; y < r.y1; ++y) {
+    for (int x = r.x0; x < r.x1; ++x) {
+      const std::size_t i = (static_cast<std::size_t>(y) * a.width + x) * 4;
+      for (int c = 0; c < 3; ++c) {
+        if (std::abs(a.rgba[i + c] - b.rgba[i + c]) > 30) {
+          ++n;
+          break;
+        }
+      }
+    }
+  }
+  return n;
+}
+
+class CockpitTest : public ViewerApp {
+ protected:
+  static ViewerOptions DriverOptions(std::uint32_t domain) {
+    ViewerOptions o = Options(domain);
+    o.hud = false;
+    o.camera.mode = CameraMode::kDriver;
+    o.delay_ns = 0;
+    return o;
+  }
+};
+
+// The steering wheel turns with the published hand-wheel angle: its lower half of the view
+// changes between 0 and 90 deg (and not between two frames at the same angle), and its top mark
+// goes to the driver's left for a left turn (positive), to the right for a right one.
+TEST_F(CockpitTest, TheSteeringWheelTurnsWithTheHandWheelAngle) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  Viewer v(DriverOptions(domain));
+  const Image straight = Show(v, pub, {Cockpit(1, 0, 0, 900, 1)});
+  const Image left = Show(v, pub, {Cockpit(2, 0, viewer::Rad(90), 900, 1)});
+  const Image right = Show(v, pub, {Cockpit(3, 0, viewer::Rad(-90), 900, 1)});
+  const Image again = Show(v, pub, {Cockpit(4, 0, 0, 900, 1)});
+  const Rect wheel{0, kH * 55 / 100, kW, kH};
+  const int pixels = wheel.x1 * (wheel.y1 - wheel.y0);
+  EXPECT_GT(ChangedPixels(straight, left, wheel), pixels / 100) << "the wheel did not turn";
+  EXPECT_LT(ChangedPixels(straight, again, wheel), pixels / 1000) << "not the same at 0 deg";
+  const Blob top = Orange(straight, wheel), l = Orange(left, wheel), r = Orange(right, wheel);
+  ASSERT_GT(top.count, 20);
+  ASSERT_GT(l.count, 10);
+  ASSERT_GT(r.count, 10);
+  EXPECT_NEAR(top.cx, kW / 2, kW / 20) << "the mark is at the wheel's top, straight ahead";
+  EXPECT_LT(l.cx, top.cx - kW / 8) << "turned left: the mark on the driver's left";
+  EXPECT_GT(r.cx, top.cx + kW / 8) << "turned right: the mark on the driver's right";
+  EXPECT_GT(l.cy, top.cy + 20) << "a quarter turn: the mark down at the wheel's side";
+}
+
+// A car close ahead: the lower parts of its spring arrows are behind the dashboard. They are
+// hidden there, not drawn as the faint ghost that marks an arrow the terrain hides (green over
+// the dashboard, the dials and the wheel).
+TEST_F(CockpitTest, AnArrowTheDashboardHidesLeavesNoGhostOnIt) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  Viewer v(DriverOptions(domain));
+  TestVehicle own, ahead;
+  for (auto& w : own.wheels) w.fp = 0;
+  ahead.id = 2;
+  ahead.x = 5;  // its rear wheels 3.85 m ahead of the eyes, their contact 16 deg below them
+  for (auto& w : ahead.wheels) w.fp = 4000;  // 2 m arrows up
+  const Image img = Show(v, pub, {MakeState(own), MakeState(ahead)});
+  const viewer::Rgb8 g = viewer::ForceColour(viewer::ForceKind::kSpring);
+  ASSERT_GT(FindColour(img, g.r, g.g, g.b, kTol).count, 50) << "the arrows over the windscreen";
+  int greenish = 0;
+  // Below the dashboard's top edge, right of the side window.
+  for (int y = kH * 62 / 100; y < kH; ++y) {
+    for (int x = kW / 5; x < kW; ++x) {
+      const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * kW + x) * 4];
+      greenish += p[1] > p[0] + 30 && p[1] > p[2] + 30 ? 1 : 0;
+    }
+  }
+  EXPECT_EQ(greenish, 0) << "an arrow's ghost over the dashboard";
+}
+
+// The speedometer's needle, measured from the pixels: the angle from its hub to the needle's
+// pixels on the screen, clockwise from up, is the dial's: -135 deg at 0 km/h to +135 deg at
+// 260 km/h, within 4 deg. The tachometer's needle (the right dial) turns with the engine speed;
+// the gear shows between them.
+TEST_F(CockpitTest, TheDialsNeedlesShowTheSpeedAndTheEngineSpeed) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  // At both qualities (low: as on a software renderer).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = DriverOptions(domain);
+    o.quality = q;
+    Viewer v(o);
+    auto needle_deg = [](const Image& img, Rect dial) {
+      const Blob needle = FindColour(img, 255, 80, 0, 10, dial);
+      const Blob hub = FindColour(img, 0, 160, 230, 10, dial);
+      EXPECT_GT(needle.count, 15);
+      EXPECT_GT(hub.count, 4);
+      return viewer::Deg(std::atan2(needle.cx - hub.cx, -(needle.cy - hub.cy)));
+    };
+    const Rect speedo{0, kH / 2, kW / 2, kH}, tacho{kW / 2, kH / 2, kW, kH};
+    std::uint64_t step = q == viewer::Quality::kHigh ? 1 : 1000;
+    double tacho_deg[2] = {0, 0};
+    int k = 0;
+    for (double kmh : {30.0, 100.0, 170.0}) {
+      const double rpm = kmh < 50 ? 2000 : 5000;
+      const Image img = Show(v, pub, {Cockpit(step++, kmh, 0, rpm, 3)});
+      const double expected = -135 + 270 * kmh / 260;
+      EXPECT_NEAR(needle_deg(img, speedo), expected, 4) << kmh << " km/h";
+      if (k < 2) tacho_deg[k++] = needle_deg(img, tacho);
+    }
+    EXPECT_GT(tacho_deg[1] - tacho_deg[0], 60) << "2000 -> 5000 rpm: the tachometer's needle";
+    // The gear between the dials, on seven segments: 3 lights five of them, 1 two.
+    auto lit_segments = [&](int gear) {
+      const Image img = Show(v, pub, {Cockpit(step++, 50, 0, 2000, gear)});
+      const Rect digit{kW * 46 / 100, kH / 2, kW * 54 / 100, kH};
+      return FindColour(img, 250, 250, 250, 6, digit).count;
+    };
+    const int first = lit_segments(1), third = lit_segments(3);
+    EXPECT_GT(first, 5) << "no gear shown";
+    EXPECT_GT(third, 2 * first) << "gear 3 (" << third << " px) against gear 1 (" << first << ")";
+  }
+}
+
+// Where a mirror's glass is on the last frame's screen (its corners projected, a few pixels in
+// from its edges), and its centre's column.
+struct ScreenRect {
+  Rect r;
+  double centre_x = 0;
+};
+ScreenRect MirrorOnScreen(Viewer& v, int mirror, int width, int height) {
+  const viewer::VehicleView* own = v.vehicle(1);
+  EXPECT_NE(own, nullptr);
+  if (own == nullptr) return {};
+  const viewer::Mirror m =
+      viewer::MirrorsFor(own->geometry, v.camera().seat_B)[static_cast<std::size_t>(mirror)];
+  const viewer::CameraView& cam = v.last_camera();
+  double x0 = 1e9, x1 = -1e9, y0 = 1e9, y1 = -1e9;
+  for (double sx : {-1.0, 1.0}) {
+    for (double sy : {-1.0, 1.0}) {
+      const Vec3 c_B = m.centre_B + m.right_B * (sx * m.half_width) + m.up_B * (sy * m.half_height);
+      double w = 0;
+      const Vec3 ndc = (cam.proj * cam.view).TransformPoint(own->pose_WB * c_B, &w);
+      EXPECT_GT(w, 0) << "mirror " << mirror << " behind the camera";
+      const double x = (ndc.x / w * 0.5 + 0.5) * width, y = (0.5 - 0.5 * ndc.y / w) * height;
+      x0 = std::min(x0, x);
+      x1 = std::max(x1, x);
+      y0 = std::min(y0, y);
+      y1 = std::max(y1, y);
+    }
+  }
+  ScreenRect s;
+  s.r = {std::max(0, static_cast<int>(x0) + 3), std::max(0, static_cast<int>(y0) + 3),
+         std::min(width, static_cast<int>(x1) - 3), std::min(height, static_cast<int>(y1) - 3)};
+  s.centre_x = 0.5 * (x0 + x1);
+  EXPECT_GT(s.r.x1 - s.r.x0, 20) << "mirror " << mirror << " not on the screen";
+  EXPECT_GT(s.r.y1 - s.r.y0, 5) << "mirror " << mirror << " not on the screen";
+  return s;
+}
+
+// The pixels of a region that differ between two images (over 30 levels in a channel), and
+// their centroid.
+Blob Changed(const Image& a, const Image& b, Rect r) {
+  Blob d;
+  for (int y = r.y0; y < r.y1; ++y) {
+    for (int x = r.x0; x < r.x1; ++x) {
+      const std::size_t i = (static_cast<std::size_t>(y) * a.width + x) * 4;
+      for (int c = 0; c < 3; ++c) {
+        if (std::abs(a.rgba[i + c] - b.rgba[i + c]) > 30) {
+          d.cx += x;
+          d.cy += y;
+          ++d.count;
+          break;
+        }
+      }
+    }
+  }
+  if (d.count > 0) {
+    d.cx /= d.count;
+    d.cy /= d.count;
+  }
+  return d;
+}
+
+// The mirrors show the world behind. A second car 12 m behind (1.8 m to the left, then to the
+// right) shows in the rear-view mirror and not when it is far away. An interior mirror reverses
+// front and back, not left and right: a car behind on the left is on the mirror's left as the
+// driver sees it (a camera looking back would show it on its right). Each side mirror shows a
+// car 10 m along its line of sight, the other side mirror does not. A wide view (3:1, 90 deg
+// high) sees all three mirrors. At high and low quality.
+TEST_F(CockpitTest, TheMirrorsShowWhatIsBehindReflectedAsAMirrorDoes) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  std::uint64_t step = 1;
+  // At both qualities (low: smaller images, the mirrors drawn in turns, one a frame).
+  for (viewer::Quality q : {viewer::Quality::kHigh, viewer::Quality::kLow}) {
+    SCOPED_TRACE(std::string(viewer::QualityName(q)));
+    ViewerOptions o = DriverOptions(domain);
+    o.quality = q;
+    constexpr int kWide = 1200, kLow = 400;
+    o.width = kWide;
+    o.height = kLow;
+    o.camera.fovy = viewer::Rad(90);
+    Viewer v(o);
+    TestVehicle own, other;
+    for (auto& w : own.wheels) w.fp = 0;
+    other.id = 2;
+    for (auto& w : other.wheels) w.fp = 0;
+    auto show_other_at = [&](double x, double y) {
+      own.step = other.step = step++;
+      other.x = x;
+      other.y = y;
+      Show(v, pub, {MakeState(own), MakeState(other)});
+      for (int i = 0; i < 3; ++i) EXPECT_TRUE(v.Frame());  // every mirror's turn at low
+      return Keep(v.Screenshot());
+    };
+    const Image away = show_other_at(-12, 150);
+    const ScreenRect rear = MirrorOnScreen(v, viewer::kRearViewMirror, kWide, kLow);
+    const int rear_px = (rear.r.x1 - rear.r.x0) * (rear.r.y1 - rear.r.y0);
+    const Image behind_left = show_other_at(-12, 1.8);
+    const Image behind_right = show_other_at(-12, -1.8);
+    const Image away_again = show_other_at(-12, 150);
+    const Blob left = Changed(away, behind_left, rear.r),
+               right = Changed(away, behind_right, rear.r);
+    EXPECT_GT(left.count, rear_px / 20) << "the car behind on the left is not in the mirror";
+    EXPECT_GT(right.count, rear_px / 20) << "the car behind on the right is not in the mirror";
+    EXPECT_LT(Changed(away, away_again, rear.r).count, rear_px / 200) << "moved away: still seen";
+    EXPECT_LT(left.cx, rear.centre_x) << "behind on the left: on the mirror's left";
+    EXPECT_GT(right.cx, rear.centre_x) << "behind on the right: on the mirror's right";
+
+    // The side mirrors: a car 10 m along each one's line of sight.
+    const auto mirrors = viewer::MirrorsFor(v.vehicle(1)->geometry, v.camera().seat_B);
+    const ScreenRect side[2] = {MirrorOnScreen(v, viewer::kLeftMirror, kWide, kLow),
+                                MirrorOnScreen(v, viewer::kRightMirror, kWide, kLow)};
+    for (int k = 0; k < 2; ++k) {
+      const viewer::Mirror& m =
+          mirrors[static_cast<std::size_t>(k == 0 ? viewer::kLeftMirror : viewer::kRightMirror)];
+      const Vec3 p = m.centre_B + m.look_B * 10.0;  // (own car at the origin, heading along X)
+      const Image seen = show_other_at(p.x, p.y);
+      const int px = (side[k].r.x1 - side[k].r.x0) * (side[k].r.y1 - side[k].r.y0);
+      const int other_px =
+          (side[1 - k].r.x1 - side[1 - k].r.x0) * (side[1 - k].r.y1 - side[1 - k].r.y0);
+      EXPECT_GT(Changed(away, seen, side[k].r).count, px / 10)
+          << (k == 0 ? "left" : "right") << " mirror: the car along its line of sight";
+      EXPECT_LT(Changed(away, seen, side[1 - k].r).count, other_px / 200)
+          << (k == 0 ? "right" : "left") << " mirror shows the car behind on the other side";
+    }
+  }
 }
 
 TEST_F(ViewerApp, TheForcesLegendStartsCollapsedAndLOpensIt) {
@@ -450,10 +906,17 @@ pb::VehicleParams AllParams() {
         r->SetEnumValue(&p, f, 1);
         break;
       case google::protobuf::FieldDescriptor::CPPTYPE_MESSAGE: {
+        // A wheel: its numbers, and a Magic Formula tyre by its name and coefficients (what a
+        // server sends for a wheel given a .tir file; never the file's name).
         auto* w = r->MutableMessage(&p, f);
-        for (int k = 0; k < w->GetDescriptor()->field_count(); ++k) {
-          w->GetReflection()->SetDouble(w, w->GetDescriptor()->field(k), 0.3);
+        const auto* wd = w->GetDescriptor();
+        for (int k = 0; k < wd->field_count(); ++k) {
+          if (wd->field(k)->cpp_type() == google::protobuf::FieldDescriptor::CPPTYPE_DOUBLE)
+            w->GetReflection()->SetDouble(w, wd->field(k), 0.3);
         }
+        auto* mf = static_cast<pb::WheelParams*>(w)->mutable_magic_formula();
+        mf->set_name("synthetic 205/55 R16");
+        mf->set_fnomin(4000.0);
         break;
       }
       default:
@@ -529,6 +992,8 @@ TEST_F(ParamsPanel, EveryFieldIsNamedInWordsWithItsUnitFromTheOneTable) {
   for (int i = 0; i < d->field_count(); ++i) {
     const std::string path = d->field(i)->name();
     SCOPED_TRACE(path);
+    // Tyre files' names travel only to the server (it sends their coefficients): not shown.
+    if (path.starts_with("tire_file")) continue;
     const std::string_view words = limits::ParamWords(path);
     ASSERT_FALSE(words.empty()) << "the table does not name " << path;
     ASSERT_EQ(drawn.count(path), 1u) << "not in the panel";
@@ -542,12 +1007,16 @@ TEST_F(ParamsPanel, EveryFieldIsNamedInWordsWithItsUnitFromTheOneTable) {
   ASSERT_TRUE(FramesUntil(*v_, {}, [&] { return v_->params_editor().drawn().count("lf.radius"); }));
   const auto* w = pb::WheelParams::descriptor();
   for (int i = 0; i < w->field_count(); ++i) {
+    // The tyre's file name travels only to the server (it sends the coefficients): not shown.
+    if (w->field(i)->name() == "tire_file") continue;
     const std::string path = "lf." + w->field(i)->name();
     SCOPED_TRACE(path);
     ASSERT_EQ(v_->params_editor().drawn().count(path), 1u);
     EXPECT_EQ(v_->params_editor().drawn().at(path).label, limits::ParamWords(path));
   }
   EXPECT_EQ(v_->params_editor().drawn().at("lf.radius").label, "wheel radius, m");
+  // The wheel's Magic Formula tyre shows its name on its group.
+  EXPECT_EQ(v_->params_editor().drawn().at("lf.magic_formula").text, "synthetic 205/55 R16");
   EXPECT_EQ(v_->params_editor().drawn().at("b").label, "distance T to front axle, m");
 }
 

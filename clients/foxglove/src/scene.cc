@@ -5,6 +5,7 @@
 
 #include "foxglove/FrameTransforms.pb.h"
 #include "foxglove/SceneUpdate.pb.h"
+#include "vdyn/client/palette.h"
 
 namespace vdyn::foxglove {
 namespace {
@@ -212,10 +213,8 @@ std::string_view WheelName(int wheel) {
 }
 
 Rgb8 VehicleColour(std::uint32_t vehicle_id) {
-  static constexpr Rgb8 kPalette[] = {{90, 170, 200},  {150, 110, 210}, {230, 230, 235},
-                                      {80, 190, 160},  {200, 150, 170}, {120, 140, 230},
-                                      {170, 190, 110}, {210, 170, 120}};
-  return kPalette[(vehicle_id + 7) % 8];  // vehicle 1 gets the first colour
+  const auto& c = client::VehiclePaint(vehicle_id);  // the viewer's too (client/palette.h)
+  return {c[0], c[1], c[2]};
 }
 
 std::string BodyFrame(std::uint32_t vehicle_id) {

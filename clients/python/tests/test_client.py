@@ -132,7 +132,13 @@ def test_a_driver_drives_and_the_subscription_loses_no_state(realtime_server, do
             states.append(sub.take() if sub.queued else sub.next())
         steps = np.concatenate([s.step for s in states])
         assert np.array_equal(steps, np.arange(steps[0], steps[0] + len(steps), dtype=np.uint64))
-        assert np.all(np.concatenate([s.throttle_in for s in states]) == 0.3)
+        # The stronger source drives. On a loaded machine its 1 kHz sender may stall past the lease
+        # (75 ms): the backup drives meanwhile (0.1) and the stronger one takes the vehicle back at
+        # its next sample (2026-12-05, beside two builds); were both stalled, the watchdog's safe
+        # state (no throttle). Nothing else is ever applied.
+        throttle = np.concatenate([s.throttle_in for s in states])
+        assert np.all((throttle == 0.3) | (throttle == 0.1) | (throttle == 0.0)), np.unique(throttle)
+        assert np.count_nonzero(throttle == 0.3) >= 0.9 * len(throttle) and throttle[-1] == 0.3
         assert sub.missing_steps == 0 and sub.overflowed == 0 and sub.dds_lost == 0
         # When it stops, the weaker one takes the vehicle after the lease (docs/topics.md).
         drv.stop()

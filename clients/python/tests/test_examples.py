@@ -101,6 +101,41 @@ def test_pip_installs_the_package_into_a_venv(tmp_path):
     assert int(columns) == len(vdyn.COLUMNS) and float(mass) == 1.0
 
 
+def test_tire_curves_of_the_synthetic_file(tmp_path, capsys):
+    tire = os.path.join(EXAMPLES, "..", "..", "..", "tires", "vdyn_synthetic_205_55R16_mf61.tir")
+    r = run_example("tire_curves", [tire, "--server", SERVER], tmp_path, capsys)
+    assert r["loads"] == [2250.0, 4500.0, 6750.0]
+    nominal = r["curves"][1]
+    # The file's own numbers at FNOMIN (tires/README.md, docs/model.md 8.2b): Kya = PKY1 Fz0
+    # sin(PKY4 atan(1 / PKY2)) = -72.8 kN/rad; mu_y about PDY1 = 1.05 (with the shifts), mu_x
+    # about PDX1 = 1.2; the aligning moment peaks before the side force, at a few degrees.
+    assert nominal["Kya_N_per_rad"] == pytest.approx(-72809.0, rel=0.01)
+    assert nominal["mu_y"] == pytest.approx(1.05, rel=0.02)
+    assert nominal["mu_x"] == pytest.approx(1.2, rel=0.02)
+    assert 1.0 < nominal["Mz_peak_alpha_deg"] < 6.0
+    # Load sensitivity: the friction coefficient falls with the load (PDY2 < 0, PDX2 < 0).
+    mu_y = [c["mu_y"] for c in r["curves"]]
+    assert mu_y[0] > mu_y[1] > mu_y[2]
+
+
+def test_a_magic_formula_tyres_inputs_and_outputs_are_columns(flat_server, domain):
+    """Every tyre input and output, per wheel, every step (docs/formats.md): what a reader needs to
+    evaluate the law again."""
+    tire = os.path.join(EXAMPLES, "..", "..", "..", "tires", "vdyn_synthetic_205_55R16_mf61.tir")
+    flat_server("--tire", tire)
+    import vdyn
+    import numpy as np
+    sim = vdyn.Client(domain=domain, timeout=30)
+    s = sim.step(2000, vdyn.make_input(steer=0.05, throttle=0.5, vehicle_id=1))[1]
+    assert np.all(s.wheel("pressure_Pa") == 230000.0)  # the file's INFLPRES on every wheel
+    for name in ("kappaLaw", "alphaLaw_rad", "camber_rad", "Mx_Nm", "My_Nm"):
+        assert s.wheel(name).shape == (2000, 4)
+    # Turning left, the body rolls right side down: every wheel leans its top to the right.
+    assert np.all(s.wheel("camber_rad")[-1] > 0.0)
+    assert np.all(s.wheel("My_Nm")[-1] < 0.0)  # rolling forward, against it
+    assert np.any(s.wheel("Mx_Nm")[-1] != 0.0)
+
+
 def _other_interpreters():
     """Pythons on this machine that are not the one vdyn was built for (a pyenv interpreter first
     on PATH, as on the development machine), at most one per version."""

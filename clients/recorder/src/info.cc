@@ -252,7 +252,7 @@ class Info {
         e.server_id().empty() || e.vehicle_id() != m.key) {
       return false;
     }
-    ServerEvents& s = servers_[Printable(e.server_id())];
+    ServerEvents& s = servers_[{Printable(e.server_id()), e.incarnation()}];
     if (e.sequence() >= kImpossibleSequence) {
       ++s.impossible;
       return true;
@@ -278,7 +278,7 @@ class Info {
   bool OnWorld(const RecordedMessage& m) {
     pb::WorldDescription w;
     if (!w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return false;
-    WorldSeen& seen = worlds_[Printable(w.server_id())];
+    WorldSeen& seen = worlds_[{Printable(w.server_id()), w.incarnation()}];
     seen = {Printable(w.name()), w.terrain_hash(), static_cast<std::size_t>(w.meshes_size()), 0,
             w.step_ns()};
     for (const pb::Mesh& mesh : w.meshes()) {
@@ -378,7 +378,7 @@ class Info {
 
   void PrintWorldsAndVehicles() {
     for (const auto& [server, w] : worlds_) {
-      out_ << "world       '" << w.name << "' of server '" << server << "': terrain hash "
+      out_ << "world       '" << w.name << "' of " << Name(server) << ": terrain hash "
            << Hex(w.terrain_hash) << ", " << Count(w.meshes, "mesh", "meshes") << ", "
            << Count(w.triangles, "triangle", "triangles") << ", step "
            << static_cast<double>(w.step_ns) * 1e-6 << " ms\n";
@@ -440,11 +440,11 @@ class Info {
     }
     for (const auto& [server, s] : servers_) {
       if (s.missing > 0) {
-        gaps += "\n  server '" + server + "': " + Count(s.missing, "event", "events") +
+        gaps += "\n  " + Name(server) + ": " + Count(s.missing, "event", "events") +
                 " missing in " + Count(s.gaps, "gap", "gaps");
       }
       if (s.impossible > 0) {
-        gaps += "\n  server '" + server + "': " + Count(s.impossible, "event has", "events have") +
+        gaps += "\n  " + Name(server) + ": " + Count(s.impossible, "event has", "events have") +
                 " a sequence number no server reaches (2^48 or more: damaged or foreign): not "
                 "counted";
       }
@@ -472,7 +472,7 @@ class Info {
   void PrintEvents() {
     for (const auto& [server, s] : servers_) {
       if (s.count == 0) continue;
-      out_ << "events      server '" << server << "': " << Count(s.count, "event", "events")
+      out_ << "events      " << Name(server) << ": " << Count(s.count, "event", "events")
            << ", sequence " << s.first << ".." << s.last << (s.gaps ? "" : ", no gap") << "\n";
       for (const auto& [veh, from] : s.branched_from) {
         out_ << "            vehicle " << veh << " continues " << from << "\n";
@@ -502,7 +502,7 @@ class Info {
     }
     for (const auto& [server, s] : servers_) {
       const auto w = worlds_.find(server);
-      if (w == worlds_.end()) return "no world description of server '" + server + "' (vdyn/world)";
+      if (w == worlds_.end()) return "no world description of " + Name(server) + " (vdyn/world)";
       if (s.terrain_hashes.size() > 1 ||
           (s.terrain_hashes.size() == 1 && *s.terrain_hashes.begin() != w->second.terrain_hash)) {
         return "the events name another terrain than the recorded world";
@@ -525,7 +525,7 @@ class Info {
     std::string partly;  // what verify cannot cover: it re-simulates around it
     for (const auto& [server, s] : servers_) {
       if (s.gaps > 0) {
-        partly += "; " + Count(s.missing, "event", "events") + " of server '" + server + "' " +
+        partly += "; " + Count(s.missing, "event", "events") + " of " + Name(server) + " " +
                   (s.missing == 1 ? "is" : "are") + " missing (" + Count(s.gaps, "gap", "gaps") +
                   ")";
       }
@@ -557,8 +557,28 @@ class Info {
   bool events_recorded_ = true;
   std::map<std::string, ChannelStats> channels_;
   std::map<std::uint32_t, VehicleStats> vehicles_;
-  std::map<std::string, ServerEvents> servers_;  // by server id (as printable)
-  std::map<std::string, WorldSeen> worlds_;      // by server id (as printable)
+  // By server id (as printable) and start (SessionEvent.incarnation): a server restarted with
+  // the same id numbers its events afresh.
+  using ServerKey = std::pair<std::string, std::uint64_t>;
+  std::map<ServerKey, ServerEvents> servers_;
+  std::map<ServerKey, WorldSeen> worlds_;
+  // "server 'vdyn'", or "server 'vdyn' (its start 2 of 3)" when the recording holds several
+  // starts of that id (its events or worlds), numbered in time order (an incarnation is a
+  // start time).
+  std::string Name(const ServerKey& key) const {
+    std::set<std::uint64_t> starts;
+    for (const auto& [k, s] : servers_) {
+      if (k.first == key.first) starts.insert(k.second);
+    }
+    for (const auto& [k, w] : worlds_) {
+      if (k.first == key.first) starts.insert(k.second);
+    }
+    const std::string name = "server '" + key.first + "'";
+    if (starts.size() <= 1) return name;
+    const auto at = std::distance(starts.begin(), starts.find(key.second)) + 1;
+    return name + " (its start " + std::to_string(at) + " of " + std::to_string(starts.size()) +
+           ")";
+  }
   std::vector<mcap::Metadata> meta_;
   std::uint64_t first_ = 0, last_ = 0, messages_ = 0, foreign_messages_ = 0;
   std::uint64_t unchecked_states_ = 0;

@@ -160,6 +160,7 @@ std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload
     if (w.type == 0 && w.number == 3) f.step = w.value;
     if (w.type == 0 && w.number == 5) f.step_ns = w.value;
     if (w.type == 1 && w.number == 21) f.state_hash = w.value;
+    if (w.type == 1 && w.number == 27) f.incarnation = w.value;
     return true;
   });
   if (!framed || id != key) return std::nullopt;

@@ -42,7 +42,25 @@ struct Hole {
   }
 };
 
+// A server's start: a server restarted with the same id counts steps and event sequence numbers
+// afresh, so each start is replayed on its own (SessionEvent.incarnation; 0 in recordings made
+// before servers stamped it).
+struct ServerStart {
+  std::string id;
+  std::uint64_t incarnation = 0;
+  auto operator<=>(const ServerStart&) const = default;
+};
+
+// One vehicle of one server start.
+struct RunKey {
+  std::uint32_t vehicle = 0;
+  std::uint64_t incarnation = 0;
+  auto operator<=>(const RunKey&) const = default;
+};
+
 struct Server {
+  // Which of its id's starts in the recording, in time order from 1; 0 when there is one.
+  std::uint32_t start = 0;
   std::optional<pb::WorldDescription> world;
   std::vector<pb::SessionEvent> events;  // by sequence, each once
   std::vector<Hole> holes;
@@ -50,9 +68,9 @@ struct Server {
 
 // Every server's world and events (the small part of a recording), in one pass. A world may come
 // from a copy (the first one's chunk lost).
-std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
+std::map<ServerStart, Server> CollectEvents(const mcap::Reader& reader,
                                             const std::function<void(double)>& progress) {
-  std::map<std::string, Server> servers;
+  std::map<ServerStart, Server> servers;
   RecordingVisitor v;
   v.wants = [](TopicId t) { return t == TopicId::kEvents || t == TopicId::kWorld; };
   v.on_progress = progress;
@@ -63,17 +81,28 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
         // A sequence no server reaches is damage or a foreign writer: not an event, and not the
         // end of a hole of 2^64 events.
         if (e.sequence() >= kImpossibleSequence) return;
-        servers[e.server_id()].events.push_back(std::move(e));
+        servers[{e.server_id(), e.incarnation()}].events.push_back(std::move(e));
       }
     } else {
       pb::WorldDescription w;
       if (w.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
-        const std::string id = w.server_id();
-        servers[id].world = std::move(w);
+        const ServerStart key{w.server_id(), w.incarnation()};
+        servers[key].world = std::move(w);
       }
     }
   };
   ScanRecording(reader, v);
+  // A start's number among its id's (incarnations are start times: the map's order is time
+  // order), where the id started more than once.
+  std::map<std::string, std::uint32_t> starts_of;
+  for (const auto& [key, s] : servers) ++starts_of[key.id];
+  const std::string* last_id = nullptr;
+  std::uint32_t n = 0;
+  for (auto& [key, s] : servers) {
+    n = last_id != nullptr && *last_id == key.id ? n + 1 : 1;
+    last_id = &key.id;
+    s.start = starts_of[key.id] > 1 ? n : 0;
+  }
   for (auto& [id, s] : servers) {
     std::stable_sort(s.events.begin(), s.events.end(),
                      [](const auto& a, const auto& b) { return a.sequence() < b.sequence(); });
@@ -92,9 +121,22 @@ std::map<std::string, Server> CollectEvents(const mcap::Reader& reader,
 
 // Why a server's events cannot be re-simulated at all, or empty (a hole in its events stops only
 // the stretch it touches).
-std::string CheckServer(const std::string& id, const Server& s) {
+// "server 'vdyn'", or "server 'vdyn' (its start 2)" when it was restarted in the recording.
+std::string ServerName(const std::string& id, std::uint32_t start) {
+  return "server '" + Printable(id) + "'" +
+         (start == 0 ? "" : " (its start " + std::to_string(start) + ")");
+}
+
+// "vehicle 1", or "vehicle 1 of the server's start 2" when its server was restarted.
+std::string VehicleName(std::uint32_t vehicle, std::uint32_t start) {
+  return "vehicle " + std::to_string(vehicle) +
+         (start == 0 ? "" : " of the server's start " + std::to_string(start));
+}
+
+std::string CheckServer(const ServerStart& key, const Server& s) {
   if (!s.world) {
-    return "no world description of server '" + Printable(id) + "' was recorded (vdyn/world)";
+    return "no world description of " + ServerName(key.id, s.start) +
+           " was recorded (vdyn/world)";
   }
   return {};
 }
@@ -219,7 +261,8 @@ constexpr const char* kDamagedWhy =
 
 struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
-  std::string server;
+  ServerStart server;
+  std::uint32_t start = 0;  // Server::start
   std::shared_ptr<const World> world;
   std::uint64_t terrain_hash = 0;
   std::vector<const pb::SessionEvent*> events;  // by sequence
@@ -260,7 +303,7 @@ struct VehicleRun {
       const bool restarts = next < events.size();
       if (from < seg.uncertain_from) {
         seg.uncertain_from = from;
-        seg.hole = "events of server '" + Printable(server) + "' were lost: " + h.Text() + "; " +
+        seg.hole = "events of " + ServerName(server.id, start) + " were lost: " + h.Text() + "; " +
                    (restarts ? "re-simulated again from the checkpoint at step " +
                                    std::to_string(events[next]->step())
                              : "no checkpoint after them");
@@ -300,6 +343,7 @@ pb::VehicleState Resimulated(const VehicleReplayer& r, const pb::VehicleState& r
   FillVehicleState(recorded.vehicle_id(), recorded.server_id(), sim.step_ns(),
                    recorded.sim_time_ns(), rec, input, recorded.control().watchdog_safe_state(),
                    rec.derived.steering_torque, out);
+  out.set_incarnation(recorded.incarnation());
   return out;
 }
 
@@ -314,12 +358,14 @@ VerifyResult Verify(const VerifyOptions& o) {
       if (o.on_progress) o.on_progress(lo + (hi - lo) * f);
     };
   };
-  std::map<std::string, Server> servers = CollectEvents(reader, progress(0.0, 0.1));
+  std::map<ServerStart, Server> servers = CollectEvents(reader, progress(0.0, 0.1));
   if (servers.empty()) {
     res.cannot = "no session events were recorded (vdyn/events): nothing to re-simulate from";
     return res;
   }
-  std::map<std::uint32_t, VehicleRun> runs;
+  // Each vehicle of each server start replays on its own: a restarted server's vehicle 1 starts
+  // again from step 0 (its states say which start stepped them).
+  std::map<RunKey, VehicleRun> runs;
   for (auto& [id, s] : servers) {
     if (std::string why = CheckServer(id, s); !why.empty()) {
       res.cannot = why;
@@ -334,12 +380,13 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
     const std::uint64_t hash = TerrainHash(world->terrain);
     for (const Hole& h : s.holes) {
-      res.holes.push_back("server '" + Printable(id) + "': " + h.Text());
+      res.holes.push_back(ServerName(id.id, s.start) + ": " + h.Text());
     }
     for (const pb::SessionEvent& e : s.events) {
       if (o.vehicle && e.vehicle_id() != *o.vehicle) continue;
-      VehicleRun& run = runs[e.vehicle_id()];
+      VehicleRun& run = runs[{e.vehicle_id(), id.incarnation}];
       run.server = id;
+      run.start = s.start;
       run.world = world;
       run.terrain_hash = hash;
       run.events.push_back(&e);
@@ -349,14 +396,14 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
   }
   std::size_t startable = 0;
-  for (auto& [id, run] : runs) {
+  for (auto& [key, run] : runs) {
     run.Plan(servers.at(run.server).holes);
     if (run.segments.empty()) {
-      run.error = "vehicle " + std::to_string(id) + ": no spawn or checkpoint event was recorded";
+      run.error = VehicleName(key.vehicle, run.start) + ": no spawn or checkpoint event was recorded";
       continue;
     }
     for (Segment& seg : run.segments) {
-      seg.replayer = run.Fresh(id, seg.first_event, &run.error);
+      seg.replayer = run.Fresh(key.vehicle, seg.first_event, &run.error);
       if (!seg.replayer) break;
     }
     if (!run.error.empty()) {
@@ -371,7 +418,10 @@ VerifyResult Verify(const VerifyOptions& o) {
     return res;
   }
   // Stream the states: replay each vehicle up to the step of its next state and compare.
-  std::optional<std::pair<std::uint32_t, std::uint64_t>> compare_next;  // divergence: next state
+  // The starts of the servers, by incarnation (a state names its own).
+  std::map<std::uint64_t, std::uint32_t> start_of;
+  for (const auto& [key, s] : servers) start_of[key.incarnation] = s.start;
+  std::optional<std::pair<RunKey, std::uint64_t>> compare_next;  // divergence: next state
   pb::VehicleState recorded;
   RecordingVisitor v;
   v.wants = [](TopicId t) { return t == TopicId::kState; };
@@ -385,10 +435,13 @@ VerifyResult Verify(const VerifyOptions& o) {
     }
     const std::uint64_t step = read->step;
     const std::uint64_t hash = read->state_hash;
-    auto it = runs.find(m.key);
+    const RunKey key{m.key, read->incarnation};
+    const auto known = start_of.find(read->incarnation);
+    const std::uint32_t start = known == start_of.end() ? 0 : known->second;
+    auto it = runs.find(key);
     if (it == runs.end() || it->second.segments.empty()) {
       ++res.not_resimulated;  // no spawn or checkpoint of this vehicle at all
-      if (it != runs.end()) res.Unverified(m.key, step, it->second.error, false);
+      if (it != runs.end()) res.Unverified(m.key, start, step, it->second.error, false);
       return;
     }
     VehicleRun& run = it->second;
@@ -396,17 +449,17 @@ VerifyResult Verify(const VerifyOptions& o) {
     if (seg == nullptr) {
       // Before the vehicle's first spawn or checkpoint: a recorder that joined late (or lost it).
       ++res.not_resimulated;
-      res.Unverified(m.key, step, "before its first spawn or checkpoint in the recording", false);
+      res.Unverified(m.key, start, step, "before its first spawn or checkpoint in the recording", false);
       return;
     }
     if (seg->lost) {
-      res.Unverified(m.key, step, seg->why);
+      res.Unverified(m.key, start, step, seg->why);
       return;
     }
     if (step > run.last_event_step + kAheadSteps) {
       // Far beyond every event of the vehicle (a checkpoint comes each second): not a step to
       // simulate towards (a damaged step would cost hours).
-      res.Unverified(m.key, step,
+      res.Unverified(m.key, start, step,
                      "beyond the vehicle's last recorded event (step " +
                          std::to_string(run.last_event_step) + "): not re-simulated");
       return;
@@ -423,7 +476,7 @@ VerifyResult Verify(const VerifyOptions& o) {
               },
               &why)) {
         seg->Lose(step, "the re-simulation stopped: " + why);
-        res.Unverified(m.key, step, seg->why);
+        res.Unverified(m.key, start, step, seg->why);
         return;
       }
       seg->replayed_to = step + 1;
@@ -432,14 +485,14 @@ VerifyResult Verify(const VerifyOptions& o) {
     const auto& slot = run.ring[step % VehicleRun::kRing];
     if (slot.first != step) {
       ++res.not_resimulated;  // not re-simulated (a state older than the ring holds)
-      res.Unverified(m.key, step, "not re-simulated (it arrived too late in the file)", false);
+      res.Unverified(m.key, start, step, "not re-simulated (it arrived too late in the file)", false);
       return;
     }
     if (slot.second != hash && step >= seg->uncertain_from) {
       // Events of this stretch are missing: the replay lacks them, it has not diverged. It goes
       // on from the next checkpoint after the hole.
       seg->Lose(step, seg->hole);
-      res.Unverified(m.key, step, seg->why);
+      res.Unverified(m.key, start, step, seg->why);
       return;
     }
     if (slot.second != hash && step > run.last_event_step && fresh_step &&
@@ -460,12 +513,12 @@ VerifyResult Verify(const VerifyOptions& o) {
                             std::to_string(run.last_event_step) +
                             " and this state's input is in none of them (the last events never "
                             "reached the recording)");
-        res.Unverified(m.key, step, seg->why);
+        res.Unverified(m.key, start, step, seg->why);
         return;
       }
     }
     ++res.compared;
-    if (compare_next && compare_next->first == m.key && compare_next->second == step) {
+    if (compare_next && compare_next->first == key && compare_next->second == step) {
       compare_next.reset();
       std::string why;
       if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
@@ -490,22 +543,23 @@ VerifyResult Verify(const VerifyOptions& o) {
           if (!fields.empty()) {
             damaged = true;
             ++res.damaged;
-            if (!res.first_damaged) res.first_damaged = Damaged{m.key, step, fields};
+            if (!res.first_damaged) res.first_damaged = Damaged{m.key, start, step, fields};
           }
         }
       }
       if (damaged) {
-        res.Unverified(m.key, step, kDamagedWhy, false);
+        res.Unverified(m.key, start, step, kDamagedWhy, false);
       } else {
-        res.Verified(m.key, step);
+        res.Verified(m.key, start, step);
       }
       return;
     }
     ++res.mismatched;
-    res.Unverified(m.key, step, kDivergedWhy, false);
+    res.Unverified(m.key, start, step, kDivergedWhy, false);
     if (res.first) return;
     Divergence d;
     d.vehicle = m.key;
+    d.start = start;
     d.step = step;
     d.t = static_cast<double>(step) * static_cast<double>(run.step_ns) * 1e-9;
     d.recorded_hash = hash;
@@ -522,7 +576,7 @@ VerifyResult Verify(const VerifyOptions& o) {
       });
     }
     // Only the hash differs: the step's start agrees, so look at the state after it.
-    if (d.fields.size() <= 1) compare_next = std::make_pair(m.key, step + 1);
+    if (d.fields.size() <= 1) compare_next = std::make_pair(key, step + 1);
     res.first = std::move(d);
   };
   const mcap::ScanResult scan = ScanRecording(reader, v);
@@ -533,23 +587,25 @@ VerifyResult Verify(const VerifyOptions& o) {
   return res;
 }
 
-void VerifyResult::Verified(std::uint32_t vehicle, std::uint64_t step) {
+void VerifyResult::Verified(std::uint32_t vehicle, std::uint32_t start, std::uint64_t step) {
   auto& range = vehicles[vehicle];
   if (range.count == 0) range.first = step;
   range.first = std::min(range.first, step);
   range.last = std::max(range.last, step);
   ++range.count;
   std::vector<StepRun>& r = runs[vehicle];
-  if (r.empty() || !r.back().why.empty()) r.push_back({step, step, 0, {}});
+  if (r.empty() || !r.back().why.empty() || r.back().start != start)
+    r.push_back({start, step, step, 0, {}});
   r.back().last = std::max(r.back().last, step);
   ++r.back().count;
 }
 
-void VerifyResult::Unverified(std::uint32_t vehicle, std::uint64_t step, const std::string& why,
-                              bool counts) {
+void VerifyResult::Unverified(std::uint32_t vehicle, std::uint32_t start, std::uint64_t step,
+                              const std::string& why, bool counts) {
   if (counts) ++unverified;
   std::vector<StepRun>& r = runs[vehicle];
-  if (r.empty() || r.back().why != why) r.push_back({step, step, 0, why});
+  if (r.empty() || r.back().why != why || r.back().start != start)
+    r.push_back({start, step, step, 0, why});
   r.back().last = std::max(r.back().last, step);
   ++r.back().count;
 }
@@ -602,7 +658,7 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     if (r.unverified == 0) out << "  steps:\n";
     for (const auto& [id, rs] : r.runs) {
       for (const StepRun& run : rs) {
-        out << "    vehicle " << id << ", steps " << run.first << ".." << run.last << " ("
+        out << "    " << VehicleName(id, run.start) << ", steps " << run.first << ".." << run.last << " ("
             << run.count
             << " states): " << (run.why.empty() ? "verified bit for bit" : Printable(run.why, 600))
             << "\n";
@@ -611,9 +667,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
   };
   if (r.first) {
     const Divergence& d = *r.first;
-    std::snprintf(line, sizeof line,
-                  "DIVERGES at vehicle %u, step %" PRIu64 " (t = %.3f s of simulation)", d.vehicle,
-                  d.step, d.t);
+    std::snprintf(line, sizeof line, "DIVERGES at %s, step %" PRIu64 " (t = %.3f s of simulation)",
+                  VehicleName(d.vehicle, d.start).c_str(), d.step, d.t);
     out << o.file.string() << ": " << line << ": the state hash after the step was "
         << Hex(d.recorded_hash) << " in the recording, " << Hex(d.resimulated_hash)
         << " re-simulated\n";
@@ -629,7 +684,7 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
         out << "\n";
       }
     }
-    out << "  " << d.matched_before << " steps of vehicle " << d.vehicle
+    out << "  " << d.matched_before << " steps of " << VehicleName(d.vehicle, d.start)
         << " matched bit for bit before it; " << r.mismatched << " of " << r.compared
         << " compared steps differ\n";
     unverified();
@@ -645,18 +700,17 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     notes();
     return 1;
   }
+  // Per vehicle (and server start) the verified stretches: "vehicle 1: steps 0..999, 2000..2999".
   std::string ranges;
   for (const auto& [id, rs] : r.runs) {
-    std::string verified;
+    std::map<std::uint32_t, std::string> verified;  // by start
     for (const StepRun& run : rs) {
-      if (run.why.empty()) {
-        verified += (verified.empty() ? "" : ", ") + std::to_string(run.first) + ".." +
-                    std::to_string(run.last);
-      }
+      if (!run.why.empty()) continue;
+      std::string& v = verified[run.start];
+      v += (v.empty() ? "" : ", ") + std::to_string(run.first) + ".." + std::to_string(run.last);
     }
-    if (!verified.empty()) {
-      ranges += (ranges.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) +
-                ": steps " + verified;
+    for (const auto& [start, steps] : verified) {
+      ranges += (ranges.empty() ? "" : "; ") + VehicleName(id, start) + ": steps " + steps;
     }
   }
   std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
@@ -673,8 +727,8 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
     out << "  DAMAGED: " << r.damaged
         << " recorded states match their re-simulation's hash but not "
         << "their other fields: their bytes were changed where no CRC covered them; the first, "
-           "vehicle "
-        << d.vehicle << " at step " << d.step << " (recorded, re-simulated):\n";
+        << VehicleName(d.vehicle, d.start) << " at step " << d.step
+        << " (recorded, re-simulated):\n";
     print(d.fields);
   }
   if (!r.holes.empty()) {
@@ -703,10 +757,11 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   std::optional<std::uint32_t> chosen = vehicle;
   std::optional<std::uint64_t> step;
   std::optional<std::uint64_t> hash_before;
+  std::uint64_t incarnation = 0;  // the server start that stepped the chosen state
   std::uint64_t last_time = 0;
   {
-    std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>>
-        last;  // vehicle -> (step, hash)
+    std::map<std::pair<std::uint32_t, std::uint64_t>, std::pair<std::uint64_t, std::uint64_t>>
+        last;  // (vehicle, server start) -> (step, hash)
     RecordingVisitor v;
     v.wants = [](TopicId t) { return t == TopicId::kState; };
     v.on_message = [&](const RecordedMessage& m) {
@@ -720,10 +775,11 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
       const std::uint64_t h = fields->state_hash;
       if (m.log_time >= at) {
         step = s;
-        if (auto it = last.find(m.key); it != last.end() && it->second.first + 1 == s)
+        incarnation = fields->incarnation;
+        if (auto it = last.find({m.key, incarnation}); it != last.end() && it->second.first + 1 == s)
           hash_before = it->second.second;
       }
-      last[m.key] = {s, h};
+      last[{m.key, fields->incarnation}] = {s, h};
     };
     ScanRecording(reader, v);
   }
@@ -735,10 +791,11 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
                   *chosen, at_s, static_cast<double>(last_time - first) * 1e-9);
     throw std::runtime_error(b);
   }
-  std::map<std::string, Server> servers = CollectEvents(reader, {});
+  std::map<ServerStart, Server> servers = CollectEvents(reader, {});
   const Server* server = nullptr;
-  std::string server_id;
+  ServerStart server_id;
   for (const auto& [id, s] : servers) {
+    if (id.incarnation != incarnation) continue;
     for (const auto& e : s.events) {
       if (e.vehicle_id() == *chosen) {
         server = &s;
@@ -752,8 +809,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   if (std::string why = CheckServer(server_id, *server); !why.empty())
     throw std::runtime_error(why);
   if (!server->holes.empty()) {
-    throw std::runtime_error("events of server '" + Printable(server_id) +
-                             "' were lost: " + server->holes.front().Text() +
+    throw std::runtime_error("events of " + ServerName(server_id.id, server->start) +
+                             " were lost: " + server->holes.front().Text() +
                              ": the exact state of a moment cannot be rebuilt across them");
   }
   std::shared_ptr<const World> world = WorldFromDescription(*server->world);
@@ -795,7 +852,7 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   bp.at_s = at_s;
   bp.state = ToExactState(sim->state());
   ToInputSample(sim->input(), static_cast<std::int64_t>(*step), bp.input);
-  bp.server_id = server_id;
+  bp.server_id = server_id.id;
   bp.world_name = server->world->name();
   bp.terrain_hash = server->world->terrain_hash();
   char label[256];

@@ -62,7 +62,8 @@ Rig RigFor(const CameraState& c, const CameraScene& s) {
       if (s.followed != nullptr) {
         const Pose& p = s.followed->pose_WB;
         r.eye = p * c.seat_B;
-        r.target = r.eye + p.R.c[0];
+        r.target =
+            r.eye + p.R.c[0] * std::cos(c.driver_pitch) + p.R.c[2] * std::sin(c.driver_pitch);
         r.up = p.R.c[2];
         r.with_body = true;
       } else {

@@ -105,7 +105,8 @@ constexpr Rgb8 kUnderbody{28, 28, 30};
 constexpr Rgb8 kGlassTint{22, 28, 34};
 constexpr Rgb8 kGrille{18, 18, 20};
 constexpr Rgb8 kHeadlight{240, 240, 232};
-constexpr Rgb8 kTaillight{205, 22, 24};
+constexpr Rgb8 kTaillight{170, 18, 22};
+constexpr Rgb8 kReverseLight{215, 215, 208};
 constexpr Rgb8 kPlate{230, 230, 222};
 
 // A body cross-section at one station: 14 points around, starting at the bottom centre, up the
@@ -143,20 +144,21 @@ CarShape CarShapeFor(const VehicleGeometry& g) {
   return s;
 }
 
-ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
+Cabin CabinFor(const VehicleGeometry& g) {
   const CarShape s = CarShapeFor(g);
+  Cabin c;
   const double L = std::max(s.x_front - s.x_rear, 0.5);
   const double xr = s.x_rear, xf = s.x_rear + L;
-  const double hw = std::max(s.half_width, 0.2);
   const double r = 0.5 * (s.radius_front + s.radius_rear);
   // Heights are those of a saloon on 0.32 m wheels, scaled with the wheel radius.
-  const double sv = std::clamp(r / 0.32, 0.7, 1.6);
-  auto H = [&](double h) { return s.z_ground + h * sv; };
+  c.scale = std::clamp(r / 0.32, 0.7, 1.6);
+  c.z_ground = s.z_ground;
+  c.half_width = std::max(s.half_width, 0.2);
   // The axles as the cabin's reference; implausible ones (outside the body, or a wheelbase under
   // a third of it) give way to a saloon's proportions.
   double xra = s.x_rear_axle, xfa = s.x_front_axle;
-  const bool axles_inside = xra > xr && xfa < xf && xfa - xra > L / 3;
-  if (!axles_inside) {
+  c.axles_inside = xra > xr && xfa < xf && xfa - xra > L / 3;
+  if (!c.axles_inside) {
     xra = xr + 0.21 * L;
     xfa = xf - 0.19 * L;
   }
@@ -170,8 +172,27 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
                           hi - gap * static_cast<double>(cabin.size() - 1 - i));
     if (i > 0) cabin[i] = std::max(cabin[i], cabin[i - 1] + gap);
   }
+  c.x_rear_window = cabin[0];
+  c.x_roof_rear = cabin[1];
+  c.x_roof_front = cabin[2];
+  c.x_cowl = cabin[3];
+  c.z_belt_cowl = c.H(0.93);
+  c.z_roof_front = c.H(1.42);
+  return c;
+}
+
+ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
+  const CarShape s = CarShapeFor(g);
+  const Cabin cab = CabinFor(g);
+  const double L = std::max(s.x_front - s.x_rear, 0.5);
+  const double xr = s.x_rear, xf = s.x_rear + L;
+  const double hw = cab.half_width;
+  const double sv = cab.scale;
+  auto H = [&](double h) { return cab.H(h); };
+  const bool axles_inside = cab.axles_inside;
   // Plain names, not a structured binding: clang 14 cannot capture those in the lambdas below.
-  const double x_rwb = cabin[0], x_rr = cabin[1], x_rf = cabin[2], x_cowl = cabin[3];
+  const double x_rwb = cab.x_rear_window, x_rr = cab.x_roof_rear, x_rf = cab.x_roof_front,
+               x_cowl = cab.x_cowl;
   const double x_b = Mix(x_rr, x_rf, 0.45);  // B pillar
   const double end = std::min(0.1, 0.03 * L);
 
@@ -341,6 +362,7 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
   };
   const std::uint32_t head = soup.Look(Material::kLightFront, kHeadlight);
   const std::uint32_t tail = soup.Look(Material::kLightRear, kTaillight);
+  const std::uint32_t reverse = soup.Look(Material::kLightReverse, kReverseLight);
   const std::uint32_t grille = soup.Look(Material::kMatte, kGrille);
   const std::uint32_t plate = soup.Look(Material::kMatte, kPlate);
   const double wf = hw * Pwl(width, xf), wr = hw * Pwl(width, xr);
@@ -350,6 +372,9 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
     end_quad(xfd, std::min(y0, y1), std::max(y0, y1), H(0.53), H(0.62), head, true);
     const double t0 = side * 0.58 * wr, t1 = side * 0.88 * wr;
     end_quad(xrd, std::min(t0, t1), std::max(t0, t1), H(0.60), H(0.70), tail, false);
+    // The reversing lamp: inboard of the tail light, in its band.
+    const double r0 = side * 0.47 * wr, r1 = side * 0.56 * wr;
+    end_quad(xrd, std::min(r0, r1), std::max(r0, r1), H(0.61), H(0.69), reverse, false);
   }
   end_quad(xfd, -0.40 * wf, 0.40 * wf, H(0.38), H(0.52), grille, true);
   end_quad(xfd, -0.70 * wf, 0.70 * wf, H(0.24), H(0.33), grille, true);
@@ -529,6 +554,10 @@ ModelMesh LoadCarModel(const std::string& path) {
       named_paint[i] = any_paint = true;
     } else if (NameHas(name, {"glass", "window"}) || opacity < 0.9f) {
       looks[i] = {Material::kGlass, kGlassTint};
+    } else if (NameHas(name, {"reverse", "backup"})) {
+      looks[i] = {Material::kLightReverse, c};
+    } else if (NameHas(name, {"brake", "tail"})) {
+      looks[i] = {Material::kLightRear, c};
     } else if (NameHas(name, {"chrome", "metal"})) {
       looks[i] = {Material::kChrome, c};
     } else {

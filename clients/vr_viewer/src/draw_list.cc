@@ -166,6 +166,8 @@ void AppendVehicleBody(const VehicleView& v, VehicleParts parts, bool coarse, Fr
     b.geometry = v.geometry;
     b.paint = VehicleColour(v.id);
     b.coarse = coarse;
+    b.brake_lights = v.braking;
+    b.reverse_lights = v.reversing;
     lists.bodies.push_back(b);
     double a = 0, bx = 0, cy = 0;
     if (ContactPlane(v, a, bx, cy)) {

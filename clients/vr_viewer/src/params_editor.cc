@@ -173,6 +173,7 @@ bool ParamsEditor::EditFields(gp::Message& m, const std::string& prefix) {
     const std::string label = FieldLabel(path) + "##" + path;
     ImGui::PushID(f->number());
     bool open = false;
+    std::string text;
     switch (f->cpp_type()) {
       case gp::FieldDescriptor::CPPTYPE_DOUBLE: {
         double v = r->GetDouble(m, f);
@@ -216,15 +217,33 @@ bool ParamsEditor::EditFields(gp::Message& m, const std::string& prefix) {
         }
         break;
       }
-      case gp::FieldDescriptor::CPPTYPE_MESSAGE:
-        open = ImGui::TreeNode(label.c_str());
+      case gp::FieldDescriptor::CPPTYPE_STRING:  // read only, where given: a tyre's name
+        if (f->has_presence() ? !r->HasField(m, f) : r->GetString(m, f).empty()) {
+          ImGui::PopID();
+          continue;  // not drawn: no rectangle of its own
+        }
+        text = r->GetString(m, f);
+        ImGui::Text("%s: %s", FieldLabel(path).c_str(), text.c_str());
         break;
+      case gp::FieldDescriptor::CPPTYPE_MESSAGE: {
+        // A group with a name (a wheel's Magic Formula tyre) shows it on the closed group too.
+        const gp::Message& sub = r->GetMessage(m, f);
+        const gp::FieldDescriptor* name = sub.GetDescriptor()->FindFieldByName("name");
+        if (name != nullptr && name->cpp_type() == gp::FieldDescriptor::CPPTYPE_STRING &&
+            !name->is_repeated()) {
+          text = sub.GetReflection()->GetString(sub, name);
+        }
+        const std::string shown =
+            text.empty() ? label : FieldLabel(path) + ": " + text + "##" + path;
+        open = ImGui::TreeNode(shown.c_str());
+        break;
+      }
       default:
         ImGui::PopID();
         continue;
     }
     const ImVec2 lo = ImGui::GetItemRectMin(), hi = ImGui::GetItemRectMax();
-    drawn_[path] = {FieldLabel(path), lo.x, lo.y, hi.x, hi.y};
+    drawn_[path] = {FieldLabel(path), lo.x, lo.y, hi.x, hi.y, std::move(text)};
     Hover(path);
     if (open) {
       changed |= EditFields(*r->MutableMessage(&m, f), path + ".");

@@ -91,12 +91,15 @@ void CheckFramebuffer(const char* what) {
   }
 }
 
+// The texture unit of a mirror's image (surfaces 0, the shadow map 1, clouds 2).
+constexpr int kMirrorUnit = 3;
+
 // Uniform locations of a program, looked up once.
 struct Uniforms {
   GLint view_proj = -1, model = -1, eye = -1, fog = -1, paint = -1, alpha = -1;
   GLint frame = -1, half_size = -1, strip = -1, grid = -1, surfaces = -1;
   GLint shadow_map = -1, shadow_mat = -1, shadow_box = -1, shadow_texel = -1;
-  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1;
+  GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1, lights = -1;
 };
 
 Vec3 Linear(Rgb8 c) {
@@ -172,6 +175,8 @@ RenderSettings SettingsFor(Quality q) {
     s.high_shading = false;
     s.texture_px = 256;
     s.srgb_textures = false;
+    s.mirror_px = 128;
+    s.mirror_interval = 3;  // one of the three mirrors a frame
   }
   return s;
 }
@@ -317,6 +322,7 @@ struct Renderer::Program {
     u.clouds = at("u_clouds");
     u.strength = at("u_strength");
     u.radius = at("u_radius");
+    u.lights = at("u_lights");
     // Texture units: surfaces 0, the shadow map 1, clouds 2.
     glUseProgram(id);
     if (u.surfaces >= 0) glUniform1i(u.surfaces, 0);
@@ -377,9 +383,14 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   sky_ = std::make_unique<Program>(Vs(shaders::kSkyVs), Fragment(o, shaders::kSkyFs), "sky");
   hills_ =
       std::make_unique<Program>(Vs(shaders::kHillsVs), Fragment(o, shaders::kHillsFs), "far hills");
-  contact_ = std::make_unique<Program>(Vs(shaders::kContactVs), Fragment(o, shaders::kContactFs),
+  contact_ = std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kContactFs),
                                        "contact shadows");
   depth_ = std::make_unique<Program>(Vs(shaders::kDepthVs), Vs(shaders::kDepthFs), "shadow map");
+  mirror_ =
+      std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kMirrorFs), "mirrors");
+  glUseProgram(mirror_->id);
+  glUniform1i(glGetUniformLocation(mirror_->id, "u_image"), kMirrorUnit);
+  glUseProgram(0);
   glGenVertexArrays(1, &sky_vao_);
   {
     // The far hills' outline: elevation angles (rad) from a few waves around the horizon; the
@@ -832,10 +843,14 @@ void Renderer::DrawModels(const Program& p, const FrameLists& lists, const Mat4&
     const GpuMesh& m = BodyMesh(b);
     SetMat(p.u.model, BodyTransform(b));
     SetVec3(p.u.paint, Linear(b.paint));
+    glUniform2f(p.u.lights, b.brake_lights ? 1.0f : 0.0f, b.reverse_lights ? 1.0f : 0.0f);
+    if (b.from_inside) glEnable(GL_CULL_FACE);
     glBindVertexArray(m.vao);
     glDrawElements(GL_TRIANGLES, m.count, GL_UNSIGNED_INT, nullptr);
+    glDisable(GL_CULL_FACE);
   }
   SetVec3(p.u.paint, {1, 1, 1});
+  glUniform2f(p.u.lights, 0.0f, 0.0f);
   for (const WheelInstance& w : lists.wheels) {
     if (!InFrustum(view_proj, w.centre_W, w.radius)) continue;
     const GpuMesh& m = w.coarse ? wheel_coarse_ : wheel_fine_;
@@ -905,6 +920,74 @@ void Renderer::DrawList(const viewer::DrawList& list, Pass pass, const Mat4& vie
 }
 
 void Renderer::Draw(const View& v, const FrameLists& lists) {
+  if (v.update_mirrors && !lists.mirrors.empty()) {
+    GLint target_fbo = 0;
+    GLint viewport[4] = {0, 0, 1, 1};
+    glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &target_fbo);
+    glGetIntegerv(GL_VIEWPORT, viewport);
+    UpdateMirrors(v, lists);
+    glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(target_fbo));
+    glViewport(viewport[0], viewport[1], viewport[2], viewport[3]);
+  }
+  DrawScene(v, lists, false);
+}
+
+void Renderer::UpdateMirrors(const View& v, const FrameLists& lists) {
+  const std::uint64_t frame = mirror_frames_++;
+  const auto interval = static_cast<std::uint64_t>(std::max(settings_.mirror_interval, 1));
+  const double far_m = std::min(FarOf(v.proj), 5000.0);
+  for (const MirrorInstance& m : lists.mirrors) {
+    const auto i = static_cast<std::size_t>(std::max(m.index, 0));
+    if (mirror_targets_.size() <= i) mirror_targets_.resize(i + 1);
+    // The rear-view mirror's image `mirror_px` wide, the side ones' half; their height by the
+    // glass's aspect.
+    const int w = std::max(i == 0 ? settings_.mirror_px : settings_.mirror_px / 2, 8);
+    const int h = std::max(static_cast<int>(std::lround(w * m.tan_half_y / m.tan_half_x)), 8);
+    auto& target = mirror_targets_[i];
+    if (!target) target = std::make_unique<RenderTarget>();
+    if (target->width() != w || target->height() != h) {
+      target->Resize(w, h, 0);
+    } else if ((frame + i) % interval != 0) {
+      continue;  // not this one's turn
+    }
+    target->BeginScene();
+    View mv;
+    mv.eye_W = m.eye_W;
+    mv.view = LookAt(m.eye_W, m.eye_W + m.look_W, m.up_W);
+    mv.proj = Perspective(2 * std::atan(m.tan_half_y), m.tan_half_x / m.tan_half_y, 0.05, far_m);
+    mv.haze = v.haze;
+    DrawScene(mv, lists, true);
+  }
+}
+
+void Renderer::DrawMirrorGlass(const FrameLists& lists, const Mat4& view_proj) {
+  glUseProgram(mirror_->id);
+  SetMat(mirror_->u.view_proj, view_proj);
+  glBindVertexArray(contact_vao_);  // (the same layout: position, texture coordinates)
+  glBindBuffer(GL_ARRAY_BUFFER, contact_vbo_);
+  glActiveTexture(GL_TEXTURE0 + kMirrorUnit);
+  for (const MirrorInstance& m : lists.mirrors) {
+    const auto i = static_cast<std::size_t>(std::max(m.index, 0));
+    if (i >= mirror_targets_.size() || !mirror_targets_[i]) continue;
+    std::array<float, 30> v{};
+    std::size_t n = 0;
+    for (std::size_t k : {0, 1, 2, 0, 2, 3}) {
+      const Vec3& p = m.glass_W[k];
+      for (float f : {static_cast<float>(p.x), static_cast<float>(p.y), static_cast<float>(p.z),
+                      m.uv[k][0], m.uv[k][1]}) {
+        v[n++] = f;
+      }
+    }
+    glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(sizeof v), v.data(), GL_STREAM_DRAW);
+    glBindTexture(GL_TEXTURE_2D, mirror_targets_[i]->colour_texture());
+    glDrawArrays(GL_TRIANGLES, 0, 6);
+  }
+  glBindTexture(GL_TEXTURE_2D, 0);
+  glActiveTexture(GL_TEXTURE0);
+  glBindVertexArray(0);
+}
+
+void Renderer::DrawScene(const View& v, const FrameLists& lists, bool in_mirror) {
   GLint target_fbo = 0;
   GLint viewport[4] = {0, 0, 1, 1};
   glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &target_fbo);
@@ -918,7 +1001,7 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   // The sun's shadow map around the focus: the followed vehicle, else where the view's centre
   // meets the ground (at most 30 m ahead).
   shadow_ready_ = false;
-  if (settings_.shadows) {
+  if (settings_.shadows && !in_mirror) {
     Vec3 focus;
     if (v.focus_W) {
       focus = *v.focus_W;
@@ -967,6 +1050,14 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   DrawContactShadows(lists, view_proj);
   DrawList(lists.opaque, Pass::kOpaque, view_proj);
   glEnable(GL_STENCIL_TEST);
+  // The cockpit marks its pixels (2): no arrow's ghost is drawn over it (an arrow of a car ahead
+  // that the dashboard hides is simply hidden).
+  glStencilFunc(GL_ALWAYS, 2, 0xFF);
+  glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
+  if (!in_mirror) {
+    DrawList(lists.cockpit, Pass::kOpaque, view_proj);
+    if (!lists.mirrors.empty()) DrawMirrorGlass(lists, view_proj);
+  }
   glStencilFunc(GL_ALWAYS, 1, 0xFF);
   glStencilOp(GL_KEEP, GL_KEEP, GL_REPLACE);
   DrawList(lists.arrows, Pass::kOpaque, view_proj);
@@ -998,7 +1089,13 @@ void Renderer::Draw(const View& v, const FrameLists& lists) {
   glDepthMask(GL_TRUE);
   glDisable(GL_BLEND);
   DrawList(lists.translucent, Pass::kTranslucent, view_proj);
-  DrawList(lists.arrows, Pass::kGhost, view_proj);
+  if (!in_mirror) {
+    glEnable(GL_STENCIL_TEST);
+    glStencilFunc(GL_NOTEQUAL, 2, 0xFF);
+    glStencilOp(GL_KEEP, GL_KEEP, GL_KEEP);
+    DrawList(lists.arrows, Pass::kGhost, view_proj);
+    glDisable(GL_STENCIL_TEST);
+  }
   glBindVertexArray(0);
   glUseProgram(0);
 }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vdyn/client/palette.h"
 #include "vdyn/viewer/car_model.h"
 
 namespace vdyn::viewer {
@@ -79,10 +80,8 @@ std::string_view WheelName(int wheel) {
 }
 
 Rgb8 VehicleColour(std::uint32_t vehicle_id) {
-  static constexpr Rgb8 kPalette[] = {{90, 170, 200},  {150, 110, 210}, {230, 230, 235},
-                                      {80, 190, 160},  {200, 150, 170}, {120, 140, 230},
-                                      {170, 190, 110}, {210, 170, 120}};
-  return kPalette[(vehicle_id + 7) % 8];  // vehicle 1 gets the first colour
+  const auto& c = client::VehiclePaint(vehicle_id);  // the clients' shared palette
+  return {c[0], c[1], c[2]};
 }
 
 std::string CheckGeometry(const pb::VehicleGeometry& g) {
@@ -116,6 +115,16 @@ std::string CheckGeometry(const pb::VehicleGeometry& g) {
 VehicleGeometry GeometryFor(std::uint32_t vehicle_id, const pb::WorldDescription* world,
                             const pb::VehicleParams* params) {
   VehicleGeometry g = DefaultGeometry();
+  if (params != nullptr) {
+    if (params->has_steering_ratio() && params->steering_ratio() > 0 &&
+        params->steering_ratio() < 100) {
+      g.steering_ratio = params->steering_ratio();
+    }
+    if (params->has_engine_rpm_limit() && params->engine_rpm_limit() > 500 &&
+        params->engine_rpm_limit() < 30000) {
+      g.engine_rpm_limit = params->engine_rpm_limit();
+    }
+  }
   if (world != nullptr) {
     for (const pb::VehicleGeometry& d : world->vehicles()) {
       if (d.vehicle_id() != vehicle_id || !CheckGeometry(d).empty()) continue;
@@ -263,6 +272,24 @@ VehicleView BuildVehicleView(const pb::VehicleState& s, const VehicleGeometry& g
     v.arrows.push_back({ForceKind::kSide, w, B, wv.t_lat_W * ws.fy(), false});
   }
   v.ground_z = ground / kWheels;
+  // The lamps.
+  double brake_torque = 0, drive = 0;
+  for (const pb::WheelState& ws : s.wheels()) {
+    brake_torque = std::max(brake_torque, ws.brake_torque());
+    drive += ws.fh() + ws.drive_torque();
+  }
+  v.braking = s.control().brake() > kBrakeLightInput || brake_torque > kBrakeLightTorqueNm;
+  const double v_forward = Dot(v_T, x_B);
+  v.reversing = s.drivetrain().gear() < 0 || (v_forward < -kReverseLightSpeed && drive < 0);
+  // The cockpit's readings.
+  v.has_gearbox = s.model() == pb::VEHICLE_MODEL_FULL;
+  if (v.has_gearbox) {
+    v.hand_wheel_rad = s.steering().hand_wheel_angle();
+    v.engine_rpm = s.drivetrain().engine_rpm();
+    v.gear = s.drivetrain().gear();
+  } else {
+    v.hand_wheel_rad = s.control().gamma() * g.steering_ratio;
+  }
   // Drag acts against X_B (eq. 15, signed with vx): drawn pointing at the nose.
   const Vec3 nose = v.pose_WB * Vec3{g.front, 0, 0};
   v.arrows.push_back({ForceKind::kDrag, -1, nose, x_B * (-s.da()), true});

@@ -282,22 +282,24 @@ layout(location = 3) in uint a_material;
 uniform mat4 u_model;
 uniform mat4 u_view_proj;
 uniform vec3 u_paint;  // linear
+uniform vec2 u_lights;  // the body's brake and reversing lights: 1 lit, 0 not
 out vec3 v_pos;
 out vec3 v_normal;
 out vec3 v_albedo;
 // The material's shading (car_model.h: matte, paint, glass, chrome, rubber, headlight, tail
-// light), as numbers rather than branches: diffuse share, the sky's reflection (at normal
-// incidence, at grazing incidence, tinted by the albedo), the sun's highlight (share, power),
-// light of its own.
+// light, reversing light), as numbers rather than branches: diffuse share, the sky's reflection
+// (at normal incidence, at grazing incidence, tinted by the albedo), the sun's highlight (share,
+// power), light of its own (the lamps: their own light, times kLit while lit).
 flat out vec4 v_reflect;  // diffuse, sky, sky at grazing angles, sky tinted
 flat out vec3 v_shine;    // highlight share, power, own light
-const vec4 kReflect[7] = vec4[7](vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.03, 0.45, 0.0),
+const vec4 kReflect[8] = vec4[8](vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.03, 0.45, 0.0),
                                  vec4(1.0, 0.08, 0.7, 0.0), vec4(0.45, 0.0, 0.0, 0.55),
                                  vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.0, 0.0, 0.0),
-                                 vec4(1.0, 0.0, 0.0, 0.0));
-const vec3 kShine[7] = vec3[7](vec3(0.0, 1.0, 0.0), vec3(0.6, 120.0, 0.0), vec3(2.0, 400.0, 0.0),
+                                 vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.0, 0.0, 0.0));
+const vec3 kShine[8] = vec3[8](vec3(0.0, 1.0, 0.0), vec3(0.6, 120.0, 0.0), vec3(2.0, 400.0, 0.0),
                                vec3(0.9, 60.0, 0.0), vec3(0.05, 16.0, 0.0), vec3(0.0, 1.0, 0.9),
-                               vec3(0.3, 60.0, 0.6));
+                               vec3(0.3, 60.0, 0.3), vec3(0.3, 60.0, 0.15));
+const float kLit = 14.0;  // a lit lamp's own light over an unlit one's
 vec3 Decode(vec3 c) {
   return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(vec3(0.04045), c));
 }
@@ -305,10 +307,12 @@ void main() {
   vec4 p = u_model * vec4(a_pos, 1.0);
   v_pos = p.xyz;
   v_normal = mat3(u_model) * a_normal;
-  int m = int(min(a_material, 6u));
+  int m = int(min(a_material, 7u));
   v_albedo = Decode(a_rgba.rgb) * (m == 1 ? u_paint : vec3(1.0));
   v_reflect = kReflect[m];
   v_shine = kShine[m];
+  float lit = m == 6 ? u_lights.x : (m == 7 ? u_lights.y : 0.0);
+  v_shine.z *= mix(1.0, kLit, lit);
   gl_Position = u_view_proj * p;
 }
 )";
@@ -447,9 +451,9 @@ void main() {
 }
 )";
 
-// --- contact shadows under the vehicles ----------------------------------------------------------
+// --- contact shadows under the vehicles, and the mirrors: a textured quad in the world -----------
 
-const char* const kContactVs = R"(
+const char* const kWorldQuadVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec2 a_uv;
 uniform mat4 u_view_proj;
@@ -469,6 +473,19 @@ void main() {
   vec2 q = abs(v_uv);
   float k = (1.0 - smoothstep(0.55, 1.0, q.x)) * (1.0 - smoothstep(0.35, 1.0, q.y));
   o_colour = vec4(vec3(1.0 - u_strength * k), 1.0);
+}
+)";
+
+// --- the cockpit's mirrors (vertex shader: kWorldQuadVs) -------------------------------------
+
+// The mirror's image, already encoded for the screen; the glass reflects 85 % of the light.
+const char* const kMirrorFs = R"(
+in vec2 v_uv;
+uniform sampler2D u_image;
+out vec4 o_colour;
+void main() {
+  vec3 c = texture(u_image, v_uv).rgb;
+  o_colour = vec4(Encode(0.85 * Decode(c)), 1.0);
 }
 )";
 

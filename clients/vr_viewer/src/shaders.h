@@ -30,8 +30,9 @@ extern const char* const kSkyVs;
 extern const char* const kSkyFs;
 extern const char* const kHillsVs;
 extern const char* const kHillsFs;
-extern const char* const kContactVs;
+extern const char* const kWorldQuadVs;  // contact shadows and mirrors
 extern const char* const kContactFs;
+extern const char* const kMirrorFs;
 extern const char* const kDepthVs;
 extern const char* const kDepthFs;
 

@@ -17,6 +17,7 @@
 #include <stdexcept>
 
 #include "vdyn/input.pb.h"
+#include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/world_mesh.h"
 #include "vdyn/viewer/xr_session.h"
@@ -211,12 +212,15 @@ struct Viewer::Impl {
   }
 
   // What the frame's stages share: the drawn server and world, the followed vehicle's view and
-  // the desktop camera.
+  // the camera. The camera's state is taken once, as the frame begins: a key that changes it
+  // (applied after the HUD, ApplyKeys) counts from the next frame, so the HUD, the view and
+  // what is left out of it (the own body from the driver's seat) always agree within a frame.
   struct FrameScene {
     std::string server;
     const AcceptedWorld* accepted = nullptr;
     const pb::WorldDescription* world = nullptr;
     const VehicleView* followed = nullptr;
+    CameraState camera;
     CameraScene cs;
     CameraView cam;
   };
@@ -841,9 +845,9 @@ Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
     const pb::VehicleParams* vp = sv != nullptr && sv->params ? &*sv->params : nullptr;
     const AcceptedWorld* own_world = WorldOf(server_id);
     views.emplace(
-        id, BuildVehicleView(
-                t.drawn, GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp),
-                &t.spin));
+        id, BuildVehicleView(t.drawn,
+                             GeometryFor(id, own_world != nullptr ? &own_world->desc : f.world, vp),
+                             &t.spin));
   }
   f.followed = owner.followed_ ? owner.vehicle(*owner.followed_) : nullptr;
   f.cs.followed = f.followed;
@@ -857,7 +861,8 @@ Viewer::Impl::FrameScene Viewer::Impl::UpdateScene() {
                                  ? Vec3{f.world->spawn().x(), f.world->spawn().y(), 0}
                                  : 0.5 * (a.min_W + a.max_W);
   }
-  f.cam = ComputeCamera(o.camera, f.cs, desktop->width(), desktop->height());
+  f.camera = o.camera;
+  f.cam = ComputeCamera(f.camera, f.cs, desktop->width(), desktop->height());
   owner.last_camera_ = f.cam;
   return f;
 }
@@ -873,11 +878,36 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
                              : 2.0 * Norm(p - eye) * std::tan(0.5 * fovy) / std::max(height_px, 1);
     return std::max(0.03, 1.6 * mpp);
   };
+  // The cockpit's mirrors see what is behind: a vehicle is drawn when the view or a mirror sees
+  // it.
+  std::vector<Mat4> seen_by = {view_proj};
+  if (inside && f.camera.cockpit && owner.followed_) {
+    if (auto own = views.find(*owner.followed_); own != views.end()) {
+      AppendMirrors(own->second, f.camera.seat_B, lists.mirrors);
+      for (const MirrorInstance& m : lists.mirrors) {
+        seen_by.push_back(MirrorViewProj(m, f.cs.far_m));
+      }
+    }
+  }
   for (const auto& [id, v] : views) {
-    // From the driver's seat nothing of the own vehicle is drawn (its body, tyres and arrows
-    // would fill the view of the road ahead); its forces show in the other cameras.
-    if (inside && owner.followed_ && id == *owner.followed_) continue;
-    if (!InFrustum(view_proj, v.pose_WB.t, BoundingRadius(v, o.arrows))) continue;
+    // From the driver's seat the own vehicle is its cockpit and its bonnet (the body from
+    // inside); its tyres and arrows are left out (they would fill the view of the road ahead),
+    // its forces show in the other cameras.
+    if (inside && owner.followed_ && id == *owner.followed_) {
+      if (!f.camera.cockpit) continue;
+      VehicleParts parts;
+      parts.wheels = parts.arrows = false;
+      AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
+      for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
+      AppendCockpit(v, f.camera.seat_B, lists.cockpit);
+      continue;
+    }
+    const double bound = BoundingRadius(v, o.arrows);
+    const auto& at = v.pose_WB.t;  // a lambda may not capture a structured binding (clang 14)
+    if (std::none_of(seen_by.begin(), seen_by.end(),
+                     [&](const Mat4& vp) { return InFrustum(vp, at, bound); })) {
+      continue;
+    }
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }
@@ -974,6 +1004,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
     ImGui::TextUnformatted(
         "1-6  chase, driver, orbit, map, north, beside camera   C  next camera\n"
         "K    horizon level / with the body (chase, orbit)     R  recentre the headset\n"
+        "I    the cockpit in the driver's seat on / off\n"
         "Q/E  turn the geographic cameras left/right    N  back to north\n"
         "     (the wheel's paddle shifters do the same)\n"
         "Tab  next vehicle (Shift: previous)\n"
@@ -1064,11 +1095,11 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
     Line(Format("no vehicle on domain %u yet", o.domain));
   }
   const double frame_ms = stats.frame_ms.empty() ? 0.0 : stats.frame_ms.back();
-  const CameraMode cm = o.camera.mode;
+  const CameraMode cm = f.camera.mode;
   const bool lockable = cm == CameraMode::kChase || cm == CameraMode::kOrbit;
   Line(Format(
       "camera %s%s (1-6, C)   frame %.1f ms", std::string(CameraName(cm)).c_str(),
-      lockable ? (o.camera.horizon_locked ? ", horizon level (K)" : ", with the body (K)") : "",
+      lockable ? (f.camera.horizon_locked ? ", horizon level (K)" : ", with the body (K)") : "",
       frame_ms));
   if (xr) {
     Line(Format("OpenXR: %s, %s  (R: recentre)", xr->runtime_name().c_str(),
@@ -1107,7 +1138,7 @@ void Viewer::Impl::HudLabels(const FrameScene& f) {
   };
   for (const auto& [id, v] : views) {
     const bool own = owner.followed_ && id == *owner.followed_;
-    if (own && o.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
+    if (own && f.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
     ask(Format("#%u", id), v.pose_WB * Vec3{0, 0, 1.6}, own ? 2 : 1, ImColour(VehicleColour(id)));
   }
   if (f.world != nullptr) {
@@ -1146,6 +1177,7 @@ void Viewer::Impl::ApplyKeys() {
     if (k == SDLK_c)
       c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
     if (k == SDLK_k) c.horizon_locked = !c.horizon_locked;
+    if (k == SDLK_i) c.cockpit = !c.cockpit;
     if (k == SDLK_r) recentre_pending = true;
     if (k == SDLK_q) TurnGeographic(c, +1);
     if (k == SDLK_e) TurnGeographic(c, -1);
@@ -1205,7 +1237,7 @@ bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
     recentre_pending = false;
     // The reference space's origin in the world: the camera's place (its eye point, level, or
     // turning with the body), the floor under it when standing.
-    Pose place = XrPlace(o.camera, f.cs);
+    Pose place = XrPlace(f.camera, f.cs);
     const Pose neutral = NeutralHead();
     Pose ref = head_ref;
     ref.t.y -= neutral.t.y;  // standing on STAGE: the head's height stays the runtime's
@@ -1217,10 +1249,11 @@ bool Viewer::Impl::DrawHeadset(const FrameScene& f) {
         world_from_space, hud_in_space, 0.05, f.cs.far_m,
         [&](const XrEye& eye) {
           BuildLists(f, eye.proj * eye.view, eye.eye_W, false, 0, Rad(90), eye.target->height(),
-                     o.camera.mode == CameraMode::kDriver);
+                     f.camera.mode == CameraMode::kDriver);
           eye.target->BeginScene();
           Renderer::View rv{eye.view, eye.proj, eye.eye_W};
           if (f.followed != nullptr) rv.focus_W = f.followed->pose_WB.t;  // the sun's shadow map
+          rv.update_mirrors = eye.index == 0;  // the left eye's mirror images serve both
           renderer->Draw(rv, lists);
           eye.target->Resolve();
         },
@@ -1264,7 +1297,7 @@ void Viewer::Impl::DrawDesktop(const FrameScene& f, bool xr_drawn) {
   }
   const CameraView& cam = f.cam;
   BuildLists(f, cam.proj * cam.view, cam.eye_W, cam.orthographic, cam.metres_per_pixel, cam.fovy,
-             target.height(), o.camera.mode == CameraMode::kDriver);
+             target.height(), f.camera.mode == CameraMode::kDriver);
   target.BeginScene();
   Renderer::View rv{cam.view, cam.proj, cam.eye_W};
   rv.haze = !cam.orthographic;

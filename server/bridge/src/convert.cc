@@ -211,6 +211,12 @@ void FillVehicleState(std::uint32_t vehicle_id, const std::string& server_id,
     ws->set_v_long(o.v_long);
     ws->set_abs_factor(r.control.abs_factor[w]);
     ws->set_kerb(o.kerb);
+    ws->set_kappa_law(o.kappa_law);
+    ws->set_alpha_law(o.alpha_law);
+    ws->set_camber(o.camber);
+    ws->set_pressure(o.pressure);
+    ws->set_mx(o.Mx);
+    ws->set_my(o.My);
   }
   *out.mutable_input() = input;
   pb::AppliedControl* c = out.mutable_control();

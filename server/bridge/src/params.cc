@@ -1,6 +1,7 @@
 #include "vdyn/bridge/params.h"
 
 #include <algorithm>
+#include <cctype>
 #include <set>
 
 #include "vdyn/base/limits.h"
@@ -17,6 +18,34 @@ const pb::WheelParams& Wheel(const pb::VehicleParams& m, int w) {
     case kLR: return m.lr();
     default: return m.rr();
   }
+}
+
+// The coefficients' fields of the message, in the physics' table order.
+const std::vector<const gp::FieldDescriptor*>& TireFields() {
+  static const std::vector<const gp::FieldDescriptor*> fields = [] {
+    std::vector<const gp::FieldDescriptor*> v;
+    for (const MagicFormulaField& f : MagicFormulaFields()) {
+      v.push_back(pb::MagicFormulaTire::descriptor()->FindFieldByName(std::string(f.name)));
+    }
+    return v;
+  }();
+  return fields;
+}
+
+// A Magic Formula tyre from its message: each coefficient given, or its fallback (NaN for the
+// required ones: Validate names them).
+MagicFormula TireFromProto(const pb::MagicFormulaTire& t) {
+  MagicFormula m;
+  m.enabled = true;
+  m.side = t.tyreside() == "RIGHT" ? -1 : t.tyreside() == "SYMMETRIC" ? 0 : 1;
+  const gp::Reflection* r = t.GetReflection();
+  const auto fields = MagicFormulaFields();
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    const gp::FieldDescriptor* f = TireFields()[i];
+    m.*fields[i].member =
+        f != nullptr && r->HasField(t, f) ? r->GetDouble(t, f) : fields[i].fallback;
+  }
+  return m;
 }
 
 // The plain struct from the message, field by field (no checks).
@@ -44,6 +73,8 @@ Params RawParams(const pb::VehicleParams& m) {
     d.spin_inertia = s.spin_inertia();
     d.min_length = s.min_length();
     d.max_length = s.max_length();
+    d.camber = s.has_camber() ? s.camber() : 0.0;
+    if (s.has_magic_formula()) d.mf = TireFromProto(s.magic_formula());
   }
   p.mu = m.mu();
   p.cx = m.cx();
@@ -139,6 +170,57 @@ void CheckEnum(const gp::Message& msg, const char* name, std::vector<ParamIssue>
   }
 }
 
+// A tyre message's own fields (the coefficients are the physics' to check).
+void CheckTireMessage(const pb::MagicFormulaTire& t, const std::string& tp,
+                      std::vector<ParamIssue>& out) {
+  if (t.fittyp() != 61 && t.fittyp() != 62) {
+    out.push_back({tp + "fittyp", std::to_string(t.fittyp()) +
+                                      " is not a model vdyn evaluates (61: MF 6.1, 62: MF 6.2)"});
+  }
+  if (!t.tyreside().empty() && t.tyreside() != "LEFT" && t.tyreside() != "RIGHT" &&
+      t.tyreside() != "SYMMETRIC") {
+    out.push_back({tp + "tyreside", "must be LEFT, RIGHT or SYMMETRIC"});
+  }
+  if (t.name().size() > limits::kMaxNameBytes) {
+    out.push_back({tp + "name", "longer than " + std::to_string(limits::kMaxNameBytes) + " bytes"});
+  }
+}
+
+// A missing coefficient's reason names the tyre file and the key as the file writes it.
+void NameTireFiles(const pb::VehicleParams& msg, std::vector<ParamIssue>& issues) {
+  for (ParamIssue& i : issues) {
+    const std::size_t at = i.field.find(".magic_formula.");
+    if (at == std::string::npos || i.reason.rfind("missing", 0) != 0) continue;
+    const int w = static_cast<int>(
+        std::find(kWheelFields.begin(), kWheelFields.end(), i.field.substr(0, at)) -
+        kWheelFields.begin());
+    if (w >= kNumWheels) continue;
+    std::string key = i.field.substr(at + 15);
+    for (char& c : key) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+    const std::string& name = Wheel(msg, w).magic_formula().name();
+    i.reason = "missing from the tyre file" + (name.empty() ? std::string() : " '" + name + "'") +
+               " (" + key + "): the Magic Formula's equations need it";
+  }
+}
+
+// What only a message can get wrong about tyres: a file name where the coefficients belong, a
+// model version or side the physics does not know, a name too long.
+void CheckTires(const pb::VehicleParams& msg, std::vector<ParamIssue>& out) {
+  constexpr const char* kFileOnly =
+      "a tyre file is read where a parameter file is loaded; a message carries its coefficients "
+      "(magic_formula)";
+  if (msg.has_tire_file()) out.push_back({"tire_file", kFileOnly});
+  if (msg.has_tire_file_front()) out.push_back({"tire_file_front", kFileOnly});
+  if (msg.has_tire_file_rear()) out.push_back({"tire_file_rear", kFileOnly});
+  for (int w = 0; w < kNumWheels; ++w) {
+    const pb::WheelParams& wp = Wheel(msg, w);
+    const std::string prefix = std::string(kWheelFields[w]) + ".";
+    if (wp.has_tire_file()) out.push_back({prefix + "tire_file", kFileOnly});
+    if (!wp.has_magic_formula()) continue;
+    CheckTireMessage(wp.magic_formula(), prefix + "magic_formula.", out);
+  }
+}
+
 }  // namespace
 
 std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
@@ -159,6 +241,7 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
   CheckEnum(msg, "yaw_mode", out);
   CheckEnum(msg, "tire_law", out);
   CheckEnum(msg, "differential", out);
+  CheckTires(msg, out);
   const Params raw = RawParams(msg);
   for (ParamIssue& i : CheckParams(raw)) {
     if (missing.count(i.field) != 0) continue;
@@ -171,7 +254,21 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg) {
     }
     out.push_back(std::move(i));
   }
+  NameTireFiles(msg, out);
   return out;
+}
+
+MagicFormula MagicFormulaFromProto(const pb::MagicFormulaTire& tire) {
+  std::vector<ParamIssue> issues;
+  CheckTireMessage(tire, "magic_formula.", issues);
+  MagicFormula m = TireFromProto(tire);
+  if (issues.empty()) issues = CheckMagicFormula(m, "magic_formula.");
+  if (!issues.empty()) {
+    throw ParamsError((tire.name().empty() ? std::string("tyre") : tire.name()) + ": " +
+                      FormatIssues(issues));
+  }
+  DeriveMagicFormula(m);
+  return m;
 }
 
 ValidParams ParamsFromProto(const pb::VehicleParams& msg) {

@@ -79,11 +79,13 @@ AppliedControl ComputeControls(const Params& p, const DriverInput& in, double h,
   const double brake = u.brake * p.brake_force_max;
   for (int w = 0; w < kNumWheels; ++w) {
     const bool front = IsFront(w);
-    u.gamma_W[w] = front ? u.gamma : 0.0;  // parallel front steering, rear wheels fixed
-    u.cos_gamma_W[w] = std::cos(u.gamma_W[w]);
-    u.sin_gamma_W[w] = std::sin(u.gamma_W[w]);
-    u.drive_W[w] = 0.5 * drive * (front ? p.drive_front_fraction : 1.0 - p.drive_front_fraction);
-    u.brake_W[w] = 0.5 * brake * (front ? p.brake_front_fraction : 1.0 - p.brake_front_fraction);
+    u.wheel_gamma[w] = front ? u.gamma : 0.0;  // parallel front steering, rear wheels fixed
+    u.wheel_cos_gamma[w] = std::cos(u.wheel_gamma[w]);
+    u.wheel_sin_gamma[w] = std::sin(u.wheel_gamma[w]);
+    u.wheel_drive[w] =
+        0.5 * drive * (front ? p.drive_front_fraction : 1.0 - p.drive_front_fraction);
+    u.wheel_brake[w] =
+        0.5 * brake * (front ? p.brake_front_fraction : 1.0 - p.brake_front_fraction);
   }
   return u;
 }

@@ -56,6 +56,13 @@ int AutomaticGear(const Params& p, int g, double w_out, double pedal) {
   return g;
 }
 
+// The integral action of ABS and traction control on a factor in [0, 1]: with the slip's excess
+// over its target (> 0: too much slip, in units of the target; >= -1), the factor falls at
+// `release` per unit of excess and rises at `apply` per unit missing.
+double SlipIntegralAction(double factor, double excess, double release, double apply, double h) {
+  return std::clamp(factor + h * (excess > 0.0 ? -release * excess : -apply * excess), 0.0, 1.0);
+}
+
 // Per-wheel longitudinal velocity of the mount point along the wheel's heading, from the body
 // motion alone (the controllers' view at the step start; no terrain).
 std::array<double, kNumWheels> WheelSpeedsAlongHeading(const Params& p, const StateVector& x) {
@@ -206,9 +213,7 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
       if (d.drive_share[w] <= 0.0) continue;
       excess = std::max(excess, dir * kappa[w] / (kSlipTarget * d.peak_slip[w]) - 1.0);
     }
-    excess = std::max(excess, -1.0);
-    ds.tc = std::clamp(ds.tc + h * (excess > 0.0 ? -kTcRelease * excess : -kTcApply * excess),
-                       0.0, 1.0);
+    ds.tc = SlipIntegralAction(ds.tc, std::max(excess, -1.0), kTcRelease, kTcApply, h);
   } else {
     ds.tc = 1.0;
   }
@@ -225,12 +230,12 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
       if (std::abs(v_long[w]) > kControlSpeed) {
         excess = std::max(-Sgn(v_long[w]) * kappa[w] / (kSlipTarget * d.peak_slip[w]) - 1.0, -1.0);
       }
-      ds.abs[w] = std::clamp(
-          ds.abs[w] + h * (excess > 0.0 ? -kAbsRelease * excess : -kAbsApply * excess), 0.0, 1.0);
+      ds.abs[w] = SlipIntegralAction(ds.abs[w], excess, kAbsRelease, kAbsApply, h);
     } else {
       ds.abs[w] = 1.0;
     }
-    u.brake_torque_W[w] = ds.abs[w] * brake * d.brake_torque[w] + in.handbrake * d.handbrake_torque[w];
+    u.wheel_brake_torque[w] =
+        ds.abs[w] * brake * d.brake_torque[w] + in.handbrake * d.handbrake_torque[w];
     u.abs_factor[w] = ds.abs[w];
   }
   u.tc_factor = ds.tc;
@@ -240,11 +245,11 @@ AppliedControl ComputeControlsFull(const Params& p, const DriverInput& in, doubl
   // Road-wheel angles at the step start, for the record.
   const FrontWheelAngles geom = SteeringGeometry(p, x[sx::kHandWheel]);
   for (int w = 0; w < kNumWheels; ++w) {
-    u.cos_gamma_W[w] = IsFront(w) ? geom.cos_gamma[w] : 1.0;
-    u.sin_gamma_W[w] = IsFront(w) ? geom.sin_gamma[w] : 0.0;
-    u.gamma_W[w] = std::atan2(u.sin_gamma_W[w], u.cos_gamma_W[w]);
-    u.drive_W[w] = 0.0;
-    u.brake_W[w] = u.brake_torque_W[w] / p.wheel[w].radius;
+    u.wheel_cos_gamma[w] = IsFront(w) ? geom.cos_gamma[w] : 1.0;
+    u.wheel_sin_gamma[w] = IsFront(w) ? geom.sin_gamma[w] : 0.0;
+    u.wheel_gamma[w] = std::atan2(u.wheel_sin_gamma[w], u.wheel_cos_gamma[w]);
+    u.wheel_drive[w] = 0.0;
+    u.wheel_brake[w] = u.wheel_brake_torque[w] / p.wheel[w].radius;
   }
   return u;
 }

@@ -160,7 +160,18 @@ void DeriveFullModel(Params& p) {
                         (front ? p.brake_front_fraction : 1.0 - p.brake_front_fraction) * wp.radius;
     d.handbrake_torque[w] = front ? 0.0 : 0.5 * p.handbrake_force_max * wp.radius;
     // z = C_kappa kappa / (3 mu Fz) with C_kappa proportional to the load: kappa* is load-free.
-    d.peak_slip[w] = d.peak_z * 3.0 * d.mu_static * wp.nominal_load / wp.longitudinal_stiffness;
+    // A Magic Formula tyre's: where its Fx peaks at its nominal load.
+    d.peak_slip[w] =
+        wp.mf.enabled ? MagicFormulaPeaks(wp.mf, wp.mf.fnomin * wp.mf.lfzo).kappa
+                      : d.peak_z * 3.0 * d.mu_static * wp.nominal_load / wp.longitudinal_stiffness;
+    const double camber = w == kLF || w == kLR ? -wp.camber : wp.camber;
+    d.camber_cos[w] = std::cos(camber);
+    d.camber_sin[w] = std::sin(camber);
+    d.tire_vertical_stiffness[w] = p.tire_vertical_stiffness;
+    if (wp.mf.enabled && wp.mf.vertical_stiffness > 0.0) {
+      const double dpi = (wp.mf.inflpres - wp.mf.nompres) / wp.mf.nompres;
+      d.tire_vertical_stiffness[w] = wp.mf.vertical_stiffness * (1.0 + wp.mf.pfz1 * dpi);
+    }
     const double x = 1.0 / p.tire_load_sensitivity;  // sin(2 atan x) = 2x / (1 + x^2)
     d.load_sensitivity_norm[w] = (1.0 + x * x) / (2.0 * x);
   }
@@ -178,6 +189,11 @@ void DeriveFullModel(Params& p) {
 
 void DeriveParams(Params& p) {
   p.wheelbase = p.b + p.c;
+  for (WheelParams& wp : p.wheel) {
+    if (!wp.mf.enabled) continue;
+    DeriveMagicFormula(wp.mf);
+    wp.radius = wp.mf.unloaded_radius;  // the tyre file's free radius
+  }
   // Mount points A in the body frame (X forward, Y left, Z up), the paper's Fig. 4:
   //   LF (+b, +bL)   RF (+b, -bP)
   //   LR (-c, +bL)   RR (-c, -bP)     each z_offset below T.
@@ -202,6 +218,61 @@ void DeriveParams(Params& p) {
     p.probe_dir_B[k] = Eigen::Vector3d(ends[k].x(), ends[k].y(), 0.0) / p.probe_length[k];
   }
   DeriveFullModel(p);
+}
+
+// A Magic Formula tyre's coefficients: every one present and finite, and the values the equations
+// divide by or take a peak from on the right side (field paths lf.magic_formula.pdy1).
+void AddMagicFormulaIssues(const MagicFormula& m, const std::string& prefix,
+                           std::vector<ParamIssue>& out) {
+  const std::size_t issues_before = out.size();
+  bool finite = true;
+  for (const MagicFormulaField& f : MagicFormulaFields()) {
+    if (!std::isfinite(m.*f.member)) {
+      out.push_back(
+          {prefix + std::string(f.name), std::isnan(f.fallback) && std::isnan(m.*f.member)
+                                             ? "missing: the Magic Formula's equations need it"
+                                             : "must be a finite number"});
+      finite = false;
+    }
+  }
+  if (!finite) return;
+  auto need = [&](bool ok, const char* field, const std::string& why) {
+    if (!ok) out.push_back({prefix + field, why});
+  };
+  constexpr double kHalfPi = 1.5707963267948966;
+  need(m.fnomin > 0.0, "fnomin", "the nominal load must be positive");
+  need(m.lfzo > 0.0, "lfzo", "the nominal load's scale must be positive");
+  need(m.unloaded_radius > 0.0 && m.unloaded_radius <= 3.0, "unloaded_radius",
+       "must be in (0, 3] m");
+  need(m.longvl > 0.0, "longvl", "the nominal speed must be positive");
+  need(m.vxlow > 0.0, "vxlow", "must be positive");
+  need(m.nompres > 0.0, "nompres", "the nominal pressure must be positive");
+  need(m.inflpres > 0.0, "inflpres", "the inflation pressure must be positive");
+  need(m.longitudinal_stiffness > 0.0, "longitudinal_stiffness", "must be positive");
+  need(m.lateral_stiffness > 0.0, "lateral_stiffness", "must be positive");
+  need(m.vertical_stiffness >= 0.0, "vertical_stiffness",
+       "must not be negative (0: the vehicle's)");
+  need(m.pcx1 * m.lcx > 1.0, "pcx1",
+       "the shape factor PCX1 * LCX must exceed 1 (a curve with a peak)");
+  need(m.pcy1 * m.lcy > 1.0, "pcy1",
+       "the shape factor PCY1 * LCY must exceed 1 (a curve with a peak)");
+  need(m.pdx1 * m.lmux > 0.0, "pdx1", "the friction PDX1 * LMUX must be positive");
+  need(m.pdy1 * m.lmuy > 0.0, "pdy1", "the friction PDY1 * LMUY must be positive");
+  need(m.kpumin < 0.0 && m.kpumax > 0.0, "kpumin",
+       "KPUMIN < 0 < KPUMAX: the range holds zero slip");
+  need(m.alpmin > -kHalfPi && m.alpmin < 0.0 && m.alpmax > 0.0 && m.alpmax < kHalfPi, "alpmin",
+       "-pi/2 < ALPMIN < 0 < ALPMAX < pi/2");
+  need(m.cammin < m.cammax, "cammin", "CAMMIN must be below CAMMAX");
+  need(m.presmin < m.presmax, "presmin", "PRESMIN must be below PRESMAX");
+  need(m.fzmax > 0.0, "fzmax", "must be positive");
+  if (out.size() != issues_before) return;
+  // The slip stiffnesses at the nominal load: Fx along the slip, Fy against it (TNO's signs).
+  const MfLoad L = MagicFormulaLoad(m, m.fnomin * m.lfzo, 0.0, m.inflpres);
+  need(L.Kxk > 0.0, "pkx1",
+       "the slip stiffness Kxk at FNOMIN is " + FormatApprox(L.Kxk) + " N: it must be positive");
+  need(L.Kya < 0.0, "pky1",
+       "the cornering stiffness Kya at FNOMIN is " + FormatApprox(L.Kya) +
+           " N/rad: it must be negative (the side force opposes the slip, ISO signs as TNO's)");
 }
 
 // Rules between the full model's parameters (each named by the field a user would change).
@@ -235,6 +306,12 @@ void CheckFullModel(const Params& p, std::vector<ParamIssue>& out) {
 }
 
 }  // namespace
+
+std::vector<ParamIssue> CheckMagicFormula(const MagicFormula& mf, const std::string& prefix) {
+  std::vector<ParamIssue> out;
+  AddMagicFormulaIssues(mf, prefix, out);
+  return out;
+}
 
 std::string FormatIssues(const std::vector<ParamIssue>& issues) {
   std::string s;
@@ -270,6 +347,11 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
                                                 FormatNumber(wp.max_length) + " m), got " +
                                                 FormatNumber(wp.min_length)});
     }
+    if (!(std::abs(wp.camber) <= 0.3)) {
+      out.push_back({prefix + "camber",
+                     "static camber must be in [-0.3, 0.3] rad, got " + FormatNumber(wp.camber)});
+    }
+    if (wp.mf.enabled) AddMagicFormulaIssues(wp.mf, prefix + "magic_formula.", out);
     if (p.model == VehicleModel::kFull && !(wp.damper_coefficient > 0.0)) {
       out.push_back({prefix + "damper_coefficient",
                      "must be positive for the full model (the wheel's travel is set by it)"});
@@ -357,8 +439,13 @@ double MaxResolvedStep(const Params& p, std::string* why) {
       const WheelParams& wp = p.wheel[w];
       const std::string name(kWheelNames[w]);
       const double k_brake = (d.brake_torque[w] + d.handbrake_torque[w]) / p.brake_stick_angle;
+      // A Magic Formula tyre: its carcass stiffness Cx (= Kxk / sigma_kappa) at twice its
+      // nominal load, at most.
       const double k_tire =
-          wp.longitudinal_stiffness * wp.radius * wp.radius / p.tire_relaxation_long;
+          wp.mf.enabled
+              ? MagicFormulaLoad(wp.mf, 2.0 * wp.mf.fnomin * wp.mf.lfzo, 0.0, wp.mf.inflpres).Cx *
+                    wp.radius * wp.radius
+              : wp.longitudinal_stiffness * wp.radius * wp.radius / p.tire_relaxation_long;
       limit(2.0 / std::sqrt((k_brake + k_tire) / wp.spin_inertia), name + " wheel on a held brake");
       if (p.stick_damping_time > 0.0) {
         limit(2.5 / (k_brake * p.stick_damping_time / wp.spin_inertia), name + " brake stick damping");

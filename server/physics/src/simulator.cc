@@ -14,6 +14,32 @@
 
 namespace vdyn {
 
+namespace {
+
+// The horizontal traces held for a step, at x: the walls (both models) and the kerb edges (the
+// full model). Returns whether the wall traces were cast (near a steep surface).
+bool FindHeldContacts(const Params& p, const Terrain& terrain, const StateVector& x,
+                      WallPlanes& walls, WheelEdges& edges) {
+  const bool traced = FindWalls(p, terrain, x, walls);
+  if (p.model == VehicleModel::kFull) FindWheelEdges(p, terrain, x, edges);
+  return traced;
+}
+
+// xdot = f(x) of the parameters' model, with the controls and the held contacts: the one place
+// the paper's and the full model's equations are chosen, shared by Step and Forward (as MuJoCo's
+// mj_forward serves mj_step).
+void EvaluateModel(const Params& p, const Terrain& terrain, const AppliedControl& u,
+                   const WallPlanes& walls, const WheelEdges& edges, const StateVector& x,
+                   StateVector& xdot, Derived& out, bool report_all) {
+  if (p.model == VehicleModel::kFull) {
+    EvaluateDerivativeFull(p, terrain, u, walls, edges, x, xdot, out, report_all);
+  } else {
+    EvaluateDerivative(p, terrain, u, walls, x, xdot, out, report_all);
+  }
+}
+
+}  // namespace
+
 State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, double speed,
                    double* max_misfit) {
   const Eigen::Matrix3d R_yaw =
@@ -46,7 +72,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
     if (p.model == VehicleModel::kFull) {
       // The full model's wheel hangs on its spring (within its travel) and its tire is
       // compressed by the load.
-      lS = std::clamp(lS, wp.min_length, wp.max_length) - F / p.tire_vertical_stiffness;
+      lS = std::clamp(lS, wp.min_length, wp.max_length) - F / p.full.tire_vertical_stiffness[w];
     }
     A(w, 0) = 1.0;
     A(w, 1) = -p.p_TA_B[w].x();
@@ -186,6 +212,32 @@ void SetInvariantHandler(InvariantHandler handler) {
   g_invariant_handler.store(handler != nullptr ? handler : &AssertionFailure);
 }
 
+bool CheckStepDemands(const StepRecord& r, const State& after, char* why, std::size_t n) {
+  constexpr double kUnitTolerance = 1e-9;
+  if (!r.state.x.allFinite()) {
+    std::snprintf(why, n, "demand: the starting state is not finite");
+    return false;
+  }
+  const State* states[] = {&r.state, &after};
+  const char* names[] = {"starting", "new"};
+  for (int i = 0; i < 2; ++i) {
+    const double q = states[i]->x.segment<4>(sx::kQ).norm();
+    if (!(std::abs(q - 1.0) <= kUnitTolerance)) {
+      std::snprintf(why, n, "demand: the %s state's quaternion has norm %.9g, not 1", names[i], q);
+      return false;
+    }
+  }
+  for (int w = 0; w < kNumWheels; ++w) {
+    const double Fp = r.derived.wheel[w].Fp;
+    if (!(Fp >= 0.0)) {
+      std::snprintf(why, n, "demand: wheel %s: spring force Fp = %g N, not >= 0",
+                    kWheelNames[static_cast<std::size_t>(w)].data(), Fp);
+      return false;
+    }
+  }
+  return true;
+}
+
 std::string CheckStepInvariants(const StepRecord& r, const State& after) {
   std::string why = UnitQuaternion("starting", r.state);
   if (why.empty()) why = UnitQuaternion("new", after);
@@ -200,13 +252,23 @@ std::string CheckStepInvariants(const StepRecord& r, const State& after) {
                     wheel, o.Fp);
       why = buf;
     }
-    const std::pair<const char*, double> scalars[] = {
-        {"Fp", o.Fp},           {"Fh", o.Fh},
-        {"Fb", o.Fb},           {"Fy", o.Fy},
-        {"Frr", o.Frr},         {"lS", o.lS},
-        {"lS_rate", o.lS_rate}, {"slip_angle", o.slip_angle},
-        {"omega", o.omega},     {"slip_ratio", o.slip_ratio},
-        {"Fx", o.Fx},           {"Mz", o.Mz}};
+    const std::pair<const char*, double> scalars[] = {{"Fp", o.Fp},
+                                                      {"Fh", o.Fh},
+                                                      {"Fb", o.Fb},
+                                                      {"Fy", o.Fy},
+                                                      {"Frr", o.Frr},
+                                                      {"lS", o.lS},
+                                                      {"lS_rate", o.lS_rate},
+                                                      {"slip_angle", o.slip_angle},
+                                                      {"omega", o.omega},
+                                                      {"slip_ratio", o.slip_ratio},
+                                                      {"Fx", o.Fx},
+                                                      {"Mz", o.Mz},
+                                                      {"kappa_law", o.kappa_law},
+                                                      {"alpha_law", o.alpha_law},
+                                                      {"camber", o.camber},
+                                                      {"Mx", o.Mx},
+                                                      {"My", o.My}};
     for (const auto& [name, v] : scalars) Finite(why, wheel, name, v);
     Finite(why, wheel, "F_W", o.F_W);
   }
@@ -227,30 +289,20 @@ StepStatus Simulator::Step() {
   const Terrain& terrain = world_->terrain;
   ws_.start = state_;
 
-  // Stage: controls (latched input, speed control) and walls, held for the whole step.
+  // Stage: controls (latched input, speed control) and the horizontal traces, held for the step.
   record_.input = input_;
   record_.control = ComputeControls(params_.get(), input_, h_, state_);
-  if (FindWalls(params_.get(), terrain, state_.x, ws_.walls)) ++wall_traced_steps_;
+  if (FindHeldContacts(params_.get(), terrain, state_.x, ws_.walls, ws_.edges)) {
+    ++wall_traced_steps_;
+  }
 
   // Stage: RK4 over the equations of motion; stage 0 is evaluated at x_n and is what we report.
   const AppliedControl& u = record_.control;
-  const bool full = params_->model == VehicleModel::kFull;
-  if (full) {
-    // The wheel-level horizontal traces (kerb edges), held for the step like the walls.
-    if (FindWheelEdges(params_.get(), terrain, state_.x, ws_.edges)) ++edge_traced_steps_;
-    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
-      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-      EvaluateDerivativeFull(params_.get(), terrain, u, ws_.walls, ws_.edges, x, xdot, d,
-                             stage == 0);
-    };
-    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
-  } else {
-    auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
-      Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
-      EvaluateDerivative(params_.get(), terrain, u, ws_.walls, x, xdot, d, stage == 0);
-    };
-    Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
-  }
+  auto f = [&](int stage, const StateVector& x, StateVector& xdot) {
+    Derived& d = stage == 0 ? record_.derived : ws_.stage_derived;
+    EvaluateModel(params_.get(), terrain, u, ws_.walls, ws_.edges, x, xdot, d, stage == 0);
+  };
+  Rk4Step(kClassicalRk4, f, h_, ws_.rk4, state_.x);
 
   // Stage: post-step.
   StateVector& x = state_.x;
@@ -261,7 +313,8 @@ StepStatus Simulator::Step() {
     return StepStatus::kNonFinite;
   }
   x.segment<4>(sx::kQ) /= qn;
-  if (!full && params_->yaw_mode == YawMode::kPaper && ws_.stage_derived.any_contact) {
+  if (params_->model == VehicleModel::kPaper && params_->yaw_mode == YawMode::kPaper &&
+      ws_.stage_derived.any_contact) {
     // The yaw rate is eq. 6 of the new state (contact as seen by the last stage).
     const Eigen::Matrix3d R_WB = Orientation(x).toRotationMatrix();
     x[sx::kW + 2] = R_WB.col(0).dot(Velocity(x)) * std::sin(u.gamma) / params_->wheelbase;
@@ -271,6 +324,9 @@ StepStatus Simulator::Step() {
   record_.state = ws_.start;
   state_.step = ws_.start.step + 1;
   record_.hash_after = StateHash(state_);
+  if (!CheckStepDemands(record_, state_, last_invariant_failure_, sizeof last_invariant_failure_)) {
+    ++invariant_failures_;
+  }
   if constexpr (kCheckInvariants) {
     if (std::string why = CheckStepInvariants(record_, state_); !why.empty()) InvariantFailed(why);
   }
@@ -282,15 +338,10 @@ void Simulator::Forward(Derived& out, AppliedControl* control) const {
   const AppliedControl u = ComputeControls(params_.get(), input_, h_, s);
   if (control != nullptr) *control = u;
   WallPlanes walls;
-  FindWalls(params_.get(), world_->terrain, state_.x, walls);
+  WheelEdges edges;
+  FindHeldContacts(params_.get(), world_->terrain, state_.x, walls, edges);
   StateVector xdot;
-  if (params_->model == VehicleModel::kFull) {
-    WheelEdges edges;
-    FindWheelEdges(params_.get(), world_->terrain, state_.x, edges);
-    EvaluateDerivativeFull(params_.get(), world_->terrain, u, walls, edges, state_.x, xdot, out);
-  } else {
-    EvaluateDerivative(params_.get(), world_->terrain, u, walls, state_.x, xdot, out);
-  }
+  EvaluateModel(params_.get(), world_->terrain, u, walls, edges, state_.x, xdot, out, true);
 }
 
 }  // namespace vdyn

@@ -1,6 +1,7 @@
 #include "vdyn/physics/vehicle_model.h"
 
 #include "vdyn/physics/full_model.h"
+#include "vdyn/physics/magic_formula.h"
 
 #include <algorithm>
 #include <cmath>
@@ -132,7 +133,7 @@ void TireForces(const Params& p, const AppliedControl& u, int w, const BodyKinem
   const WheelParams& wp = p.wheel[w];
   const Eigen::Vector3d& n_W = o.n_W;
   const Eigen::Vector3d heading_W =
-      u.cos_gamma_W[w] * k.R_WB.col(0) + u.sin_gamma_W[w] * k.R_WB.col(1);
+      u.wheel_cos_gamma[w] * k.R_WB.col(0) + u.wheel_sin_gamma[w] * k.R_WB.col(1);
   Eigen::Vector3d t_long = heading_W - heading_W.dot(n_W) * n_W;
   const double t_norm = t_long.norm();
   t_long = t_norm > 1e-9 ? Eigen::Vector3d(t_long / t_norm) : k.R_WB.col(0);
@@ -146,8 +147,8 @@ void TireForces(const Params& p, const AppliedControl& u, int w, const BodyKinem
   o.slip_angle = report_all ? std::atan(tan_alpha) : 0.0;
   double Fy = TireLateralForce(p.tire_law, tan_alpha, wp.cornering_stiffness, p.mu, o.Fp);
   const double roll_sign = SoftSign(o.v_long, 0.1 * p.tire_slip_speed);
-  double Fh = u.drive_W[w];
-  double Fb = u.brake_W[w] * roll_sign;  // opposes rolling; fades out at standstill
+  double Fh = u.wheel_drive[w];
+  double Fb = u.wheel_brake[w] * roll_sign;  // opposes rolling; fades out at standstill
   double Frr = p.rolling_resistance * o.Fp * roll_sign;
   // Friction circle: the tangential force never exceeds mu * Fp.
   double Fx = Fh - Fb - Frr;
@@ -255,7 +256,7 @@ void Derivatives(const Params& p, const BodyKinematics& k, const BodyLoads& load
   std::array<TraceHit, kNumWheels> hits;
   SenseTerrain(p, terrain, u, x, k, hits, out);
   for (int w = 0; w < kNumWheels; ++w) {
-    out.wheel[w].gamma = u.gamma_W[w];
+    out.wheel[w].gamma = u.wheel_gamma[w];
     Suspension(p.wheel[w], k, hits[w], out.wheel[w]);
     TireForces(p, u, w, k, report_all, out.wheel[w]);
   }
@@ -282,6 +283,8 @@ constexpr double kRetraceOffset = 1e-3;       // m off a steep face before traci
 constexpr double kGovernorBand = 0.1;         // of idle speed: the idle governor's band
 constexpr double kLimiterBand = 0.02;         // of the rev limit: the limiter's band
 constexpr double kStickSlipRateMax = 500.0;   // 1/s: a friction element's fastest break-away
+constexpr double kMinRelaxationLength = 0.05;  // m: a Magic Formula tyre's shortest (light load)
+constexpr double kSlidePullRate = 200.0;       // 1/s: a deflection past the peaks back, at rest
 
 double Sgn(double v) { return static_cast<double>((v > 0.0) - (v < 0.0)); }
 
@@ -386,7 +389,7 @@ void SuspensionFull(const Params& p, int w, const BodyKinematics& k, const Trace
       o.kerb = true;
     }
   }
-  N *= p.tire_vertical_stiffness;
+  N *= p.full.tire_vertical_stiffness[w];
   const double Fz = N.norm();
   o.contact = pen_sum > 0.0 && Fz > 0.0;
   if (o.contact) {
@@ -406,6 +409,94 @@ void SuspensionFull(const Params& p, int w, const BodyKinematics& k, const Trace
   o.lS = l_s;
   o.lT = wp.free_length - l_s;
   o.lS_rate = l_s_rate;
+}
+
+// 4b. The Magic Formula tyre (docs/model.md, 8.2b): the same deflections (u, v) with the file's
+//     load-dependent relaxation lengths, the low-speed damping as the brush law's, the MF 6.1 law
+//     at the transient slips and the wheel's inclination, the sliding limit at low speed.
+void TireForcesMagicFormula(const Params& p, int w, const BodyKinematics& k,
+                            const Eigen::Vector3d& lateral_W, const Eigen::Vector3d& t_long,
+                            const Eigen::Vector3d& t_lat, double defl_u, double defl_v,
+                            double v_slip, bool report_all, WheelOutputs& o, double& du,
+                            double& dv) {
+  const WheelParams& wp = p.wheel[w];
+  const MagicFormula& m = wp.mf;
+  const double speed = std::abs(o.v_long);
+  // Inclination to the ground: the wheel's spin axis (its left, after the static camber: minus
+  // camber on the left, plus on the right, so that negative camber leans the top inboard) against
+  // the contact normal; ISO-W: positive leans the top to the right.
+  const bool left = w == kLF || w == kLR;
+  const Eigen::Vector3d axle_W =
+      p.full.camber_cos[w] * lateral_W + p.full.camber_sin[w] * k.R_WB.col(2);
+  const double gamma = std::asin(std::clamp(axle_W.dot(o.n_W), -1.0, 1.0));
+  // A tyre on the other side than its file's TYRESIDE is mirrored (TNO's convention).
+  const double mirror = (m.side == 0 || m.side == (left ? 1 : -1)) ? 1.0 : -1.0;
+  const MfLoad load = MagicFormulaLoad(m, o.contact ? o.Fp : 0.0, mirror * gamma, m.inflpres);
+  const double sigma_kappa = std::max(load.sigma_kappa, kMinRelaxationLength);
+  const double sigma_alpha = std::max(load.sigma_alpha, kMinRelaxationLength);
+  const double kappa_t = defl_u / sigma_kappa;
+  const double tan_alpha_t = defl_v / sigma_alpha;
+  if (report_all) {
+    o.slip_ratio = v_slip / std::max(speed, kSlipSpeedFloor);
+    o.slip_ratio_t = kappa_t;
+    o.slip_angle_t = std::atan(tan_alpha_t);
+    o.slip_angle = std::atan(o.v_lat / std::max(speed, kSlipSpeedFloor));
+    o.camber = gamma;
+    o.pressure = m.inflpres;
+    o.kappa_law = o.alpha_law = 0.0;
+  }
+  if (!o.contact) {
+    o.Fx = o.Fy = o.Mz = o.Mx = o.My = 0.0;
+    o.F_W.setZero();
+    du = -defl_u / kAirRelaxTime;
+    dv = -defl_v / kAirRelaxTime;
+    return;
+  }
+  // Low-speed damping of the patch, as the brush law's (faded out by kLowSpeed).
+  const double fade = std::max(0.0, 1.0 - speed / kLowSpeed);
+  const double damp = p.tire_low_speed_damping * fade * fade;
+  const double kappa = kappa_t + damp * v_slip / std::max(load.Kxk, 1.0);
+  const double tan_alpha = tan_alpha_t + damp * o.v_lat / std::max(std::abs(load.Kya), 1.0);
+  const double Vc = std::sqrt(o.v_long * o.v_long + o.v_lat * o.v_lat);
+  const MfOutput f =
+      EvaluateMagicFormula(m, load, {kappa, mirror * tan_alpha, o.v_long, Vc},
+                           /*aligning=*/report_all || w == kLF || w == kRF, report_all);
+  o.Fx = f.Fx;
+  o.Fy = mirror * f.Fy;
+  o.Mz = mirror * f.Mz;
+  o.My = f.My;
+  if (report_all) {
+    o.kappa_law = kappa;
+    o.alpha_law = std::atan(tan_alpha);
+    o.Mx = mirror * f.Mx;
+  }
+  o.F_W = o.Fp * o.n_W + o.Fx * t_long + o.Fy * t_lat;
+
+  // Relaxation (as the brush law's) with the file's relaxation lengths. At low speed (where a
+  // deflection would otherwise grow without bound, and stay wound up when the car stops) the patch
+  // slides once its deflection carries the peak force on the carcass stiffness (slide >= 1): the
+  // outward part of the rate is removed and the deflection pulled back to that limit, both faded
+  // in below kLowSpeed, so that at speed the whole curve is followed.
+  du = v_slip - speed * defl_u / sigma_kappa;
+  dv = o.v_lat - speed * defl_v / sigma_alpha;
+  const double hold = fade;
+  if (f.slide > 1.0 && hold > 0.0) {
+    const double kx = std::max(load.Kxk, 1.0) / sigma_kappa;
+    const double ky = std::max(std::abs(load.Kya), 1.0) / sigma_alpha;
+    const double wx = kx * defl_u, wy = ky * defl_v;
+    const double wn = std::sqrt(wx * wx + wy * wy);
+    if (wn > 0.0) {
+      const double ex = wx / wn, ey = wy / wn;
+      const double radial = ex * kx * du + ey * ky * dv;
+      if (radial > 0.0) {
+        du -= hold * radial * ex / kx;
+        dv -= hold * radial * ey / ky;
+      }
+      const double pull = hold * kSlidePullRate * (1.0 - 1.0 / f.slide);
+      du -= pull * defl_u;
+      dv -= pull * defl_v;
+    }
+  }
 }
 
 // 4. Tire forces: transient slips from the contact patch's deflections (u, v), the brush law
@@ -428,6 +519,16 @@ void TireForcesFull(const Params& p, int w, const BodyKinematics& k, double cos_
   o.v_lat = v_B.dot(t_lat);
   const double v_slip = omega * wp.radius - o.v_long;  // longitudinal slip velocity
   const double speed = std::abs(o.v_long);
+  if (wp.mf.enabled) {
+    const Eigen::Vector3d lateral_W = -sin_g * k.R_WB.col(0) + cos_g * k.R_WB.col(1);
+    TireForcesMagicFormula(p, w, k, lateral_W, t_long, t_lat, defl_u, defl_v, v_slip, report_all, o,
+                           du, dv);
+    return;
+  }
+  if (report_all) {
+    o.camber = o.pressure = o.Mx = 0.0;  // the brush law reads no camber and no pressure
+    o.kappa_law = o.alpha_law = 0.0;
+  }
   const double kappa_t = defl_u / p.tire_relaxation_long;
   const double tan_alpha_t = defl_v / p.tire_relaxation_lat;
   if (report_all) {
@@ -453,6 +554,10 @@ void TireForcesFull(const Params& p, int w, const BodyKinematics& k, double cos_
   const double damp = p.tire_low_speed_damping * fade * fade;
   const double phi_x = C_kappa * kappa_t + damp * v_slip;
   const double phi_y = C_alpha * tan_alpha_t + damp * o.v_lat;
+  if (report_all) {
+    o.kappa_law = phi_x / C_kappa;
+    o.alpha_law = std::atan(phi_y / C_alpha);
+  }
   const double mu0 = p.full.mu_static;
   const double force_max = 3.0 * mu0 * Fz;
   const double z = std::sqrt(phi_x * phi_x + phi_y * phi_y) / force_max;
@@ -518,18 +623,20 @@ void DrivetrainFull(const Params& p, const AppliedControl& u, const StateVector&
     WheelOutputs& o = out.wheel[w];
     const double omega = x[sx::kWheelSpin + w];
     const double T_drive = p.drivetrain_efficiency * u.gearbox_ratio * d.drive_share[w] * clutch.torque;
-    const StickSlip brake = LuGre(x[sx::kBrake + w], omega, u.brake_torque_W[w],
+    const StickSlip brake = LuGre(x[sx::kBrake + w], omega, u.wheel_brake_torque[w],
                                   p.brake_stick_angle, p.stick_damping_time);
     xdot[sx::kBrake + w] = brake.rate;
-    const double T_roll = o.contact ? p.rolling_resistance * o.Fp * wp.radius *
-                                          std::clamp(omega * wp.radius / kRollingSpeed, -1.0, 1.0)
-                                    : 0.0;
+    // Rolling resistance: f_rr Fz R, or a Magic Formula tyre's |My|, against the rolling.
+    const double T_rr = wp.mf.enabled ? std::abs(o.My) : p.rolling_resistance * o.Fp * wp.radius;
+    const double T_roll =
+        o.contact ? T_rr * std::clamp(omega * wp.radius / kRollingSpeed, -1.0, 1.0) : 0.0;
     net[w] = T_drive - brake.torque - wp.radius * o.Fx - T_roll;
     o.drive_torque = T_drive;
     o.brake_torque = std::abs(brake.torque);
     o.Fh = T_drive / wp.radius;
     o.Fb = o.brake_torque / wp.radius;
     o.Frr = std::abs(T_roll) / wp.radius;
+    o.My = -T_roll;
   }
   for (int w = 0; w < kNumWheels; ++w) xdot[sx::kWheelSpin + w] = net[w] / p.wheel[w].spin_inertia;
   if (p.differential == Differential::kLocked) {

@@ -54,6 +54,8 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_out_of_range_ = drops_.Register("out-of-range input on vdyn/input");
   drop_rejected_ = drops_.Register("rejected control request");
   drop_step_input_ = drops_.Register("out-of-range input in a step request");
+  // Checked by the receiver or the planner before: never expected, counted should it happen.
+  drop_session_refused_input_ = drops_.Register("input the session refused after its checks");
   drop_unknown_buttons_ = drops_.Register("unknown button bits on vdyn/input (ignored)");
   drop_unanswered_gone_ = drops_.Register(
       "control request unanswered: its client went away before its steps were done");
@@ -64,6 +66,11 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   drop_unanswered_room_ = drops_.Register("control request unanswered: no room to hand it on");
 
   if (const std::string clash = FindClash(); !clash.empty()) throw std::runtime_error(clash);
+  // This start of the server: its states, events and world carry it, so that a recording of a
+  // server restarted with the same id tells the two starts apart.
+  if (options_.session.incarnation == 0) {
+    options_.session.incarnation = static_cast<std::uint64_t>(base::WallNow().ns);
+  }
   // From here on this server runs its vehicles: a server that starts later gives way to it.
   if (!participant_.SetUserData(Claim(true).Encode())) {
     spdlog::warn("server '{}': cannot announce that it runs its vehicles: {}",
@@ -84,6 +91,7 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
       DescribeWorld(*world_, options_.session.server_id, options_.session.step_ns));
+  world_msg->set_incarnation(options_.session.incarnation);
   // Side by side on the free ground around the spawn (placement.h).
   const std::vector<Pose2> poses =
       StartPoses(*world_, ParamsFromProto(options_.session.default_params).get(),
@@ -170,7 +178,9 @@ bool ServerNode::Boundary() {
     }
     const bool step = p.op == PreparedRequest::Op::kStep;
     if (step && deferred_step_replies_.size() == kMaxDeferred) break;
-    if (step && p.step_input) session_->OfferInput(p.request->step().input(), nullptr);
+    if (step && p.step_input && !session_->OfferInput(p.request->step().input(), nullptr)) {
+      drops_.Count(drop_session_refused_input_);
+    }
     RequestOutcome o = session_->Commit(p);
     if (step && o.accepted) {
       // Answered when its steps are done: the ones pending before it, then its own.
@@ -203,7 +213,9 @@ bool ServerNode::Boundary() {
   }
   // Inputs were checked by the receiver (key, ranges); the newest of each vehicle wins.
   while (pb::DriverInput* in = inputs_.Front()) {
-    if (session_->HasVehicle(in->vehicle_id())) session_->OfferInput(*in, nullptr);
+    if (session_->HasVehicle(in->vehicle_id()) && !session_->OfferInput(*in, nullptr)) {
+      drops_.Count(drop_session_refused_input_);
+    }
     inputs_.Pop();
   }
   return applied;
@@ -283,7 +295,7 @@ void ServerNode::AnswerWhatIsLeft() {
   // publisher cannot take by the shutdown deadline is counted as unanswered.
   const base::MonoTime give_up =
       base::MonotonicNow() +
-      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+      options_.shutdown_deadline;
   auto answer = [&](RequestOutcome&& o) {
     while (!outcomes_.TryPush(std::move(o))) {
       publisher_bell_.Ring();
@@ -341,6 +353,9 @@ void ServerNode::PushReport(base::MonoTime now) {
       v.source[n] = '\0';
       v.nonfinite_steps = sim.nonfinite_steps();
       v.sanitized_inputs = sim.sanitized_inputs();
+      v.invariant_failures = sim.invariant_failures();
+      std::snprintf(v.last_invariant_failure, sizeof v.last_invariant_failure, "%s",
+                    sim.last_invariant_failure());
       v.speed_kmh = Velocity(sim.state().x).norm() * 3.6;
     });
     reports_.Commit();
@@ -365,7 +380,9 @@ int ServerNode::RunRealtime(const std::atomic<bool>& stop) {
                                        : states_->WriterNice());
   const std::int64_t h = options_.session.step_ns;
   const std::int64_t end_steps =
-      options_.duration_s > 0 ? std::llround(options_.duration_s * 1e9 / static_cast<double>(h)) : 0;
+      options_.duration.ns > 0
+          ? std::llround(static_cast<double>(options_.duration.ns) / static_cast<double>(h))
+          : 0;
   spdlog::info("server '{}': real time on domain {}, {} vehicle(s), step {} ms; {}",
                options_.session.server_id, options_.domain_id, session_->vehicle_count(),
                static_cast<double>(h) * 1e-6, scheduling_);
@@ -493,7 +510,7 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
   window_start_ = base::MonotonicNow();
   window_start_cpu_ = base::ProcessCpuTime();
   base::MonoTime last_request = base::MonotonicNow();
-  const auto timeout = base::Nanos{static_cast<std::int64_t>(options_.lockstep_timeout_s * 1e9)};
+  const base::Nanos timeout = options_.lockstep_timeout;
   while (!stop.load(std::memory_order_relaxed)) {
     const std::uint32_t token = loop_bell_.Token();
     // The client is silent only while no request comes and no steps it asked for are running.
@@ -511,7 +528,7 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
     if ((now - window_start_).ns >= 1'000'000'000) PushReport(now);
     if (now - last_request > timeout) {
       spdlog::error("lockstep: no control request for {} s; the client is gone? stopping",
-                    base::FormatNumber(options_.lockstep_timeout_s));
+                    base::FormatNumber(options_.lockstep_timeout.seconds()));
       return 3;
     }
     if (prepared_.empty() && inputs_.empty()) loop_bell_.Wait(token, base::Milliseconds(20));
@@ -539,7 +556,7 @@ int ServerNode::Run(const std::atomic<bool>& stop) {
   AnswerWhatIsLeft();
   publisher_deadline_ns_ =
       (base::MonotonicNow() +
-       base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)}).ns;
+       options_.shutdown_deadline).ns;
   publisher_stop_ = true;
   publisher_bell_.Ring();
   if (publisher_.joinable()) publisher_.join();
@@ -624,7 +641,7 @@ void ServerNode::ReceiverLoop() {
       // at most the shutdown deadline.
       if (drain_until.ns == 0) {
         drain_until = base::MonotonicNow() +
-                      base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+                      options_.shutdown_deadline;
       } else if ((!backlog && got == 0) || base::MonotonicNow() >= drain_until) {
         break;
       }
@@ -787,7 +804,7 @@ std::string ServerNode::FindClash() {
   const base::MonoTime start = base::MonotonicNow();
   const base::MonoTime quiet_end = start + base::Milliseconds(300);
   const base::MonoTime end =
-      start + base::Nanos{static_cast<std::int64_t>(options_.discovery_s * 1e9)};
+      start + options_.discovery;
   std::map<std::uint32_t, std::string> taken;  // vehicle -> server
   bool same_id = false;
   auto note = [&](const std::string& server, std::uint32_t vehicle) {
@@ -988,7 +1005,7 @@ void ServerNode::RequestLoop() {
     const bool stopping = requests_stop_.load();
     if (stopping && give_up.ns == 0) {
       give_up = base::MonotonicNow() +
-                base::Nanos{static_cast<std::int64_t>(options_.shutdown_deadline_s * 1e9)};
+                options_.shutdown_deadline;
     }
     if (stopping && base::MonotonicNow() >= give_up) {
       // The publisher took no answer for the whole deadline: what is left is counted.
@@ -1126,6 +1143,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     vd->set_input_source(v.source);
     vd->set_nonfinite_steps(v.nonfinite_steps);
     vd->set_sanitized_inputs(v.sanitized_inputs);
+    vd->set_invariant_failures(v.invariant_failures);
+    vd->set_last_invariant_failure(v.last_invariant_failure);
     std::lock_guard<std::mutex> lock(sources_mu_);
     const base::MonoTime now = base::MonotonicNow();
     for (const InputArbiter::Source& src : sources_copy_) {
@@ -1237,7 +1256,8 @@ void ServerNode::PublisherLoop() {
     }
     // Then events, a batch at a time.
     for (int n = 0; n < 64 && events_.TryPop(rec); ++n) {
-      const pb::SessionEvent e = ToMessage(rec, server_id, terrain_hash, options_.session.step_ns);
+      const pb::SessionEvent e = ToMessage(rec, server_id, terrain_hash, options_.session.step_ns,
+                                            options_.session.incarnation);
       rec.params.reset();
       rec.request.reset();
       PublishOne(TopicId::kEvents, e.vehicle_id(), e, base::MonotonicNow() + base::Seconds(1));

@@ -22,11 +22,13 @@ bool SamePhysics(const DriverInput& a, const DriverInput& b) {
 }  // namespace
 
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
-                           std::uint64_t terrain_hash, std::int64_t step_ns) {
+                           std::uint64_t terrain_hash, std::int64_t step_ns,
+                           std::uint64_t incarnation) {
   using Kind = SessionEventRecord::Kind;
   pb::SessionEvent e;
   e.set_vehicle_id(r.vehicle_id);
   e.set_server_id(server_id);
+  e.set_incarnation(incarnation);
   e.set_step(static_cast<std::uint64_t>(r.step));
   e.set_sequence(r.sequence);
   switch (r.kind) {
@@ -137,6 +139,7 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
   v.applied_msg.mutable_source_id()->reserve(limits::kMaxIdBytes);
   FillVehicleState(id, config.server_id, config.step_ns, 0, v.sim->last_step(), v.applied_msg, true,
                    0.0, v.state_msg);
+  v.state_msg.set_incarnation(config.incarnation);  // FillVehicleState leaves it as set here
   v.state_msg.mutable_input()->mutable_source_id()->reserve(limits::kMaxIdBytes);
   return v;
 }

@@ -27,9 +27,9 @@ class InputPublisher {
   InputPublisher(transport::Participant& participant, std::uint32_t vehicle_id,
                  std::string source_id, std::int32_t strength);
   // Sets vehicle, source, the next sequence number and the stamp (now, monotonic) and writes.
-  bool Publish(pb::DriverInput& msg);
+  [[nodiscard]] bool Publish(pb::DriverInput& msg);
   // The same with the time the input was read (a device's sample), for latency measurements.
-  bool Publish(pb::DriverInput& msg, base::MonoTime sampled);
+  [[nodiscard]] bool Publish(pb::DriverInput& msg, base::MonoTime sampled);
   std::uint64_t sent() const { return sequence_; }
   const std::string& last_error() const { return writer_.last_error(); }
   std::uint32_t vehicle_id() const { return vehicle_id_; }

@@ -95,6 +95,7 @@ struct StateFields {
   std::uint64_t step = 0;
   std::uint64_t step_ns = 0;
   std::uint64_t state_hash = 0;
+  std::uint64_t incarnation = 0;  // the server's start that stepped it (0: not stamped)
 };
 std::optional<StateFields> ReadStateFields(std::span<const std::uint8_t> payload,
                                            std::uint32_t key);

@@ -30,8 +30,11 @@ struct FieldDiff {
   std::string resimulated;
 };
 
+// `start`, where a recording holds a server restarted with the same id: which of its starts (from
+// 1, in time order) stepped the vehicle; 0 when the server started once.
 struct Divergence {
   std::uint32_t vehicle = 0;
+  std::uint32_t start = 0;
   std::uint64_t step = 0;
   double t = 0;  // s of simulation at the step's start
   std::uint64_t recorded_hash = 0, resimulated_hash = 0;
@@ -46,6 +49,7 @@ struct Divergence {
 // Which recorded states of one vehicle were verified and which could not be, in step order:
 // runs of consecutive recorded states (`why` empty: verified; else the reason).
 struct StepRun {
+  std::uint32_t start = 0;  // the server's start (Divergence::start)
   std::uint64_t first = 0, last = 0, count = 0;
   std::string why;
 };
@@ -54,6 +58,7 @@ struct StepRun {
 // bytes were damaged where no CRC covered them (a chunk without one).
 struct Damaged {
   std::uint32_t vehicle = 0;
+  std::uint32_t start = 0;
   std::uint64_t step = 0;
   std::vector<FieldDiff> fields;  // recorded, re-simulated
 };
@@ -85,11 +90,11 @@ struct VerifyResult {
     return resimulated && mismatched == 0 && compared > 0 && unverified == 0 && damaged == 0 &&
            malformed == 0;
   }
-  void Verified(std::uint32_t vehicle, std::uint64_t step);
+  void Verified(std::uint32_t vehicle, std::uint32_t start, std::uint64_t step);
   // A stretch with a reason. `counts`: a state a loss kept from being verified (`unverified`);
   // false: one before the vehicle's start, or one compared that differs or is damaged.
-  void Unverified(std::uint32_t vehicle, std::uint64_t step, const std::string& why,
-                  bool counts = true);
+  void Unverified(std::uint32_t vehicle, std::uint32_t start, std::uint64_t step,
+                  const std::string& why, bool counts = true);
 };
 
 struct VerifyOptions {

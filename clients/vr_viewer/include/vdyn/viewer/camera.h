@@ -1,7 +1,8 @@
 // The viewer's cameras. Each follows one vehicle (the followed one) and gives a view and a
 // projection:
 //   chase    behind the vehicle along its heading, looking at it
-//   driver   at the driver's seat, looking along the body's X axis (rolls and pitches with it)
+//   driver   at the driver's seat, looking along the body's X axis a little down (rolls and
+//            pitches with it), in the cockpit (cockpit.h)
 //   orbit    around the vehicle at a yaw, pitch and distance fixed in the world (mouse drag, wheel)
 //   map      straight down, orthographic, geographic: north up by default
 //   north    the paper's geographic camera: behind the vehicle looking north by default, turned in
@@ -46,6 +47,10 @@ struct CameraState {
   double beside_distance = 6;      // m to the vehicle's left
   double eye_height = 1.6;         // m above the ground: beside, and a standing headset's eyes
   Vec3 seat_B{-0.35, 0.37, 0.55};  // the driver's eyes from T, body frame, m
+  // The driver camera on the desktop looks this far down from the body's X axis (the road ahead
+  // above the cockpit's dials and wheel); a headset's seat stays level with the body.
+  double driver_pitch = Rad(-6);
+  bool cockpit = true;  // the driver's seat shows the cockpit (key I); else nothing of the car
   bool horizon_locked = true;      // chase and orbit keep the horizon level
 };
 

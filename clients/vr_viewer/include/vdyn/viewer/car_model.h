@@ -8,7 +8,9 @@
 //    glTF convention), fitted to the same box: scaled to the body's length, its lowest point on
 //    the ground. Nodes named like a wheel (wheel, tire, tyre, rim) are left out: the viewer
 //    draws its own wheels where the state puts them. The paint (materials named paint, body or
-//    carpaint, else the largest) takes the vehicle's colour.
+//    carpaint, else the largest) takes the vehicle's colour; materials named like a brake or
+//    tail light (brake, tail) light up while braking, like a reversing light (reverse, backup)
+//    in reverse.
 //  - A wheel: a tyre with a white mark on each sidewall and a five-spoke rim, radius 1, axle
 //    along Y; the renderer scales it by the wheel's radius and turns it by its spin.
 #pragma once
@@ -25,13 +27,14 @@ namespace vdyn::viewer {
 
 // How a surface of a model is shaded.
 enum class Material : std::uint8_t {
-  kMatte = 0,       // diffuse only
-  kPaint = 1,       // the vehicle's colour (times the vertex colour), glossy
-  kGlass = 2,       // dark, reflects the sky
-  kChrome = 3,      // bright metal, sharp highlights
-  kRubber = 4,      // tyres: dark, a soft sheen
-  kLightFront = 5,  // headlights: bright whatever the light
-  kLightRear = 6,   // tail lights
+  kMatte = 0,         // diffuse only
+  kPaint = 1,         // the vehicle's colour (times the vertex colour), glossy
+  kGlass = 2,         // dark, reflects the sky
+  kChrome = 3,        // bright metal, sharp highlights
+  kRubber = 4,        // tyres: dark, a soft sheen
+  kLightFront = 5,    // headlights: bright whatever the light
+  kLightRear = 6,     // tail and brake lights: lit brightly while braking
+  kLightReverse = 7,  // reversing lights: lit in reverse
 };
 
 struct ModelVertex {
@@ -63,6 +66,20 @@ struct CarShape {
 };
 // The nominal spring length is 70 % of the free length (about the static load of a car).
 CarShape CarShapeFor(const VehicleGeometry& g);
+
+// Where the built-in body's greenhouse is (body frame, m): the stations along X of the rear
+// window's base, the roof's rear and front edges and the windscreen's base (the cowl), the belt
+// line's height at the cowl and the roof's at its front edge. The cockpit is built inside it.
+struct Cabin {
+  double x_rear_window = 0, x_roof_rear = 0, x_roof_front = 0, x_cowl = 0;
+  double z_belt_cowl = 0, z_roof_front = 0;
+  double half_width = 0.9;
+  double z_ground = -0.59;
+  double scale = 1;  // heights: a saloon's on 0.32 m wheels, scaled with the wheel radius
+  bool axles_inside = true;
+  double H(double h) const { return z_ground + h * scale; }  // a saloon's height h, scaled
+};
+Cabin CabinFor(const VehicleGeometry& g);
 
 // The built-in body for a vehicle's geometry, in its body frame (`coarse`: fewer facets, for a
 // vehicle far from the eye).

@@ -59,6 +59,11 @@ struct BodyInstance {
   VehicleGeometry geometry;
   Rgb8 paint;
   bool coarse = false;
+  bool brake_lights = false;    // lit (VehicleView::braking)
+  bool reverse_lights = false;  // lit (VehicleView::reversing)
+  // Seen from its own driver's seat: drawn with its back faces culled (its bonnet shows through
+  // the windscreen; the cockpit stands for the rest).
+  bool from_inside = false;
 };
 
 // A wheel to draw: the wheel mesh (radius 1, axle along Y) turned into the frame R_WW (columns:
@@ -77,21 +82,36 @@ struct ContactShadow {
   std::array<Vec3, 4> corners_W;  // counter-clockwise seen from above
 };
 
+// A mirror in the cockpit (cockpit.h): its glass in the world and the view it shows - from
+// eye_W along look_W (up_W up), the tangents of its half angles - and where each glass corner
+// (the driver's lower left, lower right, upper right, upper left) is in that image (0..1).
+struct MirrorInstance {
+  int index = 0;  // MirrorIndex: which of the renderer's images
+  std::array<Vec3, 4> glass_W;
+  std::array<std::array<float, 2>, 4> uv{};
+  Vec3 eye_W, look_W, up_W;
+  double tan_half_x = 0.2, tan_half_y = 0.1;
+};
+
 // The lists of one frame: what is opaque, what is translucent (drawn after), and the force
 // arrows (drawn last, in full colour where seen and as a faint ghost where something hides them);
-// the bodies and wheels of the vehicles and their contact shadows.
+// the cockpit (opaque; no ghost of an arrow is drawn over it); the bodies and wheels of the
+// vehicles and their contact shadows; the cockpit's mirrors.
 struct FrameLists {
-  DrawList opaque, translucent, arrows;
+  DrawList opaque, translucent, arrows, cockpit;
   std::vector<BodyInstance> bodies;
   std::vector<WheelInstance> wheels;
   std::vector<ContactShadow> contact_shadows;
+  std::vector<MirrorInstance> mirrors;
   void Clear() {
     opaque.Clear();
+    cockpit.Clear();
     translucent.Clear();
     arrows.Clear();
     bodies.clear();
     wheels.clear();
     contact_shadows.clear();
+    mirrors.clear();
   }
 };
 

@@ -56,6 +56,7 @@ class ParamsEditor {
   struct DrawnField {
     std::string label;
     float x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+    std::string text;  // a read-only text field's value (a tyre's name)
   };
   const std::map<std::string, DrawnField>& drawn() const { return drawn_; }
 

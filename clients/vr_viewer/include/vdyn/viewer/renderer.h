@@ -97,6 +97,11 @@ struct RenderSettings {
   // light (8 bits: coarser steps in the dark, unseen in the textures' grain; a software
   // renderer samples them faster).
   bool srgb_textures = true;
+  // The cockpit's mirrors: the rear-view mirror's image this many pixels wide (the side mirrors'
+  // half as wide), each drawn again every `mirror_interval` frames, the mirrors taking turns
+  // (1: all every frame; 3: one a frame).
+  int mirror_px = 256;
+  int mirror_interval = 1;
 };
 RenderSettings SettingsFor(Quality q);
 
@@ -125,9 +130,12 @@ class Renderer {
     // The centre of the sun's shadow map (the followed vehicle); without it, where the view's
     // centre meets the ground, at most 30 m ahead.
     std::optional<Vec3> focus_W = std::nullopt;
+    // The lists' mirrors drawn anew (due by the interval) before the view: false for a
+    // headset's second eye (the first eye's images serve both).
+    bool update_mirrors = true;
   };
-  // Draws the sky, the terrain and the frame's lists into the bound target: the shadow map
-  // first, then what is opaque, the sky, what is translucent, the arrows.
+  // Draws the sky, the terrain and the frame's lists into the bound target: the mirrors' images
+  // and the shadow map first, then what is opaque, the sky, what is translucent, the arrows.
   void Draw(const View& v, const FrameLists& lists);
 
   // Blits a target's colour into the default framebuffer of a window (letterboxed, no scaling of
@@ -161,13 +169,20 @@ class Renderer {
   enum class Pass { kOpaque, kTranslucent, kGhost };
   void DrawList(const viewer::DrawList& list, Pass pass, const Mat4& view_proj);
   void UseScene(const Program& p, const View& v, double fog_m);
+  // The scene of a view; `in_mirror`: a mirror's image (no shadow map, cockpit, mirrors or
+  // arrows' ghosts).
+  void DrawScene(const View& v, const FrameLists& lists, bool in_mirror);
+  void UpdateMirrors(const View& v, const FrameLists& lists);
+  void DrawMirrorGlass(const FrameLists& lists, const Mat4& view_proj);
 
   RenderSettings settings_;
   // By style, grid and shadows (chunks away from the shadow map's box go without), made when
   // first used.
   std::map<int, std::unique_ptr<Program>> terrain_;
-  std::unique_ptr<Program> model_, list_, sky_, hills_, contact_, depth_;
-  bool software_ = false;  // a software renderer (llvmpipe): no anisotropic filtering
+  std::unique_ptr<Program> model_, list_, sky_, hills_, contact_, depth_, mirror_;
+  std::vector<std::unique_ptr<RenderTarget>> mirror_targets_;  // by MirrorIndex
+  std::uint64_t mirror_frames_ = 0;  // frames that drew the mirrors (whose turn it is)
+  bool software_ = false;            // a software renderer (llvmpipe): no anisotropic filtering
   std::uint32_t sky_vao_ = 0;
   std::uint32_t hills_vao_ = 0, hills_vbo_ = 0;
   std::int32_t hills_vertices_ = 0;

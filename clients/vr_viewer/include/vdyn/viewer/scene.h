@@ -45,6 +45,10 @@ struct VehicleGeometry {
   std::array<double, kWheels> radius{};  // m
   std::array<double, kWheels> free_length{};
   double front = 2.2, rear = 2.5, half_width = 0.9;  // body box from T, m
+  // For the cockpit (its parameters when known): the hand wheel turns steering_ratio times the
+  // road wheels (the paper model publishes no hand-wheel angle); the rev limiter's speed.
+  double steering_ratio = 15;
+  double engine_rpm_limit = 6500;
   enum class Source { kWorld, kParams, kDefault };
   Source source = Source::kDefault;
 };
@@ -93,7 +97,22 @@ struct VehicleView {
   double yaw = 0;
   // Ground height under the vehicle (mean of the four B), m.
   double ground_z = 0;
+  // Its lamps: the brake lights while it brakes (the applied brake input, or a brake torque at
+  // a wheel, over the thresholds below), the reversing lights in reverse gear or while the drive
+  // pushes it backwards.
+  bool braking = false;
+  bool reversing = false;
+  // The cockpit's readings: the hand wheel's angle (rad, positive left: the full model's
+  // steering state, else the road wheels' steering angle times the steering ratio), the engine's
+  // speed and the engaged gear (-1 reverse, 0 neutral; the full model only).
+  double hand_wheel_rad = 0;
+  double engine_rpm = 0;
+  int gear = 0;
+  bool has_gearbox = false;
 };
+inline constexpr double kBrakeLightInput = 0.02;     // applied brake input, [0, 1]
+inline constexpr double kBrakeLightTorqueNm = 10.0;  // a wheel's brake torque (full model)
+inline constexpr double kReverseLightSpeed = 0.2;    // m/s backwards, with the drive backwards
 
 // Empty when a state can be drawn: four wheels, a usable quaternion, positions within 1e7 m;
 // else why not. (Non-finite numbers never get here: the transport drops them.)

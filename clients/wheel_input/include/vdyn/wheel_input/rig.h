@@ -36,7 +36,7 @@ class InputSink {
  public:
   virtual ~InputSink() = default;
   // Writes one input read at `sampled`; false when it could not (last_error()).
-  virtual bool Publish(pb::DriverInput& msg, base::MonoTime sampled) = 0;
+  [[nodiscard]] virtual bool Publish(pb::DriverInput& msg, base::MonoTime sampled) = 0;
   virtual std::string last_error() const = 0;
 };
 

@@ -20,6 +20,11 @@ std::vector<ParamIssue> ValidateVehicleParams(const pb::VehicleParams& msg);
 // every issue otherwise.
 ValidParams ParamsFromProto(const pb::VehicleParams& msg);
 
+// A Magic Formula tyre from its message, checked (the message's model version and side, every
+// coefficient the equations need; issues named "magic_formula.pdy1") and derived, as a wheel
+// would carry it. Throws ParamsError naming every issue.
+MagicFormula MagicFormulaFromProto(const pb::MagicFormulaTire& tire);
+
 // Parses text (as a file holds it), merges it over `base` and validates the result. Throws
 // ParamsError naming `source_name`, the line/field and the reason.
 pb::VehicleParams ParseVehicleParams(const std::string& text, bool json,

@@ -35,12 +35,12 @@ struct AppliedControl {
   double brake = 0;     // effective [0, 1]
   double cruise_u = 0;  // speed-control output in [-1, 1] (0 when off)
   bool cruise_active = false;
-  // Per wheel: steering angle gamma_W, commanded drive force Fh and brake force Fb (N).
-  std::array<double, kNumWheels> gamma_W{};
-  std::array<double, kNumWheels> cos_gamma_W{};  // held over the step: computed once
-  std::array<double, kNumWheels> sin_gamma_W{};
-  std::array<double, kNumWheels> drive_W{};
-  std::array<double, kNumWheels> brake_W{};
+  // Per wheel: steering angle wheel_gamma, commanded drive force Fh and brake force Fb (N).
+  std::array<double, kNumWheels> wheel_gamma{};
+  std::array<double, kNumWheels> wheel_cos_gamma{};  // held over the step: computed once
+  std::array<double, kNumWheels> wheel_sin_gamma{};
+  std::array<double, kNumWheels> wheel_drive{};
+  std::array<double, kNumWheels> wheel_brake{};
 
   // --- The full model ---------------------------------------------------------------------------
   bool hands_on = true;          // the column follows hand_wheel_target (false: hands off)
@@ -51,9 +51,9 @@ struct AppliedControl {
   double gearbox_ratio = 0;      // signed total ratio gear * final drive (0 in neutral)
   bool shifting = false;
   bool automatic = true;
-  std::array<double, kNumWheels> brake_torque_W{};  // brake + handbrake capacity, N*m
-  std::array<double, kNumWheels> abs_factor{};      // ABS brake-pressure factor applied
-  double tc_factor = 0;                             // traction control's torque factor applied
+  std::array<double, kNumWheels> wheel_brake_torque{};  // brake + handbrake capacity, N*m
+  std::array<double, kNumWheels> abs_factor{};          // ABS brake-pressure factor applied
+  double tc_factor = 0;                                 // traction control's torque factor applied
 };
 
 // Clamps a driver input to its valid ranges; non-finite values become 0 (and are reported by

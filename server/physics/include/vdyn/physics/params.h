@@ -16,6 +16,7 @@
 
 #include <Eigen/Core>
 
+#include "vdyn/physics/magic_formula.h"
 #include "vdyn/physics/state.h"
 
 namespace vdyn {
@@ -47,6 +48,10 @@ struct WheelParams {
   double spin_inertia = 0;            // kg*m^2: wheel, tire, hub, brake disc, half shaft
   double min_length = 0;              // m: the spring's end of travel (bump)
   double max_length = 0;              // m: the rebound stop (the wheel hangs here)
+  double camber = 0;                  // rad, static; negative leans the top inboard
+  // A Magic Formula tyre (mf.enabled): its law replaces the brush law on this wheel, and its
+  // UNLOADED_RADIUS the radius above (docs/model.md, 8.2b).
+  MagicFormula mf;
 };
 
 struct Params {
@@ -128,6 +133,12 @@ struct Params {
     std::array<double, kNumWheels> handbrake_torque{};  // N*m per wheel at full lever
     std::array<double, kNumWheels> peak_slip{};      // slip ratio at the brush law's peak
     std::array<double, kNumWheels> load_sensitivity_norm{};  // 1 / sin(2 atan(1 / p))
+    // The tyre's radial stiffness per wheel: a Magic Formula tyre's VERTICAL_STIFFNESS (with its
+    // pressure term) where the file gives one, else tire_vertical_stiffness. N/m.
+    std::array<double, kNumWheels> tire_vertical_stiffness{};
+    // cos and sin of the static camber about the wheel's heading, as the inclination reads it
+    // (minus camber on the left wheels, plus on the right).
+    std::array<double, kNumWheels> camber_cos{}, camber_sin{};
     double mu_slide = 0;         // sliding friction coefficient, mu * mu_slide_ratio
     double mu_static = 0;        // the brush's adhesion limit mu_0, so that the peak is mu
     double peak_z = 1;           // normalised slip of the law's peak (1: no peak)
@@ -171,6 +182,10 @@ class ValidParams {
 // the spring's travel, the static load carried by the spring within its travel, a rigid body's
 // inertia, a body that reaches its axles). Empty when valid.
 std::vector<ParamIssue> CheckParams(const Params& p);
+// A Magic Formula tyre's coefficients: each one the equations need present and finite, and the
+// values they divide by or take a peak from on the right side; each issue's field is `prefix` and
+// the coefficient ("lf.magic_formula.pdy1"). Empty when usable (CheckParams runs it per wheel).
+std::vector<ParamIssue> CheckMagicFormula(const MagicFormula& mf, const std::string& prefix);
 // The validated parameters with their derived members, or nullopt and the issues.
 std::optional<ValidParams> Validate(Params p, std::vector<ParamIssue>* issues = nullptr);
 

@@ -8,6 +8,7 @@
 // forces, derivatives at each of 4 stages) -> post-step (normalise, checks, record).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -87,8 +88,10 @@ class Simulator {
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
-  // Full model: steps whose wheel-level horizontal traces (kerb edges) were cast.
-  std::uint64_t edge_traced_steps() const { return edge_traced_steps_; }
+  // Steps that broke an always-on invariant (CheckStepDemands), and the last one's reason ("" when
+  // none): counted in every build, reported in the server's diagnostics.
+  std::uint64_t invariant_failures() const { return invariant_failures_; }
+  const char* last_invariant_failure() const { return last_invariant_failure_; }
 
  private:
   struct Workspace {
@@ -110,8 +113,15 @@ class Simulator {
   std::uint64_t nonfinite_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
-  std::uint64_t edge_traced_steps_ = 0;
+  std::uint64_t invariant_failures_ = 0;
+  char last_invariant_failure_[160] = "";
 };
+
+// The invariants that must hold in every build (Drake's DRAKE_DEMAND tier), checked after every
+// step without allocating: the state the step starts from is finite with a unit quaternion, the
+// new state's quaternion is a unit one, and every spring force is >= 0. Returns true when they
+// hold; otherwise writes which failed, with its value, into why[0..n) (NUL-terminated).
+bool CheckStepDemands(const StepRecord& r, const State& after, char* why, std::size_t n);
 
 // Invariants of a step the model guarantees by construction, checked after every step in debug and
 // sanitizer builds (VDYN_CHECK_INVARIANTS; compiled out elsewhere): the state it starts from and

@@ -46,6 +46,17 @@ struct WheelOutputs {
   double drive_torque = 0;  // N*m
   double brake_torque = 0;  // N*m (>= 0, applied)
   bool kerb = false;        // an edge found by the C-D traces carries part of the load
+  // The tyre law's inputs and its other outputs (full model; what a reader needs to evaluate the
+  // law again at this point): the slips it read (the transient slips plus the low-speed damping),
+  // the inclination and the inflation pressure (a Magic Formula tyre's; 0 for the brush law,
+  // which reads neither), the overturning moment (Magic Formula) and the rolling resistance
+  // moment applied.
+  double kappa_law = 0;  // longitudinal slip the law read
+  double alpha_law = 0;  // slip angle the law read, rad
+  double camber = 0;     // inclination to the ground, rad (ISO-W: > 0 leans the top right)
+  double pressure = 0;   // inflation pressure, Pa
+  double Mx = 0;         // overturning moment, N*m (about the wheel heading)
+  double My = 0;         // rolling resistance moment, N*m (< 0 against forward rolling)
 };
 
 // A wall found by a horizontal trace at the start of a step; contact at each stage is evaluated

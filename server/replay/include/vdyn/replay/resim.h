@@ -28,13 +28,13 @@ class VehicleReplayer {
 
   // Adds this vehicle's next event (events in sequence order). False, and why, for an event
   // that cannot be replayed (another vehicle, another terrain, a step that goes backwards).
-  bool Add(const pb::SessionEvent& e, std::string* error);
+  [[nodiscard]] bool Add(const pb::SessionEvent& e, std::string* error);
 
   // Replays from the first spawn or checkpoint up to step `end_step` (exclusive), calling
   // on_step(step, hash_after) for every step. False, and why, when it cannot go on. Called again
   // with a later end_step it goes on where it stopped (a recorder's verify streams a file this
   // way); the events at the step it stopped at are already applied.
-  bool Run(std::uint64_t end_step,
+  [[nodiscard]] bool Run(std::uint64_t end_step,
            const std::function<void(std::uint64_t, std::uint64_t)>& on_step, std::string* error);
 
   // The simulator, once started (nullptr before the first spawn or checkpoint, or after removal).

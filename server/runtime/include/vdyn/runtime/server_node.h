@@ -53,8 +53,9 @@ struct ServerOptions {
   std::uint32_t domain_id = 0;
   std::vector<std::uint32_t> vehicle_ids = {1};
   SessionConfig session;
-  double duration_s = 0;          // real time: stop after this much simulated time (0: never)
-  double lockstep_timeout_s = 10;  // lockstep: give up without a request for this long
+  // Durations are base::Nanos (built with base::FromSeconds from a user's seconds).
+  base::Nanos duration{0};  // real time: stop after this much simulated time (0: never)
+  base::Nanos lockstep_timeout = base::Seconds(10);  // lockstep: give up without a request this long
   int rt_priority = 50;
   // The state writer thread's nice value in real time (0: left as it is). -10 put it ahead of
   // 8 rigs and a recorder on 2 vCPUs (no state refused, against 0.49-0.70 M at 0), and starved
@@ -63,10 +64,10 @@ struct ServerOptions {
   std::int64_t max_lag_steps = 1000;  // beyond this backlog the schedule is rebased
   bool status_line = false;       // a terminal line of speed, step rate and lateness
   std::string stats_out;          // real time: write a run summary here at the end
-  double shutdown_deadline_s = 2.0;  // how long the publisher may drain at the end
+  base::Nanos shutdown_deadline = base::Milliseconds(2000);  // the publisher's drain at the end
   // At start, how long to listen for other servers on the domain (a vehicle id or a server id
   // already in use is refused) once one has been discovered; with none, 300 ms.
-  double discovery_s = 1.5;
+  base::Nanos discovery = base::Milliseconds(1500);
 };
 
 class ServerNode {
@@ -92,6 +93,8 @@ class ServerNode {
     char source[72] = {};
     std::uint64_t nonfinite_steps = 0;
     std::uint64_t sanitized_inputs = 0;
+    std::uint64_t invariant_failures = 0;
+    char last_invariant_failure[160] = {};
     double speed_kmh = 0;
   };
   struct WindowReport {
@@ -227,7 +230,7 @@ class ServerNode {
 
   // Receiver's: input arbitration and what other servers run; copies for the publisher.
   InputArbiter arbiter_{
-      OwnershipLease(base::Nanos{static_cast<std::int64_t>(options_.session.watchdog_s * 1e9)})};
+      OwnershipLease(base::FromSeconds(options_.session.watchdog_s))};
   std::mutex sources_mu_;
   std::vector<InputArbiter::Source> sources_copy_;
   struct OtherVehicle {
@@ -240,7 +243,7 @@ class ServerNode {
   int drop_rebase_ = -1, drop_events_full_ = -1, drop_outbox_full_ = -1, drop_inputs_full_ = -1,
       drop_key_mismatch_ = -1, drop_out_of_range_ = -1, drop_rejected_ = -1, drop_step_input_ = -1,
       drop_unknown_buttons_ = -1, drop_unanswered_gone_ = -1, drop_unanswered_write_ = -1,
-      drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1;
+      drop_unanswered_stopped_ = -1, drop_unanswered_room_ = -1, drop_session_refused_input_ = -1;
 
   // Loop statistics: the current window and the whole run.
   std::string scheduling_;

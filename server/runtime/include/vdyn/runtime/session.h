@@ -49,6 +49,10 @@ struct SessionConfig {
   // StepPool, limits::kStepThreads). Results are bit for bit the same for any count.
   int step_threads = 1;
   pb::VehicleParams default_params;  // complete; spawn requests merge over it
+  // Which start of the server this is, stamped on its states, events and world (0: none given;
+  // a ServerNode gives its start time, ns since the Unix epoch). A recording that holds a server
+  // restarted with the same id keeps the two starts' steps and sequence numbers apart by it.
+  std::uint64_t incarnation = 0;
 };
 
 // One change of the applied input: from `step` on, `input`.
@@ -89,7 +93,8 @@ struct SessionEventRecord {
 
 // The message of a record (vehicle, server, step and sequence filled in).
 pb::SessionEvent ToMessage(const SessionEventRecord& r, const std::string& server_id,
-                           std::uint64_t terrain_hash, std::int64_t step_ns);
+                           std::uint64_t terrain_hash, std::int64_t step_ns,
+                           std::uint64_t incarnation = 0);
 
 // Where Session::StepInto puts a step's states: one frame per vehicle, in id order, each filled
 // with the vehicle's encoded state message (protobuf wire bytes) on the thread that stepped it -
@@ -228,7 +233,7 @@ class Session {
 
   // Offers a live input for the next step boundary. Returns false (and why) when it is refused:
   // unknown vehicle or a value out of range. Non-finite values never get here (transport).
-  bool OfferInput(const pb::DriverInput& input, std::string* reason);
+  [[nodiscard]] bool OfferInput(const pb::DriverInput& input, std::string* reason);
 
   // One step of every vehicle, in three phases: (1) serial, in id order: each vehicle's input
   // latched (its input events); (2) on the step pool, each vehicle in one thread's contiguous
