@@ -863,42 +863,61 @@ int RunVerify(const VerifyOptions& o, std::ostream& out) {
 
 // --- takeover -----------------------------------------------------------------------------------
 
+namespace {
+
+// The recorded state at or after log time `at`: its vehicle (`vehicle`, or the first recorded),
+// its step and server start, the recorded hash of the step before, and the last log time.
+struct StateAtTime {
+  std::optional<std::uint32_t> chosen;
+  std::optional<std::uint64_t> step;
+  std::optional<std::uint64_t> hash_before;
+  std::uint64_t incarnation = 0;  // the server start that stepped the chosen state
+  std::uint64_t last_time = 0;
+};
+StateAtTime FindStateAt(const mcap::Reader& reader, std::uint64_t at,
+                        std::optional<std::uint32_t> vehicle) {
+  StateAtTime r;
+  r.chosen = vehicle;
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::pair<std::uint64_t, std::uint64_t>>
+      last;  // (vehicle, server start) -> (step, hash)
+  RecordingVisitor v;
+  v.wants = [](TopicId t) { return t == TopicId::kState; };
+  v.on_message = [&](const RecordedMessage& m) {
+    r.last_time = std::max(r.last_time, m.log_time);
+    if (r.step) return;
+    if (!r.chosen) r.chosen = m.key;
+    if (m.key != *r.chosen) return;
+    const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+    if (!fields) return;  // not a state of this vehicle
+    const std::uint64_t s = fields->step;
+    const std::uint64_t h = fields->state_hash;
+    if (m.log_time >= at) {
+      r.step = s;
+      r.incarnation = fields->incarnation;
+      if (auto it = last.find({m.key, r.incarnation});
+          it != last.end() && it->second.first + 1 == s)
+        r.hash_before = it->second.second;
+    }
+    last[{m.key, fields->incarnation}] = {s, h};
+  };
+  ScanRecording(reader, v);
+  return r;
+}
+
+}  // namespace
+
 BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
                             std::optional<std::uint32_t> vehicle) {
   mcap::Reader reader(file);
   const std::uint64_t first = FirstLogTime(reader);
   const auto at = first + static_cast<std::uint64_t>(base::FromSeconds(at_s).ns);
   // The vehicle and its step at that time, and the recorded hash of the step before.
-  std::optional<std::uint32_t> chosen = vehicle;
-  std::optional<std::uint64_t> step;
-  std::optional<std::uint64_t> hash_before;
-  std::uint64_t incarnation = 0;  // the server start that stepped the chosen state
-  std::uint64_t last_time = 0;
-  {
-    std::map<std::pair<std::uint32_t, std::uint64_t>, std::pair<std::uint64_t, std::uint64_t>>
-        last;  // (vehicle, server start) -> (step, hash)
-    RecordingVisitor v;
-    v.wants = [](TopicId t) { return t == TopicId::kState; };
-    v.on_message = [&](const RecordedMessage& m) {
-      last_time = std::max(last_time, m.log_time);
-      if (step) return;
-      if (!chosen) chosen = m.key;
-      if (m.key != *chosen) return;
-      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
-      if (!fields) return;  // not a state of this vehicle
-      const std::uint64_t s = fields->step;
-      const std::uint64_t h = fields->state_hash;
-      if (m.log_time >= at) {
-        step = s;
-        incarnation = fields->incarnation;
-        if (auto it = last.find({m.key, incarnation});
-            it != last.end() && it->second.first + 1 == s)
-          hash_before = it->second.second;
-      }
-      last[{m.key, fields->incarnation}] = {s, h};
-    };
-    ScanRecording(reader, v);
-  }
+  const StateAtTime found = FindStateAt(reader, at, vehicle);
+  const std::optional<std::uint32_t>& chosen = found.chosen;
+  const std::optional<std::uint64_t>& step = found.step;
+  const std::optional<std::uint64_t>& hash_before = found.hash_before;
+  const std::uint64_t incarnation = found.incarnation;
+  const std::uint64_t last_time = found.last_time;
   if (!chosen) throw std::runtime_error(file.string() + " holds no vehicle states");
   if (!step) {
     char b[160];
@@ -976,6 +995,33 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   return bp;
 }
 
+namespace {
+
+// The world of a live server on terrain `terrain_hash`, waited for up to `wait_s`; the worlds seen
+// on other terrains go to `others` ("'name' of server 'id'").
+std::optional<pb::WorldDescription> FindLiveWorld(transport::Participant& participant,
+                                                  std::uint64_t terrain_hash, double wait_s,
+                                                  const std::atomic<bool>& stop,
+                                                  std::set<std::string>& others) {
+  std::optional<pb::WorldDescription> live;
+  transport::DropCounters drops;
+  transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
+    (void)worlds.Wait(std::chrono::milliseconds(100));
+    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      if (w.terrain_hash() == terrain_hash) {
+        live = w;
+      } else {
+        others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) + "'");
+      }
+    });
+  }
+  return live;
+}
+
+}  // namespace
+
 int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
   std::filesystem::path new_file = o.out;
   if (new_file.empty()) {
@@ -989,25 +1035,9 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
       << std::endl;
   transport::Participant participant(o.domain);
   // The live server, and its world: the recording must continue on the terrain it was made on.
-  std::optional<pb::WorldDescription> live;
   std::set<std::string> others;
-  {
-    transport::DropCounters drops;
-    transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
-    const auto deadline =
-        std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
-    while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
-      (void)worlds.Wait(std::chrono::milliseconds(100));
-      (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
-        if (w.terrain_hash() == bp.terrain_hash) {
-          live = w;
-        } else {
-          others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) +
-                        "'");
-        }
-      });
-    }
-  }
+  const std::optional<pb::WorldDescription> live =
+      FindLiveWorld(participant, bp.terrain_hash, o.wait_s, stop, others);
   if (!live) {
     out << "vdyn-recorder takeover: no server on domain " << o.domain << " runs world '"
         << bp.world_name << "' (terrain hash " << base::FormatHex(bp.terrain_hash, 16)
