@@ -8,6 +8,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
+#include "vdyn/messages/control_reply.h"
 #include "vdyn/runtime/request_planner.h"
 
 namespace vdyn {
@@ -107,16 +108,8 @@ std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id)
 }
 
 pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) {
-  pb::ControlReply reply;
-  if (o.request) {
-    reply.set_request_id(o.request->request_id());
-    // An id too long to echo is cut to its limit (such a client cannot match it anyway).
-    reply.set_client_id(o.request->client_id().substr(0, limits::kMaxIdBytes));
-    reply.set_vehicle_id(o.request->vehicle_id());
-  }
-  reply.set_server_id(server_id);
-  reply.set_accepted(o.accepted);
-  if (!o.accepted) reply.set_reason(OutcomeReason(o, server_id).substr(0, limits::kMaxReasonBytes));
+  pb::ControlReply reply = messages::ReplyTo(o.request.get(), server_id);
+  if (!o.accepted) messages::Refuse(reply, OutcomeReason(o, server_id));
   if (o.applied_step >= 0) reply.set_applied_step(static_cast<std::uint64_t>(o.applied_step));
   reply.set_sim_time_ns(o.sim_time_ns);
   return reply;
