@@ -23,6 +23,7 @@
 #include "vdyn/viewer/lighting.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
+#include "vdyn/viewer/textures.h"
 #include "vdyn/viewer/viewer.h"
 #include "vdyn/viewer/world_mesh.h"
 #include "viewer_support.h"
@@ -757,6 +758,99 @@ TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
     last = seen;
   }
   EXPECT_LT(last, 0.35) << "the farthest ground is not mostly fog";
+}
+
+// Materials, seen from straight above in the map view at quality high: four patches of a model
+// body, each 1.4 x 1.6 m. The same grey (180) as chrome and as matte plastic: a smooth metal has
+// no diffuse part and mirrors the sky in its own colour, so from above it shows the zenith's deep
+// blue (lighting.h: blue over red about 5) darkened by its grey; the matte patch diffuses the
+// sun's and the sky's light, near white (blue over red near 1). The vehicle's paint under its
+// clear coat flat, and tilted so that its normal halves the angle between the sun and the eye:
+// the clear coat mirrors the sun there, a highlight whose linear value is well above 1 (about
+// twice the sun's light on a white face); the filmic tone mapping rolls it off towards white
+// without clipping it.
+viewer::ModelMesh MaterialPatches() {
+  viewer::ModelMesh m;
+  const viewer::Lighting& l = viewer::SceneLighting();
+  const viewer::Vec3 h = viewer::Normalized(l.sun_W + viewer::Vec3{0, 0, 1});  // sun and the eye
+  auto quad = [&](double x0, viewer::Vec3 n, viewer::Material mat, std::uint8_t grey) {
+    const auto base = static_cast<std::uint32_t>(m.vertices.size());
+    const double xc = x0 + 0.7;
+    for (const auto& [dx, dy] : {std::pair{-0.7, -0.8}, {0.7, -0.8}, {0.7, 0.8}, {-0.7, 0.8}}) {
+      viewer::ModelVertex v{};
+      const double z = 1.0 - (n.x * dx + n.y * dy) / n.z;  // the plane through (xc, 0, 1)
+      v.p[0] = static_cast<float>(xc + dx);
+      v.p[1] = static_cast<float>(dy);
+      v.p[2] = static_cast<float>(z);
+      v.n[0] = static_cast<float>(n.x);
+      v.n[1] = static_cast<float>(n.y);
+      v.n[2] = static_cast<float>(n.z);
+      v.rgba[0] = v.rgba[1] = v.rgba[2] = grey;
+      v.rgba[3] = 255;
+      v.material[0] = static_cast<std::uint8_t>(mat);
+      m.vertices.push_back(v);
+    }
+    m.indices.insert(m.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+  };
+  quad(0.0, {0, 0, 1}, viewer::Material::kChrome, 180);
+  quad(1.6, {0, 0, 1}, viewer::Material::kMatte, 180);
+  quad(3.2, h, viewer::Material::kPaint, 255);
+  quad(4.8, {0, 0, 1}, viewer::Material::kPaint, 255);
+  m.min = m.fit_min = {0, -0.8, 0};
+  m.max = m.fit_max = {6.2, 0.8, 1.5};
+  return m;
+}
+
+TEST_F(ViewerTest, MetalMirrorsTheSkyMatteDiffusesAndAClearCoatHighlightIsNotClipped) {
+  const auto model = std::make_shared<const viewer::ModelMesh>(MaterialPatches());
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = SceneOptions(domain, viewer::Quality::kHigh, CameraMode::kMap);
+  o.camera.map_half_height = 4;
+  o.car_model = model;
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;  // no arrows
+  const Image img = Show(v, pub, {MakeState(t)});
+  const viewer::VehicleView* view = v.vehicle(t.id);
+  ASSERT_NE(view, nullptr);
+  const viewer::Mat4 fit = viewer::FitModel(*model, view->geometry, false);
+  // The mean colour (linear) of 13 x 13 pixels at a patch's centre.
+  auto patch = [&](double x0) {
+    const viewer::Vec3 c_W = view->pose_WB * fit.TransformPoint({x0 + 0.7, 0, 1});
+    const auto px =
+        MapPixel(c_W.x, c_W.y, view->pose_WB.t.x, view->pose_WB.t.y, kPi / 2, 4, kW, kH);
+    viewer::Vec3 sum;
+    int top = 0;
+    for (int y = static_cast<int>(px[1]) - 6; y <= static_cast<int>(px[1]) + 6; ++y) {
+      for (int x = static_cast<int>(px[0]) - 6; x <= static_cast<int>(px[0]) + 6; ++x) {
+        const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+        sum = sum +
+              viewer::Vec3{viewer::ToLinear(p[0]), viewer::ToLinear(p[1]), viewer::ToLinear(p[2])};
+        top =
+            std::max({top, static_cast<int>(p[0]), static_cast<int>(p[1]), static_cast<int>(p[2])});
+      }
+    }
+    return std::pair{sum / 169.0, top};
+  };
+  const auto [chrome, chrome_top] = patch(0.0);
+  const auto [matte, matte_top] = patch(1.6);
+  const auto [highlight, highlight_top] = patch(3.2);
+  const auto [paint, paint_top] = patch(4.8);
+  std::printf(
+      "linear rgb: chrome %.3f %.3f %.3f, matte %.3f %.3f %.3f, paint %.3f %.3f %.3f, "
+      "paint at the sun's mirror angle %.3f %.3f %.3f (brightest byte %d)\n",
+      chrome.x, chrome.y, chrome.z, matte.x, matte.y, matte.z, paint.x, paint.y, paint.z,
+      highlight.x, highlight.y, highlight.z, highlight_top);
+  EXPECT_GT(chrome.z, 2.5 * chrome.x) << "the chrome does not mirror the deep blue overhead";
+  EXPECT_LT(chrome.x, 0.6 * matte.x) << "the chrome has a diffuse part";
+  EXPECT_LT(matte.z, 1.3 * matte.x) << "the matte patch is not lit white by the sun";
+  EXPECT_GT(matte.x, 0.25) << "the matte patch is dark";
+  // The highlight: near white over the paint's blue (vehicle 1: red 90 of 255), not clipped.
+  EXPECT_GT(highlight.x, paint.x + 0.4) << "no clear-coat highlight of the sun";
+  EXPECT_GT(highlight.x, 0.7);
+  EXPECT_LT(highlight_top, 253) << "the highlight is clipped to white";
 }
 
 TEST_F(ViewerTest, TheStatusPanelStaysClearOfTheCompassInANarrowWindow) {
