@@ -119,11 +119,13 @@ vec3 SunSpecular(vec3 n, vec3 v, vec3 f0, float r, float sun) {
   vec3 F = f0 + (1.0 - f0) * (x2 * x2 * x);
   return kSunRgb * (sun * nl * D * vis) * F;
 }
-// A dielectric's (F0 0.04) reflection of the sky and the sun: the world's surfaces.
-vec3 DielectricSpecular(vec3 n, vec3 v, float r, float sun) {
-  vec2 ab = EnvBrdf(r, max(dot(n, v), 1e-4));
-  return SkySpecular(reflect(-v, n), n, r) * (0.04 * ab.x + ab.y) +
-         SunSpecular(n, v, vec3(0.04), r, sun);
+// A rough dielectric's reflection of the sky and the sun beyond what its albedo holds: the
+// world's surfaces. Their textures' colours are as seen from above, their 4 % reflection there
+// included; what grows with the angle is Schlick's rise towards grazing (the road's sheen
+// towards the horizon, its glare against a low sun), added here.
+vec3 WorldSpecular(vec3 n, vec3 v, float r, float sun) {
+  float x = 1.0 - max(dot(n, v), 0.0), rise = x * x * x * x * x;
+  return rise * (SkySpecular(reflect(-v, n), n, r) + SunSpecular(n, v, vec3(1.0), r, sun));
 }
 
 #ifdef SHADOWS
@@ -318,7 +320,7 @@ void main() {
 #endif
 #if defined(HIGH) && (STYLE == 1 || STYLE == 2 || STYLE == 3 || STYLE == 6)
   // Asphalt, paint and concrete: rough dielectrics, a sheen towards the sun and the sky.
-  c += DielectricSpecular(n, normalize(to_eye), STYLE == 2 ? 0.55 : 0.75, sun);
+  c += WorldSpecular(n, normalize(to_eye), STYLE == 2 ? 0.55 : 0.75, sun);
 #endif
 #ifdef GRID
   vec2 g = xy / u_grid;
