@@ -91,7 +91,7 @@ struct RenderSettings {
   int shadow_map_px = 1024;     // its size
   double shadow_radius_m = 20;  // half its side on the ground, around the followed vehicle
   bool clouds = true;
-  bool high_shading = true;  // glossy paint, glass and chrome; the grass's large-scale variation
+  bool high_shading = true;  // sun highlights, rough reflections, world specular; grass patches
   int texture_px = 512;      // surface textures' size
   // The surface textures stored as sRGB (decoded per texel when sampled) or already in linear
   // light (8 bits: coarser steps in the dark, unseen in the textures' grain; a software
