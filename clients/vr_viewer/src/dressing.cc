@@ -194,9 +194,9 @@ void AppendSign(DrawList& list, const Side& s, double u, double width, int palet
 
 // The hills: a ring around the facility's centre from r0 to r1, low at its inner edge, its
 // ridge-line varying with the azimuth. In sectors (chunks of their own, for culling).
-void AppendHills(Dressing& d, const Vec3& centre, double r0, double r1, double z, bool full,
+void AppendHills(Dressing& d, const Vec3& centre, double r0, double r1, double z,
                  std::vector<std::pair<std::uint32_t, std::uint32_t>>& spans) {
-  const int segments = full ? 120 : 60, rings = full ? 6 : 3, per_sector = full ? 10 : 5;
+  constexpr int segments = 120, rings = 6, per_sector = 10;
   auto height = [&](double az, double t) {
     const double ridge = 60 + 35 * std::sin(3 * az + 0.7) + 20 * std::sin(7 * az + 2.1) +
                          10 * std::sin(13 * az + 0.4) + 6 * std::sin(29 * az + 1.3);
@@ -343,7 +343,7 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
     return std::pair{static_cast<std::int64_t>(std::floor(p.x / kChunkCellM)),
                      static_cast<std::int64_t>(std::floor(p.y / kChunkCellM))};
   };
-  const double band = full ? 70.0 : 45.0;
+  const double band = full ? 70.0 : 40.0;
   for (std::size_t si = 0; si < 4; ++si) {
     const Side& s = sides[si];
     const bool buildings = si == stand_side;
@@ -368,7 +368,7 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
         const double clump = Smooth(0.4, 0.7, Noise(p.x / 80.0, p.y / 80.0, 5));
         const double keep = 0.06 + 0.6 * clump;
         if (Hash(i, j, seed + 2) >= keep) continue;
-        if (!full && Hash(i, j, seed + 3) >= 0.34) continue;
+        if (!full && Hash(i, j, seed + 3) >= 0.3) continue;
         const double height = 6.0 + 9.0 * Hash(i, j, seed + 4) * (0.6 + 0.4 * clump);
         if (buildings &&
             (stand.Near(u, w, 0.35 * height + 3) || pits.Near(u, w, 0.35 * height + 3))) {
@@ -390,7 +390,8 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
     d.trees += list.size();
   }
   const double r0 = Norm(Vec3{hi.x - lo.x, hi.y - lo.y, 0}) * 0.5 + 180.0;
-  AppendHills(d, centre, r0, r0 + 600.0, z, full, spans);
+  // (Low: none; the sky's band of far hills stands for them.)
+  if (full) AppendHills(d, centre, r0, r0 + 600.0, z, spans);
 
   for (const auto& [first, count] : spans) {
     if (count == 0) continue;

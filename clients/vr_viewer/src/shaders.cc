@@ -165,7 +165,9 @@ void main() {
   v_fog = FogVector(a_pos);
 #ifndef SHADOWS
   vec3 n = normalize(a_normal);
+#if STYLE == 3 || STYLE == 4
   n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   v_light = Diffuse(n * sign(dot(n, u_eye - a_pos) + 1e-9), 1.0);
 #endif
   gl_Position = u_view_proj * vec4(a_pos, 1.0);
@@ -188,7 +190,7 @@ uniform vec4 u_frame;        // the mesh's strip frame: centre x, y; its long ax
 uniform vec2 u_half_size;    // from the centre along and across, m
 uniform float u_strip;       // 1: a strip (markings and kerbs)
 uniform float u_grid;        // grid spacing, m
-uniform float u_relief;      // slopes shaded this much steeper (rough ground, washboard: 3, 4)
+uniform float u_relief;      // slopes shaded this much steeper (rough ground 3, washboard 4)
 uniform vec2 u_z_range;      // the mesh's lowest and highest point, m
 uniform vec4 u_poster_a;     // a prop's poster face: lower left corner x, y, z; width
 uniform vec4 u_poster_b;     // its right (unit) x, y; height; 1 when it has one
@@ -225,9 +227,11 @@ void main() {
   vec3 to_eye = u_eye - v_pos;
   n *= sign(dot(n, to_eye) + 1e-9);
   vec3 n_mesh = n;
+#if STYLE == 3 || STYLE == 4
   // Low relief (rough ground's bumps, the washboard's ripples: slopes of a few degrees) shaded as
   // if steeper, so it reads from the driver's seat: the normal's tilt scaled by u_relief.
   n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   vec2 xy = v_pos.xy;
   // The frame's coordinates: along, across from the centre line.
   vec2 rel = xy - u_frame.xy;

@@ -45,8 +45,8 @@ struct Dressing {
   std::size_t trees = 0;  // how many (for the quality's budget and the tests)
 };
 
-// `full` (quality high): every tree of the clumps and the finer hills; else a third of the trees
-// and coarser hills (a software renderer's budget).
+// `full` (quality high): every tree of the clumps and the hills; else under a third of the trees,
+// in a narrower band, and no hills (a software renderer's budget: the sky's far hills remain).
 Dressing MakeDressing(const TerrainData& t, bool full);
 
 // Whether the barrier meshes close around the drivable ones: each side of their bounds is covered
