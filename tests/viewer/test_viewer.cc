@@ -1130,6 +1130,29 @@ TEST(Dressing, NothingStandsWhereAVehicleCanDriveAndAnOpenWorldGetsNone) {
     *m.mutable_indices() = kept;
   }
   EXPECT_FALSE(viewer::MakeDressing(viewer::TerrainFromWorld(gap), true).enclosed);
+  // A barrier 20,000 km a side (coordinates within the description's bound) closes in the road,
+  // but gets no dressing: the work would grow with its length.
+  pb::WorldDescription huge = MakeWorld("test", 0);
+  pb::Mesh* wall = huge.add_meshes();
+  wall->set_name("far_barrier");
+  wall->set_kind(pb::SURFACE_BARRIER);
+  const double r = 1e7;
+  const double corners[5][2] = {{-r, -r}, {r, -r}, {r, r}, {-r, r}, {-r, -r}};
+  for (int k = 0; k < 4; ++k) {
+    const auto base = static_cast<std::uint32_t>(wall->vertices_size() / 3);
+    for (const double* c : {corners[k], corners[k + 1]}) {
+      for (double z : {0.0, 1.5}) {
+        wall->add_vertices(c[0]);
+        wall->add_vertices(c[1]);
+        wall->add_vertices(z);
+      }
+    }
+    for (std::uint32_t i : {0u, 2u, 3u, 0u, 3u, 1u}) wall->add_indices(base + i);
+  }
+  const viewer::TerrainData huge_t = viewer::TerrainFromWorld(huge);
+  viewer::Vec3 lo, hi;
+  ASSERT_TRUE(viewer::BarrierEncloses(huge_t, &lo, &hi));
+  EXPECT_TRUE(viewer::MakeDressing(huge_t, true).list.vertices().empty());
 }
 
 // The facility's billboard gets its poster on the panel's face towards the facility (south): 9 m

@@ -287,6 +287,7 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
   Dressing d;
   Vec3 lo, hi;
   if (!BarrierEncloses(t, &lo, &hi)) return d;
+  if (hi.x - lo.x > kMaxDressedSideM || hi.y - lo.y > kMaxDressedSideM) return d;
   d.enclosed = true;
   d.reach_min_W = lo;
   d.reach_max_W = hi;
@@ -378,12 +379,15 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
       }
     }
   }
-  for (const auto& [cell, list] : signs) {
+  // (By entry: a lambda may not capture a structured binding, clang 14.)
+  for (const auto& entry : signs) {
+    const std::vector<SignAt>& list = entry.second;
     chunk([&] {
       for (const SignAt& a : list) AppendSign(d.list, sides[a.side], a.u, 6.0, a.palette);
     });
   }
-  for (const auto& [cell, list] : trees) {
+  for (const auto& entry : trees) {
+    const std::vector<Tree>& list = entry.second;
     chunk([&] {
       for (const Tree& tr : list) AppendTree(d.list, tr, full);
     });

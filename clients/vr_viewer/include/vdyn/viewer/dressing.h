@@ -27,6 +27,9 @@ namespace vdyn::viewer {
 
 // How far beyond the barrier's outer face (m) the nearest dressing stands.
 inline constexpr double kDressingClearanceM = 2.0;
+// A barrier longer than this on a side (m) gets no dressing: the trees and signs along it would
+// grow with its length (a 10,000 km box in a description must not cost minutes and gigabytes).
+inline constexpr double kMaxDressedSideM = 5000.0;
 
 // A part of the dressing's triangles (vertices [first, first + count) of the list) with the
 // bounds of its vertices: what is out of view is not drawn.
