@@ -17,9 +17,12 @@
 #include "../process.h"
 #include "../test_support.h"
 #include "vdyn/base/time.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/physics/world.h"
 #include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/dressing.h"
 #include "vdyn/viewer/lighting.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
@@ -1139,6 +1142,131 @@ TEST(ViewerCulling, SpheresOutsideTheViewAreLeftOut) {
   EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));  // beyond the far plane
   EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));    // just under the top (28.9 m)
   EXPECT_FALSE(viewer::InFrustum(vp, {50, 0, 31}, 1));
+}
+
+// The dressing around the facility (trees, buildings, signs, hills) stands only where no vehicle
+// can drive: every triangle's bounds are checked against the facility's description as its
+// server publishes it - the glass barrier's bounds (which keep every vehicle in) and each mesh a
+// vehicle drives on - not against the numbers the dressing was placed by. Worlds a vehicle is not
+// closed in get none.
+TEST(Dressing, NothingStandsWhereAVehicleCanDriveAndAnOpenWorldGetsNone) {
+  const std::unique_ptr<World> world = BuildBuiltinWorld("facility");
+  const pb::WorldDescription w = DescribeWorld(*world, "test", 1'000'000);
+  struct Box {
+    double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+    void Add(double x, double y) {
+      x0 = std::min(x0, x);
+      y0 = std::min(y0, y);
+      x1 = std::max(x1, x);
+      y1 = std::max(y1, y);
+    }
+    bool Overlaps(const Box& o, double margin) const {
+      return x0 < o.x1 + margin && o.x0 - margin < x1 && y0 < o.y1 + margin && o.y0 - margin < y1;
+    }
+  };
+  Box barrier;
+  std::vector<std::pair<std::string, Box>> drivable;
+  for (const pb::Mesh& m : w.meshes()) {
+    Box b;
+    for (int i = 0; i + 2 < m.vertices_size(); i += 3) b.Add(m.vertices(i), m.vertices(i + 1));
+    if (m.kind() == pb::SURFACE_BARRIER) {
+      barrier.Add(b.x0, b.y0);
+      barrier.Add(b.x1, b.y1);
+    } else if (m.kind() != pb::SURFACE_GROUND) {
+      drivable.emplace_back(m.name(), b);
+    }
+  }
+  ASSERT_GT(barrier.x1 - barrier.x0, 100.0);
+  ASSERT_GE(drivable.size(), 5u);
+  for (bool full : {true, false}) {
+    const viewer::Dressing d = viewer::MakeDressing(viewer::TerrainFromWorld(w), full);
+    ASSERT_TRUE(d.enclosed) << "the facility's barrier closes it in";
+    EXPECT_GT(d.trees, full ? 150u : 40u);
+    const auto& v = d.list.vertices();
+    ASSERT_GT(v.size(), 3000u);
+    std::size_t inside = 0, on_drivable = 0, near_barrier = 0;
+    std::string first;
+    for (std::size_t k = 0; k + 2 < v.size(); k += 3) {
+      Box t;
+      for (std::size_t q = 0; q < 3; ++q) t.Add(v[k + q].p[0], v[k + q].p[1]);
+      if (t.Overlaps(barrier, 1.0)) {
+        if (inside++ == 0) first = std::to_string(t.x0) + ", " + std::to_string(t.y0);
+      }
+      for (const auto& [name, b] : drivable) on_drivable += t.Overlaps(b, 1.0) ? 1 : 0;
+      // (Some of it near the barrier: the place is dressed, not only its horizon.)
+      near_barrier += t.Overlaps(barrier, 30.0) ? 1 : 0;
+    }
+    EXPECT_EQ(inside, 0u) << "triangles within 1 m of the barrier's bounds; the first at " << first;
+    EXPECT_EQ(on_drivable, 0u);
+    EXPECT_GT(near_barrier, 500u);
+  }
+  // An open world (a road on open ground, no barrier) gets no dressing.
+  const viewer::Dressing open =
+      viewer::MakeDressing(viewer::TerrainFromWorld(MakeWorld("test", 0)), true);
+  EXPECT_FALSE(open.enclosed);
+  EXPECT_TRUE(open.list.vertices().empty());
+  // Nor does the facility with a gap in its barrier: the north wall's triangles left out.
+  pb::WorldDescription gap = w;
+  for (pb::Mesh& m : *gap.mutable_meshes()) {
+    if (m.kind() != pb::SURFACE_BARRIER) continue;
+    google::protobuf::RepeatedField<std::uint32_t> kept;
+    for (int i = 0; i + 2 < m.indices_size(); i += 3) {
+      bool north = true;
+      for (int q = 0; q < 3; ++q)
+        north = north && m.vertices(3 * static_cast<int>(m.indices(i + q)) + 1) > 0.9 * barrier.y1;
+      if (north) continue;
+      for (int q = 0; q < 3; ++q) kept.Add(m.indices(i + q));
+    }
+    ASSERT_LT(kept.size(), m.indices_size());
+    *m.mutable_indices() = kept;
+  }
+  EXPECT_FALSE(viewer::MakeDressing(viewer::TerrainFromWorld(gap), true).enclosed);
+  // A barrier 20,000 km a side (coordinates within the description's bound) closes in the road,
+  // but gets no dressing: the work would grow with its length.
+  pb::WorldDescription huge = MakeWorld("test", 0);
+  pb::Mesh* wall = huge.add_meshes();
+  wall->set_name("far_barrier");
+  wall->set_kind(pb::SURFACE_BARRIER);
+  const double r = 1e7;
+  const double corners[5][2] = {{-r, -r}, {r, -r}, {r, r}, {-r, r}, {-r, -r}};
+  for (int k = 0; k < 4; ++k) {
+    const auto base = static_cast<std::uint32_t>(wall->vertices_size() / 3);
+    for (const double* c : {corners[k], corners[k + 1]}) {
+      for (double z : {0.0, 1.5}) {
+        wall->add_vertices(c[0]);
+        wall->add_vertices(c[1]);
+        wall->add_vertices(z);
+      }
+    }
+    for (std::uint32_t i : {0u, 2u, 3u, 0u, 3u, 1u}) wall->add_indices(base + i);
+  }
+  const viewer::TerrainData huge_t = viewer::TerrainFromWorld(huge);
+  viewer::Vec3 lo, hi;
+  ASSERT_TRUE(viewer::BarrierEncloses(huge_t, &lo, &hi));
+  EXPECT_TRUE(viewer::MakeDressing(huge_t, true).list.vertices().empty());
+}
+
+// The facility's billboard gets its poster on the panel's face towards the facility (south): 9 m
+// wide, 3 m high, its lower left corner (seen from the front) at the panel's west end, 3 m up.
+TEST(Poster, TheBillboardsPanelFacingTheFacilityCarriesIt) {
+  const std::unique_ptr<World> world = BuildBuiltinWorld("facility");
+  const viewer::TerrainData t = viewer::TerrainFromWorld(DescribeWorld(*world, "test", 1'000'000));
+  const viewer::TerrainMesh* board = nullptr;
+  for (const viewer::TerrainMesh& m : t.meshes) {
+    if (m.name == "billboard") board = &m;
+    if (m.name != "billboard") {
+      EXPECT_FALSE(m.poster.present) << m.name;
+    }
+  }
+  ASSERT_NE(board, nullptr);
+  const viewer::PosterFace& f = board->poster;
+  ASSERT_TRUE(f.present);
+  EXPECT_NEAR(f.width_m, 9.0, 1e-3);
+  EXPECT_NEAR(f.height_m, 3.0, 1e-3);
+  EXPECT_NEAR(f.right_W.x, 1.0, 1e-6);  // seen from the south, east is to the right
+  EXPECT_NEAR(f.origin_W.x, -4.5, 1e-3);
+  EXPECT_NEAR(f.origin_W.y, 170.0, 1e-3);
+  EXPECT_NEAR(f.origin_W.z, 3.0, 1e-3);
 }
 
 }  // namespace

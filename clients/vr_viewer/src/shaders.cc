@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "vdyn/viewer/lighting.h"
+#include "vdyn/viewer/textures.h"
 #include "vdyn/viewer/world_mesh.h"
 
 namespace vdyn::viewer {
@@ -182,6 +183,11 @@ std::string Fragment(const Options& o, const char* body) {
   s += "const float kLineWidth = " + Num(RoadMarkings::kLineWidth) + ";\n";
   s += "const float kDash = " + Num(RoadMarkings::kDash) + ";\n";
   s += "const float kDashPeriod = " + Num(RoadMarkings::kDashPeriod) + ";\n";
+  {
+    const Rgb8 g = MeanColour(TextureLayer::kGrass);  // the grass texture's mean, linear
+    s += "const float kGrassLuma = " +
+         Num(0.2126 * ToLinear(g.r) + 0.7152 * ToLinear(g.g) + 0.0722 * ToLinear(g.b)) + ";\n";
+  }
   s += kCommon;
   s += body;
   return s;
@@ -200,6 +206,7 @@ const char* const kTerrainVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 uniform mat4 u_view_proj;
+uniform float u_relief;  // the slopes' shading made this much steeper (Relief in the fragment shader)
 out vec3 v_pos;
 out vec3 v_normal;
 out vec3 v_fog;
@@ -212,6 +219,9 @@ void main() {
   v_fog = FogVector(a_pos);
 #ifndef SHADOWS
   vec3 n = normalize(a_normal);
+#if STYLE == 3 || STYLE == 4
+  n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   v_light = Diffuse(n * sign(dot(n, u_eye - a_pos) + 1e-9), 1.0);
 #endif
   gl_Position = u_view_proj * vec4(a_pos, 1.0);
@@ -234,6 +244,10 @@ uniform vec4 u_frame;        // the mesh's strip frame: centre x, y; its long ax
 uniform vec2 u_half_size;    // from the centre along and across, m
 uniform float u_strip;       // 1: a strip (markings and kerbs)
 uniform float u_grid;        // grid spacing, m
+uniform float u_relief;      // slopes shaded this much steeper (rough ground 3, washboard 4)
+uniform vec2 u_z_range;      // the mesh's lowest and highest point, m
+uniform vec4 u_poster_a;     // a prop's poster face: lower left corner x, y, z; width
+uniform vec4 u_poster_b;     // its right (unit) x, y; height; 1 when it has one
 out vec4 o_colour;
 
 vec3 Tex(float layer, vec2 uv_m, float tile_m) {
@@ -251,11 +265,27 @@ float Band(float d, float half_width) {
   return clamp((half_width - abs(d)) / max(fwidth(d), 1e-4) + 0.5, 0.0, 1.0);
 }
 float Luma(vec3 c) { return dot(c, vec3(0.2126, 0.7152, 0.0722)); }
+// Grass; quality high: near the eye its own grain again, 4.4 times finer, fading out by 30 m (the
+// nearest metres show blades, not one magnified tile).
+vec3 Grass(vec2 xy, float dist) {
+  vec3 g = Tex(0.0, xy, 4.0) * Variation(xy);
+#ifdef HIGH
+  float near = 1.0 - smoothstep(4.0, 30.0, dist);
+  g *= mix(1.0, clamp(Luma(Tex(0.0, xy, 0.91)) / kGrassLuma, 0.45, 1.7), near);
+#endif
+  return g;
+}
 
 void main() {
   vec3 n = normalize(v_normal);
   vec3 to_eye = u_eye - v_pos;
   n *= sign(dot(n, to_eye) + 1e-9);
+  vec3 n_mesh = n;
+#if STYLE == 3 || STYLE == 4
+  // Low relief (rough ground's bumps, the washboard's ripples: slopes of a few degrees) shaded as
+  // if steeper, so it reads from the driver's seat: the normal's tilt scaled by u_relief.
+  n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   vec2 xy = v_pos.xy;
   // The frame's coordinates: along, across from the centre line.
   vec2 rel = xy - u_frame.xy;
@@ -289,13 +319,24 @@ void main() {
   vec3 albedo = mix(vec3(0.80, 0.50, 0.008), vec3(0.018), block) *
                 clamp(0.7 + 0.5 * Luma(Tex(1.0, tc, 3.0)) / 0.077, 0.7, 1.2);
 #elif STYLE == 3
-  vec3 albedo = Tex(2.0, tc, 3.0);  // concrete
+  // Concrete; its edges (where a face meets the mesh's bounds: a ramp's foot, sides and top edge,
+  // the washboard's outline) a worn, lighter arris, and grime in a band just inside.
+  vec3 albedo = Tex(2.0, tc, 3.0);
+  vec2 to_bound = u_half_size - abs(v_uv);
+  vec2 dir = u_frame.zw;
+  float e = 1e3;  // to the nearest bound that lies within the face, m
+  if (abs(dot(n_mesh.xy, dir)) < 0.7) e = min(e, to_bound.x);
+  if (abs(dot(n_mesh.xy, vec2(-dir.y, dir.x))) < 0.7) e = min(e, to_bound.y);
+  if (abs(n_mesh.z) < 0.7) e = min(e, min(v_pos.z - u_z_range.x, u_z_range.y - v_pos.z));
+  float arris = 1.0 - clamp((e - 0.05) / max(fwidth(e), 1e-4) + 0.5, 0.0, 1.0);
+  float grime = 1.0 - smoothstep(0.05, 0.5, e);
+  albedo *= 1.0 + 0.45 * arris - 0.3 * grime * (1.0 - arris);
 #elif STYLE == 4
   // Dirt and gravel, into the grass at the edge.
   vec3 dirt = Tex(3.0, tc, 3.0) * Variation(xy + vec2(17.0, 5.0));
   vec2 inside = u_half_size - abs(v_uv);
   float edge = min(inside.x, inside.y);
-  vec3 albedo = mix(Tex(0.0, tc, 4.0) * Variation(xy), dirt, smoothstep(0.5, 5.0, edge));
+  vec3 albedo = mix(Grass(tc, length(to_eye)), dirt, smoothstep(0.5, 5.0, edge));
 #elif STYLE == 5
   // Glass: posts every 3 m, a rail on top, a concrete foot.
   float along = abs(n.x) > abs(n.y) ? v_pos.y : v_pos.x;
@@ -308,8 +349,18 @@ void main() {
   alpha = mix(0.22 + 0.6 * fres, 1.0, solid);
 #elif STYLE == 6
   vec3 albedo = vec3(0.55, 0.57, 0.59) * (0.85 + 0.3 * Luma(Tex(2.0, tc, 3.0)) / 0.38);
+  // The poster (texture layer 5) on its face, front side only.
+  if (u_poster_b.w > 0.5) {
+    vec2 right = u_poster_b.xy;
+    vec3 pn = vec3(right.y, -right.x, 0.0);
+    vec3 d = v_pos - u_poster_a.xyz;
+    vec2 puv = vec2(dot(d.xy, right) / u_poster_a.w, d.z / u_poster_b.z);
+    float on = step(0.95, dot(normalize(v_normal), pn)) * step(abs(dot(d, pn)), 0.02) *
+               step(0.0, puv.x) * step(puv.x, 1.0) * step(0.0, puv.y) * step(puv.y, 1.0);
+    albedo = mix(albedo, texture(u_surfaces, vec3(puv.x, 1.0 - puv.y, 5.0)).rgb, on);
+  }
 #else
-  vec3 albedo = Tex(0.0, tc, 4.0) * Variation(xy);  // grass
+  vec3 albedo = Grass(tc, length(to_eye));
 #endif
 #ifdef SHADOWS
   float sun = SunVisibility(v_pos, n);

@@ -930,7 +930,7 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }
-  if (f.world != nullptr) {
+  if (f.world != nullptr && o.landmarks) {
     // Landmarks: a small marker on the ground (their names are labels on the desktop).
     for (const pb::Landmark& l : f.world->landmarks()) {
       const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
@@ -1028,6 +1028,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
         "     (the wheel's paddle shifters do the same)\n"
         "Tab  next vehicle (Shift: previous)\n"
         "+/-  arrow scale     L forces legend   P parameters   H HUD\n"
+        "M    landmarks (the world's named points) on / off\n"
         "drag orbit   wheel zoom   F12 screenshot   Esc quit");
     Occupied();
     ImGui::End();
@@ -1160,7 +1161,7 @@ void Viewer::Impl::HudLabels(const FrameScene& f) {
     if (own && f.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
     ask(Format("#%u", id), v.pose_WB * Vec3{0, 0, 1.6}, own ? 2 : 1, ImColour(VehicleColour(id)));
   }
-  if (f.world != nullptr) {
+  if (f.world != nullptr && o.landmarks) {
     for (const pb::Landmark& l : f.world->landmarks()) {
       ask(l.name(), {l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0}, 0, IM_COL32(255, 255, 255, 255));
     }
@@ -1204,6 +1205,7 @@ void Viewer::Impl::ApplyKeys() {
     if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS) o.arrows.metres_per_newton *= 1.25;
     if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
     if (k == SDLK_h) o.hud = !o.hud;
+    if (k == SDLK_m) o.landmarks = !o.landmarks;
     if (k == SDLK_p) show_params = !show_params;
     if (k == SDLK_l) legend_open = !legend_open;
     if (k == SDLK_F1) show_help = !show_help;

@@ -45,6 +45,8 @@ struct ViewerOptions {
   double fps = 60;      // frame rate cap; 0: as fast as it draws
   bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
   bool hud = true;
+  // The landmarks (the world's named points): a marker and its name; off by default (key M).
+  bool landmarks = false;
   // Headless: after `frames` frames (counted once the world and the followed vehicle are there,
   // or once `wait_s` has passed), write `screenshot` (when set) and end. 0: run until closed.
   std::uint64_t frames = 0;
