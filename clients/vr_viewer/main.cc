@@ -112,6 +112,7 @@ int main(int argc, char** argv) {
                  "Write frame times, latency and refusal counts here at the end");
   app.add_flag("--hidden", o.hidden, "No window on the screen (drawing is offscreen anyway)");
   app.add_flag("--no-hud", no_hud, "Start with the HUD hidden (H shows it)");
+  app.add_flag("--landmarks", o.landmarks, "Start with the landmarks shown (M toggles them)");
   app.add_flag("--playback", o.playback, "Label the view PLAYBACK (a player's diagnostics do it)");
   app.add_flag("--xr", o.xr, "Stereo in an OpenXR headset (desktop window when no runtime)");
   app.add_option("--xr-space", xr_space,

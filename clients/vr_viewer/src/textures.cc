@@ -147,6 +147,76 @@ Lin Dirt(double x, double y) {
   return c;
 }
 
+// A 5 x 7 pixel font: the letters the poster needs, rows top down, '#' set.
+struct Glyph {
+  char c;
+  const char* rows[7];
+};
+constexpr Glyph kFont[] = {
+    {'V', {"#...#", "#...#", "#...#", "#...#", "#...#", ".#.#.", "..#.."}},
+    {'D', {"####.", "#...#", "#...#", "#...#", "#...#", "#...#", "####."}},
+    {'Y', {"#...#", "#...#", ".#.#.", "..#..", "..#..", "..#..", "..#.."}},
+    {'N', {"#...#", "##..#", "#.#.#", "#..##", "#...#", "#...#", "#...#"}},
+    {'P', {"####.", "#...#", "#...#", "####.", "#....", "#....", "#...."}},
+    {'R', {"####.", "#...#", "#...#", "####.", "#.#..", "#..#.", "#...#"}},
+    {'O', {".###.", "#...#", "#...#", "#...#", "#...#", "#...#", ".###."}},
+    {'I', {".###.", "..#..", "..#..", "..#..", "..#..", "..#..", ".###."}},
+    {'G', {".###.", "#...#", "#....", "#.###", "#...#", "#...#", ".###."}},
+    {'U', {"#...#", "#...#", "#...#", "#...#", "#...#", "#...#", ".###."}},
+};
+
+// Whether a point (x right, y down, in font pixels from the text's top left, slanted by `slant`
+// per pixel of height) is inside a letter of `text` (6 font pixels per letter: 5 and a gap).
+bool InText(const char* text, double x, double y, double slant) {
+  if (y < 0 || y >= 7) return false;
+  x -= slant * (7 - y);
+  if (x < 0) return false;
+  const auto letter = static_cast<std::size_t>(x / 6);
+  const auto col = static_cast<int>(x - 6.0 * static_cast<double>(letter));
+  for (std::size_t i = 0; text[i] != 0; ++i) {
+    if (i != letter) continue;
+    if (col >= 5) return false;
+    for (const Glyph& g : kFont) {
+      if (g.c == text[i]) return g.rows[static_cast<int>(y)][col] == '#';
+    }
+    return false;
+  }
+  return false;
+}
+
+// The billboard's poster at (x, y) in [0, 1)^2 (y down) of a face kPosterAspect : 1: a deep blue
+// ground, red and white chevrons on the right, "VDYN" large in white and "PROVING GROUND" in
+// yellow below it, a red band along the bottom. Each pixel is the mean of 4 x 4 samples (the
+// letters' edges smooth).
+Lin Poster(double x, double y, int size) {
+  Lin sum;
+  for (int sj = 0; sj < 4; ++sj) {
+    for (int si = 0; si < 4; ++si) {
+      const double u = (x + (si - 1.5) / (4.0 * size)) * kPosterAspect;  // 0 .. 3 across
+      const double v = y + (sj - 1.5) / (4.0 * size);                    // 0 .. 1 down
+      Lin c = Mix(L({18, 52, 128}), L({8, 26, 74}), v);
+      // Chevrons pointing right, from u = 2.05 on.
+      const double chevron = u - 2.05 - 0.45 * std::abs(v - 0.45);
+      if (chevron > 0 && v < 0.86) {
+        const double k = std::fmod(chevron / 0.16, 2.0);
+        c = k < 1.0 ? L({214, 30, 36}) : L({240, 240, 236});
+      }
+      if (v > 0.88) c = L({200, 24, 30});
+      if (v > 0.86 && v <= 0.88) c = L({240, 240, 236});
+      // "VDYN": 7 font pixels 0.42 high; "PROVING GROUND" 0.13 high.
+      const double big = 0.42 / 7, small = 0.13 / 7;
+      if (InText("VDYN", (u - 0.16) / big, (v - 0.1) / big, 0.25)) c = L({248, 248, 244});
+      if (InText("PROVING GROUND", (u - 0.18) / small, (v - 0.61) / small, 0.25)) {
+        c = L({252, 206, 40});
+      }
+      sum.r += c.r / 16;
+      sum.g += c.g / 16;
+      sum.b += c.b / 16;
+    }
+  }
+  return sum;
+}
+
 }  // namespace
 
 double ToLinear(std::uint8_t srgb) {
@@ -173,6 +243,8 @@ Rgb8 MeanColour(TextureLayer layer) {
       return {128, 128, 128};
     case TextureLayer::kClouds:
       return {255, 255, 255};
+    case TextureLayer::kPoster:
+      return {40, 60, 120};
   }
   return {128, 128, 128};
 }
@@ -191,6 +263,8 @@ double TileMetres(TextureLayer layer) {
       return 61.0;  // not a multiple of the others: their tiling does not line up with it
     case TextureLayer::kClouds:
       return 2400.0;
+    case TextureLayer::kPoster:
+      return 1.0;  // over its face once
   }
   return 1.0;
 }
@@ -236,10 +310,14 @@ TextureImage MakeTexture(TextureLayer layer, int size) {
           alpha[k] = cover;
           break;
         }
+        case TextureLayer::kPoster:
+          lin[k] = Poster(x, y, size);
+          break;
       }
     }
   }
-  if (layer != TextureLayer::kMacro && layer != TextureLayer::kClouds) {
+  if (layer != TextureLayer::kMacro && layer != TextureLayer::kClouds &&
+      layer != TextureLayer::kPoster) {
     // Scale each channel (in linear light) so the mean is the layer's colour; clamping moves it
     // a little, so repeat.
     const Lin target = L(MeanColour(layer));
