@@ -88,6 +88,12 @@ vec3 ToneMap(vec3 c) {
 vec3 Output(vec3 c) { return Encode(ToneMap(c)); }
 // Fogged towards the horizon's colour, tone mapped and encoded for the screen.
 vec3 Finish(vec3 c, vec3 p) { return Output(mix(c, kHorizonRgb, FogAmount(p))); }
+// The same with light of its own (a lamp): shown as it is beside the tone-mapped rest, so a lit
+// lamp reaches full brightness in its colour (a display's emitter, not a scene highlight).
+vec3 FinishOwn(vec3 c, vec3 own, vec3 p) {
+  float f = FogAmount(p);
+  return Encode(max(ToneMap(mix(c, kHorizonRgb, f)), mix(own, kHorizonRgb, f)));
+}
 
 // --- physically based shading (metal/roughness), the sky as the environment light -------------
 const float kPi = 3.14159265;
@@ -121,12 +127,14 @@ vec3 SunSpecular(vec3 n, vec3 v, vec3 f0, float r, float sun) {
   return kSunRgb * (sun * nl * D * vis) * F;
 }
 // A rough dielectric's reflection of the sky and the sun beyond what its albedo holds: the
-// world's surfaces. Their textures' colours are as seen from above, their 4 % reflection there
-// included; what grows with the angle is Schlick's rise towards grazing (the road's sheen
-// towards the horizon, its glare against a low sun), added here.
+// world's surfaces. Their textures' colours are as seen from above, their reflection there
+// included; what grows with the angle is the split-sum's rise from normal incidence to n.v (for a
+// rough surface a few per cent: Schlick's full rise holds only for a mirror), and the sun's GGX
+// highlight (the road's glare against a low sun).
 vec3 WorldSpecular(vec3 n, vec3 v, float r, float sun) {
-  float x = 1.0 - max(dot(n, v), 0.0), rise = x * x * x * x * x;
-  return rise * (SkySpecular(reflect(-v, n), n, r) + SunSpecular(n, v, vec3(1.0), r, sun));
+  vec2 at_v = EnvBrdf(r, max(dot(n, v), 1e-4)), at_normal = EnvBrdf(r, 1.0);
+  float rise = max(0.04 * (at_v.x - at_normal.x) + at_v.y - at_normal.y, 0.0);
+  return rise * SkySpecular(reflect(-v, n), n, r) + SunSpecular(n, v, vec3(0.04), r, sun);
 }
 
 #ifdef SHADOWS
@@ -460,9 +468,9 @@ void main() {
   spec = max(spec, vec3(0.04 * coat));
   vec3 c = v_albedo * (1.0 - metal) * (1.0 - spec) * Diffuse(n, sun) + SkyRadiance(r) * spec;
 #endif
-  c = max(c, v_albedo * v_material.w);
+  vec3 own = gl_FrontFacing ? v_albedo * v_material.w : vec3(0.0);
   c = gl_FrontFacing ? c : vec3(0.012);
-  o_colour = vec4(Finish(c, v_pos), 1.0);
+  o_colour = vec4(FinishOwn(c, own, v_pos), 1.0);
 }
 )";
 
