@@ -6,6 +6,8 @@
 #include <map>
 #include <utility>
 
+#include "vdyn/viewer/textures.h"
+
 namespace vdyn::viewer {
 namespace {
 
@@ -15,31 +17,13 @@ constexpr double kSignOutM = kDressingClearanceM + 0.3;
 constexpr double kTreeCellM = 9.0;     // one tree at most per cell of this side
 constexpr double kChunkCellM = 120.0;  // trees and signs drawn (or left out of view) in cells
 
-// Integer hash of a lattice point, in [0, 1).
-double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
-  std::uint64_t h = seed * 0xD6E8FEB86659FD93ull ^
-                    (static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ull) ^
-                    (static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4Full);
-  h ^= h >> 33;
-  h *= 0xFF51AFD7ED558CCDull;
-  h ^= h >> 33;
-  h *= 0xC4CEB9FE1A85EC53ull;
-  h ^= h >> 33;
-  return static_cast<double>(h >> 11) * (1.0 / 9007199254740992.0);
-}
-
-double Smooth(double e0, double e1, double x) {
-  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
-  return t * t * (3 - 2 * t);
-}
-
 // Value noise in [0, 1) on a lattice of unit cells.
 double Noise(double x, double y, std::uint64_t seed) {
   const double fx = std::floor(x), fy = std::floor(y);
   const auto i = static_cast<std::int64_t>(fx), j = static_cast<std::int64_t>(fy);
-  const double tx = Smooth(0, 1, x - fx), ty = Smooth(0, 1, y - fy);
-  const double a = Hash(i, j, seed), b = Hash(i + 1, j, seed);
-  const double c = Hash(i, j + 1, seed), d = Hash(i + 1, j + 1, seed);
+  const double tx = SmoothStep(0, 1, x - fx), ty = SmoothStep(0, 1, y - fy);
+  const double a = LatticeHash(i, j, seed), b = LatticeHash(i + 1, j, seed);
+  const double c = LatticeHash(i, j + 1, seed), d = LatticeHash(i + 1, j + 1, seed);
   return (a + (b - a) * tx) * (1 - ty) + (c + (d - c) * tx) * ty;
 }
 
@@ -118,7 +102,7 @@ void AppendTree(DrawList& list, const Tree& t, bool full) {
   const int seg = full ? 7 : 5;
   if (t.hash < 0.45) {
     // A conifer: a short trunk, two cones.
-    const Rgb8 needles = Shade({44, 74, 42}, 0.8 + 0.4 * Hash(std::lround(b.x), 3, 9));
+    const Rgb8 needles = Shade({44, 74, 42}, 0.8 + 0.4 * LatticeHash(std::lround(b.x), 3, 9));
     list.Cylinder(b, b + Vec3{0, 0, 0.25 * h}, 0.04 * h + 0.1, bark, true, 5);
     const double r = 0.22 * h;
     list.Cone(b + Vec3{0, 0, 0.15 * h}, b + Vec3{0, 0, 0.75 * h}, r, needles, true, seg);
@@ -126,7 +110,7 @@ void AppendTree(DrawList& list, const Tree& t, bool full) {
               seg);
   } else {
     // A broadleaf tree: a trunk, a round crown.
-    const Rgb8 leaves = Shade({78, 106, 46}, 0.75 + 0.45 * Hash(std::lround(b.y), 5, 11));
+    const Rgb8 leaves = Shade({78, 106, 46}, 0.75 + 0.45 * LatticeHash(std::lround(b.y), 5, 11));
     list.Cylinder(b, b + Vec3{0, 0, 0.5 * h}, 0.035 * h + 0.12, bark, true, 5);
     const double r = 0.3 * h;
     Blob(list, b + Vec3{0, 0, 0.62 * h}, {r, r * (0.85 + 0.3 * t.hash), 0.42 * h}, leaves,
@@ -201,7 +185,7 @@ void AppendHills(Dressing& d, const Vec3& centre, double r0, double r1, double z
     const double ridge = 60 + 35 * std::sin(3 * az + 0.7) + 20 * std::sin(7 * az + 2.1) +
                          10 * std::sin(13 * az + 0.4) + 6 * std::sin(29 * az + 1.3);
     const double rough = 0.8 + 0.4 * Noise(az * 12.0, t * 3.0, 71);
-    return std::max(ridge, 12.0) * rough * Smooth(0.0, 0.7, t);
+    return std::max(ridge, 12.0) * rough * SmoothStep(0.0, 0.7, t);
   };
   auto point = [&](int i, int k) {
     const double az = 2 * kPi * i / segments, t = static_cast<double>(k) / rings;
@@ -360,22 +344,22 @@ Dressing MakeDressing(const TerrainData& t, bool full) {
     for (std::int64_t i = -cells_u; i < cells_u; ++i) {
       for (std::int64_t j = 0; j < cells_w; ++j) {
         const auto seed = static_cast<std::uint64_t>(si) * 1000 + 17;
-        const double u = (static_cast<double>(i) + Hash(i, j, seed)) * kTreeCellM;
+        const double u = (static_cast<double>(i) + LatticeHash(i, j, seed)) * kTreeCellM;
         const double w =
-            kTreeBandFromM + (static_cast<double>(j) + Hash(i, j, seed + 1)) * kTreeCellM;
+            kTreeBandFromM + (static_cast<double>(j) + LatticeHash(i, j, seed + 1)) * kTreeCellM;
         if (std::abs(u) > reach_u || w > band) continue;
         const Vec3 p = s.At(u, w, z - 0.1);
         // Clumps: woods where a coarse noise is high, a scattered tree elsewhere.
-        const double clump = Smooth(0.4, 0.7, Noise(p.x / 80.0, p.y / 80.0, 5));
+        const double clump = SmoothStep(0.4, 0.7, Noise(p.x / 80.0, p.y / 80.0, 5));
         const double keep = 0.06 + 0.6 * clump;
-        if (Hash(i, j, seed + 2) >= keep) continue;
-        if (!full && Hash(i, j, seed + 3) >= 0.3) continue;
-        const double height = 6.0 + 9.0 * Hash(i, j, seed + 4) * (0.6 + 0.4 * clump);
+        if (LatticeHash(i, j, seed + 2) >= keep) continue;
+        if (!full && LatticeHash(i, j, seed + 3) >= 0.3) continue;
+        const double height = 6.0 + 9.0 * LatticeHash(i, j, seed + 4) * (0.6 + 0.4 * clump);
         if (buildings &&
             (stand.Near(u, w, 0.35 * height + 3) || pits.Near(u, w, 0.35 * height + 3))) {
           continue;
         }
-        trees[cell_of(p)].push_back({p, height, Hash(i, j, seed + 5)});
+        trees[cell_of(p)].push_back({p, height, LatticeHash(i, j, seed + 5)});
       }
     }
   }

@@ -6,10 +6,9 @@
 #include <stdexcept>
 
 namespace vdyn::viewer {
-namespace {
 
 // Integer hash of a lattice point, in [0, 1).
-double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
+double LatticeHash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
   std::uint64_t h = seed * 0xD6E8FEB86659FD93ull ^
                     (static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ull) ^
                     (static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4Full);
@@ -20,6 +19,13 @@ double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
   h ^= h >> 33;
   return static_cast<double>(h >> 11) * (1.0 / 9007199254740992.0);
 }
+
+double SmoothStep(double e0, double e1, double x) {
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+
+namespace {
 
 std::int64_t Wrap(std::int64_t i, std::int64_t period) {
   const std::int64_t m = i % period;
@@ -35,9 +41,9 @@ double Noise(double x, double y, int period, std::uint64_t seed) {
   tx = tx * tx * (3 - 2 * tx);
   ty = ty * ty * (3 - 2 * ty);
   const std::int64_t p = period;
-  const double a = Hash(Wrap(i, p), Wrap(j, p), seed), b = Hash(Wrap(i + 1, p), Wrap(j, p), seed);
-  const double c = Hash(Wrap(i, p), Wrap(j + 1, p), seed);
-  const double d = Hash(Wrap(i + 1, p), Wrap(j + 1, p), seed);
+  const double a = LatticeHash(Wrap(i, p), Wrap(j, p), seed), b = LatticeHash(Wrap(i + 1, p), Wrap(j, p), seed);
+  const double c = LatticeHash(Wrap(i, p), Wrap(j + 1, p), seed);
+  const double d = LatticeHash(Wrap(i + 1, p), Wrap(j + 1, p), seed);
   return (a + (b - a) * tx) * (1 - ty) + (c + (d - c) * tx) * ty;
 }
 
@@ -50,11 +56,6 @@ double Fbm(double x, double y, int period, int octaves, std::uint64_t seed) {
     w *= 0.5;
   }
   return sum / weight;
-}
-
-double Smooth(double e0, double e1, double x) {
-  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
-  return t * t * (3 - 2 * t);
 }
 
 struct Lin {
@@ -81,15 +82,15 @@ double Stones(double x, double y, int cells, double radius_cells, std::uint64_t 
   for (std::int64_t dj = -1; dj <= 1; ++dj) {
     for (std::int64_t di = -1; di <= 1; ++di) {
       const std::int64_t i = Wrap(ci + di, cells), j = Wrap(cj + dj, cells);
-      const double sx = static_cast<double>(ci + di) + Hash(i, j, seed);
-      const double sy = static_cast<double>(cj + dj) + Hash(i, j, seed + 7);
-      const double r = radius_cells * (0.5 + Hash(i, j, seed + 13));
+      const double sx = static_cast<double>(ci + di) + LatticeHash(i, j, seed);
+      const double sy = static_cast<double>(cj + dj) + LatticeHash(i, j, seed + 7);
+      const double r = radius_cells * (0.5 + LatticeHash(i, j, seed + 13));
       const double d = std::hypot(fx - sx, fy - sy) / r;
       if (d < 1.0) {
         const double cover = 1.0 - d * d;
         if (cover > best) {
           best = cover;
-          *shade = Hash(i, j, seed + 29);
+          *shade = LatticeHash(i, j, seed + 29);
         }
       }
     }
@@ -101,10 +102,10 @@ Lin Grass(double x, double y) {
   const double patches = Fbm(x, y, 4, 4, 11);
   const double fine = Fbm(x, y, 64, 2, 12);
   const double blades =
-      Hash(static_cast<std::int64_t>(x * 4096), static_cast<std::int64_t>(y * 4096), 13);
-  Lin c = Mix(L({58, 88, 34}), L({112, 138, 58}), Smooth(0.25, 0.75, patches));
+      LatticeHash(static_cast<std::int64_t>(x * 4096), static_cast<std::int64_t>(y * 4096), 13);
+  Lin c = Mix(L({58, 88, 34}), L({112, 138, 58}), SmoothStep(0.25, 0.75, patches));
   // Dry, yellowish patches and clover-dark spots.
-  const double dry = Smooth(0.62, 0.8, Fbm(x + 0.37, y + 0.11, 3, 3, 14));
+  const double dry = SmoothStep(0.62, 0.8, Fbm(x + 0.37, y + 0.11, 3, 3, 14));
   c = Mix(c, L({138, 134, 74}), 0.45 * dry);
   c = Scale(c, 0.7 + 0.45 * fine + 0.25 * (blades - 0.5));
   return c;
@@ -113,7 +114,7 @@ Lin Grass(double x, double y) {
 Lin Asphalt(double x, double y) {
   const double patches = Fbm(x, y, 3, 4, 21);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 22);
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 22);
   Lin c = Scale(L({72, 72, 75}), 0.88 + 0.24 * patches + 0.22 * (grain - 0.5));
   double shade = 0;
   const double stone = Stones(x, y, 96, 0.22, 23, &shade);
@@ -124,7 +125,7 @@ Lin Asphalt(double x, double y) {
 Lin Concrete(double x, double y) {
   const double mottle = Fbm(x, y, 4, 5, 31);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 32);
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 32);
   Lin c = Scale(L({164, 161, 154}), 0.86 + 0.24 * mottle + 0.08 * (grain - 0.5));
   double shade = 0;
   if (Stones(x, y, 64, 0.12, 33, &shade) > 0.2) c = Scale(c, 0.72);  // pores
@@ -134,15 +135,15 @@ Lin Concrete(double x, double y) {
 Lin Dirt(double x, double y) {
   const double patches = Fbm(x, y, 4, 5, 41);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 42);
-  Lin c = Mix(L({96, 76, 56}), L({146, 122, 92}), Smooth(0.2, 0.8, patches));
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 42);
+  Lin c = Mix(L({96, 76, 56}), L({146, 122, 92}), SmoothStep(0.2, 0.8, patches));
   c = Scale(c, 0.9 + 0.2 * (grain - 0.5));
   double shade = 0;
   const double stone = Stones(x, y, 48, 0.3, 43, &shade);
   if (stone > 0) {
     // A pebble: lit on top, its shadow towards the lower right.
     const Lin pebble = Scale(Mix(L({120, 112, 100}), L({190, 182, 168}), shade), 0.7 + 0.5 * stone);
-    c = Mix(c, pebble, Smooth(0.0, 0.25, stone));
+    c = Mix(c, pebble, SmoothStep(0.0, 0.25, stone));
   }
   return c;
 }
@@ -304,8 +305,8 @@ TextureImage MakeTexture(TextureLayer layer, int size) {
         }
         case TextureLayer::kClouds: {
           const double f = Fbm(x, y, 4, 6, 61);
-          const double cover = Smooth(0.48, 0.78, f);
-          const double lum = 1.0 - 0.35 * Smooth(0.6, 0.95, f);  // denser: greyer underneath
+          const double cover = SmoothStep(0.48, 0.78, f);
+          const double lum = 1.0 - 0.35 * SmoothStep(0.6, 0.95, f);  // denser: greyer underneath
           lin[k] = {lum, lum, lum * 1.02};
           alpha[k] = cover;
           break;

@@ -34,6 +34,11 @@ Rgb8 MeanColour(TextureLayer layer);
 
 // sRGB <-> linear light (the sRGB curve, as the GPU decodes textures and the shaders encode).
 double ToLinear(std::uint8_t srgb);
+// An integer hash of the lattice point (i, j) for a seed, in [0, 1): the procedural textures'
+// and the dressing's noise.
+double LatticeHash(std::int64_t i, std::int64_t j, std::uint64_t seed);
+// 0 below e0, 1 above e1, the cubic 3t^2 - 2t^3 between.
+double SmoothStep(double e0, double e1, double x);
 std::uint8_t ToSrgb(double linear);
 
 }  // namespace vdyn::viewer
