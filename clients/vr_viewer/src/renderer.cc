@@ -18,6 +18,20 @@
 namespace vdyn::viewer {
 namespace {
 
+// A draw list's vertex (position, normal, colour) as the bound vertex array's attributes 0-2.
+void VertexLayout() {
+  const auto stride = static_cast<GLsizei>(sizeof(Vertex));
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, p)));
+  glEnableVertexAttribArray(1);
+  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, n)));
+  glEnableVertexAttribArray(2);
+  glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, rgba)));
+}
+
 std::string Log(GLuint object, bool program) {
   GLint len = 0;
   if (program) {
@@ -429,16 +443,7 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   glGenBuffers(1, &dyn_vbo_);
   glBindVertexArray(dyn_vao_);
   glBindBuffer(GL_ARRAY_BUFFER, dyn_vbo_);
-  const auto stride = static_cast<GLsizei>(sizeof(Vertex));
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, p)));
-  glEnableVertexAttribArray(1);
-  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, n)));
-  glEnableVertexAttribArray(2);
-  glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, rgba)));
+  VertexLayout();
   // Contact shadows: position, corner.
   glGenVertexArrays(1, &contact_vao_);
   glGenBuffers(1, &contact_vbo_);
@@ -707,16 +712,7 @@ void Renderer::UploadDressing(const Dressing& d) {
   glBindBuffer(GL_ARRAY_BUFFER, dressing_.vbo);
   glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(d.list.vertices().size() * sizeof(Vertex)),
                d.list.vertices().data(), GL_STATIC_DRAW);
-  const auto stride = static_cast<GLsizei>(sizeof(Vertex));
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, p)));
-  glEnableVertexAttribArray(1);
-  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, n)));
-  glEnableVertexAttribArray(2);
-  glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, rgba)));
+  VertexLayout();
   glBindVertexArray(0);
   dressing_chunks_ = d.chunks;
 }
