@@ -10,9 +10,10 @@
 //  - latency: from a state's DDS source stamp (the server's wall clock, same machine) to the
 //    moment the frame that first shows it is presented, at the viewer's default 60 Hz cap.
 // Each case runs `runs` times for `frames` frames; medians over the runs of each run's p50 and
-// p99 are printed, and each viewer's frame-time p50 over the peer's.
+// p99 are printed, and each viewer's frame-time p50 over the peer's. With `both` after the peer,
+// the peer runs at --quality low and high too, and each quality is compared with the peer's same.
 //
-// Usage: viewer_bench [runs=3] [frames=600] [peer-viewer-binary]
+// Usage: viewer_bench [runs=3] [frames=600] [peer-viewer-binary [both]]
 #include <signal.h>
 #include <unistd.h>
 
@@ -89,10 +90,15 @@ int main(int argc, char** argv) {
     std::string name, binary, quality;  // quality empty: the peer (no --quality option)
   };
   std::vector<Variant> variants;
-  if (argc > 3) variants.push_back({"peer", argv[3], ""});
+  if (argc > 4 && std::string(argv[4]) == "both") {
+    variants.push_back({"peer-low", argv[3], "low"});
+    variants.push_back({"peer-high", argv[3], "high"});
+  } else if (argc > 3) {
+    variants.push_back({"peer", argv[3], ""});
+  }
   variants.push_back({"low", VDYN_VIEWER_BINARY, "low"});
   variants.push_back({"high", VDYN_VIEWER_BINARY, "high"});
-  std::printf("%-9s %-7s %-24s %-7s %-10s %-24s %-24s\n", "vehicles", "viewer",
+  std::printf("%-9s %-9s %-24s %-7s %-10s %-24s %-24s\n", "vehicles", "viewer",
               "frame p50/p99 ms no cap", "fps", "p50/peer", "frame p50/p99 ms 60 Hz",
               "latency p50/p99 ms 60 Hz");
   const int domain_base = 150 + getpid() % 40;
@@ -173,13 +179,22 @@ int main(int argc, char** argv) {
         Track(1, -1);
       }
     }
-    const double peer50 = variants.front().name == "peer" ? Median(samples.front().f50) : 0.0;
+    // Each viewer against the peer at its quality (or the one peer).
+    auto peer50_for = [&](const Variant& v) {
+      for (std::size_t k = 0; k < variants.size(); ++k) {
+        if (variants[k].name == "peer" || variants[k].name == "peer-" + v.quality) {
+          return Median(samples[k].f50);
+        }
+      }
+      return 0.0;
+    };
     for (std::size_t k = 0; k < variants.size(); ++k) {
       const Samples& sm = samples[k];
       const double fp50 = Median(sm.f50);
+      const double peer50 = peer50_for(variants[k]);
       char ratio[32] = "-";
       if (peer50 > 0) std::snprintf(ratio, sizeof ratio, "%.2f", fp50 / peer50);
-      std::printf("%-9d %-7s %8.2f / %-13.2f %-7.1f %-10s %8.2f / %-13.2f %8.2f / %-13.2f\n",
+      std::printf("%-9d %-9s %8.2f / %-13.2f %-7.1f %-10s %8.2f / %-13.2f %8.2f / %-13.2f\n",
                   vehicles, variants[k].name.c_str(), fp50, Median(sm.f99),
                   fp50 > 0 ? 1000.0 / fp50 : 0.0, ratio, Median(sm.c50), Median(sm.c99),
                   Median(sm.l50), Median(sm.l99));

@@ -36,13 +36,16 @@ fi
 # The recorder first, so it has the whole session: every topic, raw, into MCAP.
 "$rec" record out/live.mcap --domain "$domain" --no-status &
 recorder=$!
-# The server runs until the drive ends (then Ctrl-C, as a user would): a fixed duration outlasted
-# the drive, and its last seconds were the watchdog's braking without a driver.
-"$bin/server/vdyn-server" --domain "$domain" --world facility --status \
+# The server runs the drive's 40 s of simulated time and ends; the input, started just after it,
+# is still sending then (the car stands braked from ~35 s), and is stopped once the server has
+# ended: no step runs without a driver. (Stopping the server after the input had ended left the
+# last 0.1-0.5 s to the watchdog's safe state; a longer fixed duration, its last seconds.)
+"$bin/server/vdyn-server" --domain "$domain" --world facility --status --duration 40 \
   --stats-out out/live-stats.txt &
 server=$!
 viewer=""
-trap 'kill "$server" "$recorder" $viewer 2>/dev/null || true' EXIT
+input=""
+trap 'kill "$server" "$recorder" $viewer $input 2>/dev/null || true' EXIT
 if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${VDYN_VIEWER:-1}" != 0 ]; then
   # The viewer joins the session (it gets the world at once: transient local) and follows
   # vehicle 1 on the chase camera; its keys: F1.
@@ -51,9 +54,11 @@ if [ -n "${DISPLAY:-}${WAYLAND_DISPLAY:-}" ] && [ "${VDYN_VIEWER:-1}" != 0 ]; th
   viewer=$!
   echo "vdyn-viewer open on domain $domain (log in out/viewer.log)"
 fi
-"$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30
-kill -INT "$server"
+"$bin/clients/wheel_input/vdyn-input" --domain "$domain" --maneuver demo --wait 30 &
+input=$!
 wait "$server"
+kill -INT "$input" 2>/dev/null || true
+wait "$input"  # 0 when stopped by Ctrl-C; 1 or 2 when it failed (set -e ends the script)
 kill -INT "$recorder"
 wait "$recorder"
 if [ -n "$viewer" ]; then kill -INT "$viewer" 2>/dev/null || true; wait "$viewer" || true; fi

@@ -6,22 +6,23 @@
 #include <string>
 #include <vector>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/transport/drops.h"
 
 namespace vdyn::testing {
 
-// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`.
+// Waits on a reader until `done` says so or the timeout passes, handing every sample to `on`
+// (base::PollUntil, the one bounded wait: it looks once more after its last wait).
 template <class M, class On, class Done>
 bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout, On on, Done done) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (!done()) {
-    if (std::chrono::steady_clock::now() >= deadline) return false;
-    (void)reader.Wait(std::chrono::milliseconds(50));
-    (void)reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
-  }
-  return true;
+  return base::PollUntil(
+      base::Deadline::After(base::Nanos{std::chrono::nanoseconds(timeout).count()}),
+      base::Milliseconds(50), done, [&](base::Nanos slice) {
+        (void)reader.Wait(base::Chrono(slice));
+        (void)reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
+      });
 }
 
 // A stand-in for a server's request handling: keeps every request it reads, in order, and

@@ -306,6 +306,16 @@ TEST(Text, FixedReadingsNeverShowMinusZero) {
   EXPECT_EQ(base::FormatFixed(0.0, 1, true), "+0.0");
 }
 
+// Hashes and CRCs quoted one way: "0x", zero-padded to the width asked, every digit kept.
+TEST(Text, HexadecimalIsPaddedToItsWidthAndNeverCut) {
+  EXPECT_EQ(base::FormatHex(0xbeef, 8), "0x0000beef");
+  EXPECT_EQ(base::FormatHex(0x0f, 2), "0x0f");
+  EXPECT_EQ(base::FormatHex(0xcbf29ce484222325ull, 16), "0xcbf29ce484222325");
+  EXPECT_EQ(base::FormatHex(1, 16), "0x0000000000000001");
+  EXPECT_EQ(base::FormatHex(0x1234, 2), "0x1234");  // wider than asked: all of it
+  EXPECT_EQ(base::FormatHex(~0ull, 99), "0xffffffffffffffff");
+}
+
 TEST(Text, QuoteCutsAndEscapesUntrustedText) {
   EXPECT_EQ(base::Quote("ok"), "ok");
   EXPECT_EQ(base::Quote(std::string("a\nb\x01", 4)), "a\\nb\\x01");
@@ -355,6 +365,7 @@ TEST(SpscQueue, TwoThreadsPassEveryItemInOrder) {
 
 #include "vdyn/control.pb.h"
 #include "vdyn/messages/checks.h"
+#include "vdyn/messages/control_reply.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/world.pb.h"
@@ -384,6 +395,29 @@ TEST(Messages, EveryFieldIsCheckedNestedAndRepeated) {
   EXPECT_EQ(messages::MaxStringBytes("reason"), limits::kMaxReasonBytes);
   EXPECT_EQ(messages::MaxStringBytes("server_id"), limits::kMaxIdBytes);
   EXPECT_EQ(messages::MaxStringBytes("name"), limits::kMaxNameBytes);
+}
+
+// A reply (the server's and the recorder's player's, one form) answers its request by its ids and
+// is one every receiver takes: an id or a reason too long for a reply is cut to its limit, never
+// sent as a reply that the client's reader drops (CheckMessage).
+TEST(Messages, AControlReplyEchoesItsRequestAndPassesTheReceiversChecks) {
+  pb::ControlRequest r;
+  r.set_request_id(41);
+  r.set_vehicle_id(7);
+  r.set_client_id(std::string(200, 'c'));
+  pb::ControlReply reply = messages::ReplyTo(&r, "vdyn");
+  EXPECT_EQ(reply.request_id(), 41u);
+  EXPECT_EQ(reply.vehicle_id(), 7u);
+  EXPECT_EQ(reply.server_id(), "vdyn");
+  EXPECT_EQ(reply.client_id(), std::string(limits::kMaxIdBytes, 'c'));
+  EXPECT_TRUE(reply.accepted());
+  EXPECT_EQ(messages::CheckMessage(reply).problem, messages::Problem::kNone);
+  messages::Refuse(reply, std::string(5000, 'x'));
+  EXPECT_FALSE(reply.accepted());
+  EXPECT_EQ(reply.reason().size(), limits::kMaxReasonBytes);
+  EXPECT_EQ(messages::CheckMessage(reply).problem, messages::Problem::kNone)
+      << messages::CheckMessage(reply).field;
+  EXPECT_EQ(messages::ReplyTo(nullptr, "vdyn").client_id(), "");  // to no request
 }
 
 // The check on the serialised bytes agrees with the reflective one: clean means clean, and

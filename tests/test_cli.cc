@@ -71,7 +71,7 @@ TEST(Cli, ModelOptionChoosesTheModelAndRefusesOthers) {
   TempDir dir;
   const Result demo = RunServer("--demo --model paper --csv " + (dir / "d.csv").string());
   ASSERT_EQ(demo.exit_code, 0) << demo.output;
-  EXPECT_THAT(demo.output, HasSubstr("state hash f00662dacbdc2b22"));
+  EXPECT_THAT(demo.output, HasSubstr("state hash 65de67228a69d83c"));
 }
 
 TEST(Cli, BatchWritesTheCsvWithUnitsInTheHeader) {

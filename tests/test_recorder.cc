@@ -1735,6 +1735,53 @@ std::optional<std::pair<double, double>> YRange(const std::string& script,
   return std::make_pair(lo, hi);
 }
 
+// The panels gnuplot is told to draw in figure `name`, in order: their y label and y range.
+struct PlotPanel {
+  std::string ylabel;
+  double lo = 0, hi = 0;
+};
+std::vector<PlotPanel> Panels(const std::string& script, const std::string& name) {
+  std::vector<PlotPanel> panels;
+  const std::size_t at = script.find("set output '" + name + ".png'");
+  if (at == std::string::npos) return panels;
+  const std::size_t end = script.find("set output", at + 1);
+  std::istringstream lines(script.substr(at, end == std::string::npos ? end : end - at));
+  std::string line;
+  while (std::getline(lines, line)) {
+    if (line.rfind("set ylabel '", 0) == 0) {
+      panels.push_back({line.substr(12, line.size() - 13)});
+    } else if (!panels.empty() && line.rfind("set yrange [", 0) == 0) {
+      EXPECT_EQ(
+          std::sscanf(line.c_str(), "set yrange [%lf:%lf]", &panels.back().lo, &panels.back().hi),
+          2)
+          << line;
+    }
+  }
+  return panels;
+}
+
+// The data file the figures plot (states.dat): its columns by name, then its rows.
+struct PlotData {
+  std::map<std::string, std::size_t> column;
+  std::vector<std::vector<double>> rows;
+};
+PlotData ReadPlotData(const std::filesystem::path& path) {
+  PlotData d;
+  std::ifstream in(path);
+  std::string line, name;
+  std::getline(in, line);
+  std::istringstream header(line);
+  header >> name;  // "#"
+  while (header >> name) d.column.emplace(name, d.column.size());
+  while (std::getline(in, line)) {
+    std::istringstream values(line);
+    std::vector<double> row;
+    for (double v = 0; values >> v;) row.push_back(v);
+    d.rows.push_back(std::move(row));
+  }
+  return d;
+}
+
 // `plot out/live.mcap` failed for every relative path, blaming gnuplot; the figures left parts
 // blank, hid pedals at rest on the axis and magnified noise into data.
 TEST_F(RecorderTest, PlotWorksWithRelativePathsAndDrawsWhatMatters) {
@@ -1774,14 +1821,34 @@ TEST_F(RecorderTest, PlotWorksWithRelativePathsAndDrawsWhatMatters) {
   }
   EXPECT_GT(cells, 1000u);
   EXPECT_EQ(road, cells) << "cells without the road (no surface, or missing)";
-  // Pedals at rest stay in sight (their 0 above the axis); a 0.3 N ripple is not blown up.
+  // The figures plot the recording: every one of its 3,000 states (fewer than a figure's row
+  // limit: none left out), in order, at its time, place and speed, the pedals at rest.
+  const PlotData data = ReadPlotData(plots / "states.dat");
+  ASSERT_EQ(data.rows.size(), 3000u);
+  for (const char* c : {"t_s", "x_m", "speed_kmh", "throttle", "brake"}) {
+    ASSERT_EQ(data.column.count(c), 1u) << c;
+  }
+  std::size_t wrong = 0;
+  for (std::size_t k = 0; k < data.rows.size(); ++k) {
+    const std::vector<double>& r = data.rows[k];
+    auto at = [&](const char* c) { return r.at(data.column.at(c)); };
+    const bool right = std::abs(at("t_s") - 0.001 * static_cast<double>(k)) < 1e-9 &&
+                       std::abs(at("x_m") - (-150.0 + 0.1 * static_cast<double>(k))) < 1e-9 &&
+                       at("speed_kmh") == 360.0 && at("throttle") == 0.0 && at("brake") == 0.0;
+    if (!right && wrong++ < 3) ADD_FAILURE() << "state " << k << " plotted wrongly";
+  }
+  EXPECT_EQ(wrong, 0u);
+  // Pedals at rest stay in sight: each pedal's panel shows its whole travel, and its recorded 0
+  // is drawn above the panel's bottom edge, not on the axis. A 0.3 N ripple is not blown up.
   const std::string script = testing::ReadFile(plots / "plot.gp");
   std::size_t pedals = 0;
-  for (std::size_t at = script.find("set yrange [-0.05:1.05]"); at != std::string::npos;
-       at = script.find("set yrange [-0.05:1.05]", at + 1)) {
+  for (const PlotPanel& p : Panels(script, "controls")) {
+    if (p.ylabel.find("0..1") == std::string::npos) continue;
     ++pedals;
+    EXPECT_GE(p.hi, 1.0) << p.ylabel;
+    EXPECT_GE((0.0 - p.lo) / (p.hi - p.lo), 0.02) << p.ylabel << ": 0 on the bottom edge";
   }
-  EXPECT_EQ(pedals, 2u) << script;
+  EXPECT_EQ(pedals, 2u) << "a panel for the throttle and one for the brake\n" << script;
   const auto brake = YRange(script, "brake_forces");
   ASSERT_TRUE(brake.has_value()) << script;
   EXPECT_LT(brake->first, 0.0);

@@ -1,9 +1,11 @@
 // Session rules without the network: requests, input latching, the watchdog, events and the
 // bit-exact re-simulation of a session from its events.
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <numeric>
 #include <set>
 #include <span>
@@ -544,39 +546,123 @@ TEST(Placement, AsManyVehiclesAsTheServerRunsStartOnFreeGroundOrItSaysHowManyFit
   EXPECT_THROW((void)StartPoses(*away, p, 1), WorldError);
 }
 
-// The pool's fixed partition: every item once, by one thread, in contiguous parts in order, the
-// first (the smaller) on the calling thread; and Run returns only when every part is done (checked
-// right after each of many jobs).
-TEST(StepPool, EachItemOnceInContiguousPartsAndRunWaitsForEveryPart) {
+// What the pool's user sees of one job: every item stepped exactly once per job, and Run returns
+// only when every part is done (checked right after each of many jobs).
+TEST(StepPool, EveryItemOnceAJobAndRunWaitsForEveryPart) {
   for (const int threads : {1, 2, 3, 5}) {
     StepPool pool(threads);
     for (const std::size_t n : {0u, 1u, 2u, 3u, 7u, 256u}) {
       SCOPED_TRACE(std::to_string(threads) + " threads, " + std::to_string(n) + " items");
       std::vector<int> visits(n, 0);
-      std::vector<std::thread::id> by(n);
       for (int job = 1; job <= 300; ++job) {
         auto part = [&](std::size_t begin, std::size_t end) {
-          for (std::size_t i = begin; i < end; ++i) {
-            ++visits[i];
-            by[i] = std::this_thread::get_id();
-          }
+          for (std::size_t i = begin; i < end; ++i) ++visits[i];
         };
         pool.Run(n, part);
         for (std::size_t i = 0; i < n; ++i) ASSERT_EQ(visits[i], job) << "item " << i;
       }
-      // Part k starts at n W(k) / W(T) with W(0) = 0, W(k) = 2 + 3 (k - 1): the calling thread's
-      // part weighs 2, a worker's 3. The same thread for each part, another for the next.
-      const auto w = [](int k) { return k == 0 ? 0 : 2 + 3 * (k - 1); };
-      for (int k = 0; k < threads; ++k) {
-        const std::size_t b = n * w(k) / w(threads), e = n * w(k + 1) / w(threads);
-        for (std::size_t i = b; i < e; ++i) EXPECT_EQ(by[i], by[b]) << "item " << i;
-        if (k == 0 && e > 0) {
-          EXPECT_EQ(by[0], std::this_thread::get_id());
-        }
-        if (b > 0 && b < e) {
-          EXPECT_NE(by[b], by[b - 1]) << "part " << k;
-        }
+    }
+  }
+}
+
+// Who steps what, as seen from the items: each thread one contiguous run of items, a different
+// thread for each run; the calling thread the first run (it also runs the session's serial
+// phases, so it gets the smallest share, but a real one: at least half a worker's, less one
+// item); the workers' shares within one item of each other (a worker that got nothing counts as
+// an empty share). One item alone is stepped on the calling thread (no worker is woken for it).
+TEST(StepPool, TheWorkIsSharedInContiguousRunsTheCallersTheSmallest) {
+  for (const int threads : {1, 2, 3, 5}) {
+    StepPool pool(threads);
+    for (const std::size_t n : {1u, 2u, 3u, 7u, 10u, 256u, 1001u}) {
+      SCOPED_TRACE(std::to_string(threads) + " threads, " + std::to_string(n) + " items");
+      std::vector<std::thread::id> by(n);
+      auto part = [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) by[i] = std::this_thread::get_id();
+      };
+      pool.Run(n, part);
+      // The runs of equal thread ids, in item order.
+      std::vector<std::pair<std::thread::id, std::size_t>> runs;
+      for (std::size_t i = 0; i < n; ++i) {
+        if (runs.empty() || runs.back().first != by[i]) runs.push_back({by[i], 0});
+        ++runs.back().second;
       }
+      std::set<std::thread::id> threads_seen;
+      for (const auto& [id, size] : runs) {
+        EXPECT_TRUE(threads_seen.insert(id).second) << "a thread stepped two runs";
+      }
+      EXPECT_LE(runs.size(), static_cast<std::size_t>(threads));
+      const std::thread::id here = std::this_thread::get_id();
+      const std::size_t caller = runs.front().first == here ? runs.front().second : 0;
+      for (std::size_t r = 1; r < runs.size(); ++r) EXPECT_NE(runs[r].first, here);
+      if (n == 1) {
+        EXPECT_EQ(caller, 1u);
+        continue;
+      }
+      std::vector<std::size_t> workers;
+      for (const auto& [id, size] : runs) {
+        if (id != here) workers.push_back(size);
+      }
+      workers.resize(static_cast<std::size_t>(threads - 1), 0);  // the workers that got nothing
+      if (workers.empty()) {
+        EXPECT_EQ(caller, n);
+        continue;
+      }
+      const auto [least, most] = std::minmax_element(workers.begin(), workers.end());
+      EXPECT_LE(*most - *least, 1u);
+      EXPECT_LE(caller, *least);
+      if (n >= 10 * static_cast<std::size_t>(threads)) {
+        EXPECT_LT(caller, *least);  // the serial phases are the caller's: a smaller share
+      }
+      EXPECT_GE(2 * caller + 2, *least);
+    }
+  }
+}
+
+// A session's vehicles stepped by the pool, as a server's client sees them: each vehicle's state
+// advances by exactly one step per session step and is published once, and every published state
+// is the same, bit for bit, with 1, 2 and 4 stepping threads (seven vehicles, each steered its own
+// way, cut unevenly among the threads).
+TEST(StepPool, EveryVehicleOnceAStepAndTheSameStatesWith1And2And4Threads) {
+  const std::shared_ptr<const World> world = testing::SharedWorld("flat");
+  constexpr std::uint32_t kVehicles = 7;
+  constexpr std::uint64_t kSteps = 400;
+  // The states' hashes with one thread, by (vehicle, step).
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::uint64_t> one_thread;
+  for (const int threads : {1, 2, 4}) {
+    SCOPED_TRACE(std::to_string(threads) + " stepping thread(s)");
+    SessionConfig c = Config();
+    c.step_threads = threads;
+    Session s(world, c, nullptr);
+    for (std::uint32_t id = 1; id <= kVehicles; ++id) {
+      s.Spawn(id, {0.0, 12.0 * id, 0.0}, 10.0, pb::VehicleParams());
+    }
+    std::map<std::pair<std::uint32_t, std::uint64_t>, std::uint64_t> seen;
+    for (std::uint64_t step = 0; step < kSteps; ++step) {  // the step a state reports
+      for (std::uint32_t id = 1; id <= kVehicles; ++id) {
+        pb::DriverInput in;
+        in.set_vehicle_id(id);
+        in.set_source_id("t");
+        in.set_steer(0.002 * id * std::sin(0.01 * static_cast<double>(step + 1)));
+        in.set_throttle(0.1 * (id % 3));
+        std::string why;
+        ASSERT_TRUE(s.OfferInput(in, &why)) << why;
+      }
+      std::map<std::uint32_t, int> published;
+      s.Step([&](std::uint32_t id, const pb::VehicleState& st) {
+        ++published[id];
+        EXPECT_EQ(st.step(), step) << "vehicle " << id;
+        seen[{id, st.step()}] = st.state_hash();
+      });
+      ASSERT_EQ(published.size(), kVehicles) << "step " << step;
+      for (const auto& [id, count] : published) ASSERT_EQ(count, 1) << "vehicle " << id;
+    }
+    for (std::uint32_t id = 1; id <= kVehicles; ++id) {
+      EXPECT_EQ(s.simulator(id).state().step, static_cast<std::int64_t>(kSteps));
+    }
+    if (threads == 1) {
+      one_thread = seen;
+    } else {
+      EXPECT_TRUE(seen == one_thread) << "the states differ from one thread's";
     }
   }
 }

@@ -15,6 +15,7 @@
 #include <thread>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -579,6 +580,67 @@ TEST(Validation, CsvPipeWritesTheSameBytesWhoeverFormatsTheRows) {
 }
 
 // --- friction circle, paper yaw mode, containment -----------------------------------------------
+// The demo drive (vdyn-input --maneuver demo, scripts/demo.sh's live session) stays on the
+// facility's road from its start to its stop: at every step every wheel's contact point (in the
+// air off jump ramp A, the point below the wheel) lies on the road's asphalt - the part of the
+// road mesh at its full height, read from the world's own meshes (its 0.4 m edges slope down to
+// the grass) - and a trace straight down from above it meets the road or what is built on it
+// (bumps, washboard, ramp A), never the grass. For the full model (the default) and the paper's.
+// (Before: the step steer, 3 degrees held 4 s, turned the car 53 degrees onto the grass.)
+TEST(Properties, TheDemoDriveKeepsEveryWheelOnTheFacilitysRoad) {
+  const auto world = SharedWorld("facility");
+  const Terrain& terrain = world->terrain;
+  double top = -std::numeric_limits<double>::infinity();
+  for (const TriangleMesh& mesh : terrain.meshes()) {
+    if (mesh.kind != SurfaceKind::kRoad) continue;
+    for (const Vector3d& v : mesh.vertices_W) top = std::max(top, v.z());
+  }
+  Eigen::AlignedBox2d asphalt;
+  for (const TriangleMesh& mesh : terrain.meshes()) {
+    if (mesh.kind != SurfaceKind::kRoad) continue;
+    for (const Vector3d& v : mesh.vertices_W) {
+      if (v.z() >= top) asphalt.extend(Eigen::Vector2d(v.x(), v.y()));
+    }
+  }
+  ASSERT_FALSE(asphalt.isEmpty());
+  ASSERT_GT(asphalt.sizes().x(), 500.0);  // the 524 m test road, 8 m wide
+  ASSERT_NEAR(asphalt.sizes().y(), 8.0, 1e-9);
+  const Maneuver m = Maneuver::Named("demo");
+  for (const bool paper : {false, true}) {
+    SCOPED_TRACE(paper ? "paper model" : "full model");
+    Simulator sim(world, paper ? PaperDefaults() : testing::DefaultParams());
+    int off = 0;
+    double margin = std::numeric_limits<double>::infinity();  // nearest approach to an edge, m
+    Drive(sim, std::llround(m.end_time() / sim.h()),
+          [&m](Simulator& s) { s.SetInput(FromManeuver(m.At(s.time()))); },
+          [&](const StepRecord& r) {
+            for (std::size_t k = 0; k < r.derived.wheel.size(); ++k) {
+              const Vector3d& p = r.derived.wheel[k].p_B_W;
+              const Eigen::Vector2d xy(p.x(), p.y());
+              const TraceHit hit =
+                  terrain.Trace(Vector3d(p.x(), p.y(), p.z() + 2.0), -Vector3d::UnitZ(), 10.0);
+              const SurfaceKind kind = hit.hit ? terrain.meshes()[hit.mesh].kind : SurfaceKind::kGround;
+              const bool on_road = asphalt.contains(xy) &&
+                                   (kind == SurfaceKind::kRoad || kind == SurfaceKind::kObstacle ||
+                                    kind == SurfaceKind::kRamp);
+              margin = std::min({margin, p.y() - asphalt.min().y(), asphalt.max().y() - p.y(),
+                                 p.x() - asphalt.min().x(), asphalt.max().x() - p.x()});
+              if (!on_road && ++off <= 3) {
+                ADD_FAILURE() << "wheel " << k << " off the road at t = " << r.t
+                              << " s: (" << p.x() << ", " << p.y() << ") on "
+                              << (hit.hit ? terrain.meshes()[hit.mesh].name : "nothing");
+              }
+            }
+            return false;
+          });
+    EXPECT_EQ(off, 0);
+    std::printf("demo drive (%s): the wheels came within %.2f m of the asphalt's edge\n",
+                paper ? "paper model" : "full model", margin);
+    EXPECT_GT(Position(sim.state().x).x(), 150.0);  // it drove the road: past the step steer
+    EXPECT_LT(Velocity(sim.state().x).norm(), 0.01);  // and stopped on it
+  }
+}
+
 TEST(Properties, EveryWheelForceStaysInsideTheFrictionCircle) {
   const auto world = SharedWorld("facility");
   const ValidParams p = PaperDefaults();

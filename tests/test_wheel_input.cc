@@ -6,6 +6,7 @@
 // slept: every ramp and fade is checked against its closed form.
 #include <SDL2/SDL.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
@@ -18,8 +19,10 @@
 #include "test_support.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/client/driver_input.h"
+#include "vdyn/io/maneuver.h"
 #include "vdyn/io/vehicle_params.h"
 #include "vdyn/wheel_input/calibrate.h"
+#include "vdyn/wheel_input/commands.h"
 #include "vdyn/wheel_input/controls.h"
 #include "vdyn/wheel_input/devices.h"
 #include "vdyn/wheel_input/ffb.h"
@@ -1565,6 +1568,52 @@ TEST(Window, ReadingsAtRestShowNoMinusZero) {
     EXPECT_THAT(item.text, ::testing::Not(::testing::ContainsRegex("-0(\\.0+)?( |$)")))
         << item.text;
   }
+}
+
+// --- the commands (commands.h), called as vdyn-input's main calls them -----------------------
+
+// calibrate with a device SDL does not have: exit code 2 (bad input) and the reason, before any
+// prompt or device is opened.
+TEST_F(SdlTest, CalibrateRefusesADeviceSdlDoesNotHaveWithExitCode2) {
+  CalibrateOptions o;
+  o.device = 200;
+  o.out = (dir_.path() / "never.txt").string();
+  const std::atomic<bool> stop{false};
+  ::testing::internal::CaptureStderr();
+  const int code = Calibrate(o, stop);
+  const std::string err = ::testing::internal::GetCapturedStderr();
+  EXPECT_EQ(code, 2);
+  EXPECT_THAT(err, HasSubstr("no device 200 to calibrate (vdyn-input list shows what SDL sees)"));
+  EXPECT_FALSE(std::filesystem::exists(o.out));
+}
+
+// play with a maneuver file that is not there: the maneuver's error naming the file (main makes
+// it exit code 2), before anything is sent.
+TEST(Commands, PlayRefusesAMissingManeuverFileNamingIt) {
+  testing::TempDir dir;
+  PlayOptions o;
+  o.maneuver = (dir.path() / "none.csv").string();
+  const std::atomic<bool> stop{false};
+  try {
+    (void)Play(CommonOptions{}, o, stop);
+    ADD_FAILURE() << "a missing maneuver was played";
+  } catch (const ManeuverError& e) {
+    EXPECT_THAT(e.what(), HasSubstr(o.maneuver + ": no such maneuver file"));
+  }
+}
+
+// What a person is told when the vehicle to drive is not on the domain: no server, or the
+// vehicles that are there and the two ways to go on.
+TEST(Commands, WhyNoVehicleNamesTheVehiclesThereAndHowToDriveOne) {
+  CommonOptions c;
+  c.vehicle_id = 3;
+  EXPECT_EQ(WhyNoVehicle(c, {}), "is vdyn-server running?");
+  EXPECT_EQ(WhyNoVehicle(c, {1}),
+            "vdyn-server there has vehicle 1: drive it with --vehicle-id 1, or start vdyn-server "
+            "with --vehicle-ids 1,3");
+  EXPECT_EQ(WhyNoVehicle(c, {1, 2}),
+            "vdyn-server there has vehicles 1,2: drive one with --vehicle-id 1, or start "
+            "vdyn-server with --vehicle-ids 1,2,3");
 }
 
 }  // namespace

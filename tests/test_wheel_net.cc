@@ -125,17 +125,15 @@ class WheelNet : public ::testing::Test {
 // Takes states of vehicle 1 until `done` says so or the timeout passes.
 bool StatesUntil(transport::Reader<pb::VehicleState>& states, std::chrono::milliseconds timeout,
                  pb::VehicleState& last, const std::function<bool(const pb::VehicleState&)>& done) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
   bool ok = false;
-  while (!ok && std::chrono::steady_clock::now() < deadline) {
-    (void)states.Wait(50ms);
-    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
-      if (s.vehicle_id() != 1 || ok) return;
-      last = s;
-      ok = done(s);
-    });
-  }
-  return ok;
+  return testing::ReadUntil(
+      states, timeout,
+      [&](const pb::VehicleState& s) {
+        if (s.vehicle_id() != 1 || ok) return;
+        last = s;
+        ok = done(s);
+      },
+      [&] { return ok; });
 }
 
 TEST_F(WheelNet, KeyboardDrivesTheVehicleWithRealKeyEvents) {

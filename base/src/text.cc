@@ -90,6 +90,13 @@ std::string FormatApprox(double v, int digits) {
   return parsed ? FormatNumber(*parsed) : std::string(buf);
 }
 
+std::string FormatHex(std::uint64_t v, int digits) {
+  char buf[24];
+  std::snprintf(buf, sizeof buf, "0x%0*llx", std::clamp(digits, 1, 16),
+                static_cast<unsigned long long>(v));
+  return buf;
+}
+
 std::string FormatFixed(double v, int decimals, bool plus) {
   char buf[64];
   std::snprintf(buf, sizeof buf, plus ? "%+.*f" : "%.*f", std::clamp(decimals, 0, 17), v);

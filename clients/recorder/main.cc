@@ -8,8 +8,8 @@
 #include <cstdio>
 #include <iostream>
 
-#include <CLI/CLI.hpp>
 #include <spdlog/spdlog.h>
+#include <CLI/CLI.hpp>
 
 #include "vdyn/base/memory.h"
 #include "vdyn/cli/errors.h"
@@ -26,7 +26,9 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
-extern "C" void OnSignal(int) { g_stop.store(true); }
+extern "C" void OnSignal(int) {
+  g_stop.store(true);
+}
 
 std::string CommandLine(int argc, char** argv) {
   std::string s;
@@ -68,226 +70,383 @@ CLI::Validator TopicNames() {
       "TOPIC");
 }
 
-}  // namespace
+namespace recorder = vdyn::recorder;
+namespace limits = vdyn::limits;
+namespace cli = vdyn::cli;
 
-int main(int argc, char** argv) {
-  using namespace vdyn;
-  // Recording takes DDS samples and writes chunks at a high rate: keep freed memory rather than
-  // fault it back in (base/memory.h; a quarter less CPU at 128 vehicles).
-  (void)base::KeepFreedMemory();
-  CLI::App app{"vdyn-recorder: record vdyn sessions to MCAP; info, export, plot, play, verify, takeover, recover"};
-  app.require_subcommand(1);
-  const limits::Range time_range = limits::kRecordingTimeS;
+// The terminal the recorder runs in, and the argument list (recorded and takeover's files name it).
+struct Invocation {
+  int argc = 0;
+  char** argv = nullptr;
+  bool tty = false;
+};
 
-  // record
+// --status / --no-status, as record, play and takeover take them.
+struct StatusFlags {
+  bool on = false, off = false;
+  void Add(CLI::App* c) {
+    c->add_flag("--status", on, "Print the status line (default: on a terminal)");
+    c->add_flag("--no-status", off, "No status line");
+  }
+  bool Show(bool tty) const { return on || (!off && tty); }
+};
+
+// A vehicle id option (--vehicle, --as): into an optional only when given.
+struct VehicleOption {
+  std::uint32_t id = 0;
+  CLI::Option* option = nullptr;
+  void Add(CLI::App* c, const std::string& name, const std::string& help) {
+    option = c->add_option(name, id, help)->check(cli::VehicleId());
+  }
+  void Into(std::optional<std::uint32_t>& to) const {
+    if (*option) to = id;
+  }
+};
+
+// Each command: its options (the constructor adds them) and its run.
+struct Record {
   recorder::RecordOptions ro;
   std::uint32_t domain = 0;
   std::vector<std::string> topic_names;
   std::vector<std::uint32_t> vehicles;
   std::string compression = "zstd";
   double chunk_kb = 1024, queue_mb = 256, split_mb = 0, split_s = 0;
-  bool status = false, no_status = false;
-  auto* rec = app.add_subcommand("record", "Record every vdyn topic of a domain into an MCAP file");
-  rec->add_option("out", ro.out, "The recording, e.g. out/session.mcap")->required();
-  rec->add_option("--domain", domain, "DDS domain id")->check(cli::WholeInRange(limits::kDomainId))->capture_default_str();
-  rec->add_option("--duration", ro.duration_s, "Stop after this many seconds (default: at Ctrl-C / SIGTERM)")
-      ->check(cli::InRange(limits::kDurationS));
-  rec->add_option("--topics", topic_names, "Only these topics, e.g. state,events,world,params")
-      ->delimiter(',')->check(TopicNames());
-  rec->add_option("--vehicles", vehicles, "Only these vehicles, e.g. 1,2 (events are kept for all)")->delimiter(',')->check(cli::VehicleId());
-  rec->add_option("--split-mb", split_mb, "Start a new file after this many MiB")->check(cli::InRange(limits::kSplitMb));
-  rec->add_option("--split-s", split_s, "Start a new file after this many seconds")->check(cli::InRange(limits::kSplitS));
-  rec->add_option("--compression", compression, "Chunk compression: zstd, lz4 or none")
-      ->check(CLI::IsMember({"zstd", "lz4", "none"}))->capture_default_str();
-  rec->add_option("--chunk-kb", chunk_kb, "Close a chunk at this size (or after 250 ms)")
-      ->check(cli::InRange(limits::kChunkKb))->capture_default_str();
-  rec->add_option("--queue-mb", queue_mb, "Memory for samples waiting to be written; beyond it they are dropped and counted")
-      ->check(cli::InRange(limits::kRecorderQueueMb))->capture_default_str();
-  rec->add_flag("--status", status, "Print the status line (default: on a terminal)");
-  rec->add_flag("--no-status", no_status, "No status line");
+  StatusFlags status;
+  CLI::App* cmd;
 
-  // info
-  std::filesystem::path file;
-  auto* info = app.add_subcommand("info", "Channels, counts, time range, vehicles, world, gaps; whether it re-simulates");
-  info->add_option("file", file, "A recording")->required();
-
-  // export
-  recorder::ExportOptions eo;
-  std::uint32_t vehicle = 0;
-  auto* exp = app.add_subcommand(
-      "export",
-      "States to CSV (columns as vdyn-server --batch --csv), or a copy with Foxglove's scene");
-  exp->add_option("file", eo.file, "A recording")->required();
-  recorder::FoxgloveExportOptions fo;
-  auto* exp_csv = exp->add_option("--csv", eo.csv, "The CSV file");
-  auto* exp_fox = exp->add_option("--foxglove", fo.out,
-                                  "A copy of the recording with Foxglove's scene added (MCAP)");
-  exp_csv->excludes(exp_fox);
-  exp->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
-      ->check(cli::InRange(limits::kFoxgloveSceneHz))
-      ->capture_default_str();
-  exp->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
-      ->check(cli::InRange(limits::kArrowScale))
-      ->capture_default_str();
-  auto* exp_vehicle = exp->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
-  exp->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
-  exp->add_option("--from", eo.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
-  exp->add_option("--to", eo.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
-  exp->add_option("--every", eo.every, "Rows whose step is a multiple of N (as --csv-every)")
-      ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
-
-  // plot
-  recorder::PlotOptions po;
-  auto* plot = app.add_subcommand("plot", "Figures (gnuplot, PNG or SVG) and one HTML page");
-  plot->add_option("file", po.file, "A recording")->required();
-  plot->add_option("--out", po.out_dir, "Folder for the figures (default: beside FILE, named after it: run.mcap -> run-plots)");
-  auto* plot_vehicle = plot->add_option("--vehicle", vehicle, "The vehicle (default: the first)")->check(cli::VehicleId());
-  plot->add_option("--format", po.format, "png or svg")->check(CLI::IsMember({"png", "svg"}))->capture_default_str();
-  plot->add_option("--from", po.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
-  plot->add_option("--to", po.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
-
-  // play
-  recorder::PlayOptions pl;
-  std::vector<std::string> play_topics;
-  bool no_keys = false;
-  auto* play = app.add_subcommand("play", "Republish a recording to DDS (world, params, states, inputs) at its recorded timing");
-  play->add_option("file", pl.file, "A recording")->required();
-  play->add_option("--domain", pl.domain, "DDS domain id")->check(cli::WholeInRange(limits::kDomainId))->capture_default_str();
-  play->add_option("--rate", pl.rate, "Playback speed, 1 = real time")->check(cli::InRange(limits::kPlaybackRate))->capture_default_str();
-  play->add_flag("--loop", pl.loop, "Start again at the end");
-  play->add_flag("--paused", pl.paused, "Start paused (space or a resume request starts it)");
-  play->add_option("--from", pl.from_s, "Start, s from the recording's start")->check(cli::InRange(time_range));
-  play->add_option("--to", pl.to_s, "End, s from the recording's start")->check(cli::InRange(time_range));
-  play->add_option("--topics", play_topics, "Topics to republish (default: world,params,state,input)")
-      ->delimiter(',')->check(TopicNames());
-  auto* play_vehicle = play->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
-  play->add_option("--server-id", pl.server_id, "The id control requests address the player by")->check(cli::Id("server id"))->capture_default_str();
-  play->add_flag("--no-keys", no_keys, "Ignore the keyboard");
-  play->add_flag("--force", pl.force, "Play even where a live server runs");
-  play->add_flag("--status", status, "Print the status line (default: on a terminal)");
-  play->add_flag("--no-status", no_status, "No status line");
-
-  // verify
-  recorder::VerifyOptions vo;
-  auto* ver = app.add_subcommand("verify", "Re-simulate from the recorded events; compare every recorded state hash");
-  ver->add_option("file", vo.file, "A recording")->required();
-  auto* ver_vehicle = ver->add_option("--vehicle", vehicle, "Only this vehicle")->check(cli::VehicleId());
-
-  // takeover
-  recorder::TakeoverOptions to;
-  std::uint32_t as_vehicle = 0;
-  auto* take = app.add_subcommand("takeover", "A live server resumes from the recorded state at --at; the new recording names this one");
-  take->add_option("file", to.file, "A recording")->required();
-  take->add_option("--at", to.at_s, "Seconds from the recording's start")->required()->check(cli::InRange(time_range));
-  take->add_option("--domain", to.domain, "DDS domain id of the live server")->check(cli::WholeInRange(limits::kDomainId))->capture_default_str();
-  auto* take_vehicle = take->add_option("--vehicle", vehicle, "The recorded vehicle (default: the first)")->check(cli::VehicleId());
-  auto* take_as = take->add_option("--as", as_vehicle, "The live vehicle id to restore into (default: the same)")->check(cli::VehicleId());
-  take->add_option("--out", to.out, "The new recording (default: FILE-takeover.mcap)");
-  take->add_option("--duration", to.duration_s, "Stop after this many seconds (default: at Ctrl-C)")->check(cli::InRange(limits::kDurationS));
-  take->add_option("--wait", to.wait_s, "Seconds to wait for the live server")->check(cli::InRange(limits::kWaitS))->capture_default_str();
-  take->add_flag("--status", status, "Print the status line (default: on a terminal)");
-  take->add_flag("--no-status", no_status, "No status line");
-
-  // recover
-  recorder::RecoverOptions co;
-  auto* recov = app.add_subcommand("recover", "Salvage a truncated or damaged recording into a closed, indexed copy");
-  recov->add_option("file", co.file, "The damaged recording")->required();
-  recov->add_option("-o,--out", co.out, "The copy (default: FILE-recovered.mcap)");
-
-  if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
-  if (!rec->parsed() && !play->parsed() && !take->parsed()) {
-    // The commands that only read a file stop at the next record on a signal (record, play
-    // and takeover stop on g_stop themselves).
-    mcap::StopReadsWhen(&g_stop);
+  explicit Record(CLI::App& app)
+      : cmd(app.add_subcommand("record", "Record every vdyn topic of a domain into an MCAP file")) {
+    cmd->add_option("out", ro.out, "The recording, e.g. out/session.mcap")->required();
+    cmd->add_option("--domain", domain, "DDS domain id")
+        ->check(cli::WholeInRange(limits::kDomainId))
+        ->capture_default_str();
+    cmd->add_option("--duration", ro.duration_s,
+                    "Stop after this many seconds (default: at Ctrl-C / SIGTERM)")
+        ->check(cli::InRange(limits::kDurationS));
+    cmd->add_option("--topics", topic_names, "Only these topics, e.g. state,events,world,params")
+        ->delimiter(',')
+        ->check(TopicNames());
+    cmd->add_option("--vehicles", vehicles,
+                    "Only these vehicles, e.g. 1,2 (events are kept for all)")
+        ->delimiter(',')
+        ->check(cli::VehicleId());
+    cmd->add_option("--split-mb", split_mb, "Start a new file after this many MiB")
+        ->check(cli::InRange(limits::kSplitMb));
+    cmd->add_option("--split-s", split_s, "Start a new file after this many seconds")
+        ->check(cli::InRange(limits::kSplitS));
+    cmd->add_option("--compression", compression, "Chunk compression: zstd, lz4 or none")
+        ->check(CLI::IsMember({"zstd", "lz4", "none"}))
+        ->capture_default_str();
+    cmd->add_option("--chunk-kb", chunk_kb, "Close a chunk at this size (or after 250 ms)")
+        ->check(cli::InRange(limits::kChunkKb))
+        ->capture_default_str();
+    cmd->add_option(
+           "--queue-mb", queue_mb,
+           "Memory for samples waiting to be written; beyond it they are dropped and counted")
+        ->check(cli::InRange(limits::kRecorderQueueMb))
+        ->capture_default_str();
+    status.Add(cmd);
   }
-  const bool tty = isatty(STDERR_FILENO) == 1;
-  const bool show_status = status || (!no_status && tty);
+
+  int Run(const Invocation& in) {
+    ro.command_line = CommandLine(in.argc, in.argv);
+    for (const std::string& t : topic_names) ro.topics.insert(*TopicByName(t));
+    ro.vehicles.insert(vehicles.begin(), vehicles.end());
+    ro.writer.compression = compression == "zstd"  ? vdyn::mcap::Compression::kZstd
+                            : compression == "lz4" ? vdyn::mcap::Compression::kLz4
+                                                   : vdyn::mcap::Compression::kNone;
+    ro.writer.chunk_bytes = static_cast<std::size_t>(chunk_kb * 1024);
+    ro.queue_bytes = static_cast<std::size_t>(queue_mb * 1024 * 1024);
+    ro.split_bytes = static_cast<std::uint64_t>(split_mb * 1024 * 1024);
+    ro.split_s = split_s;
+    ro.status_line = status.Show(in.tty);
+    ro.status_tty = in.tty;
+    vdyn::transport::Participant participant(domain, limits::kRecorderReceiveBufferBytes);
+    recorder::Capture capture(participant, ro);
+    spdlog::info("vdyn-recorder: recording domain {} to {}{}", domain, ro.out.string(),
+                 ro.duration_s > 0 ? " for " + vdyn::base::FormatNumber(ro.duration_s) + " s"
+                                   : "; Ctrl-C ends");
+    const recorder::CaptureSummary s = capture.Run(g_stop);
+    std::string files;
+    for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
+    std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds)
+              << " to " << files << " ("
+              << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
+    std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped()
+              << s.dropped_by_topic();
+    std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
+                s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
+                recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
+    return 0;
+  }
+};
+
+struct Info {
+  std::filesystem::path file;
+  CLI::App* cmd;
+  explicit Info(CLI::App& app)
+      : cmd(app.add_subcommand(
+            "info",
+            "Channels, counts, time range, vehicles, world, gaps; whether it re-simulates")) {
+    cmd->add_option("file", file, "A recording")->required();
+  }
+  int Run() const { return recorder::RunInfo(file, std::cout); }
+};
+
+struct Export {
+  recorder::ExportOptions eo;
+  recorder::FoxgloveExportOptions fo;
+  VehicleOption vehicle;
+  CLI::App* cmd;
+  CLI::Option* csv;
+  CLI::Option* foxglove;
+
+  explicit Export(CLI::App& app)
+      : cmd(app.add_subcommand("export",
+                               "States to CSV (columns as vdyn-server --batch --csv), or a copy "
+                               "with Foxglove's scene")) {
+    cmd->add_option("file", eo.file, "A recording")->required();
+    csv = cmd->add_option("--csv", eo.csv, "The CSV file");
+    foxglove = cmd->add_option("--foxglove", fo.out,
+                               "A copy of the recording with Foxglove's scene added (MCAP)");
+    csv->excludes(foxglove);
+    cmd->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
+        ->check(cli::InRange(limits::kFoxgloveSceneHz))
+        ->capture_default_str();
+    cmd->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
+        ->check(cli::InRange(limits::kArrowScale))
+        ->capture_default_str();
+    vehicle.Add(cmd, "--vehicle", "Only this vehicle");
+    cmd->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
+    cmd->add_option("--from", eo.from_s, "Start, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--to", eo.to_s, "End, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--every", eo.every, "Rows whose step is a multiple of N (as --csv-every)")
+        ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
+  }
+
+  int Run() {
+    if (*foxglove) {
+      fo.file = eo.file;
+      return recorder::RunExportFoxglove(fo, std::cout);
+    }
+    if (!*csv) {
+      std::cerr << "vdyn-recorder export: give --csv OUT.csv or --foxglove OUT.mcap\n";
+      return 2;
+    }
+    vehicle.Into(eo.vehicle);
+    return recorder::RunExport(eo, std::cout);
+  }
+};
+
+struct Plot {
+  recorder::PlotOptions po;
+  VehicleOption vehicle;
+  CLI::App* cmd;
+
+  explicit Plot(CLI::App& app)
+      : cmd(app.add_subcommand("plot", "Figures (gnuplot, PNG or SVG) and one HTML page")) {
+    cmd->add_option("file", po.file, "A recording")->required();
+    cmd->add_option(
+        "--out", po.out_dir,
+        "Folder for the figures (default: beside FILE, named after it: run.mcap -> run-plots)");
+    vehicle.Add(cmd, "--vehicle", "The vehicle (default: the first)");
+    cmd->add_option("--format", po.format, "png or svg")
+        ->check(CLI::IsMember({"png", "svg"}))
+        ->capture_default_str();
+    cmd->add_option("--from", po.from_s, "Start, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--to", po.to_s, "End, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+  }
+
+  int Run() {
+    vehicle.Into(po.vehicle);
+    return recorder::RunPlot(po, std::cout);
+  }
+};
+
+struct Play {
+  recorder::PlayOptions pl;
+  std::vector<std::string> topics;
+  VehicleOption vehicle;
+  bool no_keys = false;
+  StatusFlags status;
+  CLI::App* cmd;
+
+  explicit Play(CLI::App& app)
+      : cmd(app.add_subcommand("play",
+                               "Republish a recording to DDS (world, params, states, inputs) at "
+                               "its recorded timing")) {
+    cmd->add_option("file", pl.file, "A recording")->required();
+    cmd->add_option("--domain", pl.domain, "DDS domain id")
+        ->check(cli::WholeInRange(limits::kDomainId))
+        ->capture_default_str();
+    cmd->add_option("--rate", pl.rate, "Playback speed, 1 = real time")
+        ->check(cli::InRange(limits::kPlaybackRate))
+        ->capture_default_str();
+    cmd->add_flag("--loop", pl.loop, "Start again at the end");
+    cmd->add_flag("--paused", pl.paused, "Start paused (space or a resume request starts it)");
+    cmd->add_option("--from", pl.from_s, "Start, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--to", pl.to_s, "End, s from the recording's start")
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--topics", topics, "Topics to republish (default: world,params,state,input)")
+        ->delimiter(',')
+        ->check(TopicNames());
+    vehicle.Add(cmd, "--vehicle", "Only this vehicle");
+    cmd->add_option("--server-id", pl.server_id, "The id control requests address the player by")
+        ->check(cli::Id("server id"))
+        ->capture_default_str();
+    cmd->add_flag("--no-keys", no_keys, "Ignore the keyboard");
+    cmd->add_flag("--force", pl.force, "Play even where a live server runs");
+    status.Add(cmd);
+  }
+
+  int Run(const Invocation& in) {
+    vehicle.Into(pl.vehicle);
+    if (!topics.empty()) {
+      pl.topics.clear();
+      for (const std::string& t : topics)
+        pl.topics.insert(vdyn::transport::Spec(*TopicByName(t)).name);
+    }
+    pl.keyboard = !no_keys;
+    pl.status_line = status.Show(in.tty);
+    return recorder::RunPlay(pl, g_stop, std::cout);
+  }
+};
+
+struct Verify {
+  recorder::VerifyOptions vo;
+  VehicleOption vehicle;
+  CLI::App* cmd;
+
+  explicit Verify(CLI::App& app)
+      : cmd(app.add_subcommand(
+            "verify", "Re-simulate from the recorded events; compare every recorded state hash")) {
+    cmd->add_option("file", vo.file, "A recording")->required();
+    vehicle.Add(cmd, "--vehicle", "Only this vehicle");
+  }
+
+  int Run() {
+    vehicle.Into(vo.vehicle);
+    return recorder::RunVerify(vo, std::cout);
+  }
+};
+
+struct Takeover {
+  recorder::TakeoverOptions to;
+  VehicleOption vehicle, as_vehicle;
+  StatusFlags status;
+  CLI::App* cmd;
+
+  explicit Takeover(CLI::App& app)
+      : cmd(app.add_subcommand("takeover",
+                               "A live server resumes from the recorded state at --at; the new "
+                               "recording names this one")) {
+    cmd->add_option("file", to.file, "A recording")->required();
+    cmd->add_option("--at", to.at_s, "Seconds from the recording's start")
+        ->required()
+        ->check(cli::InRange(limits::kRecordingTimeS));
+    cmd->add_option("--domain", to.domain, "DDS domain id of the live server")
+        ->check(cli::WholeInRange(limits::kDomainId))
+        ->capture_default_str();
+    vehicle.Add(cmd, "--vehicle", "The recorded vehicle (default: the first)");
+    as_vehicle.Add(cmd, "--as", "The live vehicle id to restore into (default: the same)");
+    cmd->add_option("--out", to.out, "The new recording (default: FILE-takeover.mcap)");
+    cmd->add_option("--duration", to.duration_s,
+                    "Stop after this many seconds (default: at Ctrl-C)")
+        ->check(cli::InRange(limits::kDurationS));
+    cmd->add_option("--wait", to.wait_s, "Seconds to wait for the live server")
+        ->check(cli::InRange(limits::kWaitS))
+        ->capture_default_str();
+    status.Add(cmd);
+  }
+
+  int Run(const Invocation& in) {
+    vehicle.Into(to.vehicle);
+    as_vehicle.Into(to.as_vehicle);
+    to.command_line = CommandLine(in.argc, in.argv);
+    to.status_line = status.Show(in.tty);
+    to.status_tty = in.tty;
+    return recorder::RunTakeover(to, g_stop, std::cout);
+  }
+};
+
+struct Recover {
+  recorder::RecoverOptions co;
+  CLI::App* cmd;
+  explicit Recover(CLI::App& app)
+      : cmd(app.add_subcommand(
+            "recover", "Salvage a truncated or damaged recording into a closed, indexed copy")) {
+    cmd->add_option("file", co.file, "The damaged recording")->required();
+    cmd->add_option("-o,--out", co.out, "The copy (default: FILE-recovered.mcap)");
+  }
+  int Run() const { return recorder::RunRecover(co, std::cout); }
+};
+
+// Runs a command; what it throws becomes a message and an exit code (the file's header says which).
+template <typename F>
+int Guarded(F&& run) {
   try {
-    if (rec->parsed()) {
-      ro.command_line = CommandLine(argc, argv);
-      for (const std::string& t : topic_names) ro.topics.insert(*TopicByName(t));
-      ro.vehicles.insert(vehicles.begin(), vehicles.end());
-      ro.writer.compression = compression == "zstd" ? mcap::Compression::kZstd
-                              : compression == "lz4" ? mcap::Compression::kLz4
-                                                     : mcap::Compression::kNone;
-      ro.writer.chunk_bytes = static_cast<std::size_t>(chunk_kb * 1024);
-      ro.queue_bytes = static_cast<std::size_t>(queue_mb * 1024 * 1024);
-      ro.split_bytes = static_cast<std::uint64_t>(split_mb * 1024 * 1024);
-      ro.split_s = split_s;
-      ro.status_line = show_status;
-      ro.status_tty = tty;
-      transport::Participant participant(domain, limits::kRecorderReceiveBufferBytes);
-      recorder::Capture capture(participant, ro);
-      spdlog::info("vdyn-recorder: recording domain {} to {}{}", domain, ro.out.string(),
-                   ro.duration_s > 0 ? " for " + base::FormatNumber(ro.duration_s) + " s" : "; Ctrl-C ends");
-      const recorder::CaptureSummary s = capture.Run(g_stop);
-      std::string files;
-      for (const auto& f : s.files) files += (files.empty() ? "" : ", ") + f.string();
-      std::cout << "recorded " << s.messages << " messages in " << recorder::FormatDuration(s.seconds) << " to "
-                << files << " (" << recorder::FormatBytes(static_cast<double>(s.bytes_on_disk)) << ")";
-      std::cout << "; lost " << s.total_lost() << ", dropped " << s.total_dropped() << s.dropped_by_topic();
-      std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
-                  s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
-                  recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
-      return 0;
-    }
-    if (info->parsed()) return recorder::RunInfo(file, std::cout);
-    if (exp->parsed()) {
-      if (*exp_fox) {
-        fo.file = eo.file;
-        return recorder::RunExportFoxglove(fo, std::cout);
-      }
-      if (!*exp_csv) {
-        std::cerr << "vdyn-recorder export: give --csv OUT.csv or --foxglove OUT.mcap\n";
-        return 2;
-      }
-      if (*exp_vehicle) eo.vehicle = vehicle;
-      return recorder::RunExport(eo, std::cout);
-    }
-    if (plot->parsed()) {
-      if (*plot_vehicle) po.vehicle = vehicle;
-      return recorder::RunPlot(po, std::cout);
-    }
-    if (play->parsed()) {
-      if (*play_vehicle) pl.vehicle = vehicle;
-      if (!play_topics.empty()) {
-        pl.topics.clear();
-        for (const std::string& t : play_topics) pl.topics.insert(transport::Spec(*TopicByName(t)).name);
-      }
-      pl.keyboard = !no_keys;
-      pl.status_line = show_status;
-      return recorder::RunPlay(pl, g_stop, std::cout);
-    }
-    if (ver->parsed()) {
-      if (*ver_vehicle) vo.vehicle = vehicle;
-      return recorder::RunVerify(vo, std::cout);
-    }
-    if (take->parsed()) {
-      if (*take_vehicle) to.vehicle = vehicle;
-      if (*take_as) to.as_vehicle = as_vehicle;
-      to.command_line = CommandLine(argc, argv);
-      to.status_line = show_status;
-      to.status_tty = tty;
-      return recorder::RunTakeover(to, g_stop, std::cout);
-    }
-    if (recov->parsed()) return recorder::RunRecover(co, std::cout);
-  } catch (const mcap::Interrupted& e) {
-    std::cerr << "vdyn-recorder: " << e.what() << ": stopped before the end; no output was completed (an unfinished file is removed)\n";
+    return run();
+  } catch (const vdyn::mcap::Interrupted& e) {
+    std::cerr
+        << "vdyn-recorder: " << e.what()
+        << ": stopped before the end; no output was completed (an unfinished file is removed)\n";
     return 1;
-  } catch (const mcap::McapError& e) {
+  } catch (const vdyn::mcap::McapError& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;
   } catch (const recorder::OutputError& e) {  // an output that is an input, or a folder
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 2;
-  } catch (const transport::TransportError& e) {
+  } catch (const vdyn::transport::TransportError& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 1;
   } catch (const std::exception& e) {
     std::cerr << "vdyn-recorder: " << e.what() << "\n";
     return 1;
   }
-  return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  // Recording takes DDS samples and writes chunks at a high rate: keep freed memory rather than
+  // fault it back in (base/memory.h; a quarter less CPU at 128 vehicles).
+  (void)vdyn::base::KeepFreedMemory();
+  CLI::App app{
+      "vdyn-recorder: record vdyn sessions to MCAP; info, export, plot, play, verify, takeover, "
+      "recover"};
+  app.require_subcommand(1);
+  Record record(app);
+  Info info(app);
+  Export exp(app);
+  Plot plot(app);
+  Play play(app);
+  Verify verify(app);
+  Takeover takeover(app);
+  Recover recover(app);
+  if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
+  std::signal(SIGINT, OnSignal);
+  std::signal(SIGTERM, OnSignal);
+  if (!record.cmd->parsed() && !play.cmd->parsed() && !takeover.cmd->parsed()) {
+    // The commands that only read a file stop at the next record on a signal (record, play
+    // and takeover stop on g_stop themselves).
+    vdyn::mcap::StopReadsWhen(&g_stop);
+  }
+  const Invocation in{argc, argv, isatty(STDERR_FILENO) == 1};
+  return Guarded([&] {
+    if (record.cmd->parsed()) return record.Run(in);
+    if (info.cmd->parsed()) return info.Run();
+    if (exp.cmd->parsed()) return exp.Run();
+    if (plot.cmd->parsed()) return plot.Run();
+    if (play.cmd->parsed()) return play.Run(in);
+    if (verify.cmd->parsed()) return verify.Run();
+    if (takeover.cmd->parsed()) return takeover.Run(in);
+    if (recover.cmd->parsed()) return recover.Run();
+    return 2;
+  });
 }

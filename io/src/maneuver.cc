@@ -192,17 +192,25 @@ ManeuverInput Maneuver::At(double t) const {
 const std::string& DemoManeuverCsv() {
   // On `facility` from the road's west end (x = -250 m) heading east: cruise at 50 km/h over the
   // speed bumps (x = -180..-140), the washboard (-100..-80), the one-sided bump (-40) and jump
-  // ramp A (x = 40), then a step steer to the left onto open ground and a full stop.
+  // ramp A (x = 40), then a step steer to the left and its mirror to the right, which brings the
+  // heading back: the car moves over about 1 m and stays on the 8 m wide road (every wheel on
+  // asphalt, tests/test_validation.cc), and a full stop at x ~ 195 m, 67 m before the road ends.
+  // The steps come just before the stop, so that a heading left by late input (a watchdog that
+  // held the steering) carries the car a short way only. (Before, one 3 degree step held 4 s
+  // turned the car 53 degrees off the road onto the grass.)
   static const std::string csv =
       "t_s,steer_deg,throttle,brake,cruise_kmh\n"
       "# accelerate on the automatic speed control along the test road\n"
       "0,0,0,0,50\n"
       "# over the speed bumps, the washboard, the one-sided bump and jump ramp A (t ~ 23 s)\n"
-      "26,0,0,0,50\n"
-      "# step steer: 3 degrees to the left within 0.1 s, held 4 s, then straight\n"
-      "26.1,3,0,0,50\n"
-      "30,3,0,0,50\n"
-      "30.1,0,0,0,50\n"
+      "31.3,0,0,0,50\n"
+      "# step steer: 1.5 degrees to the left within 0.1 s, held 0.6 s (the yaw rate settles in\n"
+      "# about 0.3 s); then 1.5 degrees to the right, held as long; then straight\n"
+      "31.4,1.5,0,0,50\n"
+      "32,1.5,0,0,50\n"
+      "32.2,-1.5,0,0,50\n"
+      "32.8,-1.5,0,0,50\n"
+      "32.9,0,0,0,50\n"
       "# full stop: speed control off, full brake\n"
       "33,0,0,0,\n"
       "33.1,0,0,1,\n"

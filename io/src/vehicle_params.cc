@@ -5,9 +5,10 @@
 #include <fstream>
 #include <sstream>
 
-#include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 #include <google/protobuf/util/json_util.h>
+
+#include "vdyn/messages/text_format.h"
 
 namespace vdyn {
 namespace {
@@ -33,19 +34,6 @@ pb::WheelParams MakeWheel(double z_offset, double stiffness, double damping, dou
   w.set_camber(0.0);
   return w;
 }
-
-class CollectErrors : public gp::io::ErrorCollector {
- public:
-  void AddError(int line, gp::io::ColumnNumber column, const std::string& message) override {
-    if (!text.empty()) text += "; ";
-    text += "line " + std::to_string(line + 1) + ", column " + std::to_string(column + 1) + ": " +
-            message;
-  }
-  void AddWarning(int line, gp::io::ColumnNumber column, const std::string& message) override {
-    AddError(line, column, "warning: " + message);
-  }
-  std::string text;
-};
 
 }  // namespace
 
@@ -169,12 +157,9 @@ pb::VehicleParams ParseVehicleParamsText(const std::string& text, bool json,
                         std::string(status.message()));
     }
   } else {
-    gp::TextFormat::Parser parser;
-    CollectErrors errors;
-    parser.RecordErrorsTo(&errors);
-    if (!parser.ParseFromString(text, &update)) {
-      throw ParamsError(source_name + ": " +
-                        (errors.text.empty() ? std::string("cannot parse") : errors.text));
+    std::string errors;
+    if (!messages::ParseTextFormat(text, update, &errors)) {
+      throw ParamsError(source_name + ": " + errors);
     }
   }
   if (folder != nullptr) {

@@ -7,22 +7,26 @@
 #include <SDL.h>
 
 #include <cmath>
-#include <limits>
 #include <cstdlib>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <memory>
 
 #include "../dds_wait.h"
 #include "../process.h"
 #include "../test_support.h"
 #include "vdyn/base/time.h"
+#include "vdyn/bridge/convert.h"
+#include "vdyn/physics/world.h"
 #include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/dressing.h"
 #include "vdyn/viewer/lighting.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
+#include "vdyn/viewer/textures.h"
 #include "vdyn/viewer/viewer.h"
 #include "vdyn/viewer/world_mesh.h"
 #include "viewer_support.h"
@@ -62,6 +66,15 @@ class ViewerTest : public ::testing::Test {
     o.width = kW;
     o.height = kH;
     o.wait_s = 60;
+    return o;
+  }
+
+  // Options for a scene's test: no HUD, at the quality and with the camera given.
+  static ViewerOptions SceneOptions(std::uint32_t domain, viewer::Quality q, CameraMode mode) {
+    ViewerOptions o = Options(domain);
+    o.quality = q;
+    o.hud = false;
+    o.camera.mode = mode;
     return o;
   }
 
@@ -677,21 +690,19 @@ TEST_F(ViewerTest, TheSkyIsDeeperBlueOverheadThanTowardsTheHorizon) {
   EXPECT_LT(top.r + top.g + top.b, low.r + low.g + low.b - 60) << "not paler at the horizon";
 }
 
-// Fog: the ground fades to the horizon's colour with distance. In linear light a pixel of ground
-// at distance d is mixed with the fog colour H as C = H + (G - H) exp(-(d/F)^2), G the lit grass
-// (clients/vr_viewer/README.md: fog thickening towards the horizon, to its colour; F the fog's
-// depth, 0.55 of the far plane's distance). Seen from 20 m up, each ground pixel's distance
-// follows from its view ray; pixels are grouped by distance, and |C - H| of each group's mean over
-// that of the nearest group must fall as exp(-(d/F)^2) does: nearly clear at 0.2 F, about a third
-// at F. Without fog the far grass keeps the near grass's colour.
+// Fog: the ground fades to the horizon's colour with distance, as a person sees it from a hill.
+// Seen from 20 m up across flat grass, each ground pixel's distance follows from its view ray;
+// pixels are grouped by distance (as fractions of the far plane's distance, where the drawn world
+// ends and the fog must hide it), and the colour of each group's mean is compared with the
+// horizon's colour H (lighting.h, the sky's colour at the horizon). Near the eye the grass keeps
+// its own colour; every farther group lies closer to H than the one before, and the farthest
+// (about 0.8 of the way to the far plane, just short of the far hills) has gone most of the way.
+// Without fog the far grass keeps the near grass's colour.
 TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);
   ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
-  ViewerOptions o = Options(domain);
-  o.quality = viewer::Quality::kLow;
-  o.hud = false;
-  o.camera.mode = CameraMode::kOrbit;
+  ViewerOptions o = SceneOptions(domain, viewer::Quality::kLow, CameraMode::kOrbit);
   o.camera.orbit_distance = 50;
   o.camera.orbit_pitch = viewer::Rad(24);  // the eye about 20 m up
   o.camera.orbit_yaw = viewer::Rad(90);    // north of the car, looking south across the road
@@ -701,22 +712,18 @@ TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
   const viewer::CameraView& cam = v.last_camera();
   ASSERT_FALSE(cam.orthographic);
   const viewer::Mat4 inv = viewer::Inverse(cam.proj * cam.view);
-  // The fog's depth: 0.55 of the far plane's distance (from the projection: -(far + near) /
-  // (far - near) and -2 far near / (far - near) in its third row).
+  // The far plane's distance, from the projection: -(far + near) / (far - near) and
+  // -2 far near / (far - near) in its third row.
   const double far_m = cam.proj(2, 3) / (cam.proj(2, 2) + 1.0);
-  const double kFogM = 0.55 * far_m;
   const viewer::Vec3 H = viewer::SceneLighting().horizon_rgb;
   struct Group {
     double lo_m, hi_m;
-    viewer::Vec3 sum;      // linear colour
-    double fog_clear = 0;  // sum of exp(-(d/F)^2)
+    viewer::Vec3 sum;  // linear colour
     int n = 0;
   };
-  // Out to 1.5 F (the far hills stand at 0.9 of the far plane, 1.6 F, and hide the ground
-  // beyond).
   std::vector<Group> groups;
-  for (auto [lo, hi] : {std::pair{0.14, 0.2}, {0.45, 0.55}, {0.9, 1.1}, {1.3, 1.5}}) {
-    groups.push_back({lo * kFogM, hi * kFogM, {}});
+  for (auto [lo, hi] : {std::pair{0.077, 0.11}, {0.25, 0.3}, {0.5, 0.6}, {0.72, 0.82}}) {
+    groups.push_back({lo * far_m, hi * far_m, {}});
   }
   const auto decode = [](std::uint8_t c) {
     const double u = c / 255.0;
@@ -736,32 +743,119 @@ TEST_F(ViewerTest, TheGroundFadesToTheFogColourWithDistance) {
         if (s < gr.lo_m || s >= gr.hi_m) continue;
         const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
         gr.sum = gr.sum + viewer::Vec3{decode(p[0]), decode(p[1]), decode(p[2])};
-        gr.fog_clear += std::exp(-(s / kFogM) * (s / kFogM));
         ++gr.n;
       }
     }
   }
   for (const Group& gr : groups) ASSERT_GT(gr.n, 200) << "too few ground pixels at " << gr.lo_m;
-  // The grass's own colour from the nearest group (there the fog takes 0.4 % at most).
-  const Group& near = groups.front();
-  const viewer::Vec3 grass = H + (near.sum / near.n - H) / (near.fog_clear / near.n);
-  const double grass_from_fog = viewer::Norm(grass - H);
-  ASSERT_GT(grass_from_fog, 0.2) << "the grass is the fog's colour even nearby";
-  double last = 2;
-  for (const Group& gr : groups) {
-    const double seen = viewer::Norm(gr.sum / gr.n - H) / grass_from_fog;
-    const double expected = gr.fog_clear / gr.n;
-    std::printf(
-        "ground %4.0f-%4.0f m: |C - H| / |G - H| %.3f, exp(-(d/F)^2) %.3f (%d pixels, F %.0f m)\n",
-        gr.lo_m, gr.hi_m, seen, expected, gr.n, kFogM);
-    EXPECT_NEAR(seen, expected, 0.07) << "at " << gr.lo_m << "-" << gr.hi_m << " m";
-    EXPECT_LT(seen, last) << "not fading with distance at " << gr.lo_m << " m";
+  const double near_from_fog = viewer::Norm(groups.front().sum / groups.front().n - H);
+  ASSERT_GT(near_from_fog, 0.2) << "the grass is the fog's colour even nearby";
+  double last = 1.0;  // the nearest group's own
+  for (std::size_t i = 1; i < groups.size(); ++i) {
+    const Group& gr = groups[i];
+    const double seen = viewer::Norm(gr.sum / gr.n - H) / near_from_fog;
+    std::printf("ground %4.0f-%4.0f m: |C - H| over the nearest group's %.3f (%d pixels)\n",
+                gr.lo_m, gr.hi_m, seen, gr.n);
+    EXPECT_LT(seen, last - 0.05) << "not fading towards the horizon's colour at " << gr.lo_m
+                                 << " m";
     last = seen;
   }
+  EXPECT_LT(last, 0.35) << "the farthest ground is not mostly fog";
 }
 
-// In a window 640 px wide the HUD's status panel ends before the compass in the top right corner:
-// a long line (here the server's name) wraps instead of running under it.
+// Materials, seen from straight above in the map view at quality high: four patches of a model
+// body, each 1.4 x 1.6 m. The same grey (180) as chrome and as matte plastic: a smooth metal has
+// no diffuse part and mirrors the sky in its own colour, so from above it shows the zenith's deep
+// blue (lighting.h: blue over red about 5) darkened by its grey; the matte patch diffuses the
+// sun's and the sky's light, near white (blue over red near 1). The vehicle's paint under its
+// clear coat flat, and tilted so that its normal halves the angle between the sun and the eye:
+// the clear coat mirrors the sun there, a highlight whose linear value is well above 1 (about
+// twice the sun's light on a white face); the filmic tone mapping rolls it off towards white
+// without clipping it.
+viewer::ModelMesh MaterialPatches() {
+  viewer::ModelMesh m;
+  const viewer::Lighting& l = viewer::SceneLighting();
+  const viewer::Vec3 h = viewer::Normalized(l.sun_W + viewer::Vec3{0, 0, 1});  // sun and the eye
+  auto quad = [&](double x0, viewer::Vec3 n, viewer::Material mat, std::uint8_t grey) {
+    const auto base = static_cast<std::uint32_t>(m.vertices.size());
+    const double xc = x0 + 0.7;
+    for (const auto& [dx, dy] : {std::pair{-0.7, -0.8}, {0.7, -0.8}, {0.7, 0.8}, {-0.7, 0.8}}) {
+      viewer::ModelVertex v{};
+      const double z = 1.0 - (n.x * dx + n.y * dy) / n.z;  // the plane through (xc, 0, 1)
+      v.p[0] = static_cast<float>(xc + dx);
+      v.p[1] = static_cast<float>(dy);
+      v.p[2] = static_cast<float>(z);
+      v.n[0] = static_cast<float>(n.x);
+      v.n[1] = static_cast<float>(n.y);
+      v.n[2] = static_cast<float>(n.z);
+      v.rgba[0] = v.rgba[1] = v.rgba[2] = grey;
+      v.rgba[3] = 255;
+      v.material[0] = static_cast<std::uint8_t>(mat);
+      m.vertices.push_back(v);
+    }
+    m.indices.insert(m.indices.end(), {base, base + 1, base + 2, base, base + 2, base + 3});
+  };
+  quad(0.0, {0, 0, 1}, viewer::Material::kChrome, 180);
+  quad(1.6, {0, 0, 1}, viewer::Material::kMatte, 180);
+  quad(3.2, h, viewer::Material::kPaint, 255);
+  quad(4.8, {0, 0, 1}, viewer::Material::kPaint, 255);
+  m.min = m.fit_min = {0, -0.8, 0};
+  m.max = m.fit_max = {6.2, 0.8, 1.5};
+  return m;
+}
+
+TEST_F(ViewerTest, MetalMirrorsTheSkyMatteDiffusesAndAClearCoatHighlightIsNotClipped) {
+  const auto model = std::make_shared<const viewer::ModelMesh>(MaterialPatches());
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
+  ViewerOptions o = SceneOptions(domain, viewer::Quality::kHigh, CameraMode::kMap);
+  o.camera.map_half_height = 4;
+  o.car_model = model;
+  Viewer v(o);
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;  // no arrows
+  const Image img = Show(v, pub, {MakeState(t)});
+  const viewer::VehicleView* view = v.vehicle(t.id);
+  ASSERT_NE(view, nullptr);
+  const viewer::Mat4 fit = viewer::FitModel(*model, view->geometry, false);
+  // The mean colour (linear) of 13 x 13 pixels at a patch's centre.
+  auto patch = [&](double x0) {
+    const viewer::Vec3 c_W = view->pose_WB * fit.TransformPoint({x0 + 0.7, 0, 1});
+    const auto px =
+        MapPixel(c_W.x, c_W.y, view->pose_WB.t.x, view->pose_WB.t.y, kPi / 2, 4, kW, kH);
+    viewer::Vec3 sum;
+    int top = 0;
+    for (int y = static_cast<int>(px[1]) - 6; y <= static_cast<int>(px[1]) + 6; ++y) {
+      for (int x = static_cast<int>(px[0]) - 6; x <= static_cast<int>(px[0]) + 6; ++x) {
+        const std::uint8_t* p = img.rgba.data() + (static_cast<std::size_t>(y) * kW + x) * 4;
+        sum = sum +
+              viewer::Vec3{viewer::ToLinear(p[0]), viewer::ToLinear(p[1]), viewer::ToLinear(p[2])};
+        top =
+            std::max({top, static_cast<int>(p[0]), static_cast<int>(p[1]), static_cast<int>(p[2])});
+      }
+    }
+    return std::pair{sum / 169.0, top};
+  };
+  const auto [chrome, chrome_top] = patch(0.0);
+  const auto [matte, matte_top] = patch(1.6);
+  const auto [highlight, highlight_top] = patch(3.2);
+  const auto [paint, paint_top] = patch(4.8);
+  std::printf(
+      "linear rgb: chrome %.3f %.3f %.3f, matte %.3f %.3f %.3f, paint %.3f %.3f %.3f, "
+      "paint at the sun's mirror angle %.3f %.3f %.3f (brightest byte %d)\n",
+      chrome.x, chrome.y, chrome.z, matte.x, matte.y, matte.z, paint.x, paint.y, paint.z,
+      highlight.x, highlight.y, highlight.z, highlight_top);
+  EXPECT_GT(chrome.z, 2.5 * chrome.x) << "the chrome does not mirror the deep blue overhead";
+  EXPECT_LT(chrome.x, 0.6 * matte.x) << "the chrome has a diffuse part";
+  EXPECT_LT(matte.z, 1.3 * matte.x) << "the matte patch is not lit white by the sun";
+  EXPECT_GT(matte.x, 0.25) << "the matte patch is dark";
+  // The highlight: near white over the paint's blue (vehicle 1: red 90 of 255), not clipped.
+  EXPECT_GT(highlight.x, paint.x + 0.4) << "no clear-coat highlight of the sun";
+  EXPECT_GT(highlight.x, 0.7);
+  EXPECT_LT(highlight_top, 253) << "the highlight is clipped to white";
+}
+
 TEST_F(ViewerTest, TheStatusPanelStaysClearOfTheCompassInANarrowWindow) {
   const std::uint32_t domain = FreshDomain();
   TestPublisher pub(domain);
@@ -1048,6 +1142,131 @@ TEST(ViewerCulling, SpheresOutsideTheViewAreLeftOut) {
   EXPECT_FALSE(viewer::InFrustum(vp, {2000, 0, 0}, 1));  // beyond the far plane
   EXPECT_TRUE(viewer::InFrustum(vp, {50, 0, 28}, 1));    // just under the top (28.9 m)
   EXPECT_FALSE(viewer::InFrustum(vp, {50, 0, 31}, 1));
+}
+
+// The dressing around the facility (trees, buildings, signs, hills) stands only where no vehicle
+// can drive: every triangle's bounds are checked against the facility's description as its
+// server publishes it - the glass barrier's bounds (which keep every vehicle in) and each mesh a
+// vehicle drives on - not against the numbers the dressing was placed by. Worlds a vehicle is not
+// closed in get none.
+TEST(Dressing, NothingStandsWhereAVehicleCanDriveAndAnOpenWorldGetsNone) {
+  const std::unique_ptr<World> world = BuildBuiltinWorld("facility");
+  const pb::WorldDescription w = DescribeWorld(*world, "test", 1'000'000);
+  struct Box {
+    double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+    void Add(double x, double y) {
+      x0 = std::min(x0, x);
+      y0 = std::min(y0, y);
+      x1 = std::max(x1, x);
+      y1 = std::max(y1, y);
+    }
+    bool Overlaps(const Box& o, double margin) const {
+      return x0 < o.x1 + margin && o.x0 - margin < x1 && y0 < o.y1 + margin && o.y0 - margin < y1;
+    }
+  };
+  Box barrier;
+  std::vector<std::pair<std::string, Box>> drivable;
+  for (const pb::Mesh& m : w.meshes()) {
+    Box b;
+    for (int i = 0; i + 2 < m.vertices_size(); i += 3) b.Add(m.vertices(i), m.vertices(i + 1));
+    if (m.kind() == pb::SURFACE_BARRIER) {
+      barrier.Add(b.x0, b.y0);
+      barrier.Add(b.x1, b.y1);
+    } else if (m.kind() != pb::SURFACE_GROUND) {
+      drivable.emplace_back(m.name(), b);
+    }
+  }
+  ASSERT_GT(barrier.x1 - barrier.x0, 100.0);
+  ASSERT_GE(drivable.size(), 5u);
+  for (bool full : {true, false}) {
+    const viewer::Dressing d = viewer::MakeDressing(viewer::TerrainFromWorld(w), full);
+    ASSERT_TRUE(d.enclosed) << "the facility's barrier closes it in";
+    EXPECT_GT(d.trees, full ? 150u : 40u);
+    const auto& v = d.list.vertices();
+    ASSERT_GT(v.size(), 3000u);
+    std::size_t inside = 0, on_drivable = 0, near_barrier = 0;
+    std::string first;
+    for (std::size_t k = 0; k + 2 < v.size(); k += 3) {
+      Box t;
+      for (std::size_t q = 0; q < 3; ++q) t.Add(v[k + q].p[0], v[k + q].p[1]);
+      if (t.Overlaps(barrier, 1.0)) {
+        if (inside++ == 0) first = std::to_string(t.x0) + ", " + std::to_string(t.y0);
+      }
+      for (const auto& [name, b] : drivable) on_drivable += t.Overlaps(b, 1.0) ? 1 : 0;
+      // (Some of it near the barrier: the place is dressed, not only its horizon.)
+      near_barrier += t.Overlaps(barrier, 30.0) ? 1 : 0;
+    }
+    EXPECT_EQ(inside, 0u) << "triangles within 1 m of the barrier's bounds; the first at " << first;
+    EXPECT_EQ(on_drivable, 0u);
+    EXPECT_GT(near_barrier, 500u);
+  }
+  // An open world (a road on open ground, no barrier) gets no dressing.
+  const viewer::Dressing open =
+      viewer::MakeDressing(viewer::TerrainFromWorld(MakeWorld("test", 0)), true);
+  EXPECT_FALSE(open.enclosed);
+  EXPECT_TRUE(open.list.vertices().empty());
+  // Nor does the facility with a gap in its barrier: the north wall's triangles left out.
+  pb::WorldDescription gap = w;
+  for (pb::Mesh& m : *gap.mutable_meshes()) {
+    if (m.kind() != pb::SURFACE_BARRIER) continue;
+    google::protobuf::RepeatedField<std::uint32_t> kept;
+    for (int i = 0; i + 2 < m.indices_size(); i += 3) {
+      bool north = true;
+      for (int q = 0; q < 3; ++q)
+        north = north && m.vertices(3 * static_cast<int>(m.indices(i + q)) + 1) > 0.9 * barrier.y1;
+      if (north) continue;
+      for (int q = 0; q < 3; ++q) kept.Add(m.indices(i + q));
+    }
+    ASSERT_LT(kept.size(), m.indices_size());
+    *m.mutable_indices() = kept;
+  }
+  EXPECT_FALSE(viewer::MakeDressing(viewer::TerrainFromWorld(gap), true).enclosed);
+  // A barrier 20,000 km a side (coordinates within the description's bound) closes in the road,
+  // but gets no dressing: the work would grow with its length.
+  pb::WorldDescription huge = MakeWorld("test", 0);
+  pb::Mesh* wall = huge.add_meshes();
+  wall->set_name("far_barrier");
+  wall->set_kind(pb::SURFACE_BARRIER);
+  const double r = 1e7;
+  const double corners[5][2] = {{-r, -r}, {r, -r}, {r, r}, {-r, r}, {-r, -r}};
+  for (int k = 0; k < 4; ++k) {
+    const auto base = static_cast<std::uint32_t>(wall->vertices_size() / 3);
+    for (const double* c : {corners[k], corners[k + 1]}) {
+      for (double z : {0.0, 1.5}) {
+        wall->add_vertices(c[0]);
+        wall->add_vertices(c[1]);
+        wall->add_vertices(z);
+      }
+    }
+    for (std::uint32_t i : {0u, 2u, 3u, 0u, 3u, 1u}) wall->add_indices(base + i);
+  }
+  const viewer::TerrainData huge_t = viewer::TerrainFromWorld(huge);
+  viewer::Vec3 lo, hi;
+  ASSERT_TRUE(viewer::BarrierEncloses(huge_t, &lo, &hi));
+  EXPECT_TRUE(viewer::MakeDressing(huge_t, true).list.vertices().empty());
+}
+
+// The facility's billboard gets its poster on the panel's face towards the facility (south): 9 m
+// wide, 3 m high, its lower left corner (seen from the front) at the panel's west end, 3 m up.
+TEST(Poster, TheBillboardsPanelFacingTheFacilityCarriesIt) {
+  const std::unique_ptr<World> world = BuildBuiltinWorld("facility");
+  const viewer::TerrainData t = viewer::TerrainFromWorld(DescribeWorld(*world, "test", 1'000'000));
+  const viewer::TerrainMesh* board = nullptr;
+  for (const viewer::TerrainMesh& m : t.meshes) {
+    if (m.name == "billboard") board = &m;
+    if (m.name != "billboard") {
+      EXPECT_FALSE(m.poster.present) << m.name;
+    }
+  }
+  ASSERT_NE(board, nullptr);
+  const viewer::PosterFace& f = board->poster;
+  ASSERT_TRUE(f.present);
+  EXPECT_NEAR(f.width_m, 9.0, 1e-3);
+  EXPECT_NEAR(f.height_m, 3.0, 1e-3);
+  EXPECT_NEAR(f.right_W.x, 1.0, 1e-6);  // seen from the south, east is to the right
+  EXPECT_NEAR(f.origin_W.x, -4.5, 1e-3);
+  EXPECT_NEAR(f.origin_W.y, 170.0, 1e-3);
+  EXPECT_NEAR(f.origin_W.z, 3.0, 1e-3);
 }
 
 }  // namespace

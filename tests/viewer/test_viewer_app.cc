@@ -1106,6 +1106,7 @@ TEST_F(ViewerApp, LandmarkNamesNeverOverlapAndFadeTowardsTheHorizon) {
   }
   ASSERT_TRUE(pub.World(w));
   ViewerOptions o = Options(domain);
+  o.landmarks = true;
   Viewer v(o);
   Show(v, pub, {MakeState(TestVehicle{})});
   v.Frame();
@@ -1122,6 +1123,46 @@ TEST_F(ViewerApp, LandmarkNamesNeverOverlapAndFadeTowardsTheHorizon) {
   EXPECT_TRUE(names.count("#1")) << "the followed vehicle's number";
   EXPECT_TRUE(names.count("post 0"));
   EXPECT_LT(labels.size(), 41u) << "nothing decluttered";
+}
+
+TEST_F(ViewerApp, LandmarksAreHiddenUntilTheKeyMShowsThem) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  pb::WorldDescription w = MakeWorld("test", kPi / 2);
+  for (int i = 0; i < 3; ++i) {
+    pb::Landmark* l = w.add_landmarks();
+    l->set_name("post " + std::to_string(i));
+    l->mutable_p_w()->set_x(15 + 10.0 * i);
+    l->mutable_p_w()->set_y(4);
+  }
+  ASSERT_TRUE(pub.World(w));
+  Viewer v(Options(domain));
+  const Image hidden = Keep(Show(v, pub, {MakeState(TestVehicle{})}));
+  auto landmark_labels = [&] {
+    int n = 0;
+    for (const auto& l : v.labels()) n += l.text.rfind("post ", 0) == 0 ? 1 : 0;
+    return n;
+  };
+  EXPECT_EQ(landmark_labels(), 0) << "landmark names are shown by default";
+  // Their orange markers are not drawn either.
+  auto orange = [](const Image& img) {
+    int n = 0;
+    for (std::size_t k = 0; k + 3 < img.rgba.size(); k += 4) {
+      const int r = img.rgba[k], g = img.rgba[k + 1], b = img.rgba[k + 2];
+      n += r > 150 && g > 50 && g < 0.75 * r && b < 0.45 * g ? 1 : 0;
+    }
+    return n;
+  };
+  const int orange_hidden = orange(hidden);
+  Key(SDLK_m);
+  v.Frame();
+  v.Frame();
+  EXPECT_GT(landmark_labels(), 0) << "M did not show the landmarks' names";
+  EXPECT_GT(orange(Keep(v.Screenshot())), orange_hidden + 20) << "M did not show their markers";
+  Key(SDLK_m);
+  v.Frame();
+  v.Frame();
+  EXPECT_EQ(landmark_labels(), 0) << "M did not hide them again";
 }
 
 }  // namespace

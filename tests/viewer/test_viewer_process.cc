@@ -411,6 +411,19 @@ class ViewerXr : public ViewerProcess {
                                                   std::vector<std::string> args,
                                                   const std::string& exit_after = "0",
                                                   const std::string& stage = "1") {
+    return Run(states, {"--xr"}, std::move(args), exit_after, stage);
+  }
+  // The same viewer on the desktop (no --xr): its screenshot in dir_/desktop.png.
+  void RunOnDesktop(const pb::VehicleState& state, std::vector<std::string> args) {
+    args.insert(args.end(), {"--screenshot", (dir_ / "desktop.png").string()});
+    Run({state}, {}, std::move(args), "0", "1");
+  }
+
+ private:
+  std::map<std::string, std::string> Run(const std::vector<pb::VehicleState>& states,
+                                         const std::vector<std::string>& xr,
+                                         const std::vector<std::string>& args,
+                                         const std::string& exit_after, const std::string& stage) {
     const std::uint32_t domain = FreshDomain();
     TestPublisher pub(domain);
     EXPECT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
@@ -421,7 +434,6 @@ class ViewerXr : public ViewerProcess {
     std::vector<std::string> argv = {VDYN_VIEWER_BINARY,
                                      "--domain",
                                      std::to_string(domain),
-                                     "--xr",
                                      "--hidden",
                                      "--fps",
                                      "0",
@@ -431,6 +443,7 @@ class ViewerXr : public ViewerProcess {
                                      "60",
                                      "--stats-out",
                                      (dir_ / "stats.txt").string()};
+    argv.insert(argv.end(), xr.begin(), xr.end());
     argv.insert(argv.end(), args.begin(), args.end());
     if (std::find(args.begin(), args.end(), "--width") == args.end()) {
       argv.insert(argv.end(), {"--width", "640", "--height", "400"});
@@ -457,6 +470,8 @@ class ViewerXr : public ViewerProcess {
     }
     return ReadKeyValues(dir_ / "report.txt");
   }
+
+ protected:
   std::string log_;
 };
 
@@ -563,6 +578,26 @@ TEST_F(ViewerXr, SeatedTheWholeFrameLoopRunsAndEachEyeSeesTheArrowsFromItsOwnPla
   EXPECT_LT(transparent.count, hud->width * hud->height - 5000) << "the HUD is empty";
 }
 
+// The HUD's first word (LIVE, green) in an image's top left: its first row, how many rows down to
+// the first without green, and its mean column.
+struct Word {
+  int top = 0, rows = 0;
+  double cx = 0;
+};
+Word Live(const Image& img) {
+  const Rect top_left{0, 0, img.width / 2, img.height / 3};
+  const Blob green = FindColour(img, 102, 255, 102, 40, top_left);
+  Word w;
+  if (green.count <= 20) return w;
+  w.top = green.min_y;
+  w.cx = green.cx;
+  while (FindColour(img, 102, 255, 102, 40, {0, w.top + w.rows, img.width / 2, w.top + w.rows + 1})
+             .count > 0) {
+    ++w.rows;
+  }
+  return w;
+}
+
 TEST_F(ViewerXr, TheHudIsAReadablePanelBelowTheEyesFixedInTheSpaceFacingThem) {
   TestVehicle t;
   const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--frames", "8",
@@ -582,30 +617,46 @@ TEST_F(ViewerXr, TheHudIsAReadablePanelBelowTheEyesFixedInTheSpaceFacingThem) {
   const viewer::Mat3 R = viewer::RotationFromQuat(qw, qx, qy, qz);
   const viewer::Vec3 to_eyes = viewer::Normalized(-viewer::Vec3{x, y, z});
   EXPECT_GT(viewer::Dot(R.c[2], to_eyes), std::cos(viewer::Rad(3)));
-  // Readable: the capitals of its first word (LIVE, green) subtend at least 0.8 deg at the eyes.
-  // Their height: the rows from the first green one down to the first without green.
+  // Readable: the capitals of its first word (LIVE, green) at least as tall in degrees of view
+  // as on the desktop at 1280x720. In the headset: LIVE's top and bottom edges on the panel (its
+  // axes x right, y up, centred at its pose) seen through the left eye's projection (the head at
+  // the LOCAL origin, the runtime's field of view), as the angle between the two rows' rays.
   const auto hud = LoadPng(dir_ / "hud.png");
   ASSERT_TRUE(hud.has_value());
-  const Rect top_left{0, 0, hud->width / 2, hud->height / 3};
-  const Blob green = FindColour(*hud, 102, 255, 102, 40, top_left);
-  ASSERT_GT(green.count, 20) << "no LIVE on the HUD";
-  int rows = 0;
-  while (FindColour(*hud, 102, 255, 102, 40,
-                    {0, green.min_y + rows, hud->width / 2, green.min_y + rows + 1})
-             .count > 0) {
-    ++rows;
-  }
+  const Word live = Live(*hud);
+  ASSERT_GT(live.rows, 2) << "no LIVE on the HUD";
   std::istringstream size(report.at("quad_size_m"));
   double width_m = 0, height_m = 0;
   size >> width_m >> height_m;
-  const double metres = rows * width_m / hud->width;
-  const double deg = viewer::Deg(std::atan(metres / std::sqrt(x * x + y * y + z * z)));
-  EXPECT_GT(deg, 0.8) << "LIVE is " << rows << " px of " << hud->width << " on a " << width_m
-                      << " m panel";
+  auto on_panel = [&](double px, double py) {
+    return viewer::Vec3{x, y, z} + R.c[0] * ((px / hud->width - 0.5) * width_m) +
+           R.c[1] * ((0.5 - py / hud->height) * height_m);
+  };
+  const EyeModel left = Eyes({0, 0, 0}, viewer::Mat3{}, 0)[0];
+  auto elevation = [&](const viewer::Vec3& p) {  // of the ray through p's row in the eye image
+    const double row = EyePixel(left, p)[1];
+    return std::atan(left.up - row / xrtest::kEyeHeight * (left.up - left.down));
+  };
+  const double headset_deg = viewer::Deg(elevation(on_panel(live.cx, live.top)) -
+                                         elevation(on_panel(live.cx, live.top + live.rows)));
   // The frame is drawn at the runtime's predicted display time (its clock converted): the
   // viewer's last display time is the one the runtime predicted for the last frame drawn.
   const auto stats = ReadKeyValues(dir_ / "stats.txt");
   EXPECT_EQ(stats.at("last_display_mono_ns"), report.at("last_drawn_display_ns"));
+  // On the desktop: LIVE's rows of the window's 720, whose height spans the camera's vertical
+  // field of view.
+  RunOnDesktop(MakeState(t), {"--frames", "8", "--width", "1280", "--height", "720"});
+  const auto desktop = LoadPng(dir_ / "desktop.png");
+  ASSERT_TRUE(desktop.has_value());
+  const Word desk = Live(*desktop);
+  ASSERT_GT(desk.rows, 2) << "no LIVE on the desktop's HUD";
+  const double fovy = viewer::CameraState{}.fovy;
+  const double desktop_deg = viewer::Deg(2 * std::atan(std::tan(0.5 * fovy) * desk.rows / 720.0));
+  std::printf(
+      "LIVE: %.2f deg in the headset (%d px of the HUD's %d), %.2f deg on the desktop "
+      "(%d px of 720)\n",
+      headset_deg, live.rows, hud->height, desktop_deg, desk.rows);
+  EXPECT_GE(headset_deg, desktop_deg) << "the headset's HUD text is smaller than the desktop's";
 }
 
 TEST_F(ViewerXr, StandingBesideTheVehicleTheRuntimeEndsTheSessionAndTheViewerFollows) {

@@ -6,6 +6,7 @@
 #include <map>
 #include <set>
 
+#include "vdyn/base/text.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
@@ -379,8 +380,8 @@ class Info {
   void PrintWorldsAndVehicles() {
     for (const auto& [server, w] : worlds_) {
       out_ << "world       '" << w.name << "' of " << Name(server) << ": terrain hash "
-           << Hex(w.terrain_hash) << ", " << Count(w.meshes, "mesh", "meshes") << ", "
-           << Count(w.triangles, "triangle", "triangles") << ", step "
+           << base::FormatHex(w.terrain_hash, 16) << ", " << Count(w.meshes, "mesh", "meshes")
+           << ", " << Count(w.triangles, "triangle", "triangles") << ", step "
            << static_cast<double>(w.step_ns) * 1e-6 << " ms\n";
     }
     if (worlds_.empty()) out_ << "world       none recorded\n";

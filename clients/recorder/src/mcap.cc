@@ -18,6 +18,7 @@
 #include <zstd.h>
 
 #include "mapped_file.h"
+#include "vdyn/base/text.h"
 #include "vdyn/recorder/output_file.h"
 
 namespace vdyn::mcap {
@@ -64,17 +65,6 @@ const char* OpName(std::uint8_t op) {
     default:
       return op >= 0x80 ? "private" : "unknown";
   }
-}
-
-std::string Hex32(std::uint32_t v) {
-  char b[16];
-  std::snprintf(b, sizeof b, "0x%08x", v);
-  return b;
-}
-std::string Hex8(std::uint8_t v) {
-  char b[8];
-  std::snprintf(b, sizeof b, "0x%02x", v);
-  return b;
 }
 
 // --- serialisation (little endian, as the spec says)
@@ -1208,7 +1198,7 @@ class Scanner {
     if (f.op == kHeader && f.offset != 8) return "a second header record (a damaged opcode?)";
     if (!KnownOp(f.op) && f.op != kHeader) {
       return std::string("a record of ") + (f.op >= 0x80 ? "private" : "unknown") + " opcode " +
-             Hex8(f.op) + ": a damaged opcode, or another writer's record";
+             base::FormatHex(f.op, 2) + ": a damaged opcode, or another writer's record";
     }
     return std::string("a malformed ") + OpName(f.op) + " record (" +
            std::to_string(f.content.size()) +
@@ -1347,11 +1337,11 @@ class Scanner {
     if (!crc_holds) {
       const std::uint32_t crc =
           Crc32(0, std::span<const std::uint8_t>(data_, static_cast<std::size_t>(pos_)));
-      Problem(pos_, "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
-                        Hex32(crc) + "): the file is corrupted");
+      Problem(pos_, "data section CRC mismatch (stored " + base::FormatHex(stored, 8) +
+                        ", computed " + base::FormatHex(crc, 8) + "): the file is corrupted");
       res_.damage.push_back({pos_, 0,
-                             "data section CRC mismatch (stored " + Hex32(stored) + ", computed " +
-                                 Hex32(crc) +
+                             "data section CRC mismatch (stored " + base::FormatHex(stored, 8) +
+                                 ", computed " + base::FormatHex(crc, 8) +
                                  "): some byte before it is damaged; what no chunk CRC checks is "
                                  "unchecked",
                              std::nullopt, 0});
@@ -1388,8 +1378,8 @@ class Scanner {
       const std::uint32_t got =
           Crc32(0, std::span<const std::uint8_t>(scratch_.data(), scratch_.size()));
       if (got != h.crc) {
-        why = "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
-              "): the file is corrupted";
+        why = "chunk CRC mismatch (stored " + base::FormatHex(h.crc, 8) + ", computed " +
+              base::FormatHex(got, 8) + "): the file is corrupted";
       }
     }
     if (why.empty()) why = InnerRecords(scratch_);
@@ -1503,8 +1493,8 @@ class Scanner {
           0, std::span<const std::uint8_t>(
                  data_ + summary_pos, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_pos)));
       if (got != stored) {
-        Problem(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " +
-                            Hex32(got) + "): the file is corrupted");
+        Problem(footer, "summary CRC mismatch (stored " + base::FormatHex(stored, 8) +
+                            ", computed " + base::FormatHex(got, 8) + "): the file is corrupted");
         return;
       }
     }
@@ -1582,8 +1572,8 @@ std::optional<Reader::Summary> Reader::SummaryOf() const {
         std::span<const std::uint8_t>(
             data_ + summary_start, static_cast<std::size_t>(footer + 1 + 8 + 16 - summary_start)));
     if (got != stored) {
-      Fail(footer, "summary CRC mismatch (stored " + Hex32(stored) + ", computed " + Hex32(got) +
-                       "): the file is corrupted");
+      Fail(footer, "summary CRC mismatch (stored " + base::FormatHex(stored, 8) + ", computed " +
+                       base::FormatHex(got, 8) + "): the file is corrupted");
     }
   }
   Summary s;
@@ -1647,8 +1637,8 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
     const std::uint32_t got =
         Crc32(0, std::span<const std::uint8_t>(scratch.data(), scratch.size()));
     if (got != h.crc)
-      Fail(pos, "chunk CRC mismatch (stored " + Hex32(h.crc) + ", computed " + Hex32(got) +
-                    "): the file is corrupted");
+      Fail(pos, "chunk CRC mismatch (stored " + base::FormatHex(h.crc, 8) + ", computed " +
+                    base::FormatHex(got, 8) + "): the file is corrupted");
   }
   std::uint64_t p = 0;
   while (p < scratch.size()) {

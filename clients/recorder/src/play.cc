@@ -19,6 +19,7 @@
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
 #include "vdyn/diagnostics.pb.h"
+#include "vdyn/messages/control_reply.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/transport/dds.h"
@@ -367,12 +368,7 @@ void Player::HandleRequests() {
         r.has_pause() || r.has_resume() || r.has_step() || r.has_playback() || r.has_hello();
     if (!player_command) return;  // for a server
     if (!r.server_id().empty() && r.server_id() != o_.server_id) return;
-    pb::ControlReply reply;
-    reply.set_request_id(r.request_id());
-    reply.set_client_id(r.client_id());
-    reply.set_vehicle_id(r.vehicle_id());
-    reply.set_server_id(o_.server_id);
-    reply.set_accepted(true);
+    pb::ControlReply reply = messages::ReplyTo(&r, o_.server_id);
     if (r.has_hello()) {
       // accepted: nothing to do
     } else if (r.has_pause()) {
@@ -383,8 +379,8 @@ void Player::HandleRequests() {
       Anchor(pos0_);
     } else if (r.has_step()) {
       if (r.step().steps() == 0 || r.step().steps() > limits::kMaxStepsPerRequest) {
-        reply.set_accepted(false);
-        reply.set_reason("step needs 1.." + std::to_string(limits::kMaxStepsPerRequest) + " steps");
+        messages::Refuse(reply,
+                         "step needs 1.." + std::to_string(limits::kMaxStepsPerRequest) + " steps");
       } else {
         Anchor(Position());
         paused_ = true;
@@ -393,11 +389,11 @@ void Player::HandleRequests() {
     } else {
       const auto& p = r.playback();
       if (p.has_rate() && !limits::Check(limits::kPlaybackRate, p.rate()).empty()) {
-        reply.set_accepted(false);
-        reply.set_reason(limits::Check(limits::kPlaybackRate, p.rate()));
-      } else if (p.has_seek_ns() && (p.seek_ns() < 0 || static_cast<std::uint64_t>(p.seek_ns()) > to_)) {
-        reply.set_accepted(false);
-        reply.set_reason("seek_ns must be in [0, " + std::to_string(to_) + "], the recording's length");
+        messages::Refuse(reply, limits::Check(limits::kPlaybackRate, p.rate()));
+      } else if (p.has_seek_ns() &&
+                 (p.seek_ns() < 0 || static_cast<std::uint64_t>(p.seek_ns()) > to_)) {
+        messages::Refuse(
+            reply, "seek_ns must be in [0, " + std::to_string(to_) + "], the recording's length");
       } else {
         if (p.has_rate()) {
           Anchor(Position());

@@ -269,70 +269,15 @@ std::pair<double, double> PanelRange(const Panel& p, double lo, double hi) {
   return {lo, hi};
 }
 
-}  // namespace
-
-int RunPlot(const PlotOptions& o, std::ostream& out) {
-  if (o.format != "png" && o.format != "svg") {
-    out << "vdyn-recorder plot: --format must be png or svg\n";
-    return 2;
-  }
-  mcap::Reader reader(o.file);
-  fs::path dir = o.out_dir;
-  if (dir.empty()) {
-    dir = o.file;
-    dir.replace_filename(o.file.stem().string() + "-plots");
-  }
-  std::error_code ec;
-  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) {
-    out << "vdyn-recorder plot: " << dir.string()
-        << " is a file, not a folder: give --out a folder\n";
-    return 2;
-  }
-  fs::create_directories(dir, ec);
-  if (ec) {
-    out << "vdyn-recorder plot: cannot create the folder " << dir.string() << ": " << ec.message()
-        << "\n";
-    return 1;
-  }
-  // Vehicle and the size of its state channel (for decimation), from the summary.
-  std::map<std::uint32_t, std::uint64_t> state_counts;
-  if (auto s = reader.ReadSummary(); s && s->statistics) {
-    for (const auto& [id, info] : VdynChannels(*s)) {
-      if (info.topic != TopicId::kState) continue;
-      const auto n = s->statistics->channel_message_counts.find(id);
-      state_counts[info.key] += n == s->statistics->channel_message_counts.end() ? 0 : n->second;
-    }
-  } else {
-    out << "vdyn-recorder plot: " << o.file.string()
-        << " has no summary (it was not closed): run `vdyn-recorder recover` first\n";
-    return 1;
-  }
-  if (state_counts.empty()) {
-    out << "vdyn-recorder plot: no vehicle states in " << o.file.string() << "\n";
-    return 1;
-  }
-  const std::uint32_t vehicle = o.vehicle.value_or(state_counts.begin()->first);
-  if (state_counts.count(vehicle) == 0) {
-    out << "vdyn-recorder plot: no states of vehicle " << vehicle << " in " << o.file.string()
-        << "\n";
-    return 2;
-  }
-  const std::uint64_t stride =
-      std::max<std::uint64_t>(1, (state_counts[vehicle] + kMaxRows - 1) / kMaxRows);
-
-  // The columns the figures use, by name; a figure whose columns this build lacks is left out.
-  const std::vector<std::string> names = CsvColumns();
-  auto col = [&](const std::string& n) -> int {
-    const auto it = std::find(names.begin(), names.end(), n);
-    return it == names.end() ? -1 : static_cast<int>(it - names.begin());
-  };
+// The figures, in the order the page shows them (columns by the CSV's names).
+std::vector<Figure> Figures() {
   const std::vector<std::string> wheels = {"LF", "RF", "LR", "RR"};
   auto per_wheel = [&](const char* prefix) {
     std::vector<std::pair<std::string, std::string>> lines;
     for (const std::string& w : wheels) lines.push_back({std::string(prefix) + "_" + w + "_N", w});
     return lines;
   };
-  std::vector<Figure> figures = {
+  return {
       {"speed",
        "Speed",
        {{"km/h", {{"speed_kmh", "speed"}, {"cruise_set_kmh", "cruise set speed"}}, 10}}},
@@ -357,174 +302,285 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
          1.05},
         {"brake, 0..1", {{"brake_in", "input"}, {"brake", "applied"}}, 1, true, -0.05, 1.05}}},
   };
-  std::vector<int> data_cols;  // CSV column index of each data-file column
-  std::map<std::string, int> data_col_of;
-  auto use = [&](const std::string& n) {
-    if (data_col_of.count(n)) return true;
-    const int c = col(n);
-    if (c < 0) return false;
-    data_col_of[n] = static_cast<int>(data_cols.size()) + 1;
-    data_cols.push_back(c);
-    return true;
+}
+
+// `plot` as its stages: the output folder, the vehicle, the columns the figures use, the data
+// (one pass over the recording), the map, the gnuplot script, gnuplot, the page, and everything
+// renamed into place. A stage that fails prints why and gives the exit code.
+class Plotter {
+ public:
+  Plotter(const PlotOptions& o, std::ostream& out) : o_(o), out_(out), reader_(o.file) {}
+
+  int Run() {
+    if (const int rc = PrepareFolder(); rc != 0) return rc;
+    if (const int rc = ChooseVehicle(); rc != 0) return rc;
+    if (const int rc = ChooseColumns(); rc != 0) return rc;
+    // Everything is made in a scratch folder inside the output folder and renamed into place
+    // once gnuplot has drawn it all: an error leaves the folder as it was, and no output
+    // replaces the recording (whatever it is called).
+    const ScratchFolder work(dir_);
+    work_ = work.path();
+    if (const int rc = WriteData(); rc != 0) return rc;
+    outputs_ = {"states.dat", "plot.gp"};
+    if (have_xy_ && world_) WriteMap();
+    WriteScript();
+    if (const int rc = RunGnuplot(o_.gnuplot, work_, out_); rc != 0) return rc;
+    for (const std::string& f : made_) outputs_.push_back(f + "." + o_.format);
+    WritePage();
+    outputs_.push_back("index.html");
+    // Into place, all checked against the recording first (none moves when one may not).
+    for (const std::string& f : outputs_) CheckNotAnInput(dir_ / f, {o_.file});
+    for (const std::string& f : outputs_) MoveInto(work_ / f, dir_ / f, {o_.file});
+    out_ << made_.size() << " figures (" << o_.format << ") and index.html in " << dir_.string()
+         << "\n";
+    return 0;
+  }
+
+ private:
+  // The map's cells: from (x0, y0), nx by ny cells of cell_x by cell_y metres.
+  struct MapGrid {
+    double x0 = 0, y0 = 0, cell_x = 1, cell_y = 1;
+    int nx = 0, ny = 0;
   };
-  std::vector<std::string> skipped;
-  const bool have_time = use("t_s");
-  const bool have_xy = use("x_m") && use("y_m");
-  if (!have_time) {
-    out << "vdyn-recorder plot: this build's CSV has no t_s column\n";
-    return 1;
-  }
-  for (Figure& f : figures) {
-    for (Panel& p : f.panels) {
-      std::vector<std::pair<std::string, std::string>> kept;
-      for (auto& [c, legend] : p.lines) {
-        if (use(c))
-          kept.push_back({c, legend});
-        else
-          skipped.push_back(c);
-      }
-      p.lines = kept;
+
+  int PrepareFolder() {
+    dir_ = o_.out_dir;
+    if (dir_.empty()) {
+      dir_ = o_.file;
+      dir_.replace_filename(o_.file.stem().string() + "-plots");
     }
-    std::erase_if(f.panels, [](const Panel& p) { return p.lines.empty(); });
+    std::error_code ec;
+    if (fs::exists(dir_, ec) && !fs::is_directory(dir_, ec)) {
+      out_ << "vdyn-recorder plot: " << dir_.string()
+           << " is a file, not a folder: give --out a folder\n";
+      return 2;
+    }
+    fs::create_directories(dir_, ec);
+    if (ec) {
+      out_ << "vdyn-recorder plot: cannot create the folder " << dir_.string() << ": "
+           << ec.message() << "\n";
+      return 1;
+    }
+    return 0;
   }
 
-  // Everything is made in a scratch folder inside the output folder and renamed into place once
-  // gnuplot has drawn it all: an error leaves the folder as it was, and no output replaces the
-  // recording (whatever it is called).
-  const ScratchFolder work(dir);
-
-  // The data: every stride-th state of the vehicle in the time range.
-  const std::uint64_t start = FirstLogTime(reader);
-  const auto from = start + static_cast<std::uint64_t>(base::FromSeconds(o.from_s).ns);
-  const auto to =
-      o.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o.to_s).ns) : ~0ull;
-  std::ofstream data(work.path() / "states.dat");
-  data << "#";
-  for (int c : data_cols) data << " " << names[static_cast<std::size_t>(c)];
-  data << "\n";
-  pb::VehicleState state;
-  std::vector<double> values;
-  std::vector<double> col_lo(data_cols.size(), 1e300), col_hi(data_cols.size(), -1e300);
-  std::optional<pb::WorldDescription> world;
-  std::uint64_t n = 0, rows = 0;
-  double x_lo = 1e300, x_hi = -1e300, y_lo = 1e300, y_hi = -1e300, top_kmh = 0, distance = 0;
-  double last_x = 0, last_y = 0, t_first = 0, t_last = 0;
-  bool any = false;
-  char buf[64];
-  Progress progress("plot");
-  RecordingVisitor v;
-  v.wants = [](TopicId t) { return t == TopicId::kState || t == TopicId::kWorld; };
-  v.on_progress = [&](double f) { progress.Update(f); };
-  v.on_message = [&](const RecordedMessage& m) {
-    if (m.topic == TopicId::kWorld) {
-      if (!world) {
-        world.emplace();
-        if (!world->ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) world.reset();
+  // The vehicle and the size of its state channel (for decimation), from the summary.
+  int ChooseVehicle() {
+    std::map<std::uint32_t, std::uint64_t> state_counts;
+    if (auto s = reader_.ReadSummary(); s && s->statistics) {
+      for (const auto& [id, info] : VdynChannels(*s)) {
+        if (info.topic != TopicId::kState) continue;
+        const auto n = s->statistics->channel_message_counts.find(id);
+        state_counts[info.key] += n == s->statistics->channel_message_counts.end() ? 0 : n->second;
       }
-      return;
+    } else {
+      out_ << "vdyn-recorder plot: " << o_.file.string()
+           << " has no summary (it was not closed): run `vdyn-recorder recover` first\n";
+      return 1;
     }
-    if (m.key != vehicle || m.log_time < from || m.log_time > to) return;
-    if (!state.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
-    const double x = state.p_wt_w().x(), y = state.p_wt_w().y();
-    if (any) distance += std::hypot(x - last_x, y - last_y);
-    last_x = x;
-    last_y = y;
-    top_kmh = std::max(top_kmh, state.speed_kmh());
-    x_lo = std::min(x_lo, x);
-    x_hi = std::max(x_hi, x);
-    y_lo = std::min(y_lo, y);
-    y_hi = std::max(y_hi, y);
+    if (state_counts.empty()) {
+      out_ << "vdyn-recorder plot: no vehicle states in " << o_.file.string() << "\n";
+      return 1;
+    }
+    vehicle_ = o_.vehicle.value_or(state_counts.begin()->first);
+    if (state_counts.count(vehicle_) == 0) {
+      out_ << "vdyn-recorder plot: no states of vehicle " << vehicle_ << " in " << o_.file.string()
+           << "\n";
+      return 2;
+    }
+    stride_ = std::max<std::uint64_t>(1, (state_counts[vehicle_] + kMaxRows - 1) / kMaxRows);
+    return 0;
+  }
+
+  // A CSV column into the data file (once); false when this build's CSV has no such column.
+  bool Use(const std::string& n) {
+    if (data_col_of_.count(n)) return true;
+    const auto it = std::find(names_.begin(), names_.end(), n);
+    if (it == names_.end()) return false;
+    data_col_of_[n] = static_cast<int>(data_cols_.size()) + 1;
+    data_cols_.push_back(static_cast<int>(it - names_.begin()));
+    return true;
+  }
+
+  // The columns the figures use, by name; a figure whose columns this build lacks is left out.
+  int ChooseColumns() {
+    names_ = CsvColumns();
+    figures_ = Figures();
+    const bool have_time = Use("t_s");
+    have_xy_ = Use("x_m") && Use("y_m");
+    if (!have_time) {
+      out_ << "vdyn-recorder plot: this build's CSV has no t_s column\n";
+      return 1;
+    }
+    for (Figure& f : figures_) {
+      for (Panel& p : f.panels) {
+        std::vector<std::pair<std::string, std::string>> kept;
+        for (auto& [c, legend] : p.lines) {
+          if (Use(c))
+            kept.push_back({c, legend});
+          else
+            skipped_.push_back(c);
+        }
+        p.lines = kept;
+      }
+      std::erase_if(f.panels, [](const Panel& p) { return p.lines.empty(); });
+    }
+    col_lo_.assign(data_cols_.size(), 1e300);
+    col_hi_.assign(data_cols_.size(), -1e300);
+    return 0;
+  }
+
+  // The data: every stride-th state of the vehicle in the time range, and the world.
+  int WriteData() {
+    const std::uint64_t start = FirstLogTime(reader_);
+    from_ = start + static_cast<std::uint64_t>(base::FromSeconds(o_.from_s).ns);
+    to_ = o_.to_s ? start + static_cast<std::uint64_t>(base::FromSeconds(*o_.to_s).ns) : ~0ull;
+    data_.open(work_ / "states.dat");
+    data_ << "#";
+    for (int c : data_cols_) data_ << " " << names_[static_cast<std::size_t>(c)];
+    data_ << "\n";
+    Progress progress("plot");
+    RecordingVisitor v;
+    v.wants = [](TopicId t) { return t == TopicId::kState || t == TopicId::kWorld; };
+    v.on_progress = [&](double f) { progress.Update(f); };
+    v.on_message = [this](const RecordedMessage& m) {
+      if (m.topic == TopicId::kWorld) {
+        KeepWorld(m);
+      } else {
+        AddState(m);
+      }
+    };
+    ScanRecording(reader_, v);
+    progress.Finish();
+    data_.close();
+    if (rows_ == 0) {
+      out_ << "vdyn-recorder plot: no states of vehicle " << vehicle_ << " in the time range\n";
+      return 1;
+    }
+    return 0;
+  }
+
+  // The first world description that reads.
+  void KeepWorld(const RecordedMessage& m) {
+    if (world_) return;
+    world_.emplace();
+    if (!world_->ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) world_.reset();
+  }
+
+  // One state: into the trajectory's bounds and the page's figures, and (every stride-th) a row.
+  void AddState(const RecordedMessage& m) {
+    if (m.key != vehicle_ || m.log_time < from_ || m.log_time > to_) return;
+    if (!state_.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) return;
+    const double x = state_.p_wt_w().x(), y = state_.p_wt_w().y();
+    if (any_) distance_ += std::hypot(x - last_x_, y - last_y_);
+    last_x_ = x;
+    last_y_ = y;
+    top_kmh_ = std::max(top_kmh_, state_.speed_kmh());
+    x_lo_ = std::min(x_lo_, x);
+    x_hi_ = std::max(x_hi_, x);
+    y_lo_ = std::min(y_lo_, y);
+    y_hi_ = std::max(y_hi_, y);
     const double t =
-        static_cast<double>(state.step()) * static_cast<double>(state.step_ns()) * 1e-9;
-    if (!any) t_first = t;
-    t_last = t;
-    any = true;
-    if (n++ % stride != 0) return;
-    CsvRowValues(state, values);
-    for (std::size_t i = 0; i < data_cols.size(); ++i) {
-      const double val = values[static_cast<std::size_t>(data_cols[i])];
+        static_cast<double>(state_.step()) * static_cast<double>(state_.step_ns()) * 1e-9;
+    if (!any_) t_first_ = t;
+    t_last_ = t;
+    any_ = true;
+    if (n_++ % stride_ != 0) return;
+    CsvRowValues(state_, values_);
+    char buf[64];
+    for (std::size_t i = 0; i < data_cols_.size(); ++i) {
+      const double val = values_[static_cast<std::size_t>(data_cols_[i])];
       if (std::isfinite(val)) {
-        col_lo[i] = std::min(col_lo[i], val);
-        col_hi[i] = std::max(col_hi[i], val);
+        col_lo_[i] = std::min(col_lo_[i], val);
+        col_hi_[i] = std::max(col_hi_[i], val);
       }
       const auto r = std::to_chars(buf, buf + sizeof buf, val);
-      data << (i ? " " : "") << std::string_view(buf, static_cast<std::size_t>(r.ptr - buf));
+      data_ << (i ? " " : "") << std::string_view(buf, static_cast<std::size_t>(r.ptr - buf));
     }
-    data << "\n";
-    ++rows;
-  };
-  ScanRecording(reader, v);
-  progress.Finish();
-  data.close();
-  if (rows == 0) {
-    out << "vdyn-recorder plot: no states of vehicle " << vehicle << " in the time range\n";
-    return 1;
+    data_ << "\n";
+    ++rows_;
   }
-  std::vector<std::string> outputs = {"states.dat", "plot.gp"};
 
-  // The map: the trajectory's bounds with a margin, within the world's surfaces (no empty band
-  // where the world ends), square cells.
-  const bool map = have_xy && world.has_value();
-  double mx0 = 0, my0 = 0, cell_x = 1, cell_y = 1;
-  int nx = 0, ny = 0;
-  if (map) {
-    const double margin = std::max(20.0, 0.1 * std::max(x_hi - x_lo, y_hi - y_lo));
-    double x0 = x_lo - margin, x1 = x_hi + margin, y0 = y_lo - margin, y1 = y_hi + margin;
-    if (const auto b = WorldBounds(*world)) {
+  // The map's area: the trajectory's bounds with a margin, within the world's surfaces (no empty
+  // band where the world ends), in square cells.
+  MapGrid MapArea() const {
+    const double margin = std::max(20.0, 0.1 * std::max(x_hi_ - x_lo_, y_hi_ - y_lo_));
+    double x0 = x_lo_ - margin, x1 = x_hi_ + margin, y0 = y_lo_ - margin, y1 = y_hi_ + margin;
+    if (const auto b = WorldBounds(*world_)) {
       // Clipped to the surfaces, as long as the trajectory stays inside what is left.
-      if (std::max(x0, (*b)[0]) <= x_lo && std::min(x1, (*b)[1]) >= x_hi) {
+      if (std::max(x0, (*b)[0]) <= x_lo_ && std::min(x1, (*b)[1]) >= x_hi_) {
         x0 = std::max(x0, (*b)[0]);
         x1 = std::min(x1, (*b)[1]);
       }
-      if (std::max(y0, (*b)[2]) <= y_lo && std::min(y1, (*b)[3]) >= y_hi) {
+      if (std::max(y0, (*b)[2]) <= y_lo_ && std::min(y1, (*b)[3]) >= y_hi_) {
         y0 = std::max(y0, (*b)[2]);
         y1 = std::min(y1, (*b)[3]);
       }
     }
     // kMapCells along the longer side, as many on the other as keep the cells nearly square; the
     // cells tile the area exactly (no row half outside the world).
+    MapGrid g;
     const double longer = std::max({x1 - x0, y1 - y0, 1.0});
-    nx = std::clamp(static_cast<int>(std::lround(kMapCells * (x1 - x0) / longer)), 2, kMapCells);
-    ny = std::clamp(static_cast<int>(std::lround(kMapCells * (y1 - y0) / longer)), 2, kMapCells);
-    cell_x = std::max(x1 - x0, 1e-3) / nx;
-    cell_y = std::max(y1 - y0, 1e-3) / ny;
-    mx0 = x0;
-    my0 = y0;
-    const std::vector<double> kind = SurfaceMap(*world, mx0, my0, cell_x, cell_y, nx, ny);
-    std::ofstream mf(work.path() / "map.dat");
+    g.nx = std::clamp(static_cast<int>(std::lround(kMapCells * (x1 - x0) / longer)), 2, kMapCells);
+    g.ny = std::clamp(static_cast<int>(std::lround(kMapCells * (y1 - y0) / longer)), 2, kMapCells);
+    g.cell_x = std::max(x1 - x0, 1e-3) / g.nx;
+    g.cell_y = std::max(y1 - y0, 1e-3) / g.ny;
+    g.x0 = x0;
+    g.y0 = y0;
+    return g;
+  }
+
+  void WriteMap() {
+    map_ = MapArea();
+    const MapGrid& g = *map_;
+    const std::vector<double> kind =
+        SurfaceMap(*world_, g.x0, g.y0, g.cell_x, g.cell_y, g.nx, g.ny);
+    std::ofstream mf(work_ / "map.dat");
     // gnuplot's "nonuniform matrix": first row the x of each column, then y and the row's values.
-    mf << nx;
-    for (int i = 0; i < nx; ++i) mf << " " << mx0 + (i + 0.5) * cell_x;
+    mf << g.nx;
+    for (int i = 0; i < g.nx; ++i) mf << " " << g.x0 + (i + 0.5) * g.cell_x;
     mf << "\n";
-    for (int j = 0; j < ny; ++j) {
-      mf << my0 + (j + 0.5) * cell_y;
-      for (int i = 0; i < nx; ++i) {
+    for (int j = 0; j < g.ny; ++j) {
+      mf << g.y0 + (j + 0.5) * g.cell_y;
+      for (int i = 0; i < g.nx; ++i) {
         mf << " "
-           << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(nx) +
+           << kind[static_cast<std::size_t>(j) * static_cast<std::size_t>(g.nx) +
                    static_cast<std::size_t>(i)];
       }
       mf << "\n";
     }
-    outputs.push_back("map.dat");
+    outputs_.push_back("map.dat");
+  }
+
+  std::string Terminal(int width, int height) const {
+    return std::string(o_.format == "png" ? "pngcairo" : "svg") + " size " + std::to_string(width) +
+           "," + std::to_string(height) + (o_.format == "png" ? "" : " dynamic") +
+           " font 'sans,10'";
   }
 
   // The gnuplot script: one terminal per figure.
-  const std::string ext = o.format;
-  auto terminal = [&](int width, int height) {
-    return std::string(o.format == "png" ? "pngcairo" : "svg") + " size " + std::to_string(width) +
-           "," + std::to_string(height) + (o.format == "png" ? "" : " dynamic") + " font 'sans,10'";
-  };
-  std::ofstream gp(work.path() / "plot.gp");
-  gp << "# Written by vdyn-recorder plot from " << o.file.filename().string()
-     << "; run: gnuplot plot.gp\n";
-  gp << "set grid\nset key outside right top\n";
-  std::vector<std::string> made;
-  for (const Figure& f : figures) {
-    if (f.panels.empty()) continue;
+  void WriteScript() {
+    std::ofstream gp(work_ / "plot.gp");
+    gp << "# Written by vdyn-recorder plot from " << o_.file.filename().string()
+       << "; run: gnuplot plot.gp\n";
+    gp << "set grid\nset key outside right top\n";
+    for (const Figure& f : figures_) {
+      if (f.panels.empty()) continue;
+      WriteFigure(gp, f);
+      made_.push_back(f.file);
+    }
+    if (map_) {
+      WriteTrajectory(gp);
+      made_.push_back("trajectory");
+    }
+    gp << "unset output\n";
+  }
+
+  void WriteFigure(std::ofstream& gp, const Figure& f) {
     const int panels = static_cast<int>(f.panels.size());
-    gp << "set terminal " << terminal(1200, panels == 1 ? 480 : 200 + 220 * panels) << "\n";
-    gp << "set output '" << f.file << "." << ext << "'\n";
-    const std::string title = Escape(f.title) + " (vehicle " + std::to_string(vehicle) + ")";
+    gp << "set terminal " << Terminal(1200, panels == 1 ? 480 : 200 + 220 * panels) << "\n";
+    gp << "set output '" << f.file << "." << o_.format << "'\n";
+    const std::string title = Escape(f.title) + " (vehicle " + std::to_string(vehicle_) + ")";
     if (panels > 1) {
       // The same margins on every panel, so their time axes line up whatever their legends.
       gp << "set multiplot layout " << panels << ",1 title \"" << title << "\"\nunset title\n";
@@ -533,38 +589,43 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
       gp << "set title \"" << title << "\"\n";
     }
     for (int pi = 0; pi < panels; ++pi) {
-      const Panel& p = f.panels[static_cast<std::size_t>(pi)];
-      double lo = 1e300, hi = -1e300;
-      for (const auto& [c, legend] : p.lines) {
-        const std::size_t k = static_cast<std::size_t>(data_col_of[c] - 1);
-        lo = std::min(lo, col_lo[k]);
-        hi = std::max(hi, col_hi[k]);
-      }
-      const auto [ylo, yhi] = PanelRange(p, lo, hi);
-      gp << "set ylabel '" << p.ylabel << "'\nset yrange [" << ylo << ":" << yhi << "]\n";
-      gp << "set xlabel '" << (pi + 1 == panels ? "time, s" : "") << "'\n";
-      gp << "plot ";
-      for (std::size_t i = 0; i < p.lines.size(); ++i) {
-        const auto& [c, legend] = p.lines[i];
-        // Dashed: the right wheels, and an input under what was applied.
-        const bool dashed = legend == "RF" || legend == "RR" || legend == "input";
-        gp << (i ? ", " : "") << "'states.dat' using " << data_col_of["t_s"] << ":"
-           << data_col_of[c] << " with lines lw " << (legend == "input" ? 2.5 : 1.5) << " dt "
-           << (dashed ? 2 : 1) << " title \"" << Escape(legend) << "\"";
-      }
-      gp << "\n";
+      WritePanel(gp, f.panels[static_cast<std::size_t>(pi)], pi + 1 == panels);
     }
     if (panels > 1) gp << "unset multiplot\nset lmargin -1\nset rmargin -1\n";
     gp << "set autoscale y\n";
-    made.push_back(f.file);
   }
-  if (map) {
+
+  void WritePanel(std::ofstream& gp, const Panel& p, bool bottom) {
+    double lo = 1e300, hi = -1e300;
+    for (const auto& [c, legend] : p.lines) {
+      const std::size_t k = static_cast<std::size_t>(data_col_of_[c] - 1);
+      lo = std::min(lo, col_lo_[k]);
+      hi = std::max(hi, col_hi_[k]);
+    }
+    const auto [ylo, yhi] = PanelRange(p, lo, hi);
+    gp << "set ylabel '" << p.ylabel << "'\nset yrange [" << ylo << ":" << yhi << "]\n";
+    gp << "set xlabel '" << (bottom ? "time, s" : "") << "'\n";
+    gp << "plot ";
+    for (std::size_t i = 0; i < p.lines.size(); ++i) {
+      const auto& [c, legend] = p.lines[i];
+      // Dashed: the right wheels, and an input under what was applied.
+      const bool dashed = legend == "RF" || legend == "RR" || legend == "input";
+      gp << (i ? ", " : "") << "'states.dat' using " << data_col_of_["t_s"] << ":"
+         << data_col_of_[c] << " with lines lw " << (legend == "input" ? 2.5 : 1.5) << " dt "
+         << (dashed ? 2 : 1) << " title \"" << Escape(legend) << "\"";
+    }
+    gp << "\n";
+  }
+
+  void WriteTrajectory(std::ofstream& gp) {
+    const MapGrid& g = *map_;
     // As wide as the page, as tall as the map's shape needs (the plot area is about 740 px wide).
-    const double aspect = (ny * cell_y) / (nx * cell_x);
+    const double aspect = (g.ny * g.cell_y) / (g.nx * g.cell_x);
     const int height = std::clamp(static_cast<int>(740 * aspect) + 180, 360, 1100);
-    gp << "set terminal " << terminal(1000, height) << "\nset output 'trajectory." << ext << "'\n";
-    gp << "set title \"Trajectory of vehicle " << vehicle << " over world '"
-       << Escape(world->name()) << "'\"\n";
+    gp << "set terminal " << Terminal(1000, height) << "\nset output 'trajectory." << o_.format
+       << "'\n";
+    gp << "set title \"Trajectory of vehicle " << vehicle_ << " over world '"
+       << Escape(world_->name()) << "'\"\n";
     gp << "set xlabel 'x, m'\nset ylabel 'y, m'\nset size ratio -1\nset key outside bottom center "
           "horizontal\n";
     // Surface kinds (world.proto's SurfaceKind), one colour each, and the cells without one.
@@ -579,65 +640,97 @@ int RunPlot(const PlotOptions& o, std::ostream& out) {
     gp << ")\nset cbrange [-0.5:" << kNoSurface + 0.5
        << "]\nset cbtics ('ground' 0, 'road' 1, 'obstacle' 2, "
           "'rough' 3, 'ramp' 4, 'barrier' 5, 'prop' 6, 'no surface' 7)\nunset cblabel\n";
-    gp << "set xrange [" << mx0 << ":" << mx0 + nx * cell_x << "]\nset yrange [" << my0 << ":"
-       << my0 + ny * cell_y << "]\n";
+    gp << "set xrange [" << g.x0 << ":" << g.x0 + g.nx * g.cell_x << "]\nset yrange [" << g.y0
+       << ":" << g.y0 + g.ny * g.cell_y << "]\n";
+    const int x = data_col_of_["x_m"], y = data_col_of_["y_m"];
     gp << "plot 'map.dat' nonuniform matrix with image notitle, "
-       << "'states.dat' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
+       << "'states.dat' using " << x << ":" << y
        << " with lines lw 2.5 lc rgb '#c1121f' title 'trajectory', "
-       << "'states.dat' every ::0::0 using " << data_col_of["x_m"] << ":" << data_col_of["y_m"]
+       << "'states.dat' every ::0::0 using " << x << ":" << y
        << " with points pt 7 ps 1.5 lc rgb '#003049' title 'start', "
-       << "'' using " << data_col_of["x_m"] << ":" << data_col_of["y_m"] << " every ::" << rows - 1
-       << "::" << rows - 1 << " with points pt 5 ps 1.5 lc rgb '#000000' title 'end'\n";
-    made.push_back("trajectory");
+       << "'' using " << x << ":" << y << " every ::" << rows_ - 1 << "::" << rows_ - 1
+       << " with points pt 5 ps 1.5 lc rgb '#000000' title 'end'\n";
   }
-  gp << "unset output\n";
-  gp.close();
-  if (const int rc = RunGnuplot(o.gnuplot, work.path(), out); rc != 0) return rc;
-  for (const std::string& f : made) outputs.push_back(f + "." + ext);
 
   // One page that shows them all.
-  std::ofstream html(work.path() / "index.html");
-  html << "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>vdyn recording: "
-       << Html(o.file.filename().string())
-       << "</title>\n<style>body{font-family:sans-serif;margin:2em;"
-       << "max-width:1250px}img,object{width:100%;border:1px solid #ddd;margin:0.5em 0}"
-       << "td{padding:0.2em 1em 0.2em 0}</style></head><body>\n";
-  html << "<h1>" << Html(o.file.filename().string()) << ": vehicle " << vehicle
-       << "</h1>\n<table>\n";
-  auto row = [&](const std::string& k, const std::string& val) {
-    html << "<tr><td>" << k << "</td><td>" << Html(val) << "</td></tr>\n";
-  };
-  row("simulation time", FormatDuration(t_first) + " .. " + FormatDuration(t_last));
-  char b[64];
-  std::snprintf(b, sizeof b, "%.1f m", distance);
-  row("distance", b);
-  std::snprintf(b, sizeof b, "%.1f km/h", top_kmh);
-  row("top speed", b);
-  if (world) row("world", world->name() + " (server " + world->server_id() + ")");
-  row("states plotted",
-      std::to_string(rows) + (stride > 1 ? " (every " + Ordinal(stride) + ")" : ""));
-  html << "</table>\n";
-  for (const std::string& f : made) {
-    if (o.format == "png") {
-      html << "<img src=\"" << f << ".png\" alt=\"" << f << "\">\n";
-    } else {
-      html << "<object type=\"image/svg+xml\" data=\"" << f << ".svg\"></object>\n";
+  void WritePage() {
+    std::ofstream html(work_ / "index.html");
+    html << "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>vdyn recording: "
+         << Html(o_.file.filename().string())
+         << "</title>\n<style>body{font-family:sans-serif;margin:2em;"
+         << "max-width:1250px}img,object{width:100%;border:1px solid #ddd;margin:0.5em 0}"
+         << "td{padding:0.2em 1em 0.2em 0}</style></head><body>\n";
+    html << "<h1>" << Html(o_.file.filename().string()) << ": vehicle " << vehicle_
+         << "</h1>\n<table>\n";
+    auto row = [&](const std::string& k, const std::string& val) {
+      html << "<tr><td>" << k << "</td><td>" << Html(val) << "</td></tr>\n";
+    };
+    row("simulation time", FormatDuration(t_first_) + " .. " + FormatDuration(t_last_));
+    char b[64];
+    std::snprintf(b, sizeof b, "%.1f m", distance_);
+    row("distance", b);
+    std::snprintf(b, sizeof b, "%.1f km/h", top_kmh_);
+    row("top speed", b);
+    if (world_) row("world", world_->name() + " (server " + world_->server_id() + ")");
+    row("states plotted",
+        std::to_string(rows_) + (stride_ > 1 ? " (every " + Ordinal(stride_) + ")" : ""));
+    html << "</table>\n";
+    for (const std::string& f : made_) {
+      if (o_.format == "png") {
+        html << "<img src=\"" << f << ".png\" alt=\"" << f << "\">\n";
+      } else {
+        html << "<object type=\"image/svg+xml\" data=\"" << f << ".svg\"></object>\n";
+      }
     }
+    if (!skipped_.empty()) {
+      html << "<p>Columns this build's CSV does not have (left out):";
+      for (const std::string& s : skipped_) html << " " << Html(s);
+      html << "</p>\n";
+    }
+    html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a "
+            "href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
   }
-  if (!skipped.empty()) {
-    html << "<p>Columns this build's CSV does not have (left out):";
-    for (const std::string& s : skipped) html << " " << Html(s);
-    html << "</p>\n";
+
+  const PlotOptions& o_;
+  std::ostream& out_;
+  mcap::Reader reader_;
+  fs::path dir_, work_;
+  std::uint32_t vehicle_ = 0;
+  std::uint64_t stride_ = 1;
+  // The columns: the CSV's names, the figures' lines, the data file's columns (CSV index of
+  // each; 1-based data-file column by name) and each data column's finite range.
+  std::vector<std::string> names_;
+  std::vector<Figure> figures_;
+  std::vector<int> data_cols_;
+  std::map<std::string, int> data_col_of_;
+  std::vector<std::string> skipped_;
+  bool have_xy_ = false;
+  std::vector<double> col_lo_, col_hi_;
+  // The data pass.
+  std::uint64_t from_ = 0, to_ = 0;
+  std::ofstream data_;
+  pb::VehicleState state_;
+  std::vector<double> values_;
+  std::optional<pb::WorldDescription> world_;
+  std::uint64_t n_ = 0, rows_ = 0;
+  double x_lo_ = 1e300, x_hi_ = -1e300, y_lo_ = 1e300, y_hi_ = -1e300, top_kmh_ = 0, distance_ = 0;
+  double last_x_ = 0, last_y_ = 0, t_first_ = 0, t_last_ = 0;
+  bool any_ = false;
+  // What is written.
+  std::optional<MapGrid> map_;
+  std::vector<std::string> made_;     // figures, without extension
+  std::vector<std::string> outputs_;  // files renamed into the output folder
+};
+
+}  // namespace
+
+int RunPlot(const PlotOptions& o, std::ostream& out) {
+  // Before the recording is opened.
+  if (o.format != "png" && o.format != "svg") {
+    out << "vdyn-recorder plot: --format must be png or svg\n";
+    return 2;
   }
-  html << "<p>Data: <a href=\"states.dat\">states.dat</a>, script: <a "
-          "href=\"plot.gp\">plot.gp</a>.</p>\n</body></html>\n";
-  html.close();
-  outputs.push_back("index.html");
-  // Into place, all checked against the recording first (none moves when one may not).
-  for (const std::string& f : outputs) CheckNotAnInput(dir / f, {o.file});
-  for (const std::string& f : outputs) MoveInto(work.path() / f, dir / f, {o.file});
-  out << made.size() << " figures (" << o.format << ") and index.html in " << dir.string() << "\n";
-  return 0;
+  return Plotter(o, out).Run();
 }
 
 }  // namespace vdyn::recorder

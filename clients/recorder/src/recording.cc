@@ -322,10 +322,4 @@ std::string Printable(std::string_view text, std::size_t max) {
   return out;
 }
 
-std::string Hex(std::uint64_t v) {
-  char b[24];
-  std::snprintf(b, sizeof b, "0x%016llx", static_cast<unsigned long long>(v));
-  return b;
-}
-
 }  // namespace vdyn::recorder

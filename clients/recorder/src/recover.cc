@@ -67,6 +67,309 @@ const char* DataCrcText(mcap::ScanResult::DataCrc c) {
   return "";
 }
 
+// `recover` as its stages: probe the source (its chunks' compression, whether its data-section
+// CRC holds, its summary as a second copy), copy every whole record into a new writer, sum up what
+// was left out and what no CRC vouches for into the copy's metadata, close it, and report.
+class Recovery {
+ public:
+  Recovery(const RecoverOptions& o, std::filesystem::path dest)
+      : o_(o), dest_(std::move(dest)), reader_(o.file, mcap::Reader::Open::kSalvage) {}
+
+  int Run(std::ostream& out) {
+    Probe();
+    OpenCopy();
+    CopyRecords();
+    const Losses losses = Tally();
+    WriteMetadata(losses);
+    writer_->Close();
+    Report(out);
+    return 0;
+  }
+
+ private:
+  struct Losses {
+    std::uint64_t messages = 0, bytes = 0, orphaned = 0;
+    Ranges ranges;
+  };
+
+  // Without decompressing anything (cheap): the chunks' compression, and whether the data
+  // section's CRC holds - then it vouches for the chunks that carry none of their own. The
+  // summary, only as a second copy of schema and channel records whose data-section copy is
+  // damaged (and only when its own CRC holds).
+  void Probe() {
+    mcap::Visitor probe;
+    probe.on_chunk = [&](const mcap::ChunkIndex& c) {
+      ++compressions_[c.compression];
+      return false;
+    };
+    const mcap::ScanResult layout = reader_.Scan(probe, /*lenient=*/true);
+    data_crc_holds_ = layout.data_crc == mcap::ScanResult::DataCrc::kMatched;
+    summary_state_ = layout.summary ? "read" : "absent";
+    try {
+      summary_ = reader_.ReadSummary();
+    } catch (const mcap::McapError& e) {
+      summary_state_ = "damaged (" + e.reason() + ")";
+    }
+  }
+
+  void OpenCopy() {
+    mcap::WriterOptions wo;
+    wo.library = reader_.header_library().empty() ? "vdyn-recorder" : reader_.header_library();
+    wo.library += " (recovered)";
+    wo.compression = compressions_["lz4"] > compressions_["zstd"] ? mcap::Compression::kLz4
+                                                                  : mcap::Compression::kZstd;
+    wo.inputs = {o_.file};
+    writer_.emplace(dest_, wo);
+  }
+
+  void CopyRecords() {
+    mcap::Visitor v;
+    v.on_schema = [&](const mcap::Schema& s) {
+      source_schemas_.try_emplace(s.id, s);
+      if (schema_ids_.count(s.id) == 0)
+        schema_ids_[s.id] = writer_->AddSchema(s.name, s.encoding, s.data);
+    };
+    v.on_channel = [&](const mcap::Channel& c) {
+      if (channel_ids_.count(c.id) == 0) AddChannel(c);
+    };
+    v.on_message = [&](const mcap::Message& m, std::uint64_t) { CopyMessage(m); };
+    v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
+      writer_->WriteMetadata(m.name, m.values);
+    };
+    Progress progress("recover");
+    v.on_progress = [&](std::uint64_t at) {
+      progress.Update(static_cast<double>(at) / static_cast<double>(reader_.size()));
+    };
+    scan_ = reader_.Scan(v, /*lenient=*/true);
+    progress.Finish();
+  }
+
+  const mcap::Schema* SummarySchema(std::uint16_t id) const {
+    if (!summary_) return nullptr;
+    for (const mcap::Schema& s : summary_->schemas) {
+      if (s.id == id) return &s;
+    }
+    return nullptr;
+  }
+
+  // The copy's id of a source schema: from its record, else the summary's copy, else (a vdyn
+  // channel) this build's descriptor of the topic's type; 0 when there is none.
+  std::uint16_t SchemaFor(const mcap::Channel& c) {
+    if (c.schema_id == 0) return 0;
+    if (const auto it = schema_ids_.find(c.schema_id); it != schema_ids_.end()) return it->second;
+    const mcap::Schema* s = nullptr;
+    if (const auto it = source_schemas_.find(c.schema_id); it != source_schemas_.end())
+      s = &it->second;
+    if (s == nullptr && (s = SummarySchema(c.schema_id)) != nullptr) {
+      notes_.push_back("schema " + std::to_string(c.schema_id) + " ('" + s->name +
+                       "') from the summary: its record in the data section is damaged");
+    }
+    if (s != nullptr) {
+      return schema_ids_[c.schema_id] = writer_->AddSchema(s->name, s->encoding, s->data);
+    }
+    const auto info = ParseChannelInfo(c);
+    if (info && PayloadDescriptor(info->topic) != nullptr) {
+      const auto* d = PayloadDescriptor(info->topic);
+      notes_.push_back("schema " + std::to_string(c.schema_id) + " of " + c.topic +
+                       " rebuilt from this build's descriptor of " + d->full_name() +
+                       ": its records are damaged");
+      return schema_ids_[c.schema_id] =
+                 writer_->AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d));
+    }
+    notes_.push_back("channel " + c.topic + " names schema " + std::to_string(c.schema_id) +
+                     ", which is damaged: its messages are kept without a schema");
+    return 0;
+  }
+
+  void AddChannel(const mcap::Channel& c) {
+    channel_ids_[c.id] = writer_->AddChannel(SchemaFor(c), c.topic, c.message_encoding, c.metadata);
+  }
+
+  void CopyMessage(const mcap::Message& m) {
+    if (channel_ids_.count(m.channel_id) == 0) {
+      // Its channel record is damaged: the summary's copy, else the message is lost.
+      const mcap::Channel* copy = nullptr;
+      if (summary_) {
+        for (const mcap::Channel& c : summary_->channels) {
+          if (c.id == m.channel_id) copy = &c;
+        }
+      }
+      if (copy == nullptr) {
+        ++orphans_[m.channel_id];
+        return;
+      }
+      notes_.push_back("channel " + std::to_string(copy->id) + " (" + copy->topic +
+                       ") from the summary: its record in the data section is damaged");
+      AddChannel(*copy);
+    }
+    const bool no_crc = m.unchecked && !data_crc_holds_;
+    writer_->SetChunkCrc(!no_crc);
+    writer_->WriteMessage(channel_ids_.at(m.channel_id), m.sequence, m.log_time, m.publish_time,
+                          m.data);
+    if (first_log_ == 0 || m.log_time < first_log_) first_log_ = m.log_time;
+    if (no_crc) {
+      ++unchecked_;
+      unchecked_ranges_.Add(m.log_time, m.log_time, last_unchecked_);
+    }
+    last_unchecked_ = no_crc;
+    ++kept_;
+  }
+
+  // What was left out: damaged bytes and chunks, and messages whose channel nothing defines.
+  Losses Tally() {
+    Losses l;
+    for (const mcap::Damage& d : scan_.damage) {
+      l.bytes += d.length;
+      l.messages += d.messages;
+      if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
+        l.ranges.Add(d.chunk->message_start_time, d.chunk->message_end_time);
+      }
+    }
+    for (const auto& [ch, n] : orphans_) {
+      l.orphaned += n;
+      notes_.push_back(std::to_string(n) + " messages on channel " + std::to_string(ch) +
+                       ", whose channel record is damaged (no copy in a summary): left out");
+    }
+    return l;
+  }
+
+  bool Closed() const { return scan_.data_crc != mcap::ScanResult::DataCrc::kNotReached; }
+
+  // The copy's "vdyn.recovered" metadata (docs/formats.md): what was left out and what no CRC
+  // vouches for, which `info` prints.
+  void WriteMetadata(const Losses& l) {
+    const mcap::ScanResult& r = scan_;
+    mcap::StringMap meta = {{"from", o_.file.filename().string()},
+                            {"file_size", std::to_string(reader_.size())},
+                            {"good_until", std::to_string(r.good_until)},
+                            {"closed", Closed() ? "yes" : "no"},
+                            {"data_crc", DataCrcText(r.data_crc)},
+                            {"summary", summary_state_},
+                            {"problem", r.problem},
+                            {"problem_offset", std::to_string(r.problem_offset)},
+                            {"messages", std::to_string(kept_)},
+                            {"chunks_skipped", std::to_string(r.chunks_skipped)},
+                            {"chunks_duplicated", std::to_string(r.chunks_duplicated)},
+                            {"records_skipped", std::to_string(r.records_skipped)},
+                            {"bytes_left_out", std::to_string(l.bytes)},
+                            {"messages_lost", std::to_string(l.messages + l.orphaned)},
+                            {"lost_log_ns", l.ranges.Text()},
+                            {"unchecked_messages", std::to_string(unchecked_)},
+                            {"unchecked_log_ns", unchecked_ranges_.Text()}};
+    constexpr std::size_t kListed = 200;
+    for (std::size_t i = 0; i < r.damage.size() && i < kListed; ++i) {
+      const mcap::Damage& d = r.damage[i];
+      char key[32];
+      std::snprintf(key, sizeof key, "damage.%03zu", i);
+      meta[key] = "offset " + std::to_string(d.offset) + ", " + std::to_string(d.length) +
+                  " bytes: " + d.what;
+    }
+    if (r.damage.size() > kListed) meta["damage.more"] = std::to_string(r.damage.size() - kListed);
+    for (std::size_t i = 0; i < notes_.size() && i < kListed; ++i) {
+      char key[32];
+      std::snprintf(key, sizeof key, "note.%03zu", i);
+      meta[key] = notes_[i];
+    }
+    writer_->SetChunkCrc(true);
+    writer_->WriteMetadata("vdyn.recovered", meta);
+  }
+
+  // A log time as seconds after the first message kept (signed: a lost chunk may lie before it).
+  std::string At(std::uint64_t ns) const {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.3f s",
+                  (static_cast<double>(ns) - static_cast<double>(first_log_)) * 1e-9);
+    return b;
+  }
+
+  void Report(std::ostream& out) const {
+    const mcap::ScanResult& r = scan_;
+    const bool whole = r.complete && r.damage.empty() && notes_.empty() && unchecked_ == 0;
+    if (whole) {
+      out << o_.file.string() << " was whole (" << kept_ << " messages); a fresh copy is in "
+          << dest_.string() << "\n";
+      return;
+    }
+    ReportCounts(out);
+    ReportDamage(out);
+    for (const std::string& n : notes_) out << "  " << n << "\n";
+    if (summary_state_ != "read" && summary_state_ != "absent") {
+      out << "  the source's summary is " << summary_state_
+          << ": not used; the copy's is rebuilt from the data section\n";
+    }
+    if (unchecked_ > 0) {
+      out << "  unchecked: " << unchecked_
+          << " messages lie in chunks without a CRC and the source's "
+          << "data-section CRC "
+          << (r.data_crc == mcap::ScanResult::DataCrc::kMismatched
+                  ? "does not match"
+                  : "is " + std::string(DataCrcText(r.data_crc)))
+          << ": nothing can tell whether they are intact; the copy keeps them in chunks without a "
+             "CRC "
+             "and says so (`vdyn-recorder info`)\n";
+    }
+    out << "written, closed and indexed: " << dest_.string() << "\n";
+  }
+
+  // The copy's chunks are counted as `info` counts them (the writer packs them anew).
+  void ReportCounts(std::ostream& out) const {
+    const mcap::ScanResult& r = scan_;
+    out << o_.file.string() << ": recovered " << Count(kept_, "message", "messages") << " from "
+        << Count(r.chunks, "chunk", "chunks") << " of the source, written in "
+        << Count(writer_->chunks(), "chunk", "chunks");
+    if (r.chunks_skipped > 0)
+      out << "; " << Count(r.chunks_skipped, "damaged chunk", "damaged chunks") << " dropped";
+    if (r.chunks_duplicated > 0)
+      out << "; " << Count(r.chunks_duplicated, "copy of a chunk", "copies of a chunk")
+          << " dropped";
+    if (r.records_skipped > 0)
+      out << "; "
+          << Count(r.records_skipped, "damaged record or run of bytes",
+                   "damaged records or runs of bytes")
+          << " skipped";
+    if (!Closed()) out << " (the file was not closed: no data end record)";
+    out << "\n";
+  }
+
+  void ReportDamage(std::ostream& out) const {
+    const mcap::ScanResult& r = scan_;
+    if (!r.damage.empty()) out << "  damage found (" << r.damage.size() << "):\n";
+    for (std::size_t i = 0; i < r.damage.size() && i < 20; ++i) {
+      const mcap::Damage& d = r.damage[i];
+      out << "    offset " << d.offset;
+      if (d.length > 0) out << ", " << d.length << " bytes";
+      out << ": " << d.what;
+      if (d.messages > 0) out << "; " << Count(d.messages, "message", "messages");
+      if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
+        out << " (log time " << At(d.chunk->message_start_time) << " .. "
+            << At(d.chunk->message_end_time) << ")";
+      }
+      out << "\n";
+    }
+    if (r.damage.size() > 20)
+      out << "    ... " << (r.damage.size() - 20) << " more (in the copy's metadata)\n";
+  }
+
+  const RecoverOptions& o_;
+  const std::filesystem::path dest_;
+  mcap::Reader reader_;
+  // The source, probed.
+  std::map<std::string, int> compressions_;
+  bool data_crc_holds_ = false;
+  std::optional<mcap::Reader::Summary> summary_;
+  std::string summary_state_;
+  // The copy.
+  std::optional<mcap::Writer> writer_;
+  std::map<std::uint16_t, mcap::Schema> source_schemas_;
+  std::map<std::uint16_t, std::uint16_t> schema_ids_, channel_ids_;
+  std::vector<std::string> notes_;  // schemas and channels taken from elsewhere, or missing
+  std::map<std::uint16_t, std::uint64_t> orphans_;  // messages on a channel no record defines
+  std::uint64_t kept_ = 0, unchecked_ = 0, first_log_ = 0;
+  Ranges unchecked_ranges_;
+  bool last_unchecked_ = false;
+  mcap::ScanResult scan_;
+};
+
 }  // namespace
 
 int RunRecover(const RecoverOptions& o, std::ostream& out) {
@@ -76,239 +379,7 @@ int RunRecover(const RecoverOptions& o, std::ostream& out) {
     dest.replace_filename(o.file.stem().string() + "-recovered" + o.file.extension().string());
   }
   CheckNotAnInput(dest, {o.file});
-  mcap::Reader reader(o.file, mcap::Reader::Open::kSalvage);
-  // First, without decompressing anything (cheap): the chunks' compression, and whether the
-  // data section's CRC holds - then it vouches for the chunks that carry none of their own.
-  std::map<std::string, int> compressions;
-  mcap::Visitor probe;
-  probe.on_chunk = [&](const mcap::ChunkIndex& c) {
-    ++compressions[c.compression];
-    return false;
-  };
-  const mcap::ScanResult layout = reader.Scan(probe, /*lenient=*/true);
-  const bool data_crc_holds = layout.data_crc == mcap::ScanResult::DataCrc::kMatched;
-  // The summary, only as a second copy of schema and channel records whose data-section copy is
-  // damaged (and only when its own CRC holds).
-  std::optional<mcap::Reader::Summary> summary;
-  std::string summary_state = layout.summary ? "read" : "absent";
-  try {
-    summary = reader.ReadSummary();
-  } catch (const mcap::McapError& e) {
-    summary_state = "damaged (" + e.reason() + ")";
-  }
-
-  mcap::WriterOptions wo;
-  wo.library = reader.header_library().empty() ? "vdyn-recorder" : reader.header_library();
-  wo.library += " (recovered)";
-  wo.compression = compressions["lz4"] > compressions["zstd"] ? mcap::Compression::kLz4
-                                                              : mcap::Compression::kZstd;
-  wo.inputs = {o.file};
-  mcap::Writer writer(dest, wo);
-  std::map<std::uint16_t, mcap::Schema> source_schemas;
-  std::map<std::uint16_t, std::uint16_t> schema_ids, channel_ids;
-  std::vector<std::string> notes;  // schemas and channels taken from elsewhere, or missing
-  std::map<std::uint16_t, std::uint64_t> orphans;  // messages on a channel no record defines
-  std::uint64_t kept = 0, unchecked = 0, first_log = 0;
-  Ranges unchecked_ranges;
-  bool last_unchecked = false;
-  auto summary_schema = [&](std::uint16_t id) -> const mcap::Schema* {
-    if (!summary) return nullptr;
-    for (const mcap::Schema& s : summary->schemas) {
-      if (s.id == id) return &s;
-    }
-    return nullptr;
-  };
-  // The copy's id of a source schema: from its record, else the summary's copy, else (a vdyn
-  // channel) this build's descriptor of the topic's type; 0 when there is none.
-  auto schema_for = [&](const mcap::Channel& c) -> std::uint16_t {
-    if (c.schema_id == 0) return 0;
-    if (const auto it = schema_ids.find(c.schema_id); it != schema_ids.end()) return it->second;
-    const mcap::Schema* s = nullptr;
-    if (const auto it = source_schemas.find(c.schema_id); it != source_schemas.end())
-      s = &it->second;
-    if (s == nullptr && (s = summary_schema(c.schema_id)) != nullptr) {
-      notes.push_back("schema " + std::to_string(c.schema_id) + " ('" + s->name +
-                      "') from the summary: its record in the data section is damaged");
-    }
-    if (s != nullptr) {
-      return schema_ids[c.schema_id] = writer.AddSchema(s->name, s->encoding, s->data);
-    }
-    const auto info = ParseChannelInfo(c);
-    if (info && PayloadDescriptor(info->topic) != nullptr) {
-      const auto* d = PayloadDescriptor(info->topic);
-      notes.push_back("schema " + std::to_string(c.schema_id) + " of " + c.topic +
-                      " rebuilt from this build's descriptor of " + d->full_name() +
-                      ": its records are damaged");
-      return schema_ids[c.schema_id] =
-                 writer.AddSchema(d->full_name(), "protobuf", FileDescriptorSetOf(d));
-    }
-    notes.push_back("channel " + c.topic + " names schema " + std::to_string(c.schema_id) +
-                    ", which is damaged: its messages are kept without a schema");
-    return 0;
-  };
-  auto add_channel = [&](const mcap::Channel& c) {
-    channel_ids[c.id] = writer.AddChannel(schema_for(c), c.topic, c.message_encoding, c.metadata);
-  };
-  mcap::Visitor v;
-  v.on_schema = [&](const mcap::Schema& s) {
-    source_schemas.try_emplace(s.id, s);
-    if (schema_ids.count(s.id) == 0)
-      schema_ids[s.id] = writer.AddSchema(s.name, s.encoding, s.data);
-  };
-  v.on_channel = [&](const mcap::Channel& c) {
-    if (channel_ids.count(c.id) == 0) add_channel(c);
-  };
-  v.on_message = [&](const mcap::Message& m, std::uint64_t) {
-    if (channel_ids.count(m.channel_id) == 0) {
-      // Its channel record is damaged: the summary's copy, else the message is lost.
-      const mcap::Channel* copy = nullptr;
-      if (summary) {
-        for (const mcap::Channel& c : summary->channels) {
-          if (c.id == m.channel_id) copy = &c;
-        }
-      }
-      if (copy == nullptr) {
-        ++orphans[m.channel_id];
-        return;
-      }
-      notes.push_back("channel " + std::to_string(copy->id) + " (" + copy->topic +
-                      ") from the summary: its record in the data section is damaged");
-      add_channel(*copy);
-    }
-    const bool no_crc = m.unchecked && !data_crc_holds;
-    writer.SetChunkCrc(!no_crc);
-    writer.WriteMessage(channel_ids.at(m.channel_id), m.sequence, m.log_time, m.publish_time,
-                        m.data);
-    if (first_log == 0 || m.log_time < first_log) first_log = m.log_time;
-    if (no_crc) {
-      ++unchecked;
-      unchecked_ranges.Add(m.log_time, m.log_time, last_unchecked);
-    }
-    last_unchecked = no_crc;
-    ++kept;
-  };
-  v.on_metadata = [&](const mcap::Metadata& m, std::uint64_t) {
-    writer.WriteMetadata(m.name, m.values);
-  };
-  Progress progress("recover");
-  v.on_progress = [&](std::uint64_t at) {
-    progress.Update(static_cast<double>(at) / static_cast<double>(reader.size()));
-  };
-  const mcap::ScanResult r = reader.Scan(v, /*lenient=*/true);
-  progress.Finish();
-
-  // What was left out, and what no CRC vouches for.
-  std::uint64_t lost_messages = 0, lost_bytes = 0;
-  Ranges lost_ranges;
-  for (const mcap::Damage& d : r.damage) {
-    lost_bytes += d.length;
-    lost_messages += d.messages;
-    if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
-      lost_ranges.Add(d.chunk->message_start_time, d.chunk->message_end_time);
-    }
-  }
-  std::uint64_t orphaned = 0;
-  for (const auto& [ch, n] : orphans) {
-    orphaned += n;
-    notes.push_back(std::to_string(n) + " messages on channel " + std::to_string(ch) +
-                    ", whose channel record is damaged (no copy in a summary): left out");
-  }
-  const bool closed = r.data_crc != mcap::ScanResult::DataCrc::kNotReached;
-  mcap::StringMap meta = {{"from", o.file.filename().string()},
-                          {"file_size", std::to_string(reader.size())},
-                          {"good_until", std::to_string(r.good_until)},
-                          {"closed", closed ? "yes" : "no"},
-                          {"data_crc", DataCrcText(r.data_crc)},
-                          {"summary", summary_state},
-                          {"problem", r.problem},
-                          {"problem_offset", std::to_string(r.problem_offset)},
-                          {"messages", std::to_string(kept)},
-                          {"chunks_skipped", std::to_string(r.chunks_skipped)},
-                          {"chunks_duplicated", std::to_string(r.chunks_duplicated)},
-                          {"records_skipped", std::to_string(r.records_skipped)},
-                          {"bytes_left_out", std::to_string(lost_bytes)},
-                          {"messages_lost", std::to_string(lost_messages + orphaned)},
-                          {"lost_log_ns", lost_ranges.Text()},
-                          {"unchecked_messages", std::to_string(unchecked)},
-                          {"unchecked_log_ns", unchecked_ranges.Text()}};
-  constexpr std::size_t kListed = 200;
-  for (std::size_t i = 0; i < r.damage.size() && i < kListed; ++i) {
-    const mcap::Damage& d = r.damage[i];
-    char key[32];
-    std::snprintf(key, sizeof key, "damage.%03zu", i);
-    meta[key] = "offset " + std::to_string(d.offset) + ", " + std::to_string(d.length) +
-                " bytes: " + d.what;
-  }
-  if (r.damage.size() > kListed) meta["damage.more"] = std::to_string(r.damage.size() - kListed);
-  for (std::size_t i = 0; i < notes.size() && i < kListed; ++i) {
-    char key[32];
-    std::snprintf(key, sizeof key, "note.%03zu", i);
-    meta[key] = notes[i];
-  }
-  writer.SetChunkCrc(true);
-  writer.WriteMetadata("vdyn.recovered", meta);
-  writer.Close();
-
-  const bool whole = r.complete && r.damage.empty() && notes.empty() && unchecked == 0;
-  if (whole) {
-    out << o.file.string() << " was whole (" << kept << " messages); a fresh copy is in "
-        << dest.string() << "\n";
-    return 0;
-  }
-  auto at = [&](std::uint64_t ns) {
-    char b[32];
-    // Signed: a lost chunk may lie before the first message kept.
-    std::snprintf(b, sizeof b, "%.3f s",
-                  (static_cast<double>(ns) - static_cast<double>(first_log)) * 1e-9);
-    return std::string(b);
-  };
-  // The copy's chunks are counted as `info` counts them (the writer packs them anew).
-  out << o.file.string() << ": recovered " << Count(kept, "message", "messages") << " from "
-      << Count(r.chunks, "chunk", "chunks") << " of the source, written in "
-      << Count(writer.chunks(), "chunk", "chunks");
-  if (r.chunks_skipped > 0)
-    out << "; " << Count(r.chunks_skipped, "damaged chunk", "damaged chunks") << " dropped";
-  if (r.chunks_duplicated > 0)
-    out << "; " << Count(r.chunks_duplicated, "copy of a chunk", "copies of a chunk") << " dropped";
-  if (r.records_skipped > 0)
-    out << "; "
-        << Count(r.records_skipped, "damaged record or run of bytes",
-                 "damaged records or runs of bytes")
-        << " skipped";
-  if (!closed) out << " (the file was not closed: no data end record)";
-  out << "\n";
-  if (!r.damage.empty()) out << "  damage found (" << r.damage.size() << "):\n";
-  for (std::size_t i = 0; i < r.damage.size() && i < 20; ++i) {
-    const mcap::Damage& d = r.damage[i];
-    out << "    offset " << d.offset;
-    if (d.length > 0) out << ", " << d.length << " bytes";
-    out << ": " << d.what;
-    if (d.messages > 0) out << "; " << Count(d.messages, "message", "messages");
-    if (d.chunk && d.chunk->message_end_time >= d.chunk->message_start_time) {
-      out << " (log time " << at(d.chunk->message_start_time) << " .. "
-          << at(d.chunk->message_end_time) << ")";
-    }
-    out << "\n";
-  }
-  if (r.damage.size() > 20)
-    out << "    ... " << (r.damage.size() - 20) << " more (in the copy's metadata)\n";
-  for (const std::string& n : notes) out << "  " << n << "\n";
-  if (summary_state != "read" && summary_state != "absent") {
-    out << "  the source's summary is " << summary_state
-        << ": not used; the copy's is rebuilt from the data section\n";
-  }
-  if (unchecked > 0) {
-    out << "  unchecked: " << unchecked << " messages lie in chunks without a CRC and the source's "
-        << "data-section CRC "
-        << (r.data_crc == mcap::ScanResult::DataCrc::kMismatched
-                ? "does not match"
-                : "is " + std::string(DataCrcText(r.data_crc)))
-        << ": nothing can tell whether they are intact; the copy keeps them in chunks without a "
-           "CRC "
-           "and says so (`vdyn-recorder info`)\n";
-  }
-  out << "written, closed and indexed: " << dest.string() << "\n";
-  return 0;
+  return Recovery(o, dest).Run(out);
 }
 
 }  // namespace vdyn::recorder

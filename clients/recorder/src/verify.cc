@@ -1,4 +1,5 @@
-// verify and takeover: the recorder's only code that links the physics (vdyn_replay, the bridge).
+// verify and takeover: the recorder's only code that re-simulates (vdyn_replay, by name; the
+// physics stays behind its interface).
 #include "vdyn/recorder/verify.h"
 
 #include <algorithm>
@@ -15,9 +16,8 @@
 #include <google/protobuf/message.h>
 #include <google/protobuf/reflection.h>
 
+#include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
-#include "vdyn/bridge/convert.h"
-#include "vdyn/physics/world.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/commands.h"
 #include "vdyn/recorder/output_file.h"
@@ -135,8 +135,7 @@ std::string VehicleName(std::uint32_t vehicle, std::uint32_t start) {
 
 std::string CheckServer(const ServerStart& key, const Server& s) {
   if (!s.world) {
-    return "no world description of " + ServerName(key.id, s.start) +
-           " was recorded (vdyn/world)";
+    return "no world description of " + ServerName(key.id, s.start) + " was recorded (vdyn/world)";
   }
   return {};
 }
@@ -198,8 +197,10 @@ void Diff(const google::protobuf::Message& a, const google::protobuf::Message& b
         if (ra->GetUInt64(a, f) != rb->GetUInt64(b, f)) {
           const bool hash = f->type() == FD::TYPE_FIXED64;
           out.push_back({name,
-                         hash ? Hex(ra->GetUInt64(a, f)) : std::to_string(ra->GetUInt64(a, f)),
-                         hash ? Hex(rb->GetUInt64(b, f)) : std::to_string(rb->GetUInt64(b, f))});
+                         hash ? base::FormatHex(ra->GetUInt64(a, f), 16)
+                              : std::to_string(ra->GetUInt64(a, f)),
+                         hash ? base::FormatHex(rb->GetUInt64(b, f), 16)
+                              : std::to_string(rb->GetUInt64(b, f))});
         }
         break;
       case FD::CPPTYPE_INT64:
@@ -263,8 +264,7 @@ struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
   ServerStart server;
   std::uint32_t start = 0;  // Server::start
-  std::shared_ptr<const World> world;
-  std::uint64_t terrain_hash = 0;
+  ReplayWorld world;
   std::vector<const pb::SessionEvent*> events;  // by sequence
   std::vector<Segment> segments;                // by start step
   std::vector<std::pair<std::uint64_t, std::uint64_t>> ring =
@@ -324,7 +324,7 @@ struct VehicleRun {
   // A replayer of the events from `first_event` on (a spawn or checkpoint).
   std::unique_ptr<VehicleReplayer> Fresh(std::uint32_t id, std::size_t first_event,
                                          std::string* why) const {
-    auto r = std::make_unique<VehicleReplayer>(world, terrain_hash, id);
+    auto r = std::make_unique<VehicleReplayer>(world, id);
     for (std::size_t i = first_event; i < events.size(); ++i) {
       if (!r->Add(*events[i], why)) return nullptr;
     }
@@ -332,259 +332,334 @@ struct VehicleRun {
   }
 };
 
-// The state message the re-simulation gives for the step it just ran, made like the server's
-// (the recorded message lends what is not physics: server id, time, the input's source).
-pb::VehicleState Resimulated(const VehicleReplayer& r, const pb::VehicleState& recorded) {
-  const Simulator& sim = *r.simulator();
-  const StepRecord& rec = sim.last_step();
-  pb::DriverInput input = recorded.input();
-  ToProto(rec.input, input);
-  pb::VehicleState out;
-  FillVehicleState(recorded.vehicle_id(), recorded.server_id(), sim.step_ns(),
-                   recorded.sim_time_ns(), rec, input, recorded.control().watchdog_safe_state(),
-                   rec.derived.steering_torque, out);
-  out.set_incarnation(recorded.incarnation());
-  return out;
-}
+// `verify` as its stages: collect each server's world and events, plan each vehicle's replay (its
+// stretches between holes in the events), start a replayer per stretch, then stream the recorded
+// states and compare each with its re-simulation.
+class Verifier {
+ public:
+  explicit Verifier(const VerifyOptions& o) : o_(o), reader_(o.file) {}
 
-}  // namespace
+  VerifyResult Run() {
+    servers_ = CollectEvents(reader_, Progress(0.0, 0.1));
+    if (servers_.empty()) {
+      res_.cannot = "no session events were recorded (vdyn/events): nothing to re-simulate from";
+      return std::move(res_);
+    }
+    if (!CollectRuns() || !StartReplays()) return std::move(res_);
+    CompareStates();
+    res_.resimulated = res_.cannot.empty();
+    res_.wall_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count();
+    return std::move(res_);
+  }
 
-VerifyResult Verify(const VerifyOptions& o) {
-  VerifyResult res;
-  const auto wall_start = std::chrono::steady_clock::now();
-  mcap::Reader reader(o.file);
-  auto progress = [&](double lo, double hi) {
-    return [&o, lo, hi](double f) {
-      if (o.on_progress) o.on_progress(lo + (hi - lo) * f);
-    };
+ private:
+  // A recorded state being compared: where it belongs.
+  struct StateAt {
+    const RecordedMessage& m;
+    std::uint64_t step = 0;
+    std::uint64_t hash = 0;
+    RunKey key;
+    std::uint32_t start = 0;  // its server's start (Server::start)
   };
-  std::map<ServerStart, Server> servers = CollectEvents(reader, progress(0.0, 0.1));
-  if (servers.empty()) {
-    res.cannot = "no session events were recorded (vdyn/events): nothing to re-simulate from";
-    return res;
+
+  std::function<void(double)> Progress(double lo, double hi) const {
+    return [this, lo, hi](double f) {
+      if (o_.on_progress) o_.on_progress(lo + (hi - lo) * f);
+    };
   }
+
   // Each vehicle of each server start replays on its own: a restarted server's vehicle 1 starts
-  // again from step 0 (its states say which start stepped them).
-  std::map<RunKey, VehicleRun> runs;
-  for (auto& [id, s] : servers) {
-    if (std::string why = CheckServer(id, s); !why.empty()) {
-      res.cannot = why;
-      return res;
+  // again from step 0 (its states say which start stepped them). False: res_.cannot says why.
+  bool CollectRuns() {
+    for (auto& [id, s] : servers_) {
+      if (std::string why = CheckServer(id, s); !why.empty()) {
+        res_.cannot = why;
+        return false;
+      }
+      ReplayWorld world;
+      try {
+        world = ReplayWorldFrom(*s.world);
+      } catch (const std::exception& e) {
+        res_.cannot = std::string("the recorded world cannot be rebuilt: ") + e.what();
+        return false;
+      }
+      for (const Hole& h : s.holes)
+        res_.holes.push_back(ServerName(id.id, s.start) + ": " + h.Text());
+      for (const pb::SessionEvent& e : s.events) {
+        if (o_.vehicle && e.vehicle_id() != *o_.vehicle) continue;
+        VehicleRun& run = runs_[{e.vehicle_id(), id.incarnation}];
+        run.server = id;
+        run.start = s.start;
+        run.world = world;
+        run.events.push_back(&e);
+        run.last_event_step = std::max(run.last_event_step, LastActionStep(e));
+        if (e.has_spawned()) run.step_ns = e.spawned().step_ns();
+        if (e.has_checkpoint()) run.step_ns = e.checkpoint().step_ns();
+      }
     }
-    std::shared_ptr<const World> world;
-    try {
-      world = WorldFromDescription(*s.world);
-    } catch (const std::exception& e) {
-      res.cannot = std::string("the recorded world cannot be rebuilt: ") + e.what();
-      return res;
-    }
-    const std::uint64_t hash = TerrainHash(world->terrain);
-    for (const Hole& h : s.holes) {
-      res.holes.push_back(ServerName(id.id, s.start) + ": " + h.Text());
-    }
-    for (const pb::SessionEvent& e : s.events) {
-      if (o.vehicle && e.vehicle_id() != *o.vehicle) continue;
-      VehicleRun& run = runs[{e.vehicle_id(), id.incarnation}];
-      run.server = id;
-      run.start = s.start;
-      run.world = world;
-      run.terrain_hash = hash;
-      run.events.push_back(&e);
-      run.last_event_step = std::max(run.last_event_step, LastActionStep(e));
-      if (e.has_spawned()) run.step_ns = e.spawned().step_ns();
-      if (e.has_checkpoint()) run.step_ns = e.checkpoint().step_ns();
-    }
+    // The starts of the servers, by incarnation (a state names its own).
+    for (const auto& [key, s] : servers_) start_of_[key.incarnation] = s.start;
+    return true;
   }
-  std::size_t startable = 0;
-  for (auto& [key, run] : runs) {
-    run.Plan(servers.at(run.server).holes);
-    if (run.segments.empty()) {
-      run.error = VehicleName(key.vehicle, run.start) + ": no spawn or checkpoint event was recorded";
-      continue;
+
+  // A replayer per stretch of each vehicle's events. False: res_.cannot says why.
+  bool StartReplays() {
+    std::size_t startable = 0;
+    for (auto& [key, run] : runs_) {
+      run.Plan(servers_.at(run.server).holes);
+      if (run.segments.empty()) {
+        run.error =
+            VehicleName(key.vehicle, run.start) + ": no spawn or checkpoint event was recorded";
+        continue;
+      }
+      for (Segment& seg : run.segments) {
+        seg.replayer = run.Fresh(key.vehicle, seg.first_event, &run.error);
+        if (!seg.replayer) break;
+      }
+      if (!run.error.empty()) {
+        res_.cannot = run.error;
+        return false;
+      }
+      ++startable;
     }
-    for (Segment& seg : run.segments) {
-      seg.replayer = run.Fresh(key.vehicle, seg.first_event, &run.error);
-      if (!seg.replayer) break;
+    if (startable == 0) {
+      res_.cannot = runs_.empty() ? "no session events of the chosen vehicle were recorded"
+                                  : runs_.begin()->second.error;
+      return false;
     }
-    if (!run.error.empty()) {
-      res.cannot = run.error;
-      return res;
-    }
-    ++startable;
+    return true;
   }
-  if (startable == 0) {
-    res.cannot = runs.empty() ? "no session events of the chosen vehicle were recorded"
-                              : runs.begin()->second.error;
-    return res;
+
+  // Streams the states: replays each vehicle up to the step of its next state and compares.
+  void CompareStates() {
+    RecordingVisitor v;
+    v.wants = [](TopicId t) { return t == TopicId::kState; };
+    v.on_progress = Progress(0.1, 1.0);
+    v.on_message = [this](const RecordedMessage& m) { OnState(m); };
+    const mcap::ScanResult scan = ScanRecording(reader_, v);
+    res_.data_crc_checked = scan.data_crc == mcap::ScanResult::DataCrc::kMatched;
   }
-  // Stream the states: replay each vehicle up to the step of its next state and compare.
-  // The starts of the servers, by incarnation (a state names its own).
-  std::map<std::uint64_t, std::uint32_t> start_of;
-  for (const auto& [key, s] : servers) start_of[key.incarnation] = s.start;
-  std::optional<std::pair<RunKey, std::uint64_t>> compare_next;  // divergence: next state
-  pb::VehicleState recorded;
-  RecordingVisitor v;
-  v.wants = [](TopicId t) { return t == TopicId::kState; };
-  v.on_progress = progress(0.1, 1.0);
-  v.on_message = [&](const RecordedMessage& m) {
-    if (o.vehicle && m.key != *o.vehicle) return;
+
+  void OnState(const RecordedMessage& m) {
+    if (o_.vehicle && m.key != *o_.vehicle) return;
     const std::optional<StateFields> read = ReadStateFields(m.data, m.key);
     if (!read) {
-      ++res.malformed;  // not a state of this vehicle: no step to place it at
+      ++res_.malformed;  // not a state of this vehicle: no step to place it at
       return;
     }
-    const std::uint64_t step = read->step;
-    const std::uint64_t hash = read->state_hash;
-    const RunKey key{m.key, read->incarnation};
-    const auto known = start_of.find(read->incarnation);
-    const std::uint32_t start = known == start_of.end() ? 0 : known->second;
-    auto it = runs.find(key);
-    if (it == runs.end() || it->second.segments.empty()) {
-      ++res.not_resimulated;  // no spawn or checkpoint of this vehicle at all
-      if (it != runs.end()) res.Unverified(m.key, start, step, it->second.error, false);
-      return;
+    const auto known = start_of_.find(read->incarnation);
+    const StateAt at{m, read->step, read->state_hash, RunKey{m.key, read->incarnation},
+                     known == start_of_.end() ? 0 : known->second};
+    VehicleRun* run = nullptr;
+    Segment* seg = Place(at, run);
+    if (seg == nullptr) return;
+    bool fresh_step = false;
+    if (!ReplayTo(at, *run, *seg, fresh_step)) return;
+    const auto& slot = run->ring[at.step % VehicleRun::kRing];
+    if (!Comparable(at, *run, *seg, slot, fresh_step)) return;
+    ++res_.compared;
+    if (compare_next_ && compare_next_->first == at.key && compare_next_->second == at.step) {
+      compare_next_.reset();
+      DiffFresh(at, *run, *seg, res_.first->next_fields);
+    }
+    if (slot.second == at.hash) {
+      Matched(at, *run, *seg, fresh_step);
+    } else {
+      Diverged(at, *run, *seg, slot.second);
+    }
+  }
+
+  // The stretch of its vehicle's replay a state falls in; nullptr (and why, in res_) for a state
+  // that no replay reaches.
+  Segment* Place(const StateAt& at, VehicleRun*& run_out) {
+    const RecordedMessage& m = at.m;
+    auto it = runs_.find(at.key);
+    if (it == runs_.end() || it->second.segments.empty()) {
+      ++res_.not_resimulated;  // no spawn or checkpoint of this vehicle at all
+      if (it != runs_.end()) res_.Unverified(m.key, at.start, at.step, it->second.error, false);
+      return nullptr;
     }
     VehicleRun& run = it->second;
-    Segment* seg = run.SegmentAt(step);
+    Segment* seg = run.SegmentAt(at.step);
     if (seg == nullptr) {
       // Before the vehicle's first spawn or checkpoint: a recorder that joined late (or lost it).
-      ++res.not_resimulated;
-      res.Unverified(m.key, start, step, "before its first spawn or checkpoint in the recording", false);
-      return;
+      ++res_.not_resimulated;
+      res_.Unverified(m.key, at.start, at.step,
+                      "before its first spawn or checkpoint in the recording", false);
+      return nullptr;
     }
     if (seg->lost) {
-      res.Unverified(m.key, start, step, seg->why);
-      return;
+      res_.Unverified(m.key, at.start, at.step, seg->why);
+      return nullptr;
     }
-    if (step > run.last_event_step + kAheadSteps) {
+    if (at.step > run.last_event_step + kAheadSteps) {
       // Far beyond every event of the vehicle (a checkpoint comes each second): not a step to
       // simulate towards (a damaged step would cost hours).
-      res.Unverified(m.key, start, step,
-                     "beyond the vehicle's last recorded event (step " +
-                         std::to_string(run.last_event_step) + "): not re-simulated");
-      return;
+      res_.Unverified(m.key, at.start, at.step,
+                      "beyond the vehicle's last recorded event (step " +
+                          std::to_string(run.last_event_step) + "): not re-simulated");
+      return nullptr;
     }
-    bool fresh_step = false;
-    if (step + 1 > seg->replayed_to) {
-      const double h = static_cast<double>(run.step_ns) * 1e-9;
-      std::string why;
-      if (!seg->replayer->Run(
-              step + 1,
-              [&](std::uint64_t s, std::uint64_t hh) {
-                run.ring[s % VehicleRun::kRing] = {s, hh};
-                res.sim_seconds += h;
-              },
-              &why)) {
-        seg->Lose(step, "the re-simulation stopped: " + why);
-        res.Unverified(m.key, start, step, seg->why);
-        return;
-      }
-      seg->replayed_to = step + 1;
-      fresh_step = true;
+    run_out = &run;
+    return seg;
+  }
+
+  // Runs the stretch's replay up to the state's step, keeping each step's hash in the ring.
+  // False when the replay stopped (the stretch is lost); `fresh_step` when this state's step was
+  // the last one run.
+  bool ReplayTo(const StateAt& at, VehicleRun& run, Segment& seg, bool& fresh_step) {
+    if (at.step + 1 <= seg.replayed_to) return true;
+    const double h = static_cast<double>(run.step_ns) * 1e-9;
+    std::string why;
+    if (!seg.replayer->Run(
+            at.step + 1,
+            [&](std::uint64_t s, std::uint64_t hh) {
+              run.ring[s % VehicleRun::kRing] = {s, hh};
+              res_.sim_seconds += h;
+            },
+            &why)) {
+      seg.Lose(at.step, "the re-simulation stopped: " + why);
+      res_.Unverified(at.m.key, at.start, at.step, seg.why);
+      return false;
     }
-    const auto& slot = run.ring[step % VehicleRun::kRing];
-    if (slot.first != step) {
-      ++res.not_resimulated;  // not re-simulated (a state older than the ring holds)
-      res.Unverified(m.key, start, step, "not re-simulated (it arrived too late in the file)", false);
-      return;
+    seg.replayed_to = at.step + 1;
+    fresh_step = true;
+    return true;
+  }
+
+  // Whether a re-simulated hash can be held against the state: not when the ring no longer holds
+  // its step, nor when a difference is explained by events the recording lost.
+  bool Comparable(const StateAt& at, const VehicleRun& run, Segment& seg,
+                  const std::pair<std::uint64_t, std::uint64_t>& slot, bool fresh_step) {
+    const RecordedMessage& m = at.m;
+    if (slot.first != at.step) {
+      ++res_.not_resimulated;  // not re-simulated (a state older than the ring holds)
+      res_.Unverified(m.key, at.start, at.step,
+                      "not re-simulated (it arrived too late in the file)", false);
+      return false;
     }
-    if (slot.second != hash && step >= seg->uncertain_from) {
+    if (slot.second == at.hash) return true;
+    if (at.step >= seg.uncertain_from) {
       // Events of this stretch are missing: the replay lacks them, it has not diverged. It goes
       // on from the next checkpoint after the hole.
-      seg->Lose(step, seg->hole);
-      res.Unverified(m.key, start, step, seg->why);
-      return;
+      seg.Lose(at.step, seg.hole);
+      res_.Unverified(m.key, at.start, at.step, seg.why);
+      return false;
     }
-    if (slot.second != hash && step > run.last_event_step && fresh_step &&
-        seg->replayer->simulator() != nullptr &&
-        static_cast<std::uint64_t>(seg->replayer->simulator()->last_step().step) == step &&
-        recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
+    if (at.step > run.last_event_step && fresh_step && InputNotRecorded(at, seg)) {
       // Past the vehicle's last recorded event, the server applied an input that no recorded
       // event gives: the recording's last events never reached it (the server or the recorder
       // stopped first, or they were lost at the end, where no later sequence number shows the
       // hole). The replay lacks them; it has not diverged.
-      std::vector<FieldDiff> fields;
-      Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
-      const bool input_differs = std::any_of(fields.begin(), fields.end(), [](const FieldDiff& f) {
-        return f.field.rfind("input.", 0) == 0;
-      });
-      if (input_differs) {
-        seg->Lose(step, "the recording's events end at step " +
+      seg.Lose(at.step, "the recording's events end at step " +
                             std::to_string(run.last_event_step) +
                             " and this state's input is in none of them (the last events never "
                             "reached the recording)");
-        res.Unverified(m.key, start, step, seg->why);
-        return;
-      }
+      res_.Unverified(m.key, at.start, at.step, seg.why);
+      return false;
     }
-    ++res.compared;
-    if (compare_next && compare_next->first == key && compare_next->second == step) {
-      compare_next.reset();
-      std::string why;
-      if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
-          fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
-          recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
-        Diff(recorded, Resimulated(*fresh, recorded), "", res.first->next_fields);
-      }
-    }
-    if (slot.second == hash) {
-      ++run.matched;
-      bool damaged = false;
-      if (m.unchecked) {
-        // No CRC vouched for these bytes: the hash covers the state, not every field of the
-        // message. Compare them all with the re-simulation (it just ran this very step).
-        ++res.unchecked;
-        const Simulator* sim = seg->replayer->simulator();
-        if (fresh_step && sim != nullptr &&
-            static_cast<std::uint64_t>(sim->last_step().step) == step &&
-            recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
-          std::vector<FieldDiff> fields;
-          Diff(recorded, Resimulated(*seg->replayer, recorded), "", fields);
-          if (!fields.empty()) {
-            damaged = true;
-            ++res.damaged;
-            if (!res.first_damaged) res.first_damaged = Damaged{m.key, start, step, fields};
-          }
-        }
-      }
-      if (damaged) {
-        res.Unverified(m.key, start, step, kDamagedWhy, false);
-      } else {
-        res.Verified(m.key, start, step);
-      }
+    return true;
+  }
+
+  // The recorded state, read whole into recorded_.
+  bool ParseRecorded(const RecordedMessage& m) {
+    return recorded_.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()));
+  }
+
+  // The fields of the recorded state that differ from the replay's message of the step it just
+  // ran (that step being the state's); false when there is no such message to compare with.
+  bool DiffJustRun(const StateAt& at, const VehicleReplayer& r, std::vector<FieldDiff>& out) {
+    if (r.last_step() != at.step || !ParseRecorded(at.m)) return false;
+    const std::optional<pb::VehicleState> resimulated = r.StateMessage(recorded_);
+    if (!resimulated) return false;
+    Diff(recorded_, *resimulated, "", out);
+    return true;
+  }
+
+  // The state's input is not the replay's: the server had an input the recording lacks.
+  bool InputNotRecorded(const StateAt& at, const Segment& seg) {
+    std::vector<FieldDiff> fields;
+    if (!DiffJustRun(at, *seg.replayer, fields)) return false;
+    return std::any_of(fields.begin(), fields.end(),
+                       [](const FieldDiff& f) { return f.field.rfind("input.", 0) == 0; });
+  }
+
+  // The fields in which the state differs from its stretch replayed afresh up to its step (the
+  // running replay has moved on); nothing when that replay cannot be had.
+  void DiffFresh(const StateAt& at, const VehicleRun& run, const Segment& seg,
+                 std::vector<FieldDiff>& out) {
+    std::string why;
+    auto fresh = run.Fresh(at.m.key, seg.first_event, &why);
+    if (!fresh || !fresh->Run(at.step + 1, {}, &why) || !fresh->last_step() ||
+        !ParseRecorded(at.m)) {
       return;
     }
-    ++res.mismatched;
-    res.Unverified(m.key, start, step, kDivergedWhy, false);
-    if (res.first) return;
-    Divergence d;
-    d.vehicle = m.key;
-    d.start = start;
-    d.step = step;
-    d.t = static_cast<double>(step) * static_cast<double>(run.step_ns) * 1e-9;
-    d.recorded_hash = hash;
-    d.resimulated_hash = slot.second;
-    d.matched_before = run.matched;
-    std::string why;
-    if (auto fresh = run.Fresh(m.key, seg->first_event, &why);
-        fresh && fresh->Run(step + 1, {}, &why) && fresh->simulator() &&
-        recorded.ParseFromArray(m.data.data(), static_cast<int>(m.data.size()))) {
-      Diff(recorded, Resimulated(*fresh, recorded), "", d.fields);
-      // Causes first: the input and controls applied over the step, then what they moved.
-      std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
-        return f.field.rfind("input.", 0) == 0 || f.field.rfind("control.", 0) == 0;
-      });
+    if (const auto resimulated = fresh->StateMessage(recorded_))
+      Diff(recorded_, *resimulated, "", out);
+  }
+
+  // A state whose hash matched: verified, unless it came without a CRC and other fields differ.
+  void Matched(const StateAt& at, VehicleRun& run, const Segment& seg, bool fresh_step) {
+    ++run.matched;
+    bool damaged = false;
+    if (at.m.unchecked) {
+      // No CRC vouched for these bytes: the hash covers the state, not every field of the
+      // message. Compare them all with the re-simulation (it just ran this very step).
+      ++res_.unchecked;
+      std::vector<FieldDiff> fields;
+      if (fresh_step && DiffJustRun(at, *seg.replayer, fields) && !fields.empty()) {
+        damaged = true;
+        ++res_.damaged;
+        if (!res_.first_damaged) res_.first_damaged = Damaged{at.m.key, at.start, at.step, fields};
+      }
     }
+    if (damaged) {
+      res_.Unverified(at.m.key, at.start, at.step, kDamagedWhy, false);
+    } else {
+      res_.Verified(at.m.key, at.start, at.step);
+    }
+  }
+
+  // A state whose hash differs: counted, and the first one described field by field.
+  void Diverged(const StateAt& at, const VehicleRun& run, const Segment& seg,
+                std::uint64_t resimulated_hash) {
+    ++res_.mismatched;
+    res_.Unverified(at.m.key, at.start, at.step, kDivergedWhy, false);
+    if (res_.first) return;
+    Divergence d;
+    d.vehicle = at.m.key;
+    d.start = at.start;
+    d.step = at.step;
+    d.t = static_cast<double>(at.step) * static_cast<double>(run.step_ns) * 1e-9;
+    d.recorded_hash = at.hash;
+    d.resimulated_hash = resimulated_hash;
+    d.matched_before = run.matched;
+    DiffFresh(at, run, seg, d.fields);
+    // Causes first: the input and controls applied over the step, then what they moved.
+    std::stable_partition(d.fields.begin(), d.fields.end(), [](const FieldDiff& f) {
+      return f.field.rfind("input.", 0) == 0 || f.field.rfind("control.", 0) == 0;
+    });
     // Only the hash differs: the step's start agrees, so look at the state after it.
-    if (d.fields.size() <= 1) compare_next = std::make_pair(key, step + 1);
-    res.first = std::move(d);
-  };
-  const mcap::ScanResult scan = ScanRecording(reader, v);
-  res.data_crc_checked = scan.data_crc == mcap::ScanResult::DataCrc::kMatched;
-  res.resimulated = res.cannot.empty();
-  res.wall_seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-  return res;
+    if (d.fields.size() <= 1) compare_next_ = std::make_pair(at.key, at.step + 1);
+    res_.first = std::move(d);
+  }
+
+  const VerifyOptions& o_;
+  const std::chrono::steady_clock::time_point wall_start_ = std::chrono::steady_clock::now();
+  mcap::Reader reader_;
+  VerifyResult res_;
+  std::map<ServerStart, Server> servers_;
+  std::map<RunKey, VehicleRun> runs_;
+  std::map<std::uint64_t, std::uint32_t> start_of_;               // server start by incarnation
+  std::optional<std::pair<RunKey, std::uint64_t>> compare_next_;  // divergence: next state
+  pb::VehicleState recorded_;
+};
+
+}  // namespace
+
+VerifyResult Verify(const VerifyOptions& o) {
+  return Verifier(o).Run();
 }
 
 void VerifyResult::Verified(std::uint32_t vehicle, std::uint32_t start, std::uint64_t step) {
@@ -610,143 +685,226 @@ void VerifyResult::Unverified(std::uint32_t vehicle, std::uint32_t start, std::u
   ++r.back().count;
 }
 
+namespace {
+
+// What `verify` found, as a person reads it: a divergence, nothing compared, or the verified
+// stretches; then what was not verified and the recording's own integrity notes.
+class VerifyReport {
+ public:
+  VerifyReport(const VerifyOptions& o, const VerifyResult& r, std::ostream& out)
+      : o_(o), r_(r), out_(out) {}
+
+  int Print() {
+    // A recovered file says what its source lost and what no CRC checked: said here too, never
+    // a bit-exact claim on its own.
+    recovered_ = IntegrityNotes(ReadMetadata(mcap::Reader(o_.file)), {}, 0, "");
+    if (!r_.resimulated) {
+      // The reason may quote the file (a world's name): shown as text, cut to a line.
+      out_ << o_.file.string() << ": cannot re-simulate: " << Printable(r_.cannot, 600) << "\n";
+      return 1;
+    }
+    if (r_.first) {
+      PrintDivergence(*r_.first);
+      Unverified();
+      Notes();
+      return 1;
+    }
+    if (r_.compared == 0) {
+      out_ << o_.file.string()
+           << ": nothing compared: no recorded state falls after a spawn or checkpoint";
+      out_ << (r_.unverified > 0 ? "" : "\n");
+      if (r_.unverified > 0) out_ << " that the recording kept whole\n";
+      Unverified();
+      Notes();
+      return 1;
+    }
+    PrintVerified();
+    PrintDamage();
+    if (!r_.holes.empty()) {
+      out_ << "  events lost from the recording:";
+      for (const std::string& h : r_.holes) out_ << " " << h << ";";
+      out_ << (r_.unverified == 0 ? " every recorded state still matched its re-simulation\n"
+                                  : "\n");
+    }
+    Unverified();
+    if (r_.unchecked > 0 && !r_.data_crc_checked) {
+      out_ << "  " << r_.unchecked << " of the compared states come from chunks without a CRC: "
+           << "their hashes matched and every field was compared with the re-simulation"
+           << (r_.damaged > 0 ? "" : " (all equal)") << "\n";
+    }
+    Notes();
+    return r_.ok() ? 0 : 1;
+  }
+
+ private:
+  void Notes() {
+    for (const std::string& n : recovered_) out_ << "  " << n << "\n";
+  }
+
+  // Up to 12 differing fields (the hash itself left out); how many.
+  std::size_t Fields(const std::vector<FieldDiff>& fields) {
+    std::size_t shown = 0;
+    char line[256];
+    for (const FieldDiff& f : fields) {
+      if (f.field == "state_hash") continue;
+      if (++shown > 12) {
+        out_ << "    ... " << (fields.size() - 12) << " more\n";
+        break;
+      }
+      std::snprintf(line, sizeof line, "    %-22s %-26s %s\n", f.field.c_str(), f.recorded.c_str(),
+                    f.resimulated.c_str());
+      out_ << line;
+    }
+    return shown;
+  }
+
+  // What could not be verified, per vehicle: the stretches and why.
+  void Unverified() {
+    if (r_.malformed > 0) {
+      out_ << "  NOT verified: " << r_.malformed
+           << " recorded state messages do not read as states "
+           << "of their vehicle (damaged or foreign payloads)\n";
+    }
+    bool all_verified = true;
+    for (const auto& [id, rs] : r_.runs) {
+      for (const StepRun& run : rs) all_verified = all_verified && run.why.empty();
+    }
+    if (all_verified) return;
+    if (r_.unverified > 0) out_ << "  NOT verified: " << r_.unverified << " recorded states\n";
+    if (r_.unverified == 0) out_ << "  steps:\n";
+    for (const auto& [id, rs] : r_.runs) {
+      for (const StepRun& run : rs) {
+        out_ << "    " << VehicleName(id, run.start) << ", steps " << run.first << ".." << run.last
+             << " (" << run.count
+             << " states): " << (run.why.empty() ? "verified bit for bit" : Printable(run.why, 600))
+             << "\n";
+      }
+    }
+  }
+
+  void PrintDivergence(const Divergence& d) {
+    char line[256];
+    std::snprintf(line, sizeof line, "DIVERGES at %s, step %" PRIu64 " (t = %.3f s of simulation)",
+                  VehicleName(d.vehicle, d.start).c_str(), d.step, d.t);
+    out_ << o_.file.string() << ": " << line << ": the state hash after the step was "
+         << base::FormatHex(d.recorded_hash, 16) << " in the recording, "
+         << base::FormatHex(d.resimulated_hash, 16) << " re-simulated\n";
+    out_ << "  state fields that differ at that step (recorded, re-simulated):\n";
+    if (Fields(d.fields) == 0) {
+      out_ << "    none: the step started from the same state with the same input; the state "
+              "after it\n"
+              "    differs";
+      if (!d.next_fields.empty()) {
+        out_ << " (the next recorded state, recorded vs re-simulated):\n";
+        Fields(d.next_fields);
+      } else {
+        out_ << "\n";
+      }
+    }
+    out_ << "  " << d.matched_before << " steps of " << VehicleName(d.vehicle, d.start)
+         << " matched bit for bit before it; " << r_.mismatched << " of " << r_.compared
+         << " compared steps differ\n";
+  }
+
+  // Per vehicle (and server start) the verified stretches: "vehicle 1: steps 0..999, 2000..2999".
+  void PrintVerified() {
+    std::string ranges;
+    for (const auto& [id, rs] : r_.runs) {
+      std::map<std::uint32_t, std::string> verified;  // by start
+      for (const StepRun& run : rs) {
+        if (!run.why.empty()) continue;
+        std::string& v = verified[run.start];
+        v += (v.empty() ? "" : ", ") + std::to_string(run.first) + ".." + std::to_string(run.last);
+      }
+      for (const auto& [start, steps] : verified) {
+        ranges += (ranges.empty() ? "" : "; ") + VehicleName(id, start) + ": steps " + steps;
+      }
+    }
+    char line[256];
+    std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
+                  r_.compared - r_.damaged);  // as the stretches listed
+    out_ << o_.file.string() << ": " << (r_.unverified > 0 ? "PARTLY verified: " : "") << line
+         << " (" << ranges << ")";
+    if (r_.not_resimulated > 0)
+      out_ << "; " << r_.not_resimulated << " states before a spawn or checkpoint not compared";
+    std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n",
+                  r_.sim_seconds, r_.wall_seconds,
+                  r_.wall_seconds > 0 ? r_.sim_seconds / r_.wall_seconds : 0.0);
+    out_ << line;
+  }
+
+  void PrintDamage() {
+    if (r_.damaged == 0) return;
+    const Damaged& d = *r_.first_damaged;
+    out_ << "  DAMAGED: " << r_.damaged
+         << " recorded states match their re-simulation's hash but not "
+         << "their other fields: their bytes were changed where no CRC covered them; the first, "
+         << VehicleName(d.vehicle, d.start) << " at step " << d.step
+         << " (recorded, re-simulated):\n";
+    Fields(d.fields);
+  }
+
+  const VerifyOptions& o_;
+  const VerifyResult& r_;
+  std::ostream& out_;
+  std::vector<std::string> recovered_;
+};
+
+}  // namespace
+
 int RunVerify(const VerifyOptions& o, std::ostream& out) {
   Progress bar("verify");
   VerifyOptions with = o;
   with.on_progress = [&bar](double f) { bar.Update(f); };
   const VerifyResult r = Verify(with);
   bar.Finish();
-  // A recovered file says what its source lost and what no CRC checked: said here too, never
-  // a bit-exact claim on its own.
-  const std::vector<std::string> recovered =
-      IntegrityNotes(ReadMetadata(mcap::Reader(o.file)), {}, 0, "");
-  auto notes = [&] {
-    for (const std::string& n : recovered) out << "  " << n << "\n";
-  };
-  char line[256];
-  if (!r.resimulated) {
-    // The reason may quote the file (a world's name): shown as text, cut to a line.
-    out << o.file.string() << ": cannot re-simulate: " << Printable(r.cannot, 600) << "\n";
-    return 1;
-  }
-  auto print = [&](const std::vector<FieldDiff>& fields) {
-    std::size_t shown = 0;
-    for (const FieldDiff& f : fields) {
-      if (f.field == "state_hash") continue;
-      if (++shown > 12) {
-        out << "    ... " << (fields.size() - 12) << " more\n";
-        break;
-      }
-      std::snprintf(line, sizeof line, "    %-22s %-26s %s\n", f.field.c_str(), f.recorded.c_str(),
-                    f.resimulated.c_str());
-      out << line;
-    }
-    return shown;
-  };
-  // What could not be verified, per vehicle: the stretches and why.
-  auto unverified = [&] {
-    if (r.malformed > 0) {
-      out << "  NOT verified: " << r.malformed << " recorded state messages do not read as states "
-          << "of their vehicle (damaged or foreign payloads)\n";
-    }
-    bool all_verified = true;
-    for (const auto& [id, rs] : r.runs) {
-      for (const StepRun& run : rs) all_verified = all_verified && run.why.empty();
-    }
-    if (all_verified) return;
-    if (r.unverified > 0) out << "  NOT verified: " << r.unverified << " recorded states\n";
-    if (r.unverified == 0) out << "  steps:\n";
-    for (const auto& [id, rs] : r.runs) {
-      for (const StepRun& run : rs) {
-        out << "    " << VehicleName(id, run.start) << ", steps " << run.first << ".." << run.last << " ("
-            << run.count
-            << " states): " << (run.why.empty() ? "verified bit for bit" : Printable(run.why, 600))
-            << "\n";
-      }
-    }
-  };
-  if (r.first) {
-    const Divergence& d = *r.first;
-    std::snprintf(line, sizeof line, "DIVERGES at %s, step %" PRIu64 " (t = %.3f s of simulation)",
-                  VehicleName(d.vehicle, d.start).c_str(), d.step, d.t);
-    out << o.file.string() << ": " << line << ": the state hash after the step was "
-        << Hex(d.recorded_hash) << " in the recording, " << Hex(d.resimulated_hash)
-        << " re-simulated\n";
-    out << "  state fields that differ at that step (recorded, re-simulated):\n";
-    if (print(d.fields) == 0) {
-      out << "    none: the step started from the same state with the same input; the state after "
-             "it\n"
-             "    differs";
-      if (!d.next_fields.empty()) {
-        out << " (the next recorded state, recorded vs re-simulated):\n";
-        print(d.next_fields);
-      } else {
-        out << "\n";
-      }
-    }
-    out << "  " << d.matched_before << " steps of " << VehicleName(d.vehicle, d.start)
-        << " matched bit for bit before it; " << r.mismatched << " of " << r.compared
-        << " compared steps differ\n";
-    unverified();
-    notes();
-    return 1;
-  }
-  if (r.compared == 0) {
-    out << o.file.string()
-        << ": nothing compared: no recorded state falls after a spawn or checkpoint";
-    out << (r.unverified > 0 ? "" : "\n");
-    if (r.unverified > 0) out << " that the recording kept whole\n";
-    unverified();
-    notes();
-    return 1;
-  }
-  // Per vehicle (and server start) the verified stretches: "vehicle 1: steps 0..999, 2000..2999".
-  std::string ranges;
-  for (const auto& [id, rs] : r.runs) {
-    std::map<std::uint32_t, std::string> verified;  // by start
-    for (const StepRun& run : rs) {
-      if (!run.why.empty()) continue;
-      std::string& v = verified[run.start];
-      v += (v.empty() ? "" : ", ") + std::to_string(run.first) + ".." + std::to_string(run.last);
-    }
-    for (const auto& [start, steps] : verified) {
-      ranges += (ranges.empty() ? "" : "; ") + VehicleName(id, start) + ": steps " + steps;
-    }
-  }
-  std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
-                r.compared - r.damaged);  // as the stretches listed
-  out << o.file.string() << ": " << (r.unverified > 0 ? "PARTLY verified: " : "") << line << " ("
-      << ranges << ")";
-  if (r.not_resimulated > 0)
-    out << "; " << r.not_resimulated << " states before a spawn or checkpoint not compared";
-  std::snprintf(line, sizeof line, "; %.1f s simulated in %.1f s, %.0fx real time\n", r.sim_seconds,
-                r.wall_seconds, r.wall_seconds > 0 ? r.sim_seconds / r.wall_seconds : 0.0);
-  out << line;
-  if (r.damaged > 0) {
-    const Damaged& d = *r.first_damaged;
-    out << "  DAMAGED: " << r.damaged
-        << " recorded states match their re-simulation's hash but not "
-        << "their other fields: their bytes were changed where no CRC covered them; the first, "
-        << VehicleName(d.vehicle, d.start) << " at step " << d.step
-        << " (recorded, re-simulated):\n";
-    print(d.fields);
-  }
-  if (!r.holes.empty()) {
-    out << "  events lost from the recording:";
-    for (const std::string& h : r.holes) out << " " << h << ";";
-    out << (r.unverified == 0 ? " every recorded state still matched its re-simulation\n" : "\n");
-  }
-  unverified();
-  if (r.unchecked > 0 && !r.data_crc_checked) {
-    out << "  " << r.unchecked << " of the compared states come from chunks without a CRC: their "
-        << "hashes matched and every field was compared with the re-simulation"
-        << (r.damaged > 0 ? "" : " (all equal)") << "\n";
-  }
-  notes();
-  return r.ok() ? 0 : 1;
+  return VerifyReport(o, r, out).Print();
 }
 
 // --- takeover -----------------------------------------------------------------------------------
+
+namespace {
+
+// The recorded state at or after log time `at`: its vehicle (`vehicle`, or the first recorded),
+// its step and server start, the recorded hash of the step before, and the last log time.
+struct StateAtTime {
+  std::optional<std::uint32_t> chosen;
+  std::optional<std::uint64_t> step;
+  std::optional<std::uint64_t> hash_before;
+  std::uint64_t incarnation = 0;  // the server start that stepped the chosen state
+  std::uint64_t last_time = 0;
+};
+StateAtTime FindStateAt(const mcap::Reader& reader, std::uint64_t at,
+                        std::optional<std::uint32_t> vehicle) {
+  StateAtTime r;
+  r.chosen = vehicle;
+  std::map<std::pair<std::uint32_t, std::uint64_t>, std::pair<std::uint64_t, std::uint64_t>>
+      last;  // (vehicle, server start) -> (step, hash)
+  RecordingVisitor v;
+  v.wants = [](TopicId t) { return t == TopicId::kState; };
+  v.on_message = [&](const RecordedMessage& m) {
+    r.last_time = std::max(r.last_time, m.log_time);
+    if (r.step) return;
+    if (!r.chosen) r.chosen = m.key;
+    if (m.key != *r.chosen) return;
+    const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
+    if (!fields) return;  // not a state of this vehicle
+    const std::uint64_t s = fields->step;
+    const std::uint64_t h = fields->state_hash;
+    if (m.log_time >= at) {
+      r.step = s;
+      r.incarnation = fields->incarnation;
+      if (auto it = last.find({m.key, r.incarnation});
+          it != last.end() && it->second.first + 1 == s)
+        r.hash_before = it->second.second;
+    }
+    last[{m.key, fields->incarnation}] = {s, h};
+  };
+  ScanRecording(reader, v);
+  return r;
+}
+
+}  // namespace
 
 BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
                             std::optional<std::uint32_t> vehicle) {
@@ -754,35 +912,12 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   const std::uint64_t first = FirstLogTime(reader);
   const auto at = first + static_cast<std::uint64_t>(base::FromSeconds(at_s).ns);
   // The vehicle and its step at that time, and the recorded hash of the step before.
-  std::optional<std::uint32_t> chosen = vehicle;
-  std::optional<std::uint64_t> step;
-  std::optional<std::uint64_t> hash_before;
-  std::uint64_t incarnation = 0;  // the server start that stepped the chosen state
-  std::uint64_t last_time = 0;
-  {
-    std::map<std::pair<std::uint32_t, std::uint64_t>, std::pair<std::uint64_t, std::uint64_t>>
-        last;  // (vehicle, server start) -> (step, hash)
-    RecordingVisitor v;
-    v.wants = [](TopicId t) { return t == TopicId::kState; };
-    v.on_message = [&](const RecordedMessage& m) {
-      last_time = std::max(last_time, m.log_time);
-      if (step) return;
-      if (!chosen) chosen = m.key;
-      if (m.key != *chosen) return;
-      const std::optional<StateFields> fields = ReadStateFields(m.data, m.key);
-      if (!fields) return;  // not a state of this vehicle
-      const std::uint64_t s = fields->step;
-      const std::uint64_t h = fields->state_hash;
-      if (m.log_time >= at) {
-        step = s;
-        incarnation = fields->incarnation;
-        if (auto it = last.find({m.key, incarnation}); it != last.end() && it->second.first + 1 == s)
-          hash_before = it->second.second;
-      }
-      last[{m.key, fields->incarnation}] = {s, h};
-    };
-    ScanRecording(reader, v);
-  }
+  const StateAtTime found = FindStateAt(reader, at, vehicle);
+  const std::optional<std::uint32_t>& chosen = found.chosen;
+  const std::optional<std::uint64_t>& step = found.step;
+  const std::optional<std::uint64_t>& hash_before = found.hash_before;
+  const std::uint64_t incarnation = found.incarnation;
+  const std::uint64_t last_time = found.last_time;
   if (!chosen) throw std::runtime_error(file.string() + " holds no vehicle states");
   if (!step) {
     char b[160];
@@ -813,9 +948,7 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
                              " were lost: " + server->holes.front().Text() +
                              ": the exact state of a moment cannot be rebuilt across them");
   }
-  std::shared_ptr<const World> world = WorldFromDescription(*server->world);
-  const std::uint64_t terrain_hash = TerrainHash(world->terrain);
-  VehicleReplayer replayer(world, terrain_hash, *chosen);
+  VehicleReplayer replayer(ReplayWorldFrom(*server->world), *chosen);
   BranchPoint bp;
   std::string why;
   for (const auto& e : server->events) {
@@ -835,8 +968,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
           &why)) {
     throw std::runtime_error(why);
   }
-  const Simulator* sim = replayer.simulator();
-  if (sim == nullptr || static_cast<std::uint64_t>(sim->state().step) != *step) {
+  const std::optional<VehicleReplayer::Exact> exact = replayer.ExactAt(*step);
+  if (!exact) {
     throw std::runtime_error("vehicle " + std::to_string(*chosen) +
                              " cannot be re-simulated to step " + std::to_string(*step) +
                              " (no spawn or checkpoint before it?)");
@@ -850,8 +983,8 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   bp.vehicle = *chosen;
   bp.step = *step;
   bp.at_s = at_s;
-  bp.state = ToExactState(sim->state());
-  ToInputSample(sim->input(), static_cast<std::int64_t>(*step), bp.input);
+  bp.state = exact->state;
+  bp.input = exact->input;
   bp.server_id = server_id.id;
   bp.world_name = server->world->name();
   bp.terrain_hash = server->world->terrain_hash();
@@ -861,6 +994,33 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   bp.label = label;
   return bp;
 }
+
+namespace {
+
+// The world of a live server on terrain `terrain_hash`, waited for up to `wait_s`; the worlds seen
+// on other terrains go to `others` ("'name' of server 'id'").
+std::optional<pb::WorldDescription> FindLiveWorld(transport::Participant& participant,
+                                                  std::uint64_t terrain_hash, double wait_s,
+                                                  const std::atomic<bool>& stop,
+                                                  std::set<std::string>& others) {
+  std::optional<pb::WorldDescription> live;
+  transport::DropCounters drops;
+  transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
+  while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
+    (void)worlds.Wait(std::chrono::milliseconds(100));
+    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+      if (w.terrain_hash() == terrain_hash) {
+        live = w;
+      } else {
+        others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) + "'");
+      }
+    });
+  }
+  return live;
+}
+
+}  // namespace
 
 int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::ostream& out) {
   std::filesystem::path new_file = o.out;
@@ -875,29 +1035,13 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
       << std::endl;
   transport::Participant participant(o.domain);
   // The live server, and its world: the recording must continue on the terrain it was made on.
-  std::optional<pb::WorldDescription> live;
   std::set<std::string> others;
-  {
-    transport::DropCounters drops;
-    transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
-    const auto deadline =
-        std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
-    while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
-      (void)worlds.Wait(std::chrono::milliseconds(100));
-      (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
-        if (w.terrain_hash() == bp.terrain_hash) {
-          live = w;
-        } else {
-          others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) +
-                        "'");
-        }
-      });
-    }
-  }
+  const std::optional<pb::WorldDescription> live =
+      FindLiveWorld(participant, bp.terrain_hash, o.wait_s, stop, others);
   if (!live) {
     out << "vdyn-recorder takeover: no server on domain " << o.domain << " runs world '"
-        << bp.world_name << "' (terrain hash " << Hex(bp.terrain_hash) << ") within " << o.wait_s
-        << " s";
+        << bp.world_name << "' (terrain hash " << base::FormatHex(bp.terrain_hash, 16)
+        << ") within " << o.wait_s << " s";
     for (const std::string& w : others) out << "; seen: " << w;
     out << "\n";
     return 1;

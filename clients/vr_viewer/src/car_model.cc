@@ -14,6 +14,7 @@
 #include <utility>
 
 #include "vdyn/viewer/mesh_util.h"
+#include "vdyn/viewer/textures.h"
 
 namespace vdyn::viewer {
 namespace {
@@ -181,47 +182,163 @@ Cabin CabinFor(const VehicleGeometry& g) {
   return c;
 }
 
-ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
-  const CarShape s = CarShapeFor(g);
-  const Cabin cab = CabinFor(g);
-  const double L = std::max(s.x_front - s.x_rear, 0.5);
-  const double xr = s.x_rear, xf = s.x_rear + L;
-  const double hw = cab.half_width;
-  const double sv = cab.scale;
-  auto H = [&](double h) { return cab.H(h); };
-  const bool axles_inside = cab.axles_inside;
-  // Plain names, not a structured binding: clang 14 cannot capture those in the lambdas below.
-  const double x_rwb = cab.x_rear_window, x_rr = cab.x_roof_rear, x_rf = cab.x_roof_front,
-               x_cowl = cab.x_cowl;
-  const double x_b = Mix(x_rr, x_rf, 0.45);  // B pillar
-  const double end = std::min(0.1, 0.03 * L);
+namespace {
 
-  const std::vector<std::pair<double, double>> belt = {
-      {xr, H(0.74)},       {xr + end, H(0.90)}, {xr + 0.12 * L / 4.7, H(0.96)},
-      {x_rwb, H(0.99)},    {x_cowl, H(0.93)},   {xf - 0.14 * L / 4.7, H(0.80)},
-      {xf - end, H(0.74)}, {xf, H(0.66)}};
-  const std::vector<std::pair<double, double>> roof = {{x_rwb, H(0.99)},
-                                                       {x_rr, H(1.40)},
-                                                       {Mix(x_rr, x_rf, 0.5), H(1.44)},
-                                                       {x_rf, H(1.42)},
-                                                       {x_cowl, H(0.93)}};
-  const std::vector<std::pair<double, double>> bottom = {
-      {xr, H(0.34)}, {xr + 0.18 * L / 4.7, H(0.22)}, {xf - 0.18 * L / 4.7, H(0.20)}, {xf, H(0.30)}};
-  const std::vector<std::pair<double, double>> width = {
-      {xr, 0.86},       {xr + end, 0.95}, {xr + 0.4 * L / 4.7, 1.0}, {xf - 0.45 * L / 4.7, 1.0},
-      {xf - end, 0.95}, {xf, 0.85}};
+// The built-in body as data. Every length along the body is a key place (below) moved by a
+// fraction of the body's length L (the numbers were drawn on a 4.7 m saloon); every height is a
+// saloon's in metres, scaled with the wheel radius (Cabin::H); every width a fraction of the half
+// width.
+//
+//   kRear  kRearEnd  kRearWindow  kRoofRear  kBPillar*  kRoofFront  kCowl  kFrontEnd  kFront
+//     |__/‾‾‾‾‾‾‾‾‾‾‾‾‾/‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾|‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾‾\_____________\__|
+enum class At : std::uint8_t {
+  kRear,
+  kRearEnd,  // the rounded ends: min(0.1 m, 0.03 L) in from each end
+  kRearWindow,
+  kRoofRear,
+  kRoofMid,
+  kBPillarRear,  // the B pillar, 7 cm wide, 45 % of the way from the roof's rear to its front
+  kBPillarFront,
+  kRoofFront,
+  kCowl,
+  kFrontEnd,
+  kFront,
+  kCount
+};
+constexpr double kSaloonLength = 4.7;  // m: the body the fractions below were drawn on
 
-  // Stations along X: the key places, and the wheel arches (a half circle over each axle at the
-  // nominal wheel centre, 7 cm above the tyre; the body's bottom follows it).
-  struct Station {
-    double x, z_bottom;
-  };
-  std::vector<Station> stations;
-  auto add = [&](double x) { stations.push_back({x, Pwl(bottom, x)}); };
-  for (double x : {xr, xr + end, xr + 0.12 * L / 4.7, x_rwb, x_rr, x_b - 0.035, x_b + 0.035, x_rf,
-                   x_cowl, xf - 0.14 * L / 4.7, xf - end, xf}) {
-    add(x);
+struct ProfilePoint {
+  At at;
+  double dx_saloon;  // m along a 4.7 m saloon, scaled with the body's length
+  double value;      // a height (Cabin::H) or a fraction of the half width
+};
+// The belt line (the side's top edge below the windows), the greenhouse's top (roof, windscreen
+// and rear window), the sill and the plan-view width, each sorted by x.
+constexpr ProfilePoint kBelt[] = {{At::kRear, 0, 0.74},     {At::kRearEnd, 0, 0.90},
+                                  {At::kRear, 0.12, 0.96},  {At::kRearWindow, 0, 0.99},
+                                  {At::kCowl, 0, 0.93},     {At::kFront, -0.14, 0.80},
+                                  {At::kFrontEnd, 0, 0.74}, {At::kFront, 0, 0.66}};
+constexpr ProfilePoint kRoof[] = {{At::kRearWindow, 0, 0.99},
+                                  {At::kRoofRear, 0, 1.40},
+                                  {At::kRoofMid, 0, 1.44},
+                                  {At::kRoofFront, 0, 1.42},
+                                  {At::kCowl, 0, 0.93}};
+constexpr ProfilePoint kBottom[] = {{At::kRear, 0, 0.34},
+                                    {At::kRear, 0.18, 0.22},
+                                    {At::kFront, -0.18, 0.20},
+                                    {At::kFront, 0, 0.30}};
+constexpr ProfilePoint kWidth[] = {{At::kRear, 0, 0.86},     {At::kRearEnd, 0, 0.95},
+                                   {At::kRear, 0.4, 1.0},    {At::kFront, -0.45, 1.0},
+                                   {At::kFrontEnd, 0, 0.95}, {At::kFront, 0, 0.85}};
+// The stations the sections stand at besides the smoothing ones and the wheel arches: every
+// place where a profile or a band's look changes.
+constexpr ProfilePoint kKeyStations[] = {
+    {At::kRear, 0, 0},         {At::kRearEnd, 0, 0},   {At::kRear, 0.12, 0},
+    {At::kRearWindow, 0, 0},   {At::kRoofRear, 0, 0},  {At::kBPillarRear, 0, 0},
+    {At::kBPillarFront, 0, 0}, {At::kRoofFront, 0, 0}, {At::kCowl, 0, 0},
+    {At::kFront, -0.14, 0},    {At::kFrontEnd, 0, 0},  {At::kFront, 0, 0}};
+
+// The body's looks, registered in this order.
+enum Look : std::uint32_t {
+  kPaintLook,
+  kGlassLook,
+  kTrimLook,
+  kUnderLook,
+  kHeadLook,
+  kTailLook,
+  kReverseLook,
+  kGrilleLook,
+  kPlateLook,
+  kLookCount
+};
+constexpr std::pair<Material, Rgb8> kLooks[kLookCount] = {{Material::kPaint, kWhite},
+                                                          {Material::kGlass, kGlassTint},
+                                                          {Material::kMatte, kTrim},
+                                                          {Material::kMatte, kUnderbody},
+                                                          {Material::kLightFront, kHeadlight},
+                                                          {Material::kLightRear, kTaillight},
+                                                          {Material::kLightReverse, kReverseLight},
+                                                          {Material::kMatte, kGrille},
+                                                          {Material::kMatte, kPlate}};
+
+// Details on the ends, a few millimetres proud: headlights, grille and the lower intake at the
+// front; tail lights, reversing lamps (inboard of the tail lights, in their band) and the number
+// plate at the back. y as fractions of the end's half width (a pair: one each side, mirrored),
+// heights as Cabin::H.
+struct EndPanel {
+  Look look;
+  bool front, pair;
+  double y0, y1, h0, h1;
+};
+constexpr EndPanel kEndPanels[] = {{kHeadLook, true, true, 0.52, 0.84, 0.53, 0.62},
+                                   {kTailLook, false, true, 0.58, 0.88, 0.60, 0.70},
+                                   {kReverseLook, false, true, 0.47, 0.56, 0.61, 0.69},
+                                   {kGrilleLook, true, false, -0.40, 0.40, 0.38, 0.52},
+                                   {kGrilleLook, true, false, -0.70, 0.70, 0.24, 0.33},
+                                   {kPlateLook, false, false, -0.26, 0.26, 0.45, 0.56}};
+
+// The key places of one body, and its profiles in metres.
+struct BodyPlan {
+  std::array<double, static_cast<std::size_t>(At::kCount)> x{};
+  double length = 0, half_width = 0, scale = 1;
+  Cabin cab;
+  double x_b = 0;  // the B pillar's centre
+  std::vector<std::pair<double, double>> belt, roof, bottom, width;
+
+  double X(const ProfilePoint& p) const {
+    return x[static_cast<std::size_t>(p.at)] + p.dx_saloon * length / kSaloonLength;
   }
+  double Rear() const { return x[static_cast<std::size_t>(At::kRear)]; }
+  double Front() const { return x[static_cast<std::size_t>(At::kFront)]; }
+  double XAt(At a) const { return x[static_cast<std::size_t>(a)]; }
+};
+
+template <std::size_t N>
+std::vector<std::pair<double, double>> Heights(const BodyPlan& b, const ProfilePoint (&t)[N]) {
+  std::vector<std::pair<double, double>> out;
+  for (const ProfilePoint& p : t) out.emplace_back(b.X(p), b.cab.H(p.value));
+  return out;
+}
+
+BodyPlan PlanBody(const VehicleGeometry& g) {
+  const CarShape s = CarShapeFor(g);
+  BodyPlan b;
+  b.cab = CabinFor(g);
+  b.length = std::max(s.x_front - s.x_rear, 0.5);
+  b.half_width = b.cab.half_width;
+  b.scale = b.cab.scale;
+  const double xr = s.x_rear, xf = s.x_rear + b.length;
+  const double end = std::min(0.1, 0.03 * b.length);
+  b.x_b = Mix(b.cab.x_roof_rear, b.cab.x_roof_front, 0.45);
+  b.x = {xr,
+         xr + end,
+         b.cab.x_rear_window,
+         b.cab.x_roof_rear,
+         Mix(b.cab.x_roof_rear, b.cab.x_roof_front, 0.5),
+         b.x_b - 0.035,
+         b.x_b + 0.035,
+         b.cab.x_roof_front,
+         b.cab.x_cowl,
+         xf - end,
+         xf};
+  b.belt = Heights(b, kBelt);
+  b.roof = Heights(b, kRoof);
+  b.bottom = Heights(b, kBottom);
+  for (const ProfilePoint& p : kWidth) b.width.emplace_back(b.X(p), p.value);
+  return b;
+}
+
+// Stations along X: the key places, and the wheel arches (a half circle over each axle at the
+// nominal wheel centre, 7 cm above the tyre; the body's bottom follows it), sorted by x.
+struct Station {
+  double x, z_bottom;
+};
+std::vector<Station> BodyStations(const VehicleGeometry& g, const BodyPlan& b, bool coarse) {
+  const CarShape s = CarShapeFor(g);
+  const double xr = b.Rear(), xf = b.Front();
+  std::vector<Station> stations;
+  auto add = [&](double x) { stations.push_back({x, Pwl(b.bottom, x)}); };
+  for (const ProfilePoint& p : kKeyStations) add(b.X(p));
   if (!coarse) {
     for (double x = xr + 0.3; x < xf - 0.3; x += 0.3) add(x);  // smooth sides between the keys
   }
@@ -229,7 +346,7 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
     double x, z_centre, radius;
   };
   std::vector<Arch> arches;
-  if (axles_inside) {
+  if (b.cab.axles_inside) {
     arches.push_back({s.x_rear_axle, s.z_wheel_centre_rear, s.radius_rear + 0.07});
     arches.push_back({s.x_front_axle, s.z_wheel_centre_front, s.radius_front + 0.07});
   }
@@ -241,7 +358,7 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
   });
   for (const Arch& a : arches) {
     if (a.x - a.radius < xr + 0.05 || a.x + a.radius > xf - 0.05) continue;
-    const double base_in = Pwl(bottom, a.x - a.radius), base_out = Pwl(bottom, a.x + a.radius);
+    const double base_in = Pwl(b.bottom, a.x - a.radius), base_out = Pwl(b.bottom, a.x + a.radius);
     stations.push_back({a.x - a.radius, base_in});
     const int arch_steps = coarse ? 5 : 10;
     for (int k = 0; k <= arch_steps; ++k) {
@@ -252,7 +369,7 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
     stations.push_back({a.x + a.radius, base_out});
   }
   std::stable_sort(stations.begin(), stations.end(),
-                   [](const Station& a, const Station& b) { return a.x < b.x - 1e-9; });
+                   [](const Station& p, const Station& q) { return p.x < q.x - 1e-9; });
   // Keep the first of stations closer than 1 mm unless they are an arch's vertical edge.
   std::vector<Station> unique;
   for (const Station& st : stations) {
@@ -262,145 +379,158 @@ ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
     }
     unique.push_back(st);
   }
-  stations = std::move(unique);
+  return unique;
+}
 
-  auto section = [&](const Station& st) {
-    const double x = st.x;
-    const double w = hw * Pwl(width, x);
-    const double zb = st.z_bottom;
-    const double zmid = std::max(H(0.55), zb + 0.03);
-    const double zbelt = std::max(Pwl(belt, x), zmid + 0.05);
-    const double gh = (x > x_rwb && x < x_cowl) ? std::max(Pwl(roof, x) - zbelt, 0.0) : 0.0;
-    const double k = std::clamp(gh / 0.15, 0.0, 1.0);
-    const double ztop = zbelt + std::max(gh, 0.02);
-    std::array<Vec3, 8> half = {
-        Vec3{x, 0, zb},
-        Vec3{x, 0.97 * w, zb},
-        Vec3{x, w, zmid},
-        Vec3{x, 0.975 * w, zbelt},
-        Vec3{x, 0.94 * w, zbelt + 0.01},
-        Vec3{x, Mix(0.90, 0.74, k) * w, zbelt + std::max(gh - 0.04, 0.015)},
-        Vec3{x, Mix(0.86, 0.68, k) * w, ztop},
-        Vec3{x, 0, ztop + 0.02 + 0.02 * k},
-    };
-    Section sec;
-    for (int i = 0; i < 8; ++i)
-      sec[static_cast<std::size_t>(i)] = half[static_cast<std::size_t>(i)];
-    for (int i = 1; i <= 6; ++i) {  // down the right side
-      const Vec3& p = half[static_cast<std::size_t>(7 - i)];
-      sec[static_cast<std::size_t>(7 + i)] = {p.x, -p.y, p.z};
-    }
-    return sec;
+// The body's cross-section at a station (the 14 points of Section).
+Section SectionAt(const BodyPlan& b, const Station& st) {
+  const double x = st.x;
+  const double w = b.half_width * Pwl(b.width, x);
+  const double zb = st.z_bottom;
+  const double zmid = std::max(b.cab.H(0.55), zb + 0.03);
+  const double zbelt = std::max(Pwl(b.belt, x), zmid + 0.05);
+  const bool greenhouse = x > b.XAt(At::kRearWindow) && x < b.XAt(At::kCowl);
+  const double gh = greenhouse ? std::max(Pwl(b.roof, x) - zbelt, 0.0) : 0.0;
+  const double k = std::clamp(gh / 0.15, 0.0, 1.0);
+  const double ztop = zbelt + std::max(gh, 0.02);
+  const std::array<Vec3, 8> half = {
+      Vec3{x, 0, zb},
+      Vec3{x, 0.97 * w, zb},
+      Vec3{x, w, zmid},
+      Vec3{x, 0.975 * w, zbelt},
+      Vec3{x, 0.94 * w, zbelt + 0.01},
+      Vec3{x, Mix(0.90, 0.74, k) * w, zbelt + std::max(gh - 0.04, 0.015)},
+      Vec3{x, Mix(0.86, 0.68, k) * w, ztop},
+      Vec3{x, 0, ztop + 0.02 + 0.02 * k},
   };
+  Section sec;
+  for (std::size_t i = 0; i < 8; ++i) sec[i] = half[i];
+  for (std::size_t i = 1; i <= 6; ++i) {  // down the right side
+    const Vec3& p = half[7 - i];
+    sec[7 + i] = {p.x, -p.y, p.z};
+  }
+  return sec;
+}
 
-  Soup soup;
-  const std::uint32_t paint = soup.Look(Material::kPaint, kWhite);
-  const std::uint32_t glass = soup.Look(Material::kGlass, kGlassTint);
-  const std::uint32_t trim = soup.Look(Material::kMatte, kTrim);
-  const std::uint32_t under = soup.Look(Material::kMatte, kUnderbody);
-  // The look of the band between points i and i+1 of the left half (mirrored on the right) over
-  // stations at xm.
-  auto band_look = [&](int i, double xm) {
-    const bool rear_window = xm > x_rwb && xm < x_rr;
-    const bool roof_zone = xm > x_rr && xm < x_rf;
-    const bool screen = xm > x_rf && xm < x_cowl;
-    const bool b_pillar = std::abs(xm - x_b) < 0.035;
-    switch (i) {
-      case 0:
-        return under;
-      case 1:  // the lower side: paint, black bumpers at the ends
-        return (xm < xr + 0.25 * L / 4.7 || xm > xf - 0.2 * L / 4.7) ? trim : paint;
-      case 4:
-        if (roof_zone) return b_pillar ? trim : glass;
-        return screen ? glass : paint;
-      case 6:
-        return (rear_window || screen) ? glass : paint;
-      default:
-        return paint;
-    }
-  };
+// The look of the band between points i and i+1 of the left half (mirrored on the right) over
+// stations at xm.
+Look BandLook(const BodyPlan& b, int i, double xm) {
+  const double L = b.length, xr = b.Rear(), xf = b.Front();
+  const bool rear_window = xm > b.XAt(At::kRearWindow) && xm < b.XAt(At::kRoofRear);
+  const bool roof_zone = xm > b.XAt(At::kRoofRear) && xm < b.XAt(At::kRoofFront);
+  const bool screen = xm > b.XAt(At::kRoofFront) && xm < b.XAt(At::kCowl);
+  const bool b_pillar = std::abs(xm - b.x_b) < 0.035;
+  switch (i) {
+    case 0:
+      return kUnderLook;
+    case 1:  // the lower side: paint, black bumpers at the ends
+      return (xm < xr + 0.25 * L / kSaloonLength || xm > xf - 0.2 * L / kSaloonLength) ? kTrimLook
+                                                                                       : kPaintLook;
+    case 4:
+      if (roof_zone) return b_pillar ? kTrimLook : kGlassLook;
+      return screen ? kGlassLook : kPaintLook;
+    case 6:
+      return (rear_window || screen) ? kGlassLook : kPaintLook;
+    default:
+      return kPaintLook;
+  }
+}
+
+// The shell: bands between consecutive sections, and the end caps (fans from the section's
+// middle) facing back and forward.
+void AddShell(Soup& soup, const std::array<std::uint32_t, kLookCount>& looks, const BodyPlan& b,
+              const std::vector<Station>& stations) {
   std::vector<Section> secs;
-  for (const Station& st : stations) secs.push_back(section(st));
+  for (const Station& st : stations) secs.push_back(SectionAt(b, st));
   for (std::size_t j = 0; j + 1 < secs.size(); ++j) {
-    const Section &a = secs[j], &b = secs[j + 1];
+    const Section &p = secs[j], &q = secs[j + 1];
     const double xm = 0.5 * (stations[j].x + stations[j + 1].x);
-    for (int i = 0; i < kSection; ++i) {
-      const int n = (i + 1) % kSection;
-      const int band = i < 7 ? i : 13 - i;  // the right side mirrors the left's bands
-      soup.Quad(a[static_cast<std::size_t>(i)], a[static_cast<std::size_t>(n)],
-                b[static_cast<std::size_t>(n)], b[static_cast<std::size_t>(i)],
-                band_look(band, xm));
+    for (std::size_t i = 0; i < kSection; ++i) {
+      const std::size_t n = (i + 1) % kSection;
+      const int band = i < 7 ? static_cast<int>(i) : 13 - static_cast<int>(i);  // mirrored
+      soup.Quad(p[i], p[n], q[n], q[i], looks[BandLook(b, band, xm)]);
     }
   }
-  // End caps (fans from the section's middle), facing back and forward.
-  auto cap = [&](const Section& sec, bool front) {
+  for (const bool front : {false, true}) {
+    const Section& sec = front ? secs.back() : secs.front();
     Vec3 c;
     for (const Vec3& p : sec) c += p / kSection;
-    for (int i = 0; i < kSection; ++i) {
-      const Vec3& p = sec[static_cast<std::size_t>(i)];
-      const Vec3& q = sec[static_cast<std::size_t>((i + 1) % kSection)];
+    for (std::size_t i = 0; i < kSection; ++i) {
+      const Vec3& p = sec[i];
+      const Vec3& q = sec[(i + 1) % kSection];
       if (front) {
-        soup.Tri(c, p, q, paint);
+        soup.Tri(c, p, q, looks[kPaintLook]);
       } else {
-        soup.Tri(c, q, p, paint);
+        soup.Tri(c, q, p, looks[kPaintLook]);
       }
     }
-  };
-  cap(secs.front(), false);
-  cap(secs.back(), true);
+  }
+}
 
-  // Details on the ends, a few millimetres proud: headlights, grille and the lower intake at the
-  // front; tail lights, the number plate and the bumper at the back.
-  auto end_quad = [&](double x, double y0, double y1, double z0, double z1, std::uint32_t look,
-                      bool front) {
-    const Vec3 a{x, y0, z0}, b{x, y1, z0}, c{x, y1, z1}, d{x, y0, z1};
-    if (front) {
-      soup.Quad(a, b, c, d, look);  // facing +X
+void AddEndPanels(Soup& soup, const std::array<std::uint32_t, kLookCount>& looks,
+                  const BodyPlan& b) {
+  const double wf = b.half_width * Pwl(b.width, b.Front());
+  const double wr = b.half_width * Pwl(b.width, b.Rear());
+  auto panel = [&](const EndPanel& e, double side) {
+    const double w = e.front ? wf : wr;
+    const double x = e.front ? b.Front() + 0.004 : b.Rear() - 0.004;
+    const double y0 = std::min(side * e.y0, side * e.y1) * w;
+    const double y1 = std::max(side * e.y0, side * e.y1) * w;
+    const double z0 = b.cab.H(e.h0), z1 = b.cab.H(e.h1);
+    const Vec3 p{x, y0, z0}, q{x, y1, z0}, r{x, y1, z1}, t{x, y0, z1};
+    if (e.front) {
+      soup.Quad(p, q, r, t, looks[e.look]);  // facing +X
     } else {
-      soup.Quad(a, d, c, b, look);  // facing -X
+      soup.Quad(p, t, r, q, looks[e.look]);  // facing -X
     }
   };
-  const std::uint32_t head = soup.Look(Material::kLightFront, kHeadlight);
-  const std::uint32_t tail = soup.Look(Material::kLightRear, kTaillight);
-  const std::uint32_t reverse = soup.Look(Material::kLightReverse, kReverseLight);
-  const std::uint32_t grille = soup.Look(Material::kMatte, kGrille);
-  const std::uint32_t plate = soup.Look(Material::kMatte, kPlate);
-  const double wf = hw * Pwl(width, xf), wr = hw * Pwl(width, xr);
-  const double xfd = xf + 0.004, xrd = xr - 0.004;
-  for (double side : {1.0, -1.0}) {
-    const double y0 = side * 0.52 * wf, y1 = side * 0.84 * wf;
-    end_quad(xfd, std::min(y0, y1), std::max(y0, y1), H(0.53), H(0.62), head, true);
-    const double t0 = side * 0.58 * wr, t1 = side * 0.88 * wr;
-    end_quad(xrd, std::min(t0, t1), std::max(t0, t1), H(0.60), H(0.70), tail, false);
-    // The reversing lamp: inboard of the tail light, in its band.
-    const double r0 = side * 0.47 * wr, r1 = side * 0.56 * wr;
-    end_quad(xrd, std::min(r0, r1), std::max(r0, r1), H(0.61), H(0.69), reverse, false);
+  for (const double side : {1.0, -1.0}) {
+    for (const EndPanel& e : kEndPanels) {
+      if (e.pair) panel(e, side);
+    }
   }
-  end_quad(xfd, -0.40 * wf, 0.40 * wf, H(0.38), H(0.52), grille, true);
-  end_quad(xfd, -0.70 * wf, 0.70 * wf, H(0.24), H(0.33), grille, true);
-  end_quad(xrd, -0.26 * wr, 0.26 * wr, H(0.45), H(0.56), plate, false);
-  // Door mirrors: small wedges on the doors at the windscreen's base, inside the body box.
-  for (double side : {1.0, -1.0}) {
-    const double zb = Pwl(belt, x_cowl) + 0.03, zt = zb + 0.11 * sv;
+  for (const EndPanel& e : kEndPanels) {
+    if (!e.pair) panel(e, 1.0);
+  }
+}
+
+// Door mirrors: small wedges on the doors at the windscreen's base, inside the body box.
+void AddDoorMirrors(Soup& soup, const std::array<std::uint32_t, kLookCount>& looks,
+                    const BodyPlan& b) {
+  const double x_cowl = b.XAt(At::kCowl), hw = b.half_width;
+  for (const double side : {1.0, -1.0}) {
+    const double zb = Pwl(b.belt, x_cowl) + 0.03, zt = zb + 0.11 * b.scale;
     const double x0 = x_cowl - 0.16, x1 = x_cowl - 0.04;
     const double yi = side * 0.9 * hw, yo = side * hw;
     const Vec3 p[8] = {{x0, yi, zb}, {x1, yi, zb}, {x1, yo, zb}, {x0, yo, zb},
                        {x0, yi, zt}, {x1, yi, zt}, {x1, yo, zt}, {x0, yo, zt}};
-    const std::uint32_t shell = paint;
-    auto q = [&](int a, int b, int c, int d, std::uint32_t look) {
+    auto q = [&](int i, int j, int k, int l, Look look) {
       if (side > 0) {
-        soup.Quad(p[a], p[b], p[c], p[d], look);
+        soup.Quad(p[i], p[j], p[k], p[l], looks[look]);
       } else {
-        soup.Quad(p[a], p[d], p[c], p[b], look);
+        soup.Quad(p[i], p[l], p[k], p[j], looks[look]);
       }
     };
-    q(0, 3, 2, 1, shell);  // bottom
-    q(4, 5, 6, 7, shell);  // top
-    q(1, 2, 6, 5, trim);   // forward face
-    q(0, 4, 7, 3, glass);  // the glass, facing back
-    q(3, 7, 6, 2, shell);  // outer side
-    q(0, 1, 5, 4, shell);  // inner side
+    q(0, 3, 2, 1, kPaintLook);  // bottom
+    q(4, 5, 6, 7, kPaintLook);  // top
+    q(1, 2, 6, 5, kTrimLook);   // forward face
+    q(0, 4, 7, 3, kGlassLook);  // the glass, facing back
+    q(3, 7, 6, 2, kPaintLook);  // outer side
+    q(0, 1, 5, 4, kPaintLook);  // inner side
   }
+}
+
+}  // namespace
+
+ModelMesh BuildCarBody(const VehicleGeometry& g, bool coarse) {
+  const BodyPlan plan = PlanBody(g);
+  Soup soup;
+  std::array<std::uint32_t, kLookCount> looks{};
+  for (std::size_t i = 0; i < kLookCount; ++i)
+    looks[i] = soup.Look(kLooks[i].first, kLooks[i].second);
+  AddShell(soup, looks, plan, BodyStations(g, plan, coarse));
+  AddEndPanels(soup, looks, plan);
+  AddDoorMirrors(soup, looks, plan);
   return Finish(soup, 40.0);
 }
 
@@ -518,12 +648,7 @@ Rgb8 ColourOf(const aiMaterial& m, float* opacity) {
   if (m.Get(AI_MATKEY_OPACITY, o) != AI_SUCCESS) o = c.a;
   *opacity = std::min(o, c.a);
   // glTF's base colour factors are linear: to sRGB.
-  auto to8 = [](float v) {
-    const double l = std::clamp(static_cast<double>(v), 0.0, 1.0);
-    const double e = l <= 0.0031308 ? 12.92 * l : 1.055 * std::pow(l, 1.0 / 2.4) - 0.055;
-    return static_cast<std::uint8_t>(std::lround(e * 255));
-  };
-  return {to8(c.r), to8(c.g), to8(c.b)};
+  return {ToSrgb(c.r), ToSrgb(c.g), ToSrgb(c.b)};
 }
 
 }  // namespace

@@ -18,6 +18,20 @@
 namespace vdyn::viewer {
 namespace {
 
+// A draw list's vertex (position, normal, colour) as the bound vertex array's attributes 0-2.
+void VertexLayout() {
+  const auto stride = static_cast<GLsizei>(sizeof(Vertex));
+  glEnableVertexAttribArray(0);
+  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, p)));
+  glEnableVertexAttribArray(1);
+  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, n)));
+  glEnableVertexAttribArray(2);
+  glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, stride,
+                        reinterpret_cast<const void*>(offsetof(Vertex, rgba)));
+}
+
 std::string Log(GLuint object, bool program) {
   GLint len = 0;
   if (program) {
@@ -100,6 +114,8 @@ struct Uniforms {
   GLint frame = -1, half_size = -1, strip = -1, grid = -1, surfaces = -1;
   GLint shadow_map = -1, shadow_mat = -1, shadow_box = -1, shadow_texel = -1;
   GLint inv_view_proj = -1, clouds = -1, strength = -1, radius = -1, lights = -1;
+  GLint z_range = -1, poster_a = -1, poster_b = -1,
+        relief = -1;  // terrain: the mesh's heights, its poster
 };
 
 Vec3 Linear(Rgb8 c) {
@@ -323,6 +339,10 @@ struct Renderer::Program {
     u.strength = at("u_strength");
     u.radius = at("u_radius");
     u.lights = at("u_lights");
+    u.z_range = at("u_z_range");
+    u.relief = at("u_relief");
+    u.poster_a = at("u_poster_a");
+    u.poster_b = at("u_poster_b");
     // Texture units: surfaces 0, the shadow map 1, clouds 2.
     glUseProgram(id);
     if (u.surfaces >= 0) glUniform1i(u.surfaces, 0);
@@ -386,8 +406,8 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   contact_ = std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kContactFs),
                                        "contact shadows");
   depth_ = std::make_unique<Program>(Vs(shaders::kDepthVs), Vs(shaders::kDepthFs), "shadow map");
-  mirror_ =
-      std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kMirrorFs), "mirrors");
+  mirror_ = std::make_unique<Program>(Vs(shaders::kWorldQuadVs), Fragment(o, shaders::kMirrorFs),
+                                      "mirrors");
   glUseProgram(mirror_->id);
   glUniform1i(glGetUniformLocation(mirror_->id, "u_image"), kMirrorUnit);
   glUseProgram(0);
@@ -423,16 +443,7 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   glGenBuffers(1, &dyn_vbo_);
   glBindVertexArray(dyn_vao_);
   glBindBuffer(GL_ARRAY_BUFFER, dyn_vbo_);
-  const auto stride = static_cast<GLsizei>(sizeof(Vertex));
-  glEnableVertexAttribArray(0);
-  glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, p)));
-  glEnableVertexAttribArray(1);
-  glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, n)));
-  glEnableVertexAttribArray(2);
-  glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, stride,
-                        reinterpret_cast<const void*>(offsetof(Vertex, rgba)));
+  VertexLayout();
   // Contact shadows: position, corner.
   glGenVertexArrays(1, &contact_vao_);
   glGenBuffers(1, &contact_vbo_);
@@ -449,12 +460,13 @@ Renderer::Renderer(const RenderSettings& settings) : settings_(settings) {
   const int px = settings_.texture_px;
   glGenTextures(1, &surfaces_tex_);
   glBindTexture(GL_TEXTURE_2D_ARRAY, surfaces_tex_);
-  glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, settings_.srgb_textures ? GL_SRGB8_ALPHA8 : GL_RGBA8, px, px,
-               5, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
-  const TextureLayer layers[] = {TextureLayer::kGrass, TextureLayer::kAsphalt,
+  const TextureLayer layers[] = {TextureLayer::kGrass,    TextureLayer::kAsphalt,
                                  TextureLayer::kConcrete, TextureLayer::kDirt,
-                                 TextureLayer::kMacro};
-  for (int i = 0; i < 5; ++i) {
+                                 TextureLayer::kMacro,    TextureLayer::kPoster};
+  constexpr int kLayers = static_cast<int>(std::size(layers));
+  glTexImage3D(GL_TEXTURE_2D_ARRAY, 0, settings_.srgb_textures ? GL_SRGB8_ALPHA8 : GL_RGBA8, px, px,
+               kLayers, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
+  for (int i = 0; i < kLayers; ++i) {
     TextureImage img = MakeTexture(layers[i], px);
     if (!settings_.srgb_textures) ToLinearBytes(img);
     UploadLayer(GL_TEXTURE_2D_ARRAY, i, img);
@@ -621,6 +633,8 @@ Mat4 Renderer::BodyTransform(const BodyInstance& b) const {
 void Renderer::ClearTerrain() {
   for (Terrain& t : terrain_meshes_) Free(t.mesh);
   terrain_meshes_.clear();
+  Free(dressing_);
+  dressing_chunks_.clear();
   terrain_triangles_ = 0;
 }
 
@@ -631,6 +645,12 @@ void Renderer::SetTerrain(const TerrainData& t) {
     m.style = tm.style;
     m.frame = tm.frame;
     m.chunks = tm.chunks;
+    m.min_z = tm.min_W.z;
+    m.max_z = tm.max_W.z;
+    m.poster = tm.poster;
+    // Low relief shaded steeper: rough ground (bumps of 0.3 m over metres), the washboard.
+    if (tm.kind == pb::SURFACE_ROUGH) m.relief = 3.0;
+    if (tm.kind == pb::SURFACE_OBSTACLE && tm.style == SurfaceStyle::kConcrete) m.relief = 4.0;
     m.translucent = tm.style == SurfaceStyle::kGlass;
     m.mesh = UploadTerrain(tm.vertices, tm.indices);
     terrain_meshes_.push_back(std::move(m));
@@ -680,6 +700,35 @@ void Renderer::SetTerrain(const TerrainData& t) {
   std::stable_sort(terrain_meshes_.begin(), terrain_meshes_.end(),
                    [&](const Terrain& a, const Terrain& b) { return order(a) < order(b); });
   terrain_triangles_ = t.triangles;
+  UploadDressing(MakeDressing(t, settings_.quality == Quality::kHigh));
+}
+
+void Renderer::UploadDressing(const Dressing& d) {
+  if (d.list.vertices().empty()) return;
+  dressing_.count = static_cast<std::int32_t>(d.list.vertices().size());
+  glGenVertexArrays(1, &dressing_.vao);
+  glBindVertexArray(dressing_.vao);
+  glGenBuffers(1, &dressing_.vbo);
+  glBindBuffer(GL_ARRAY_BUFFER, dressing_.vbo);
+  glBufferData(GL_ARRAY_BUFFER, static_cast<GLsizeiptr>(d.list.vertices().size() * sizeof(Vertex)),
+               d.list.vertices().data(), GL_STATIC_DRAW);
+  VertexLayout();
+  glBindVertexArray(0);
+  dressing_chunks_ = d.chunks;
+}
+
+void Renderer::DrawDressing(const Mat4& view_proj) {
+  if (dressing_chunks_.empty()) return;
+  glUseProgram(list_->id);
+  SetMat(list_->u.view_proj, view_proj);
+  glUniform1f(list_->u.alpha, 1.0f);
+  glBindVertexArray(dressing_.vao);
+  for (const DressingChunk& c : dressing_chunks_) {
+    const Vec3 centre = 0.5 * (c.min_W + c.max_W);
+    if (!InFrustum(view_proj, centre, 0.5 * Norm(c.max_W - c.min_W))) continue;
+    glDrawArrays(GL_TRIANGLES, static_cast<GLint>(c.first), static_cast<GLsizei>(c.count));
+  }
+  glBindVertexArray(0);
 }
 
 void Renderer::UseScene(const Program& p, const View& v, double fog_m) {
@@ -815,6 +864,19 @@ void Renderer::DrawTerrain(const View& v, const Mat4& view_proj, double fog_m, b
         glUniform2f(p.u.half_size, static_cast<float>(t.frame.half_length_m),
                     static_cast<float>(t.frame.half_width_m));
         glUniform1f(p.u.strip, t.frame.strip ? 1.0f : 0.0f);
+        if (p.u.relief >= 0) glUniform1f(p.u.relief, static_cast<float>(t.relief));
+        if (p.u.z_range >= 0) {
+          glUniform2f(p.u.z_range, static_cast<float>(t.min_z), static_cast<float>(t.max_z));
+        }
+        if (p.u.poster_a >= 0) {
+          const PosterFace& f = t.poster;
+          glUniform4f(p.u.poster_a, static_cast<float>(f.origin_W.x),
+                      static_cast<float>(f.origin_W.y), static_cast<float>(f.origin_W.z),
+                      static_cast<float>(f.width_m));
+          glUniform4f(p.u.poster_b, static_cast<float>(f.right_W.x),
+                      static_cast<float>(f.right_W.y), static_cast<float>(f.height_m),
+                      f.present ? 1.0f : 0.0f);
+        }
         current = &p;
       }
       // The level of detail by the distance from the eye to the chunk's box.
@@ -1049,6 +1111,7 @@ void Renderer::DrawScene(const View& v, const FrameLists& lists, bool in_mirror)
   DrawTerrain(v, view_proj, fog_m, false, grid_m);
   DrawContactShadows(lists, view_proj);
   DrawList(lists.opaque, Pass::kOpaque, view_proj);
+  DrawDressing(view_proj);
   glEnable(GL_STENCIL_TEST);
   // The cockpit marks its pixels (2): no arrow's ghost is drawn over it (an arrow of a car ahead
   // that the dashboard hides is simply hidden).

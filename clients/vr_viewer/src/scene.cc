@@ -39,44 +39,8 @@ const pb::WheelParams& WheelOf(const pb::VehicleParams& p, int w) {
 }  // namespace
 
 Rgb8 ForceColour(ForceKind kind) {
-  switch (kind) {
-    case ForceKind::kSpring:
-      return {40, 200, 60};
-    case ForceKind::kDrive:
-      return {40, 110, 255};
-    case ForceKind::kBrake:
-      return {235, 40, 40};
-    case ForceKind::kSide:
-      return {255, 210, 0};
-    case ForceKind::kDrag:
-      return {220, 60, 220};
-    case ForceKind::kWall:
-      return {255, 130, 0};
-  }
-  return {255, 255, 255};
-}
-
-std::string_view ForceLabel(ForceKind kind) {
-  switch (kind) {
-    case ForceKind::kSpring:
-      return "spring Fp";
-    case ForceKind::kDrive:
-      return "drive Fh";
-    case ForceKind::kBrake:
-      return "brake Fb";
-    case ForceKind::kSide:
-      return "side Fy";
-    case ForceKind::kDrag:
-      return "drag Da";
-    case ForceKind::kWall:
-      return "wall";
-  }
-  return "?";
-}
-
-std::string_view WheelName(int wheel) {
-  static constexpr std::string_view kNames[] = {"LF", "RF", "LR", "RR"};
-  return wheel >= 0 && wheel < kWheels ? kNames[wheel] : std::string_view("body");
+  const auto& c = client::ForcePaint(kind);  // the Foxglove scenes' too (client/palette.h)
+  return {c[0], c[1], c[2]};
 }
 
 Rgb8 VehicleColour(std::uint32_t vehicle_id) {

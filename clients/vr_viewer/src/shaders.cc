@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "vdyn/viewer/lighting.h"
+#include "vdyn/viewer/textures.h"
 #include "vdyn/viewer/world_mesh.h"
 
 namespace vdyn::viewer {
@@ -71,8 +72,70 @@ vec3 FogVector(vec3 p) { return u_fog_m > 0.0 ? (p - u_eye) / u_fog_m : vec3(0.0
 float FogAmount(vec3 p) {
   return FogOver(FogVector(p));
 }
-// Fogged towards the horizon's colour, encoded for the screen.
-vec3 Finish(vec3 c, vec3 p) { return Encode(mix(c, kHorizonRgb, FogAmount(p))); }
+// Filmic tone mapping: linear light as it is up to the knee (0.6: the scene's diffuse range,
+// a face turned to the sun gets 1 times its albedo), then a shoulder that rolls highlights off
+// towards white (extended Reinhard on the excess, white at kWhite, the slope continuous at the
+// knee), per channel, so a bright highlight keeps its gradation and turns towards white as on
+// film instead of clipping to a flat patch.
+const float kKnee = 0.6, kWhite = 16.0;
+vec3 ToneMap(vec3 c) {
+  vec3 t = max(c - kKnee, 0.0) / (1.0 - kKnee);
+  float w = (kWhite - kKnee) / (1.0 - kKnee);
+  vec3 shoulder = kKnee + (1.0 - kKnee) * t * (1.0 + t / (w * w)) / (1.0 + t);
+  return mix(c, shoulder, step(kKnee, c));
+}
+// Linear scene light to the screen's bytes: tone mapped, sRGB-encoded.
+vec3 Output(vec3 c) { return Encode(ToneMap(c)); }
+// Fogged towards the horizon's colour, tone mapped and encoded for the screen.
+vec3 Finish(vec3 c, vec3 p) { return Output(mix(c, kHorizonRgb, FogAmount(p))); }
+// The same with light of its own (a lamp): shown as it is beside the tone-mapped rest, so a lit
+// lamp reaches full brightness in its colour (a display's emitter, not a scene highlight).
+vec3 FinishOwn(vec3 c, vec3 own, vec3 p) {
+  float f = FogAmount(p);
+  return Encode(max(ToneMap(mix(c, kHorizonRgb, f)), mix(own, kHorizonRgb, f)));
+}
+
+// --- physically based shading (metal/roughness), the sky as the environment light -------------
+const float kPi = 3.14159265;
+// The sky's light reflected by a surface of roughness r (0 mirror .. 1 rough) towards the eye
+// along the mirror direction d of a face with normal n: a mirror sees the gradient, a rough face
+// the average of its hemisphere (the ambient light of Hemi, as radiance), between the two as the
+// lobe widens (the dominant direction bends towards the normal).
+vec3 SkySpecular(vec3 d, vec3 n, float r) {
+  vec3 mirror = SkyRadiance(normalize(mix(d, n, r * r)));
+  return mix(mirror, Hemi(n), r * r);
+}
+// The split-sum environment BRDF's scale and bias on F0 for roughness r at n.v (the analytic fit
+// of Karis, "Physically based shading on mobile", 2014).
+vec2 EnvBrdf(float r, float nv) {
+  vec4 q = r * vec4(-1.0, -0.0275, -0.572, 0.022) + vec4(1.0, 0.0425, 1.04, -0.04);
+  float a004 = min(q.x * q.x, exp2(-9.28 * nv)) * q.x + q.y;
+  return vec2(-1.04, 1.04) * a004 + q.zw;
+}
+// The sun's specular reflection: GGX distribution, height-correlated Smith visibility
+// (Hammon's approximation), Schlick's Fresnel; times the sun's light where it reaches.
+vec3 SunSpecular(vec3 n, vec3 v, vec3 f0, float r, float sun) {
+  vec3 h = normalize(kSunDir + v);
+  float nl = max(dot(n, kSunDir), 0.0), nv = max(dot(n, v), 1e-4);
+  float nh = max(dot(n, h), 0.0), vh = max(dot(v, h), 0.0);
+  float a = max(r * r, 0.004), a2 = a * a;
+  float d = nh * nh * (a2 - 1.0) + 1.0;
+  float D = a2 / (kPi * d * d);
+  float vis = 0.5 / (nl * (nv * (1.0 - a) + a) + nv * (nl * (1.0 - a) + a) + 1e-5);
+  float x = 1.0 - vh, x2 = x * x;
+  vec3 F = f0 + (1.0 - f0) * (x2 * x2 * x);
+  return kSunRgb * (sun * nl * D * vis) * F;
+}
+// A rough dielectric's reflection of the sky and the sun beyond what its albedo holds: the
+// world's surfaces. Their textures' colours are as seen from above, their reflection there
+// included; what grows with the angle is the split-sum's rise from normal incidence to n.v (for a
+// rough surface a few per cent: Schlick's full rise holds only for a mirror), and the sun's GGX
+// highlight (the road's glare against a low sun).
+vec3 WorldSpecular(vec3 n, vec3 v, float r, float sun) {
+  vec2 at_v = EnvBrdf(r, max(dot(n, v), 1e-4)), at_normal = EnvBrdf(r, 1.0);
+  float rise = max(0.04 * (at_v.x - at_normal.x) + at_v.y - at_normal.y, 0.0);
+  return rise * SkySpecular(reflect(-v, n), n, r) + SunSpecular(n, v, vec3(0.04), r, sun);
+}
 
 #ifdef SHADOWS
 uniform sampler2DShadow u_shadow_map;
@@ -128,6 +191,11 @@ std::string Fragment(const Options& o, const char* body) {
   s += "const float kLineWidth = " + Num(RoadMarkings::kLineWidth) + ";\n";
   s += "const float kDash = " + Num(RoadMarkings::kDash) + ";\n";
   s += "const float kDashPeriod = " + Num(RoadMarkings::kDashPeriod) + ";\n";
+  {
+    const Rgb8 g = MeanColour(TextureLayer::kGrass);  // the grass texture's mean, linear
+    s += "const float kGrassLuma = " +
+         Num(0.2126 * ToLinear(g.r) + 0.7152 * ToLinear(g.g) + 0.0722 * ToLinear(g.b)) + ";\n";
+  }
   s += kCommon;
   s += body;
   return s;
@@ -146,6 +214,7 @@ const char* const kTerrainVs = R"(
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 uniform mat4 u_view_proj;
+uniform float u_relief;  // the slopes' shading made this much steeper (Relief in the fragment shader)
 out vec3 v_pos;
 out vec3 v_normal;
 out vec3 v_fog;
@@ -158,6 +227,9 @@ void main() {
   v_fog = FogVector(a_pos);
 #ifndef SHADOWS
   vec3 n = normalize(a_normal);
+#if STYLE == 3 || STYLE == 4
+  n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   v_light = Diffuse(n * sign(dot(n, u_eye - a_pos) + 1e-9), 1.0);
 #endif
   gl_Position = u_view_proj * vec4(a_pos, 1.0);
@@ -180,6 +252,10 @@ uniform vec4 u_frame;        // the mesh's strip frame: centre x, y; its long ax
 uniform vec2 u_half_size;    // from the centre along and across, m
 uniform float u_strip;       // 1: a strip (markings and kerbs)
 uniform float u_grid;        // grid spacing, m
+uniform float u_relief;      // slopes shaded this much steeper (rough ground 3, washboard 4)
+uniform vec2 u_z_range;      // the mesh's lowest and highest point, m
+uniform vec4 u_poster_a;     // a prop's poster face: lower left corner x, y, z; width
+uniform vec4 u_poster_b;     // its right (unit) x, y; height; 1 when it has one
 out vec4 o_colour;
 
 vec3 Tex(float layer, vec2 uv_m, float tile_m) {
@@ -197,11 +273,27 @@ float Band(float d, float half_width) {
   return clamp((half_width - abs(d)) / max(fwidth(d), 1e-4) + 0.5, 0.0, 1.0);
 }
 float Luma(vec3 c) { return dot(c, vec3(0.2126, 0.7152, 0.0722)); }
+// Grass; quality high: near the eye its own grain again, 4.4 times finer, fading out by 30 m (the
+// nearest metres show blades, not one magnified tile).
+vec3 Grass(vec2 xy, float dist) {
+  vec3 g = Tex(0.0, xy, 4.0) * Variation(xy);
+#ifdef HIGH
+  float near = 1.0 - smoothstep(4.0, 30.0, dist);
+  g *= mix(1.0, clamp(Luma(Tex(0.0, xy, 0.91)) / kGrassLuma, 0.45, 1.7), near);
+#endif
+  return g;
+}
 
 void main() {
   vec3 n = normalize(v_normal);
   vec3 to_eye = u_eye - v_pos;
   n *= sign(dot(n, to_eye) + 1e-9);
+  vec3 n_mesh = n;
+#if STYLE == 3 || STYLE == 4
+  // Low relief (rough ground's bumps, the washboard's ripples: slopes of a few degrees) shaded as
+  // if steeper, so it reads from the driver's seat: the normal's tilt scaled by u_relief.
+  n = normalize(vec3(n.xy * u_relief, n.z));
+#endif
   vec2 xy = v_pos.xy;
   // The frame's coordinates: along, across from the centre line.
   vec2 rel = xy - u_frame.xy;
@@ -235,13 +327,24 @@ void main() {
   vec3 albedo = mix(vec3(0.80, 0.50, 0.008), vec3(0.018), block) *
                 clamp(0.7 + 0.5 * Luma(Tex(1.0, tc, 3.0)) / 0.077, 0.7, 1.2);
 #elif STYLE == 3
-  vec3 albedo = Tex(2.0, tc, 3.0);  // concrete
+  // Concrete; its edges (where a face meets the mesh's bounds: a ramp's foot, sides and top edge,
+  // the washboard's outline) a worn, lighter arris, and grime in a band just inside.
+  vec3 albedo = Tex(2.0, tc, 3.0);
+  vec2 to_bound = u_half_size - abs(v_uv);
+  vec2 dir = u_frame.zw;
+  float e = 1e3;  // to the nearest bound that lies within the face, m
+  if (abs(dot(n_mesh.xy, dir)) < 0.7) e = min(e, to_bound.x);
+  if (abs(dot(n_mesh.xy, vec2(-dir.y, dir.x))) < 0.7) e = min(e, to_bound.y);
+  if (abs(n_mesh.z) < 0.7) e = min(e, min(v_pos.z - u_z_range.x, u_z_range.y - v_pos.z));
+  float arris = 1.0 - clamp((e - 0.05) / max(fwidth(e), 1e-4) + 0.5, 0.0, 1.0);
+  float grime = 1.0 - smoothstep(0.05, 0.5, e);
+  albedo *= 1.0 + 0.45 * arris - 0.3 * grime * (1.0 - arris);
 #elif STYLE == 4
   // Dirt and gravel, into the grass at the edge.
   vec3 dirt = Tex(3.0, tc, 3.0) * Variation(xy + vec2(17.0, 5.0));
   vec2 inside = u_half_size - abs(v_uv);
   float edge = min(inside.x, inside.y);
-  vec3 albedo = mix(Tex(0.0, tc, 4.0) * Variation(xy), dirt, smoothstep(0.5, 5.0, edge));
+  vec3 albedo = mix(Grass(tc, length(to_eye)), dirt, smoothstep(0.5, 5.0, edge));
 #elif STYLE == 5
   // Glass: posts every 3 m, a rail on top, a concrete foot.
   float along = abs(n.x) > abs(n.y) ? v_pos.y : v_pos.x;
@@ -254,13 +357,29 @@ void main() {
   alpha = mix(0.22 + 0.6 * fres, 1.0, solid);
 #elif STYLE == 6
   vec3 albedo = vec3(0.55, 0.57, 0.59) * (0.85 + 0.3 * Luma(Tex(2.0, tc, 3.0)) / 0.38);
+  // The poster (texture layer 5) on its face, front side only.
+  if (u_poster_b.w > 0.5) {
+    vec2 right = u_poster_b.xy;
+    vec3 pn = vec3(right.y, -right.x, 0.0);
+    vec3 d = v_pos - u_poster_a.xyz;
+    vec2 puv = vec2(dot(d.xy, right) / u_poster_a.w, d.z / u_poster_b.z);
+    float on = step(0.95, dot(normalize(v_normal), pn)) * step(abs(dot(d, pn)), 0.02) *
+               step(0.0, puv.x) * step(puv.x, 1.0) * step(0.0, puv.y) * step(puv.y, 1.0);
+    albedo = mix(albedo, texture(u_surfaces, vec3(puv.x, 1.0 - puv.y, 5.0)).rgb, on);
+  }
 #else
-  vec3 albedo = Tex(0.0, tc, 4.0) * Variation(xy);  // grass
+  vec3 albedo = Grass(tc, length(to_eye));
 #endif
 #ifdef SHADOWS
-  vec3 c = albedo * Diffuse(n, SunVisibility(v_pos, n)) + add;
+  float sun = SunVisibility(v_pos, n);
+  vec3 c = albedo * Diffuse(n, sun) + add;
 #else
+  float sun = 1.0;
   vec3 c = albedo * v_light + add;
+#endif
+#if defined(HIGH) && (STYLE == 1 || STYLE == 2 || STYLE == 3 || STYLE == 6)
+  // Asphalt, paint and concrete: rough dielectrics, a sheen towards the sun and the sky.
+  c += WorldSpecular(n, normalize(to_eye), STYLE == 2 ? 0.55 : 0.75, sun);
 #endif
 #ifdef GRID
   vec2 g = xy / u_grid;
@@ -268,7 +387,7 @@ void main() {
   vec2 gd = abs(fract(g - 0.5) - 0.5) / max(w, vec2(1e-6));
   c *= 1.0 - 0.35 * (1.0 - clamp(min(gd.x, gd.y), 0.0, 1.0));
 #endif
-  o_colour = vec4(Encode(mix(c, kHorizonRgb, FogOver(v_fog))), alpha);
+  o_colour = vec4(Output(mix(c, kHorizonRgb, FogOver(v_fog))), alpha);
 }
 )";
 
@@ -286,19 +405,18 @@ uniform vec2 u_lights;  // the body's brake and reversing lights: 1 lit, 0 not
 out vec3 v_pos;
 out vec3 v_normal;
 out vec3 v_albedo;
-// The material's shading (car_model.h: matte, paint, glass, chrome, rubber, headlight, tail
-// light, reversing light), as numbers rather than branches: diffuse share, the sky's reflection
-// (at normal incidence, at grazing incidence, tinted by the albedo), the sun's highlight (share,
-// power), light of its own (the lamps: their own light, times kLit while lit).
-flat out vec4 v_reflect;  // diffuse, sky, sky at grazing angles, sky tinted
-flat out vec3 v_shine;    // highlight share, power, own light
-const vec4 kReflect[8] = vec4[8](vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.03, 0.45, 0.0),
-                                 vec4(1.0, 0.08, 0.7, 0.0), vec4(0.45, 0.0, 0.0, 0.55),
-                                 vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.0, 0.0, 0.0),
-                                 vec4(1.0, 0.0, 0.0, 0.0), vec4(1.0, 0.0, 0.0, 0.0));
-const vec3 kShine[8] = vec3[8](vec3(0.0, 1.0, 0.0), vec3(0.6, 120.0, 0.0), vec3(2.0, 400.0, 0.0),
-                               vec3(0.9, 60.0, 0.0), vec3(0.05, 16.0, 0.0), vec3(0.0, 1.0, 0.9),
-                               vec3(0.3, 60.0, 0.3), vec3(0.3, 60.0, 0.15));
+// The material (car_model.h: matte, paint, glass, chrome, rubber, headlight, tail light,
+// reversing light) as numbers rather than branches: metallic, roughness, clear coat (a smooth
+// lacquer over the paint), light of its own (the lamps: times kLit while lit).
+flat out vec4 v_material;
+const vec4 kMaterial[8] = vec4[8](vec4(0.0, 0.7, 0.0, 0.0),    // matte plastic
+                                  vec4(0.0, 0.45, 1.0, 0.0),   // paint under a clear coat
+                                  vec4(0.0, 0.03, 0.0, 0.0),   // tinted glass
+                                  vec4(1.0, 0.12, 0.0, 0.0),   // chrome
+                                  vec4(0.0, 0.85, 0.0, 0.0),   // rubber
+                                  vec4(0.0, 0.3, 0.0, 0.9),    // headlight
+                                  vec4(0.0, 0.3, 0.0, 0.3),    // tail light
+                                  vec4(0.0, 0.3, 0.0, 0.15));  // reversing light
 const float kLit = 14.0;  // a lit lamp's own light over an unlit one's
 vec3 Decode(vec3 c) {
   return mix(c / 12.92, pow((c + 0.055) / 1.055, vec3(2.4)), step(vec3(0.04045), c));
@@ -309,40 +427,50 @@ void main() {
   v_normal = mat3(u_model) * a_normal;
   int m = int(min(a_material, 7u));
   v_albedo = Decode(a_rgba.rgb) * (m == 1 ? u_paint : vec3(1.0));
-  v_reflect = kReflect[m];
-  v_shine = kShine[m];
+  v_material = kMaterial[m];
   float lit = m == 6 ? u_lights.x : (m == 7 ? u_lights.y : 0.0);
-  v_shine.z *= mix(1.0, kLit, lit);
+  v_material.w *= mix(1.0, kLit, lit);
   gl_Position = u_view_proj * p;
 }
 )";
 
-// The inside of a body (a face seen from behind) is dark. Quality low: diffuse and own light only.
+// Metal/roughness shading lit by the sun and the sky: the base layer (a metal reflects in its
+// own colour and has no diffuse part; a dielectric reflects 4 % at normal incidence, more at
+// grazing angles), then the clear coat over the paint (F0 0.04, smooth: the sky's gradient and a
+// sharp sun highlight). The inside of a body (a face seen from behind) is dark. Quality low: the
+// sky's reflection along the mirror direction without the sun's highlight or the rough lobe.
 const char* const kModelFs = R"(
 in vec3 v_pos;
 in vec3 v_normal;
 in vec3 v_albedo;
-flat in vec4 v_reflect;
-flat in vec3 v_shine;
+flat in vec4 v_material;
 out vec4 o_colour;
 void main() {
   vec3 n = normalize(v_normal);
+  vec3 v = normalize(u_eye - v_pos);
+  float metal = v_material.x, rough = v_material.y, coat = v_material.z;
   float sun = SunVisibility(v_pos, n);
-  vec3 c = v_albedo * Diffuse(n, sun) * v_reflect.x;
+  float nv = max(dot(n, v), 1e-4);
+  vec3 f0 = mix(vec3(0.04), v_albedo, metal);
+  vec3 r = reflect(-v, n);
 #ifdef HIGH
-  vec3 view = normalize(u_eye - v_pos);
-  float ndh = max(dot(n, normalize(kSunDir + view)), 0.0);
-  float lit = sun * step(0.0, dot(n, kSunDir));
-  float fres = pow(1.0 - max(dot(n, view), 0.0), 5.0);
-  vec3 sky = SkyRadiance(reflect(-view, n));
-  c += sky * (v_reflect.y + v_reflect.z * fres + v_reflect.w * v_albedo) +
-       kSunRgb * (lit * v_shine.x * pow(ndh, v_shine.y));
+  vec2 ab = EnvBrdf(rough, nv);
+  vec3 spec = f0 * ab.x + ab.y;
+  vec3 c = v_albedo * (1.0 - metal) * (1.0 - spec) * Diffuse(n, sun) +
+           SkySpecular(r, n, rough) * spec + SunSpecular(n, v, f0, rough, sun);
+  // The clear coat takes its Fresnel share of the light off the layer beneath.
+  float x = 1.0 - nv, x2 = x * x;
+  float fc = coat * (0.04 + 0.96 * x2 * x2 * x);
+  c = c * (1.0 - fc) + fc * SkySpecular(r, n, 0.03) + coat * SunSpecular(n, v, vec3(0.04), 0.2, sun);
 #else
-  c += vec3(0.04, 0.05, 0.07) * step(0.05, v_reflect.y);  // glass: a hint of the sky
+  float x = 1.0 - nv, x2 = x * x;
+  vec3 spec = f0 + (max(vec3(1.0 - rough), f0) - f0) * (x2 * x2 * x);
+  spec = max(spec, vec3(0.04 * coat));
+  vec3 c = v_albedo * (1.0 - metal) * (1.0 - spec) * Diffuse(n, sun) + SkyRadiance(r) * spec;
 #endif
-  c = max(c, v_albedo * v_shine.z);
+  vec3 own = gl_FrontFacing ? v_albedo * v_material.w : vec3(0.0);
   c = gl_FrontFacing ? c : vec3(0.012);
-  o_colour = vec4(Finish(c, v_pos), 1.0);
+  o_colour = vec4(FinishOwn(c, own, v_pos), 1.0);
 }
 )";
 
@@ -423,7 +551,7 @@ void main() {
     c = mix(c, lit, 0.9 * cover);
   }
 #endif
-  o_colour = vec4(Encode(c), 1.0);
+  o_colour = vec4(Output(c), 1.0);
 }
 )";
 
@@ -447,7 +575,7 @@ in float v_height;
 out vec4 o_colour;
 void main() {
   vec3 hills = mix(vec3(0.10, 0.15, 0.12), kHorizonRgb, 0.6 + 8.0 * max(v_height, 0.0));
-  o_colour = vec4(Encode(hills), 1.0);
+  o_colour = vec4(Output(hills), 1.0);
 }
 )";
 

@@ -6,10 +6,9 @@
 #include <stdexcept>
 
 namespace vdyn::viewer {
-namespace {
 
 // Integer hash of a lattice point, in [0, 1).
-double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
+double LatticeHash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
   std::uint64_t h = seed * 0xD6E8FEB86659FD93ull ^
                     (static_cast<std::uint64_t>(i) * 0x9E3779B97F4A7C15ull) ^
                     (static_cast<std::uint64_t>(j) * 0xC2B2AE3D27D4EB4Full);
@@ -20,6 +19,13 @@ double Hash(std::int64_t i, std::int64_t j, std::uint64_t seed) {
   h ^= h >> 33;
   return static_cast<double>(h >> 11) * (1.0 / 9007199254740992.0);
 }
+
+double SmoothStep(double e0, double e1, double x) {
+  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+
+namespace {
 
 std::int64_t Wrap(std::int64_t i, std::int64_t period) {
   const std::int64_t m = i % period;
@@ -35,9 +41,9 @@ double Noise(double x, double y, int period, std::uint64_t seed) {
   tx = tx * tx * (3 - 2 * tx);
   ty = ty * ty * (3 - 2 * ty);
   const std::int64_t p = period;
-  const double a = Hash(Wrap(i, p), Wrap(j, p), seed), b = Hash(Wrap(i + 1, p), Wrap(j, p), seed);
-  const double c = Hash(Wrap(i, p), Wrap(j + 1, p), seed);
-  const double d = Hash(Wrap(i + 1, p), Wrap(j + 1, p), seed);
+  const double a = LatticeHash(Wrap(i, p), Wrap(j, p), seed), b = LatticeHash(Wrap(i + 1, p), Wrap(j, p), seed);
+  const double c = LatticeHash(Wrap(i, p), Wrap(j + 1, p), seed);
+  const double d = LatticeHash(Wrap(i + 1, p), Wrap(j + 1, p), seed);
   return (a + (b - a) * tx) * (1 - ty) + (c + (d - c) * tx) * ty;
 }
 
@@ -50,11 +56,6 @@ double Fbm(double x, double y, int period, int octaves, std::uint64_t seed) {
     w *= 0.5;
   }
   return sum / weight;
-}
-
-double Smooth(double e0, double e1, double x) {
-  const double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
-  return t * t * (3 - 2 * t);
 }
 
 struct Lin {
@@ -81,15 +82,15 @@ double Stones(double x, double y, int cells, double radius_cells, std::uint64_t 
   for (std::int64_t dj = -1; dj <= 1; ++dj) {
     for (std::int64_t di = -1; di <= 1; ++di) {
       const std::int64_t i = Wrap(ci + di, cells), j = Wrap(cj + dj, cells);
-      const double sx = static_cast<double>(ci + di) + Hash(i, j, seed);
-      const double sy = static_cast<double>(cj + dj) + Hash(i, j, seed + 7);
-      const double r = radius_cells * (0.5 + Hash(i, j, seed + 13));
+      const double sx = static_cast<double>(ci + di) + LatticeHash(i, j, seed);
+      const double sy = static_cast<double>(cj + dj) + LatticeHash(i, j, seed + 7);
+      const double r = radius_cells * (0.5 + LatticeHash(i, j, seed + 13));
       const double d = std::hypot(fx - sx, fy - sy) / r;
       if (d < 1.0) {
         const double cover = 1.0 - d * d;
         if (cover > best) {
           best = cover;
-          *shade = Hash(i, j, seed + 29);
+          *shade = LatticeHash(i, j, seed + 29);
         }
       }
     }
@@ -101,10 +102,10 @@ Lin Grass(double x, double y) {
   const double patches = Fbm(x, y, 4, 4, 11);
   const double fine = Fbm(x, y, 64, 2, 12);
   const double blades =
-      Hash(static_cast<std::int64_t>(x * 4096), static_cast<std::int64_t>(y * 4096), 13);
-  Lin c = Mix(L({58, 88, 34}), L({112, 138, 58}), Smooth(0.25, 0.75, patches));
+      LatticeHash(static_cast<std::int64_t>(x * 4096), static_cast<std::int64_t>(y * 4096), 13);
+  Lin c = Mix(L({58, 88, 34}), L({112, 138, 58}), SmoothStep(0.25, 0.75, patches));
   // Dry, yellowish patches and clover-dark spots.
-  const double dry = Smooth(0.62, 0.8, Fbm(x + 0.37, y + 0.11, 3, 3, 14));
+  const double dry = SmoothStep(0.62, 0.8, Fbm(x + 0.37, y + 0.11, 3, 3, 14));
   c = Mix(c, L({138, 134, 74}), 0.45 * dry);
   c = Scale(c, 0.7 + 0.45 * fine + 0.25 * (blades - 0.5));
   return c;
@@ -113,7 +114,7 @@ Lin Grass(double x, double y) {
 Lin Asphalt(double x, double y) {
   const double patches = Fbm(x, y, 3, 4, 21);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 22);
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 22);
   Lin c = Scale(L({72, 72, 75}), 0.88 + 0.24 * patches + 0.22 * (grain - 0.5));
   double shade = 0;
   const double stone = Stones(x, y, 96, 0.22, 23, &shade);
@@ -124,7 +125,7 @@ Lin Asphalt(double x, double y) {
 Lin Concrete(double x, double y) {
   const double mottle = Fbm(x, y, 4, 5, 31);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 32);
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 32);
   Lin c = Scale(L({164, 161, 154}), 0.86 + 0.24 * mottle + 0.08 * (grain - 0.5));
   double shade = 0;
   if (Stones(x, y, 64, 0.12, 33, &shade) > 0.2) c = Scale(c, 0.72);  // pores
@@ -134,17 +135,87 @@ Lin Concrete(double x, double y) {
 Lin Dirt(double x, double y) {
   const double patches = Fbm(x, y, 4, 5, 41);
   const double grain =
-      Hash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 42);
-  Lin c = Mix(L({96, 76, 56}), L({146, 122, 92}), Smooth(0.2, 0.8, patches));
+      LatticeHash(static_cast<std::int64_t>(x * 2048), static_cast<std::int64_t>(y * 2048), 42);
+  Lin c = Mix(L({96, 76, 56}), L({146, 122, 92}), SmoothStep(0.2, 0.8, patches));
   c = Scale(c, 0.9 + 0.2 * (grain - 0.5));
   double shade = 0;
   const double stone = Stones(x, y, 48, 0.3, 43, &shade);
   if (stone > 0) {
     // A pebble: lit on top, its shadow towards the lower right.
     const Lin pebble = Scale(Mix(L({120, 112, 100}), L({190, 182, 168}), shade), 0.7 + 0.5 * stone);
-    c = Mix(c, pebble, Smooth(0.0, 0.25, stone));
+    c = Mix(c, pebble, SmoothStep(0.0, 0.25, stone));
   }
   return c;
+}
+
+// A 5 x 7 pixel font: the letters the poster needs, rows top down, '#' set.
+struct Glyph {
+  char c;
+  const char* rows[7];
+};
+constexpr Glyph kFont[] = {
+    {'V', {"#...#", "#...#", "#...#", "#...#", "#...#", ".#.#.", "..#.."}},
+    {'D', {"####.", "#...#", "#...#", "#...#", "#...#", "#...#", "####."}},
+    {'Y', {"#...#", "#...#", ".#.#.", "..#..", "..#..", "..#..", "..#.."}},
+    {'N', {"#...#", "##..#", "#.#.#", "#..##", "#...#", "#...#", "#...#"}},
+    {'P', {"####.", "#...#", "#...#", "####.", "#....", "#....", "#...."}},
+    {'R', {"####.", "#...#", "#...#", "####.", "#.#..", "#..#.", "#...#"}},
+    {'O', {".###.", "#...#", "#...#", "#...#", "#...#", "#...#", ".###."}},
+    {'I', {".###.", "..#..", "..#..", "..#..", "..#..", "..#..", ".###."}},
+    {'G', {".###.", "#...#", "#....", "#.###", "#...#", "#...#", ".###."}},
+    {'U', {"#...#", "#...#", "#...#", "#...#", "#...#", "#...#", ".###."}},
+};
+
+// Whether a point (x right, y down, in font pixels from the text's top left, slanted by `slant`
+// per pixel of height) is inside a letter of `text` (6 font pixels per letter: 5 and a gap).
+bool InText(const char* text, double x, double y, double slant) {
+  if (y < 0 || y >= 7) return false;
+  x -= slant * (7 - y);
+  if (x < 0) return false;
+  const auto letter = static_cast<std::size_t>(x / 6);
+  const auto col = static_cast<int>(x - 6.0 * static_cast<double>(letter));
+  for (std::size_t i = 0; text[i] != 0; ++i) {
+    if (i != letter) continue;
+    if (col >= 5) return false;
+    for (const Glyph& g : kFont) {
+      if (g.c == text[i]) return g.rows[static_cast<int>(y)][col] == '#';
+    }
+    return false;
+  }
+  return false;
+}
+
+// The billboard's poster at (x, y) in [0, 1)^2 (y down) of a face kPosterAspect : 1: a deep blue
+// ground, red and white chevrons on the right, "VDYN" large in white and "PROVING GROUND" in
+// yellow below it, a red band along the bottom. Each pixel is the mean of 4 x 4 samples (the
+// letters' edges smooth).
+Lin Poster(double x, double y, int size) {
+  Lin sum;
+  for (int sj = 0; sj < 4; ++sj) {
+    for (int si = 0; si < 4; ++si) {
+      const double u = (x + (si - 1.5) / (4.0 * size)) * kPosterAspect;  // 0 .. 3 across
+      const double v = y + (sj - 1.5) / (4.0 * size);                    // 0 .. 1 down
+      Lin c = Mix(L({18, 52, 128}), L({8, 26, 74}), v);
+      // Chevrons pointing right, from u = 2.05 on.
+      const double chevron = u - 2.05 - 0.45 * std::abs(v - 0.45);
+      if (chevron > 0 && v < 0.86) {
+        const double k = std::fmod(chevron / 0.16, 2.0);
+        c = k < 1.0 ? L({214, 30, 36}) : L({240, 240, 236});
+      }
+      if (v > 0.88) c = L({200, 24, 30});
+      if (v > 0.86 && v <= 0.88) c = L({240, 240, 236});
+      // "VDYN": 7 font pixels 0.42 high; "PROVING GROUND" 0.13 high.
+      const double big = 0.42 / 7, small = 0.13 / 7;
+      if (InText("VDYN", (u - 0.16) / big, (v - 0.1) / big, 0.25)) c = L({248, 248, 244});
+      if (InText("PROVING GROUND", (u - 0.18) / small, (v - 0.61) / small, 0.25)) {
+        c = L({252, 206, 40});
+      }
+      sum.r += c.r / 16;
+      sum.g += c.g / 16;
+      sum.b += c.b / 16;
+    }
+  }
+  return sum;
 }
 
 }  // namespace
@@ -173,6 +244,8 @@ Rgb8 MeanColour(TextureLayer layer) {
       return {128, 128, 128};
     case TextureLayer::kClouds:
       return {255, 255, 255};
+    case TextureLayer::kPoster:
+      return {40, 60, 120};
   }
   return {128, 128, 128};
 }
@@ -191,6 +264,8 @@ double TileMetres(TextureLayer layer) {
       return 61.0;  // not a multiple of the others: their tiling does not line up with it
     case TextureLayer::kClouds:
       return 2400.0;
+    case TextureLayer::kPoster:
+      return 1.0;  // over its face once
   }
   return 1.0;
 }
@@ -230,16 +305,20 @@ TextureImage MakeTexture(TextureLayer layer, int size) {
         }
         case TextureLayer::kClouds: {
           const double f = Fbm(x, y, 4, 6, 61);
-          const double cover = Smooth(0.48, 0.78, f);
-          const double lum = 1.0 - 0.35 * Smooth(0.6, 0.95, f);  // denser: greyer underneath
+          const double cover = SmoothStep(0.48, 0.78, f);
+          const double lum = 1.0 - 0.35 * SmoothStep(0.6, 0.95, f);  // denser: greyer underneath
           lin[k] = {lum, lum, lum * 1.02};
           alpha[k] = cover;
           break;
         }
+        case TextureLayer::kPoster:
+          lin[k] = Poster(x, y, size);
+          break;
       }
     }
   }
-  if (layer != TextureLayer::kMacro && layer != TextureLayer::kClouds) {
+  if (layer != TextureLayer::kMacro && layer != TextureLayer::kClouds &&
+      layer != TextureLayer::kPoster) {
     // Scale each channel (in linear light) so the mean is the layer's colour; clamping moves it
     // a little, so repeat.
     const Lin target = L(MeanColour(layer));

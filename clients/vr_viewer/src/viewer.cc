@@ -254,35 +254,8 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   if (options_.client_id.empty()) options_.client_id = "vdyn-viewer-" + std::to_string(getpid());
   impl_ = std::make_unique<Impl>(*this, options_);
   Impl& m = *impl_;
-
   m.session.on_world = [this](const pb::WorldDescription& w, const transport::SampleInfo&) {
-    Impl& im = *impl_;
-    const std::string why = CheckWorld(w);
-    if (!why.empty()) {
-      ++stats_.worlds_refused;
-      stats_.last_refusal = "world '" + w.name() + "' of server '" + w.server_id() + "': " + why;
-      im.session.drops().Count("world refused by the viewer", why);
-      spdlog::warn("vdyn-viewer: refused {}; keeping the world drawn before", stats_.last_refusal);
-      return;
-    }
-    ++stats_.worlds_accepted;
-    AcceptedWorld& a = im.worlds[w.server_id()];
-    a.desc = w;
-    ++a.serial;
-    constexpr double kBig = 1e300;
-    a.min_W = {kBig, kBig, kBig};
-    a.max_W = {-kBig, -kBig, -kBig};
-    std::size_t triangles = 0;
-    for (const pb::Mesh& mesh : w.meshes()) {
-      triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
-      for (int i = 0; i + 2 < mesh.vertices_size(); i += 3) {
-        const Vec3 v{mesh.vertices(i), mesh.vertices(i + 1), mesh.vertices(i + 2)};
-        a.min_W = {std::min(a.min_W.x, v.x), std::min(a.min_W.y, v.y), std::min(a.min_W.z, v.z)};
-        a.max_W = {std::max(a.max_W.x, v.x), std::max(a.max_W.y, v.y), std::max(a.max_W.z, v.z)};
-      }
-    }
-    spdlog::info("vdyn-viewer: world '{}' of server '{}': {} meshes, {} triangles, {} landmarks",
-                 w.name(), w.server_id(), w.meshes_size(), triangles, w.landmarks_size());
+    AcceptWorld(w);
   };
   m.session.on_state = [this](const pb::VehicleState& s, const transport::SampleInfo&) {
     const std::string why = CheckState(s);
@@ -293,23 +266,65 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
     }
   };
   m.session.on_input = [this](const pb::DriverInput& in, const transport::SampleInfo&) {
-    Impl& im = *impl_;
-    std::uint32_t& prev = im.buttons[{in.vehicle_id(), in.source_id()}];
-    const std::uint32_t pressed = in.buttons() & ~prev;
-    prev = in.buttons();
-    // The paddles of the followed vehicle's driver (any vehicle's while none is followed).
-    if (followed_ && *followed_ != in.vehicle_id()) return;
-    int turn = 0;
-    if (pressed & pb::BUTTON_PADDLE_LEFT) ++turn;
-    if (pressed & pb::BUTTON_PADDLE_RIGHT) --turn;
-    if (turn != 0) {
-      TurnGeographic(options_.camera, turn);
-      ++stats_.paddle_presses;
-      spdlog::info("vdyn-viewer: paddle {} from '{}': geographic camera at {:.0f} deg from north",
-                   turn > 0 ? "left" : "right", in.source_id(), Deg(options_.camera.geo_turn));
-    }
+    HandlePaddles(in);
   };
+  OpenWindow();
+  StartRenderer();
+  StartImGui();
+  m.params = std::make_unique<ParamsEditor>(m.participant, options_.client_id);
+  StartHeadset();
+}
 
+void Viewer::AcceptWorld(const pb::WorldDescription& w) {
+  Impl& im = *impl_;
+  const std::string why = CheckWorld(w);
+  if (!why.empty()) {
+    ++stats_.worlds_refused;
+    stats_.last_refusal = "world '" + w.name() + "' of server '" + w.server_id() + "': " + why;
+    im.session.drops().Count("world refused by the viewer", why);
+    spdlog::warn("vdyn-viewer: refused {}; keeping the world drawn before", stats_.last_refusal);
+    return;
+  }
+  ++stats_.worlds_accepted;
+  AcceptedWorld& a = im.worlds[w.server_id()];
+  a.desc = w;
+  ++a.serial;
+  constexpr double kBig = 1e300;
+  a.min_W = {kBig, kBig, kBig};
+  a.max_W = {-kBig, -kBig, -kBig};
+  std::size_t triangles = 0;
+  for (const pb::Mesh& mesh : w.meshes()) {
+    triangles += static_cast<std::size_t>(mesh.indices_size() / 3);
+    for (int i = 0; i + 2 < mesh.vertices_size(); i += 3) {
+      const Vec3 v{mesh.vertices(i), mesh.vertices(i + 1), mesh.vertices(i + 2)};
+      a.min_W = {std::min(a.min_W.x, v.x), std::min(a.min_W.y, v.y), std::min(a.min_W.z, v.z)};
+      a.max_W = {std::max(a.max_W.x, v.x), std::max(a.max_W.y, v.y), std::max(a.max_W.z, v.z)};
+    }
+  }
+  spdlog::info("vdyn-viewer: world '{}' of server '{}': {} meshes, {} triangles, {} landmarks",
+               w.name(), w.server_id(), w.meshes_size(), triangles, w.landmarks_size());
+}
+
+void Viewer::HandlePaddles(const pb::DriverInput& in) {
+  Impl& im = *impl_;
+  std::uint32_t& prev = im.buttons[{in.vehicle_id(), in.source_id()}];
+  const std::uint32_t pressed = in.buttons() & ~prev;
+  prev = in.buttons();
+  // The paddles of the followed vehicle's driver (any vehicle's while none is followed).
+  if (followed_ && *followed_ != in.vehicle_id()) return;
+  int turn = 0;
+  if (pressed & pb::BUTTON_PADDLE_LEFT) ++turn;
+  if (pressed & pb::BUTTON_PADDLE_RIGHT) --turn;
+  if (turn != 0) {
+    TurnGeographic(options_.camera, turn);
+    ++stats_.paddle_presses;
+    spdlog::info("vdyn-viewer: paddle {} from '{}': geographic camera at {:.0f} deg from north",
+                 turn > 0 ? "left" : "right", in.source_id(), Deg(options_.camera.geo_turn));
+  }
+}
+
+void Viewer::OpenWindow() {
+  Impl& m = *impl_;
   // Window and OpenGL 3.3 core.
   SDL_SetHint(SDL_HINT_VIDEO_X11_FORCE_EGL, "0");  // GLX: OpenXR's Xlib binding needs it
   if (std::getenv("WAYLAND_DISPLAY") == nullptr && std::getenv("XDG_RUNTIME_DIR") == nullptr) {
@@ -356,7 +371,10 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   spdlog::info("vdyn-viewer: OpenGL {} on {} (SDL video: {})",
                reinterpret_cast<const char*>(glGetString(GL_VERSION)), stats_.renderer,
                SDL_GetCurrentVideoDriver());
+}
 
+void Viewer::StartRenderer() {
+  Impl& m = *impl_;
   if (options_.samples < 0) {
     // Multisampling doubles the frame time of a software renderer: off there unless asked for.
     const bool software = stats_.renderer.find("llvmpipe") != std::string::npos ||
@@ -374,7 +392,10 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   }
   m.desktop = std::make_unique<RenderTarget>();
   m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+}
 
+void Viewer::StartImGui() {
+  Impl& m = *impl_;
   IMGUI_CHECKVERSION();
   ImGui::CreateContext();
   ImGuiIO& io = ImGui::GetIO();
@@ -385,9 +406,11 @@ Viewer::Viewer(ViewerOptions options) : options_(std::move(options)) {
   ImGui_ImplSDL2_InitForOpenGL(m.window, m.gl);
   ImGui_ImplOpenGL3_Init("#version 330 core");
   m.imgui_ready = true;
+}
 
-  m.params = std::make_unique<ParamsEditor>(m.participant, options_.client_id);
-
+void Viewer::StartHeadset() {
+  Impl& m = *impl_;
+  ImGuiIO& io = ImGui::GetIO();
   stats_.xr_status = "off";
   if (options_.xr) {
     XrOptions xo;
@@ -487,10 +510,6 @@ const std::vector<Viewer::ShownLabel>& Viewer::labels() const {
 
 const std::vector<LabelBox>& Viewer::hud_boxes() const {
   return impl_->hud_boxes;
-}
-
-void Viewer::RecentreHeadset() {
-  impl_->recentre_pending = true;
 }
 
 Image Viewer::Screenshot() const {
@@ -911,7 +930,7 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
     const double px_per_m = 1.0 / std::max(radius_at(v.pose_WB.t) / 1.6, 1e-6);
     AppendVehicle(v, o.arrows, radius_at, true, px_per_m < 40.0, lists);
   }
-  if (f.world != nullptr) {
+  if (f.world != nullptr && o.landmarks) {
     // Landmarks: a small marker on the ground (their names are labels on the desktop).
     for (const pb::Landmark& l : f.world->landmarks()) {
       const Vec3 p{l.p_w().x(), l.p_w().y(), l.p_w().z()};
@@ -1009,6 +1028,7 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
         "     (the wheel's paddle shifters do the same)\n"
         "Tab  next vehicle (Shift: previous)\n"
         "+/-  arrow scale     L forces legend   P parameters   H HUD\n"
+        "M    landmarks (the world's named points) on / off\n"
         "drag orbit   wheel zoom   F12 screenshot   Esc quit");
     Occupied();
     ImGui::End();
@@ -1141,7 +1161,7 @@ void Viewer::Impl::HudLabels(const FrameScene& f) {
     if (own && f.camera.mode == CameraMode::kDriver) continue;  // not drawn from its own seat
     ask(Format("#%u", id), v.pose_WB * Vec3{0, 0, 1.6}, own ? 2 : 1, ImColour(VehicleColour(id)));
   }
-  if (f.world != nullptr) {
+  if (f.world != nullptr && o.landmarks) {
     for (const pb::Landmark& l : f.world->landmarks()) {
       ask(l.name(), {l.p_w().x(), l.p_w().y(), l.p_w().z() + 1.0}, 0, IM_COL32(255, 255, 255, 255));
     }
@@ -1185,6 +1205,7 @@ void Viewer::Impl::ApplyKeys() {
     if (k == SDLK_PLUS || k == SDLK_EQUALS || k == SDLK_KP_PLUS) o.arrows.metres_per_newton *= 1.25;
     if (k == SDLK_MINUS || k == SDLK_KP_MINUS) o.arrows.metres_per_newton /= 1.25;
     if (k == SDLK_h) o.hud = !o.hud;
+    if (k == SDLK_m) o.landmarks = !o.landmarks;
     if (k == SDLK_p) show_params = !show_params;
     if (k == SDLK_l) legend_open = !legend_open;
     if (k == SDLK_F1) show_help = !show_help;

@@ -319,7 +319,73 @@ TerrainData TerrainFromWorld(const pb::WorldDescription& world) {
   }
   if (t.meshes.empty()) t.min_W = t.max_W = Vec3{};
   if (!t.has_ground) t.ground_min_W = t.ground_max_W = Vec3{};
+  const Vec3 middle = 0.5 * (t.min_W + t.max_W);
+  for (TerrainMesh& m : t.meshes) {
+    if (m.style == SurfaceStyle::kPainted) m.poster = PosterFaceOf(m.vertices, m.indices, middle);
+  }
   return t;
+}
+
+PosterFace PosterFaceOf(const std::vector<TerrainVertex>& vertices,
+                        const std::vector<std::uint32_t>& indices, const Vec3& towards_W,
+                        double min_area_m2) {
+  // The vertical triangles grouped by their plane (the normal's heading in whole degrees, the
+  // plane's offset in centimetres): each group's area and members.
+  struct Group {
+    double area = 0;
+    Vec3 n;
+    std::vector<std::uint32_t> corners;
+  };
+  std::map<std::pair<std::int64_t, std::int64_t>, Group> groups;
+  auto pos = [&](std::uint32_t i) {
+    const TerrainVertex& v = vertices[i];
+    return Vec3{v.p[0], v.p[1], v.p[2]};
+  };
+  for (std::size_t k = 0; k + 2 < indices.size(); k += 3) {
+    const Vec3 a = pos(indices[k]), b = pos(indices[k + 1]), c = pos(indices[k + 2]);
+    const Vec3 cr = Cross(b - a, c - a);
+    const double area = 0.5 * Norm(cr);
+    if (area < 1e-9) continue;
+    const Vec3 n = cr / (2 * area);
+    if (std::abs(n.z) > 0.05) continue;  // not vertical
+    // Only faces whose outside (by their winding, as the shader tells front from back) looks
+    // towards the middle of the world: the panel's back is plain.
+    if (Dot(n, towards_W - a) <= 0) continue;
+    const double heading = std::atan2(n.y, n.x);
+    const std::pair<std::int64_t, std::int64_t> key{std::llround(Deg(heading)),
+                                                    std::llround(Dot(n, a) * 100)};
+    Group& g = groups[key];
+    g.area += area;
+    g.n = n;
+    g.corners.insert(g.corners.end(), {indices[k], indices[k + 1], indices[k + 2]});
+  }
+  const Group* best = nullptr;
+  for (const auto& [key, g] : groups) {
+    if (best == nullptr || g.area > best->area) best = &g;
+  }
+  PosterFace f;
+  if (best == nullptr || best->area < min_area_m2) return f;
+  // Seen from the front (looking along -n, up is z), right is -n x z.
+  f.right_W = Normalized(Vec3{-best->n.y, best->n.x, 0});
+  constexpr double kBig = std::numeric_limits<double>::max();
+  double u0 = kBig, u1 = -kBig, z0 = kBig, z1 = -kBig;
+  Vec3 any;
+  for (std::uint32_t i : best->corners) {
+    const Vec3 p = pos(i);
+    any = p;
+    u0 = std::min(u0, Dot(p, f.right_W));
+    u1 = std::max(u1, Dot(p, f.right_W));
+    z0 = std::min(z0, p.z);
+    z1 = std::max(z1, p.z);
+  }
+  // The lower left corner: on the plane, at u0 along right, z0 up.
+  const double offset = Dot(best->n, any);
+  f.origin_W = best->n * offset + f.right_W * u0;
+  f.origin_W.z = z0;
+  f.width_m = u1 - u0;
+  f.height_m = z1 - z0;
+  f.present = true;
+  return f;
 }
 
 SurfaceLook LookOf(pb::SurfaceKind kind) {

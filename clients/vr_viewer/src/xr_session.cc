@@ -22,14 +22,6 @@
 
 namespace vdyn::viewer {
 
-Mat3 XrAxesIn(const Mat3& f) {
-  Mat3 r;
-  r.c[0] = -f.c[1];
-  r.c[1] = f.c[2];
-  r.c[2] = -f.c[0];
-  return r;
-}
-
 namespace {
 
 // A zeroed OpenXR structure of its type.
@@ -156,6 +148,15 @@ struct Headset::Impl {
   bool head_known = false;
   std::uint64_t space_changes = 0;
 
+  // The constructor's stages, in order.
+  void CreateInstance();      // an instance with OpenGL, on the runtime's headset system
+  void CheckOpenGlVersion();  // the runtime's OpenGL requirements against this context
+  void CreateSession();       // the session on the current GLX context
+  void CreateSpaces();        // the place's reference space (seated or standing) and the head's
+  void ReadViews();           // the two eyes' recommended sizes
+  void ChooseFormat();        // an sRGB swapchain format whenever the runtime offers one
+  void CreateSwapchains();    // the eyes', the HUD's and the desktop mirror's
+
   void Check(XrResult r, const char* what) const {
     if (XR_FAILED(r)) throw XrError(std::string("OpenXR ") + what + ": " + ResultName(instance, r));
   }
@@ -218,6 +219,187 @@ struct Headset::Impl {
   }
 };
 
+void Headset::Impl::CreateInstance() {
+  // The runtime must offer OpenGL.
+  std::uint32_t n = 0;
+  XrResult r = xrEnumerateInstanceExtensionProperties(nullptr, 0, &n, nullptr);
+  if (XR_FAILED(r)) {
+    throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
+                  "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
+  }
+  std::vector<XrExtensionProperties> exts(
+      n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
+  Check(xrEnumerateInstanceExtensionProperties(nullptr, n, &n, exts.data()),
+        "xrEnumerateInstanceExtensionProperties");
+  bool has_gl = false, has_timespec = false;
+  for (const auto& e : exts) {
+    has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
+    has_timespec |= std::strcmp(e.extensionName, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME) == 0;
+  }
+  if (!has_gl) throw XrError("the OpenXR runtime does not offer XR_KHR_opengl_enable");
+
+  auto ici = XrStruct<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
+  std::strncpy(ici.applicationInfo.applicationName, "vdyn-viewer",
+               XR_MAX_APPLICATION_NAME_SIZE - 1);
+  ici.applicationInfo.applicationVersion = 1;
+  std::strncpy(ici.applicationInfo.engineName, "vdyn", XR_MAX_ENGINE_NAME_SIZE - 1);
+  ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
+  // The display time of a frame in this machine's clock (for drawing the scene at that instant).
+  const char* enabled[] = {XR_KHR_OPENGL_ENABLE_EXTENSION_NAME,
+                           XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME};
+  ici.enabledExtensionCount = has_timespec ? 2 : 1;
+  ici.enabledExtensionNames = enabled;
+  r = xrCreateInstance(&ici, &instance);
+  if (XR_FAILED(r)) {
+    throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
+                  "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
+  }
+  if (has_timespec) {
+    Check(xrGetInstanceProcAddr(instance, "xrConvertTimeToTimespecTimeKHR",
+                                reinterpret_cast<PFN_xrVoidFunction*>(&to_timespec)),
+          "xrGetInstanceProcAddr(xrConvertTimeToTimespecTimeKHR)");
+  }
+  auto ip = XrStruct<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
+  Check(xrGetInstanceProperties(instance, &ip), "xrGetInstanceProperties");
+  runtime = ip.runtimeName;
+
+  auto sgi = XrStruct<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
+  sgi.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
+  r = xrGetSystem(instance, &sgi, &system);
+  if (XR_FAILED(r)) {
+    throw XrError("OpenXR runtime '" + runtime + "' has no headset (" + ResultName(instance, r) +
+                  "): is one connected?");
+  }
+}
+
+void Headset::Impl::CheckOpenGlVersion() {
+  // The runtime's OpenGL requirements, which must be asked before the session is created.
+  PFN_xrGetOpenGLGraphicsRequirementsKHR get_reqs = nullptr;
+  Check(xrGetInstanceProcAddr(instance, "xrGetOpenGLGraphicsRequirementsKHR",
+                              reinterpret_cast<PFN_xrVoidFunction*>(&get_reqs)),
+        "xrGetInstanceProcAddr(xrGetOpenGLGraphicsRequirementsKHR)");
+  auto reqs = XrStruct<XrGraphicsRequirementsOpenGLKHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_OPENGL_KHR);
+  Check(get_reqs(instance, system, &reqs), "xrGetOpenGLGraphicsRequirementsKHR");
+  const int gl_version = epoxy_gl_version();  // e.g. 45
+  const XrVersion have = XR_MAKE_VERSION(gl_version / 10, gl_version % 10, 0);
+  if (have < reqs.minApiVersionSupported) {
+    throw XrError("OpenXR runtime needs OpenGL " +
+                  std::to_string(XR_VERSION_MAJOR(reqs.minApiVersionSupported)) + "." +
+                  std::to_string(XR_VERSION_MINOR(reqs.minApiVersionSupported)) +
+                  ", this context has " + std::to_string(gl_version / 10) + "." +
+                  std::to_string(gl_version % 10));
+  }
+}
+
+void Headset::Impl::CreateSession() {
+  // The Xlib binding of the current GLX context.
+  auto binding = XrStruct<XrGraphicsBindingOpenGLXlibKHR>(XR_TYPE_GRAPHICS_BINDING_OPENGL_XLIB_KHR);
+  binding.xDisplay = glXGetCurrentDisplay();
+  binding.glxContext = glXGetCurrentContext();
+  binding.glxDrawable = glXGetCurrentDrawable();
+  if (binding.xDisplay == nullptr || binding.glxContext == nullptr) {
+    throw XrError("no current GLX context for OpenXR (the window does not use GLX)");
+  }
+  int fb_id = 0;
+  glXQueryContext(binding.xDisplay, binding.glxContext, GLX_FBCONFIG_ID, &fb_id);
+  const int attribs[] = {GLX_FBCONFIG_ID, fb_id, 0};
+  int count = 0;
+  GLXFBConfig* configs =
+      glXChooseFBConfig(binding.xDisplay, DefaultScreen(binding.xDisplay), attribs, &count);
+  if (configs != nullptr && count > 0) {
+    binding.glxFBConfig = configs[0];
+    if (XVisualInfo* vi = glXGetVisualFromFBConfig(binding.xDisplay, configs[0])) {
+      binding.visualid = static_cast<std::uint32_t>(vi->visualid);
+      XFree(vi);
+    }
+  }
+  if (configs != nullptr) XFree(configs);
+
+  auto sci = XrStruct<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
+  sci.next = &binding;
+  sci.systemId = system;
+  Check(xrCreateSession(instance, &sci, &session), "xrCreateSession");
+}
+
+void Headset::Impl::CreateSpaces() {
+  // Reference spaces.
+  std::uint32_t ns = 0;
+  Check(xrEnumerateReferenceSpaces(session, 0, &ns, nullptr), "xrEnumerateReferenceSpaces");
+  std::vector<XrReferenceSpaceType> spaces(ns);
+  Check(xrEnumerateReferenceSpaces(session, ns, &ns, spaces.data()), "xrEnumerateReferenceSpaces");
+  XrReferenceSpaceType type = XR_REFERENCE_SPACE_TYPE_LOCAL;
+  if (!options.seated) {
+    bool stage = false;
+    for (auto s : spaces) stage |= s == XR_REFERENCE_SPACE_TYPE_STAGE;
+    if (stage) {
+      type = XR_REFERENCE_SPACE_TYPE_STAGE;
+    } else {
+      standing_on_local = true;
+    }
+  }
+  auto rci = XrStruct<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
+  rci.referenceSpaceType = type;
+  rci.poseInReferenceSpace.orientation.w = 1;
+  Check(xrCreateReferenceSpace(session, &rci, &space), "xrCreateReferenceSpace");
+  rci.referenceSpaceType = XR_REFERENCE_SPACE_TYPE_VIEW;
+  Check(xrCreateReferenceSpace(session, &rci, &view_space), "xrCreateReferenceSpace(VIEW)");
+}
+
+void Headset::Impl::ReadViews() {
+  // Stereo views and their swapchains.
+  std::uint32_t nv = 0;
+  Check(xrEnumerateViewConfigurationViews(
+            instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &nv, nullptr),
+        "xrEnumerateViewConfigurationViews");
+  if (nv != 2)
+    throw XrError("OpenXR runtime offers " + std::to_string(nv) + " stereo views, not 2");
+  config_views.fill(XrStruct<XrViewConfigurationView>(XR_TYPE_VIEW_CONFIGURATION_VIEW));
+  Check(
+      xrEnumerateViewConfigurationViews(instance, system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO,
+                                        2, &nv, config_views.data()),
+      "xrEnumerateViewConfigurationViews");
+}
+
+void Headset::Impl::ChooseFormat() {
+  std::uint32_t nf = 0;
+  Check(xrEnumerateSwapchainFormats(session, 0, &nf, nullptr), "xrEnumerateSwapchainFormats");
+  std::vector<std::int64_t> formats(nf);
+  Check(xrEnumerateSwapchainFormats(session, nf, &nf, formats.data()),
+        "xrEnumerateSwapchainFormats");
+  // The renderer writes sRGB-encoded colour (its shaders encode; GL_FRAMEBUFFER_SRGB stays
+  // off, so the bytes are stored as written). OpenXR treats every non-sRGB format as linear
+  // and the compositor encodes it again (issue 35: washed out on Monado, the road's median 142
+  // against 69), so an sRGB format is chosen whenever the runtime offers one.
+  const auto offered = [&](std::int64_t f) {
+    return std::find(formats.begin(), formats.end(), f) != formats.end();
+  };
+  if (offered(kGlSrgb8Alpha8)) {
+    format = kGlSrgb8Alpha8;
+  } else if (offered(kGlRgba8)) {
+    format = kGlRgba8;
+    spdlog::warn(
+        "OpenXR: runtime '{}' offers no sRGB swapchain format (GL_SRGB8_ALPHA8): the "
+        "headset will show the colours lighter than the desktop window",
+        runtime);
+  } else {
+    throw XrError("OpenXR runtime offers neither GL_SRGB8_ALPHA8 nor GL_RGBA8 swapchains");
+  }
+}
+
+void Headset::Impl::CreateSwapchains() {
+  for (int e = 0; e < 2; ++e) {
+    const auto& cv = config_views[static_cast<std::size_t>(e)];
+    CreateSwapchain(eyes[static_cast<std::size_t>(e)],
+                    static_cast<int>(cv.recommendedImageRectWidth),
+                    static_cast<int>(cv.recommendedImageRectHeight), 1, options.samples);
+  }
+  if (options.hud) CreateSwapchain(hud, options.hud_width, options.hud_height, 1, 0);
+  mirror.Resize(eyes[0].width, eyes[0].height, 0);
+  spdlog::info("OpenXR: runtime '{}', {}x{} per eye, {} space{}", runtime, eyes[0].width,
+               eyes[0].height, options.seated ? "seated (LOCAL)" : "standing",
+               standing_on_local ? " on LOCAL (the runtime has no STAGE)" : "");
+}
+
 Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
   Impl& x = *impl_;
   x.options = options;
@@ -226,173 +408,13 @@ Headset::Headset(const XrOptions& options) : impl_(std::make_unique<Impl>()) {
   // (e.g. to "error" or "all") brings them back.
   setenv("XR_LOADER_DEBUG", "none", 0);
   try {
-    // The runtime must offer OpenGL.
-    std::uint32_t n = 0;
-    XrResult r = xrEnumerateInstanceExtensionProperties(nullptr, 0, &n, nullptr);
-    if (XR_FAILED(r)) {
-      throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
-                    "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
-    }
-    std::vector<XrExtensionProperties> exts(
-        n, XrStruct<XrExtensionProperties>(XR_TYPE_EXTENSION_PROPERTIES));
-    x.Check(xrEnumerateInstanceExtensionProperties(nullptr, n, &n, exts.data()),
-            "xrEnumerateInstanceExtensionProperties");
-    bool has_gl = false, has_timespec = false;
-    for (const auto& e : exts) {
-      has_gl |= std::strcmp(e.extensionName, XR_KHR_OPENGL_ENABLE_EXTENSION_NAME) == 0;
-      has_timespec |=
-          std::strcmp(e.extensionName, XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME) == 0;
-    }
-    if (!has_gl) throw XrError("the OpenXR runtime does not offer XR_KHR_opengl_enable");
-
-    auto ici = XrStruct<XrInstanceCreateInfo>(XR_TYPE_INSTANCE_CREATE_INFO);
-    std::strncpy(ici.applicationInfo.applicationName, "vdyn-viewer",
-                 XR_MAX_APPLICATION_NAME_SIZE - 1);
-    ici.applicationInfo.applicationVersion = 1;
-    std::strncpy(ici.applicationInfo.engineName, "vdyn", XR_MAX_ENGINE_NAME_SIZE - 1);
-    ici.applicationInfo.apiVersion = XR_CURRENT_API_VERSION;
-    // The display time of a frame in this machine's clock (for drawing the scene at that instant).
-    const char* enabled[] = {XR_KHR_OPENGL_ENABLE_EXTENSION_NAME,
-                             XR_KHR_CONVERT_TIMESPEC_TIME_EXTENSION_NAME};
-    ici.enabledExtensionCount = has_timespec ? 2 : 1;
-    ici.enabledExtensionNames = enabled;
-    r = xrCreateInstance(&ici, &x.instance);
-    if (XR_FAILED(r)) {
-      throw XrError("no OpenXR runtime (" + ResultName(XR_NULL_HANDLE, r) +
-                    "): install one (Monado, SteamVR) or point XR_RUNTIME_JSON at its manifest");
-    }
-    if (has_timespec) {
-      x.Check(xrGetInstanceProcAddr(x.instance, "xrConvertTimeToTimespecTimeKHR",
-                                    reinterpret_cast<PFN_xrVoidFunction*>(&x.to_timespec)),
-              "xrGetInstanceProcAddr(xrConvertTimeToTimespecTimeKHR)");
-    }
-    auto ip = XrStruct<XrInstanceProperties>(XR_TYPE_INSTANCE_PROPERTIES);
-    x.Check(xrGetInstanceProperties(x.instance, &ip), "xrGetInstanceProperties");
-    x.runtime = ip.runtimeName;
-
-    auto sgi = XrStruct<XrSystemGetInfo>(XR_TYPE_SYSTEM_GET_INFO);
-    sgi.formFactor = XR_FORM_FACTOR_HEAD_MOUNTED_DISPLAY;
-    r = xrGetSystem(x.instance, &sgi, &x.system);
-    if (XR_FAILED(r)) {
-      throw XrError("OpenXR runtime '" + x.runtime + "' has no headset (" +
-                    ResultName(x.instance, r) + "): is one connected?");
-    }
-
-    // The runtime's OpenGL requirements, which must be asked before the session is created.
-    PFN_xrGetOpenGLGraphicsRequirementsKHR get_reqs = nullptr;
-    x.Check(xrGetInstanceProcAddr(x.instance, "xrGetOpenGLGraphicsRequirementsKHR",
-                                  reinterpret_cast<PFN_xrVoidFunction*>(&get_reqs)),
-            "xrGetInstanceProcAddr(xrGetOpenGLGraphicsRequirementsKHR)");
-    auto reqs = XrStruct<XrGraphicsRequirementsOpenGLKHR>(XR_TYPE_GRAPHICS_REQUIREMENTS_OPENGL_KHR);
-    x.Check(get_reqs(x.instance, x.system, &reqs), "xrGetOpenGLGraphicsRequirementsKHR");
-    const int gl_version = epoxy_gl_version();  // e.g. 45
-    const XrVersion have = XR_MAKE_VERSION(gl_version / 10, gl_version % 10, 0);
-    if (have < reqs.minApiVersionSupported) {
-      throw XrError("OpenXR runtime needs OpenGL " +
-                    std::to_string(XR_VERSION_MAJOR(reqs.minApiVersionSupported)) + "." +
-                    std::to_string(XR_VERSION_MINOR(reqs.minApiVersionSupported)) +
-                    ", this context has " + std::to_string(gl_version / 10) + "." +
-                    std::to_string(gl_version % 10));
-    }
-
-    // The Xlib binding of the current GLX context.
-    auto binding =
-        XrStruct<XrGraphicsBindingOpenGLXlibKHR>(XR_TYPE_GRAPHICS_BINDING_OPENGL_XLIB_KHR);
-    binding.xDisplay = glXGetCurrentDisplay();
-    binding.glxContext = glXGetCurrentContext();
-    binding.glxDrawable = glXGetCurrentDrawable();
-    if (binding.xDisplay == nullptr || binding.glxContext == nullptr) {
-      throw XrError("no current GLX context for OpenXR (the window does not use GLX)");
-    }
-    int fb_id = 0;
-    glXQueryContext(binding.xDisplay, binding.glxContext, GLX_FBCONFIG_ID, &fb_id);
-    const int attribs[] = {GLX_FBCONFIG_ID, fb_id, 0};
-    int count = 0;
-    GLXFBConfig* configs =
-        glXChooseFBConfig(binding.xDisplay, DefaultScreen(binding.xDisplay), attribs, &count);
-    if (configs != nullptr && count > 0) {
-      binding.glxFBConfig = configs[0];
-      if (XVisualInfo* vi = glXGetVisualFromFBConfig(binding.xDisplay, configs[0])) {
-        binding.visualid = static_cast<std::uint32_t>(vi->visualid);
-        XFree(vi);
-      }
-    }
-    if (configs != nullptr) XFree(configs);
-
-    auto sci = XrStruct<XrSessionCreateInfo>(XR_TYPE_SESSION_CREATE_INFO);
-    sci.next = &binding;
-    sci.systemId = x.system;
-    x.Check(xrCreateSession(x.instance, &sci, &x.session), "xrCreateSession");
-
-    // Reference spaces.
-    std::uint32_t ns = 0;
-    x.Check(xrEnumerateReferenceSpaces(x.session, 0, &ns, nullptr), "xrEnumerateReferenceSpaces");
-    std::vector<XrReferenceSpaceType> spaces(ns);
-    x.Check(xrEnumerateReferenceSpaces(x.session, ns, &ns, spaces.data()),
-            "xrEnumerateReferenceSpaces");
-    XrReferenceSpaceType type = XR_REFERENCE_SPACE_TYPE_LOCAL;
-    if (!options.seated) {
-      bool stage = false;
-      for (auto s : spaces) stage |= s == XR_REFERENCE_SPACE_TYPE_STAGE;
-      if (stage) {
-        type = XR_REFERENCE_SPACE_TYPE_STAGE;
-      } else {
-        x.standing_on_local = true;
-      }
-    }
-    auto rci = XrStruct<XrReferenceSpaceCreateInfo>(XR_TYPE_REFERENCE_SPACE_CREATE_INFO);
-    rci.referenceSpaceType = type;
-    rci.poseInReferenceSpace.orientation.w = 1;
-    x.Check(xrCreateReferenceSpace(x.session, &rci, &x.space), "xrCreateReferenceSpace");
-    rci.referenceSpaceType = XR_REFERENCE_SPACE_TYPE_VIEW;
-    x.Check(xrCreateReferenceSpace(x.session, &rci, &x.view_space), "xrCreateReferenceSpace(VIEW)");
-
-    // Stereo views and their swapchains.
-    std::uint32_t nv = 0;
-    x.Check(xrEnumerateViewConfigurationViews(
-                x.instance, x.system, XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 0, &nv, nullptr),
-            "xrEnumerateViewConfigurationViews");
-    if (nv != 2)
-      throw XrError("OpenXR runtime offers " + std::to_string(nv) + " stereo views, not 2");
-    x.config_views.fill(XrStruct<XrViewConfigurationView>(XR_TYPE_VIEW_CONFIGURATION_VIEW));
-    x.Check(xrEnumerateViewConfigurationViews(x.instance, x.system,
-                                              XR_VIEW_CONFIGURATION_TYPE_PRIMARY_STEREO, 2, &nv,
-                                              x.config_views.data()),
-            "xrEnumerateViewConfigurationViews");
-    std::uint32_t nf = 0;
-    x.Check(xrEnumerateSwapchainFormats(x.session, 0, &nf, nullptr), "xrEnumerateSwapchainFormats");
-    std::vector<std::int64_t> formats(nf);
-    x.Check(xrEnumerateSwapchainFormats(x.session, nf, &nf, formats.data()),
-            "xrEnumerateSwapchainFormats");
-    // The renderer writes sRGB-encoded colour (its shaders encode; GL_FRAMEBUFFER_SRGB stays
-    // off, so the bytes are stored as written). OpenXR treats every non-sRGB format as linear
-    // and the compositor encodes it again (issue 35: washed out on Monado, the road's median 142
-    // against 69), so an sRGB format is chosen whenever the runtime offers one.
-    const auto offered = [&](std::int64_t f) {
-      return std::find(formats.begin(), formats.end(), f) != formats.end();
-    };
-    if (offered(kGlSrgb8Alpha8)) {
-      x.format = kGlSrgb8Alpha8;
-    } else if (offered(kGlRgba8)) {
-      x.format = kGlRgba8;
-      spdlog::warn(
-          "OpenXR: runtime '{}' offers no sRGB swapchain format (GL_SRGB8_ALPHA8): the "
-          "headset will show the colours lighter than the desktop window",
-          x.runtime);
-    } else {
-      throw XrError("OpenXR runtime offers neither GL_SRGB8_ALPHA8 nor GL_RGBA8 swapchains");
-    }
-    for (int e = 0; e < 2; ++e) {
-      const auto& cv = x.config_views[static_cast<std::size_t>(e)];
-      x.CreateSwapchain(x.eyes[static_cast<std::size_t>(e)],
-                        static_cast<int>(cv.recommendedImageRectWidth),
-                        static_cast<int>(cv.recommendedImageRectHeight), 1, options.samples);
-    }
-    if (options.hud) x.CreateSwapchain(x.hud, options.hud_width, options.hud_height, 1, 0);
-    x.mirror.Resize(x.eyes[0].width, x.eyes[0].height, 0);
-    spdlog::info("OpenXR: runtime '{}', {}x{} per eye, {} space{}", x.runtime, x.eyes[0].width,
-                 x.eyes[0].height, options.seated ? "seated (LOCAL)" : "standing",
-                 x.standing_on_local ? " on LOCAL (the runtime has no STAGE)" : "");
+    x.CreateInstance();
+    x.CheckOpenGlVersion();
+    x.CreateSession();
+    x.CreateSpaces();
+    x.ReadViews();
+    x.ChooseFormat();
+    x.CreateSwapchains();
   } catch (...) {
     x.Destroy();
     throw;

@@ -2,6 +2,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "vdyn/base/deadline.h"
+
 namespace vdyn::wheel_input {
 
 DdsLink::DdsLink(transport::Participant& participant, std::uint32_t vehicle_id,
@@ -56,14 +58,13 @@ const pb::VehicleParams* DdsLink::params() const {
 }
 
 bool DdsLink::WaitForParams(std::chrono::nanoseconds timeout) {
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  while (params() == nullptr) {
-    const auto now = std::chrono::steady_clock::now();
-    if (now >= deadline) return false;
-    (void)view_.Wait(std::min<std::chrono::nanoseconds>(deadline - now, std::chrono::milliseconds(50)));
-    view_.Poll();
-  }
-  return true;
+  return base::PollUntil(
+      base::Deadline::After(base::Nanos{timeout.count()}), base::Milliseconds(50),
+      [&] {
+        view_.Poll();
+        return params() != nullptr;
+      },
+      [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
 }
 
 void DdsLink::RequestReset() {

@@ -6,28 +6,15 @@
 #include <fstream>
 #include <sstream>
 
-#include <google/protobuf/io/tokenizer.h>
 #include <google/protobuf/text_format.h>
 
 #include "vdyn/base/limits.h"
+#include "vdyn/messages/text_format.h"
 
 namespace vdyn::wheel_input {
 namespace {
 
 namespace gp = google::protobuf;
-
-class CollectErrors : public gp::io::ErrorCollector {
- public:
-  void AddError(int line, gp::io::ColumnNumber column, const std::string& message) override {
-    if (!text.empty()) text += "; ";
-    text += "line " + std::to_string(line + 1) + ", column " + std::to_string(column + 1) + ": " +
-            message;
-  }
-  void AddWarning(int line, gp::io::ColumnNumber column, const std::string& message) override {
-    AddError(line, column, "warning: " + message);
-  }
-  std::string text;
-};
 
 // A pedal's travel must span at least this many raw units: a calibration that saw no movement
 // would otherwise divide by (almost) zero.
@@ -204,13 +191,8 @@ std::vector<std::string> ValidateMapping(const pb::WheelMapping& m, int axes, in
 
 pb::WheelMapping ParseMappingText(const std::string& text, const std::string& source) {
   pb::WheelMapping m;
-  gp::TextFormat::Parser parser;
-  CollectErrors errors;
-  parser.RecordErrorsTo(&errors);
-  if (!parser.ParseFromString(text, &m)) {
-    throw MappingError(source + ": " +
-                       (errors.text.empty() ? std::string("cannot parse") : errors.text));
-  }
+  std::string errors;
+  if (!messages::ParseTextFormat(text, m, &errors)) throw MappingError(source + ": " + errors);
   const auto why = ValidateMapping(m);
   if (!why.empty()) {
     std::string all;

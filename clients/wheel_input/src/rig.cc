@@ -11,18 +11,12 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include "command_support.h"
 #include "vdyn/base/text.h"
 #include "vdyn/wheel_input/mapping.h"
 #include "vdyn/wheel_input/sdl_haptic.h"
 
 namespace vdyn::wheel_input {
-namespace {
-
-base::Nanos Period(double hz) {
-  return base::Nanos{static_cast<std::int64_t>(1e9 / hz)};
-}
-
-}  // namespace
 
 HapticFactory SdlHapticFactory() {
   return [](const WheelDevice& wheel, std::string* why) -> std::unique_ptr<HapticDevice> {
@@ -145,7 +139,7 @@ void RigLoop::Screenshot(const std::filesystem::path& path) {
 void RigLoop::PumpEvents(base::MonoTime now) {
   if (!sdl_.video()) return;
   if (now < next_events_) return;
-  next_events_ = now + Period(cfg_.events_hz);
+  next_events_ = now + LoopPeriod(cfg_.events_hz);
   SDL_Event e;
   while (SDL_PollEvent(&e) != 0) {
     switch (e.type) {
@@ -254,7 +248,7 @@ bool RigLoop::Tick(base::MonoTime now) {
   // The vehicle's newest state and parameters are taken at the force-feedback rate, just before
   // the update that plays them (the input needs only the speed and the steering ratio from them).
   if (now >= next_ffb_) {
-    const base::Nanos period = Period(cfg_.ffb_rate_hz);
+    const base::Nanos period = LoopPeriod(cfg_.ffb_rate_hz);
     next_ffb_ = next_ffb_.ns == 0 || now - next_ffb_ > period ? now + period : next_ffb_ + period;
     feed_.Poll();
     if (const pb::VehicleParams* p = feed_.params()) ApplyParams(*p, info_);
@@ -277,7 +271,7 @@ bool RigLoop::Tick(base::MonoTime now) {
   }
 
   if (window_ && now >= next_draw_) {
-    next_draw_ = now + Period(cfg_.window_hz);
+    next_draw_ = now + LoopPeriod(cfg_.window_hz);
     DrawWindow();
   }
   return !quit_;

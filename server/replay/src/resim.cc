@@ -4,14 +4,92 @@
 
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
+#include "vdyn/physics/simulator.h"
+#include "vdyn/physics/world.h"
 
 namespace vdyn {
 
+// The replay's own: its actions, where it stands, and the simulator (never handed out).
+struct VehicleReplayer::Impl {
+  struct Action {
+    enum class Kind { kSpawned, kCheckpoint, kInput, kParams, kRemoved } kind;
+    std::uint64_t step = 0;
+    State state;
+    DriverInput input;
+    std::shared_ptr<const ValidParams> params;
+    std::int64_t step_ns = 0;
+  };
+  bool Add(const pb::SessionEvent& e, std::string* error);
+  bool Apply(const Action& a, std::string* error);
+  bool Run(std::uint64_t end_step, const std::function<void(std::uint64_t, std::uint64_t)>& on_step,
+           std::string* error);
+
+  std::shared_ptr<const World> world_;
+  std::uint64_t terrain_hash_ = 0;
+  std::uint32_t vehicle_id_ = 0;
+  std::vector<Action> actions_;
+  std::size_t next_ = 0;  // the next action to apply
+  bool started_ = false;
+  std::unique_ptr<Simulator> sim_;
+};
+
+ReplayWorld ReplayWorldFrom(const pb::WorldDescription& description) {
+  ReplayWorld w;
+  w.world = WorldFromDescription(description);
+  w.terrain_hash = TerrainHash(w.world->terrain);
+  return w;
+}
+
 VehicleReplayer::VehicleReplayer(std::shared_ptr<const World> world, std::uint64_t terrain_hash,
                                  std::uint32_t vehicle_id)
-    : world_(std::move(world)), terrain_hash_(terrain_hash), vehicle_id_(vehicle_id) {}
+    : impl_(std::make_unique<Impl>()) {
+  impl_->world_ = std::move(world);
+  impl_->terrain_hash_ = terrain_hash;
+  impl_->vehicle_id_ = vehicle_id;
+}
+
+VehicleReplayer::~VehicleReplayer() = default;
 
 bool VehicleReplayer::Add(const pb::SessionEvent& e, std::string* error) {
+  return impl_->Add(e, error);
+}
+
+bool VehicleReplayer::Run(std::uint64_t end_step,
+                          const std::function<void(std::uint64_t, std::uint64_t)>& on_step,
+                          std::string* error) {
+  return impl_->Run(end_step, on_step, error);
+}
+
+std::optional<std::uint64_t> VehicleReplayer::last_step() const {
+  if (!impl_->sim_) return std::nullopt;
+  return static_cast<std::uint64_t>(impl_->sim_->last_step().step);
+}
+
+std::optional<pb::VehicleState> VehicleReplayer::StateMessage(
+    const pb::VehicleState& recorded) const {
+  if (!impl_->sim_) return std::nullopt;
+  const Simulator& sim = *impl_->sim_;
+  const StepRecord& rec = sim.last_step();
+  pb::DriverInput input = recorded.input();
+  ToProto(rec.input, input);
+  pb::VehicleState out;
+  FillVehicleState(recorded.vehicle_id(), recorded.server_id(), sim.step_ns(),
+                   recorded.sim_time_ns(), rec, input, recorded.control().watchdog_safe_state(),
+                   rec.derived.steering_torque, out);
+  out.set_incarnation(recorded.incarnation());
+  return out;
+}
+
+std::optional<VehicleReplayer::Exact> VehicleReplayer::ExactAt(std::uint64_t step) const {
+  const Simulator* sim = impl_->sim_.get();
+  if (sim == nullptr || static_cast<std::uint64_t>(sim->state().step) != step) return std::nullopt;
+  Exact e;
+  e.state = ToExactState(sim->state());
+  ToInputSample(sim->input(), static_cast<std::int64_t>(step), e.input);
+  return e;
+}
+
+bool VehicleReplayer::Impl::Add(const pb::SessionEvent& e, std::string* error) {
   const std::string who = "vehicle " + std::to_string(vehicle_id_);
   if (e.vehicle_id() != vehicle_id_) {
     *error = who + ": an event of vehicle " + std::to_string(e.vehicle_id());
@@ -80,7 +158,7 @@ bool VehicleReplayer::Add(const pb::SessionEvent& e, std::string* error) {
   return true;  // applied requests: what they changed has its own event
 }
 
-bool VehicleReplayer::Apply(const Action& a, std::string* error) {
+bool VehicleReplayer::Impl::Apply(const Action& a, std::string* error) {
   switch (a.kind) {
     case Action::Kind::kSpawned:
       if (!sim_) {
@@ -113,9 +191,9 @@ bool VehicleReplayer::Apply(const Action& a, std::string* error) {
   return false;
 }
 
-bool VehicleReplayer::Run(std::uint64_t end_step,
-                          const std::function<void(std::uint64_t, std::uint64_t)>& on_step,
-                          std::string* error) {
+bool VehicleReplayer::Impl::Run(std::uint64_t end_step,
+                                const std::function<void(std::uint64_t, std::uint64_t)>& on_step,
+                                std::string* error) {
   const std::string who = "vehicle " + std::to_string(vehicle_id_);
   std::size_t& next = next_;
   if (!started_) {
@@ -192,8 +270,8 @@ ResimResult Resimulate(std::shared_ptr<const World> world,
       }
     }
     auto& hashes = out.hashes[vehicle];
-    if (!replayer.Run(end, [&](std::uint64_t step, std::uint64_t h) { hashes[step] = h; },
-                      &out.error)) {
+    if (!replayer.Run(
+            end, [&](std::uint64_t step, std::uint64_t h) { hashes[step] = h; }, &out.error)) {
       out.ok = false;
       return out;
     }

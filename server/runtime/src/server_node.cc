@@ -264,7 +264,7 @@ void ServerNode::ClientGone(std::uint64_t writer) {
       RequestOutcome& o = it->outcome;
       o.accepted = false;
       o.why = RequestOutcome::Why::kClientGone;
-      o.n1 = it->remaining;
+      o.steps_not_run = it->remaining;
       o.sim_time_ns = session_->steps() * session_->step_ns();
       Answer(std::move(o));
       it = deferred_step_replies_.erase(it);
@@ -572,62 +572,44 @@ void ServerNode::Refuse(const pb::ControlRequest& r, const std::string& why) {
   if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();
 }
 
+// What the receiver thread keeps between its rounds.
+struct ServerNode::Receiver {
+  Receiver(transport::Participant& participant, transport::DropCounters* drops)
+      : diagnostics(participant, TopicId::kDiagnostics, drops),
+        worlds(participant, TopicId::kWorld, drops) {
+    // Every bit a Button names (vdyn/input.proto).
+    for (int i = 0; i < pb::Button_descriptor()->value_count(); ++i) {
+      known_buttons |= static_cast<std::uint32_t>(pb::Button_descriptor()->value(i)->number());
+    }
+  }
+  // What other servers on the domain run (their diagnostics, once a second, and worlds): a
+  // spawn of one of their vehicles is refused here.
+  transport::Reader<pb::Diagnostics> diagnostics;
+  transport::Reader<pb::WorldDescription> worlds;
+  std::map<std::uint64_t, std::int32_t> strengths;  // input writer -> its ownership strength
+  std::map<std::uint64_t, int> control_writers;     // writers that sent requests -> checks missed
+  // In real time, the writer whose pause is the last pause, resume or step request passed on
+  // (0: none): a pause lasts while its client is there (docs/topics.md).
+  std::uint64_t pause_writer = 0;
+  std::uint32_t known_buttons = 0;
+  int got = 0;  // requests taken in the last round
+  base::MonoTime next_housekeeping = base::MonotonicNow();
+};
+
 void ServerNode::ReceiverLoop() {
-  const std::string& me = options_.session.server_id;
+  Receiver rx(participant_, &drops_);
   transport::Waitset waitset(participant_, &drops_);
   waitset.Attach(input_reader_);
   waitset.Attach(control_reader_);
-  // What other servers on the domain run (their diagnostics, once a second, and worlds): a spawn
-  // of one of their vehicles is refused here.
-  transport::Reader<pb::Diagnostics> diagnostics(participant_, TopicId::kDiagnostics, &drops_);
-  transport::Reader<pb::WorldDescription> worlds(participant_, TopicId::kWorld, &drops_);
-  std::map<std::uint64_t, std::int32_t> strengths;   // input writer -> its ownership strength
-  std::map<std::uint64_t, int> control_writers;      // writers that sent requests -> checks missed
-  // In real time, the writer whose pause is the last pause, resume or step request passed on (0:
-  // none): a pause lasts while its client is there (docs/topics.md).
-  std::uint64_t pause_writer = 0;
-  const bool real_time = options_.mode != ServerOptions::Mode::kLockstep;
-  int got = 0;                                       // requests taken in the last round
-  base::MonoTime next_housekeeping = base::MonotonicNow();
-  // Every bit a Button names (vdyn/input.proto).
-  std::uint32_t known_buttons = 0;
-  for (int i = 0; i < pb::Button_descriptor()->value_count(); ++i) {
-    known_buttons |= static_cast<std::uint32_t>(pb::Button_descriptor()->value(i)->number());
-  }
-
-  // Inputs the reader refused (malformed, non-finite, ...): their source is blamed.
-  input_reader_.on_refused = [&](const transport::SampleInfo& info, std::string_view kind,
-                                 std::string_view detail, const google::protobuf::Message* m) {
-    const auto* in = dynamic_cast<const pb::DriverInput*>(m);
-    arbiter_.Refuse(info.publication_handle, in != nullptr ? in->vehicle_id() : info.key,
-                    in != nullptr ? in->source_id().substr(0, limits::kMaxIdBytes) : std::string(),
-                    std::string(kind) + (detail.empty() ? "" : ": ") + std::string(detail),
-                    base::MonotonicNow());
+  input_reader_.on_refused = [this](const transport::SampleInfo& info, std::string_view kind,
+                                    std::string_view detail, const google::protobuf::Message* m) {
+    InputRefusedByReader(info, kind, detail, m);
   };
-  // Requests the reader refused but could parse (a NaN, an id too long) are answered.
-  control_reader_.on_refused = [&](const transport::SampleInfo&, std::string_view kind,
-                                   std::string_view detail, const google::protobuf::Message* m) {
-    const auto* r = dynamic_cast<const pb::ControlRequest*>(m);
-    if (r == nullptr) return;
-    if (!r->server_id().empty() && r->server_id() != me) return;
-    std::string why(kind);
-    if (!detail.empty()) why += ": " + std::string(detail);
-    if (kind.find("non-finite") != std::string_view::npos) {
-      why = std::string(detail) + " must be a finite number";
-    } else if (kind.find("oversized string") != std::string_view::npos) {
-      why = std::string(detail) + " is longer than " +
-            std::to_string(messages::MaxStringBytes(std::string(
-                detail.substr(detail.find_last_of('.') == std::string_view::npos
-                                  ? 0
-                                  : detail.find_last_of('.') + 1)))) +
-            " bytes";
-    }
-    requests_received_.fetch_add(1, std::memory_order_relaxed);
-    last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
-    ++got;
-    Refuse(*r, why);
+  control_reader_.on_refused = [this, &rx](const transport::SampleInfo&, std::string_view kind,
+                                           std::string_view detail,
+                                           const google::protobuf::Message* m) {
+    RequestRefusedByReader(rx, kind, detail, m);
   };
-
   // Set while incoming_ is full and requests may wait in the control reader: then the receiver
   // waits for the request thread's ring (a millisecond at most, for the inputs), not on the
   // waitset (which would not wait: the reader holds data).
@@ -640,9 +622,8 @@ void ServerNode::ReceiverLoop() {
       // What is still in the control reader is taken and answered (the server is stopping), for
       // at most the shutdown deadline.
       if (drain_until.ns == 0) {
-        drain_until = base::MonotonicNow() +
-                      options_.shutdown_deadline;
-      } else if ((!backlog && got == 0) || base::MonotonicNow() >= drain_until) {
+        drain_until = base::MonotonicNow() + options_.shutdown_deadline;
+      } else if ((!backlog && rx.got == 0) || base::MonotonicNow() >= drain_until) {
         break;
       }
     }
@@ -652,131 +633,183 @@ void ServerNode::ReceiverLoop() {
       (void)waitset.Wait(std::chrono::milliseconds(50));
     }
     const base::MonoTime now = base::MonotonicNow();
-    bool handed = false;
-    got = 0;
-    // What the other servers run, first: a spawn below is checked against it.
-    (void)diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
-      if (d.server_id() == me) return;
-      for (const auto& v : d.vehicles()) others_[v.vehicle_id()] = {d.server_id(), now};
-    });
-    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
-      if (w.server_id() == me) return;
-      for (const auto& v : w.vehicles()) others_[v.vehicle_id()] = {w.server_id(), now};
-    });
-    (void)input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
-      if (info.key != in.vehicle_id()) {
-        const std::string why = "envelope key " + std::to_string(info.key) + " vs vehicle_id " +
-                                std::to_string(in.vehicle_id());
-        drops_.Count(drop_key_mismatch_, why);
-        arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
-                        "key mismatch: " + why, now);
-        return;
-      }
-      const std::string why = CheckInputRanges(in);
-      if (!why.empty()) {
-        drops_.Count(drop_out_of_range_, why);
-        arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
-                        "out of range: " + why, now);
-        return;
-      }
-      const std::uint32_t unknown_bits = in.buttons() & ~known_buttons;
-      if (unknown_bits != 0) {
-        // Taken without them: a newer client's buttons mean nothing here, and are named.
-        char detail[160];
-        std::snprintf(detail, sizeof detail, "'%s' on vehicle %u set 0x%x",
-                      base::Quote(in.source_id(), 64).c_str(), in.vehicle_id(), unknown_bits);
-        drops_.Count(drop_unknown_buttons_, detail);
-      }
-      auto known = strengths.find(info.publication_handle);
-      if (known == strengths.end()) {
-        known = strengths.emplace(info.publication_handle,
-                                  input_reader_.WriterStrength(info.publication_handle)).first;
-      }
-      // Only the source that drives this vehicle now reaches the loop.
-      if (!arbiter_.Offer(in, info.publication_handle, known->second, now)) return;
-      pb::DriverInput* slot = inputs_.Reserve();
-      if (slot == nullptr) {
-        drops_.Count(drop_inputs_full_);
-        return;
-      }
-      *slot = in;
-      slot->set_buttons(in.buttons() & known_buttons);
-      inputs_.Commit();
-      handed = true;
-    });
-    // As many requests as the request thread has room for: the rest wait in the reader.
-    if (const auto room = static_cast<int>(incoming_.capacity() - incoming_.size()); room > 0) {
-      (void)control_reader_.Take(
-          [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
-            if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
-            requests_received_.fetch_add(1, std::memory_order_relaxed);
-            last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
-            ++got;
-            if (stopping) {
-              Refuse(r, "the server is stopping: the request was not applied");
-              return;
-            }
-            if (info.key != r.vehicle_id()) {
-              Refuse(r, "the envelope key " + std::to_string(info.key) +
-                            " does not match vehicle_id " + std::to_string(r.vehicle_id()));
-              return;
-            }
-            if (r.has_spawn()) {
-              const auto other = others_.find(r.vehicle_id());
-              if (other != others_.end() && now - other->second.seen < base::Seconds(3)) {
-                Refuse(r, "vehicle " + std::to_string(r.vehicle_id()) + " is run by server '" +
-                              other->second.server_id + "' on this domain");
-                return;
-              }
-            }
-            control_writers[info.publication_handle] = 0;
-            if (r.has_pause()) pause_writer = info.publication_handle;
-            if (r.has_resume() || r.has_step()) pause_writer = 0;
-            Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
-            if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
-          },
-          room);
-      request_bell_.Ring();
-    }
+    rx.got = 0;
+    ReceiveOtherServers(rx, now);  // first: a spawn below is checked against them
+    const bool handed = ReceiveInputs(rx, now);
+    ReceiveRequests(rx, now, stopping);
     backlog = incoming_.size() == incoming_.capacity();
     if (handed) loop_bell_.Ring();
-
-    if (now >= next_housekeeping) {
-      next_housekeeping = now + base::Milliseconds(200);
-      // Clients whose control writer has gone: their pending steps are dropped. Gone means
-      // missing from the matched writers at two checks in a row (a query that fails tells
-      // nothing): a client waiting for a reply is never dropped on one odd answer.
-      std::vector<std::uint64_t> live;
-      if (!control_writers.empty() && control_reader_.MatchedWriterHandles(live)) {
-        for (auto it = control_writers.begin(); it != control_writers.end();) {
-          const bool present = std::find(live.begin(), live.end(), it->first) != live.end();
-          it->second = present ? 0 : it->second + 1;
-          if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
-            // The loop cancels the steps it still owed that client; the publisher says so.
-            if (real_time && it->first == pause_writer) ResumeForGoneClient(pause_writer);
-            it = control_writers.erase(it);
-            handed = true;
-          } else {
-            ++it;
-          }
-        }
-        if (handed) loop_bell_.Ring();
-      }
-      // Input writers that have gone are forgotten.
-      if (input_reader_.MatchedWriterHandles(live)) {
-        arbiter_.Forget(live);
-        for (auto it = strengths.begin(); it != strengths.end();) {
-          it = std::find(live.begin(), live.end(), it->first) == live.end() ? strengths.erase(it)
-                                                                            : std::next(it);
-        }
-      }
-      std::vector<InputArbiter::Source> copy = arbiter_.Snapshot(now);
-      std::lock_guard<std::mutex> lock(sources_mu_);
-      sources_copy_ = std::move(copy);
-    }
+    if (now >= rx.next_housekeeping) ReceiverHousekeeping(rx, now);
   }
   input_reader_.on_refused = nullptr;
   control_reader_.on_refused = nullptr;
+}
+
+// Inputs the reader refused (malformed, non-finite, ...): their source is blamed.
+void ServerNode::InputRefusedByReader(const transport::SampleInfo& info, std::string_view kind,
+                                      std::string_view detail, const google::protobuf::Message* m) {
+  const auto* in = dynamic_cast<const pb::DriverInput*>(m);
+  arbiter_.Refuse(info.publication_handle, in != nullptr ? in->vehicle_id() : info.key,
+                  in != nullptr ? in->source_id().substr(0, limits::kMaxIdBytes) : std::string(),
+                  std::string(kind) + (detail.empty() ? "" : ": ") + std::string(detail),
+                  base::MonotonicNow());
+}
+
+// Requests the reader refused but could parse (a NaN, an id too long) are answered.
+void ServerNode::RequestRefusedByReader(Receiver& rx, std::string_view kind,
+                                        std::string_view detail,
+                                        const google::protobuf::Message* m) {
+  const auto* r = dynamic_cast<const pb::ControlRequest*>(m);
+  if (r == nullptr) return;
+  if (!r->server_id().empty() && r->server_id() != options_.session.server_id) return;
+  std::string why(kind);
+  if (!detail.empty()) why += ": " + std::string(detail);
+  if (kind.find("non-finite") != std::string_view::npos) {
+    why = std::string(detail) + " must be a finite number";
+  } else if (kind.find("oversized string") != std::string_view::npos) {
+    const std::size_t dot = detail.find_last_of('.');
+    const std::string field(detail.substr(dot == std::string_view::npos ? 0 : dot + 1));
+    why = std::string(detail) + " is longer than " +
+          std::to_string(messages::MaxStringBytes(field)) + " bytes";
+  }
+  requests_received_.fetch_add(1, std::memory_order_relaxed);
+  last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
+  ++rx.got;
+  Refuse(*r, why);
+}
+
+void ServerNode::ReceiveOtherServers(Receiver& rx, base::MonoTime now) {
+  const std::string& me = options_.session.server_id;
+  (void)rx.diagnostics.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
+    if (d.server_id() == me) return;
+    for (const auto& v : d.vehicles()) others_[v.vehicle_id()] = {d.server_id(), now};
+  });
+  (void)rx.worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+    if (w.server_id() == me) return;
+    for (const auto& v : w.vehicles()) others_[v.vehicle_id()] = {w.server_id(), now};
+  });
+}
+
+bool ServerNode::ReceiveInputs(Receiver& rx, base::MonoTime now) {
+  bool handed = false;
+  (void)input_reader_.Take([&](const pb::DriverInput& in, const transport::SampleInfo& info) {
+    if (info.key != in.vehicle_id()) {
+      const std::string why = "envelope key " + std::to_string(info.key) + " vs vehicle_id " +
+                              std::to_string(in.vehicle_id());
+      drops_.Count(drop_key_mismatch_, why);
+      arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
+                      "key mismatch: " + why, now);
+      return;
+    }
+    const std::string why = CheckInputRanges(in);
+    if (!why.empty()) {
+      drops_.Count(drop_out_of_range_, why);
+      arbiter_.Refuse(info.publication_handle, in.vehicle_id(), in.source_id(),
+                      "out of range: " + why, now);
+      return;
+    }
+    const std::uint32_t unknown_bits = in.buttons() & ~rx.known_buttons;
+    if (unknown_bits != 0) {
+      // Taken without them: a newer client's buttons mean nothing here, and are named.
+      char detail[160];
+      std::snprintf(detail, sizeof detail, "'%s' on vehicle %u set 0x%x",
+                    base::Quote(in.source_id(), 64).c_str(), in.vehicle_id(), unknown_bits);
+      drops_.Count(drop_unknown_buttons_, detail);
+    }
+    auto known = rx.strengths.find(info.publication_handle);
+    if (known == rx.strengths.end()) {
+      known = rx.strengths
+                  .emplace(info.publication_handle,
+                           input_reader_.WriterStrength(info.publication_handle))
+                  .first;
+    }
+    // Only the source that drives this vehicle now reaches the loop.
+    if (!arbiter_.Offer(in, info.publication_handle, known->second, now)) return;
+    pb::DriverInput* slot = inputs_.Reserve();
+    if (slot == nullptr) {
+      drops_.Count(drop_inputs_full_);
+      return;
+    }
+    *slot = in;
+    slot->set_buttons(in.buttons() & rx.known_buttons);
+    inputs_.Commit();
+    handed = true;
+  });
+  return handed;
+}
+
+// As many requests as the request thread has room for: the rest wait in the reader.
+void ServerNode::ReceiveRequests(Receiver& rx, base::MonoTime now, bool stopping) {
+  const auto room = static_cast<int>(incoming_.capacity() - incoming_.size());
+  if (room <= 0) return;
+  const std::string& me = options_.session.server_id;
+  (void)control_reader_.Take(
+      [&](const pb::ControlRequest& r, const transport::SampleInfo& info) {
+        if (!r.server_id().empty() && r.server_id() != me) return;  // another server's
+        requests_received_.fetch_add(1, std::memory_order_relaxed);
+        last_request_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
+        ++rx.got;
+        if (stopping) {
+          Refuse(r, "the server is stopping: the request was not applied");
+          return;
+        }
+        if (info.key != r.vehicle_id()) {
+          Refuse(r, "the envelope key " + std::to_string(info.key) + " does not match vehicle_id " +
+                        std::to_string(r.vehicle_id()));
+          return;
+        }
+        if (r.has_spawn()) {
+          const auto other = others_.find(r.vehicle_id());
+          if (other != others_.end() && now - other->second.seen < base::Seconds(3)) {
+            Refuse(r, "vehicle " + std::to_string(r.vehicle_id()) + " is run by server '" +
+                          other->second.server_id + "' on this domain");
+            return;
+          }
+        }
+        rx.control_writers[info.publication_handle] = 0;
+        if (r.has_pause()) rx.pause_writer = info.publication_handle;
+        if (r.has_resume() || r.has_step()) rx.pause_writer = 0;
+        Incoming in{std::make_shared<const pb::ControlRequest>(r), info.publication_handle, {}};
+        if (!incoming_.TryPush(std::move(in))) NoRoomToAnswer();  // room checked before
+      },
+      room);
+  request_bell_.Ring();
+}
+
+void ServerNode::ReceiverHousekeeping(Receiver& rx, base::MonoTime now) {
+  rx.next_housekeeping = now + base::Milliseconds(200);
+  // Clients whose control writer has gone: their pending steps are dropped. Gone means missing
+  // from the matched writers at two checks in a row (a query that fails tells nothing): a client
+  // waiting for a reply is never dropped on one odd answer.
+  const bool real_time = options_.mode != ServerOptions::Mode::kLockstep;
+  std::vector<std::uint64_t> live;
+  if (!rx.control_writers.empty() && control_reader_.MatchedWriterHandles(live)) {
+    bool handed = false;
+    for (auto it = rx.control_writers.begin(); it != rx.control_writers.end();) {
+      const bool present = std::find(live.begin(), live.end(), it->first) != live.end();
+      it->second = present ? 0 : it->second + 1;
+      if (it->second >= 2 && gone_clients_.TryPush(std::uint64_t{it->first})) {
+        // The loop cancels the steps it still owed that client; the publisher says so.
+        if (real_time && it->first == rx.pause_writer) ResumeForGoneClient(rx.pause_writer);
+        it = rx.control_writers.erase(it);
+        handed = true;
+      } else {
+        ++it;
+      }
+    }
+    if (handed) loop_bell_.Ring();
+  }
+  // Input writers that have gone are forgotten.
+  if (input_reader_.MatchedWriterHandles(live)) {
+    arbiter_.Forget(live);
+    for (auto it = rx.strengths.begin(); it != rx.strengths.end();) {
+      it = std::find(live.begin(), live.end(), it->first) == live.end() ? rx.strengths.erase(it)
+                                                                        : std::next(it);
+    }
+  }
+  std::vector<InputArbiter::Source> copy = arbiter_.Snapshot(now);
+  std::lock_guard<std::mutex> lock(sources_mu_);
+  sources_copy_ = std::move(copy);
 }
 
 ServerClaim ServerNode::Claim(bool running) const {
@@ -1191,7 +1224,7 @@ void ServerNode::PublishOutcome(RequestOutcome& o, base::MonoTime now) {
     spdlog::warn(
         "server '{}': client '{}' went away before the {} steps it asked for were done: "
         "the {} still to run are cancelled, and the simulation stays paused at {:.3f} s",
-        me, client, o.request->step().steps(), o.n1, static_cast<double>(o.sim_time_ns) * 1e-9);
+        me, client, o.request->step().steps(), o.steps_not_run, static_cast<double>(o.sim_time_ns) * 1e-9);
     o = RequestOutcome{};
     return;
   }

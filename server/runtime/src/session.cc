@@ -3,10 +3,12 @@
 #include <cmath>
 #include <limits>
 #include <stdexcept>
+#include <utility>
 
 #include "vdyn/base/limits.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/bridge/params.h"
+#include "vdyn/messages/control_reply.h"
 #include "vdyn/runtime/request_planner.h"
 
 namespace vdyn {
@@ -84,11 +86,11 @@ std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id)
     case Why::kExists:
       return vehicle + " exists already";
     case Why::kFull:
-      return "this server runs its maximum of " + std::to_string(o.n1) + " vehicles";
+      return "this server runs its maximum of " + std::to_string(o.max_vehicles) + " vehicles";
     case Why::kStepBehind:
-      return "restore: " + vehicle + " is at step " + std::to_string(o.n1) +
-             " and a vehicle's steps only go forward; restore step " + std::to_string(o.n2) +
-             " into a fresh server or another vehicle id";
+      return "restore: " + vehicle + " is at step " + std::to_string(o.vehicle_step) +
+             " and a vehicle's steps only go forward; restore step " +
+             std::to_string(o.restore_step) + " into a fresh server or another vehicle id";
     case Why::kChanged:
       return vehicle + " on server '" + server_id +
              "' changed while this request waited (a request before it came first); send it "
@@ -106,16 +108,8 @@ std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id)
 }
 
 pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) {
-  pb::ControlReply reply;
-  if (o.request) {
-    reply.set_request_id(o.request->request_id());
-    // An id too long to echo is cut to its limit (such a client cannot match it anyway).
-    reply.set_client_id(o.request->client_id().substr(0, limits::kMaxIdBytes));
-    reply.set_vehicle_id(o.request->vehicle_id());
-  }
-  reply.set_server_id(server_id);
-  reply.set_accepted(o.accepted);
-  if (!o.accepted) reply.set_reason(OutcomeReason(o, server_id).substr(0, limits::kMaxReasonBytes));
+  pb::ControlReply reply = messages::ReplyTo(o.request.get(), server_id);
+  if (!o.accepted) messages::Refuse(reply, OutcomeReason(o, server_id));
   if (o.applied_step >= 0) reply.set_applied_step(static_cast<std::uint64_t>(o.applied_step));
   reply.set_sim_time_ns(o.sim_time_ns);
   return reply;
@@ -259,12 +253,10 @@ RequestOutcome Session::Accept(const std::shared_ptr<const pb::ControlRequest>& 
 }
 
 RequestOutcome Session::Refuse(const std::shared_ptr<const pb::ControlRequest>& r,
-                               RequestOutcome::Why why, std::int64_t n1, std::int64_t n2) {
+                               RequestOutcome::Why why) {
   RequestOutcome o;
   o.request = r;
   o.why = why;
-  o.n1 = n1;
-  o.n2 = n2;
   o.sim_time_ns = steps_ * config_.step_ns;
   if (const auto it = vehicles_.find(r->vehicle_id()); it != vehicles_.end()) {
     o.applied_step = it->second.sim->state().step;
@@ -273,116 +265,149 @@ RequestOutcome Session::Refuse(const std::shared_ptr<const pb::ControlRequest>& 
 }
 
 RequestOutcome Session::Commit(PreparedRequest& p) {
-  using Op = PreparedRequest::Op;
-  using Why = RequestOutcome::Why;
-  const std::shared_ptr<const pb::ControlRequest>& r = p.request;
-  const std::uint32_t id = p.vehicle_id;
-  const auto it = vehicles_.find(id);
-  const bool exists = it != vehicles_.end();
-  const auto max = static_cast<std::int64_t>(config_.max_vehicles);
-  auto apply = [&]() -> RequestOutcome {
-    // The vehicle is what the plan assumed (else a request planned before this one changed it).
-    const bool about_vehicle =
-        p.op == Op::kMove || p.op == Op::kRemove || p.op == Op::kSetParams || p.op == Op::kRestore;
-    if (about_vehicle &&
-        (exists != (p.expected != nullptr) || (exists && it->second.params != p.expected))) {
-      return Refuse(r, Why::kChanged);
-    }
-    switch (p.op) {
-      case Op::kPause:
-        paused_ = true;
-        pending_steps_ = 0;
-        return Accept(r);
-      case Op::kResume:
-        paused_ = false;
-        pending_steps_ = 0;
-        return Accept(r);
-      case Op::kStep:
-        paused_ = true;
-        pending_steps_ += p.steps;
-        return Accept(r);
-      case Op::kMove: {
-        Vehicle& v = it->second;
-        State s = p.state;
-        s.step = v.sim->state().step;  // the vehicle's step count goes on
-        v.sim->SetState(s);
-        RequestOutcome o = Accept(r);
-        EmitSpawned(v);
-        return o;
-      }
-      case Op::kSpawn: {
-        if (exists) return Refuse(r, Why::kExists);
-        if (static_cast<std::int64_t>(vehicles_.size()) >= max) return Refuse(r, Why::kFull, max);
-        // A vehicle id used before in this session goes on counting where its last life ended.
-        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
-          Simulator& sim = *p.vehicle.mapped().sim;
-          State s = sim.state();
-          s.step = ret->second;
-          sim.SetState(s);
-        }
-        const auto ins = vehicles_.insert(std::move(p.vehicle));
-        order_stale_ = true;
-        EmitSpawned(ins.position->second);
-        return Accept(r);
-      }
-      case Op::kRemove: {
-        RequestOutcome o = Accept(r);
-        const std::int64_t step = it->second.sim->state().step;
-        Begin(SessionEventRecord::Kind::kRemoved, id, step);
-        Emit();
-        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
-          ret->second = step;
-        } else {
-          p.retired.key() = id;
-          p.retired.mapped() = step;
-          retired_steps_.insert(std::move(p.retired));
-        }
-        p.vehicle = vehicles_.extract(it);
-        order_stale_ = true;
-        return o;
-      }
-      case Op::kSetParams: {
-        Vehicle& v = it->second;
-        v.sim->SetParams(*p.valid);  // checked against this step when planned
-        std::swap(v.params, p.params);
-        RequestOutcome o = Accept(r);
-        SessionEventRecord& e =
-            Begin(SessionEventRecord::Kind::kParamsChanged, id, v.sim->state().step);
-        e.params = v.params;
-        Emit();
-        return o;
-      }
-      case Op::kRestore: {
-        // (vehicle, step) names one moment of a session: a vehicle's steps never go back.
-        const std::int64_t step = p.vehicle.mapped().sim->state().step;
-        std::int64_t floor = exists ? it->second.sim->state().step : 0;
-        if (const auto ret = retired_steps_.find(id); ret != retired_steps_.end()) {
-          floor = std::max(floor, ret->second);
-        }
-        if (step < floor) return Refuse(r, Why::kStepBehind, floor, step);
-        if (!exists && static_cast<std::int64_t>(vehicles_.size()) >= max) {
-          return Refuse(r, Why::kFull, max);
-        }
-        SessionVehicles::node_type old;
-        if (exists) {
-          // The old life ends here; the restored one starts at its own step (a re-simulation
-          // starts afresh from the Spawned event).
-          Begin(SessionEventRecord::Kind::kRemoved, id, it->second.sim->state().step);
-          Emit();
-          old = vehicles_.extract(it);
-        }
-        const auto ins = vehicles_.insert(std::move(p.vehicle));
-        order_stale_ = true;
-        p.vehicle = std::move(old);
-        EmitSpawned(ins.position->second, r);
-        return Accept(r);
-      }
-    }
-    return Refuse(r, Why::kChanged);
-  };
-  RequestOutcome o = apply();
+  RequestOutcome o = CommitOperation(p);
   p.applied = o.accepted;
   return o;
+}
+
+bool Session::AsPlanned(const PreparedRequest& p, SessionVehicles::iterator it) const {
+  using Op = PreparedRequest::Op;
+  const bool about_vehicle =
+      p.op == Op::kMove || p.op == Op::kRemove || p.op == Op::kSetParams || p.op == Op::kRestore;
+  if (!about_vehicle) return true;
+  const bool exists = it != vehicles_.end();
+  return exists == (p.expected != nullptr) && (!exists || it->second.params == p.expected);
+}
+
+RequestOutcome Session::CommitOperation(PreparedRequest& p) {
+  using Op = PreparedRequest::Op;
+  const auto it = vehicles_.find(p.vehicle_id);
+  // The vehicle is what the plan assumed (else a request planned before this one changed it).
+  if (!AsPlanned(p, it)) return Refuse(p.request, RequestOutcome::Why::kChanged);
+  switch (p.op) {
+    case Op::kPause:
+    case Op::kResume:
+    case Op::kStep:
+      return CommitPacing(p);
+    case Op::kMove:
+      return CommitMove(p, it->second);
+    case Op::kSpawn:
+      return CommitSpawn(p, it != vehicles_.end());
+    case Op::kRemove:
+      return CommitRemove(p, it);
+    case Op::kSetParams:
+      return CommitSetParams(p, it->second);
+    case Op::kRestore:
+      return CommitRestore(p, it);
+  }
+  return Refuse(p.request, RequestOutcome::Why::kChanged);
+}
+
+RequestOutcome Session::CommitPacing(const PreparedRequest& p) {
+  switch (p.op) {
+    case PreparedRequest::Op::kPause:
+      paused_ = true;
+      pending_steps_ = 0;
+      break;
+    case PreparedRequest::Op::kResume:
+      paused_ = false;
+      pending_steps_ = 0;
+      break;
+    default:  // kStep
+      paused_ = true;
+      pending_steps_ += p.steps;
+      break;
+  }
+  return Accept(p.request);
+}
+
+RequestOutcome Session::CommitMove(const PreparedRequest& p, Vehicle& v) {
+  State s = p.state;
+  s.step = v.sim->state().step;  // the vehicle's step count goes on
+  v.sim->SetState(s);
+  RequestOutcome o = Accept(p.request);
+  EmitSpawned(v);
+  return o;
+}
+
+RequestOutcome Session::CommitSpawn(PreparedRequest& p, bool exists) {
+  if (exists) return Refuse(p.request, RequestOutcome::Why::kExists);
+  if (vehicles_.size() >= config_.max_vehicles) {
+    RequestOutcome o = Refuse(p.request, RequestOutcome::Why::kFull);
+    o.max_vehicles = static_cast<std::int64_t>(config_.max_vehicles);
+    return o;
+  }
+  // A vehicle id used before in this session goes on counting where its last life ended.
+  if (const auto ret = retired_steps_.find(p.vehicle_id); ret != retired_steps_.end()) {
+    Simulator& sim = *p.vehicle.mapped().sim;
+    State s = sim.state();
+    s.step = ret->second;
+    sim.SetState(s);
+  }
+  const auto ins = vehicles_.insert(std::move(p.vehicle));
+  order_stale_ = true;
+  EmitSpawned(ins.position->second);
+  return Accept(p.request);
+}
+
+RequestOutcome Session::CommitRemove(PreparedRequest& p, SessionVehicles::iterator it) {
+  RequestOutcome o = Accept(p.request);
+  const std::int64_t step = it->second.sim->state().step;
+  Begin(SessionEventRecord::Kind::kRemoved, p.vehicle_id, step);
+  Emit();
+  if (const auto ret = retired_steps_.find(p.vehicle_id); ret != retired_steps_.end()) {
+    ret->second = step;
+  } else {
+    p.retired.key() = p.vehicle_id;
+    p.retired.mapped() = step;
+    retired_steps_.insert(std::move(p.retired));
+  }
+  p.replaced_vehicle = vehicles_.extract(it);
+  order_stale_ = true;
+  return o;
+}
+
+RequestOutcome Session::CommitSetParams(PreparedRequest& p, Vehicle& v) {
+  v.sim->SetParams(*p.valid);  // checked against this step when planned
+  p.replaced_params = std::exchange(v.params, std::move(p.params));
+  RequestOutcome o = Accept(p.request);
+  SessionEventRecord& e =
+      Begin(SessionEventRecord::Kind::kParamsChanged, p.vehicle_id, v.sim->state().step);
+  e.params = v.params;
+  Emit();
+  return o;
+}
+
+RequestOutcome Session::CommitRestore(PreparedRequest& p, SessionVehicles::iterator it) {
+  const bool exists = it != vehicles_.end();
+  // (vehicle, step) names one moment of a session: a vehicle's steps never go back.
+  const std::int64_t step = p.vehicle.mapped().sim->state().step;
+  std::int64_t floor = exists ? it->second.sim->state().step : 0;
+  if (const auto ret = retired_steps_.find(p.vehicle_id); ret != retired_steps_.end()) {
+    floor = std::max(floor, ret->second);
+  }
+  if (step < floor) {
+    RequestOutcome o = Refuse(p.request, RequestOutcome::Why::kStepBehind);
+    o.vehicle_step = floor;
+    o.restore_step = step;
+    return o;
+  }
+  if (!exists && vehicles_.size() >= config_.max_vehicles) {
+    RequestOutcome o = Refuse(p.request, RequestOutcome::Why::kFull);
+    o.max_vehicles = static_cast<std::int64_t>(config_.max_vehicles);
+    return o;
+  }
+  if (exists) {
+    // The old life ends here; the restored one starts at its own step (a re-simulation starts
+    // afresh from the Spawned event).
+    Begin(SessionEventRecord::Kind::kRemoved, p.vehicle_id, it->second.sim->state().step);
+    Emit();
+    p.replaced_vehicle = vehicles_.extract(it);
+  }
+  const auto ins = vehicles_.insert(std::move(p.vehicle));
+  order_stale_ = true;
+  EmitSpawned(ins.position->second, p.request);
+  return Accept(p.request);
 }
 
 pb::ControlReply Session::Reject(const pb::ControlRequest& request, const std::string& reason) {

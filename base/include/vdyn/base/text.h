@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -26,6 +27,10 @@ std::string FormatApprox(double v, int digits = 4);
 // never "-0.0", for a value that rounds to zero from below; `plus` writes "+" before a positive
 // value (and before zero).
 std::string FormatFixed(double v, int decimals, bool plus = false);
+
+// `v` in hexadecimal as a hash or a CRC is quoted: "0x" and `digits` digits, zero-padded
+// (FormatHex(0xbeef, 8) = "0x0000beef"; all of them when `v` needs more).
+std::string FormatHex(std::uint64_t v, int digits);
 
 // Untrusted text made safe for one log line or reply: at most `max_bytes` bytes of it, printable
 // ASCII kept, everything else escaped (\n, \x1b, ...), and "... (N bytes)" when cut.

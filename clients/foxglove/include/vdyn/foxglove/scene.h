@@ -24,6 +24,7 @@
 #include <string>
 #include <string_view>
 
+#include "vdyn/client/palette.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/vehicle_params.pb.h"
 #include "vdyn/world.pb.h"
@@ -37,17 +38,17 @@ namespace vdyn::foxglove {
 
 inline constexpr int kWheels = 4;  // LF, RF, LR, RR
 
-enum class ForceKind { kSpring, kDrive, kBrake, kSide, kDrag, kWall };
+using client::ForceKind;  // the arrows' kinds, names and colours: client/palette.h
+using client::ForceLabel;   // "spring Fp"
+using client::WheelName;    // "LF"
 inline constexpr int kArrowsPerVehicle = 4 * kWheels + 2;
 
 struct Rgb8 {
   std::uint8_t r = 0, g = 0, b = 0;
 };
-// The viewer's legend (clients/vr_viewer/src/scene.cc, checked against it by test_foxglove):
-// spring green, drive blue, brake red, side yellow, drag magenta, wall orange.
+// The viewer's legend (client/palette.h): spring green, drive blue, brake red, side yellow, drag
+// magenta, wall orange.
 Rgb8 ForceColour(ForceKind kind);
-std::string_view ForceLabel(ForceKind kind);  // "spring Fp"
-std::string_view WheelName(int wheel);        // "LF"
 // A vehicle's colour by id: the viewer's palette.
 Rgb8 VehicleColour(std::uint32_t vehicle_id);
 

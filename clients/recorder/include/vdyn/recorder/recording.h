@@ -130,8 +130,6 @@ std::string Ordinal(std::uint64_t n);
 // terminal may show it: control characters (escape sequences) and bytes that are not UTF-8
 // written as \xNN, and at most `max` bytes of it, then "... (N bytes)".
 std::string Printable(std::string_view text, std::size_t max = 160);
-// A hash or CRC: "0x" and 16 hex digits (one form wherever the recorder prints one).
-std::string Hex(std::uint64_t v);
 // A server's sequence number that no server reaches (one event a microsecond for 8 years):
 // damage or a foreign writer, never counted as events missing.
 inline constexpr std::uint64_t kImpossibleSequence = std::uint64_t{1} << 48;

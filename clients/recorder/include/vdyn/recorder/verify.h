@@ -1,8 +1,8 @@
-// The subcommands of vdyn-recorder that need the physics, linked by name (vdyn_replay, the
-// bridge): `verify` re-simulates a recording from its events and compares the state hash of every
+// The subcommands of vdyn-recorder that re-simulate, linked by name (vdyn_replay, whose interface
+// speaks messages; the physics stays behind it): `verify` re-simulates a recording from its events and compares the state hash of every
 // recorded step; `takeover` finds the exact state at a moment of a recording and has a live server
 // restore it. This library (vdyn_recorder_physics) is the only part of the recorder that links
-// the physics; record, info, export, play, plot and recover never do.
+// the physics (through vdyn_replay); record, info, export, play, plot and recover never do.
 #pragma once
 
 #include <atomic>

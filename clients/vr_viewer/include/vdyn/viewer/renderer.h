@@ -21,6 +21,7 @@
 
 #include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/draw_list.h"
+#include "vdyn/viewer/dressing.h"
 #include "vdyn/viewer/math.h"
 #include "vdyn/viewer/world_mesh.h"
 
@@ -91,7 +92,7 @@ struct RenderSettings {
   int shadow_map_px = 1024;     // its size
   double shadow_radius_m = 20;  // half its side on the ground, around the followed vehicle
   bool clouds = true;
-  bool high_shading = true;  // glossy paint, glass and chrome; the grass's large-scale variation
+  bool high_shading = true;  // sun highlights, rough reflections, world specular; grass patches
   int texture_px = 512;      // surface textures' size
   // The surface textures stored as sRGB (decoded per texel when sampled) or already in linear
   // light (8 bits: coarser steps in the dark, unseen in the textures' grain; a software
@@ -121,6 +122,8 @@ class Renderer {
   void SetTerrain(const TerrainData& t);
   void ClearTerrain();
   std::size_t terrain_triangles() const { return terrain_triangles_; }
+  // The dressing around the facility (dressing.h) made with the terrain: its triangles (0: none).
+  std::size_t dressing_triangles() const { return dressing_.count / 3; }
 
   struct View {
     Mat4 view, proj;
@@ -153,10 +156,14 @@ class Renderer {
     SurfaceStyle style = SurfaceStyle::kGrass;
     StripFrame frame;
     std::vector<TerrainChunk> chunks;
+    double min_z = 0, max_z = 0;
+    double relief = 1;  // its slopes shaded this much steeper
+    PosterFace poster;
     bool translucent = false;
   };
   GpuMesh Upload(const ModelMesh& m);
   GpuMesh UploadTerrain(const std::vector<TerrainVertex>& v, const std::vector<std::uint32_t>& i);
+  void UploadDressing(const Dressing& d);
   void Free(GpuMesh& m);
   const GpuMesh& BodyMesh(const BodyInstance& b);
   Mat4 BodyTransform(const BodyInstance& b) const;
@@ -164,6 +171,7 @@ class Renderer {
   const Program& TerrainProgram(SurfaceStyle style, bool grid, bool shadows);
   void DrawTerrain(const View& v, const Mat4& view_proj, double fog_m, bool translucent,
                    double grid_m);
+  void DrawDressing(const Mat4& view_proj);
   void DrawModels(const Program& p, const FrameLists& lists, const Mat4& view_proj);
   void DrawContactShadows(const FrameLists& lists, const Mat4& view_proj);
   enum class Pass { kOpaque, kTranslucent, kGhost };
@@ -195,6 +203,8 @@ class Renderer {
   bool shadow_ready_ = false;
   std::vector<Terrain> terrain_meshes_;
   std::size_t terrain_triangles_ = 0;
+  GpuMesh dressing_;  // vertices in the lists' layout, drawn by chunk (count: vertices)
+  std::vector<DressingChunk> dressing_chunks_;
   GpuMesh wheel_fine_, wheel_coarse_;
   std::map<std::vector<std::int64_t>, GpuMesh> bodies_;  // built-in bodies by geometry
   std::shared_ptr<const ModelMesh> car_model_;

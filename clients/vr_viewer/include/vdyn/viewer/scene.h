@@ -16,6 +16,7 @@
 #include <string_view>
 #include <vector>
 
+#include "vdyn/client/palette.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/vehicle_params.pb.h"
 #include "vdyn/viewer/math.h"
@@ -25,8 +26,10 @@ namespace vdyn::viewer {
 
 inline constexpr int kWheels = 4;  // LF, RF, LR, RR
 
-enum class ForceKind { kSpring, kDrive, kBrake, kSide, kDrag, kWall };
-inline constexpr int kForceKinds = 6;
+using client::ForceKind;  // the arrows' kinds, names and colours: client/palette.h
+using client::ForceLabel;   // "spring Fp"
+using client::kForceKinds;
+using client::WheelName;  // "LF"
 
 struct Rgb8 {
   std::uint8_t r = 0, g = 0, b = 0;
@@ -34,8 +37,6 @@ struct Rgb8 {
 // The legend: spring green, drive blue, brake red, side yellow, drag magenta, wall orange. Arrows
 // are drawn unlit, in exactly these colours.
 Rgb8 ForceColour(ForceKind kind);
-std::string_view ForceLabel(ForceKind kind);  // "spring Fp"
-std::string_view WheelName(int wheel);        // "LF"
 
 // A vehicle's colour by id (a palette of eight that avoids the arrows' hues).
 Rgb8 VehicleColour(std::uint32_t vehicle_id);

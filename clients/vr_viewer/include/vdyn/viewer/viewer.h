@@ -45,6 +45,8 @@ struct ViewerOptions {
   double fps = 60;      // frame rate cap; 0: as fast as it draws
   bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
   bool hud = true;
+  // The landmarks (the world's named points): a marker and its name; off by default (key M).
+  bool landmarks = false;
   // Headless: after `frames` frames (counted once the world and the followed vehicle are there,
   // or once `wait_s` has passed), write `screenshot` (when set) and end. 0: run until closed.
   std::uint64_t frames = 0;
@@ -105,7 +107,6 @@ class Viewer {
   CameraState& camera() { return options_.camera; }
   ArrowStyle& arrows() { return options_.arrows; }
   std::optional<std::uint32_t> followed() const { return followed_; }
-  void Follow(std::uint32_t vehicle_id) { options_.follow = vehicle_id; }
   // True once the followed vehicle has a state and its server's world has been accepted.
   bool ready() const;
   bool xr_active() const;
@@ -124,8 +125,6 @@ class Viewer {
   const std::vector<ShownLabel>& labels() const;
   // The HUD's boxes as the last frame drew them (pixels, y down): its panels, the compass last.
   const std::vector<LabelBox>& hud_boxes() const;
-  // Headset: the place's origin moves to where the head is now, facing where it looks (key R).
-  void RecentreHeadset();
   // The camera of the last desktop frame.
   const CameraView& last_camera() const { return last_camera_; }
   class ParamsEditor& params_editor();
@@ -133,6 +132,13 @@ class Viewer {
 
  private:
   struct Impl;
+  // The constructor's stages.
+  void AcceptWorld(const pb::WorldDescription& w);  // a server's world, checked and measured
+  void HandlePaddles(const pb::DriverInput& in);    // paddles turn the geographic camera
+  void OpenWindow();                                // the window and its OpenGL 3.3 context
+  void StartRenderer();                             // the renderer at the quality asked for
+  void StartImGui();
+  void StartHeadset();  // the OpenXR session (--xr), or the desktop window if none can start
   ViewerOptions options_;
   ViewerStats stats_;
   std::optional<std::uint32_t> followed_;

@@ -68,6 +68,15 @@ struct TerrainChunk {
   Vec3 min_W, max_W;
 };
 
+// A prop's face that carries the billboard's poster (textures.h): its largest vertical flat face
+// that looks towards the middle of the world - a rectangle from its lower left corner (seen from
+// the front) `right_W` (unit, horizontal) `width_m` wide and `height_m` high (up).
+struct PosterFace {
+  Vec3 origin_W, right_W{1, 0, 0};
+  double width_m = 0, height_m = 0;
+  bool present = false;
+};
+
 struct TerrainMesh {
   std::string name;
   pb::SurfaceKind kind = pb::SURFACE_GROUND;
@@ -77,7 +86,14 @@ struct TerrainMesh {
   std::vector<std::uint32_t> indices;  // grouped by chunk
   std::vector<TerrainChunk> chunks;
   Vec3 min_W, max_W;
+  PosterFace poster;  // props (SurfaceStyle::kPainted) with a face of at least 4 m2
 };
+
+// The poster face of a mesh's vertices and triangles, facing towards `towards_W`; none when no
+// vertical flat face is as large as `min_area_m2`.
+PosterFace PosterFaceOf(const std::vector<TerrainVertex>& vertices,
+                        const std::vector<std::uint32_t>& indices, const Vec3& towards_W,
+                        double min_area_m2 = 4.0);
 
 struct TerrainData {
   std::string name;

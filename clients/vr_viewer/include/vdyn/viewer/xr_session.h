@@ -96,8 +96,4 @@ class Headset {
   std::unique_ptr<Impl> impl_;
 };
 
-// The reference space's axes in a frame whose X is forward, Y left, Z up (body or ground): X_s =
-// right = -Y, Y_s = up = Z, Z_s = back = -X.
-Mat3 XrAxesIn(const Mat3& frame_forward_left_up);
-
 }  // namespace vdyn::viewer

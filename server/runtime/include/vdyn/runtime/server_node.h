@@ -27,6 +27,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -55,15 +56,16 @@ struct ServerOptions {
   SessionConfig session;
   // Durations are base::Nanos (built with base::FromSeconds from a user's seconds).
   base::Nanos duration{0};  // real time: stop after this much simulated time (0: never)
-  base::Nanos lockstep_timeout = base::Seconds(10);  // lockstep: give up without a request this long
+  // Lockstep: give up without a request this long.
+  base::Nanos lockstep_timeout = base::Seconds(10);
   int rt_priority = 50;
   // The state writer thread's nice value in real time (0: left as it is). -10 put it ahead of
   // 8 rigs and a recorder on 2 vCPUs (no state refused, against 0.49-0.70 M at 0), and starved
   // them instead; under the sanitizer suite's load it slowed the tests' rigs and recorders.
   int state_writer_nice = 0;
   std::int64_t max_lag_steps = 1000;  // beyond this backlog the schedule is rebased
-  bool status_line = false;       // a terminal line of speed, step rate and lateness
-  std::string stats_out;          // real time: write a run summary here at the end
+  bool status_line = false;           // a terminal line of speed, step rate and lateness
+  std::string stats_out;              // real time: write a run summary here at the end
   base::Nanos shutdown_deadline = base::Milliseconds(2000);  // the publisher's drain at the end
   // At start, how long to listen for other servers on the domain (a vehicle id or a server id
   // already in use is refused) once one has been discovered; with none, 300 ms.
@@ -106,7 +108,7 @@ class ServerNode {
     std::uint64_t steps_caught_up = 0;
     std::uint64_t max_lag_steps = 0;
     LatenessWindow lateness;
-    std::size_t n_vehicles = 0;            // the first n of `vehicles` hold this window's
+    std::size_t n_vehicles = 0;           // the first n of `vehicles` hold this window's
     std::vector<VehicleReport> vehicles;  // sized once, to the most vehicles the server runs
   };
 
@@ -158,8 +160,17 @@ class ServerNode {
                            const std::map<transport::Guid, ServerClaim>& claims) const;
   std::string FindClash();
   ServerClaim Claim(bool running) const;
-  // Receiver thread.
+  // Receiver thread: a loop of rounds, each round's stages below (receiver state in the .cc).
+  struct Receiver;
   void ReceiverLoop();
+  void ReceiveOtherServers(Receiver& rx, base::MonoTime now);
+  bool ReceiveInputs(Receiver& rx, base::MonoTime now);  // true: an input handed to the loop
+  void ReceiveRequests(Receiver& rx, base::MonoTime now, bool stopping);
+  void ReceiverHousekeeping(Receiver& rx, base::MonoTime now);
+  void InputRefusedByReader(const transport::SampleInfo& info, std::string_view kind,
+                            std::string_view detail, const google::protobuf::Message* m);
+  void RequestRefusedByReader(Receiver& rx, std::string_view kind, std::string_view detail,
+                              const google::protobuf::Message* m);
   void Refuse(const pb::ControlRequest& r, const std::string& why);
   // Request thread.
   void RequestLoop();
@@ -229,8 +240,7 @@ class ServerNode {
   std::vector<DeferredReply> deferred_step_replies_;
 
   // Receiver's: input arbitration and what other servers run; copies for the publisher.
-  InputArbiter arbiter_{
-      OwnershipLease(base::FromSeconds(options_.session.watchdog_s))};
+  InputArbiter arbiter_{OwnershipLease(base::FromSeconds(options_.session.watchdog_s))};
   std::mutex sources_mu_;
   std::vector<InputArbiter::Source> sources_copy_;
   struct OtherVehicle {

@@ -130,8 +130,8 @@ struct SessionVehicle {
   bool safe_state = true;
   DriverInput applied;  // physics fields of the input applied last step
   bool applied_valid = false;
-  pb::DriverInput applied_msg;  // the message form of what was applied
-  pb::VehicleState state_msg;   // reused for every step
+  pb::DriverInput applied_msg;               // the message form of what was applied
+  pb::VehicleState state_msg;                // reused for every step
   StepStatus step_status = StepStatus::kOk;  // of the last step (written by a stepping thread)
   // Input changes not yet sent (an InputBatch event).
   std::array<InputChange, SessionEventRecord::kMaxBatchSamples> pending{};
@@ -151,7 +151,8 @@ SessionVehicle NewVehicle(std::uint32_t id, std::shared_ptr<const World> world,
 // A control request made ready off the stepping thread (RequestPlanner::Prepare): checked, and
 // everything it needs built (a vehicle, parameters, a resting state, map nodes), so that applying
 // it at a step boundary (Session::Commit) allocates nothing: it checks what only the stepping
-// thread knows and swaps. What the swap replaces is left in it, to be freed where it came from.
+// thread knows and swaps. What it takes out of the session is left in it (replaced_*), to be freed
+// where the request came from.
 struct PreparedRequest {
   enum class Op : std::uint8_t {
     kPause,
@@ -172,10 +173,14 @@ struct PreparedRequest {
   std::uint32_t steps = 0;  // kStep
   bool step_input = false;  // kStep: apply request->step().input() first
   State state;              // kMove: the new state (the vehicle's step is kept)
-  std::shared_ptr<const pb::VehicleParams> params;  // kSetParams: new (after Commit: the old)
-  std::optional<ValidParams> valid;                 // kSetParams: checked against the step
-  SessionVehicles::node_type vehicle;  // kSpawn, kRestore: new (after Commit: the replaced one)
+  std::shared_ptr<const pb::VehicleParams> params;           // kSetParams: the new parameters
+  std::optional<ValidParams> valid;                          // kSetParams: checked against the step
+  SessionVehicles::node_type vehicle;                        // kSpawn, kRestore: the new vehicle
   std::map<std::uint32_t, std::int64_t>::node_type retired;  // kRemove: a node for its step
+  // What Commit takes out of the session, freed with this request where it came from (not on
+  // the stepping thread): the vehicle removed or replaced, the parameters replaced.
+  SessionVehicles::node_type replaced_vehicle;
+  std::shared_ptr<const pb::VehicleParams> replaced_params;
   bool applied = false;      // set by Commit: accepted (else refused)
   std::uint64_t client = 0;  // the server's: the DDS writer it came from
 };
@@ -188,18 +193,21 @@ struct RequestOutcome {
     kNone,
     kText,              // `text` says why
     kExists,            // the vehicle exists already
-    kFull,              // n1: the most vehicles
-    kStepBehind,        // restore: n1 the vehicle's step, n2 the state's
+    kFull,              // max_vehicles
+    kStepBehind,        // restore: vehicle_step, restore_step
     kChanged,           // the vehicle changed between planning and applying
     kCancelledByPause,  // a step request's steps were cancelled
     kCancelledByResume,
-    kClientGone,  // a step request's client left: n1 steps not run (no reply is sent)
+    kClientGone,  // a step request's client left: steps_not_run (no reply is sent)
     kStopped,     // the server stopped before its steps were done
   };
   std::shared_ptr<const pb::ControlRequest> request;
   bool accepted = false;
   Why why = Why::kNone;
-  std::int64_t n1 = 0, n2 = 0;
+  std::int64_t max_vehicles = 0;   // kFull: the server's most vehicles
+  std::int64_t vehicle_step = 0;   // kStepBehind: the vehicle's step (its steps only go forward)
+  std::int64_t restore_step = 0;   // kStepBehind: the step of the state to restore
+  std::int64_t steps_not_run = 0;  // kClientGone
   std::int64_t applied_step = -1;  // the vehicle's step then (-1: no such vehicle)
   std::int64_t sim_time_ns = 0;
   std::string text;
@@ -294,8 +302,17 @@ class Session {
   void FlushInputs(Vehicle& v);
   // The outcome of an accepted request: the vehicle's step, and the ControlApplied event.
   RequestOutcome Accept(const std::shared_ptr<const pb::ControlRequest>& r);
-  RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r, RequestOutcome::Why why,
-                        std::int64_t n1 = 0, std::int64_t n2 = 0);
+  RequestOutcome Refuse(const std::shared_ptr<const pb::ControlRequest>& r,
+                        RequestOutcome::Why why);
+  // Commit's stages: whether the vehicle is still what the plan assumed, then one per operation.
+  bool AsPlanned(const PreparedRequest& p, SessionVehicles::iterator it) const;
+  RequestOutcome CommitOperation(PreparedRequest& p);
+  RequestOutcome CommitPacing(const PreparedRequest& p);
+  RequestOutcome CommitMove(const PreparedRequest& p, Vehicle& v);
+  RequestOutcome CommitSpawn(PreparedRequest& p, bool exists);
+  RequestOutcome CommitRemove(PreparedRequest& p, SessionVehicles::iterator it);
+  RequestOutcome CommitSetParams(PreparedRequest& p, Vehicle& v);
+  RequestOutcome CommitRestore(PreparedRequest& p, SessionVehicles::iterator it);
   void LatchInput(Vehicle& v);
   void ContainNonFinite(Vehicle& v);
   // Phase 2 of Step for the vehicles [begin, end) of order_ (on any of the pool's threads).

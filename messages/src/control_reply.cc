@@ -1,0 +1,24 @@
+#include "vdyn/messages/control_reply.h"
+
+#include "vdyn/base/limits.h"
+
+namespace vdyn::messages {
+
+pb::ControlReply ReplyTo(const pb::ControlRequest* request, std::string_view server_id) {
+  pb::ControlReply reply;
+  if (request != nullptr) {
+    reply.set_request_id(request->request_id());
+    reply.set_client_id(request->client_id().substr(0, limits::kMaxIdBytes));
+    reply.set_vehicle_id(request->vehicle_id());
+  }
+  reply.set_server_id(std::string(server_id));
+  reply.set_accepted(true);
+  return reply;
+}
+
+void Refuse(pb::ControlReply& reply, std::string_view reason) {
+  reply.set_accepted(false);
+  reply.set_reason(std::string(reason.substr(0, limits::kMaxReasonBytes)));
+}
+
+}  // namespace vdyn::messages
