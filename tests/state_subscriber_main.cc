@@ -2,6 +2,9 @@
 // seen `count` samples or `seconds` passed, then prints how many it read. A writer whose readers
 // live in other processes takes the network path, as the server's does.
 //
+// With --states it reads vdyn/states instead (a step of every vehicle a sample, as a recorder or
+// a viewer reads) and counts the vehicle states in them (tests/lab/states_multicast.sh).
+//
 // With --print it also prints one line per state as it takes it, for scripts that watch a session
 // (tests/lab/multihost.sh):
 //   TAKE_NS PUBLISH_NS VEHICLE STEP SOURCE_ID SEQUENCE SAFE SPEED_KMH
@@ -35,18 +38,33 @@ long long RealtimeNs() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 4 || (argc == 5 && std::strcmp(argv[4], "--print") != 0) || argc > 5) {
-    std::fprintf(stderr, "usage: %s DOMAIN COUNT SECONDS [--print]\n", argv[0]);
+  const bool batches = argc == 5 && std::strcmp(argv[4], "--states") == 0;
+  if (argc < 4 || (argc == 5 && !batches && std::strcmp(argv[4], "--print") != 0) || argc > 5) {
+    std::fprintf(stderr, "usage: %s DOMAIN COUNT SECONDS [--print | --states]\n", argv[0]);
     return 2;
   }
   const auto domain = static_cast<std::uint32_t>(std::atoi(argv[1]));
   const long want = std::atol(argv[2]);
   const auto seconds = std::chrono::seconds(std::atol(argv[3]));
-  const bool print = argc == 5;
+  const bool print = argc == 5 && !batches;
   // Line-buffered: a script reading the file sees each state as soon as it is taken.
   if (print) std::setvbuf(stdout, nullptr, _IOLBF, 0);
   vdyn::transport::Participant p(domain);
   vdyn::transport::DropCounters drops;
+  if (batches) {
+    vdyn::transport::Reader<vdyn::pb::VehicleStates> steps(p, vdyn::transport::TopicId::kStates,
+                                                           &drops);
+    long n = 0;
+    const auto end = std::chrono::steady_clock::now() + seconds;
+    while (n < want && std::chrono::steady_clock::now() < end) {
+      (void)steps.Wait(std::chrono::milliseconds(100));
+      (void)steps.Take([&n](const vdyn::pb::VehicleStates& b, const vdyn::transport::SampleInfo&) {
+        n += b.states_size();
+      });
+    }
+    std::printf("received %ld\n", n);
+    return 0;
+  }
   vdyn::transport::Reader<vdyn::pb::VehicleState> states(
       p, vdyn::transport::TopicId::kState, &drops,
       print ? vdyn::transport::ReaderRole::kRecorder : vdyn::transport::ReaderRole::kDefault);

@@ -393,8 +393,14 @@ RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops, 
   }
 }
 
+void RawReader::DetachListener() {
+  if (!on_data_ || reader_ <= 0) return;
+  dds_set_listener(reader_, nullptr);  // no callback after this
+  on_data_.reset();
+}
+
 RawReader::~RawReader() {
-  if (on_data_ && reader_ > 0) dds_set_listener(reader_, nullptr);  // no callback after this
+  DetachListener();
   if (waitset_ > 0) dds_delete(waitset_);
   if (condition_ > 0) dds_delete(condition_);
   if (reader_ > 0) dds_delete(reader_);
@@ -431,11 +437,15 @@ bool RawReader::Wait(std::chrono::nanoseconds timeout) {
 }
 
 void RawReader::OnDataAvailable(std::function<void()> fn) {
-  on_data_ = std::make_unique<std::function<void()>>(std::move(fn));
+  on_data_ = std::make_unique<Listener>();
+  on_data_->fn = std::move(fn);
   dds_listener_t* l = dds_create_listener(on_data_.get());
   if (l == nullptr) throw TransportError("dds_create_listener failed");
-  dds_lset_data_available(
-      l, [](dds_entity_t, void* arg) { (*static_cast<std::function<void()>*>(arg))(); });
+  dds_lset_data_available(l, [](dds_entity_t, void* arg) {
+    auto* listener = static_cast<Listener*>(arg);
+    std::lock_guard lock(listener->mu);
+    listener->fn();
+  });
   const dds_return_t rc = dds_set_listener(reader_, l);
   dds_delete_listener(l);
   if (rc != DDS_RETCODE_OK) throw TransportError(DdsError("dds_set_listener", rc));

@@ -12,6 +12,7 @@
 #include <functional>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <stdexcept>
@@ -216,6 +217,8 @@ class RawReader {
   [[nodiscard]] bool Wait(std::chrono::nanoseconds timeout);
   // Calls fn from DDS's receive thread as soon as data arrives (the lowest latency: no hand-over
   // to another thread). Take from inside fn, and then from nowhere else: Take is not reentrant.
+  // Cyclone DDS calls a listener from each of its receive threads (unicast and multicast: a
+  // reader with writers on both); the calls are serialised here, so fn never runs twice at once.
   void OnDataAvailable(std::function<void()> fn);
   std::uint32_t MatchedWriters();
   // The instance handles of the writers matched right now into `out`; false on error (then
@@ -250,6 +253,10 @@ class RawReader {
   // empty) and calls fn with it.
   template <class Next, class F>
   int TakeInto(Next&& next, F&& fn, int max_samples);
+  // Removes the OnDataAvailable listener, waiting for a call in progress (Cyclone DDS's
+  // dds_set_listener does); nothing when there is none. A derived reader whose listener uses its
+  // own members calls it in its destructor.
+  void DetachListener();
 
  private:
   static constexpr int kBatch = 64;
@@ -268,13 +275,17 @@ class RawReader {
   dds_entity_t participant_ = 0;
   dds_entity_t subscriber_ = 0;  // with a partition
   dds_entity_t reader_ = 0;
-  dds_entity_t waitset_ = 0;    // made by the first Wait()
+  dds_entity_t waitset_ = 0;  // made by the first Wait()
   dds_entity_t condition_ = 0;
   DropCounters* drops_;
   // Drop kinds, registered at construction so counting never allocates.
   int drop_unknown_type_ = -1, drop_oversized_ = -1, drop_malformed_ = -1, drop_nonfinite_ = -1,
       drop_long_string_ = -1, drop_dds_error_ = -1;
-  std::unique_ptr<std::function<void()>> on_data_;
+  struct Listener {
+    std::mutex mu;  // one call at a time (see OnDataAvailable)
+    std::function<void()> fn;
+  };
+  std::unique_ptr<Listener> on_data_;
   std::string last_error_;
 };
 
@@ -349,6 +360,11 @@ class Reader : public RawReader {
   Reader(Participant& participant, TopicId id, DropCounters* drops,
          ReaderRole role = ReaderRole::kDefault, const std::string& partition = {})
       : RawReader(participant, id, drops, role, partition), scratch_(FirstBlockBytes(id)) {}
+  // A listener's Take parses into scratch_, which goes before ~RawReader runs: the listener is
+  // detached first (a state arriving meanwhile crashed net_bench's subscribers as they ended).
+  ~Reader() { DetachListener(); }
+  Reader(const Reader&) = delete;
+  Reader& operator=(const Reader&) = delete;
   // Calls fn(const M&, const SampleInfo&) for every valid sample available now (at most
   // max_samples taken); returns how many valid ones. The message lives until fn returns.
   template <class F>
