@@ -23,6 +23,7 @@
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/transport/control_client.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
@@ -767,8 +768,9 @@ SeatView ArrowFromTheSeat(const TempDir& dir, bool recentre) {
   out.measured_x = b.min_x;
   out.measured_y = FindColour(*img, c.r, c.g, c.b, 12, {b.min_x, 0, b.min_x + 3, img->height}).cy;
   // From the seat itself: OpenXR axes X = -Y_B, Y = Z_B, Z = -X_B (the vehicle heads east).
-  const viewer::CameraState cam;
-  const viewer::Vec3 seat{cam.seat_B.x, cam.seat_B.y, cam.seat_B.z + TestCar::kHeight};
+  const pb::WorldDescription world = MakeWorld("test", kPi / 2, {1, 2});
+  const viewer::Vec3 eyes_B = viewer::CabinFor(viewer::GeometryFor(1, &world, nullptr)).eyes_B;
+  const viewer::Vec3 seat{eyes_B.x, eyes_B.y, eyes_B.z + TestCar::kHeight};
   viewer::Mat3 axes;
   axes.c[0] = {0, -1, 0};
   axes.c[1] = {0, 0, 1};
