@@ -65,7 +65,7 @@ struct Options {
   std::vector<std::uint32_t> vehicle_ids;
   int max_vehicles = 64;
   int step_threads = 0;  // 0: chosen from --max-vehicles (DefaultStepThreads)
-  double watchdog_ms = 100.0;
+  double watchdog_ms = vdyn::limits::kDefaultWatchdogMs;
   double lockstep_timeout_s = 10.0;
   int rt_priority = 50;
   int state_writer_nice = 0;

@@ -543,7 +543,7 @@ TEST_F(ViewerTest, MalformedWorldsAndStatesAreRefusedCountedAndTheViewGoesOn) {
   // (One kind at a time: the state topic keeps only the newest sample of a vehicle.)
   ASSERT_TRUE(FramesUntil(
       v, [&] { pub.State(nan_state); },
-      [&] { return v.session().drops().Of("non-finite value on vdyn/state") > 0; }));
+      [&] { return v.session().drops().Of("non-finite value on vdyn/states") > 0; }));
   ASSERT_TRUE(FramesUntil(
       v, [&] { pub.State(three); }, [&] { return v.stats().states_refused > 0; }));
   ASSERT_NE(v.vehicle(1), nullptr);

@@ -172,14 +172,16 @@ TestPublisher::TestPublisher(std::uint32_t domain)
     : participant_(domain),
       worlds_(participant_, transport::TopicId::kWorld),
       params_(participant_, transport::TopicId::kParams),
-      states_(participant_, transport::TopicId::kState),
+      states_(participant_, transport::TopicId::kStates),
       inputs_(participant_, transport::TopicId::kInput, 10) {}
 
 bool TestPublisher::World(const pb::WorldDescription& w) {
   return worlds_.Write(transport::ServerKey(w.server_id()), w);
 }
 bool TestPublisher::State(const pb::VehicleState& s) {
-  return states_.Write(s.vehicle_id(), s);
+  pb::VehicleStates b;
+  *b.add_states() = s;
+  return states_.Write(transport::ServerKey(s.server_id()), b);
 }
 bool TestPublisher::Params(std::uint32_t vehicle_id, const pb::VehicleParams& p) {
   return params_.Write(vehicle_id, p);

@@ -87,7 +87,8 @@ class TestPublisher {
   transport::Participant participant_;
   transport::Writer<pb::WorldDescription> worlds_;
   transport::Writer<pb::VehicleParams> params_;
-  transport::Writer<pb::VehicleState> states_;
+  transport::RawWriter
+      states_;  // vdyn/states, a state a sample: a viewer reads every vehicle there
   transport::Writer<pb::DriverInput> inputs_;
   std::uint64_t input_sequence_ = 0;
 };

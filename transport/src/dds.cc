@@ -93,9 +93,8 @@ Participant::Participant(std::uint32_t domain_id, const ParticipantOptions& opti
   if (participant_ < 0) {
     const dds_entity_t rc = participant_;
     participant_ = 0;
-    throw TransportError(DdsError("cannot create the DDS participant on domain " +
-                                      std::to_string(domain_id),
-                                  rc));
+    throw TransportError(
+        DdsError("cannot create the DDS participant on domain " + std::to_string(domain_id), rc));
   }
   dds_guid_t g;
   if (const dds_return_t rc = dds_get_guid(participant_, &g); rc != DDS_RETCODE_OK) {
@@ -258,7 +257,6 @@ RawWriter::RawWriter(Participant& participant, TopicId id, std::int32_t ownershi
   dds_lset_publication_matched(l, [](dds_entity_t, dds_publication_matched_status_t st, void* arg) {
     auto* m = static_cast<Match*>(arg);
     m->count.store(st.current_count, std::memory_order_relaxed);
-    m->changes.fetch_add(1, std::memory_order_release);
   });
   dds_qos_t* q = WriterQos(id, ownership_strength);
   writer_ = dds_create_writer(parent, participant.Topic(id), q, l);
@@ -296,8 +294,8 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
   const TopicSpec& s = Spec(id_);
   if (payload.size() > s.max_payload_bytes) {
     last_error_ = "a " + std::to_string(payload.size()) + "-byte " + s.payload +
-                  " is larger than " + s.name + " allows (" +
-                  std::to_string(s.max_payload_bytes) + " bytes)";
+                  " is larger than " + s.name + " allows (" + std::to_string(s.max_payload_bytes) +
+                  " bytes)";
     return false;
   }
   vdyn_dds_Envelope env;
@@ -320,50 +318,17 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
   return true;
 }
 
-std::uint32_t RawWriter::UnmarkedReaders() {
-  const std::uint64_t changes = match_.changes.load(std::memory_order_acquire);
-  if (changes == counted_changes_ && !recount_) return unmarked_;
-  recount_ = false;
-  counted_changes_ = changes;  // a change from here on is counted at the next call
-  std::vector<dds_instance_handle_t> handles(64);
-  dds_return_t n = dds_get_matched_subscriptions(writer_, handles.data(), handles.size());
-  if (n > static_cast<dds_return_t>(handles.size())) {
-    handles.resize(static_cast<std::size_t>(n));
-    n = dds_get_matched_subscriptions(writer_, handles.data(), handles.size());
+bool RawWriter::Flush() {
+  if (sending_ != Sending::kBatched) return true;
+  // dds_write_flush (void in Cyclone DDS 0.10.2) sends nothing when it cannot lock the writer; a
+  // status read fails in the same case and says why.
+  std::uint32_t status = 0;
+  if (const dds_return_t rc = dds_get_status_changes(writer_, &status); rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError(std::string("dds_write_flush on ") + Spec(id_).name, rc);
+    return false;
   }
-  if (n < 0) {
-    last_error_ = DdsError("dds_get_matched_subscriptions", n);
-    unmarked_ = match_.count.load(std::memory_order_relaxed);  // every reader, to be safe
-    return unmarked_;
-  }
-  std::uint32_t unmarked = 0;
-  const std::size_t mark_len = sizeof kReadsStatesMark - 1;
-  for (dds_return_t i = 0; i < std::min<dds_return_t>(n, static_cast<dds_return_t>(handles.size())); ++i) {
-    dds_builtintopic_endpoint_t* ep = dds_get_matched_subscription_data(writer_, handles[static_cast<std::size_t>(i)]);
-    bool marked = false;
-    if (ep != nullptr && ep->qos != nullptr) {
-      void* data = nullptr;
-      std::size_t size = 0;
-      if (dds_qget_userdata(ep->qos, &data, &size) && data != nullptr) {
-        marked = size == mark_len && std::memcmp(data, kReadsStatesMark, mark_len) == 0;
-      }
-      dds_free(data);
-    }
-    if (ep != nullptr) {
-      dds_builtintopic_free_endpoint(ep);
-    } else {
-      recount_ = true;  // unmatched meanwhile, or not known yet: counted again next time
-    }
-    if (!marked) ++unmarked;
-  }
-  unmarked_ = unmarked;
-  return unmarked_;
-}
-
-// Nothing to check: Debian 12's Cyclone DDS (0.10) declares dds_write_flush void (a failed send
-// shows in the writer's own status and in the readers' sequence gaps, not here).
-void RawWriter::Flush() {
-  if (sending_ == Sending::kBatched) dds_write_flush(writer_);
+  dds_write_flush(writer_);
+  return true;
 }
 
 bool RawWriter::WaitForAcks(std::chrono::nanoseconds timeout) {
@@ -417,15 +382,7 @@ RawReader::RawReader(Participant& participant, TopicId id, DropCounters* drops, 
                                       (partition.empty() ? "" : " in partition " + partition),
                                   rc));
   }
-  waitset_ = dds_create_waitset(participant.handle());
-  if (waitset_ < 0) throw TransportError(DdsError("cannot create a waitset for " + name, waitset_));
-  condition_ = dds_create_readcondition(reader_, DDS_ANY_STATE);
-  if (condition_ < 0) {
-    throw TransportError(DdsError("cannot create a read condition for " + name, condition_));
-  }
-  if (const dds_return_t rc = dds_waitset_attach(waitset_, condition_, 0); rc != DDS_RETCODE_OK) {
-    throw TransportError(DdsError("cannot attach the read condition of " + name, rc));
-  }
+  participant_ = participant.handle();
   if (drops_ != nullptr) {
     drop_unknown_type_ = drops_->Register("unknown type on " + name);
     drop_oversized_ = drops_->Register("oversized payload on " + name);
@@ -445,6 +402,24 @@ RawReader::~RawReader() {
 }
 
 bool RawReader::Wait(std::chrono::nanoseconds timeout) {
+  // The waitset and its read condition are made by the first Wait: a reader served by a listener
+  // (OnDataAvailable) or another Waitset never has them, and Cyclone then signals no condition of
+  // this reader's for every sample that arrives (about 1 us a sample on its receive thread).
+  if (waitset_ == 0) {
+    const std::string name = Spec(id_).name;
+    const dds_entity_t ws = dds_create_waitset(participant_);
+    const dds_entity_t c = ws < 0 ? ws : dds_create_readcondition(reader_, DDS_ANY_STATE);
+    const dds_return_t rc = c < 0 ? c : dds_waitset_attach(ws, c, 0);
+    if (rc < 0) {
+      if (c > 0) dds_delete(c);
+      if (ws > 0) dds_delete(ws);
+      last_error_ = DdsError("cannot wait on " + name, rc);
+      if (drops_ != nullptr) drops_->Count(drop_dds_error_, "dds_waitset_wait");
+      return false;
+    }
+    waitset_ = ws;
+    condition_ = c;
+  }
   dds_attach_t triggered;
   const dds_return_t n = dds_waitset_wait(waitset_, &triggered, 1, timeout.count());
   if (n < 0) {
@@ -459,9 +434,8 @@ void RawReader::OnDataAvailable(std::function<void()> fn) {
   on_data_ = std::make_unique<std::function<void()>>(std::move(fn));
   dds_listener_t* l = dds_create_listener(on_data_.get());
   if (l == nullptr) throw TransportError("dds_create_listener failed");
-  dds_lset_data_available(l, [](dds_entity_t, void* arg) {
-    (*static_cast<std::function<void()>*>(arg))();
-  });
+  dds_lset_data_available(
+      l, [](dds_entity_t, void* arg) { (*static_cast<std::function<void()>*>(arg))(); });
   const dds_return_t rc = dds_set_listener(reader_, l);
   dds_delete_listener(l);
   if (rc != DDS_RETCODE_OK) throw TransportError(DdsError("dds_set_listener", rc));
@@ -526,8 +500,7 @@ bool RawReader::MatchedWriterHandles(std::vector<std::uint64_t>& out) {
   out.clear();
   std::vector<dds_instance_handle_t> handles(64);
   while (true) {
-    const dds_return_t n =
-        dds_get_matched_publications(reader_, handles.data(), handles.size());
+    const dds_return_t n = dds_get_matched_publications(reader_, handles.data(), handles.size());
     if (n < 0) {
       last_error_ = DdsError("dds_get_matched_publications", n);
       return false;
@@ -580,8 +553,8 @@ void RawReader::ReturnBatch(Batch& b, int n) {
   }
 }
 
-void RawReader::Refused(const SampleInfo& info, int slot, const char* kind,
-                        std::string_view detail, const google::protobuf::Message* parsed) {
+void RawReader::Refused(const SampleInfo& info, int slot, const char* kind, std::string_view detail,
+                        const google::protobuf::Message* parsed) {
   if (drops_ != nullptr) drops_->Count(slot, detail);
   if (on_refused) on_refused(info, std::string(kind) + " on " + Spec(id_).name, detail, parsed);
 }

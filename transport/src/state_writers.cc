@@ -14,7 +14,9 @@ StateWriters::StateWriters(Participant& participant, DropCounters& drops, Option
       all_(participant, TopicId::kState, 0, options.sending) {
   drop_create_ = drops_.Register("cannot create a vehicle's state writer (its partition)");
   drop_write_ = drops_.Register("write failed on vdyn/state in a vehicle partition");
-  drop_batch_ = drops_.Register("cannot create the vdyn/states writer (states go on vdyn/state only)");
+  drop_batch_ =
+      drops_.Register("cannot create the vdyn/states writer (states go on vdyn/state only)");
+  drop_flush_ = drops_.Register("flush failed on vdyn/state");
   try {
     batch_ = std::make_unique<RawWriter>(participant, TopicId::kStates, 0, Sending::kEach);
   } catch (const TransportError& e) {
@@ -23,7 +25,6 @@ StateWriters::StateWriters(Participant& participant, DropCounters& drops, Option
     drops_.Count(drop_batch_, e.what());
   }
   batched_.reserve(limits::kMaxStatesBytes);
-  all_read_ = AllRead();
   vehicles_.reserve(512);
   pending_.reserve(512);
   round_ = base::MonotonicNow();
@@ -34,12 +35,13 @@ bool StateWriters::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> p
   bool ok = true;
   if (batch_ && batch_->HasReaders()) {
     // VehicleStates field 1: the state's bytes as they are.
-    if (batched_.size() + messages::wire::BytesFieldSize(1, payload.size()) > limits::kMaxStatesBytes) {
+    if (batched_.size() + messages::wire::BytesFieldSize(1, payload.size()) >
+        limits::kMaxStatesBytes) {
       ok = WriteBatch() && ok;
     }
     messages::wire::AppendBytesField(batched_, 1, payload);
   }
-  if (all_read_) {
+  if (all_.HasReaders()) {
     if (all_.WriteBytes(key, payload)) {
       ++all_written_;
     } else {
@@ -64,12 +66,6 @@ bool StateWriters::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> p
   return ok;
 }
 
-bool StateWriters::AllRead() {
-  // A recorder's vdyn/state reader is marked: it takes these states from vdyn/states. Without a
-  // vdyn/states writer every reader gets them here.
-  return batch_ ? all_.UnmarkedReaders() > 0 : all_.HasReaders();
-}
-
 bool StateWriters::WriteBatch() {
   if (batched_.empty()) return true;
   const bool ok = batch_->WriteBytes(options_.states_key, batched_);
@@ -88,8 +84,7 @@ bool StateWriters::EndStep() {
 
 bool StateWriters::Flush() {
   const bool ok = WriteBatch();
-  all_.Flush();
-  all_read_ = AllRead();  // for the next round
+  if (!all_.Flush()) drops_.Count(drop_flush_, all_.last_error());
   int created = 0;
   while (!pending_.empty() && created < options_.new_writers_per_flush) {
     const std::uint32_t key = pending_.back();

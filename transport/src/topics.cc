@@ -50,12 +50,13 @@ dds_qos_t* BaseQos(const TopicSpec& s) {
   } else {
     dds_qset_history(q, DDS_HISTORY_KEEP_LAST, s.history_depth);
   }
-  dds_qset_durability(q, s.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL
-                                           : DDS_DURABILITY_VOLATILE);
+  dds_qset_durability(q,
+                      s.transient_local ? DDS_DURABILITY_TRANSIENT_LOCAL : DDS_DURABILITY_VOLATILE);
   if (s.transient_local) {
     // How many samples per instance a late joiner receives.
-    dds_qset_durability_service(q, 0, DDS_HISTORY_KEEP_LAST, s.history_depth == 0 ? 1 : s.history_depth,
-                                DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED);
+    dds_qset_durability_service(q, 0, DDS_HISTORY_KEEP_LAST,
+                                s.history_depth == 0 ? 1 : s.history_depth, DDS_LENGTH_UNLIMITED,
+                                DDS_LENGTH_UNLIMITED, DDS_LENGTH_UNLIMITED);
   }
   dds_qset_ownership(q, s.exclusive_ownership ? DDS_OWNERSHIP_EXCLUSIVE : DDS_OWNERSHIP_SHARED);
   dds_qset_deadline(q, s.deadline_ns > 0 ? s.deadline_ns : DDS_INFINITY);
@@ -78,7 +79,9 @@ const TopicSpec& Spec(TopicId id) {
   throw std::logic_error("unknown topic id");
 }
 
-std::span<const TopicSpec> AllTopics() { return kTopics; }
+std::span<const TopicSpec> AllTopics() {
+  return kTopics;
+}
 
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
   const TopicSpec& s = Spec(id);
@@ -105,16 +108,11 @@ dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength) {
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role) {
   const TopicSpec& s = Spec(id);
   dds_qos_t* q = BaseQos(s);
-  const bool batch_reader = role == ReaderRole::kBatchRecorder || role == ReaderRole::kBatchLatest;
-  if (batch_reader && id == TopicId::kState) {
-    dds_qset_userdata(q, kReadsStatesMark, sizeof kReadsStatesMark - 1);
-  }
-  if (id == TopicId::kStates && (role == ReaderRole::kDefault || role == ReaderRole::kBatchLatest)) {
+  if (id == TopicId::kStates && role == ReaderRole::kDefault) {
     // The newest step, in as many samples as a step of the largest states can split into
     // (StateWriters splits at limits::kMaxStatesBytes; frames of a step hold at most 4 KB a state).
     dds_qset_history(q, DDS_HISTORY_KEEP_LAST, 2);
-  } else if ((role == ReaderRole::kRecorder || role == ReaderRole::kBatchRecorder) &&
-             s.history_depth > 0 && id != TopicId::kWorld) {
+  } else if (role == ReaderRole::kRecorder && s.history_depth > 0 && id != TopicId::kWorld) {
     // A recorder takes every sample: a deeper (bounded) history per instance absorbs a late take
     // instead of overwriting samples. History is the reader's own business: it matches the
     // same writers.
@@ -134,7 +132,9 @@ dds_qos_t* PartitionQos(const std::string& partition) {
   return q;
 }
 
-std::uint32_t ServerKey(const std::string& server_id) { return base::ServerKey(server_id); }
+std::uint32_t ServerKey(const std::string& server_id) {
+  return base::ServerKey(server_id);
+}
 
 const TopicSpec* SpecByName(const std::string& name) {
   for (const TopicSpec& s : kTopics) {

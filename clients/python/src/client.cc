@@ -39,14 +39,14 @@ std::string Seconds(double s) {
   return buf;
 }
 
-// States a request's steps may hold in the server's state outbox at once (it holds at least 512
-// frames): a lockstep request asks for at most this many steps times vehicles, and waits for
-// their states before the next, so the outbox never overflows.
-constexpr std::uint32_t kOutboxFrames = 256;
-// With an input, a request carries it again at least this often: the server's input watchdog
-// (default 100 ms of simulated time) would otherwise replace an input held longer by its safe
-// state.
-constexpr std::uint32_t kInputRepeatSteps = 50;
+// States a request's steps may hold in the server's state outbox at once (it holds at least
+// limits::kMinStateOutboxFrames): a lockstep request asks for at most this many steps times
+// vehicles, and waits for their states before the next, so the outbox never overflows.
+constexpr auto kOutboxFrames = static_cast<std::uint32_t>(limits::kMinStateOutboxFrames / 2);
+// With an input, a request carries it again at least this often (steps of 1 ms): the server's
+// input watchdog (limits::kDefaultWatchdogMs of simulated time) would otherwise replace an input
+// held longer by its safe state.
+constexpr auto kInputRepeatSteps = static_cast<std::uint32_t>(limits::kDefaultWatchdogMs / 2);
 
 // A recorder-sized receive buffer: a step's burst of states must not overflow the socket.
 constexpr std::size_t kReceiveBufferBytes = std::size_t{16} << 20;

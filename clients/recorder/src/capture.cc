@@ -250,65 +250,6 @@ struct Capture::Impl {
   std::uint64_t untracked_vehicles = 0;
   std::map<std::tuple<TopicId, std::uint32_t, std::uint64_t>, SequenceGaps> sequences;
 
-  // Each state once (taker only). One participant may send this recorder a vehicle's states on
-  // vdyn/states and on vdyn/state too: a server writes vdyn/state to every matched reader once
-  // any reader that is not a recorder's reads it (a viewer, a DDS tool), the recorder's included.
-  // Both are best effort, so either copy may come first or alone: the file holds the union, and a
-  // state already recorded from the other topic (same participant, vehicle and step) is a copy,
-  // not recorded again. A state repeated on the same topic (a player seeking back) is recorded.
-  static constexpr std::uint64_t kCopyWindow = 4096;  // steps behind the newest that are checked
-  struct SeenSteps {
-    std::uint64_t newest = 0;
-    std::vector<std::uint8_t> from;  // per step % kCopyWindow: 1 vdyn/states, 2 vdyn/state
-  };
-  transport::RawReader* states_reader = nullptr;  // vdyn/states
-  transport::RawReader* state_reader = nullptr;   // vdyn/state
-  // Each writer's participant (none: not matched any more, not told apart), asked of DDS once.
-  std::unordered_map<std::uint64_t, std::optional<transport::Guid>> participant_of;
-  std::map<std::pair<transport::Guid, std::uint32_t>, SeenSteps>
-      seen_steps;  // (participant, vehicle)
-  std::uint64_t state_copies = 0;
-
-  // True when this state was recorded already from the other topic; else notes it.
-  bool StateCopy(bool batch, std::uint64_t writer, std::uint32_t vehicle, std::uint64_t step) {
-    transport::RawReader* reader = batch ? states_reader : state_reader;
-    if (reader == nullptr) return false;
-    auto p = participant_of.find(writer);
-    if (p == participant_of.end()) {
-      if (participant_of.size() >= 4096) participant_of.clear();
-      p = participant_of.emplace(writer, reader->WriterParticipant(writer)).first;
-    }
-    if (!p->second) return false;
-    const auto key = std::make_pair(*p->second, vehicle);
-    if (seen_steps.size() >= 8192 && seen_steps.count(key) == 0) {
-      seen_steps.clear();  // bounded: at worst a few copies are recorded
-    }
-    SeenSteps& seen = seen_steps[key];
-    const std::uint8_t mine = batch ? 1 : 2, other = batch ? 2 : 1;
-    if (seen.from.empty()) {
-      seen.from.assign(kCopyWindow, 0);
-      seen.newest = step;
-    } else if (step > seen.newest) {
-      for (std::uint64_t s = seen.newest + 1; s <= step && s <= seen.newest + kCopyWindow; ++s) {
-        seen.from[s % kCopyWindow] = 0;
-      }
-      seen.newest = step;
-    } else if (seen.newest - step >= kCopyWindow) {
-      return false;  // too old to tell: recorded
-    }
-    std::uint8_t& from = seen.from[step % kCopyWindow];
-    if ((from & other) != 0) {
-      if (state_copies++ == 0) {
-        spdlog::info(
-            "vdyn-recorder: states arrive on both vdyn/state and vdyn/states from one "
-            "participant: each is recorded once");
-      }
-      return true;
-    }
-    from |= mine;
-    return false;
-  }
-
   // Writer side.
   struct File {
     std::unique_ptr<mcap::Writer> w;
@@ -373,10 +314,6 @@ struct Capture::Impl {
       const std::optional<std::uint64_t> id = wire::Number(f.bytes, 1);  // absent: vehicle 0
       one.info.key = id && *id <= UINT32_MAX ? static_cast<std::uint32_t>(*id) : 0;
       one.payload = f.bytes;
-      if (StateCopy(true, one.info.publication_handle, one.info.key,
-                    wire::Number(f.bytes, 3).value_or(0))) {
-        return true;
-      }
       OnSample(TopicId::kState, one, now);
       return true;
     });
@@ -732,29 +669,24 @@ Capture::Capture(transport::Participant& participant, RecordOptions options)
       continue;
     }
     impl_->counts[s.id];
-    transport::ReaderRole role = transport::ReaderRole::kRecorder;
     if (s.id == TopicId::kState) {
       // Every vehicle's states: from vdyn servers and players a step's in one sample on
-      // vdyn/states; its vdyn/state reader is marked as such, so they send it nothing there,
-      // and it hears any other writer of vdyn/state. Where vdyn/states is not permitted (DDS
-      // Security), everything on vdyn/state.
+      // vdyn/states, the one route for a reader of every vehicle. Where vdyn/states is not
+      // permitted (DDS Security), vdyn/state instead.
       try {
         impl_->readers.emplace_back(
             TopicId::kStates,
             std::make_unique<transport::RawReader>(participant, TopicId::kStates, &impl_->drops,
                                                    transport::ReaderRole::kRecorder));
-        role = transport::ReaderRole::kBatchRecorder;
+        continue;
       } catch (const transport::TransportError& e) {
         spdlog::warn("vdyn-recorder: cannot read vdyn/states ({}); every state on vdyn/state",
                      e.what());
       }
     }
     impl_->readers.emplace_back(
-        s.id, std::make_unique<transport::RawReader>(participant, s.id, &impl_->drops, role));
-  }
-  for (auto& [t, reader] : impl_->readers) {
-    if (t == TopicId::kStates) impl_->states_reader = reader.get();
-    if (t == TopicId::kState) impl_->state_reader = reader.get();
+        s.id, std::make_unique<transport::RawReader>(participant, s.id, &impl_->drops,
+                                                     transport::ReaderRole::kRecorder));
   }
   if (world_at) {
     auto world = std::make_unique<transport::RawReader>(participant, TopicId::kWorld, &impl_->drops,
@@ -803,13 +735,8 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
     for (auto& [topic, reader] : m.readers) {
       const TopicId t = topic;
       std::unique_lock<std::mutex> counts_lock(m.counts_mu);
-      const int n = reader->TakeRaw([&](const transport::RawSample& s) {
-        if (t == TopicId::kState && m.StateCopy(false, s.info.publication_handle, s.info.key,
-                                                wire::Number(s.payload, 3).value_or(0))) {
-          return;
-        }
-        m.OnSample(t, s, m.LogNow());
-      });
+      const int n =
+          reader->TakeRaw([&](const transport::RawSample& s) { m.OnSample(t, s, m.LogNow()); });
       any = any || n > 0;
     }
     if (any) m.cv.notify_one();

@@ -85,7 +85,8 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
   states_ = std::make_unique<StateOutbox>(
       participant_, drops_, transport::ServerKey(options_.session.server_id),
       std::max<std::size_t>(
-          512, 64 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)),
+          limits::kMinStateOutboxFrames,
+          64 * std::max(options_.vehicle_ids.size(), options_.session.max_vehicles)),
       options_.vehicle_ids);
   // The world first (transient-local: viewers joining later get it), then the vehicles.
   auto world_msg = std::make_unique<pb::WorldDescription>(
@@ -467,11 +468,18 @@ void ServerNode::WriteStats(base::MonoTime start, base::MonoTime end, base::Nano
   // Every state a step made: handed to the state writer, or refused there (queue full).
   std::fprintf(f, "states_pushed %llu\n", static_cast<unsigned long long>(states_->pushed()));
   std::fprintf(f, "states_refused %llu\n", static_cast<unsigned long long>(states_->refused()));
-  // Of those handed over, written on vdyn/state by the time of this summary, and writes that
-  // failed.
+  // Of those handed over, written by the state writer by the time of this summary, and writes
+  // that failed.
   std::fprintf(f, "states_written %llu\n", static_cast<unsigned long long>(states_->written()));
   std::fprintf(f, "state_write_failures %llu\n",
                static_cast<unsigned long long>(states_->write_failures()));
+  // The state writer's rounds: the loop's hand-over to the writer's wake-up, then its writes.
+  const StateOutbox::Times t = states_->WriterTimes();
+  std::fprintf(f, "state_rounds %llu\n", static_cast<unsigned long long>(t.rounds));
+  std::fprintf(f, "state_wake_p50_us %.1f\nstate_wake_p99_us %.1f\n", t.wake_p50, t.wake_p99);
+  std::fprintf(f, "state_send_p50_us %.1f\nstate_send_p99_us %.1f\n", t.send_p50, t.send_p99);
+  std::fprintf(f, "state_send_cpu_p50_us %.1f\nstate_send_cpu_p99_us %.1f\n", t.send_cpu_p50,
+               t.send_cpu_p99);
   std::fprintf(f, "step_threads %d\n", session_->step_threads());
   // The boundaries that applied requests, and how long the requests held each.
   std::fprintf(f, "request_boundaries %llu\n",

@@ -3,6 +3,7 @@
 #include <pthread.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -11,6 +12,17 @@
 #include <string>
 
 namespace vdyn {
+namespace {
+
+// CPU time of the calling thread (the writer's own work in a round, without the time it waited
+// for a core).
+std::int64_t ThreadCpuNs() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
+}
+
+}  // namespace
 
 StateOutbox::StateOutbox(transport::Participant& participant, transport::DropCounters& drops,
                          std::uint32_t states_key, std::size_t frames,
@@ -70,7 +82,17 @@ void StateOutbox::Close(std::size_t n) {
   open_ = 0;
 }
 
-void StateOutbox::Send() { bell_.Ring(); }
+void StateOutbox::Send() {
+  handed_ns_.store(base::MonotonicNow().ns, std::memory_order_relaxed);
+  bell_.Ring();
+}
+
+StateOutbox::Times StateOutbox::WriterTimes() const {
+  std::lock_guard lock(times_mu_);
+  return {send_us_.count(),           wake_us_.Percentile(50), wake_us_.Percentile(99),
+          send_us_.Percentile(50),    send_us_.Percentile(99), send_cpu_us_.Percentile(50),
+          send_cpu_us_.Percentile(99)};
+}
 
 bool StateOutbox::Drain(base::Nanos timeout) {
   const base::MonoTime end = base::MonotonicNow() + timeout;
@@ -110,6 +132,9 @@ void StateOutbox::WriterLoop() {
   writer_tid_.notify_all();
   while (true) {
     const std::uint32_t token = bell_.Token();
+    const std::int64_t handed = handed_ns_.exchange(0, std::memory_order_relaxed);
+    const base::MonoTime start = base::MonotonicNow();
+    const std::int64_t cpu_start = ThreadCpuNs();
     std::uint64_t written = 0;
     while (Frame* f = frames_.Front()) {
       // An empty frame: a vehicle without a state this step (contained, or too large).
@@ -128,6 +153,14 @@ void StateOutbox::WriterLoop() {
     // Whatever the loop handed over so far goes out together: one vdyn/states sample, and on
     // vdyn/state shared datagrams (a frame the loop commits meanwhile waits for the next round).
     if (!writer_.Flush()) drops_.Count(drop_batch_, writer_.last_error());
+    if (written > 0) {
+      const double send_us = static_cast<double>((base::MonotonicNow() - start).ns) * 1e-3;
+      const double cpu_us = static_cast<double>(ThreadCpuNs() - cpu_start) * 1e-3;
+      std::lock_guard lock(times_mu_);
+      if (handed > 0) wake_us_.Add(static_cast<double>(start.ns - handed) * 1e-3);
+      send_us_.Add(send_us);
+      send_cpu_us_.Add(cpu_us);
+    }
     written_.fetch_add(written, std::memory_order_relaxed);
     if (stop_.load()) return;
     bell_.Wait(token, base::Milliseconds(200));

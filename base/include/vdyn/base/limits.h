@@ -54,6 +54,13 @@ inline constexpr Range kSpawnSpeed{0.0, 110.0, false, false, "speed, m/s"};
 inline constexpr std::uint32_t kMaxStepsPerRequest = 600'000;
 // Requests the server applies at one step boundary; more wait in the queue.
 inline constexpr int kMaxRequestsPerBoundary = 16;
+// Frames of the server's state outbox (runtime/state_outbox.h: 64 steps of its vehicles, never
+// fewer than this): a lockstep client that waits for a request's states before the next asks for
+// at most half as many states a request (clients/python), so the outbox never overflows.
+inline constexpr std::size_t kMinStateOutboxFrames = 512;
+// The input watchdog's default (vdyn-server --watchdog-ms): a vehicle without live input this long
+// goes to its safe state; a lockstep client repeats a held input more often than this.
+inline constexpr double kDefaultWatchdogMs = 100.0;
 
 // --- Messages -------------------------------------------------------------------------------
 // Every string field of every message (ids, names, reasons).

@@ -41,11 +41,11 @@ std::string DdsError(std::string_view what, dds_return_t rc);
 struct Decoded {
   enum class Outcome {
     kOk,
-    kUnknownType,    // the type name is not the topic's payload
-    kOversized,      // larger than the topic allows (not parsed)
-    kMalformed,      // does not parse as the payload
-    kNonFinite,      // a NaN or an infinity somewhere
-    kLongString,     // a string field longer than its limit
+    kUnknownType,  // the type name is not the topic's payload
+    kOversized,    // larger than the topic allows (not parsed)
+    kMalformed,    // does not parse as the payload
+    kNonFinite,    // a NaN or an infinity somewhere
+    kLongString,   // a string field longer than its limit
   } outcome = Outcome::kOk;
   std::string field;  // the offending field, for kNonFinite and kLongString
 };
@@ -152,8 +152,10 @@ class RawWriter {
   [[nodiscard]] bool Write(std::uint32_t key, const google::protobuf::Message& msg);
   // Writes an already serialised payload of the topic's type as it is (a recording played back).
   [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
-  // Sends what a kBatched writer has gathered (nothing to do for kEach).
-  void Flush();
+  // Sends what a kBatched writer has gathered (nothing to do for kEach). False when the writer
+  // could not be flushed (last_error()). Cyclone DDS 0.10.2's dds_write_flush returns nothing: it
+  // does nothing, silently, when it cannot lock the writer, so the writer is checked first.
+  [[nodiscard]] bool Flush();
   // Waits until every matched reliable reader has acknowledged what was written, at most
   // `timeout`; false on timeout or error (last_error() says which).
   [[nodiscard]] bool WaitForAcks(std::chrono::nanoseconds timeout);
@@ -162,10 +164,6 @@ class RawWriter {
   // Whether a reader is matched, as a publication-matched listener last set it: an atomic load,
   // no DDS call (for a hot thread that writes only while someone reads).
   bool HasReaders() const { return match_.count.load(std::memory_order_relaxed) > 0; }
-  // Matched readers without kReadsStatesMark in their user data (topics.h): those that get
-  // states only here. Asks DDS only after the matches changed (the writing thread; allocates
-  // then); otherwise an atomic load.
-  std::uint32_t UnmarkedReaders();
   const std::string& last_error() const { return last_error_; }
   dds_entity_t handle() const { return writer_; }
   TopicId topic() const { return id_; }
@@ -179,12 +177,8 @@ class RawWriter {
   dds_entity_t writer_ = 0;
   struct Match {
     std::atomic<std::uint32_t> count{0};
-    std::atomic<std::uint64_t> changes{0};
   };
   Match match_;  // kept by the publication-matched listener
-  std::uint64_t counted_changes_ = ~std::uint64_t{0};
-  std::uint32_t unmarked_ = 0;
-  bool recount_ = false;  // a matched reader's data could not be read: count again
   std::string buffer_;
   std::string last_error_;
 };
@@ -192,8 +186,8 @@ class RawWriter {
 // What a reader knows of one received sample besides the message.
 struct SampleInfo {
   std::uint32_t key = 0;
-  std::int64_t source_timestamp_ns = 0;   // the writer's wall clock
-  std::uint64_t publication_handle = 0;   // which writer
+  std::int64_t source_timestamp_ns = 0;  // the writer's wall clock
+  std::uint64_t publication_handle = 0;  // which writer
 };
 
 // One sample as it arrived: the envelope's key and type name and the payload's bytes.
@@ -249,7 +243,7 @@ class RawReader {
   // Samples DDS reports lost to this reader so far (best-effort gaps, overwritten history).
   std::uint64_t SamplesLost();
   [[nodiscard]] int TakeRaw(const std::function<void(const RawSample&)>& fn,
-              int max_samples = std::numeric_limits<int>::max());
+                            int max_samples = std::numeric_limits<int>::max());
 
  protected:
   // Takes every available sample; for each valid one parses into next() (a message to parse into,
@@ -271,9 +265,10 @@ class RawReader {
   bool Decode(const RawSample& raw, google::protobuf::Message& scratch);
 
   TopicId id_;
+  dds_entity_t participant_ = 0;
   dds_entity_t subscriber_ = 0;  // with a partition
   dds_entity_t reader_ = 0;
-  dds_entity_t waitset_ = 0;
+  dds_entity_t waitset_ = 0;    // made by the first Wait()
   dds_entity_t condition_ = 0;
   DropCounters* drops_;
   // Drop kinds, registered at construction so counting never allocates.

@@ -1,17 +1,14 @@
-// The writers of vdyn/state and vdyn/states in a process that publishes states (a server's state
-// writer thread, a player of a recording): a reader pays only for what it reads, and so does the
-// writer.
-//
-// A step's states of every vehicle go out as one sample on vdyn/states (VehicleStates, keyed by
-// the server): what a recorder reads, one sample a step to receive and take instead of one per
-// vehicle. Each state also goes to one all-vehicles writer of vdyn/state in the default
-// partition (what viewers and any DDS tool with our IDL read; with Sending::kBatched a round's
-// states share datagrams), and each vehicle has a writer of its own in its partition
-// (VehiclePartition(id)). Those two write only while a reader is matched (an atomic flag a
-// publication-matched listener keeps: no DDS call per state otherwise); a recorder's vdyn/state
-// reader, marked as one that reads vdyn/states (topics.h, ReaderRole::kBatchRecorder), does not
-// count. A client that follows one vehicle reads in that partition and receives that vehicle's
-// states and no others.
+// The writers of a process that publishes states (a server's state writer thread, a player of a
+// recording): one route per kind of reader, and a reader pays only for what it reads
+// (docs/topics.md).
+//  - vdyn/states: a step's states of every vehicle in one sample (VehicleStates, keyed by the
+//    server), for every reader of all vehicles (recorders, viewers, Python, SessionView).
+//  - vdyn/state in a vehicle's partition (VehiclePartition(id)), a writer per vehicle: for the
+//    clients that follow one vehicle (rigs, telemetry), which receive no other vehicle's states.
+//  - vdyn/state in the default partition, one writer (with Sending::kBatched a round's states share
+//    datagrams): the plain per-vehicle topic for a DDS tool with our IDL; no vdyn program reads it.
+// Each writes only while a reader is matched (an atomic flag a publication-matched listener keeps:
+// no DDS call per state otherwise), so a session of recorders and viewers costs one write a step.
 //
 // Not thread-safe: one thread writes. Vehicle writers are created by Flush() (a few per call, so
 // a burst of new vehicles does not hold up a round of states) and deleted when their vehicle has
@@ -51,15 +48,16 @@ class StateWriters {
   StateWriters& operator=(const StateWriters&) = delete;
 
   // Writes one serialised VehicleState of vehicle `key`: into this round's vdyn/states sample,
-  // and on vdyn/state to everyone and to the vehicle's readers while they have any. False when a
-  // write failed (last_error()); a failed vehicle write is counted in the drops.
+  // and on vdyn/state (default partition, the vehicle's partition) while each has a reader. False
+  // when a write failed (last_error()); a failed vehicle write is counted in the drops.
   [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
   // The states written since the last EndStep are one step's: the vdyn/states sample is written
   // now when it holds Options::sample_bytes or more. False when that write failed (last_error()).
   [[nodiscard]] bool EndStep();
-  // Writes this round's vdyn/states sample and sends what the all-vehicles writer gathered; then
-  // creates vehicle writers for vehicles seen since (at most Options::new_writers_per_flush) and
-  // deletes idle ones. False when the vdyn/states write failed (last_error()).
+  // Writes this round's vdyn/states sample and sends what the default partition's writer
+  // gathered (a failed flush is counted in the drops); then creates vehicle writers for vehicles
+  // seen since (at most Options::new_writers_per_flush) and deletes idle ones. False when the
+  // vdyn/states write failed (last_error()).
   [[nodiscard]] bool Flush();
   // Creates vehicle `key`'s own writer now (a player that knows its vehicles beforehand, so
   // one-vehicle readers have matched it by the first state).
@@ -74,7 +72,7 @@ class StateWriters {
   std::uint64_t vehicle_states_written() const { return vehicle_written_; }
   std::uint64_t all_states_written() const { return all_written_; }
   std::uint64_t batches_written() const { return batches_written_; }
-  // Readers of vdyn/state in the default partition matched now, marked or not (asks DDS).
+  // Readers of vdyn/state in the default partition matched now (asks DDS).
   std::uint32_t state_readers() { return all_.MatchedReaders(); }
   const std::string& last_error() const { return last_error_; }
 
@@ -86,7 +84,6 @@ class StateWriters {
   };
   void Create(std::uint32_t key, Vehicle& v);
   bool WriteBatch();
-  bool AllRead();
 
   Participant& participant_;
   DropCounters& drops_;
@@ -94,14 +91,13 @@ class StateWriters {
   RawWriter all_;
   std::unique_ptr<RawWriter> batch_;   // vdyn/states; null when it cannot be created
   std::vector<std::uint8_t> batched_;  // this round's VehicleStates, encoded
-  bool all_read_ = false;              // someone reads vdyn/state here (not from vdyn/states)
   std::unordered_map<std::uint32_t, Vehicle> vehicles_;
   std::vector<std::uint32_t> pending_;  // seen, no writer yet
   base::MonoTime round_;                // when Flush() last ran: the time of the writes since
   base::MonoTime next_sweep_;
   std::uint64_t vehicle_written_ = 0, all_written_ = 0, batches_written_ = 0;
   std::string last_error_;
-  int drop_create_ = -1, drop_write_ = -1, drop_batch_ = -1;
+  int drop_create_ = -1, drop_write_ = -1, drop_batch_ = -1, drop_flush_ = -1;
 };
 
 }  // namespace vdyn::transport

@@ -24,13 +24,13 @@ enum class TopicId {
 
 struct TopicSpec {
   TopicId id;
-  const char* name;       // DDS topic name
-  const char* payload;    // full protobuf message name carried in the envelope
+  const char* name;     // DDS topic name
+  const char* payload;  // full protobuf message name carried in the envelope
   bool reliable;
-  int history_depth;      // KEEP_LAST depth; 0 means KEEP_ALL
-  bool transient_local;   // late joiners get the last samples at once
+  int history_depth;     // KEEP_LAST depth; 0 means KEEP_ALL
+  bool transient_local;  // late joiners get the last samples at once
   bool exclusive_ownership;
-  std::int64_t deadline_ns;        // 0: none
+  std::int64_t deadline_ns;          // 0: none
   std::int64_t liveliness_lease_ns;  // 0: none (automatic, infinite); else manual by topic:
                                      // every write asserts the writer's liveliness
   std::size_t max_payload_bytes;     // a larger sample is refused (written or received)
@@ -44,13 +44,7 @@ std::span<const TopicSpec> AllTopics();
 // Who reads: a client or the server (the newest sample of a keep-last topic is what matters), or
 // a recorder (every sample matters: keep-last topics keep limits::kRecorderHistoryDepth samples
 // per instance, world descriptions one).
-// kBatchRecorder: a recorder that reads vdyn/states besides vdyn/state. Its vdyn/state reader
-// carries kReadsStatesMark in its user data, and a writer that batches (StateWriters) sends it
-// nothing there: it gets those states on vdyn/states. Writers that do not batch (any DDS tool)
-// still reach it on vdyn/state. kBatchLatest: the same mark with a client's history (a viewer
-// that reads every vehicle's newest state).
-enum class ReaderRole { kDefault, kRecorder, kBatchRecorder, kBatchLatest };
-inline constexpr char kReadsStatesMark[] = "vdyn: reads vdyn/states";
+enum class ReaderRole { kDefault, kRecorder };
 
 dds_qos_t* WriterQos(TopicId id, std::int32_t ownership_strength = 0);
 dds_qos_t* ReaderQos(TopicId id, ReaderRole role = ReaderRole::kDefault);

@@ -1,10 +1,10 @@
-// Every state of a domain, or of one vehicle, read the cheapest way the domain allows:
-//  - one vehicle: in that vehicle's partition (transport::VehiclePartition), so the other
-//    vehicles' states are never sent here; where that reader cannot be made (DDS Security
-//    permissions without the partition) every state is read and the others dropped here;
-//  - every vehicle: vdyn/states (a server's step in one sample) and vdyn/state marked as such a
-//    reader (states of writers that do not batch, e.g. other DDS tools); where vdyn/states is not
-//    permitted, vdyn/state alone. docs/topics.md.
+// Every state of a domain, or of one vehicle, each by one route (docs/topics.md):
+//  - one vehicle: vdyn/state in that vehicle's partition (transport::VehiclePartition), so the
+//    other vehicles' states are never sent here; where that reader cannot be made (DDS Security
+//    permissions without the partition) vdyn/state in the default partition, the others dropped
+//    here;
+//  - every vehicle: vdyn/states (a server's step in one sample); where vdyn/states is not
+//    permitted, vdyn/state in the default partition.
 // SessionView (clients' newest state per vehicle) and the Python client (every state) read
 // states through it.
 #pragma once
@@ -44,8 +44,10 @@ class StateReader {
  private:
   std::optional<std::uint32_t> filter_vehicle_;  // only_vehicle: other vehicles' states dropped
   std::string partition_fallback_;
+  // One of the two: vdyn/states (every vehicle), or vdyn/state (a vehicle's partition, or the
+  // default partition where the other cannot be made).
+  std::unique_ptr<transport::Reader<pb::VehicleStates>> batches_;
   std::unique_ptr<transport::Reader<pb::VehicleState>> states_;
-  std::unique_ptr<transport::Reader<pb::VehicleStates>> batches_;  // every vehicle: vdyn/states
 };
 
 template <class F>
@@ -61,12 +63,14 @@ int StateReader::Take(F&& fn) {
       }
     });
   }
-  (void)states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
-    if (info.key != s.vehicle_id()) return;
-    if (filter_vehicle_ && s.vehicle_id() != *filter_vehicle_) return;
-    fn(s, info);
-    ++n;
-  });
+  if (states_) {
+    (void)states_->Take([&](const pb::VehicleState& s, const transport::SampleInfo& info) {
+      if (info.key != s.vehicle_id()) return;
+      if (filter_vehicle_ && s.vehicle_id() != *filter_vehicle_) return;
+      fn(s, info);
+      ++n;
+    });
+  }
   return n;
 }
 

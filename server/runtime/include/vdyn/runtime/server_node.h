@@ -9,7 +9,8 @@
 //             vehicles, the other parts on the session's stepping workers (step_pool.h, the same
 //             scheduling), each state encoded into its frame of the state outbox - and the frames
 //             handed to the writer; no lock, no allocation, nothing logged
-//  states     the state outbox's writer: vdyn/state, best effort (state_outbox.h)
+//  states     the state outbox's writer: vdyn/states, vehicle partitions, vdyn/state while a DDS
+//             tool reads it; best effort (state_outbox.h)
 //  publisher  replies, parameters, world, events, diagnostics and the status line: every reliable
 //             write, and every log line
 //

@@ -1,21 +1,23 @@
 // The state writes of the 1 kHz loop, off the loop: Cyclone DDS allocates inside dds_write (a
 // serialised sample, an instance lookup), so each state is encoded, by the thread that stepped
-// its vehicle, into a preallocated frame of a lock-free queue and a writer thread of its own puts
-// the frames on vdyn/state (best effort, keep last 1), batched: a step's states leave together. A
-// vehicle's state also goes to its own partition while someone reads there
-// (transport/state_writers.h). The loop neither allocates nor blocks; a full queue drops the state
-// and counts it.
+// its vehicle, into a preallocated frame of a lock-free queue, and a writer thread of its own
+// hands the frames to transport::StateWriters: a step's states in one vdyn/states sample for the
+// readers of every vehicle, each vehicle's in its partition while someone follows it, and
+// vdyn/state in the default partition while a DDS tool reads it (docs/topics.md). The loop
+// neither allocates nor blocks; a full queue drops the state and counts it.
 #pragma once
 
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <mutex>
 #include <span>
 #include <thread>
 
 #include "vdyn/base/doorbell.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/base/spsc_queue.h"
+#include "vdyn/runtime/pacing.h"
 #include "vdyn/runtime/session.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
@@ -45,9 +47,9 @@ class StateOutbox final : public StateFrames {
   std::span<std::uint8_t> Buffer(std::size_t i) override;
   void Fill(std::size_t i, std::uint32_t key, std::size_t size, bool too_large) override;
   void Close(std::size_t n) override;
-  // Loop thread, after a step's pushes: wakes the writer, which writes every frame pushed so far
-  // and then sends them together (one vdyn/states sample; on vdyn/state several states per
-  // datagram).
+  // Loop thread, after a step's frames are closed: wakes the writer, which writes every frame
+  // handed over so far and then sends them together (one vdyn/states sample; on vdyn/state in
+  // the default partition several states per datagram).
   void Send();
   // Waits until every frame handed over has been written (or `timeout`); true when drained.
   [[nodiscard]] bool Drain(base::Nanos timeout);
@@ -60,9 +62,19 @@ class StateOutbox final : public StateFrames {
 
   std::uint64_t written() const { return written_.load(std::memory_order_relaxed); }
   std::uint64_t write_failures() const { return failures_.load(std::memory_order_relaxed); }
-  // States handed over by Push, and those Push refused (queue full, larger than a frame).
+  // States handed over by Close, and those refused (queue full, larger than a frame).
   std::uint64_t pushed() const { return pushed_.load(std::memory_order_relaxed); }
   std::uint64_t refused() const { return refused_.load(std::memory_order_relaxed); }
+  // The writer's rounds, in microseconds (the server's --stats-out; bench/net_bench): from the
+  // loop's hand-over (Send) to the writer thread starting its round (its wake-up), and from there
+  // to the round's states sent (every write and the flush: on loopback without multicast the
+  // kernel's delivery to each reader is in it), as wall time and as the writer thread's CPU time.
+  struct Times {
+    std::uint64_t rounds = 0;
+    double wake_p50 = 0, wake_p99 = 0, send_p50 = 0, send_p99 = 0, send_cpu_p50 = 0,
+           send_cpu_p99 = 0;
+  };
+  Times WriterTimes() const;
 
   // A frame is one page. The largest VehicleState (every field set, four wheels, a 64-byte
   // server id) encodes to about 2.2 KB; 1.1 KB is typical.
@@ -78,7 +90,7 @@ class StateOutbox final : public StateFrames {
   static_assert(sizeof(Frame) == 4096);
   void WriterLoop();
 
-  transport::StateWriters writer_;  // a step's states in one sample; vdyn/state while read
+  transport::StateWriters writer_;  // vdyn/states, and vdyn/state while read
   transport::DropCounters& drops_;
   int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1, drop_batch_ = -1;
   base::SpscQueue<Frame> frames_;
@@ -88,9 +100,12 @@ class StateOutbox final : public StateFrames {
   std::atomic<std::uint64_t> failures_{0};
   std::atomic<std::uint64_t> pushed_{0};
   std::atomic<std::uint64_t> refused_{0};
-  std::size_t open_ = 0;               // frames opened for this step
-  std::atomic<std::size_t> empty_{0};  // of them, left empty
-  std::atomic<int> writer_tid_{0};     // set by the writer thread as it starts
+  std::size_t open_ = 0;                    // frames opened for this step
+  std::atomic<std::size_t> empty_{0};       // of them, left empty
+  std::atomic<int> writer_tid_{0};          // set by the writer thread as it starts
+  std::atomic<std::int64_t> handed_ns_{0};  // monotonic time of the newest Send
+  mutable std::mutex times_mu_;             // the writer's, once a round, and WriterTimes()
+  Histogram wake_us_, send_us_, send_cpu_us_;
   std::thread thread_;
 };
 
