@@ -18,6 +18,7 @@
 #include "vdyn/base/limits.h"
 #include "vdyn/base/time.h"
 #include "vdyn/viewer/camera.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/labels.h"
 #include "vdyn/viewer/motion.h"
@@ -207,7 +208,7 @@ TEST(Cameras, LockedChaseAndOrbitKeepTheHorizonLevelUnlockedTheyRollAndPitchWith
   const viewer::Pose seat = viewer::XrPlace(d, scene);
   EXPECT_NEAR(viewer::Dot(seat.R.c[2], -car.pose_WB.R.c[0]), 1.0, 1e-9);  // looks along X_B
   EXPECT_NEAR(viewer::Dot(seat.R.c[1], car.pose_WB.R.c[2]), 1.0, 1e-9);
-  const Vec3 eye = car.pose_WB * d.seat_B;
+  const Vec3 eye = car.pose_WB * viewer::CabinFor(car.geometry).eyes_B;
   EXPECT_NEAR(viewer::Norm(seat.t - eye), 0.0, 1e-12);
 }
 
@@ -730,8 +731,8 @@ ScreenRect MirrorOnScreen(Viewer& v, int mirror, int width, int height) {
   const viewer::VehicleView* own = v.vehicle(1);
   EXPECT_NE(own, nullptr);
   if (own == nullptr) return {};
-  const viewer::Mirror m =
-      viewer::MirrorsFor(own->geometry, v.camera().seat_B)[static_cast<std::size_t>(mirror)];
+  const viewer::Mirror m = viewer::MirrorsFor(
+      own->geometry, viewer::CabinFor(own->geometry).eyes_B)[static_cast<std::size_t>(mirror)];
   const viewer::CameraView& cam = v.last_camera();
   double x0 = 1e9, x1 = -1e9, y0 = 1e9, y1 = -1e9;
   for (double sx : {-1.0, 1.0}) {
@@ -828,7 +829,8 @@ TEST_F(CockpitTest, TheMirrorsShowWhatIsBehindReflectedAsAMirrorDoes) {
     EXPECT_GT(right.cx, rear.centre_x) << "behind on the right: on the mirror's right";
 
     // The side mirrors: a car 10 m along each one's line of sight.
-    const auto mirrors = viewer::MirrorsFor(v.vehicle(1)->geometry, v.camera().seat_B);
+    const viewer::VehicleGeometry& g = v.vehicle(1)->geometry;
+    const auto mirrors = viewer::MirrorsFor(g, viewer::CabinFor(g).eyes_B);
     const ScreenRect side[2] = {MirrorOnScreen(v, viewer::kLeftMirror, kWide, kLow),
                                 MirrorOnScreen(v, viewer::kRightMirror, kWide, kLow)};
     for (int k = 0; k < 2; ++k) {
@@ -844,6 +846,118 @@ TEST_F(CockpitTest, TheMirrorsShowWhatIsBehindReflectedAsAMirrorDoes) {
       EXPECT_LT(Changed(away, seen, side[1 - k].r).count, other_px / 200)
           << (k == 0 ? "right" : "left") << " mirror shows the car behind on the other side";
     }
+  }
+}
+
+// --- the driver's seat, sized from the vehicle -------------------------------------------------
+
+// A large vehicle (an SUV or van: 5.5 m long, 2 m wide, 0.45 m wheels on a 3.3 m wheelbase)
+// beside the tests' 4.7 m saloon (TestCar): its geometry in the test world as vehicle 1, and its
+// state standing on the road (T at its own height: the mount's depth, the spring at 70 % of its
+// free length, the radius).
+struct BigCar {
+  static constexpr double kB = 1.55, kC = 1.75, kBl = 0.86, kZ = 0.0;
+  static constexpr double kRadius = 0.45, kFree = 0.40;
+  static constexpr double kFront = 2.6, kRear = 2.9, kHalfWidth = 1.0;
+  static constexpr double kHeight = TestCar::kGround - kZ + 0.7 * kFree + kRadius;
+};
+pb::WorldDescription BigCarWorld() {
+  pb::WorldDescription w = MakeWorld("test", kPi / 2);
+  pb::VehicleGeometry* g = w.mutable_vehicles(0);
+  for (int k = 0; k < 4; ++k) {
+    pb::Vec3* a = g->mutable_mount_points_b(k);
+    a->set_x(k < 2 ? BigCar::kB : -BigCar::kC);
+    a->set_y(k % 2 == 0 ? BigCar::kBl : -BigCar::kBl);
+    a->set_z(BigCar::kZ);
+    g->set_wheel_radius(k, BigCar::kRadius);
+    g->set_free_length(k, BigCar::kFree);
+  }
+  g->set_body_front(BigCar::kFront);
+  g->set_body_rear(BigCar::kRear);
+  g->set_body_half_width(BigCar::kHalfWidth);
+  return w;
+}
+pb::VehicleState BigCarState(std::uint64_t step) {
+  TestVehicle t;
+  for (auto& w : t.wheels) w.fp = 0;
+  t.step = step;
+  pb::VehicleState s = MakeState(t);
+  s.mutable_p_wt_w()->set_z(BigCar::kHeight);
+  for (int k = 0; k < 4; ++k) {
+    pb::WheelState* ws = s.mutable_wheels(k);
+    ws->mutable_p_a_w()->set_x(k < 2 ? BigCar::kB : -BigCar::kC);
+    ws->mutable_p_a_w()->set_y(k % 2 == 0 ? BigCar::kBl : -BigCar::kBl);
+    ws->mutable_p_a_w()->set_z(BigCar::kHeight + BigCar::kZ);
+    ws->set_ls(0.7 * BigCar::kFree);
+  }
+  return s;
+}
+
+// The driver's eyes lie in each vehicle's own cabin (left-hand drive): left of the centre line
+// inside the body, behind the windscreen and ahead of the roof's rear edge, over the bonnet and
+// the dashboard (above the belt line at the windscreen's base, or the road ahead is hidden),
+// under the roof with a hand's headroom, well above the floor. A fixed seat (the one every
+// vehicle had: {-0.35, 0.37, 0.55}) lies under the large vehicle's belt line: checked.
+TEST(DriversSeat, TheEyesLieInEachVehiclesOwnCabin) {
+  const pb::WorldDescription saloon_world = MakeWorld("test", kPi / 2), big_world = BigCarWorld();
+  const viewer::VehicleGeometry saloon = viewer::GeometryFor(1, &saloon_world, nullptr);
+  const viewer::VehicleGeometry big = viewer::GeometryFor(1, &big_world, nullptr);
+  ASSERT_EQ(big.source, viewer::VehicleGeometry::Source::kWorld);
+  ASSERT_NEAR(big.radius[0], BigCar::kRadius, 1e-9);
+  std::array<Vec3, 2> eyes{};
+  for (int i = 0; i < 2; ++i) {
+    SCOPED_TRACE(i == 0 ? "the saloon" : "the large vehicle");
+    const viewer::VehicleGeometry& g = i == 0 ? saloon : big;
+    const viewer::Cabin cab = viewer::CabinFor(g);
+    const Vec3 e = cab.eyes_B;
+    eyes[static_cast<std::size_t>(i)] = e;
+    EXPECT_GT(e.y, 0.2 * g.half_width) << "left-hand drive: the driver sits left of the centre";
+    EXPECT_LT(e.y, 0.7 * g.half_width);
+    // The windscreen runs from the cowl (x_cowl, z_belt_cowl) to the roof's front edge.
+    const double u = (e.z - cab.z_belt_cowl) / (cab.z_roof_front - cab.z_belt_cowl);
+    const double x_glass = cab.x_cowl + u * (cab.x_roof_front - cab.x_cowl);
+    EXPECT_LT(e.x, x_glass - 0.3) << "behind the windscreen";
+    EXPECT_GT(e.x, cab.x_roof_rear) << "under the roof, ahead of its rear edge";
+    EXPECT_GT(e.z, cab.z_belt_cowl + 0.05) << "over the bonnet and the dashboard";
+    EXPECT_LT(e.z, cab.z_roof_front - 0.1) << "a hand's headroom under the roof";
+    EXPECT_GT(e.z, cab.H(0.30) + 0.5) << "well above the floor";
+  }
+  // The large vehicle's eyes sit higher, and further from its nose.
+  EXPECT_GT(eyes[1].z, eyes[0].z + 0.2);
+  EXPECT_GT(BigCar::kFront - eyes[1].x, TestCar::kFront - eyes[0].x);
+}
+
+// From the driver's seat of each vehicle the road ahead fills the middle of the view above the
+// dashboard, the bonnet shows between them (the eyes are over the cowl), and the steering
+// wheel's top mark is straight ahead below (the checks of
+// TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres and TheSteeringWheelTurnsWith...).
+// From the fixed seat the large vehicle's dashboard hides its bonnet: checked.
+TEST_F(CockpitTest, FromEachVehiclesSeatTheRoadAheadAndTheSteeringWheelShow) {
+  for (int i = 0; i < 2; ++i) {
+    SCOPED_TRACE(i == 0 ? "the saloon" : "the large vehicle");
+    const std::uint32_t domain = FreshDomain();
+    TestPublisher pub(domain);
+    ASSERT_TRUE(pub.World(i == 0 ? MakeWorld("test", kPi / 2) : BigCarWorld()));
+    Viewer v(DriverOptions(domain));
+    const Image img = Show(v, pub, {i == 0 ? Cockpit(1, 0, 0, 900, 1) : BigCarState(1)});
+    ASSERT_NE(v.vehicle(1), nullptr);
+    ASSERT_NEAR(v.vehicle(1)->geometry.half_width,
+                i == 0 ? TestCar::kHalfWidth : BigCar::kHalfWidth, 1e-9);
+    const Rect ahead{kW * 42 / 100, kH * 45 / 100, kW * 58 / 100, kH / 2};
+    const RegionStats road = Classify(img, ahead);
+    EXPECT_GT(road.asphalt, road.pixels * 8 / 10) << "the road ahead is not what the driver sees";
+    // The bonnet: vehicle 1's pale blue paint, lit, below the horizon in the middle.
+    int bonnet = 0;
+    for (int y = kH * 45 / 100; y < kH * 65 / 100; ++y) {
+      for (int x = kW * 30 / 100; x < kW * 70 / 100; ++x) {
+        const std::uint8_t* p = &img.rgba[(static_cast<std::size_t>(y) * kW + x) * 4];
+        bonnet += p[2] > 150 && p[1] > 140 && p[2] > p[0] + 25;
+      }
+    }
+    EXPECT_GT(bonnet, 1000) << "no bonnet over the dashboard";
+    const Blob mark = Orange(img, {0, kH * 55 / 100, kW, kH});
+    EXPECT_GT(mark.count, 20) << "no steering wheel";
+    EXPECT_NEAR(mark.cx, kW / 2, kW / 20) << "the wheel's top straight ahead of the eyes";
   }
 }
 

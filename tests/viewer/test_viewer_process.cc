@@ -23,6 +23,7 @@
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/transport/control_client.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/scene.h"
 #include "vdyn/viewer/viewer.h"
@@ -767,8 +768,9 @@ SeatView ArrowFromTheSeat(const TempDir& dir, bool recentre) {
   out.measured_x = b.min_x;
   out.measured_y = FindColour(*img, c.r, c.g, c.b, 12, {b.min_x, 0, b.min_x + 3, img->height}).cy;
   // From the seat itself: OpenXR axes X = -Y_B, Y = Z_B, Z = -X_B (the vehicle heads east).
-  const viewer::CameraState cam;
-  const viewer::Vec3 seat{cam.seat_B.x, cam.seat_B.y, cam.seat_B.z + TestCar::kHeight};
+  const pb::WorldDescription world = MakeWorld("test", kPi / 2, {1, 2});
+  const viewer::Vec3 eyes_B = viewer::CabinFor(viewer::GeometryFor(1, &world, nullptr)).eyes_B;
+  const viewer::Vec3 seat{eyes_B.x, eyes_B.y, eyes_B.z + TestCar::kHeight};
   viewer::Mat3 axes;
   axes.c[0] = {0, -1, 0};
   axes.c[1] = {0, 0, 1};
@@ -802,6 +804,96 @@ TEST_F(ViewerXr, WithoutAStageTheStandingViewStandsOnLocalAtEyeHeight) {
   EXPECT_EQ(report.at("projection_space"),
             std::to_string(static_cast<int>(XR_REFERENCE_SPACE_TYPE_LOCAL)));
   EXPECT_NE(log_.find("the runtime has no STAGE"), std::string::npos) << log_;
+}
+
+// The colour of each of a grid of patches of an image: the per-channel median of each patch.
+std::vector<std::array<int, 3>> PatchMedians(const Image& img, int cells) {
+  std::vector<std::array<int, 3>> out;
+  for (int cy = 0; cy < cells; ++cy) {
+    for (int cx = 0; cx < cells; ++cx) {
+      std::array<std::vector<int>, 3> ch;
+      for (int y = cy * img.height / cells; y < (cy + 1) * img.height / cells; ++y) {
+        for (int x = cx * img.width / cells; x < (cx + 1) * img.width / cells; ++x) {
+          const std::size_t i = (static_cast<std::size_t>(y) * img.width + x) * 4;
+          for (std::size_t c = 0; c < 3; ++c) ch[c].push_back(img.rgba[i + c]);
+        }
+      }
+      std::array<int, 3> m{};
+      for (std::size_t c = 0; c < 3; ++c) {
+        std::nth_element(ch[c].begin(), ch[c].begin() + ch[c].size() / 2, ch[c].end());
+        m[c] = ch[c][ch[c].size() / 2];
+      }
+      out.push_back(m);
+    }
+  }
+  return out;
+}
+
+TEST_F(ViewerXr, EveryOfferedFormatOrderShowsTheColoursOfTheSrgbSwapchain) {
+  // The same seated driver's view (sky, road, grass, the cockpit) through runtimes that offer
+  // their formats in different orders. The test runtime shows a linear format's values encoded
+  // to sRGB, as a compositor does: the eye images it shows must match, patch by patch, those of
+  // the sRGB swapchain (whose bytes are the renderer's, as on the desktop).
+  TestVehicle t;
+  struct Order {
+    const char* formats;
+    const char* chosen;
+    int tolerance;  // per channel, of a patch's median (0..255)
+  };
+  // The sRGB swapchain first: the reference. 8-bit linear steps are coarse in the dark (the
+  // sRGB levels 7..17 all come back as 13, 18..25 as 22): up to 4 levels off in a patch that
+  // dark; 16 bits: rounding.
+  const Order orders[] = {{"RGBA16F SRGB8_ALPHA8 RGBA8", "SRGB8_ALPHA8", 0},
+                          {"RGBA16F RGBA8", "RGBA16F", 1},
+                          {"RGBA8", "RGBA8", 5},
+                          {"RGBA16 RGBA8", "RGBA16", 1}};
+  std::vector<std::array<int, 3>> reference;
+  for (const Order& o : orders) {
+    SCOPED_TRACE(o.formats);
+    setenv(xrtest::kEnvFormats, o.formats, 1);
+    const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--frames", "6"});
+    unsetenv(xrtest::kEnvFormats);
+    ASSERT_FALSE(report.empty()) << log_;
+    EXPECT_EQ(report.at("lifecycle"), "ok");
+    // Both eyes and the HUD in the chosen format.
+    EXPECT_EQ(report.at("swapchain_formats"),
+              std::string(o.chosen) + " " + o.chosen + " " + o.chosen);
+    EXPECT_NE(log_.find(std::string("swapchain format GL_") + o.chosen), std::string::npos) << log_;
+    const auto left = LoadPng(dir_ / "left.png");
+    ASSERT_TRUE(left.has_value());
+    const auto patches = PatchMedians(*left, 4);
+    if (reference.empty()) {
+      reference = patches;
+      // The view holds bright sky and dark cockpit alike: a wide range to compare.
+      int lo = 255, hi = 0;
+      for (const auto& p : patches) lo = std::min(lo, p[1]), hi = std::max(hi, p[1]);
+      EXPECT_LT(lo, 60);
+      EXPECT_GT(hi, 150);
+      continue;
+    }
+    for (std::size_t i = 0; i < patches.size(); ++i) {
+      for (std::size_t c = 0; c < 3; ++c) {
+        EXPECT_NEAR(patches[i][c], reference[i][c], o.tolerance)
+            << "patch " << i << " channel " << c;
+      }
+    }
+  }
+}
+
+TEST_F(ViewerXr, ARuntimeWithNoFormatTheViewerDrawsIntoIsNamedWithWhatItOffers) {
+  TestVehicle t;
+  setenv(xrtest::kEnvFormats, "RGB10_A2", 1);
+  const auto report = RunInHeadset(MakeState(t), {"--xr-space", "seated", "--frames", "2"});
+  unsetenv(xrtest::kEnvFormats);
+  EXPECT_NE(log_.find("offers no swapchain format this viewer draws into (GL_SRGB8_ALPHA8, "
+                      "GL_RGBA16F, GL_RGBA16 or GL_RGBA8); it offers: GL_RGB10_A2"),
+            std::string::npos)
+      << log_;
+  EXPECT_NE(log_.find("showing the desktop window instead"), std::string::npos) << log_;
+  ASSERT_FALSE(report.empty()) << log_;
+  EXPECT_EQ(report.at("lifecycle"), "ok");
+  EXPECT_EQ(report.at("frames_ended"), "0");
+  EXPECT_EQ(report.at("session_open"), "0");
 }
 
 TEST_F(ViewerProcess, WithoutAnOpenXrRuntimeTheViewerSaysSoAndShowsTheDesktop) {

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vdyn/viewer/car_model.h"
+
 namespace vdyn::viewer {
 
 std::string_view CameraName(CameraMode m) {
@@ -61,7 +63,7 @@ Rig RigFor(const CameraState& c, const CameraScene& s) {
     case CameraMode::kDriver: {
       if (s.followed != nullptr) {
         const Pose& p = s.followed->pose_WB;
-        r.eye = p * c.seat_B;
+        r.eye = p * CabinFor(s.followed->geometry).eyes_B;
         r.target =
             r.eye + p.R.c[0] * std::cos(c.driver_pitch) + p.R.c[2] * std::sin(c.driver_pitch);
         r.up = p.R.c[2];

@@ -179,6 +179,8 @@ Cabin CabinFor(const VehicleGeometry& g) {
   c.x_cowl = cabin[3];
   c.z_belt_cowl = c.H(0.93);
   c.z_roof_front = c.H(1.42);
+  c.eyes_B = {c.x_roof_front - 0.155 * (c.x_roof_front - c.x_roof_rear), 0.41 * c.half_width,
+              c.H(1.14)};
   return c;
 }
 

@@ -17,6 +17,7 @@
 #include <stdexcept>
 
 #include "vdyn/input.pb.h"
+#include "vdyn/viewer/car_model.h"
 #include "vdyn/viewer/cockpit.h"
 #include "vdyn/viewer/params_editor.h"
 #include "vdyn/viewer/world_mesh.h"
@@ -902,7 +903,7 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
   std::vector<Mat4> seen_by = {view_proj};
   if (inside && f.camera.cockpit && owner.followed_) {
     if (auto own = views.find(*owner.followed_); own != views.end()) {
-      AppendMirrors(own->second, f.camera.seat_B, lists.mirrors);
+      AppendMirrors(own->second, CabinFor(own->second.geometry).eyes_B, lists.mirrors);
       for (const MirrorInstance& m : lists.mirrors) {
         seen_by.push_back(MirrorViewProj(m, f.cs.far_m));
       }
@@ -918,7 +919,7 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
       parts.wheels = parts.arrows = false;
       AppendVehicle(v, o.arrows, radius_at, parts, false, lists);
       for (BodyInstance& b : lists.bodies) b.from_inside = b.vehicle_id == id;
-      AppendCockpit(v, f.camera.seat_B, lists.cockpit);
+      AppendCockpit(v, CabinFor(v.geometry).eyes_B, lists.cockpit);
       continue;
     }
     const double bound = BoundingRadius(v, o.arrows);

@@ -5,8 +5,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <memory>
+#include <string>
 #include <vector>
 
 #include <spdlog/spdlog.h>
@@ -33,7 +36,145 @@ T XrStruct(XrStructureType type) {
 }
 
 constexpr std::int64_t kGlRgba8 = 0x8058;        // GL_RGBA8
+constexpr std::int64_t kGlRgba16 = 0x805B;       // GL_RGBA16
+constexpr std::int64_t kGlRgba16f = 0x881A;      // GL_RGBA16F
 constexpr std::int64_t kGlSrgb8Alpha8 = 0x8C43;  // GL_SRGB8_ALPHA8
+
+// The swapchain formats this viewer draws into, best first. An sRGB one takes the renderer's
+// sRGB-encoded bytes as they are. A linear one gets them decoded to linear light (LinearCopy):
+// 16-bit float keeps the darks' steps as fine as the 8-bit sRGB image has them (8-bit linear
+// merges the darkest: sRGB levels 0..6 all become 0, 7..17 all one level shown as 13, 18..25 one
+// shown as 22), so it comes before the 16-bit normalised and the 8-bit one.
+struct FormatChoice {
+  std::int64_t format;
+  const char* name;
+  bool srgb;
+};
+constexpr FormatChoice kChoices[] = {{kGlSrgb8Alpha8, "GL_SRGB8_ALPHA8", true},
+                                     {kGlRgba16f, "GL_RGBA16F", false},
+                                     {kGlRgba16, "GL_RGBA16", false},
+                                     {kGlRgba8, "GL_RGBA8", false}};
+
+// A format's GL name where it is a common colour format, else its number.
+std::string FormatName(std::int64_t f) {
+  for (const FormatChoice& c : kChoices) {
+    if (c.format == f) return c.name;
+  }
+  switch (f) {
+    case 0x8059:
+      return "GL_RGB10_A2";
+    case 0x8C3A:
+      return "GL_R11F_G11F_B10F";
+    case 0x8814:
+      return "GL_RGBA32F";
+    case 0x8C41:
+      return "GL_SRGB8";
+    default: {
+      char buf[32];
+      std::snprintf(buf, sizeof buf, "0x%llX", static_cast<unsigned long long>(f));
+      return buf;
+    }
+  }
+}
+
+// Copies the renderer's image (sRGB-encoded, 8 bits) into a linear swapchain image, decoding
+// each texel to linear light (IEC 61966-2-1) in a full-screen triangle: what OpenXR's
+// compositor expects of a non-sRGB format, which it encodes again for the display.
+class LinearCopy {
+ public:
+  LinearCopy() {
+    static const char* kVs = R"(#version 330 core
+void main() {
+  vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+  gl_Position = vec4(p, 0.0, 1.0);
+})";
+    static const char* kFs = R"(#version 330 core
+uniform sampler2D u_image;
+out vec4 o_colour;
+void main() {
+  vec4 c = texelFetch(u_image, ivec2(gl_FragCoord.xy), 0);
+  vec3 lo = c.rgb / 12.92, hi = pow((c.rgb + 0.055) / 1.055, vec3(2.4));
+  o_colour = vec4(mix(lo, hi, step(vec3(0.04045), c.rgb)), c.a);
+})";
+    const GLuint vs = Compile(GL_VERTEX_SHADER, kVs), fs = Compile(GL_FRAGMENT_SHADER, kFs);
+    program_ = glCreateProgram();
+    glAttachShader(program_, vs);
+    glAttachShader(program_, fs);
+    glLinkProgram(program_);
+    glDeleteShader(vs);
+    glDeleteShader(fs);
+    GLint ok = 0;
+    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
+    if (!ok) throw XrError("OpenXR: the sRGB-to-linear copy's shaders do not link");
+    image_ = glGetUniformLocation(program_, "u_image");
+    glGenVertexArrays(1, &vao_);
+    glGenFramebuffers(1, &fbo_);
+  }
+  ~LinearCopy() {
+    glDeleteFramebuffers(1, &fbo_);
+    glDeleteVertexArrays(1, &vao_);
+    glDeleteProgram(program_);
+  }
+  LinearCopy(const LinearCopy&) = delete;
+  LinearCopy& operator=(const LinearCopy&) = delete;
+
+  // Draws `source` (a texture of width x height) decoded into the texture `dest`; the GL state
+  // it touches is put back.
+  void Copy(GLuint source, GLuint dest, int width, int height) {
+    GLint prev_program = 0, prev_vao = 0, prev_tex = 0, prev_active = 0, prev_fbo = 0;
+    GLint viewport[4] = {};
+    glGetIntegerv(GL_CURRENT_PROGRAM, &prev_program);
+    glGetIntegerv(GL_VERTEX_ARRAY_BINDING, &prev_vao);
+    glGetIntegerv(GL_ACTIVE_TEXTURE, &prev_active);
+    glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &prev_fbo);
+    glGetIntegerv(GL_VIEWPORT, viewport);
+    const GLenum caps[] = {GL_DEPTH_TEST, GL_BLEND, GL_CULL_FACE, GL_SCISSOR_TEST,
+                           GL_FRAMEBUFFER_SRGB};
+    std::array<GLboolean, std::size(caps)> enabled{};
+    for (std::size_t i = 0; i < std::size(caps); ++i) {
+      enabled[i] = glIsEnabled(caps[i]);
+      glDisable(caps[i]);
+    }
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, fbo_);
+    glFramebufferTexture2D(GL_DRAW_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, dest, 0);
+    if (glCheckFramebufferStatus(GL_DRAW_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+      throw XrError("OpenXR: a swapchain image cannot be drawn into");
+    glViewport(0, 0, width, height);
+    glUseProgram(program_);
+    glActiveTexture(GL_TEXTURE0);
+    glGetIntegerv(GL_TEXTURE_BINDING_2D, &prev_tex);
+    glBindTexture(GL_TEXTURE_2D, source);
+    glUniform1i(image_, 0);
+    glBindVertexArray(vao_);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glFramebufferTexture2D(GL_DRAW_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, 0, 0);
+    glBindVertexArray(static_cast<GLuint>(prev_vao));
+    glBindTexture(GL_TEXTURE_2D, static_cast<GLuint>(prev_tex));
+    glActiveTexture(static_cast<GLenum>(prev_active));
+    glUseProgram(static_cast<GLuint>(prev_program));
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, static_cast<GLuint>(prev_fbo));
+    glViewport(viewport[0], viewport[1], viewport[2], viewport[3]);
+    for (std::size_t i = 0; i < std::size(caps); ++i) {
+      if (enabled[i]) glEnable(caps[i]);
+    }
+  }
+
+ private:
+  static GLuint Compile(GLenum type, const char* source) {
+    const GLuint s = glCreateShader(type);
+    glShaderSource(s, 1, &source, nullptr);
+    glCompileShader(s);
+    GLint ok = 0;
+    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+    if (!ok) {
+      glDeleteShader(s);
+      throw XrError("OpenXR: the sRGB-to-linear copy's shader does not compile");
+    }
+    return s;
+  }
+  GLuint program_ = 0, vao_ = 0, fbo_ = 0;
+  GLint image_ = -1;
+};
 
 std::string ResultName(XrInstance instance, XrResult r) {
   char buf[XR_MAX_RESULT_STRING_SIZE] = {};
@@ -115,6 +256,7 @@ struct Swapchain {
   int width = 0, height = 0;
   std::vector<XrSwapchainImageOpenGLKHR> images;
   RenderTarget target;
+  std::uint32_t acquired = 0;  // the acquired image's index
 };
 
 }  // namespace
@@ -132,7 +274,10 @@ struct Headset::Impl {
   bool exit_requested = false;
   bool standing_on_local = false;
   std::string runtime;
-  std::int64_t format = kGlRgba8;
+  std::int64_t format = kGlSrgb8Alpha8;
+  // A linear format: the eyes and the HUD are drawn into targets of their own (sRGB-encoded, as
+  // on the desktop) and copied, decoded, into the swapchain images.
+  std::unique_ptr<LinearCopy> linear;
   std::array<Swapchain, 2> eyes;
   Swapchain hud;
   std::array<XrViewConfigurationView, 2> config_views{};
@@ -154,7 +299,7 @@ struct Headset::Impl {
   void CreateSession();       // the session on the current GLX context
   void CreateSpaces();        // the place's reference space (seated or standing) and the head's
   void ReadViews();           // the two eyes' recommended sizes
-  void ChooseFormat();        // an sRGB swapchain format whenever the runtime offers one
+  void ChooseFormat();        // an sRGB swapchain format, else the best linear one
   void CreateSwapchains();    // the eyes', the HUD's and the desktop mirror's
 
   void Check(XrResult r, const char* what) const {
@@ -181,7 +326,8 @@ struct Headset::Impl {
           "xrEnumerateSwapchainImages");
     s.width = width;
     s.height = height;
-    s.target.Resize(width, height, render_samples, true);
+    // A linear format: the target keeps a colour texture of its own, copied in at Release.
+    s.target.Resize(width, height, render_samples, linear == nullptr);
   }
 
   // Acquires and waits for an image of `s` and points its target at it.
@@ -194,10 +340,16 @@ struct Headset::Impl {
     Check(xrWaitSwapchainImage(s.handle, &wi), "xrWaitSwapchainImage");
     if (index >= s.images.size())
       throw XrError("OpenXR runtime gave a swapchain image index past the end");
-    s.target.SetExternalColour(s.images[index].image);
+    s.acquired = index;
+    if (linear == nullptr) s.target.SetExternalColour(s.images[index].image);
   }
 
+  // Releases the acquired image, with the target's picture copied into it decoded to linear
+  // light first when the format is linear.
   void Release(Swapchain& s) {
+    if (linear != nullptr) {
+      linear->Copy(s.target.colour_texture(), s.images[s.acquired].image, s.width, s.height);
+    }
     auto ri = XrStruct<XrSwapchainImageReleaseInfo>(XR_TYPE_SWAPCHAIN_IMAGE_RELEASE_INFO);
     Check(xrReleaseSwapchainImage(s.handle, &ri), "xrReleaseSwapchainImage");
   }
@@ -214,6 +366,7 @@ struct Headset::Impl {
     space = view_space = XR_NULL_HANDLE;
     if (session != XR_NULL_HANDLE) xrDestroySession(session);
     session = XR_NULL_HANDLE;
+    linear.reset();
     if (instance != XR_NULL_HANDLE) xrDestroyInstance(instance);
     instance = XR_NULL_HANDLE;
   }
@@ -366,23 +519,39 @@ void Headset::Impl::ChooseFormat() {
   std::vector<std::int64_t> formats(nf);
   Check(xrEnumerateSwapchainFormats(session, nf, &nf, formats.data()),
         "xrEnumerateSwapchainFormats");
+  formats.resize(nf);
   // The renderer writes sRGB-encoded colour (its shaders encode; GL_FRAMEBUFFER_SRGB stays
   // off, so the bytes are stored as written). OpenXR treats every non-sRGB format as linear
   // and the compositor encodes it again (issue 35: washed out on Monado, the road's median 142
-  // against 69), so an sRGB format is chosen whenever the runtime offers one.
+  // against 69): an sRGB format takes the bytes as they are, a linear one gets them decoded.
   const auto offered = [&](std::int64_t f) {
     return std::find(formats.begin(), formats.end(), f) != formats.end();
   };
-  if (offered(kGlSrgb8Alpha8)) {
-    format = kGlSrgb8Alpha8;
-  } else if (offered(kGlRgba8)) {
-    format = kGlRgba8;
-    spdlog::warn(
-        "OpenXR: runtime '{}' offers no sRGB swapchain format (GL_SRGB8_ALPHA8): the "
-        "headset will show the colours lighter than the desktop window",
-        runtime);
+  const FormatChoice* chosen = nullptr;
+  for (const FormatChoice& c : kChoices) {
+    if (offered(c.format)) {
+      chosen = &c;
+      break;
+    }
+  }
+  if (chosen == nullptr) {
+    std::string list;
+    for (std::int64_t f : formats) list += (list.empty() ? "" : ", ") + FormatName(f);
+    throw XrError("OpenXR runtime '" + runtime +
+                  "' offers no swapchain format this viewer draws into (GL_SRGB8_ALPHA8, "
+                  "GL_RGBA16F, GL_RGBA16 or GL_RGBA8); it offers: " +
+                  (list.empty() ? std::string("none") : list));
+  }
+  format = chosen->format;
+  if (chosen->srgb) {
+    spdlog::info("OpenXR: swapchain format {} (sRGB: the renderer's colour as it is)",
+                 chosen->name);
   } else {
-    throw XrError("OpenXR runtime offers neither GL_SRGB8_ALPHA8 nor GL_RGBA8 swapchains");
+    linear = std::make_unique<LinearCopy>();
+    spdlog::info(
+        "OpenXR: swapchain format {} (the runtime offers no sRGB format: the colour is "
+        "decoded to linear light for it)",
+        chosen->name);
   }
 }
 

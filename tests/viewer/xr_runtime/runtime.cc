@@ -30,6 +30,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -71,9 +72,19 @@ namespace {
 using namespace vdyn::xrtest;
 
 constexpr std::int64_t kGlRgba8 = 0x8058, kGlSrgb8Alpha8 = 0x8C43, kGlRgba16 = 0x805B,
-                       kGlRgba16f = 0x881A;
-// The formats, in the order Monado 25.1 offers its OpenGL swapchains (NOTES.md): a viewer that
-// takes the first, or RGBA8, gets a linear one.
+                       kGlRgba16f = 0x881A, kGlRgb10A2 = 0x8059;
+// The formats it can offer, by the names kEnvFormats lists them with; by default in the order
+// Monado 25.1 offers its OpenGL swapchains (NOTES.md): a viewer that takes the first, or RGBA8,
+// gets a linear one.
+struct NamedFormat {
+  const char* name;
+  std::int64_t format;
+};
+constexpr NamedFormat kFormatNames[] = {{"RGBA16", kGlRgba16},
+                                        {"RGBA16F", kGlRgba16f},
+                                        {"SRGB8_ALPHA8", kGlSrgb8Alpha8},
+                                        {"RGBA8", kGlRgba8},
+                                        {"RGB10_A2", kGlRgb10A2}};
 constexpr std::int64_t kFormats[] = {kGlRgba16, kGlRgba16f, kGlSrgb8Alpha8, kGlRgba8};
 bool IsSrgb(std::int64_t format) {
   return format == kGlSrgb8Alpha8;
@@ -134,6 +145,8 @@ struct State {
   XrReferenceSpaceType quad_space = XR_REFERENCE_SPACE_TYPE_MAX_ENUM;
   XrPosef quad_pose{};
   std::string out_dir;
+  std::vector<std::int64_t> formats{std::begin(kFormats), std::end(kFormats)};  // as offered
+  std::string swapchain_formats;  // of the swapchains created, by name, in order
 };
 
 // One lock for every call (applications may call from several threads).
@@ -174,9 +187,12 @@ std::uintptr_t Id(H h) {
   return reinterpret_cast<std::uintptr_t>(h);
 }
 
-// Reads a GL texture back (on the application's thread and context), restoring the state it
-// touches.
-Image ReadTexture(GLuint tex, int width, int height) {
+// What a compositor shows of a swapchain image: an sRGB format's bytes as they are; a linear
+// format's values (OpenXR: every non-sRGB format holds linear light) encoded to sRGB for the
+// display, from the texture's own precision. A viewer that writes sRGB-encoded values into a
+// linear format is shown washed out here, as in a real headset. Read back on the application's
+// thread and context, restoring the state it touches.
+Image Displayed(GLuint tex, int width, int height, std::int64_t format) {
   GLint prev_tex = 0, prev_pack = 0, prev_buf = 0;
   glGetIntegerv(GL_TEXTURE_BINDING_2D, &prev_tex);
   glGetIntegerv(GL_PACK_ALIGNMENT, &prev_pack);
@@ -184,37 +200,32 @@ Image ReadTexture(GLuint tex, int width, int height) {
   glBindBuffer(GL_PIXEL_PACK_BUFFER, 0);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glBindTexture(GL_TEXTURE_2D, tex);
-  Image img;
-  img.width = width;
-  img.height = height;
-  std::vector<std::uint8_t> bottom_up(static_cast<std::size_t>(width) * height * 4);
-  glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, bottom_up.data());
+  const std::size_t n = static_cast<std::size_t>(width) * static_cast<std::size_t>(height) * 4;
+  std::vector<std::uint8_t> bottom_up(n);
+  if (IsSrgb(format)) {
+    glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_UNSIGNED_BYTE, bottom_up.data());
+  } else {
+    std::vector<float> linear(n);
+    glGetTexImage(GL_TEXTURE_2D, 0, GL_RGBA, GL_FLOAT, linear.data());
+    for (std::size_t i = 0; i < n; ++i) {
+      const double c = std::clamp(static_cast<double>(linear[i]), 0.0, 1.0);
+      const double e = i % 4 == 3       ? c
+                       : c <= 0.0031308 ? 12.92 * c
+                                        : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+      bottom_up[i] = static_cast<std::uint8_t>(std::lround(255.0 * e));
+    }
+  }
   glBindTexture(GL_TEXTURE_2D, static_cast<GLuint>(prev_tex));
   glPixelStorei(GL_PACK_ALIGNMENT, prev_pack);
   glBindBuffer(GL_PIXEL_PACK_BUFFER, static_cast<GLuint>(prev_buf));
-  img.rgba.resize(bottom_up.size());
+  Image img;
+  img.width = width;
+  img.height = height;
+  img.rgba.resize(n);
   const std::size_t row = static_cast<std::size_t>(width) * 4;
   for (int y = 0; y < height; ++y) {
     std::memcpy(img.rgba.data() + static_cast<std::size_t>(y) * row,
                 bottom_up.data() + static_cast<std::size_t>(height - 1 - y) * row, row);
-  }
-  return img;
-}
-
-// What a compositor shows of a swapchain image (OpenXR: a non-sRGB format holds linear values,
-// which the compositor encodes to sRGB for the display; an sRGB one is shown as it is): the image
-// as read back, its colour sRGB-encoded when the format is linear. A viewer that writes
-// sRGB-encoded values into a linear format is shown washed out here, as in a real headset.
-Image Displayed(Image img, std::int64_t format) {
-  if (IsSrgb(format)) return img;
-  std::array<std::uint8_t, 256> encode{};
-  for (int v = 0; v < 256; ++v) {
-    const double c = v / 255.0;
-    const double e = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
-    encode[static_cast<std::size_t>(v)] = static_cast<std::uint8_t>(std::lround(255.0 * e));
-  }
-  for (std::size_t i = 0; i < img.rgba.size(); ++i) {
-    if (i % 4 != 3) img.rgba[i] = encode[img.rgba[i]];
   }
   return img;
 }
@@ -242,7 +253,8 @@ void WriteReport() {
       << s.quad_pose.orientation.y << " " << s.quad_pose.orientation.z << " "
       << s.quad_pose.orientation.w << "\n"
       << "last_drawn_display_ns " << s.last_drawn_display << "\n"
-      << "session_open " << (s.session ? 1 : 0) << "\n";
+      << "session_open " << (s.session ? 1 : 0) << "\n"
+      << "swapchain_formats" << s.swapchain_formats << "\n";
   auto png = [&](const char* name, const Image& img) {
     if (img.width > 0) {
       stbi_write_png((s.out_dir + "/" + name).c_str(), img.width, img.height, 4, img.rgba.data(),
@@ -306,6 +318,19 @@ XrResult CreateInstance(const XrInstanceCreateInfo* info, XrInstance* instance) 
   if (const char* d = std::getenv(kEnvOut)) fresh.out_dir = d;
   if (const char* e = std::getenv(kEnvExitAfter)) fresh.exit_after = std::strtoull(e, nullptr, 10);
   if (const char* st = std::getenv(kEnvStage)) fresh.stage = std::string(st) != "0";
+  if (const char* f = std::getenv(kEnvFormats)) {
+    fresh.formats.clear();
+    std::istringstream names(f);
+    for (std::string name; names >> name;) {
+      const auto* it = std::find_if(std::begin(kFormatNames), std::end(kFormatNames),
+                                    [&](const NamedFormat& n) { return name == n.name; });
+      if (it == std::end(kFormatNames)) {
+        Violation(std::string(kEnvFormats) + " names an unknown format '" + name + "'");
+      } else {
+        fresh.formats.push_back(it->format);
+      }
+    }
+  }
   *instance = reinterpret_cast<XrInstance>(0x1);
   return XR_SUCCESS;
 }
@@ -573,18 +598,20 @@ XrResult LocateViews(XrSession, const XrViewLocateInfo* info, XrViewState* state
 
 XrResult EnumerateSwapchainFormats(XrSession, std::uint32_t capacity, std::uint32_t* count,
                                    std::int64_t* formats) {
-  constexpr auto n = static_cast<std::uint32_t>(std::size(kFormats));
+  std::lock_guard<std::mutex> lock(g_mu);
+  const std::vector<std::int64_t>& offered = S().formats;
+  const auto n = static_cast<std::uint32_t>(offered.size());
   *count = n;
   if (capacity == 0) return XR_SUCCESS;
   if (capacity < n) return XR_ERROR_SIZE_INSUFFICIENT;
-  std::copy(std::begin(kFormats), std::end(kFormats), formats);
+  std::copy(offered.begin(), offered.end(), formats);
   return XR_SUCCESS;
 }
 
 XrResult CreateSwapchain(XrSession, const XrSwapchainCreateInfo* info, XrSwapchain* swapchain) {
   State& s = S();
   std::lock_guard<std::mutex> lock(g_mu);
-  if (std::find(std::begin(kFormats), std::end(kFormats), info->format) == std::end(kFormats))
+  if (std::find(s.formats.begin(), s.formats.end(), info->format) == s.formats.end())
     return XR_ERROR_SWAPCHAIN_FORMAT_UNSUPPORTED;
   if (info->width == 0 || info->height == 0 || info->arraySize != 1 || info->faceCount != 1) {
     return XR_ERROR_VALIDATION_FAILURE;
@@ -597,6 +624,9 @@ XrResult CreateSwapchain(XrSession, const XrSwapchainCreateInfo* info, XrSwapcha
   sc->width = static_cast<int>(info->width);
   sc->height = static_cast<int>(info->height);
   sc->format = info->format;
+  for (const NamedFormat& n : kFormatNames) {
+    if (n.format == info->format) s.swapchain_formats += std::string(" ") + n.name;
+  }
   sc->textures.resize(3);
   GLint prev = 0;
   glGetIntegerv(GL_TEXTURE_BINDING_2D, &prev);
@@ -766,9 +796,8 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
         Swapchain* sc = nullptr;
         if (!released(p->views[e].subImage.swapchain, p->views[e].subImage.imageRect, &sc))
           continue;
-        Image img = Displayed(ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
-                                          sc->width, sc->height),
-                              sc->format);
+        Image img = Displayed(sc->textures[static_cast<std::size_t>(sc->last_released)], sc->width,
+                              sc->height, sc->format);
         (e == 0 ? s.left : s.right) = std::move(img);
       }
       projection = true;
@@ -781,9 +810,8 @@ XrResult EndFrame(XrSession, const XrFrameEndInfo* info) {
       s.quad_pose = q->pose;
       s.quad_width_m = q->size.width;
       s.quad_height_m = q->size.height;
-      s.hud = Displayed(ReadTexture(sc->textures[static_cast<std::size_t>(sc->last_released)],
-                                    sc->width, sc->height),
-                        sc->format);
+      s.hud = Displayed(sc->textures[static_cast<std::size_t>(sc->last_released)], sc->width,
+                        sc->height, sc->format);
       quad = true;
     } else {
       Violation("a layer of a type this runtime does not compose");

@@ -27,5 +27,9 @@ inline constexpr const char* kEnvStage = "VDYN_XR_TEST_STAGE";
 // Where the head is, moved from its place above and turned about the vertical: "x y z yaw_deg"
 // (OpenXR axes of the base space, m; yaw positive to the left), e.g. a person sitting off-centre.
 inline constexpr const char* kEnvHead = "VDYN_XR_TEST_HEAD";
+// The swapchain formats it offers, in order: names among RGBA16, RGBA16F, SRGB8_ALPHA8, RGBA8
+// and RGB10_A2, separated by spaces (unset: Monado 25.1's order, "RGBA16 RGBA16F SRGB8_ALPHA8
+// RGBA8"). It shows a linear format's values encoded to sRGB, as a compositor does.
+inline constexpr const char* kEnvFormats = "VDYN_XR_TEST_FORMATS";
 
 }  // namespace vdyn::xrtest

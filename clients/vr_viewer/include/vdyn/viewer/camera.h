@@ -1,8 +1,9 @@
 // The viewer's cameras. Each follows one vehicle (the followed one) and gives a view and a
 // projection:
 //   chase    behind the vehicle along its heading, looking at it
-//   driver   at the driver's seat, looking along the body's X axis a little down (rolls and
-//            pitches with it), in the cockpit (cockpit.h)
+//   driver   at the driver's eyes (the followed vehicle's, from its geometry: CabinFor's
+//            eyes_B), looking along the body's X axis a little down (rolls and pitches with it),
+//            in the cockpit (cockpit.h)
 //   orbit    around the vehicle at a yaw, pitch and distance fixed in the world (mouse drag, wheel)
 //   map      straight down, orthographic, geographic: north up by default
 //   north    the paper's geographic camera: behind the vehicle looking north by default, turned in
@@ -43,15 +44,14 @@ struct CameraState {
   double chase_distance = 8, chase_height = 2.5;
   double north_distance = 14, north_height = 6;
   double orbit_yaw = Rad(-120), orbit_pitch = Rad(25), orbit_distance = 12;  // world frame
-  double map_half_height = 30;     // metres from the centre to the top edge
-  double beside_distance = 6;      // m to the vehicle's left
-  double eye_height = 1.6;         // m above the ground: beside, and a standing headset's eyes
-  Vec3 seat_B{-0.35, 0.37, 0.55};  // the driver's eyes from T, body frame, m
+  double map_half_height = 30;  // metres from the centre to the top edge
+  double beside_distance = 6;   // m to the vehicle's left
+  double eye_height = 1.6;      // m above the ground: beside, and a standing headset's eyes
   // The driver camera on the desktop looks this far down from the body's X axis (the road ahead
   // above the cockpit's dials and wheel); a headset's seat stays level with the body.
   double driver_pitch = Rad(-6);
   bool cockpit = true;  // the driver's seat shows the cockpit (key I); else nothing of the car
-  bool horizon_locked = true;      // chase and orbit keep the horizon level
+  bool horizon_locked = true;  // chase and orbit keep the horizon level
 };
 
 struct CameraView {

@@ -69,10 +69,15 @@ CarShape CarShapeFor(const VehicleGeometry& g);
 
 // Where the built-in body's greenhouse is (body frame, m): the stations along X of the rear
 // window's base, the roof's rear and front edges and the windscreen's base (the cowl), the belt
-// line's height at the cowl and the roof's at its front edge. The cockpit is built inside it.
+// line's height at the cowl and the roof's at its front edge; the driver's eyes (left-hand
+// drive). The cockpit is built inside it.
 struct Cabin {
   double x_rear_window = 0, x_roof_rear = 0, x_roof_front = 0, x_cowl = 0;
   double z_belt_cowl = 0, z_roof_front = 0;
+  // The driver's eyes from T: 15.5 % of the roof's length behind its front edge, 41 % of the
+  // half width to the left, a saloon's 1.14 m above the ground scaled (0.21 m over the belt line
+  // at the cowl, 0.28 m under the roof's front edge); on the default car {-0.35, 0.37, 0.55}.
+  Vec3 eyes_B;
   double half_width = 0.9;
   double z_ground = -0.59;
   double scale = 1;  // heights: a saloon's on 0.32 m wheels, scaled with the wheel radius

@@ -5,7 +5,7 @@
 // door panels and the floor; three mirrors (the rear-view mirror at the windscreen's top, a side
 // mirror on each door) showing the world behind (the renderer draws their images). The bonnet is
 // the body's own, drawn from inside with its back faces culled. Laid out from the vehicle's
-// geometry (the built-in body's greenhouse, CabinFor) and the driver's eyes (CameraState::seat_B);
+// geometry (the built-in body's greenhouse and the driver's eyes in it: CabinFor, eyes_B);
 // built each frame as triangles in the world frame (draw_list.h).
 #pragma once
 
