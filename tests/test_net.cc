@@ -72,6 +72,7 @@ struct Handover {
 };
 
 using testing::ReadUntil;
+using testing::SendUntil;
 
 class Net : public ::testing::Test {
  protected:
@@ -509,15 +510,11 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
     });
   };
   std::uint64_t next_step = 1;
-  (void)base::PollUntil(
-      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+  (void)SendUntil(
+      batches, 30s, [&] { round(next_step++, 3, 4); },
       [&] {
         take();
         return !got.empty();
-      },
-      [&](base::Nanos slice) {
-        round(next_step++, 3, 4);
-        (void)batches.Wait(base::Chrono(slice));
       });
   ASSERT_FALSE(got.empty());
   ASSERT_EQ(got.back().states_size(), 3);
@@ -560,15 +557,11 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
   transport::Reader<pb::VehicleState> single(p, TopicId::kState, &drops);
   int singles = 0;
   next_step = 2'000'000;
-  (void)base::PollUntil(
-      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+  (void)SendUntil(
+      single, 30s, [&] { round(next_step++, 3, 4); },
       [&] {
         singles += single.Take([](const pb::VehicleState&, const transport::SampleInfo&) {});
         return singles > 0;
-      },
-      [&](base::Nanos slice) {
-        round(next_step++, 3, 4);
-        (void)single.Wait(base::Chrono(slice));
       });
   EXPECT_GT(singles, 0);
   EXPECT_GT(writers.all_states_written(), 0u);
@@ -611,16 +604,15 @@ TEST_F(Net, ALaggingStateWriterSendsWholeStepsInSamplesOfBoundedSize) {
   };
   // Until the writer knows the reader: a step at a time, as a server that keeps up.
   std::uint64_t step = 1;
-  (void)base::PollUntil(
-      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+  (void)SendUntil(
+      batches, 30s,
+      [&] {
+        push_step(step++);
+        outbox.Send();
+      },
       [&] {
         take();
         return !got.empty();
-      },
-      [&](base::Nanos slice) {
-        push_step(step++);
-        outbox.Send();
-        (void)batches.Wait(base::Chrono(slice));
       });
   ASSERT_FALSE(got.empty());
   ASSERT_TRUE(outbox.Drain(base::Seconds(30)));
@@ -690,16 +682,10 @@ TEST_F(Net, AViewOfEveryVehicleReadsBatchesAndCostsTheWriterNoSingleStates) {
     return true;
   };
   // Rounds until the view has matched the writers and seen a step of every vehicle.
-  (void)base::PollUntil(
-      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
-      [&] {
-        view.Poll();
-        return all_seen(0);
-      },
-      [&](base::Nanos slice) {
-        round();
-        (void)view.Wait(base::Chrono(slice));
-      });
+  (void)SendUntil(view, 30s, round, [&] {
+    view.Poll();
+    return all_seen(0);
+  });
   ASSERT_TRUE(all_seen(0));
   // The view's readers live in this participant: every one of them matched the writers when it
   // was made. None reads vdyn/state.
