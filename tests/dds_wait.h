@@ -18,11 +18,23 @@ namespace vdyn::testing {
 template <class M, class On, class Done>
 bool ReadUntil(transport::Reader<M>& reader, std::chrono::milliseconds timeout, On on, Done done) {
   return base::PollUntil(
-      base::Deadline::After(base::Nanos{std::chrono::nanoseconds(timeout).count()}),
-      base::Milliseconds(50), done, [&](base::Nanos slice) {
+      base::Deadline::After(base::FromChrono(timeout)), base::Milliseconds(50), done,
+      [&](base::Nanos slice) {
         (void)reader.Wait(base::Chrono(slice));
         (void)reader.Take([&](const M& m, const transport::SampleInfo&) { on(m); });
       });
+}
+
+// Sends (a round of states, a step) and then waits on `waitable` (a reader, a SessionView: any
+// Wait(std::chrono::nanoseconds)) for a slice, until `done` says so or the timeout passes: a
+// writer that goes on until its reader has matched and taken something.
+template <class Waitable, class Send, class Done>
+bool SendUntil(Waitable& waitable, std::chrono::milliseconds timeout, Send send, Done done) {
+  return base::PollUntil(base::Deadline::After(base::FromChrono(timeout)), base::Milliseconds(10),
+                         done, [&](base::Nanos slice) {
+                           send();
+                           (void)waitable.Wait(base::Chrono(slice));
+                         });
 }
 
 // A stand-in for a server's request handling: keeps every request it reads, in order, and

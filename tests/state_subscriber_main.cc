@@ -23,6 +23,7 @@
 #include <cstring>
 #include <string>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 #include "vdyn/transport/topics.h"
@@ -69,9 +70,7 @@ int main(int argc, char** argv) {
       p, vdyn::transport::TopicId::kState, &drops,
       print ? vdyn::transport::ReaderRole::kRecorder : vdyn::transport::ReaderRole::kDefault);
   long n = 0;
-  const auto end = std::chrono::steady_clock::now() + seconds;
-  while (n < want && std::chrono::steady_clock::now() < end) {
-    (void)states.Wait(std::chrono::milliseconds(100));
+  const auto take = [&] {
     n += states.Take([print](const vdyn::pb::VehicleState& s,
                              const vdyn::transport::SampleInfo& info) {
       if (!print) return;
@@ -84,7 +83,14 @@ int main(int argc, char** argv) {
                   static_cast<unsigned long long>(s.input().sequence()),
                   s.control().watchdog_safe_state() ? 1 : 0, s.speed_kmh());
     });
-  }
+  };
+  (void)vdyn::base::PollUntil(
+      vdyn::base::Deadline::After(vdyn::base::FromChrono(seconds)), vdyn::base::Milliseconds(100),
+      [&] {
+        take();
+        return n >= want;
+      },
+      [&](vdyn::base::Nanos slice) { (void)states.Wait(vdyn::base::Chrono(slice)); });
   std::printf("received %ld\n", n);
   return 0;
 }

@@ -5,16 +5,21 @@
 // processes, Foxglove's protocol client, the page in Chromium) are in tests/foxglove/.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cmath>
+#include <map>
+#include <set>
 #include <string>
 #include <vector>
 
 #include "foxglove/FrameTransforms.pb.h"
 #include "foxglove/SceneUpdate.pb.h"
+#include "vdyn/client/palette.h"
 #include "vdyn/foxglove/outbox.h"
 #include "vdyn/foxglove/params.h"
 #include "vdyn/foxglove/protocol.h"
 #include "vdyn/foxglove/scene.h"
+#include "vdyn/viewer/draw_list.h"
 #include "vdyn/viewer/scene.h"
 
 namespace vdyn {
@@ -441,17 +446,85 @@ TEST(FoxgloveScene, ArrowsAreTheViewersForTheSameState) {
         EXPECT_NEAR(va.anchor_W.y, fa.tail_W.y + k * fa.force_W.y, 1e-9) << i;
         EXPECT_NEAR(va.anchor_W.z, fa.tail_W.z + k * fa.force_W.z, 1e-9) << i;
       }
-      const auto vc = viewer::ForceColour(va.kind);
-      const auto fc = foxglove::ForceColour(fa.kind);
-      EXPECT_EQ(std::tie(vc.r, vc.g, vc.b), std::tie(fc.r, fc.g, fc.b));
       EXPECT_EQ(viewer::ForceLabel(va.kind), foxglove::ForceLabel(fa.kind));
     }
   }
-  for (std::uint32_t id = 0; id < 20; ++id) {
-    const auto vc = viewer::VehicleColour(id);
-    const auto fc = foxglove::VehicleColour(id);
-    EXPECT_EQ(std::tie(vc.r, vc.g, vc.b), std::tie(fc.r, fc.g, fc.b));
+}
+
+// The colours a user sees: the scene the bridge emits paints each arrow in the palette's colour
+// of its kind (six kinds, six colours) and the body in the vehicle's paint, and the viewer's draw
+// lists for the same state hold the same colours.
+std::array<std::uint8_t, 3> Bytes(const ::foxglove::Color& c) {
+  EXPECT_DOUBLE_EQ(c.a(), 1.0);
+  auto byte = [](double x) { return static_cast<std::uint8_t>(std::lround(x * 255)); };
+  EXPECT_NEAR(c.r() * 255, byte(c.r()), 1e-9);  // a byte of sRGB, as the palette holds
+  return {byte(c.r()), byte(c.g()), byte(c.b())};
+}
+
+TEST(FoxgloveScene, ArrowsAndBodyWearThePalettesColoursAsInTheViewer) {
+  std::set<std::array<std::uint8_t, 3>> paints;
+  for (std::uint32_t id = 1; id <= 8; ++id) {
+    pb::VehicleState s = SomeState(pb::VEHICLE_MODEL_FULL);
+    s.set_vehicle_id(id);
+    const foxglove::Geometry g = foxglove::GeometryFor(id, nullptr, nullptr);
+    foxglove::SceneOptions o;
+    ::foxglove::SceneUpdate u;
+    foxglove::BuildVehicleScene(s, g, o, s.sim_time_ns(), u);
+    const ::foxglove::SceneEntity* body = nullptr;
+    const ::foxglove::SceneEntity* forces = nullptr;
+    for (const auto& e : u.entities()) {
+      if (e.id() == "vehicle/" + std::to_string(id) + "/body") body = &e;
+      if (e.id() == "vehicle/" + std::to_string(id) + "/forces") forces = &e;
+    }
+    ASSERT_NE(body, nullptr);
+    ASSERT_NE(forces, nullptr);
+    // The body's lower box is the vehicle's paint, the viewer's body too.
+    ASSERT_GE(body->cubes_size(), 1);
+    const std::array<std::uint8_t, 3> paint = Bytes(body->cubes(0).color());
+    EXPECT_EQ(paint, client::VehiclePaint(id)) << "vehicle " << id;
+    paints.insert(paint);
+    const viewer::VehicleView v =
+        viewer::BuildVehicleView(s, viewer::GeometryFor(id, nullptr, nullptr));
+    viewer::FrameLists lists;
+    viewer::AppendVehicle(
+        v, viewer::ArrowStyle{}, [](const viewer::Vec3&) { return 0.02; },
+        viewer::VehicleParts{.body = true, .wheels = false, .arrows = false}, false, lists);
+    ASSERT_EQ(lists.bodies.size(), 1u);
+    const viewer::Rgb8 vp = lists.bodies[0].paint;
+    EXPECT_EQ((std::array<std::uint8_t, 3>{vp.r, vp.g, vp.b}), paint) << "vehicle " << id;
+
+    // Each arrow in its kind's colour (the entity's order: per wheel spring, drive, brake, side;
+    // then drag and wall), and the viewer draws that kind's arrow in the same colour.
+    ASSERT_EQ(forces->arrows_size(), foxglove::kArrowsPerVehicle);
+    ASSERT_EQ(v.arrows.size(), static_cast<std::size_t>(foxglove::kArrowsPerVehicle));
+    std::map<int, std::array<std::uint8_t, 3>> by_kind;
+    for (int i = 0; i < forces->arrows_size(); ++i) {
+      const int kind = i < 4 * foxglove::kWheels ? i % 4 : 4 + (i - 4 * foxglove::kWheels);
+      const std::array<std::uint8_t, 3> c = Bytes(forces->arrows(i).color());
+      EXPECT_EQ(c, client::ForcePaint(static_cast<client::ForceKind>(kind))) << "arrow " << i;
+      by_kind[kind] = c;
+      // The viewer's arrow of the same force, alone in a list: every vertex in that colour.
+      viewer::VehicleView one = v;
+      one.arrows = {v.arrows[static_cast<std::size_t>(i)]};
+      ASSERT_EQ(static_cast<int>(one.arrows[0].kind), kind);
+      one.arrows[0].force_W = {1000, 0, 0};  // long enough to be drawn, whatever the state's
+      viewer::FrameLists arrow;
+      viewer::AppendVehicle(
+          one, viewer::ArrowStyle{}, [](const viewer::Vec3&) { return 0.02; },
+          viewer::VehicleParts{.body = false, .wheels = false, .arrows = true}, false, arrow);
+      ASSERT_FALSE(arrow.arrows.vertices().empty()) << "arrow " << i;
+      for (const viewer::Vertex& x : arrow.arrows.vertices()) {
+        ASSERT_EQ((std::array<std::uint8_t, 3>{x.rgba[0], x.rgba[1], x.rgba[2]}), c)
+            << "arrow " << i;
+      }
+    }
+    std::set<std::array<std::uint8_t, 3>> kinds;
+    for (const auto& [kind, c] : by_kind) kinds.insert(c);
+    EXPECT_EQ(by_kind.size(), static_cast<std::size_t>(client::kForceKinds));
+    EXPECT_EQ(kinds.size(), static_cast<std::size_t>(client::kForceKinds))
+        << "two kinds of force share a colour";
   }
+  EXPECT_EQ(paints.size(), 8u) << "two of the first eight vehicles share a paint";
 }
 
 TEST(FoxgloveScene, ArrowPrimitivesPointAlongTheForceWithTheScaledLength) {

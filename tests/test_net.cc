@@ -28,6 +28,7 @@
 #include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/client/session_view.h"
@@ -71,6 +72,7 @@ struct Handover {
 };
 
 using testing::ReadUntil;
+using testing::SendUntil;
 
 class Net : public ::testing::Test {
  protected:
@@ -226,14 +228,17 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
     const auto it = m.find(k);
     return it == m.end() ? std::uint64_t{0} : it->second;
   };
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (std::chrono::steady_clock::now() < deadline &&
-         !(at_all.size() == 3 && count(at_own, 2) >= 500 && count(at_view, 3) >= 500)) {
-    (void)all.Wait(20ms);
-    (void)all.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_all[i.key]; });
-    (void)own.Take([&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_own[i.key]; });
-    view.Poll();
-  }
+  (void)base::PollUntil(
+      base::Deadline::After(base::Seconds(60)), base::Milliseconds(20),
+      [&] {
+        (void)all.Take(
+            [&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_all[i.key]; });
+        (void)own.Take(
+            [&](const pb::VehicleState&, const transport::SampleInfo& i) { ++at_own[i.key]; });
+        view.Poll();
+        return at_all.size() == 3 && count(at_own, 2) >= 500 && count(at_view, 3) >= 500;
+      },
+      [&](base::Nanos slice) { (void)all.Wait(base::Chrono(slice)); });
   EXPECT_EQ(at_all.size(), 3u) << server->Log();
   EXPECT_GE(count(at_own, 2), 500u) << server->Log();
   EXPECT_GE(count(at_view, 3), 500u) << server->Log();
@@ -376,23 +381,22 @@ TEST_F(Net, WaitForServerSendsHelloAgainUntilTheNamedServerAnswers) {
   std::atomic<bool> stop{false};
   std::atomic<int> hellos{0};
   std::thread answerer([&] {
-    const auto give_up = std::chrono::steady_clock::now() + 60s;
-    while (!stop.load() && std::chrono::steady_clock::now() < give_up) {
-      (void)requests.Wait(20ms);
-      (void)requests.Take([&](const pb::ControlRequest& r, const transport::SampleInfo&) {
-        if (!r.has_hello() || r.server_id() != "lab-b") return;
-        if (hellos.fetch_add(1) == 0) return;  // the first is lost
-        pb::ControlReply other;                // another server's answer does not count
-        other.set_request_id(r.request_id());
-        other.set_client_id(r.client_id());
-        other.set_server_id("lab-a");
-        other.set_accepted(true);
-        (void)replies.Write(0, other);
-        pb::ControlReply reply = other;
-        reply.set_server_id("lab-b");
-        (void)replies.Write(0, reply);
-      });
-    }
+    (void)ReadUntil(
+        requests, 60s,
+        [&](const pb::ControlRequest& r) {
+          if (!r.has_hello() || r.server_id() != "lab-b") return;
+          if (hellos.fetch_add(1) == 0) return;  // the first is lost
+          pb::ControlReply other;                // another server's answer does not count
+          other.set_request_id(r.request_id());
+          other.set_client_id(r.client_id());
+          other.set_server_id("lab-a");
+          other.set_accepted(true);
+          (void)replies.Write(0, other);
+          pb::ControlReply reply = other;
+          reply.set_server_id("lab-b");
+          (void)replies.Write(0, reply);
+        },
+        [&] { return stop.load(); });
   });
   transport::Participant p(domain_);
   transport::ControlClient control(p, "test");
@@ -505,12 +509,13 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
       got_keys.push_back(i.key);
     });
   };
-  const auto deadline = std::chrono::steady_clock::now() + 30s;
-  for (std::uint64_t step = 1; got.empty() && std::chrono::steady_clock::now() < deadline; ++step) {
-    round(step, 3, 4);
-    (void)batches.Wait(10ms);
-    take();
-  }
+  std::uint64_t next_step = 1;
+  (void)SendUntil(
+      batches, 30s, [&] { round(next_step++, 3, 4); },
+      [&] {
+        take();
+        return !got.empty();
+      });
   ASSERT_FALSE(got.empty());
   ASSERT_EQ(got.back().states_size(), 3);
   for (int i = 0; i < 3; ++i) {
@@ -530,32 +535,34 @@ TEST_F(Net, StateWritersBatchAStepAndWriteVdynStateOnlyWhileRead) {
   EXPECT_GE(writers.batches_written() - before, 2u);
   int states = 0;
   bool in_order = true;
-  const auto until = std::chrono::steady_clock::now() + 30s;
-  while (states < many && std::chrono::steady_clock::now() < until) {
-    (void)batches.Wait(10ms);
-    got.clear();
-    take();
-    for (const pb::VehicleStates& b : got) {
-      EXPECT_LE(b.ByteSizeLong(), vdyn::limits::kMaxStatesBytes);
-      for (const pb::VehicleState& s : b.states()) {
-        in_order = in_order && s.vehicle_id() == static_cast<std::uint32_t>(states + 1);
-        ++states;
-      }
-    }
-  }
+  (void)base::PollUntil(
+      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+      [&] {
+        got.clear();
+        take();
+        for (const pb::VehicleStates& b : got) {
+          EXPECT_LE(b.ByteSizeLong(), vdyn::limits::kMaxStatesBytes);
+          for (const pb::VehicleState& s : b.states()) {
+            in_order = in_order && s.vehicle_id() == static_cast<std::uint32_t>(states + 1);
+            ++states;
+          }
+        }
+        return states >= many;
+      },
+      [&](base::Nanos slice) { (void)batches.Wait(base::Chrono(slice)); });
   EXPECT_EQ(states, many);
   EXPECT_TRUE(in_order);
 
   // Once a reader of vdyn/state (a DDS tool) has matched, states go there as well.
   transport::Reader<pb::VehicleState> single(p, TopicId::kState, &drops);
   int singles = 0;
-  const auto until2 = std::chrono::steady_clock::now() + 30s;
-  for (std::uint64_t step = 2'000'000; singles == 0 && std::chrono::steady_clock::now() < until2;
-       ++step) {
-    round(step, 3, 4);
-    (void)single.Wait(10ms);
-    singles += single.Take([](const pb::VehicleState&, const transport::SampleInfo&) {});
-  }
+  next_step = 2'000'000;
+  (void)SendUntil(
+      single, 30s, [&] { round(next_step++, 3, 4); },
+      [&] {
+        singles += single.Take([](const pb::VehicleState&, const transport::SampleInfo&) {});
+        return singles > 0;
+      });
   EXPECT_GT(singles, 0);
   EXPECT_GT(writers.all_states_written(), 0u);
   EXPECT_EQ(drops.Total(), 0u);
@@ -597,13 +604,16 @@ TEST_F(Net, ALaggingStateWriterSendsWholeStepsInSamplesOfBoundedSize) {
   };
   // Until the writer knows the reader: a step at a time, as a server that keeps up.
   std::uint64_t step = 1;
-  const auto deadline = std::chrono::steady_clock::now() + 30s;
-  while (got.empty() && std::chrono::steady_clock::now() < deadline) {
-    push_step(step++);
-    outbox.Send();
-    (void)batches.Wait(10ms);
-    take();
-  }
+  (void)SendUntil(
+      batches, 30s,
+      [&] {
+        push_step(step++);
+        outbox.Send();
+      },
+      [&] {
+        take();
+        return !got.empty();
+      });
   ASSERT_FALSE(got.empty());
   ASSERT_TRUE(outbox.Drain(base::Seconds(30)));
   (void)batches.Wait(100ms);
@@ -617,13 +627,15 @@ TEST_F(Net, ALaggingStateWriterSendsWholeStepsInSamplesOfBoundedSize) {
   outbox.Send();
   ASSERT_TRUE(outbox.Drain(base::Seconds(30)));
   int states = 0;
-  const auto until = std::chrono::steady_clock::now() + 30s;
-  while (states < kSteps * kVehicles && std::chrono::steady_clock::now() < until) {
-    (void)batches.Wait(10ms);
-    const std::size_t had = got.size();
-    take();
-    for (std::size_t b = had; b < got.size(); ++b) states += got[b].states_size();
-  }
+  (void)base::PollUntil(
+      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+      [&] {
+        const std::size_t had = got.size();
+        take();
+        for (std::size_t b = had; b < got.size(); ++b) states += got[b].states_size();
+        return states >= kSteps * kVehicles;
+      },
+      [&](base::Nanos slice) { (void)batches.Wait(base::Chrono(slice)); });
   ASSERT_EQ(states, kSteps * kVehicles) << drops.Total() << " drops";
   const std::size_t bound = 64 * 1024 + kVehicles * (largest_state + 4);
   EXPECT_GE(got.size(), 4u);  // 450 KB in samples of 64 KB and one step at most
@@ -670,23 +682,23 @@ TEST_F(Net, AViewOfEveryVehicleReadsBatchesAndCostsTheWriterNoSingleStates) {
     return true;
   };
   // Rounds until the view has matched the writers and seen a step of every vehicle.
-  const auto deadline = std::chrono::steady_clock::now() + 30s;
-  while (!all_seen(0) && std::chrono::steady_clock::now() < deadline) {
-    round();
-    (void)view.Wait(10ms);
+  (void)SendUntil(view, 30s, round, [&] {
     view.Poll();
-  }
+    return all_seen(0);
+  });
   ASSERT_TRUE(all_seen(0));
   // The view's readers live in this participant: every one of them matched the writers when it
   // was made. None reads vdyn/state.
   EXPECT_EQ(writers.state_readers(), 0u);
   const std::uint64_t from = step;
   for (int i = 0; i < 20; ++i) round();
-  const auto until = std::chrono::steady_clock::now() + 30s;
-  while (!all_seen(from) && std::chrono::steady_clock::now() < until) {
-    (void)view.Wait(10ms);
-    view.Poll();
-  }
+  (void)base::PollUntil(
+      base::Deadline::After(base::Seconds(30)), base::Milliseconds(10),
+      [&] {
+        view.Poll();
+        return all_seen(from);
+      },
+      [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
   EXPECT_TRUE(all_seen(from));
   EXPECT_EQ(writers.all_states_written(), 0u);
   EXPECT_EQ(drops.Total() + view.drops().Total(), 0u);
@@ -1079,9 +1091,10 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
   params.mutable_set_params()->mutable_params()->set_mu(0.6);
   bool params_sent = false;
   std::size_t n_states = 0;
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (n_states < 3000 && std::chrono::steady_clock::now() < deadline) {
-    (void)states.Wait(20ms);
+  // A loop of its own: the request goes out from here, between the waits.
+  const base::Deadline deadline = base::Deadline::After(base::Seconds(60));
+  while (n_states < 3000 && !deadline.Passed()) {
+    (void)states.Wait(base::Chrono(std::min(base::Milliseconds(20), deadline.Left())));
     (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
     (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       hashes[s.vehicle_id()][s.step()] = s.state_hash();
@@ -1281,10 +1294,12 @@ class StartGate {
   }
   // Lets every waiting process go once `n` wait; false when they did not within the timeout.
   bool Open(int n, std::chrono::milliseconds timeout) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (Waiting() < n) {
-      if (std::chrono::steady_clock::now() >= deadline) return false;
-      std::this_thread::sleep_for(2ms);  // polling the kernel's lock table, bounded
+    // The kernel's lock table is no event to wait on: it is polled, bounded.
+    if (!base::PollUntil(
+            base::Deadline::After(base::FromChrono(timeout)), base::Milliseconds(2),
+            [&] { return Waiting() >= n; },
+            [](base::Nanos slice) { base::SleepUntil(base::MonotonicNow() + slice); })) {
+      return false;
     }
     return flock(fd_, LOCK_UN) == 0;
   }
@@ -1385,11 +1400,13 @@ TEST_F(Net, TwoServersStartedInOneInstantNeverBothRunAVehicle) {
         published[st.server_id()].insert(st.vehicle_id());
       });
     };
-    const auto deadline = std::chrono::steady_clock::now() + 30s;
-    while (a.running() && b.running() && std::chrono::steady_clock::now() < deadline) {
-      (void)states.Wait(20ms);
-      take();
-    }
+    (void)base::PollUntil(
+        base::Deadline::After(base::Seconds(30)), base::Milliseconds(20),
+        [&] {
+          take();
+          return !a.running() || !b.running();
+        },
+        [&](base::Nanos slice) { (void)states.Wait(base::Chrono(slice)); });
     ASSERT_NE(a.running(), b.running()) << "both still run or both stopped\n" << a.Log() << b.Log();
     Process& loser = a.running() ? b : a;
     Process& winner = a.running() ? a : b;

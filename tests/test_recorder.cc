@@ -23,8 +23,10 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "dds_wait.h"
 #include "process.h"
 #include "test_support.h"
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/io/maneuver.h"
@@ -144,12 +146,15 @@ class RecorderTest : public ::testing::Test {
   // Waits (bounded) until `done` says so while `recorder` runs; false on the timeout or its end.
   static bool WaitWhileRunning(Process& recorder, const std::function<bool()>& done,
                                std::chrono::seconds timeout = 60s) {
-    const auto deadline = std::chrono::steady_clock::now() + timeout;
-    while (!done()) {
-      if (std::chrono::steady_clock::now() >= deadline || !recorder.running()) return done();
-      std::this_thread::sleep_for(20ms);
-    }
-    return true;
+    // The log is no event to wait on; the recorder's exit is (it ends the wait early).
+    (void)base::PollUntil(
+        base::Deadline::After(base::FromChrono(timeout)), base::Milliseconds(20),
+        [&] { return done() || !recorder.running(); },
+        [&](base::Nanos slice) {
+          (void)recorder.Wait(
+              std::chrono::duration_cast<std::chrono::milliseconds>(base::Chrono(slice)));
+        });
+    return done();
   }
   // Waits (bounded) until a recorder's log says it hears the server's states and events and has
   // its world: from then on it takes everything the server publishes.
@@ -395,14 +400,11 @@ TEST_F(RecorderTest, AKilledRecordingIsRefusedThenRecoveredAndItStillVerifies) {
   transport::DropCounters drops;
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   std::uint64_t step = 0;
-  const auto deadline = std::chrono::steady_clock::now() + 60s;
-  while (step < 4000 && std::chrono::steady_clock::now() < deadline) {
-    (void)states.Wait(50ms);
-    (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
-      step = std::max<std::uint64_t>(step, s.step());
-    });
-  }
-  ASSERT_GE(step, 4000u);
+  ASSERT_TRUE(testing::ReadUntil(
+      states, 60s,
+      [&](const pb::VehicleState& s) { step = std::max<std::uint64_t>(step, s.step()); },
+      [&] { return step >= 4000; }))
+      << "the drive reached step " << step << " of 4000";
   recorder->Signal(SIGKILL);
   ASSERT_EQ(recorder->Wait(10s), 128 + SIGKILL);
 
@@ -563,19 +565,21 @@ TEST_F(RecorderTest, PlayRepublishesTheStatesInOrderAtTheirRecordedTimesAndInput
                          "play" + std::to_string(static_cast<int>(rate)) + ".log");
     std::vector<Received> got;
     std::uint64_t presses = 0;
-    const auto deadline = std::chrono::steady_clock::now() + 120s;
-    while (play->running() && std::chrono::steady_clock::now() < deadline) {
-      (void)states.Wait(20ms);
-      const std::int64_t now = base::MonotonicNow().ns;
-      (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
-        got.push_back({s.step(), now});
-      });
-      (void)inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) {
-        presses += in.buttons() & 1u;
-      });
-      own_states += static_cast<std::uint64_t>(
-          own.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}));
-    }
+    (void)base::PollUntil(
+        base::Deadline::After(base::Seconds(120)), base::Milliseconds(20),
+        [&] { return !play->running(); },
+        [&](base::Nanos slice) {
+          (void)states.Wait(base::Chrono(slice));
+          const std::int64_t now = base::MonotonicNow().ns;
+          (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
+            got.push_back({s.step(), now});
+          });
+          (void)inputs.Take([&](const pb::DriverInput& in, const transport::SampleInfo&) {
+            presses += in.buttons() & 1u;
+          });
+          own_states += static_cast<std::uint64_t>(
+              own.Take([](const pb::VehicleState&, const transport::SampleInfo&) {}));
+        });
     ASSERT_EQ(play->Wait(10s), 0) << play->Log();
     (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       got.push_back({s.step(), base::MonotonicNow().ns});
@@ -643,13 +647,9 @@ TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
   };
   auto take = [&](std::size_t want, std::chrono::milliseconds within = 20s) {
     std::vector<std::uint64_t> steps;
-    const auto until = std::chrono::steady_clock::now() + within;
-    while (steps.size() < want && std::chrono::steady_clock::now() < until) {
-      (void)states.Wait(25ms);
-      (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
-        steps.push_back(s.step());
-      });
-    }
+    (void)testing::ReadUntil(
+        states, within, [&](const pb::VehicleState& s) { steps.push_back(s.step()); },
+        [&] { return steps.size() >= want; });
     return steps;
   };
   // Seek to 2 s, then 10 steps: exactly the states of steps 1999..2008 (recorded 1 ms after the
@@ -691,13 +691,9 @@ TEST_F(RecorderTest, PlayRefusesADomainWithALiveServer) {
     transport::DropCounters drops;
     transport::Reader<pb::WorldDescription> world(p, TopicId::kWorld, &drops);
     bool up = false;
-    const auto deadline = std::chrono::steady_clock::now() + 60s;
-    while (!up && std::chrono::steady_clock::now() < deadline) {
-      (void)world.Wait(50ms);
-      (void)world.Take(
-          [&](const pb::WorldDescription&, const transport::SampleInfo&) { up = true; });
-    }
-    ASSERT_TRUE(up) << server->Log();
+    ASSERT_TRUE(testing::ReadUntil(
+        world, 60s, [&](const pb::WorldDescription&) { up = true; }, [&] { return up; }))
+        << server->Log();
   }
   auto [code, out] = Run({"play", file.string(), "--domain", std::to_string(domain_), "--no-keys"});
   EXPECT_EQ(code, 2) << out;
@@ -752,13 +748,12 @@ TEST_F(RecorderTest, TakeoverContinuesBitExactlyFromTheBranchPointGivenTheRecord
                             "--out", b.string(), "--no-status"},
                            "takeover.log");
   std::optional<std::uint64_t> branch;
-  const auto deadline = std::chrono::steady_clock::now() + 120s;
-  while (!branch && std::chrono::steady_clock::now() < deadline && takeover->running()) {
-    (void)events.Wait(50ms);
-    (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
-      if (e.has_spawned() && !e.spawned().branched_from().empty()) branch = e.step();
-    });
-  }
+  (void)testing::ReadUntil(
+      events, 120s,
+      [&](const pb::SessionEvent& e) {
+        if (!branch && e.has_spawned() && !e.spawned().branched_from().empty()) branch = e.step();
+      },
+      [&] { return branch.has_value() || !takeover->running(); });
   ASSERT_TRUE(branch.has_value()) << takeover->Log() << server->Log();
   ASSERT_EQ(*branch, want) << takeover->Log() << "at " << at << " s; states around it:\n"
                            <<

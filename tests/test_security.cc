@@ -262,12 +262,10 @@ TEST_F(Security, ForgedPermissionsAndAForeignCaCannotDriveOrChangeParametersAndA
            counts["DDS Security: remote permissions refused"] > 0;
   })) << server->Log();
   // And its log says whom (the counters log each kind with its last detail).
-  const auto deadline = std::chrono::steady_clock::now() + 15s;
-  while (server->Log().find("CN=intruder") == std::string::npos &&
-         std::chrono::steady_clock::now() < deadline) {
-    (void)diag.Wait(100ms);  // the server logs its counters once a second, with its diagnostics
-    (void)diag.Take([](const pb::Diagnostics&, const transport::SampleInfo&) {});
-  }
+  // The server logs its counters once a second, with its diagnostics: each wakes the wait.
+  (void)ReadUntil(
+      diag, 15s, [](const pb::Diagnostics&) {},
+      [&] { return server->Log().find("CN=intruder") != std::string::npos; });
   EXPECT_THAT(server->Log(), HasSubstr("dropped: DDS Security: remote identity refused"));
   EXPECT_THAT(server->Log(), HasSubstr("CN=intruder"));
 }

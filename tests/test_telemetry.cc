@@ -4,6 +4,7 @@
 // test binds on loopback.
 #include <arpa/inet.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -14,6 +15,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <functional>
+#include <initializer_list>
 #include <map>
 #include <numbers>
 #include <stdexcept>
@@ -25,6 +28,7 @@
 
 #include "process.h"
 #include "test_support.h"
+#include "vdyn/base/deadline.h"
 #include "vdyn/telemetry/convert.h"
 #include "vdyn/telemetry/packets.h"
 #include "vdyn/telemetry/udp.h"
@@ -352,6 +356,13 @@ class UdpSocket {
       ++n;
     }
   }
+  // Blocks until one of `sockets` has a datagram waiting or the timeout passes.
+  static void WaitAny(std::initializer_list<const UdpSocket*> sockets, base::Nanos timeout) {
+    std::vector<pollfd> fds;
+    for (const UdpSocket* s : sockets) fds.push_back({s->fd_, POLLIN, 0});
+    const auto ms = (timeout.ns + 999'999) / 1'000'000;  // rounded up: never a busy loop
+    (void)poll(fds.data(), fds.size(), static_cast<int>(std::min<std::int64_t>(ms, 60'000)));
+  }
   std::vector<Packet> packets;
 
  private:
@@ -377,12 +388,16 @@ TEST(TelemetryUdp, DestinationsAreCheckedAndEverySendIsCounted) {
   EXPECT_EQ(sender.Send(datagram), 2);
   EXPECT_EQ(sender.sent(), 2u);
   EXPECT_EQ(sender.errors(), 0u);
-  const auto deadline = std::chrono::steady_clock::now() + 10s;
-  while ((a.packets.empty() || b.packets.empty()) && std::chrono::steady_clock::now() < deadline) {
-    a.Drain();
-    b.Drain();
-    std::this_thread::sleep_for(1ms);  // loopback delivers at once; bounded by the deadline
-  }
+  (void)base::PollUntil(
+      base::Deadline::After(base::Seconds(10)), base::Milliseconds(100),
+      [&] {
+        a.Drain();
+        b.Drain();
+        return !a.packets.empty() && !b.packets.empty();
+      },
+      [&](base::Nanos slice) {
+        UdpSocket::WaitAny({&a, &b}, slice);
+      });
   ASSERT_EQ(a.packets.size(), 1u);
   EXPECT_EQ(a.packets[0].bytes, datagram);
   ASSERT_EQ(b.packets.size(), 1u);
@@ -439,7 +454,6 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
   std::map<std::uint32_t, pb::VehicleState> by_ms;  // every state seen, by its packets' Time
   pb::VehicleState last;
   auto take_states = [&] {
-    (void)states.Wait(10ms);
     (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       if (s.vehicle_id() != 1) return;
       by_ms[TimeMs(s.sim_time_ns())] = s;
@@ -456,33 +470,39 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
     EXPECT_TRUE(input.Write(1, in)) << input.last_error();
   };
 
+  // Takes what came until `done` (the packets follow the states: a state wakes it), for at most
+  // `seconds`; `between` runs before each wait.
+  auto take_until = [&](
+                        std::int64_t seconds, const std::function<bool()>& done,
+                        const std::function<void()>& between = [] {}) {
+    return base::PollUntil(
+        base::Deadline::After(base::Seconds(seconds)), base::Milliseconds(10),
+        [&] {
+          take_states();
+          drain();
+          return done();
+        },
+        [&](base::Nanos slice) {
+          between();
+          (void)states.Wait(base::Chrono(slice));
+        });
+  };
   // Until packets flow (the server and both bridges are up).
-  auto deadline = std::chrono::steady_clock::now() + 60s;
-  while ((sim.packets.empty() || gauge.packets.empty() || sim_id.packets.empty() ||
-          gauge_id.packets.empty()) &&
-         std::chrono::steady_clock::now() < deadline) {
-    take_states();
-    drain();
-  }
+  (void)take_until(60, [&] {
+    return !sim.packets.empty() && !gauge.packets.empty() && !sim_id.packets.empty() &&
+           !gauge_id.packets.empty();
+  });
   ASSERT_FALSE(sim.packets.empty()) << server->Log() << bridge->Log();
   ASSERT_FALSE(gauge_id.packets.empty()) << bridge_ids->Log();
 
   // Full throttle to 12 m/s, then brake with the handbrake up to below 3 m/s.
   const auto window_start = std::chrono::steady_clock::now();
   const std::size_t sim_before = sim.packets.size(), gauge_before = gauge.packets.size();
-  deadline = std::chrono::steady_clock::now() + 60s;
-  while (!(last.speed_kmh() > 12 * 3.6) && std::chrono::steady_clock::now() < deadline) {
-    drive(1.0, 0.0, 0.0);
-    take_states();
-    drain();
-  }
+  (void)take_until(
+      60, [&] { return last.speed_kmh() > 12 * 3.6; }, [&] { drive(1.0, 0.0, 0.0); });
   ASSERT_GT(last.speed_kmh(), 12 * 3.6) << server->Log();
-  deadline = std::chrono::steady_clock::now() + 60s;
-  while (!(last.speed_kmh() < 3 * 3.6) && std::chrono::steady_clock::now() < deadline) {
-    drive(0.0, 1.0, 1.0);
-    take_states();
-    drain();
-  }
+  (void)take_until(
+      60, [&] { return last.speed_kmh() < 3 * 3.6; }, [&] { drive(0.0, 1.0, 1.0); });
   ASSERT_LT(last.speed_kmh(), 3 * 3.6);
   drain();
   const double window_s =
@@ -612,9 +632,10 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
   std::size_t count = sim.packets.size() + gauge.packets.size();
   auto quiet_since = std::chrono::steady_clock::now();
   bool quiet = false;
-  deadline = std::chrono::steady_clock::now() + 20s;
-  while (std::chrono::steady_clock::now() < deadline) {
-    std::this_thread::sleep_for(20ms);  // polling our own sockets, bounded by the deadline
+  // A loop of its own: it ends on a quiet spell, not on something that arrives.
+  for (const base::Deadline deadline = base::Deadline::After(base::Seconds(20));
+       !deadline.Passed();) {
+    UdpSocket::WaitAny({&sim, &gauge}, std::min(base::Milliseconds(100), deadline.Left()));
     drain();
     const std::size_t now_count = sim.packets.size() + gauge.packets.size();
     if (now_count != count) {
@@ -634,11 +655,7 @@ TEST_F(TelemetryNet, PacketsCarryTheStatesAtTheirRatesAndStopWhenStatesGoStale) 
                   "--world", "flat"},
                  "server2.log");
   const std::size_t before_restart = sim.packets.size();
-  deadline = std::chrono::steady_clock::now() + 60s;
-  while (sim.packets.size() < before_restart + 5 && std::chrono::steady_clock::now() < deadline) {
-    take_states();  // waits up to 10 ms for a state
-    drain();
-  }
+  (void)take_until(60, [&] { return sim.packets.size() >= before_restart + 5; });
   EXPECT_GE(sim.packets.size(), before_restart + 5) << server->Log();
   EXPECT_THAT(bridge->Log(), HasSubstr("sending resumed"));
 

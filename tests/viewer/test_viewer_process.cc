@@ -13,9 +13,11 @@
 #include <map>
 #include <sstream>
 
+#include "../dds_wait.h"
 #include "../process.h"
 #include "../test_support.h"
 #include "test_runtime.h"
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/time.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/session_view.h"
@@ -68,13 +70,13 @@ Xvfb* ViewerProcess::xvfb_ = nullptr;
 bool WaitForServer(std::uint32_t domain, std::uint32_t vehicle, int seconds) {
   transport::Participant p(domain);
   client::SessionView view(p, {});
-  const auto deadline = base::MonotonicNow() + base::Seconds(seconds);
-  while (base::MonotonicNow() < deadline) {
-    (void)view.Wait(std::chrono::milliseconds(100));
-    view.Poll();
-    if (view.vehicle(vehicle) != nullptr && view.vehicle(vehicle)->states > 0) return true;
-  }
-  return false;
+  return base::PollUntil(
+      base::Deadline::After(base::Seconds(seconds)), base::Milliseconds(100),
+      [&] {
+        view.Poll();
+        return view.vehicle(vehicle) != nullptr && view.vehicle(vehicle)->states > 0;
+      },
+      [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
 }
 
 TEST_F(ViewerProcess, AViewerThatJoinsLateDrawsTheWorldOfARunningServer) {
@@ -156,9 +158,9 @@ TEST_F(ViewerProcess, AParameterChangeIsAnsweredAndARejectedOneShowsItsReason) {
   o.width = 800;
   o.height = 600;
   viewer::Viewer v(o);
-  auto frames_until = [&](const std::function<bool()>& done) {
-    const auto deadline = base::MonotonicNow() + base::Seconds(60);
-    while (base::MonotonicNow() < deadline) {
+  auto frames_until = [&](const std::function<bool()>& done) {  // a frame, then a look
+    const base::Deadline deadline = base::Deadline::After(base::Seconds(60));
+    while (!deadline.Passed()) {
       v.Frame();
       if (done()) return true;
     }
@@ -958,14 +960,14 @@ TEST_F(ViewerProcess, AfterARestoreTheHudsTimeAndStepAgree) {
   transport::DropCounters drops;
   transport::Reader<pb::SessionEvent> events(pa, transport::TopicId::kEvents, &drops);
   std::optional<pb::SessionEvent> checkpoint;
-  const auto deadline = base::MonotonicNow() + base::Seconds(60);
-  while (!checkpoint && base::MonotonicNow() < deadline) {
-    (void)events.Wait(std::chrono::milliseconds(100));
-    (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) {
-      if (e.vehicle_id() == 1 && e.has_checkpoint() && e.step() >= 1000) checkpoint = e;
-    });
-  }
-  ASSERT_TRUE(checkpoint.has_value()) << a.Log();
+  ASSERT_TRUE(ReadUntil(
+      events, std::chrono::seconds(60),
+      [&](const pb::SessionEvent& e) {
+        if (!checkpoint && e.vehicle_id() == 1 && e.has_checkpoint() && e.step() >= 1000)
+          checkpoint = e;
+      },
+      [&] { return checkpoint.has_value(); }))
+      << a.Log();
   Process b({ServerBinary(), "--domain", std::to_string(db), "--world", "flat", "--duration", "120",
              "--server-id", "b", "--vehicle-ids", "2"},
             dir_ / "b.log");
@@ -993,8 +995,7 @@ TEST_F(ViewerProcess, AfterARestoreTheHudsTimeAndStepAgree) {
   o.width = 800;
   o.height = 600;
   viewer::Viewer v(o);
-  const auto until = base::MonotonicNow() + base::Seconds(60);
-  while (base::MonotonicNow() < until) {
+  for (const base::Deadline until = base::Deadline::After(base::Seconds(60)); !until.Passed();) {
     v.Frame();
     const auto* s = v.shown_state(1);
     if (s != nullptr && s->step() > checkpoint->step()) break;
@@ -1074,8 +1075,7 @@ TEST_F(ViewerProcess, APlaybackIsRecognisedWithoutAFlagAndNamesItsRecording) {
   ASSERT_FALSE(o.playback);
   viewer::Viewer v(o);
   auto first = [&] { return v.hud_text().empty() ? std::string() : v.hud_text().front(); };
-  const auto deadline = base::MonotonicNow() + base::Seconds(60);
-  while (base::MonotonicNow() < deadline) {
+  for (const base::Deadline until = base::Deadline::After(base::Seconds(60)); !until.Passed();) {
     v.Frame();
     if (v.ready() && first().rfind("PLAYBACK", 0) == 0) break;
   }

@@ -16,6 +16,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/time.h"
 #include "vdyn/io/vehicle_params.h"
 #include "vdyn/recorder/output_file.h"
@@ -244,6 +245,11 @@ struct Capture::Impl {
   // Counters: the taker's, copied for Counts() under counts_mu.
   mutable std::mutex counts_mu;
   std::map<TopicId, TopicCounts> counts;
+
+  // The taker's checks of the matched writers, counted for WaitForWriters (which waits on cv).
+  mutable std::mutex match_mu;
+  mutable std::condition_variable match_cv;
+  std::uint64_t match_checks = 0;
 
   // Gap detection (taker only).
   std::unordered_map<std::uint32_t, StepGaps> step_gaps;  // of each vehicle's states
@@ -711,6 +717,25 @@ std::uint32_t Capture::MatchedWriters(TopicId topic) const {
   return n;
 }
 
+bool Capture::WaitForWriters(TopicId topic, const base::Deadline& deadline) const {
+  Impl& m = *impl_;
+  std::uint64_t seen = 0;
+  return base::PollUntil(
+      deadline, base::Milliseconds(100),
+      [&] {
+        {
+          std::lock_guard<std::mutex> lock(m.match_mu);
+          seen = m.match_checks;
+        }
+        return MatchedWriters(topic) > 0;
+      },
+      [&](base::Nanos slice) {
+        std::unique_lock<std::mutex> lock(m.match_mu);
+        (void)m.match_cv.wait_for(lock, base::Chrono(slice),
+                                  [&] { return m.match_checks != seen; });
+      });
+}
+
 std::map<TopicId, TopicCounts> Capture::Counts() const {
   std::lock_guard<std::mutex> lock(impl_->counts_mu);
   return impl_->counts;
@@ -763,6 +788,11 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
           matched[i] = n;
         }
       }
+      {
+        std::lock_guard<std::mutex> lock(m.match_mu);
+        ++m.match_checks;
+      }
+      m.match_cv.notify_all();
     }
     if ((now - last_status).ns >= 1'000'000'000) {
       last_status = now;

@@ -15,6 +15,7 @@
 #include <memory>
 #include <set>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/base/time.h"
 #include "vdyn/control.pb.h"
@@ -462,11 +463,15 @@ int Player::Run(const std::atomic<bool>& stop) {
     // A live server on this domain would get our states and (worse) our driver inputs.
     transport::Reader<pb::WorldDescription> worlds(*participant_, TopicId::kWorld, &drops_);
     std::string live;
-    const auto deadline = base::MonotonicNow() + base::FromSeconds(o_.server_check_s);
-    while (live.empty() && base::MonotonicNow() < deadline && !stop.load()) {
-      (void)worlds.Wait(std::chrono::milliseconds(50));
-      (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) { live = w.server_id(); });
-    }
+    (void)base::PollUntil(
+        base::Deadline::AfterSeconds(o_.server_check_s), base::Milliseconds(50),
+        [&] {
+          (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+            live = w.server_id();
+          });
+          return !live.empty() || stop.load();
+        },
+        [&](base::Nanos slice) { (void)worlds.Wait(base::Chrono(slice)); });
     if (!live.empty()) {
       out_ << "vdyn-recorder play: server '" << live << "' is live on domain " << o_.domain
            << ": a playback there would mix with its vehicles and drive them with the recorded inputs; "

@@ -16,6 +16,7 @@
 #include <google/protobuf/message.h>
 #include <google/protobuf/reflection.h>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/text.h"
 #include "vdyn/base/time.h"
 #include "vdyn/recorder/capture.h"
@@ -1006,17 +1007,20 @@ std::optional<pb::WorldDescription> FindLiveWorld(transport::Participant& partic
   std::optional<pb::WorldDescription> live;
   transport::DropCounters drops;
   transport::Reader<pb::WorldDescription> worlds(participant, TopicId::kWorld, &drops);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(wait_s);
-  while (!live && !stop.load() && std::chrono::steady_clock::now() < deadline) {
-    (void)worlds.Wait(std::chrono::milliseconds(100));
-    (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
-      if (w.terrain_hash() == terrain_hash) {
-        live = w;
-      } else {
-        others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) + "'");
-      }
-    });
-  }
+  (void)base::PollUntil(
+      base::Deadline::AfterSeconds(wait_s), base::Milliseconds(100),
+      [&] {
+        (void)worlds.Take([&](const pb::WorldDescription& w, const transport::SampleInfo&) {
+          if (w.terrain_hash() == terrain_hash) {
+            live = w;
+          } else {
+            others.insert("'" + Printable(w.name()) + "' of server '" + Printable(w.server_id()) +
+                          "'");
+          }
+        });
+        return live.has_value() || stop.load();
+      },
+      [&](base::Nanos slice) { (void)worlds.Wait(base::Chrono(slice)); });
   return live;
 }
 
@@ -1077,12 +1081,7 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
     return code;
   };
   // The restore's events must reach the recording: wait until the server's writers are matched.
-  const auto match_deadline =
-      std::chrono::steady_clock::now() + std::chrono::duration<double>(o.wait_s);
-  while (capture.MatchedWriters(TopicId::kEvents) == 0 &&
-         std::chrono::steady_clock::now() < match_deadline) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
+  (void)capture.WaitForWriters(TopicId::kEvents, base::Deadline::AfterSeconds(o.wait_s));
   transport::ControlClient control(participant, "vdyn-recorder takeover");
   if (!control.WaitForServer(std::chrono::milliseconds(static_cast<std::int64_t>(o.wait_s * 1000)),
                              live->server_id())) {
@@ -1113,9 +1112,11 @@ int RunTakeover(const TakeoverOptions& o, const std::atomic<bool>& stop, std::os
       << ": drive it now (a rig or vdyn-input); recording to " << ro.out.string()
       << (o.duration_s > 0 ? "" : "; Ctrl-C ends") << "\n";
   out.flush();
-  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.duration_s);
-  while (!stop.load() && (o.duration_s <= 0 || std::chrono::steady_clock::now() < end)) {
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  // Runs until Ctrl-C or --duration (the capture ends itself then too).
+  const base::Deadline end =
+      o.duration_s > 0 ? base::Deadline::AfterSeconds(o.duration_s) : base::Deadline::Never();
+  while (!stop.load() && !end.Passed()) {
+    base::SleepUntil(base::MonotonicNow() + std::min(base::Milliseconds(50), end.Left()));
   }
   return finish(0);
 }

@@ -42,6 +42,10 @@ class Deadline {
 inline std::chrono::nanoseconds Chrono(Nanos d) {
   return std::chrono::nanoseconds(d.ns);
 }
+// And back, for a timeout given as a std::chrono duration.
+inline Nanos FromChrono(std::chrono::nanoseconds d) {
+  return Nanos{d.count()};
+}
 
 // Calls done() until it returns true or the deadline passes; between calls, wait(slice) blocks for
 // at most `slice` or what is left of the deadline, whichever is shorter (a reader's or waitset's

@@ -26,6 +26,10 @@
 #include "vdyn/recorder/mcap.h"
 #include "vdyn/transport/dds.h"
 
+namespace vdyn::base {
+class Deadline;
+}  // namespace vdyn::base
+
 namespace vdyn::recorder {
 
 struct RecordOptions {
@@ -89,6 +93,9 @@ class Capture {
   // Writers matched by the reader of a topic (0 for a topic not recorded): a caller that is
   // about to cause events waits for the server's writer first.
   std::uint32_t MatchedWriters(transport::TopicId topic) const;
+  // Blocks until the reader of `topic` has a matched writer or the deadline passes (true when it
+  // has). Woken by Run's check of the matches (every 100 ms while it runs).
+  bool WaitForWriters(transport::TopicId topic, const base::Deadline& deadline) const;
   // A copy of the counters so far (any thread).
   std::map<transport::TopicId, TopicCounts> Counts() const;
 

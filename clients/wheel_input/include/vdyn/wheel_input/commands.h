@@ -22,8 +22,8 @@ struct CommonOptions {
   double wait_s = 10.0;
   bool status = false;
   // The 1 kHz loop's SCHED_FIFO priority where permitted (0: the normal scheduler, the default:
-  // under busy-looping hogs SCHED_FIFO did not reduce the watchdog's take-overs, 2026-12-05,
-  // bench/input_starvation.sh).
+  // under busy-looping hogs SCHED_FIFO did not reduce the watchdog's take-overs; the runs are in
+  // bench/README.md, "A starved driver").
   int rt_priority = 0;
 };
 

@@ -9,8 +9,9 @@
 //             vehicles, the other parts on the session's stepping workers (step_pool.h, the same
 //             scheduling), each state encoded into its frame of the state outbox - and the frames
 //             handed to the writer; no lock, no allocation, nothing logged
-//  states     the state outbox's writer: vdyn/states, vehicle partitions, vdyn/state while a DDS
-//             tool reads it; best effort (state_outbox.h)
+//  states     the state outbox's writer: every step's states on vdyn/states (the readers of every
+//             vehicle), each vehicle's in its partition (its followers), and on vdyn/state in the
+//             default partition while a DDS tool reads it; best-effort topics (state_outbox.h)
 //  publisher  replies, parameters, world, events, diagnostics and the status line: every reliable
 //             write, and every log line
 //

@@ -90,7 +90,7 @@ class StateOutbox final : public StateFrames {
   static_assert(sizeof(Frame) == 4096);
   void WriterLoop();
 
-  transport::StateWriters writer_;  // vdyn/states, and vdyn/state while read
+  transport::StateWriters writer_;  // every route, each written while it has a reader
   transport::DropCounters& drops_;
   int drop_full_ = -1, drop_large_ = -1, drop_write_ = -1, drop_batch_ = -1;
   base::SpscQueue<Frame> frames_;
