@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <map>
 
+#include "gl_program.h"
 #include "shaders.h"
 #include "vdyn/viewer/camera.h"
 #include "vdyn/viewer/lighting.h"
@@ -61,25 +62,6 @@ GLuint Compile(GLenum type, const std::string& source, const char* what) {
     throw GlError(std::string("viewer shader '") + what + "' does not compile: " + log);
   }
   return s;
-}
-
-GLuint Link(const std::string& vs, const std::string& fs, const char* what) {
-  const GLuint v = Compile(GL_VERTEX_SHADER, vs, what);
-  const GLuint f = Compile(GL_FRAGMENT_SHADER, fs, what);
-  const GLuint p = glCreateProgram();
-  glAttachShader(p, v);
-  glAttachShader(p, f);
-  glLinkProgram(p);
-  glDeleteShader(v);
-  glDeleteShader(f);
-  GLint ok = 0;
-  glGetProgramiv(p, GL_LINK_STATUS, &ok);
-  if (!ok) {
-    const std::string log = Log(p, true);
-    glDeleteProgram(p);
-    throw GlError(std::string("viewer shader '") + what + "' does not link: " + log);
-  }
-  return p;
 }
 
 void SetMat(GLint location, const Mat4& m) {
@@ -171,6 +153,25 @@ bool CastsShadow(SurfaceStyle s) {
 }
 
 }  // namespace
+
+GLuint LinkProgram(const std::string& vs, const std::string& fs, const char* what) {
+  const GLuint v = Compile(GL_VERTEX_SHADER, vs, what);
+  const GLuint f = Compile(GL_FRAGMENT_SHADER, fs, what);
+  const GLuint p = glCreateProgram();
+  glAttachShader(p, v);
+  glAttachShader(p, f);
+  glLinkProgram(p);
+  glDeleteShader(v);
+  glDeleteShader(f);
+  GLint ok = 0;
+  glGetProgramiv(p, GL_LINK_STATUS, &ok);
+  if (!ok) {
+    const std::string log = Log(p, true);
+    glDeleteProgram(p);
+    throw GlError(std::string("viewer shader '") + what + "' does not link: " + log);
+  }
+  return p;
+}
 
 std::string_view QualityName(Quality q) {
   return q == Quality::kLow ? "low" : "high";
@@ -317,7 +318,7 @@ struct Renderer::Program {
   GLuint id = 0;
   Uniforms u;
   Program(const std::string& vs, const std::string& fs, const char* what) {
-    id = Link(vs, fs, what);
+    id = LinkProgram(vs, fs, what);
     auto at = [&](const char* name) { return glGetUniformLocation(id, name); };
     u.view_proj = at("u_view_proj");
     u.model = at("u_model");

@@ -14,6 +14,8 @@
 
 #include <spdlog/spdlog.h>
 
+#include "gl_program.h"
+
 // X11 and GLX last: their macros (None, Status, Bool...) must not reach other headers.
 #include <epoxy/gl.h>
 #include <epoxy/glx.h>
@@ -96,16 +98,11 @@ void main() {
   vec3 lo = c.rgb / 12.92, hi = pow((c.rgb + 0.055) / 1.055, vec3(2.4));
   o_colour = vec4(mix(lo, hi, step(vec3(0.04045), c.rgb)), c.a);
 })";
-    const GLuint vs = Compile(GL_VERTEX_SHADER, kVs), fs = Compile(GL_FRAGMENT_SHADER, kFs);
-    program_ = glCreateProgram();
-    glAttachShader(program_, vs);
-    glAttachShader(program_, fs);
-    glLinkProgram(program_);
-    glDeleteShader(vs);
-    glDeleteShader(fs);
-    GLint ok = 0;
-    glGetProgramiv(program_, GL_LINK_STATUS, &ok);
-    if (!ok) throw XrError("OpenXR: the sRGB-to-linear copy's shaders do not link");
+    try {
+      program_ = LinkProgram(kVs, kFs, "the headset's sRGB-to-linear copy");
+    } catch (const GlError& e) {
+      throw XrError(std::string("OpenXR: ") + e.what());
+    }
     image_ = glGetUniformLocation(program_, "u_image");
     glGenVertexArrays(1, &vao_);
     glGenFramebuffers(1, &fbo_);
@@ -160,18 +157,6 @@ void main() {
   }
 
  private:
-  static GLuint Compile(GLenum type, const char* source) {
-    const GLuint s = glCreateShader(type);
-    glShaderSource(s, 1, &source, nullptr);
-    glCompileShader(s);
-    GLint ok = 0;
-    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-    if (!ok) {
-      glDeleteShader(s);
-      throw XrError("OpenXR: the sRGB-to-linear copy's shader does not compile");
-    }
-    return s;
-  }
   GLuint program_ = 0, vao_ = 0, fbo_ = 0;
   GLint image_ = -1;
 };
