@@ -8,14 +8,16 @@
 # `lo` as Linux sets it up (no multicast flag: Cyclone sends to each reader's unicast address).
 # Each time a real-time vdyn-server on `flat` with one vehicle, three readers of vdyn/states
 # (test_state_subscriber --states) and one reader of vdyn/state in the default partition (a DDS
-# tool's route). The namespace's own UDP counters (/proc/net/snmp) over the server's life, per
-# step it ran:
-#   multicast: sent <= 2.5 (one vdyn/states datagram + one vdyn/state for the tool's reader);
-#   unicast:   sent >= 3.5 (a datagram to each of the three readers + the tool's).
-# Both print the datagrams received a step: with multicast Linux also hands the group's datagrams
-# to every other socket bound to the domain's data port (IP_MULTICAST_ALL is on by default), so
-# processes that read no vdyn/states receive them too (5.8 a step here against 4 unicast).
-# Every vdyn/states reader receives at least 90 % of the steps.
+# tool's route). The namespace's own UDP counters (/proc/net/snmp) over the server's life: the
+# datagrams received per datagram sent, which neither the machine's load nor a lagging writer's
+# larger samples change (a step's datagrams are sent and received alike):
+#   multicast: >= 2.5 (a send reaches the three readers, and the other sockets bound to the port:
+#              Linux hands a group's datagrams to each, IP_MULTICAST_ALL being on by default);
+#   unicast:   <= 1.5 (a send reaches one reader).
+# Also printed, not asserted: the datagrams sent a step (1.95 against 3.98 on a quiet machine;
+# fewer on a loaded one, whose writer sends several steps a sample). Every vdyn/states reader
+# receives at least half the steps (the readers are reached at all; best effort loses some when
+# the machine is loaded).
 #
 # Usage: tests/lab/states_multicast.sh BUILD_DIR
 #   Needs root and unshare (exit 77 = skipped otherwise).
@@ -73,18 +75,19 @@ for mode in multicast unicast; do
   [[ -n ${steps:-} && $steps -gt 0 ]] || die "$mode: the server ran no steps (logs in $WORK)"
   per_sent=$(awk -v a="$sent" -v s="$steps" 'BEGIN { printf "%.2f", a / s }')
   per_received=$(awk -v a="$received" -v s="$steps" 'BEGIN { printf "%.2f", a / s }')
-  echo "states_multicast: $mode: $steps steps; UDP datagrams sent $sent ($per_sent a step), received $received ($per_received a step)"
+  fanout=$(awk -v r="$received" -v o="$sent" 'BEGIN { printf "%.2f", (o > 0 ? r / o : 0) }')
+  echo "states_multicast: $mode: $steps steps; UDP datagrams sent $sent ($per_sent a step), received $received ($per_received a step): $fanout received per datagram sent"
   for i in 1 2 3; do
     got=$(awk '/^received/ { print $2 }' "$WORK/$mode-r$i.txt" 2>/dev/null || true)
     echo "states_multicast: $mode: vdyn/states reader $i received ${got:-0} states"
-    [[ ${got:-0} -ge $((steps * 9 / 10)) ]] || die "$mode: reader $i received ${got:-0} of $steps states"
+    [[ ${got:-0} -ge $((steps / 2)) ]] || die "$mode: reader $i received ${got:-0} of $steps states"
   done
   if [[ $mode == multicast ]]; then
-    awk -v x="$per_sent" 'BEGIN { exit !(x <= 2.5) }' ||
-      die "multicast: $per_sent datagrams sent a step, want <= 2.5 (one vdyn/states send for three readers)"
+    awk -v x="$fanout" 'BEGIN { exit !(x >= 2.5) }' ||
+      die "multicast: $fanout datagrams received per datagram sent, want >= 2.5 (one send for the three readers)"
   else
-    awk -v x="$per_sent" 'BEGIN { exit !(x >= 3.5) }' ||
-      die "unicast: $per_sent datagrams sent a step, want >= 3.5 (the control: one send per reader)"
+    awk -v x="$fanout" 'BEGIN { exit !(x <= 1.5) }' ||
+      die "unicast: $fanout datagrams received per datagram sent, want <= 1.5 (the control: a send per reader)"
   fi
 done
 echo "states_multicast: passed"
