@@ -121,10 +121,11 @@ int Subscriber(std::uint32_t domain, double from_s, double seconds, Route route)
   std::mutex mu;
   vdyn::transport::Participant p(domain);
   vdyn::transport::DropCounters drops;
-  Subscription sub(p, drops, route);
+  // Before the reader too: its listener reads them until the reader is deleted.
   const std::int64_t t0 = vdyn::base::MonotonicNow().ns;
   const std::int64_t from = t0 + static_cast<std::int64_t>(from_s * 1e9);
   const std::int64_t end = from + static_cast<std::int64_t>(seconds * 1e9);
+  Subscription sub(p, drops, route);
   sub.Listen([&](const vdyn::pb::VehicleState&, std::int64_t at, std::int64_t source) {
     const std::int64_t mono = vdyn::base::MonotonicNow().ns;
     if (mono < from || mono >= end) return;
