@@ -15,7 +15,7 @@ build_packages=(
   libsdl2-dev xvfb xauth xdotool libgl1-mesa-dri openssl
   libzstd-dev liblz4-dev zlib1g-dev gnuplot-nox
   libepoxy-dev libimgui-dev libopenxr-dev libx11-dev
-  clang libclang-rt-14-dev universal-ctags
+  clang libclang-rt-14-dev lld universal-ctags
   python3 python3-dev pybind11-dev python3-numpy python3-protobuf python3-pytest
   python3-pandas python3-matplotlib python3-venv python3-setuptools python3-pip
   libboost-dev libssl-dev nlohmann-json3-dev libjs-three chromium

@@ -86,6 +86,11 @@ struct Written {
 // chunk CRCs unless `chunk_crc` is false).
 // `small_schema`: a placeholder of a few bytes for the FileDescriptorSet (7 KB), for tests that
 // go through a file byte by byte.
+// The states of the small recordings the damage tests damage byte by byte (McapRecover): in chunks
+// of 512 bytes: at least eight chunks.
+constexpr int kSmallStates = 40;
+constexpr std::size_t kSmallChunkBytes = 512;
+
 Written WriteStates(const std::filesystem::path& path, int n, mc::Compression c,
                     std::size_t chunk_bytes = 64 * 1024, bool chunk_crc = true,
                     bool small_schema = false) {
@@ -1033,10 +1038,12 @@ std::vector<ChunkHolds> ChunksOf(const fs::path& path) {
 // message of every chunk the damage did not touch, and delivers as checked no message that was
 // not written. (Before: an opcode flipped into a summary opcode ended the data section, a message
 // index flipped to a data end was taken for one, a grown length swallowed the records behind it.)
+// The recording holds every kind of record with at least eight chunks and no more: the cases grow
+// with its size and each case reads all of it.
 TEST(McapRecover, EveryChunkTheDamageMissesIsKeptWhateverSingleByteIsDamaged) {
   testing::TempDir dir;
   const fs::path path = dir / "small.mcap";
-  const Written w = WriteStates(path, 90, mc::Compression::kZstd, 1024, true, true);
+  const Written w = WriteStates(path, kSmallStates, mc::Compression::kZstd, kSmallChunkBytes, true, true);
   const std::vector<std::uint8_t> whole = ReadBytes(path);
   const std::vector<ChunkHolds> chunks = ChunksOf(path);
   ASSERT_GE(chunks.size(), 8u);
@@ -1107,10 +1114,11 @@ TEST(McapRecover, EveryChunkTheDamageMissesIsKeptWhateverSingleByteIsDamaged) {
 TEST(McapRecover, AFlippedOpcodeOrLengthLosesNoIntactChunk) {
   testing::TempDir dir;
   const fs::path path = dir / "small.mcap";
-  WriteStates(path, 90, mc::Compression::kZstd, 1024, true, true);
+  WriteStates(path, kSmallStates, mc::Compression::kZstd, kSmallChunkBytes, true, true);
   const std::vector<std::uint8_t> whole = ReadBytes(path);
   const std::vector<ChunkHolds> chunks = ChunksOf(path);
   const std::vector<std::uint64_t> records = RecordOffsets(whole);
+  ASSERT_GE(chunks.size(), 8u);
   ASSERT_GT(records.size(), 2 * chunks.size());
   int runs = 0;
   for (const std::uint64_t rec : records) {
