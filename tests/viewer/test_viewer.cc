@@ -6,6 +6,7 @@
 
 #include <SDL.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -1267,6 +1268,45 @@ TEST(Poster, TheBillboardsPanelFacingTheFacilityCarriesIt) {
   EXPECT_NEAR(f.origin_W.x, -4.5, 1e-3);
   EXPECT_NEAR(f.origin_W.y, 170.0, 1e-3);
   EXPECT_NEAR(f.origin_W.z, 3.0, 1e-3);
+}
+
+// The sRGB curve (IEC 61966-2-1) as the standard writes it; the viewer answers from tables.
+double SrgbDecodeFormula(int byte) {
+  const double c = byte / 255.0;
+  return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+}
+int SrgbEncodeFormula(double linear) {
+  const double c = std::clamp(linear, 0.0, 1.0);
+  const double v = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
+  return static_cast<int>(std::lround(v * 255.0));
+}
+
+// ToLinear and ToSrgb give the curve's own answers: every byte decoded, a million evenly spaced
+// linear values and each byte's edges (the values around where the encoding steps up) encoded,
+// out-of-range values clamped, a NaN black.
+TEST(ViewerColour, TheSrgbTablesAnswerAsTheCurve) {
+  for (int b = 0; b < 256; ++b) {
+    ASSERT_EQ(viewer::ToLinear(static_cast<std::uint8_t>(b)), SrgbDecodeFormula(b)) << b;
+    ASSERT_EQ(viewer::ToSrgb(SrgbDecodeFormula(b)), b) << b;  // each byte comes back
+  }
+  for (int i = 0; i <= 1'000'000; ++i) {
+    const double x = i / 1e6;
+    ASSERT_EQ(viewer::ToSrgb(x), SrgbEncodeFormula(x)) << x;
+  }
+  for (int k = 1; k < 256; ++k) {  // the edge between k - 1 and k, to the last double
+    double lo = 0, hi = 1;
+    for (int it = 0; it < 200 && std::nextafter(lo, 1.0) < hi; ++it) {
+      const double mid = lo + (hi - lo) / 2;
+      (SrgbEncodeFormula(mid) >= k ? hi : lo) = mid;
+    }
+    for (const double x : {std::nextafter(lo, 0.0), lo, hi, std::nextafter(hi, 1.0)}) {
+      ASSERT_EQ(viewer::ToSrgb(x), SrgbEncodeFormula(x)) << "byte " << k << " at " << x;
+    }
+  }
+  EXPECT_EQ(viewer::ToSrgb(-0.5), 0);
+  EXPECT_EQ(viewer::ToSrgb(7.0), 255);
+  EXPECT_EQ(viewer::ToSrgb(std::numeric_limits<double>::quiet_NaN()), 0);
+  EXPECT_EQ(viewer::ToSrgb(std::numeric_limits<double>::infinity()), 255);
 }
 
 }  // namespace

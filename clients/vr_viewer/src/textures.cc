@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 
 namespace vdyn::viewer {
@@ -220,14 +222,52 @@ Lin Poster(double x, double y, int size) {
 
 }  // namespace
 
-double ToLinear(std::uint8_t srgb) {
-  const double c = srgb / 255.0;
+namespace {
+
+// The sRGB curve's two directions as the formulas (IEC 61966-2-1).
+double DecodeSrgb(double c) {
   return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
 }
-std::uint8_t ToSrgb(double linear) {
+std::uint8_t EncodeSrgbByte(double linear) {
   const double c = std::clamp(linear, 0.0, 1.0);
   const double v = c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1.0 / 2.4) - 0.055;
   return static_cast<std::uint8_t>(std::lround(v * 255.0));
+}
+
+// Both once, as tables: a texture decodes constant colours and encodes three channels per texel,
+// and the pow calls were most of the viewer's start (a quarter of its CPU for ten frames).
+struct SrgbTables {
+  std::array<double, 256> linear{};  // each byte decoded
+  // rise[k - 1]: the least linear value encoded to byte k or above (k = 1..255). The encoding is
+  // non-decreasing, so a value's byte is the number of these at or below it - the formula's own
+  // answer: each is found by bisecting the doubles of [0, 1] (ordered as their bit patterns).
+  std::array<double, 255> rise{};
+  SrgbTables() {
+    for (int i = 0; i < 256; ++i) linear[static_cast<std::size_t>(i)] = DecodeSrgb(i / 255.0);
+    for (int k = 1; k < 256; ++k) {
+      std::uint64_t lo = 0, hi = std::bit_cast<std::uint64_t>(1.0);  // byte(lo) < k <= byte(hi)
+      while (hi - lo > 1) {
+        const std::uint64_t mid = lo + (hi - lo) / 2;
+        (EncodeSrgbByte(std::bit_cast<double>(mid)) >= k ? hi : lo) = mid;
+      }
+      rise[static_cast<std::size_t>(k - 1)] = std::bit_cast<double>(hi);
+    }
+  }
+};
+const SrgbTables& Tables() {
+  static const SrgbTables tables;
+  return tables;
+}
+
+}  // namespace
+
+double ToLinear(std::uint8_t srgb) {
+  return Tables().linear[srgb];
+}
+std::uint8_t ToSrgb(double linear) {
+  if (!(linear > 0.0)) return 0;  // also NaN
+  const std::array<double, 255>& rise = Tables().rise;
+  return static_cast<std::uint8_t>(std::upper_bound(rise.begin(), rise.end(), linear) - rise.begin());
 }
 
 Rgb8 MeanColour(TextureLayer layer) {
