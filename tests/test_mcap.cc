@@ -82,15 +82,15 @@ struct Written {
   std::vector<std::uint64_t> times;
 };
 
-// A file of `n` state messages at 1 kHz of log time, written with the given compression (and
-// chunk CRCs unless `chunk_crc` is false).
-// `small_schema`: a placeholder of a few bytes for the FileDescriptorSet (7 KB), for tests that
-// go through a file byte by byte.
 // The states of the small recordings the damage tests damage byte by byte (McapRecover): in chunks
 // of 512 bytes: at least eight chunks.
 constexpr int kSmallStates = 40;
 constexpr std::size_t kSmallChunkBytes = 512;
 
+// A file of `n` state messages at 1 kHz of log time, written with the given compression (and
+// chunk CRCs unless `chunk_crc` is false).
+// `small_schema`: a placeholder of a few bytes for the FileDescriptorSet (7 KB), for tests that
+// go through a file byte by byte.
 Written WriteStates(const std::filesystem::path& path, int n, mc::Compression c,
                     std::size_t chunk_bytes = 64 * 1024, bool chunk_crc = true,
                     bool small_schema = false) {
@@ -1043,7 +1043,8 @@ std::vector<ChunkHolds> ChunksOf(const fs::path& path) {
 TEST(McapRecover, EveryChunkTheDamageMissesIsKeptWhateverSingleByteIsDamaged) {
   testing::TempDir dir;
   const fs::path path = dir / "small.mcap";
-  const Written w = WriteStates(path, kSmallStates, mc::Compression::kZstd, kSmallChunkBytes, true, true);
+  const Written w =
+      WriteStates(path, kSmallStates, mc::Compression::kZstd, kSmallChunkBytes, true, true);
   const std::vector<std::uint8_t> whole = ReadBytes(path);
   const std::vector<ChunkHolds> chunks = ChunksOf(path);
   ASSERT_GE(chunks.size(), 8u);

@@ -267,7 +267,8 @@ double ToLinear(std::uint8_t srgb) {
 std::uint8_t ToSrgb(double linear) {
   if (!(linear > 0.0)) return 0;  // also NaN
   const std::array<double, 255>& rise = Tables().rise;
-  return static_cast<std::uint8_t>(std::upper_bound(rise.begin(), rise.end(), linear) - rise.begin());
+  const auto above = std::upper_bound(rise.begin(), rise.end(), linear);
+  return static_cast<std::uint8_t>(above - rise.begin());
 }
 
 Rgb8 MeanColour(TextureLayer layer) {
