@@ -237,6 +237,21 @@ if [[ $WANT_VIEWER -eq 1 ]]; then
   fi
 fi
 
+if [[ $WANT_VIEWER -eq 1 ]]; then
+  # The viewer ends by itself after its frames: wait for it before the first cut. Starting (its
+  # world, its textures) is the heaviest work of the lab's processes; under the sanitizers, beside
+  # other tests, it starved the server's state writer during a cut for seconds, the cut outlasted
+  # Cyclone's participant lease (10 s) and the recorder lost events (2026-12-06).
+  for _ in $(seq 1 1200); do kill -0 "$VIEWER_PID" 2>/dev/null || break; sleep 0.1; done
+  wait "$VIEWER_PID" || die "the viewer on host C failed: $(tail -n 5 "$WORK/viewer.log")"
+  [[ -s $WORK/viewer-host-c.png ]] || die "the viewer on host C wrote no screenshot"
+  # It drew the world and the vehicle that came across the switch, and refused nothing.
+  for kv in "frames 10" "worlds_accepted 1" "worlds_refused 0" "vehicles 1" "states_refused 0" "drops_total 0"; do
+    grep -qx "$kv" "$WORK/viewer-stats.txt" || die "viewer on host C: expected '$kv' in $(tr '\n' ' ' <"$WORK/viewer-stats.txt")"
+  done
+  figure "viewer on host C: screenshot $WORK/viewer-host-c.png"
+fi
+
 # ---------------------------------------------------------------------------------------------
 echo "multihost: 1. cut host B's link with the backup live on host C"
 FROM=$(size_of "$OBS_A")
@@ -290,17 +305,6 @@ echo "multihost: 4. the primary rig comes back on host B; then host C dies (SIGK
 FROM=$(size_of "$OBS_A")
 start_primary 2
 wait_line "$OBS_A" "$FROM" 'src == "primary"' 120 >/dev/null || die "the restarted primary never drove"
-if [[ $WANT_VIEWER -eq 1 ]]; then
-  # The viewer ends by itself after its frames: wait for it before host C dies.
-  for _ in $(seq 1 1200); do kill -0 "$VIEWER_PID" 2>/dev/null || break; sleep 0.1; done
-  wait "$VIEWER_PID" || die "the viewer on host C failed: $(tail -n 5 "$WORK/viewer.log")"
-  [[ -s $WORK/viewer-host-c.png ]] || die "the viewer on host C wrote no screenshot"
-  # It drew the world and the vehicle that came across the switch, and refused nothing.
-  for kv in "frames 10" "worlds_accepted 1" "worlds_refused 0" "vehicles 1" "states_refused 0" "drops_total 0"; do
-    grep -qx "$kv" "$WORK/viewer-stats.txt" || die "viewer on host C: expected '$kv' in $(tr '\n' ' ' <"$WORK/viewer-stats.txt")"
-  done
-  figure "viewer on host C: screenshot $WORK/viewer-host-c.png"
-fi
 C_PIDS=$(ip netns pids "$NS_C")
 [[ -n $C_PIDS ]] || die "nothing runs on host C"
 # shellcheck disable=SC2086
