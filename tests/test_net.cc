@@ -711,40 +711,73 @@ TEST_F(Net, InputDrivesTheVehicleAndTheWatchdogBrakesWhenItStops) {
   transport::Writer<pb::DriverInput> input(p, TopicId::kInput, 10);
   transport::Reader<pb::VehicleState> states(p, TopicId::kState, &drops);
   pb::VehicleState last;
-  // Drive: throttle 1 written at ~100 Hz until the car goes faster than 10 m/s.
-  bool fast = false;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(
-      states, 20s,
-      [&](const auto& s) {
-        last = s;
-        fast = s.v_wt_b().x() > 10.0;
-      },
-      [&] {
-        EXPECT_TRUE(input.Write(1, Input(1, 1.0, "test-rig"))) << input.last_error();
-        return fast;
-      }))
-      << server->Log();
+  // Drive: throttle 1, each sample numbered, written whenever states arrive until the car goes
+  // faster than 10 m/s. A state names the input it applied (its sequence).
+  std::uint64_t sequence = 0;
+  auto drive = [&] {
+    bool fast = false;
+    return ReadUntil<pb::VehicleState>(
+        states, 20s,
+        [&](const auto& s) {
+          last = s;
+          fast = s.v_wt_b().x() > 10.0;
+        },
+        [&] {
+          pb::DriverInput in = Input(1, 1.0, "test-rig");
+          in.set_sequence(++sequence);
+          EXPECT_TRUE(input.Write(1, in)) << input.last_error();
+          return fast;
+        });
+  };
+  ASSERT_TRUE(drive()) << server->Log();
   EXPECT_EQ(last.input().source_id(), "test-rig");
   EXPECT_DOUBLE_EQ(last.control().throttle(), 1.0);
   EXPECT_FALSE(last.control().watchdog_safe_state());
-  // Stop writing: within the 100 ms watchdog the server brakes; the speed falls.
-  const std::uint64_t stop_step = last.step();
-  const double v_stop = last.v_wt_b().x();
-  std::optional<std::uint64_t> safe_step;
-  double v_later = v_stop;
-  ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 10s, [&](const auto& s) {
-    if (!safe_step && s.control().watchdog_safe_state()) safe_step = s.step();
-    if (safe_step && s.step() > *safe_step + 1000) v_later = s.v_wt_b().x();
-  }, [&] { return safe_step && v_later < v_stop - 2.0; }));
-  // The watchdog is 100 ms of simulated time after the last input arrived; that input was written
-  // after state `stop_step` was read, so the safe state starts no earlier than 100 steps after it
-  // and, allowing generously for the input in flight on a loaded machine, well before 400.
-  EXPECT_GE(*safe_step - stop_step, 100u);
-  EXPECT_LE(*safe_step - stop_step, 400u);
-  // The figure the README quotes: from the last input applied to the safe state.
-  std::printf("  watchdog: safe state %llu ms (simulated) after the last state before the input "
-              "stopped (watchdog 100 ms)\n",
-              static_cast<unsigned long long>(*safe_step - stop_step));
+  // Stop writing: the last sample written is `sequence`, after state `last` was read. It is live
+  // for the watchdog's 100 ms, counted in simulated steps from the step boundary it arrived at,
+  // whatever the wall clock does (a loaded machine delays its arrival, not the count). Then the
+  // server brakes; the speed falls.
+  std::optional<std::uint64_t> first_final;  // the first state read that applied the last sample
+  std::uint64_t before_final = 0;             // the last state read before it
+  std::optional<std::uint64_t> safe_step;     // the first safe state read after it
+  // The reader keeps the newest state: a reader stalled for the sample's 100 steps (a loaded
+  // machine) sees none of the states that applied it, and the stop is tried again.
+  for (int attempt = 1; attempt <= 3; ++attempt) {
+    if (attempt > 1) {
+      std::printf("  attempt %d: no state read showed the last sample (the reader stalled)\n",
+                  attempt - 1);
+      ASSERT_TRUE(drive()) << server->Log();
+    }
+    const std::uint64_t final_sequence = sequence;
+    const double v_stop = last.v_wt_b().x();
+    first_final.reset();
+    safe_step.reset();
+    before_final = last.step();
+    double v_later = v_stop;
+    ASSERT_TRUE(ReadUntil<pb::VehicleState>(states, 20s, [&](const auto& s) {
+      const bool safe = s.control().watchdog_safe_state();
+      if (!first_final && !safe && s.input().sequence() == final_sequence) first_final = s.step();
+      if (!first_final) before_final = std::max(before_final, s.step());
+      if (!safe_step && safe) safe_step = s.step();
+      if (safe_step && s.step() > *safe_step + 1000) v_later = s.v_wt_b().x();
+    }, [&] { return safe_step && v_later < v_stop - 2.0; }))
+        << "the last sample (" << final_sequence << ") applied: " << first_final.has_value()
+        << "\n" << server->Log();
+    if (first_final) break;
+  }
+  ASSERT_TRUE(first_final.has_value()) << "in three tries, no state read showed the last sample";
+  // Read states may miss some, so the boundary is bracketed: the sample arrived after state
+  // `before_final` and by state `first_final`. Live for 100 steps after its arrival, the safe
+  // state comes more than 100 steps after the state before it and at most 101 after the first
+  // state that applied it. Reading every state makes these 102 and 101.
+  EXPECT_GT(*safe_step - before_final, 100u);
+  EXPECT_LE(*safe_step - *first_final, 101u);
+  EXPECT_GT(*safe_step, *first_final);
+  // The figure the README quotes: from the first state that applied the last input.
+  std::printf("  watchdog: safe state %llu ms (simulated) after the first state that applied the "
+              "last input, %llu ms after the last state before it (watchdog 100 ms)\n",
+              static_cast<unsigned long long>(*safe_step - *first_final),
+              static_cast<unsigned long long>(*safe_step - before_final));
   transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
   bool said = false;
   ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 5s, [&](const auto& d) {
@@ -1090,22 +1123,28 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
   params.set_vehicle_id(2);
   params.mutable_set_params()->mutable_params()->set_mu(0.6);
   bool params_sent = false;
+  std::uint64_t params_step = 0;
   std::size_t n_states = 0;
-  // A loop of its own: the request goes out from here, between the waits.
-  const base::Deadline deadline = base::Deadline::After(base::Seconds(60));
-  while (n_states < 3000 && !deadline.Passed()) {
+  // A loop of its own: the request goes out from here, between the waits. The state topic keeps
+  // the newest state of each vehicle, so a reader takes at most two per pass: on a loaded machine
+  // under the sanitizers a pass can take 25 ms (2,300 states in 60 s in CI). The figures below
+  // ask for what such a machine gives in about a minute, with twice that as the bound.
+  const base::Deadline deadline = base::Deadline::After(base::Seconds(120));
+  while (n_states < 1500 && !deadline.Passed()) {
     (void)states.Wait(base::Chrono(std::min(base::Milliseconds(20), deadline.Left())));
     (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
     (void)states.Take([&](const pb::VehicleState& s, const transport::SampleInfo&) {
       hashes[s.vehicle_id()][s.step()] = s.state_hash();
       ++n_states;
     });
-    if (!params_sent && n_states > 1000) {
-      ASSERT_TRUE(control.Call(params, 10s).has_value());
+    if (!params_sent && n_states > 500) {
+      const auto reply = control.Call(params, 10s);
+      ASSERT_TRUE(reply.has_value());
+      params_step = reply->applied_step();
       params_sent = true;
     }
   }
-  ASSERT_GE(n_states, 3000u) << server->Log();
+  ASSERT_GE(n_states, 1500u) << server->Log();
   server->Signal(SIGTERM);
   ASSERT_TRUE(server->Wait(20s).has_value());
   (void)events.Take([&](const pb::SessionEvent& e, const transport::SampleInfo&) { captured.push_back(e); });
@@ -1124,6 +1163,7 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
   const ResimResult res = Resimulate(testing::SharedWorld("facility"), session, end);
   ASSERT_TRUE(res.ok) << res.error;
   std::size_t compared = 0;
+  std::size_t compared_after_params = 0;
   for (const auto& [v, h] : hashes) {
     for (const auto& [step, hash] : h) {
       const auto& rh = res.hashes.at(v);
@@ -1131,9 +1171,11 @@ TEST_F(Net, ResimulatingACapturedSessionReproducesItsStateHashes) {
       if (it == rh.end()) continue;  // a state from before the reset
       ASSERT_EQ(it->second, hash) << "vehicle " << v << " step " << step;
       ++compared;
+      if (v == 2 && step > params_step) ++compared_after_params;
     }
   }
-  EXPECT_GT(compared, 2500u);
+  EXPECT_GT(compared, 1200u);
+  EXPECT_GT(compared_after_params, 300u);  // the parameter change re-simulated too
   int input_changes = 0;
   for (const auto& e : session) if (e.has_input_batch() && e.vehicle_id() == 1) input_changes += e.input_batch().samples_size();
   EXPECT_GT(input_changes, 1);  // the player's input really varied
