@@ -220,8 +220,38 @@ void RenderTarget::Release() {
   msaa_fbo_ = msaa_colour_ = msaa_depth_ = resolve_fbo_ = colour_tex_ = resolve_depth_ = 0;
 }
 
+void RenderTarget::UseWindow(int width, int height) {
+  Release();
+  width_ = std::max(width, 1);
+  height_ = std::max(height, 1);
+  samples_ = 0;
+  use_external_ = false;
+  external_ = 0;
+  in_window_ = true;  // resolve_fbo_ 0: the window's framebuffer
+}
+
+bool WindowHasDepthStencil() {
+  GLint bound = 0;
+  glGetIntegerv(GL_DRAW_FRAMEBUFFER_BINDING, &bound);
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  // A buffer that is not there has the type GL_NONE (its sizes may not be asked).
+  auto bits = [](GLenum buffer, GLenum size) {
+    GLint type = GL_NONE, n = 0;
+    glGetFramebufferAttachmentParameteriv(GL_FRAMEBUFFER, buffer,
+                                          GL_FRAMEBUFFER_ATTACHMENT_OBJECT_TYPE, &type);
+    if (type == GL_NONE) return 0;
+    glGetFramebufferAttachmentParameteriv(GL_FRAMEBUFFER, buffer, size, &n);
+    return n;
+  };
+  const bool enough = bits(GL_DEPTH, GL_FRAMEBUFFER_ATTACHMENT_DEPTH_SIZE) >= 24 &&
+                      bits(GL_STENCIL, GL_FRAMEBUFFER_ATTACHMENT_STENCIL_SIZE) >= 8;
+  glBindFramebuffer(GL_FRAMEBUFFER, static_cast<GLuint>(bound));
+  return enough;
+}
+
 void RenderTarget::Resize(int width, int height, int samples, bool external_colour) {
   Release();
+  in_window_ = false;
   width_ = std::max(width, 1);
   height_ = std::max(height, 1);
   samples_ = ClampSamples(samples);
@@ -296,7 +326,7 @@ Image RenderTarget::Read() const {
   img.height = height_;
   img.rgba.resize(static_cast<std::size_t>(width_) * static_cast<std::size_t>(height_) * 4);
   glBindFramebuffer(GL_READ_FRAMEBUFFER, resolve_fbo_);
-  glReadBuffer(GL_COLOR_ATTACHMENT0);
+  glReadBuffer(in_window_ ? GL_BACK : GL_COLOR_ATTACHMENT0);
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, width_, height_, GL_RGBA, GL_UNSIGNED_BYTE, img.rgba.data());
   // OpenGL's rows run bottom up; images top down.

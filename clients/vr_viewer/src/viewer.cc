@@ -150,7 +150,8 @@ struct Viewer::Impl {
   base::MonoTime next_frame = base::MonotonicNow();
   bool counting = false;
   Image last_image;
-  bool have_image = false;
+  bool have_image = false;   // the run's last frame is in last_image
+  std::string f12_path;      // F12 asked for this frame's image, to be written there
 
   // The frame's display time (when it is expected on the screen), both clocks; the desktop's
   // lead from the scene to the screen (a running mean of the frames before).
@@ -235,8 +236,10 @@ struct Viewer::Impl {
   void ApplyKeys();                                      // hotkeys the HUD did not take
   bool DrawHeadset(const FrameScene& f);                 // both eyes and the HUD panel
   void DrawDesktop(const FrameScene& f, bool xr_drawn);  // the window's target
-  void Present();                                        // HUD on top, to the window
-  void Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f);  // timing, headless end
+  void SizeDesktop();                                    // the desktop's target, window's size
+  bool CountFrame(const FrameScene& f, bool xr_drawn);   // counts it; true: it ends the run
+  void Present(bool keep);                               // HUD on top, to the window
+  void Account(base::MonoTime t0, bool xr_drawn);        // the frame's timing
 
   // Parts of the stages.
   void NoteMissingFollow();
@@ -342,7 +345,10 @@ void Viewer::OpenWindow() {
   SDL_GL_SetAttribute(SDL_GL_CONTEXT_MINOR_VERSION, 3);
   SDL_GL_SetAttribute(SDL_GL_CONTEXT_PROFILE_MASK, SDL_GL_CONTEXT_PROFILE_CORE);
   SDL_GL_SetAttribute(SDL_GL_DOUBLEBUFFER, 1);
-  SDL_GL_SetAttribute(SDL_GL_DEPTH_SIZE, 0);  // the scene has its own depth buffer
+  // Drawn in the window, the scene needs the window's depth and stencil; else it has its own.
+  const bool in_window = options_.in_window && !options_.hidden;
+  SDL_GL_SetAttribute(SDL_GL_DEPTH_SIZE, in_window ? 24 : 0);
+  SDL_GL_SetAttribute(SDL_GL_STENCIL_SIZE, in_window ? 8 : 0);
   Uint32 flags = SDL_WINDOW_OPENGL;
   if (!options_.xr) flags |= SDL_WINDOW_RESIZABLE;
   if (options_.hidden) flags |= SDL_WINDOW_HIDDEN;
@@ -392,7 +398,23 @@ void Viewer::StartRenderer() {
                  options_.car_model ? "file's" : "built-in");
   }
   m.desktop = std::make_unique<RenderTarget>();
-  m.desktop->Resize(DrawableWidth(m.window), DrawableHeight(m.window), options_.samples);
+  m.SizeDesktop();
+  spdlog::info("vdyn-viewer: the scene is drawn {}",
+               m.desktop->in_window() ? "straight into the window"
+                                      : "into a target of its own, copied to the window");
+}
+
+void Viewer::Impl::SizeDesktop() {
+  const ViewerOptions& o = owner.options_;
+  const int w = DrawableWidth(window), h = DrawableHeight(window);
+  // Not in the offscreen driver's surface or a hidden window, whose pixels GL need not keep.
+  if (o.in_window && !o.hidden && o.samples == 0 &&
+      std::string(SDL_GetCurrentVideoDriver()) != "offscreen" && WindowHasDepthStencil()) {
+    desktop->UseWindow(w, h);
+  } else {
+    desktop->Resize(w, h, o.samples);
+  }
+  owner.stats_.drawn_in_window = desktop->in_window();
 }
 
 void Viewer::StartImGui() {
@@ -514,7 +536,8 @@ const std::vector<LabelBox>& Viewer::hud_boxes() const {
 }
 
 Image Viewer::Screenshot() const {
-  return impl_->have_image ? impl_->last_image : impl_->desktop->Read();
+  if (impl_->have_image || impl_->desktop->in_window()) return impl_->last_image;
+  return impl_->desktop->Read();
 }
 
 void Viewer::WriteStats(const std::string& path) const {
@@ -545,6 +568,7 @@ void Viewer::WriteStats(const std::string& path) const {
   }
   out << "renderer " << s.renderer << "\n"
       << "quality " << QualityName(options_.quality) << "\n"
+      << "drawn_in_window " << (s.drawn_in_window ? 1 : 0) << "\n"
       << "xr " << s.xr_status << "\n";
 }
 
@@ -632,8 +656,10 @@ bool Viewer::Frame() {
   m.ApplyKeys();
   const bool xr_drawn = m.DrawHeadset(f);
   m.DrawDesktop(f, xr_drawn);
-  m.Present();
-  m.Account(t0, xr_drawn, f);
+  const bool last = m.CountFrame(f, xr_drawn);
+  m.Present(last);
+  m.Account(t0, xr_drawn);
+  if (last) m.quit = true;
   return !m.quit;
 }
 
@@ -653,7 +679,7 @@ void Viewer::Impl::HandleEvents() {
         if (ev.window.event == SDL_WINDOWEVENT_SIZE_CHANGED && !o.xr) {
           o.width = std::max(ev.window.data1, 64);
           o.height = std::max(ev.window.data2, 64);
-          desktop->Resize(DrawableWidth(window), DrawableHeight(window), o.samples);
+          SizeDesktop();
         }
         break;
       case SDL_KEYDOWN:
@@ -1226,10 +1252,8 @@ void Viewer::Impl::ApplyKeys() {
       }
       o.follow = ids[i];
     }
-    if (k == SDLK_F12) {
-      const std::string path =
-          "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
-      if (WritePng(path, owner.Screenshot())) spdlog::info("vdyn-viewer: screenshot {}", path);
+    if (k == SDLK_F12) {  // this frame's image, read before it is shown (Present)
+      f12_path = "vdyn-viewer-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png";
     }
   }
 }
@@ -1328,17 +1352,48 @@ void Viewer::Impl::DrawDesktop(const FrameScene& f, bool xr_drawn) {
   target.Resolve();
 }
 
-void Viewer::Impl::Present() {
+// Whether this frame counts towards --frames (once the world and the vehicle are there, or the
+// wait has passed; with a headset, only frames it was given) and is the last.
+bool Viewer::Impl::CountFrame(const FrameScene& f, bool xr_drawn) {
+  const ViewerOptions& o = owner.options_;
+  ViewerStats& stats = owner.stats_;
+  if (!counting) {
+    const bool waited = (base::MonotonicNow() - start).seconds() >= o.wait_s;
+    if (owner.ready() || waited) {
+      if (!owner.ready() && o.frames > 0) {
+        spdlog::warn("vdyn-viewer: no {} after {:.0f} s; drawing what there is",
+                     f.world == nullptr ? "world" : "vehicle", o.wait_s);
+      }
+      counting = true;
+    }
+  }
+  const bool xr_pending = xr != nullptr && !xr_ended;
+  if (counting && (!xr_pending || xr_drawn)) ++stats.counted_frames;
+  return o.frames > 0 && stats.counted_frames >= o.frames;
+}
+
+// The image is read before the swap (after it, a window's back buffer holds nothing defined):
+// the run's last frame and the one F12 asked for are kept.
+void Viewer::Impl::Present(bool keep) {
   ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-  int ww = 0, wh = 0;
-  SDL_GL_GetDrawableSize(window, &ww, &wh);
-  Renderer::PresentToWindow(*desktop, ww, wh);
+  if ((keep && !have_image) || !f12_path.empty()) {
+    last_image = desktop->Read();
+    have_image = keep || have_image;
+    if (!f12_path.empty()) {
+      if (WritePng(f12_path, last_image)) spdlog::info("vdyn-viewer: screenshot {}", f12_path);
+      f12_path.clear();
+    }
+  }
+  if (!desktop->in_window()) {
+    int ww = 0, wh = 0;
+    SDL_GL_GetDrawableSize(window, &ww, &wh);
+    Renderer::PresentToWindow(*desktop, ww, wh);
+  }
   SDL_GL_SwapWindow(window);
   glFinish();
 }
 
-void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f) {
-  const ViewerOptions& o = owner.options_;
+void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn) {
   ViewerStats& stats = owner.stats_;
   // What the frame showed is on the screen now: the latency of each vehicle whose instant moved.
   const base::WallTime shown = base::WallNow();
@@ -1360,28 +1415,6 @@ void Viewer::Impl::Account(base::MonoTime t0, bool xr_drawn, const FrameScene& f
     if (stats.frames > 3) {
       present_lead_ns = present_lead_ns == 0 ? lead : 0.75 * present_lead_ns + 0.25 * lead;
     }
-  }
-
-  // The headless end.
-  if (!counting) {
-    const bool waited = (t1 - start).seconds() >= o.wait_s;
-    if (owner.ready() || waited) {
-      if (!owner.ready() && o.frames > 0) {
-        spdlog::warn("vdyn-viewer: no {} after {:.0f} s; drawing what there is",
-                     f.world == nullptr ? "world" : "vehicle", o.wait_s);
-      }
-      counting = true;
-    }
-  }
-  // With a headset, only frames it was given count.
-  const bool xr_pending = xr != nullptr && !xr_ended;
-  if (counting && (!xr_pending || xr_drawn)) ++stats.counted_frames;
-  if (o.frames > 0 && stats.counted_frames >= o.frames) {
-    if (!have_image) {
-      last_image = desktop->Read();
-      have_image = true;
-    }
-    quit = true;
   }
 }
 

@@ -51,13 +51,18 @@ class RenderTarget {
   // `external_colour` the resolved image goes into that texture (an OpenXR swapchain image)
   // instead of one of its own; call SetExternalColour per acquired image.
   void Resize(int width, int height, int samples, bool external_colour = false);
+  // The window's own back buffer (framebuffer 0, of that size, with a depth and stencil buffer)
+  // as the target: the scene and the HUD are drawn where they are shown, without a copy of each
+  // frame. No multisampling. Read() is valid only until the buffers are swapped.
+  void UseWindow(int width, int height);
+  bool in_window() const { return in_window_; }
   void SetExternalColour(std::uint32_t texture);
   // Binds the framebuffer the scene is drawn into, with its viewport.
   void BeginScene();
   // Resolves the multisampled scene into the colour texture and binds that framebuffer (for the
   // overlay drawn on top: the HUD).
   void Resolve();
-  Image Read() const;  // the resolved colour
+  Image Read() const;  // the resolved colour (in the window: the back buffer, before the swap)
   std::uint32_t colour_texture() const { return external_ != 0 ? external_ : colour_tex_; }
   std::uint32_t resolve_framebuffer() const { return resolve_fbo_; }
   int width() const { return width_; }
@@ -71,7 +76,12 @@ class RenderTarget {
   std::uint32_t resolve_fbo_ = 0, colour_tex_ = 0, resolve_depth_ = 0;
   std::uint32_t external_ = 0;
   bool use_external_ = false;
+  bool in_window_ = false;
 };
+
+// Whether the current context's window (framebuffer 0) has the depth and stencil bits the scene
+// needs, so that RenderTarget::UseWindow can draw into it.
+bool WindowHasDepthStencil();
 
 // A landmark's post and its name.
 struct LandmarkView {

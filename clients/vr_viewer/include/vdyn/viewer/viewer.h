@@ -43,7 +43,11 @@ struct ViewerOptions {
   // A car model (LoadCarModel) every vehicle gets instead of the built-in body; null: built-in.
   std::shared_ptr<const ModelMesh> car_model;
   double fps = 60;      // frame rate cap; 0: as fast as it draws
-  bool hidden = false;  // no window on the screen (headless use; rendering is offscreen anyway)
+  bool hidden = false;  // no window on the screen (headless use: drawn into a target of its own)
+  // In a visible window without multisampling (a software renderer's default), the scene and the
+  // HUD are drawn straight into the window's back buffer, saving a copy of every frame; else
+  // into a target of their own, copied to the window. false: always the latter.
+  bool in_window = true;
   bool hud = true;
   // The landmarks (the world's named points): a marker and its name; off by default (key M).
   bool landmarks = false;
@@ -81,6 +85,7 @@ struct ViewerStats {
   std::vector<double> latency_ms;
   std::int64_t last_display_mono_ns = 0;  // the last frame's display time (monotonic clock)
   std::string renderer;                   // GL_RENDERER
+  bool drawn_in_window = false;           // the scene drawn straight into the window (in_window)
   std::string xr_status;                  // "off", "runtime '...'", or why it fell back
 };
 
@@ -99,7 +104,9 @@ class Viewer {
   // Writes the screenshot and the stats (as Run does at its end); the exit code.
   int Finish();
 
-  // The last frame as drawn on the desktop (HUD included), rows top down.
+  // The last frame as drawn on the desktop (HUD included), rows top down. Drawn in the window
+  // (ViewerOptions::in_window), a frame's image is kept only when it ends a `frames` run or F12
+  // asked for it: the last such image (empty before the first).
   Image Screenshot() const;
   const ViewerStats& stats() const { return stats_; }
   void WriteStats(const std::string& path) const;
