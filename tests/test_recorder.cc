@@ -385,6 +385,33 @@ TEST_F(RecorderTest, AServerRestartedWithTheSameIdVerifiesEachStartOnItsOwn) {
   EXPECT_THAT(info, Not(HasSubstr("events missing"))) << info;
 }
 
+// A writer that goes and one that comes between two of the recorder's looks at a topic (a server
+// restarted at once) leave the number of writers as it was; the recorder still says it hears the
+// new one. Before, it said nothing, and the test above waited in vain for it (2026-12-06).
+TEST_F(RecorderTest, AWriterReplacedBetweenTwoLooksIsStillHeard) {
+  auto recorder = Recorder({"record", (dir_ / "replaced.mcap").string(), "--domain",
+                            std::to_string(domain_), "--status"},
+                           "rec.log");
+  transport::Participant p(domain_);
+  auto heard = [&](std::size_t n) {
+    return WaitWhileRunning(*recorder, [&] {
+      return Occurrences(recorder->Log(), "hearing 1 writer(s) on vdyn/events") >= n;
+    });
+  };
+  auto writer = std::make_unique<transport::RawWriter>(p, TopicId::kEvents);
+  ASSERT_TRUE(heard(1)) << recorder->Log();
+  // Both within microseconds, far inside the recorder's 100 ms between looks.
+  writer.reset();
+  writer = std::make_unique<transport::RawWriter>(p, TopicId::kEvents);
+  ASSERT_TRUE(heard(2)) << recorder->Log();
+  // Mostly seen as one change: the same number, one new and one gone (else 0 then 1).
+  const std::string log = recorder->Log();
+  EXPECT_TRUE(log.find("hearing 1 writer(s) on vdyn/events (1 new, 1 gone)") != std::string::npos ||
+              log.find("hearing 0 writer(s) on vdyn/events") != std::string::npos)
+      << log;
+  Stop(*recorder);
+}
+
 TEST_F(RecorderTest, AKilledRecordingIsRefusedThenRecoveredAndItStillVerifies) {
   const auto file = dir_ / "killed.mcap";
   auto recorder = Recorder(

@@ -462,13 +462,17 @@ std::uint64_t RawReader::SamplesLost() {
 }
 
 std::uint32_t RawReader::MatchedWriters() {
+  return Matches().now;
+}
+
+RawReader::WriterMatches RawReader::Matches() {
   dds_subscription_matched_status_t st;
   const dds_return_t rc = dds_get_subscription_matched_status(reader_, &st);
   if (rc != DDS_RETCODE_OK) {
     last_error_ = DdsError("dds_get_subscription_matched_status", rc);
-    return 0;
+    return {};
   }
-  return st.current_count;
+  return {st.current_count, st.total_count};
 }
 
 Waitset::Waitset(Participant& participant, DropCounters* drops) : drops_(drops) {

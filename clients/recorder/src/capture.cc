@@ -751,7 +751,7 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
   for (auto& [topic, reader] : m.readers) waitset.Attach(*reader);
   base::MonoTime last_status = m.mono0;
   base::MonoTime last_match_check{0};
-  std::vector<std::uint32_t> matched(m.readers.size(), 0);
+  std::vector<transport::RawReader::WriterMatches> matched(m.readers.size());
   std::uint64_t last_dropped = 0;
   base::MonoTime last_warning{0};
   const auto end_ns = base::FromSeconds(m.o.duration_s).ns;
@@ -780,11 +780,20 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       // Say when a topic's writers come and go: a person (or a test) sees the recorder hears
       // the server before anything happens.
       last_match_check = now;
+      // A writer that went and one that came between two looks (a server restarted at once)
+      // leave the count as it was: the writers ever matched still tell.
       for (std::size_t i = 0; i < m.readers.size(); ++i) {
-        const std::uint32_t n = m.readers[i].second->MatchedWriters();
-        if (n != matched[i]) {
-          spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n,
-                       transport::Spec(m.readers[i].first).name);
+        const transport::RawReader::WriterMatches n = m.readers[i].second->Matches();
+        if (n.now != matched[i].now || n.ever != matched[i].ever) {
+          const std::uint32_t came = n.ever - matched[i].ever;
+          const std::uint32_t went = matched[i].now + came - n.now;
+          if (came > 0 && went > 0) {
+            spdlog::info("vdyn-recorder: hearing {} writer(s) on {} ({} new, {} gone)", n.now,
+                         transport::Spec(m.readers[i].first).name, came, went);
+          } else {
+            spdlog::info("vdyn-recorder: hearing {} writer(s) on {}", n.now,
+                         transport::Spec(m.readers[i].first).name);
+          }
           matched[i] = n;
         }
       }

@@ -221,6 +221,13 @@ class RawReader {
   // reader with writers on both); the calls are serialised here, so fn never runs twice at once.
   void OnDataAvailable(std::function<void()> fn);
   std::uint32_t MatchedWriters();
+  // The writers matched now and ever (the latter counts a writer that went and one that came
+  // between two looks, which the former alone would not show); zeros on error.
+  struct WriterMatches {
+    std::uint32_t now = 0;
+    std::uint32_t ever = 0;
+  };
+  WriterMatches Matches();
   // The instance handles of the writers matched right now into `out`; false on error (then
   // last_error() says, and `out` is empty: not "no writers").
   [[nodiscard]] bool MatchedWriterHandles(std::vector<std::uint64_t>& out);
