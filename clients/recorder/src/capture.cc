@@ -785,8 +785,10 @@ CaptureSummary Capture::Run(const std::atomic<bool>& stop) {
       for (std::size_t i = 0; i < m.readers.size(); ++i) {
         const transport::RawReader::WriterMatches n = m.readers[i].second->Matches();
         if (n.now != matched[i].now || n.ever != matched[i].ever) {
-          const std::uint32_t came = n.ever - matched[i].ever;
-          const std::uint32_t went = matched[i].now + came - n.now;
+          // (A failed look answers zeros: nothing came then.)
+          const std::uint32_t came = n.ever > matched[i].ever ? n.ever - matched[i].ever : 0;
+          const std::uint32_t went =
+              matched[i].now + came > n.now ? matched[i].now + came - n.now : 0;
           if (came > 0 && went > 0) {
             spdlog::info("vdyn-recorder: hearing {} writer(s) on {} ({} new, {} gone)", n.now,
                          transport::Spec(m.readers[i].first).name, came, went);
