@@ -250,7 +250,10 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
   ExpectServerSays("--vehicle-ids 1,1 --duration 1" + domain, 2,
                    "vdyn-server: --vehicle-ids: vehicle 1 is listed twice");
   ExpectServerSays("--max-vehicles 2 --vehicle-ids 1,2,3 --duration 1" + domain, 2,
-                   "this server runs its maximum of 2 vehicles");
+                   "vdyn-server: --vehicle-ids lists 3 vehicles and --max-vehicles is 2: raise "
+                   "--max-vehicles to 3 (at most 256) or list fewer");
+  ExpectServerSays("--vehicle-ids 1..65 --duration 1" + domain, 2,
+                   "--vehicle-ids lists 65 vehicles and --max-vehicles is 64");
   ExpectServerSays("--world facility --spawn 5000,5000,0 --duration 1" + domain, 2,
                    "no terrain below wheel");
 }

@@ -65,7 +65,7 @@ int main(int argc, char** argv) {
                  "Send nothing while the newest state is older than this, ms")
       ->check(cli::InRange(limits::kStaleMs))
       ->capture_default_str();
-  app.add_option("--car", car, "OutGauge car name (1 to 4 characters)")->capture_default_str();
+  app.add_option("--car", car, "OutGauge car name: 1 to 4 letters, digits, _ or -")->capture_default_str();
   app.add_option("--duration", duration_s, "Stop after this many seconds (default: run on)")
       ->check(cli::InRange(limits::kDurationS));
   app.add_flag("--no-status", no_status, "No status line every second");

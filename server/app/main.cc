@@ -167,6 +167,7 @@ int RunNetworked(const Options& o) {
                        : vdyn::ServerOptions::Mode::kRealtime;
   so.domain_id = o.domain;
   so.vehicle_ids = o.vehicle_ids;
+  so.start_speed_mps = o.speed_kmh / 3.6;
   so.session.max_vehicles = static_cast<std::size_t>(o.max_vehicles);
   so.session.step_threads =
       o.step_threads > 0 ? o.step_threads : DefaultStepThreads(o.max_vehicles);
@@ -280,7 +281,7 @@ int main(int argc, char** argv) {
       ->expected(3)
       ->delimiter(',')
       ->check(vdyn::cli::InRange({-1e7, 1e7, false, false, "spawn coordinate"}));
-  app.add_option("--speed-kmh", o.speed_kmh, "Initial speed along the heading, km/h")
+  app.add_option("--speed-kmh", o.speed_kmh, "Initial speed along the heading, km/h (batch and the vehicles a networked server starts with)")
       ->check(vdyn::cli::InRange(vdyn::limits::kSpeedKmh))
       ->capture_default_str();
   app.add_flag("--quiet", o.quiet, "Print no summary");
@@ -340,6 +341,14 @@ int main(int argc, char** argv) {
       std::cerr << "vdyn-server: --vehicle-ids: vehicle " << *id << " is listed twice\n";
       return 2;
     }
+  }
+  // More vehicles listed than the server may run: said with the option that raises the limit.
+  if (o.vehicle_ids.size() > static_cast<std::size_t>(o.max_vehicles)) {
+    std::cerr << "vdyn-server: --vehicle-ids lists " << o.vehicle_ids.size()
+              << " vehicles and --max-vehicles is " << o.max_vehicles << ": raise --max-vehicles to "
+              << o.vehicle_ids.size() << " (at most " << static_cast<int>(vdyn::limits::kMaxVehicles.hi)
+              << ") or list fewer\n";
+    return 2;
   }
 
   try {

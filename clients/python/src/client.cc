@@ -66,7 +66,8 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                                                       .inputs = false,
                                                       .only_vehicle = std::nullopt}) {
   const base::Deadline deadline = DeadlineIn(timeout_s);
-  const std::string who = server_id.empty() ? "no vdyn server" : "server '" + server_id + "'";
+  const std::string who =
+      server_id.empty() ? "no vdyn server" : "no vdyn server with the id '" + server_id + "'";
   const std::string where = " on DDS domain " + std::to_string(domain);
   // The world is transient-local: a server's arrives as soon as its writer and this reader match.
   const bool found = base::PollUntil(

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import vdyn
+from conftest import SERVER
 
 
 def test_connect_gives_the_world_and_the_vehicles(lockstep_server, domain):
@@ -24,13 +25,16 @@ def test_connect_gives_the_world_and_the_vehicles(lockstep_server, domain):
 
 def test_a_wait_with_no_server_raises_within_its_timeout(domain):
     t0 = time.monotonic()
-    with pytest.raises(vdyn.TimeoutError, match=f"domain {domain}"):
+    with pytest.raises(vdyn.TimeoutError, match=f"^no vdyn server on DDS domain {domain} answered"):
         vdyn.Client(domain=domain, timeout=1.0)
     assert time.monotonic() - t0 < 6.0  # 1 s, and generous room for a loaded machine
 
 
 def test_a_named_server_that_is_absent_raises(lockstep_server, domain):
-    with pytest.raises(vdyn.TimeoutError, match="'elsewhere'"):
+    # Said as what happened: no server of that id answered (the one there is named).
+    with pytest.raises(vdyn.TimeoutError,
+                       match=f"^no vdyn server with the id 'elsewhere' on DDS domain {domain} "
+                       r"answered within 2 s: .*\(worlds seen: vdyn\)"):
         vdyn.Client(domain=domain, server_id="elsewhere", timeout=2.0)
 
 
@@ -295,3 +299,15 @@ def test_arguments_of_the_wrong_type_are_refused(lockstep_server, domain):
             call()
     # numpy's numbers are numbers.
     assert len(sim.step(np.int64(2), timeout=np.float64(30))[1]) == 2
+
+
+def test_a_networked_server_starts_its_vehicles_at_the_speed_it_was_given(start, domain):
+    # --speed-kmh: the start vehicles move along their heading from the first step (before, a
+    # networked server took the option and started them at rest).
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain),
+           "--vehicle-ids", "1,2", "--speed-kmh", "36"], "server")
+    sim = vdyn.Client(domain=domain, timeout=30)
+    first = sim.step(1)
+    for v in (1, 2):
+        assert first[v].vx_mps[0] == pytest.approx(10.0, abs=0.2), v
+        assert first[v].speed_kmh[0] == pytest.approx(36.0, abs=0.7), v

@@ -97,7 +97,8 @@ ServerNode::ServerNode(std::shared_ptr<const World> world, ServerOptions options
       StartPoses(*world_, ParamsFromProto(options_.session.default_params).get(),
                  options_.vehicle_ids.size());
   for (std::size_t i = 0; i < options_.vehicle_ids.size(); ++i) {
-    session_->Spawn(options_.vehicle_ids[i], poses[i], 0.0, pb::VehicleParams());
+    session_->Spawn(options_.vehicle_ids[i], poses[i], options_.start_speed_mps,
+                    pb::VehicleParams());
     *world_msg->add_vehicles() =
         DescribeVehicle(options_.vehicle_ids[i], session_->simulator(options_.vehicle_ids[i]).params());
   }

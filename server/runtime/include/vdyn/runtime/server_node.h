@@ -54,6 +54,7 @@ struct ServerOptions {
   Mode mode = Mode::kRealtime;
   std::uint32_t domain_id = 0;
   std::vector<std::uint32_t> vehicle_ids = {1};
+  double start_speed_mps = 0;  // the start vehicles' speed along their heading
   SessionConfig session;
   // Durations are base::Nanos (built with base::FromSeconds from a user's seconds).
   base::Nanos duration{0};  // real time: stop after this much simulated time (0: never)
