@@ -1340,10 +1340,11 @@ TEST_F(RecorderTest, VerifySaysARecordingsLastEventsAreMissingInsteadOfDiverging
   EXPECT_LT(*compared, 2500u) << out;
 }
 
-// Past the last recorded event, a state that disagrees with the replay while its input agrees is
+// Past the last recorded event, states that disagree with the replay while their input agrees are
 // a divergence, not a lost tail: the input comes with the step requests up to step 1500, the
-// last 1,000 steps are one request, and one state after the recording's last event is edited
-// (its position and hash).
+// last 1,000 steps are one request, and every state from one after the recording's last event on
+// is edited (its position and hash), as a simulation that went its own way would have them. (One
+// edited state alone, the next matching again, is a damaged message: the test below.)
 TEST_F(RecorderTest, VerifyStillSaysDivergesPastTheLastEventWhenTheInputAgrees) {
   const auto a = dir_ / "a.mcap";
   LockstepSession(domain_, a, 2500, InputAt, {}, /*input_steps=*/1500);
@@ -1365,13 +1366,13 @@ TEST_F(RecorderTest, VerifyStillSaysDivergesPastTheLastEventWhenTheInputAgrees) 
   const auto edited = dir_ / "edited.mcap";
   std::uint64_t edited_step = 0;
   CopyRecording(a, edited, /*chunk_crc=*/true, [&](const std::string& topic, std::string& data) {
-    if (topic.rfind("vdyn/state", 0) != 0 || edited_step != 0) return;
+    if (topic.rfind("vdyn/state", 0) != 0) return;
     pb::VehicleState s;
     ASSERT_TRUE(s.ParseFromString(data));
     if (s.step() <= last_event + 5) return;
     s.mutable_p_wt_w()->set_x(s.p_wt_w().x() + 1e-3);
     s.set_state_hash(s.state_hash() ^ 1u);
-    edited_step = s.step();
+    if (edited_step == 0) edited_step = s.step();
     data = s.SerializeAsString();
   });
   ASSERT_GT(edited_step, last_event);
@@ -1516,12 +1517,76 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
                 });
   std::tie(code, verified) = Run({"verify", (dir_ / "nocrc-damaged.mcap").string()});
   EXPECT_EQ(code, 1) << verified;
-  EXPECT_THAT(verified, HasSubstr("DAMAGED: 1 recorded states")) << verified;
+  // The first line says so (it said "bit-exact over ..." before the DAMAGED line).
+  EXPECT_THAT(verified, HasSubstr("nocrc-damaged.mcap: DAMAGED, PARTLY verified: bit-exact over"))
+      << verified;
+  EXPECT_THAT(verified, HasSubstr("DAMAGED: 1 recorded state(s)")) << verified;
   EXPECT_THAT(verified, HasSubstr("vehicle 1 at step 1500")) << verified;
   EXPECT_THAT(verified, HasSubstr("wheels[2].fp")) << verified;
   // Listed as damaged, never among the steps verified bit for bit.
   EXPECT_THAT(verified, HasSubstr("steps 1500..1500 (1 states): DAMAGED")) << verified;
   EXPECT_THAT(verified, HasSubstr("steps 1501..")) << verified;
+
+  // The same edit with the chunks' CRCs written anew over it (CRCs that hold): found as well,
+  // every field of every state being compared (before, only states without a CRC were).
+  CopyRecording(file, dir_ / "edited.mcap", /*chunk_crc=*/true,
+                [](const std::string& topic, std::string& data) {
+                  if (topic != "vdyn/state/1") return;
+                  pb::VehicleState s;
+                  ASSERT_TRUE(s.ParseFromString(data));
+                  if (s.step() != 1500) return;
+                  s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);
+                  data = s.SerializeAsString();
+                });
+  std::tie(code, verified) = Run({"verify", (dir_ / "edited.mcap").string()});
+  EXPECT_EQ(code, 1) << verified;
+  EXPECT_THAT(verified, HasSubstr("edited.mcap: DAMAGED, PARTLY verified")) << verified;
+  EXPECT_THAT(verified, HasSubstr("wheels[2].fp")) << verified;
+  EXPECT_THAT(verified, HasSubstr("steps 1500..1500 (1 states): DAMAGED")) << verified;
+
+  // A damaged hash (one bit) over fields that all match, the next state matching too: the
+  // recorded hash is wrong, not the simulation (it was reported as a divergence).
+  CopyRecording(file, dir_ / "hash.mcap", /*chunk_crc=*/true,
+                [](const std::string& topic, std::string& data) {
+                  if (topic != "vdyn/state/1") return;
+                  pb::VehicleState s;
+                  ASSERT_TRUE(s.ParseFromString(data));
+                  if (s.step() != 1500) return;
+                  s.set_state_hash(s.state_hash() ^ 0x100);
+                  data = s.SerializeAsString();
+                });
+  std::tie(code, verified) = Run({"verify", (dir_ / "hash.mcap").string()});
+  EXPECT_EQ(code, 1) << verified;
+  EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
+  EXPECT_THAT(verified, HasSubstr("hash.mcap: DAMAGED, PARTLY verified")) << verified;
+  EXPECT_THAT(verified, HasSubstr("vehicle 1 at step 1500")) << verified;
+  EXPECT_THAT(verified, HasSubstr("state_hash (the hash after the step)")) << verified;
+  EXPECT_THAT(verified,
+              HasSubstr("steps 1500..1500 (1 states): DAMAGED: every field matches and so does "
+                        "the next state; the recorded hash does not"))
+      << verified;
+  EXPECT_THAT(verified, HasSubstr("steps 1501..")) << verified;
+
+  // One state's position and hash both changed, the next state matching again: a damaged
+  // message too (a simulation that diverged never finds its way back; the test above edits every
+  // state after one to show a divergence).
+  CopyRecording(file, dir_ / "one.mcap", /*chunk_crc=*/true,
+                [](const std::string& topic, std::string& data) {
+                  if (topic != "vdyn/state/1") return;
+                  pb::VehicleState s;
+                  ASSERT_TRUE(s.ParseFromString(data));
+                  if (s.step() != 1500) return;
+                  s.mutable_p_wt_w()->set_x(s.p_wt_w().x() + 1e-3);
+                  s.set_state_hash(s.state_hash() ^ 1u);
+                  data = s.SerializeAsString();
+                });
+  std::tie(code, verified) = Run({"verify", (dir_ / "one.mcap").string()});
+  EXPECT_EQ(code, 1) << verified;
+  EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
+  EXPECT_THAT(verified, HasSubstr("p_wt_w.x")) << verified;
+  EXPECT_THAT(verified, HasSubstr("steps 1500..1500 (1 states): DAMAGED: the state differs from "
+                                  "its re-simulation, the next state matches it again"))
+      << verified;
 }
 
 // `info` refuses a file whose data-section CRC fails (a byte flipped in a chunk without a CRC of

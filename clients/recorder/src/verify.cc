@@ -260,6 +260,10 @@ constexpr std::uint64_t kAheadSteps = 60'000;
 constexpr const char* kDivergedWhy = "DIFFER from the re-simulation (their state hashes)";
 constexpr const char* kDamagedWhy =
     "DAMAGED: the hashes match, other fields of the recorded messages do not";
+constexpr const char* kHashDamagedWhy =
+    "DAMAGED: every field matches and so does the next state; the recorded hash does not";
+constexpr const char* kStateDamagedWhy =
+    "DAMAGED: the state differs from its re-simulation, the next state matches it again";
 
 struct VehicleRun {
   static constexpr std::size_t kRing = 1 << 14;
@@ -467,7 +471,7 @@ class Verifier {
     if (slot.second == at.hash) {
       Matched(at, *run, *seg, fresh_step);
     } else {
-      Diverged(at, *run, *seg, slot.second);
+      Diverged(at, *run, *seg, slot.second, fresh_step);
     }
   }
 
@@ -574,6 +578,13 @@ class Verifier {
     if (r.last_step() != at.step || !ParseRecorded(at.m)) return false;
     const std::optional<pb::VehicleState> resimulated = r.StateMessage(recorded_);
     if (!resimulated) return false;
+    // The same bytes are the same fields (the usual case; field by field costs 3x as much).
+    resimulated->SerializeToString(&bytes_);
+    if (bytes_.size() == at.m.data.size() &&
+        std::equal(bytes_.begin(), bytes_.end(),
+                   reinterpret_cast<const char*>(at.m.data.data()))) {
+      return true;
+    }
     Diff(recorded_, *resimulated, "", out);
     return true;
   }
@@ -600,20 +611,19 @@ class Verifier {
       Diff(recorded_, *resimulated, "", out);
   }
 
-  // A state whose hash matched: verified, unless it came without a CRC and other fields differ.
+  // A state whose hash matched: verified, unless other fields differ. The hash covers the state,
+  // not every field of the message: each is compared with the re-simulation (it just ran this
+  // very step), in chunks with a CRC too (a CRC written anew over edited bytes holds).
   void Matched(const StateAt& at, VehicleRun& run, const Segment& seg, bool fresh_step) {
     ++run.matched;
+    if (at.m.unchecked) ++res_.unchecked;
+    MismatchHealed(at);
     bool damaged = false;
-    if (at.m.unchecked) {
-      // No CRC vouched for these bytes: the hash covers the state, not every field of the
-      // message. Compare them all with the re-simulation (it just ran this very step).
-      ++res_.unchecked;
-      std::vector<FieldDiff> fields;
-      if (fresh_step && DiffJustRun(at, *seg.replayer, fields) && !fields.empty()) {
-        damaged = true;
-        ++res_.damaged;
-        if (!res_.first_damaged) res_.first_damaged = Damaged{at.m.key, at.start, at.step, fields};
-      }
+    std::vector<FieldDiff> fields;
+    if (fresh_step && DiffJustRun(at, *seg.replayer, fields) && !fields.empty()) {
+      damaged = true;
+      ++res_.damaged;
+      if (!res_.first_damaged) res_.first_damaged = Damaged{at.m.key, at.start, at.step, fields};
     }
     if (damaged) {
       res_.Unverified(at.m.key, at.start, at.step, kDamagedWhy, false);
@@ -622,11 +632,59 @@ class Verifier {
     }
   }
 
+  // The state before `at` differed from the re-simulation and `at` matches it: the re-simulation
+  // was at the recorded state after all (a step's state follows from the one before it alone), so
+  // the recorded message is what is wrong (damaged bytes), not the simulation, which never finds
+  // its way back once it has diverged. Counted as damaged instead of diverged.
+  void MismatchHealed(const StateAt& at) {
+    const auto it = mismatch_.find(at.key);
+    if (it == mismatch_.end()) return;
+    const Mismatch m = std::move(it->second);
+    mismatch_.erase(it);
+    const std::uint64_t step = m.step;
+    if (step + 1 != at.step) return;
+    const bool hash_alone =
+        m.fields_known && std::all_of(m.fields.begin(), m.fields.end(), [](const FieldDiff& f) {
+          return f.field == "state_hash";
+        });
+    const char* why = hash_alone ? kHashDamagedWhy : kStateDamagedWhy;
+    std::vector<StepRun>& runs = res_.runs[at.m.key];
+    if (runs.empty() || runs.back().why != kDivergedWhy || runs.back().last != step) return;
+    StepRun& r = runs.back();
+    if (r.first == step) {
+      r.why = why;
+    } else {  // the diverged run held earlier steps too: the last one is split off
+      --r.last;
+      --r.count;
+      runs.push_back({r.start, step, step, 1, why});
+    }
+    --res_.mismatched;
+    ++res_.damaged;
+    if (!res_.first_damaged) {
+      std::vector<FieldDiff> fields;
+      for (const FieldDiff& f : m.fields) {
+        fields.push_back(f.field == "state_hash" ? FieldDiff{"state_hash (the hash after the step)",
+                                                            f.recorded, f.resimulated}
+                                                 : f);
+      }
+      res_.first_damaged = Damaged{at.m.key, at.start, step, std::move(fields)};
+    }
+    if (res_.first && res_.first->vehicle == at.m.key && res_.first->step == step) {
+      res_.first.reset();
+      compare_next_.reset();
+    }
+  }
+
   // A state whose hash differs: counted, and the first one described field by field.
   void Diverged(const StateAt& at, const VehicleRun& run, const Segment& seg,
-                std::uint64_t resimulated_hash) {
+                std::uint64_t resimulated_hash, bool fresh_step) {
     ++res_.mismatched;
     res_.Unverified(at.m.key, at.start, at.step, kDivergedWhy, false);
+    // Diverged, or a damaged message: the next state decides (MismatchHealed).
+    Mismatch& m = mismatch_[at.key];
+    m.step = at.step;
+    m.fields.clear();
+    m.fields_known = fresh_step && DiffJustRun(at, *seg.replayer, m.fields);
     if (res_.first) return;
     Divergence d;
     d.vehicle = at.m.key;
@@ -654,7 +712,14 @@ class Verifier {
   std::map<RunKey, VehicleRun> runs_;
   std::map<std::uint64_t, std::uint32_t> start_of_;               // server start by incarnation
   std::optional<std::pair<RunKey, std::uint64_t>> compare_next_;  // divergence: next state
+  struct Mismatch {
+    std::uint64_t step = 0;
+    bool fields_known = false;
+    std::vector<FieldDiff> fields;  // recorded, re-simulated (the hash included)
+  };
+  std::map<RunKey, Mismatch> mismatch_;  // each run's last state that differed
   pb::VehicleState recorded_;
+  std::string bytes_;  // the re-simulated state message, serialized
 };
 
 }  // namespace
@@ -730,7 +795,7 @@ class VerifyReport {
     Unverified();
     if (r_.unchecked > 0 && !r_.data_crc_checked) {
       out_ << "  " << r_.unchecked << " of the compared states come from chunks without a CRC: "
-           << "their hashes matched and every field was compared with the re-simulation"
+           << "like every state, each field was compared with the re-simulation"
            << (r_.damaged > 0 ? "" : " (all equal)") << "\n";
     }
     Notes();
@@ -824,7 +889,12 @@ class VerifyReport {
     char line[256];
     std::snprintf(line, sizeof line, "bit-exact over %" PRIu64 " steps",
                   r_.compared - r_.damaged);  // as the stretches listed
-    out_ << o_.file.string() << ": " << (r_.unverified > 0 ? "PARTLY verified: " : "") << line
+    // Not "bit-exact" alone where a state was damaged: the line's first words say it.
+    out_ << o_.file.string() << ": "
+         << (r_.damaged > 0           ? "DAMAGED, PARTLY verified: "
+             : r_.unverified > 0      ? "PARTLY verified: "
+                                      : "")
+         << line
          << " (" << ranges << ")";
     if (r_.not_resimulated > 0)
       out_ << "; " << r_.not_resimulated << " states before a spawn or checkpoint not compared";
@@ -838,9 +908,10 @@ class VerifyReport {
     if (r_.damaged == 0) return;
     const Damaged& d = *r_.first_damaged;
     out_ << "  DAMAGED: " << r_.damaged
-         << " recorded states match their re-simulation's hash but not "
-         << "their other fields: their bytes were changed where no CRC covered them; the first, "
-         << VehicleName(d.vehicle, d.start) << " at step " << d.step
+         << " recorded state(s) differ from their re-simulation in one part only (the other "
+         << "fields, or the hash alone, the state after them matching): their bytes were changed "
+         << "after the server wrote them (where no CRC covered them, or with CRCs written anew); "
+         << "the first, " << VehicleName(d.vehicle, d.start) << " at step " << d.step
          << " (recorded, re-simulated):\n";
     Fields(d.fields);
   }
