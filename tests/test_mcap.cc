@@ -320,6 +320,8 @@ TEST(McapBadFiles, ATruncatedFileIsRefusedAtTheOffsetWhereItEndsAndRecoverKeepsE
   const auto path = dir / "a.mcap";
   const Written w = WriteStates(path, 4000, mc::Compression::kZstd, 16 * 1024);
   const std::vector<std::uint8_t> whole = ReadBytes(path);
+  const mc::ChunkIndex first_chunk = mc::Reader(path).Chunks().at(0);
+  const std::size_t first_chunk_end = first_chunk.chunk_start_offset + first_chunk.chunk_length;
   std::mt19937_64 rng(7);
   for (int trial = 0; trial < 40; ++trial) {
     // Cuts everywhere: inside the magic, a record header, a chunk, the summary, the footer.
@@ -350,11 +352,22 @@ TEST(McapBadFiles, ATruncatedFileIsRefusedAtTheOffsetWhereItEndsAndRecoverKeepsE
       }
     }
     if (cut < 8) continue;
-    // Recover: a closed, indexed file with a prefix of the messages, every one intact.
+    // Recover: a closed, indexed file with a prefix of the messages, every one intact; before the
+    // first chunk is whole there is no message to recover, said so, and no copy is written.
     std::ostringstream log;
     recorder::RecoverOptions ro;
     ro.file = cut_path;
     ro.out = dir / ("rec" + std::to_string(trial) + ".mcap");
+    if (cut < first_chunk_end) {
+      try {
+        recorder::RunRecover(ro, log);
+        ADD_FAILURE() << "a file cut at " << cut << " before its first chunk's end was recovered";
+      } catch (const std::runtime_error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("nothing to recover")) << cut;
+      }
+      EXPECT_FALSE(std::filesystem::exists(ro.out)) << cut;
+      continue;
+    }
     ASSERT_EQ(recorder::RunRecover(ro, log), 0) << log.str();
     mc::ScanResult res;
     const std::vector<std::string> got = ReadAll(ro.out, &res);

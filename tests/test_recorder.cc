@@ -1589,6 +1589,77 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
       << verified;
 }
 
+// Time ranges and vehicles the file does not have, said alike by every command (issue: export
+// wrote a header-only CSV with exit 0, play blamed --from for --to, verify named no vehicle, plot
+// left an empty folder behind).
+TEST_F(RecorderTest, EmptyRangesAndMissingVehiclesAreSaidAlikeAndLeaveNothingBehind) {
+  const auto file = dir_ / "synthetic.mcap";
+  WriteRecording(file);  // 3 s of vehicle 1
+  const auto csv = dir_ / "late.csv";
+  auto [code, out] = Run({"export", file.string(), "--csv", csv.string(), "--from", "30"});
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("vehicle 1: no states in the time range: " + csv.string() +
+                             " not written"));
+  EXPECT_THAT(out, HasSubstr("nothing written: no states in the time range (the recording's "
+                             "states end at 3.000 s)"));
+  EXPECT_FALSE(std::filesystem::exists(csv));
+  for (const std::string cmd : {"export", "plot", "play"}) {
+    std::vector<std::string> args = {cmd, file.string(), "--from", "2", "--to", "1"};
+    if (cmd == "export") args.insert(args.end(), {"--csv", csv.string()});
+    std::tie(code, out) = Run(args);
+    EXPECT_EQ(code, 2) << cmd << ": " << out;
+    EXPECT_THAT(out, HasSubstr("vdyn-recorder " + cmd + ": --from 2 s is after --to 1 s: the "
+                               "range is empty"));
+  }
+  std::tie(code, out) = Run({"verify", file.string(), "--vehicle", "9"});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("no states of vehicle 9 in " + file.string() + " (it has vehicle 1)"));
+  // A plot that fails leaves no folder it made: an unclosed file (exit 2, as the others say).
+  const auto cut = dir_ / "cut.mcap";
+  std::vector<std::uint8_t> b = Bytes(file);
+  b.resize(b.size() / 2);
+  PutBytes(cut, b);
+  const auto plots = dir_ / "cut-plots";
+  std::tie(code, out) = Run({"plot", cut.string(), "--out", plots.string()});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("has no summary (it was not closed)"));
+  EXPECT_FALSE(std::filesystem::exists(plots)) << out;
+  std::tie(code, out) = Run({"plot", file.string(), "--from", "30"});  // the default folder
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("no states of vehicle 1 in the time range"));
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "synthetic-plots")) << out;
+  // A file of the magic alone: nothing to recover, and no empty copy written (exit 0 before).
+  b.resize(8);
+  PutBytes(dir_ / "magic.mcap", b);
+  std::tie(code, out) = Run({"recover", (dir_ / "magic.mcap").string()});
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("nothing to recover: no message in it reads; nothing written"));
+  EXPECT_FALSE(std::filesystem::exists(dir_ / "magic-recovered.mcap"));
+}
+
+// A takeover before the vehicle's first spawn or checkpoint in the file names the --at that works.
+TEST_F(RecorderTest, ATakeoverTooEarlyNamesTheFirstTimeThatWorks) {
+  const auto a = dir_ / "a.mcap";
+  LockstepSession(domain_, a, 2500, InputAt);
+  if (HasFatalFailure()) return;
+  // The recorder joined late: no event before step 1200 (the spawn and the checkpoint at 1000).
+  const auto late = dir_ / "late.mcap";
+  CopyRecording(a, late, /*chunk_crc=*/true, {},
+                [&](const std::string& topic, const std::string& data) {
+                  if (topic.rfind("vdyn/events", 0) != 0) return false;
+                  pb::SessionEvent e;
+                  EXPECT_TRUE(e.ParseFromString(data));
+                  return e.step() < 1200;
+                });
+  auto [code, out] = Run({"takeover", late.string(), "--at", "0", "--domain",
+                          std::to_string(domain_), "--wait", "1"});
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_THAT(out, HasSubstr("its first spawn or checkpoint in the recording is at step 2000, "
+                             "recorded at "))
+      << out;
+  EXPECT_THAT(out, HasSubstr(": give --at ")) << out;
+}
+
 // `info` refuses a file whose data-section CRC fails (a byte flipped in a chunk without a CRC of
 // its own); `play` used to stream it all the same.
 TEST_F(RecorderTest, PlayRefusesWhatInfoRefuses) {

@@ -193,6 +193,14 @@ struct Info {
   int Run() const { return recorder::RunInfo(file, std::cout); }
 };
 
+// A time range whose end comes before its start: a bad command line (exit 2), said as such.
+bool TimeRangeInOrder(const char* command, double from_s, const std::optional<double>& to_s) {
+  if (!to_s || *to_s >= from_s) return true;
+  std::cerr << "vdyn-recorder " << command << ": --from " << from_s << " s is after --to " << *to_s
+            << " s: the range is empty\n";
+  return false;
+}
+
 struct Export {
   recorder::ExportOptions eo;
   recorder::FoxgloveExportOptions fo;
@@ -227,6 +235,7 @@ struct Export {
   }
 
   int Run() {
+    if (!TimeRangeInOrder("export", eo.from_s, eo.to_s)) return 2;
     if (*foxglove) {
       fo.file = eo.file;
       return recorder::RunExportFoxglove(fo, std::cout);
@@ -262,6 +271,7 @@ struct Plot {
   }
 
   int Run() {
+    if (!TimeRangeInOrder("plot", po.from_s, po.to_s)) return 2;
     vehicle.Into(po.vehicle);
     return recorder::RunPlot(po, std::cout);
   }
@@ -305,6 +315,7 @@ struct Play {
   }
 
   int Run(const Invocation& in) {
+    if (!TimeRangeInOrder("play", pl.from_s, pl.to_s)) return 2;
     vehicle.Into(pl.vehicle);
     if (!topics.empty()) {
       pl.topics.clear();

@@ -39,6 +39,7 @@ class ExportPass {
   };
   struct Totals {
     std::uint64_t malformed = 0, unchecked = 0;
+    std::uint64_t last = 0;  // the last state's log time (any time range)
     std::vector<mcap::Metadata> meta;  // of the first pass
     mcap::ScanResult scan;
     bool first = true;
@@ -65,6 +66,7 @@ class ExportPass {
       if (first) t.meta.push_back(m);
     };
     v.on_message = [&](const RecordedMessage& m) {
+      t.last = std::max(t.last, m.log_time);
       if (m.log_time < r.from || m.log_time > r.to) return;
       const auto w = writers_.find(m.key);
       if (w == writers_.end()) return;
@@ -82,14 +84,26 @@ class ExportPass {
     t.first = false;
   }
 
-  void Commit(std::ostream& report) {
+  // Each file with rows goes under its name; one without (no state of the vehicle in the time
+  // range) is not written: said, and counted in `empty`.
+  void Commit(std::ostream& report, std::size_t& written, std::size_t& empty) {
     for (auto& [id, w] : writers_) {
       try {
         w->Close();
       } catch (const std::runtime_error& e) {
-        throw OutputError(files_[id]->dest().string() + ": " + e.what());
+        // The writer's message names its file already (the scratch file's name: the output's).
+        const std::string what = e.what();
+        const std::string dest = files_[id]->dest().string();
+        throw OutputError(what.rfind(dest, 0) == 0 ? what : dest + ": " + what);
+      }
+      if (w->rows() == 0) {
+        ++empty;
+        report << "vehicle " << id << ": no states in the time range: "
+               << files_[id]->dest().string() << " not written\n";
+        continue;
       }
       files_[id]->Commit();
+      ++written;
       report << "vehicle " << id << ": " << w->rows() << " rows, " << CsvColumns().size()
              << " columns -> " << files_[id]->dest().string() << "\n";
     }
@@ -151,6 +165,7 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
   // (--each) is read once per batch of them, so memory and descriptors stay bounded whatever
   // the file holds.
   ExportPass::Totals totals;
+  std::size_t written = 0, empty = 0;
   Progress progress("export");
   const std::vector<std::uint32_t> all(chosen.begin(), chosen.end());
   for (std::size_t at = 0; at < all.size(); at += kOpenAtOnce) {
@@ -161,7 +176,7 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
       progress.Update((static_cast<double>(at) + f * static_cast<double>(n)) /
                       static_cast<double>(all.size()));
     });
-    pass.Commit(report);
+    pass.Commit(report, written, empty);
   }
   progress.Finish();
   const mcap::ScanResult& scan = totals.scan;
@@ -174,6 +189,14 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
   if (malformed > 0) {
     report << "vdyn-recorder export: " << malformed
            << " state messages did not parse and were skipped\n";
+    return 1;
+  }
+  if (written == 0) {
+    char span[64];
+    std::snprintf(span, sizeof span, "%.3f",
+                  static_cast<double>(totals.last > start ? totals.last - start : 0) * 1e-9);
+    report << "vdyn-recorder export: nothing written: no states in the time range (the "
+           << "recording's states end at " << span << " s)\n";
     return 1;
   }
   return 0;

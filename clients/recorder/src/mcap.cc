@@ -1304,7 +1304,8 @@ class Scanner {
       if (f.op == kFooter) r_.Fail(pos_, "a footer before the data end record");
       return true;
     }
-    const std::string why = std::string("a ") + OpName(f.op) +
+    const std::string name = OpName(f.op);
+    const std::string why = std::string(name[0] == 'a' || name[0] == 'u' ? "an " : "a ") + name +
                             " record inside the data section, which no verified summary follows "
                             "(a damaged opcode, or a summary whose footer is damaged)";
     if (!SkipToNextRecord(why)) stopped_ = data_end_ = true;

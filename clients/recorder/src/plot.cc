@@ -311,7 +311,26 @@ class Plotter {
  public:
   Plotter(const PlotOptions& o, std::ostream& out) : o_(o), out_(out), reader_(o.file) {}
 
+  // A failure leaves no folder that plot made (an empty one was left behind, also for a bad file).
   int Run() {
+    int rc = 0;
+    try {
+      rc = Stages();
+    } catch (...) {
+      RemoveFolderIfMade();
+      throw;
+    }
+    if (rc != 0) RemoveFolderIfMade();
+    return rc;
+  }
+
+ private:
+  void RemoveFolderIfMade() {
+    std::error_code ec;
+    if (made_folder_) fs::remove(dir_, ec);  // only when empty: nothing of anyone else's goes
+  }
+
+  int Stages() {
     if (const int rc = PrepareFolder(); rc != 0) return rc;
     if (const int rc = ChooseVehicle(); rc != 0) return rc;
     if (const int rc = ChooseColumns(); rc != 0) return rc;
@@ -336,7 +355,6 @@ class Plotter {
     return 0;
   }
 
- private:
   // The map's cells: from (x0, y0), nx by ny cells of cell_x by cell_y metres.
   struct MapGrid {
     double x0 = 0, y0 = 0, cell_x = 1, cell_y = 1;
@@ -355,6 +373,7 @@ class Plotter {
            << " is a file, not a folder: give --out a folder\n";
       return 2;
     }
+    made_folder_ = !fs::exists(dir_, ec);
     fs::create_directories(dir_, ec);
     if (ec) {
       out_ << "vdyn-recorder plot: cannot create the folder " << dir_.string() << ": "
@@ -376,7 +395,7 @@ class Plotter {
     } else {
       out_ << "vdyn-recorder plot: " << o_.file.string()
            << " has no summary (it was not closed): run `vdyn-recorder recover` first\n";
-      return 1;
+      return 2;  // a bad file, as the other commands say
     }
     if (state_counts.empty()) {
       out_ << "vdyn-recorder plot: no vehicle states in " << o_.file.string() << "\n";
@@ -720,6 +739,7 @@ class Plotter {
   std::optional<MapGrid> map_;
   std::vector<std::string> made_;     // figures, without extension
   std::vector<std::string> outputs_;  // files renamed into the output folder
+  bool made_folder_ = false;          // the output folder did not exist before
 };
 
 }  // namespace

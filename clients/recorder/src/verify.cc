@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cinttypes>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -925,6 +926,23 @@ class VerifyReport {
 }  // namespace
 
 int RunVerify(const VerifyOptions& o, std::ostream& out) {
+  // A vehicle the file has no states of: said as export and plot say it (a bad command line).
+  if (o.vehicle) {
+    const mcap::Reader reader(o.file);
+    if (const auto summary = reader.ReadSummary()) {
+      std::set<std::uint32_t> vehicles;
+      for (const auto& [id, info] : VdynChannels(*summary)) {
+        if (info.topic == TopicId::kState) vehicles.insert(info.key);
+      }
+      if (!vehicles.empty() && vehicles.count(*o.vehicle) == 0) {
+        std::string have;
+        for (std::uint32_t v : vehicles) have += (have.empty() ? "" : ", ") + std::to_string(v);
+        out << "vdyn-recorder verify: no states of vehicle " << *o.vehicle << " in "
+            << o.file.string() << " (it has vehicle " << have << ")\n";
+        return 2;
+      }
+    }
+  }
   Progress bar("verify");
   VerifyOptions with = o;
   with.on_progress = [&bar](double f) { bar.Update(f); };
@@ -1042,9 +1060,42 @@ BranchPoint FindBranchPoint(const std::filesystem::path& file, double at_s,
   }
   const std::optional<VehicleReplayer::Exact> exact = replayer.ExactAt(*step);
   if (!exact) {
+    // Where a takeover can start: the vehicle's first spawn or checkpoint, said as the --at of
+    // the first state recorded at or after it.
+    std::optional<std::uint64_t> first_start;
+    for (const auto& e : server->events) {
+      if (e.vehicle_id() == *chosen && (e.has_spawned() || e.has_checkpoint()) &&
+          (!first_start || e.step() < *first_start))
+        first_start = e.step();
+    }
+    std::string hint = " (no spawn or checkpoint of it before that step is recorded)";
+    if (first_start && *first_start > *step) {
+      std::optional<std::uint64_t> log_time;
+      RecordingVisitor v;
+      v.wants = [](TopicId t) { return t == TopicId::kState; };
+      v.on_message = [&](const RecordedMessage& m) {
+        if (log_time || m.key != *chosen) return;
+        const std::optional<StateFields> f = ReadStateFields(m.data, m.key);
+        if (f && f->incarnation == incarnation && f->step >= *first_start) log_time = m.log_time;
+      };
+      ScanRecording(reader, v);
+      char b[200];
+      if (log_time) {
+        std::snprintf(b, sizeof b,
+                      ": its first spawn or checkpoint in the recording is at step %" PRIu64
+                      ", recorded at %.3f s: give --at %.3f or later",
+                      *first_start, static_cast<double>(*log_time - first) * 1e-9,
+                      std::ceil(static_cast<double>(*log_time - first) * 1e-6) * 1e-3);
+      } else {
+        std::snprintf(b, sizeof b,
+                      ": its first spawn or checkpoint in the recording is at step %" PRIu64
+                      ", after its last recorded state",
+                      *first_start);
+      }
+      hint = b;
+    }
     throw std::runtime_error("vehicle " + std::to_string(*chosen) +
-                             " cannot be re-simulated to step " + std::to_string(*step) +
-                             " (no spawn or checkpoint before it?)");
+                             " cannot be re-simulated to step " + std::to_string(*step) + hint);
   }
   if (hash_before && replayed_before && *hash_before != *replayed_before) {
     throw std::runtime_error(
