@@ -75,8 +75,8 @@ std::string Summary(const fx::Bridge::Counters& c, const fx::Server::Stats& st,
          std::to_string(c.messages_out) + ", dropped " + std::to_string(c.dropped_messages) + " (" +
          Fixed(static_cast<double>(c.dropped_bytes) / 1e6, 1) + " MB) by slow clients' queues\n" +
          "  bad client messages " + std::to_string(c.bad_messages) + ", inputs " +
-         std::to_string(c.inputs) + " (" + std::to_string(c.input_refused) +
-         " refused), parameters " + std::to_string(c.params_accepted) + " set, " +
+         std::to_string(c.inputs) + " (" + std::to_string(c.input_clamped) + " clamped; " +
+         std::to_string(c.input_refused) + " refused), parameters " + std::to_string(c.params_accepted) + " set, " +
          std::to_string(c.params_refused) + " refused\n" +
          "  state latency (source stamp to written) p50 " + Fixed(latency.PercentileMs(50), 3) +
          " ms, p99 " + Fixed(latency.PercentileMs(99), 3) + " ms over " +

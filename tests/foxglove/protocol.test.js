@@ -207,6 +207,16 @@ test("driving from a client is refused unless allowed, then takes the vehicle at
   // Bad input is said, not sent.
   d.client.sendMessage(input, new TextEncoder().encode("{\"steer\": \"left\"}"));
   await h.until(() => d.status.find((x) => x.level === 2 && /is not a vdyn\.pb\.DriverInput/.test(x.message)), 5000, "a refusal");
+  // A number that is not finite is refused by name (it was clamped to 0 and driven), and one past
+  // its limit is clamped and said (a warning). A client hears of its input at most once a second.
+  await new Promise((r) => setTimeout(r, 1100));
+  d.client.sendMessage(input, new TextEncoder().encode(JSON.stringify({ steer: "NaN", throttle: 0.1 })));
+  await h.until(() => d.status.find((x) => x.level === 2 && /driver input for vehicle 1 refused: steer is NaN/.test(x.message)),
+                5000, "a non-finite input refused");
+  await new Promise((r) => setTimeout(r, 1100));
+  d.client.sendMessage(input, new TextEncoder().encode(JSON.stringify({ throttle: 7 })));
+  await h.until(() => d.status.find((x) => x.level === 1 && /throttle must be in \[-1, 1\], got 7: clamped/.test(x.message)),
+                5000, "a clamped input said");
   d.close();
 });
 

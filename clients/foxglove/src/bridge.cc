@@ -3,6 +3,7 @@
 #include <google/protobuf/util/json_util.h>
 
 #include <algorithm>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <limits>
@@ -19,6 +20,7 @@
 #include "vdyn/foxglove/params.h"
 #include "vdyn/foxglove/protocol.h"
 #include "vdyn/messages/descriptor_set.h"
+#include "vdyn/messages/input_checks.h"
 #include "vdyn/session.pb.h"
 #include "vdyn/transport/control_client.h"
 
@@ -741,6 +743,21 @@ void Bridge::OnText(ClientId id, std::string_view text) {
   }
 }
 
+namespace {
+// The first number of a driver input that is not finite, named ("throttle is nan"); empty when
+// all are finite.
+std::string NonFiniteInput(const pb::DriverInput& in) {
+  const std::pair<const char*, double> fields[] = {
+      {"steer", in.steer()},         {"throttle", in.throttle()}, {"brake", in.brake()},
+      {"cruise_set_kmh", in.cruise_set_kmh()}, {"clutch", in.clutch()},
+      {"handbrake", in.handbrake()}};
+  for (const auto& [name, v] : fields) {
+    if (!std::isfinite(v)) return std::string(name) + " is " + (std::isnan(v) ? "NaN" : "infinite");
+  }
+  return {};
+}
+}  // namespace
+
 void Bridge::OnBinary(ClientId id, std::span<const std::uint8_t> message) {
   Impl& m = *impl_;
   std::lock_guard lock(m.mu);
@@ -766,11 +783,28 @@ void Bridge::OnBinary(ClientId id, std::span<const std::uint8_t> message) {
       if (!parsed) {
         error = std::string("driver input for vehicle ") + std::to_string(p->second.vehicle) +
                 " is not a vdyn.pb.DriverInput (" + (p->second.json ? "JSON" : "protobuf") + ")";
+      } else if (const std::string nonfinite = NonFiniteInput(in); !nonfinite.empty()) {
+        // Not made a 0 by the clamp below (NaN clamps to 0): refused, as a server refuses it.
+        error = "driver input for vehicle " + std::to_string(p->second.vehicle) +
+                " refused: " + nonfinite;
       } else {
+        // Numbers past their limits are clamped, as every client's are, and the client is told.
+        const std::string past = messages::CheckInputRanges(in);
         client::ClampToLimits(in);
         if (!p->second.publisher->Publish(in))
           error = "input not sent: " + p->second.publisher->last_error();
         ++m.counters.inputs;
+        if (!past.empty() && error.empty()) {
+          ++m.counters.input_clamped;
+          const base::MonoTime now = base::MonotonicNow();
+          if (now - c.last_input_error >= base::Seconds(1)) {
+            c.last_input_error = now;
+            m.Status(id, c, StatusLevel::kWarning,
+                     "vdyn-foxglove: driver input for vehicle " +
+                         std::to_string(p->second.vehicle) + ": " + past +
+                         ": clamped to the limit (and any such value)");
+          }
+        }
       }
     }
   } catch (const protocol::ProtocolError& e) {

@@ -62,6 +62,7 @@ class Bridge final : public ClientHandler {
     std::uint64_t dropped_messages = 0, dropped_bytes = 0;  // by the queues' bounds
     std::uint64_t bad_messages = 0;               // client messages that could not be used
     std::uint64_t inputs = 0, input_refused = 0;  // driver input from clients
+    std::uint64_t input_clamped = 0;              // of the inputs, those clamped to the limits
     std::uint64_t params_accepted = 0, params_refused = 0;
     std::string last_refusal;
   };
