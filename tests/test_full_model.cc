@@ -707,11 +707,11 @@ TEST(FullModelProperties, NoTireForceExceedsMuTimesItsLoadOverTheDemoDrive) {
   EXPECT_GT(checked, 100000);
 }
 
-// The largest step the default parameters resolve (MaxResolvedStep: a rear wheel held by the foot
-// brake and the handbrake, docs/model.md 8.6; bench/step_sweep finds the demo drive stable to 5 ms)
-// is stable: the demo drive at that step stays finite, keeps its peak tire load and body rate
-// within 1.5x of the 1 ms run's, the braked car ends at rest, and then stays at rest, finite, with
-// both brakes held (the mode that sets the limit).
+// The largest step the default parameters resolve (MaxResolvedStep: the tyres' relaxation at the
+// fastest spawn speed, just inside a rear wheel held by the foot brake and the handbrake,
+// docs/model.md 8.6; bench/step_sweep finds the demo drive stable to 5 ms) is stable: the demo
+// drive at that step stays finite, keeps its peak tire load and body rate within 1.5x of the 1 ms
+// run's, the braked car ends at rest, and then stays at rest, finite, with both brakes held.
 TEST(FullModelProperties, DemoDriveStableAtTheLargestResolvedStep) {
   const Maneuver m = Maneuver::Parse(DemoManeuverCsv(), "demo");
   const std::int64_t largest_ns =

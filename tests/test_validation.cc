@@ -949,9 +949,14 @@ TEST(Params, TheLargestResolvedStepFollowsTheFastestMode) {
 // T_cap tau / (theta_b J). The rear wheels hold the most (foot brake and handbrake), so theirs is
 // the default car's fastest mode; a step beyond it is refused.
 TEST(Params, TheFullModelsHeldBrakeBoundsTheStep) {
-  const ValidParams def = testing::DefaultParams();
-  ASSERT_EQ(def->model, VehicleModel::kFull);
-  EXPECT_EQ(CheckStep(def, 0.001), "");  // the default car at vdyn's step
+  ASSERT_EQ(testing::DefaultParams()->model, VehicleModel::kFull);
+  EXPECT_EQ(CheckStep(testing::DefaultParams(), 0.001), "");  // the default car at vdyn's step
+  // Longer relaxation lengths than the default's, so that the held brake is the fastest mode
+  // (the default's is its tyres' relaxation at speed: the test below).
+  const ValidParams def = testing::ParamsWith([](pb::VehicleParams& m) {
+    m.set_tire_relaxation_long(0.3);
+    m.set_tire_relaxation_lat(0.6);
+  });
   auto held = [](const ValidParams& p, double* damping_rate) {
     const WheelParams& wp = p->wheel[kLR];
     // A rear wheel: the foot brake's (1 - front fraction) share of brake_force_max and the
@@ -980,6 +985,36 @@ TEST(Params, TheFullModelsHeldBrakeBoundsTheStep) {
   EXPECT_NEAR(MaxResolvedStep(light, &why), 2.5 / rate, 1e-12) << why;
   EXPECT_EQ(why, "LR brake stick damping");
   EXPECT_THROW(Simulator(SharedWorld("flat"), light, SimConfig{1'000'000}), std::invalid_argument);
+}
+
+// The contact patch's relaxation (docs/model.md 8.2) is a real pole at -|v| / sigma; RK4 is stable
+// on the negative real axis to h lambda = 2.785, and a vehicle may be spawned at 110 m/s. A short
+// lateral relaxation length was accepted and the state went non-finite in a drive at 50 km/h
+// (sigma 3 mm: h lambda = 4.6); now it is refused for the step, naming the mode.
+TEST(Params, TheTyresRelaxationAtTheFastestSpawnSpeedBoundsTheStep) {
+  const ValidParams def = testing::DefaultParams();
+  std::string why;
+  EXPECT_NEAR(MaxResolvedStep(def, &why), 2.78 * def->tire_relaxation_long / 110.0, 1e-12) << why;
+  EXPECT_EQ(why, "LF tyre relaxation, longitudinal, at 110 m/s");
+  const ValidParams short_lat = testing::ParamsWith(
+      [](pb::VehicleParams& m) { m.set_tire_relaxation_lat(0.003); });
+  EXPECT_NEAR(MaxResolvedStep(short_lat, &why), 2.78 * 0.003 / 110.0, 1e-15) << why;
+  EXPECT_EQ(why, "LF tyre relaxation, lateral, at 110 m/s");
+  EXPECT_THAT(CheckStep(short_lat, 0.001),
+              ::testing::HasSubstr("(LF tyre relaxation, lateral, at 110 m/s) needs h <= 7.58e-5"));
+  EXPECT_THROW(Simulator(SharedWorld("flat"), short_lat, SimConfig{1'000'000}),
+               std::invalid_argument);
+  // At the bound the pole is inside RK4's region: a 110 m/s car keeps a finite state at h = 1 ms
+  // with the shortest length that step resolves, 0.0396 m (h lambda = 2.78), driving straight.
+  const double sigma = 110.0 * 0.001 / 2.78 + 1e-6;
+  const ValidParams at_bound = testing::ParamsWith([sigma](pb::VehicleParams& m) {
+    m.set_tire_relaxation_lat(sigma);
+    m.set_tire_relaxation_long(sigma);
+  });
+  Simulator sim(SharedWorld("flat"), at_bound, SimConfig{1'000'000});
+  sim.Spawn({0.0, 0.0, 0.0}, 100.0);
+  for (int k = 0; k < 2000; ++k) ASSERT_EQ(sim.Step(), StepStatus::kOk) << "step " << k;
+  EXPECT_TRUE(sim.state().x.allFinite());
 }
 
 }  // namespace

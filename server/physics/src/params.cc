@@ -1,5 +1,6 @@
 #include "vdyn/physics/params.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -447,6 +448,20 @@ double MaxResolvedStep(const Params& p, std::string* why) {
                     wp.radius * wp.radius
               : wp.longitudinal_stiffness * wp.radius * wp.radius / p.tire_relaxation_long;
       limit(2.0 / std::sqrt((k_brake + k_tire) / wp.spin_inertia), name + " wheel on a held brake");
+      // The contact patch's relaxation at speed, a real pole at -|v| / sigma (8.2): stable up to
+      // the fastest a vehicle is spawned or teleported (limits::kSpawnSpeed), h |v| / sigma <=
+      // 2.78 (RK4 on the negative real axis: 2.785). A Magic Formula tyre's lengths at its
+      // nominal load.
+      double sigma_long = p.tire_relaxation_long, sigma_lat = p.tire_relaxation_lat;
+      if (wp.mf.enabled) {
+        const MfLoad L = MagicFormulaLoad(wp.mf, wp.mf.fnomin * wp.mf.lfzo, 0.0, wp.mf.inflpres);
+        sigma_long = std::max(L.sigma_kappa, kMfMinRelaxationLength);
+        sigma_lat = std::max(L.sigma_alpha, kMfMinRelaxationLength);
+      }
+      const double v_max = limits::kSpawnSpeed.hi;
+      const std::string at = " at " + FormatApprox(v_max) + " m/s";
+      limit(2.78 * sigma_long / v_max, name + " tyre relaxation, longitudinal," + at);
+      limit(2.78 * sigma_lat / v_max, name + " tyre relaxation, lateral," + at);
       if (p.stick_damping_time > 0.0) {
         limit(2.5 / (k_brake * p.stick_damping_time / wp.spin_inertia), name + " brake stick damping");
       }

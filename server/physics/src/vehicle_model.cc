@@ -283,7 +283,6 @@ constexpr double kRetraceOffset = 1e-3;       // m off a steep face before traci
 constexpr double kGovernorBand = 0.1;         // of idle speed: the idle governor's band
 constexpr double kLimiterBand = 0.02;         // of the rev limit: the limiter's band
 constexpr double kStickSlipRateMax = 500.0;   // 1/s: a friction element's fastest break-away
-constexpr double kMinRelaxationLength = 0.05;  // m: a Magic Formula tyre's shortest (light load)
 constexpr double kSlidePullRate = 200.0;       // 1/s: a deflection past the peaks back, at rest
 
 double Sgn(double v) { return static_cast<double>((v > 0.0) - (v < 0.0)); }
@@ -432,8 +431,8 @@ void TireForcesMagicFormula(const Params& p, int w, const BodyKinematics& k,
   // A tyre on the other side than its file's TYRESIDE is mirrored (TNO's convention).
   const double mirror = (m.side == 0 || m.side == (left ? 1 : -1)) ? 1.0 : -1.0;
   const MfLoad load = MagicFormulaLoad(m, o.contact ? o.Fp : 0.0, mirror * gamma, m.inflpres);
-  const double sigma_kappa = std::max(load.sigma_kappa, kMinRelaxationLength);
-  const double sigma_alpha = std::max(load.sigma_alpha, kMinRelaxationLength);
+  const double sigma_kappa = std::max(load.sigma_kappa, kMfMinRelaxationLength);
+  const double sigma_alpha = std::max(load.sigma_alpha, kMfMinRelaxationLength);
   const double kappa_t = defl_u / sigma_kappa;
   const double tan_alpha_t = defl_v / sigma_alpha;
   if (report_all) {

@@ -1170,6 +1170,17 @@ void ServerNode::PublishReport(WindowReport& r) {
   }
   for (std::size_t i = 0; i < r.n_vehicles; ++i) {
     const VehicleReport& v = r.vehicles[i];
+    // A state that went non-finite is contained (the vehicle put back at rest where it was, a
+    // spawned event): said in the log too, not only counted in the diagnostics.
+    std::uint64_t& said = nonfinite_said_[v.id];
+    if (v.nonfinite_steps < said) said = 0;  // a new vehicle of that id counts afresh
+    if (v.nonfinite_steps > said) {
+      spdlog::warn("server '{}': vehicle {}: its state became non-finite in {} more step(s) ({} in "
+                   "all): put back at rest where it was (its parameters or input drive it past "
+                   "what the step resolves?)",
+                   server_id, v.id, v.nonfinite_steps - said, v.nonfinite_steps);
+      said = v.nonfinite_steps;
+    }
     pb::VehicleDiagnostics* vd = d.add_vehicles();
     vd->set_vehicle_id(v.id);
     vd->set_watchdog_safe_state(v.safe_state);

@@ -231,6 +231,10 @@ std::span<const MagicFormulaField> MagicFormulaFields();
 // Fills the derived members (once, when parameters are validated).
 void DeriveMagicFormula(MagicFormula& mf);
 
+// The shortest relaxation length the model gives a Magic Formula tyre (at a light load, |K| / C
+// shrinks with the load), m.
+inline constexpr double kMfMinRelaxationLength = 0.05;
+
 // What depends on the load, inclination and pressure alone (held while the slips vary; the
 // relaxation lengths come from here before the slips are known).
 struct MfLoad {

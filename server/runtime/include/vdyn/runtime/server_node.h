@@ -270,6 +270,8 @@ class ServerNode {
   std::int64_t window_start_steps_ = 0;
   // Publisher's view for the status line.
   std::int64_t last_status_ns_ = 0;
+  // Publisher thread: each vehicle's non-finite steps already said in the log.
+  std::map<std::uint32_t, std::uint64_t> nonfinite_said_;
 };
 
 }  // namespace vdyn
