@@ -627,6 +627,37 @@ TEST(TireParams, AParameterFileNamesTyresPerAxleAndPerWheelRelativeToItself) {
   }
 }
 
+// The tyre is a radial spring: a stiffness the static load would compress by more than a fifth of
+// the radius (or one not positive) is refused by name. Before, 1000 N/m was accepted and the car
+// started 4 m deep and fell for ever (exit 0), as did a file whose PFZ1 made its stiffness
+// negative at its pressure, also as a live change.
+TEST(TireParams, ATyreTooSoftToCarryTheCarIsRefused) {
+  pb::VehicleParams soft = DefaultVehicleParams();
+  soft.set_tire_vertical_stiffness(1000.0);
+  std::string issues = FormatIssues(ValidateVehicleParams(soft));
+  // LF: m g c / (b + c) / 2 = 1500 * 9.81 * 1.5 / 2.7 / 2 = 4087.5 N on 1000 N/m: 4.0875 m; a
+  // fifth of the 0.32 m radius is 0.064 m, which takes 4087.5 / 0.064 = 63867 N/m (printed to 4
+  // significant digits).
+  EXPECT_THAT(issues, HasSubstr("tire_vertical_stiffness: the static load (4087 N) compresses the "
+                                "LF tyre by 4.087 m, more than a fifth of its radius (0.064 m): it "
+                                "needs at least 63867 N/m"))
+      << issues;
+  soft.set_tire_vertical_stiffness(63900.0);  // just above the front's need
+  issues = FormatIssues(ValidateVehicleParams(soft));
+  EXPECT_TRUE(issues.empty()) << issues;
+  // A tyre file's own stiffness, with its pressure term: VERTICAL_STIFFNESS (1 + PFZ1 dpi).
+  const pb::VehicleParams car = CarOn(SyntheticTire());
+  pb::VehicleParams change;
+  change.mutable_lf()->mutable_magic_formula()->set_pfz1(-100.0);
+  change.mutable_lf()->mutable_magic_formula()->set_inflpres(
+      SyntheticTire().nompres() * 1.2);  // dpi = 0.2: 1 - 20 < 0
+  issues = FormatIssues(ValidateVehicleParams(MergeVehicleParams(car, change)));
+  EXPECT_THAT(issues, HasSubstr("lf.magic_formula.vertical_stiffness: the LF tyre's vertical "
+                                "stiffness (VERTICAL_STIFFNESS (1 + PFZ1 dpi) at INFLPRES) is -"))
+      << issues;
+  EXPECT_THAT(issues, HasSubstr("it must be positive")) << issues;
+}
+
 // A message carries coefficients, never a file name; a named tyre replaces a wheel's, a nameless
 // one changes the coefficients it has, an empty one removes the tyre.
 TEST(TireParams, MessagesCarryCoefficientsAndMergeAsDocumented) {

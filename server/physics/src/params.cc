@@ -390,6 +390,33 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
                          " m): it needs at least " +
                          FormatApprox(StaticWheelLoad(p, w) / travel) + " N/m"});
     }
+    // The full model's tyre is a radial spring too: the static load compresses it by less than a
+    // fifth of its radius (a passenger tyre: 5 %), or the car starts with its wheels in the
+    // ground and sinks (a soft or negative stiffness was accepted: it fell for ever).
+    if (p.model != VehicleModel::kFull) continue;
+    const bool from_file = wp.mf.enabled && wp.mf.vertical_stiffness > 0.0;
+    const double k_tyre =
+        from_file ? wp.mf.vertical_stiffness *
+                        (1.0 + wp.mf.pfz1 * (wp.mf.inflpres - wp.mf.nompres) / wp.mf.nompres)
+                  : p.tire_vertical_stiffness;
+    const double radius = wp.mf.enabled ? wp.mf.unloaded_radius : wp.radius;
+    const double limit = 0.2 * radius;
+    const std::string field = from_file ? std::string(kWheelFields[w]) +
+                                              ".magic_formula.vertical_stiffness"
+                                        : std::string("tire_vertical_stiffness");
+    const std::string what = from_file ? " (VERTICAL_STIFFNESS (1 + PFZ1 dpi) at INFLPRES)" : "";
+    if (!(k_tyre > 0.0)) {
+      out.push_back({field, "the " + std::string(kWheelNames[w]) + " tyre's vertical stiffness" +
+                                what + " is " + FormatApprox(k_tyre) +
+                                " N/m: it must be positive"});
+    } else if (!(StaticWheelLoad(p, w) / k_tyre < limit)) {
+      out.push_back({field, "the static load (" + FormatApprox(StaticWheelLoad(p, w)) +
+                                " N) compresses the " + std::string(kWheelNames[w]) + " tyre" +
+                                what + " by " + FormatApprox(StaticWheelLoad(p, w) / k_tyre) +
+                                " m, more than a fifth of its radius (" + FormatApprox(limit) +
+                                " m): it needs at least " +
+                                FormatApprox(StaticWheelLoad(p, w) / limit) + " N/m"});
+    }
   }
   return out;
 }
