@@ -1570,6 +1570,28 @@ TEST(Window, ReadingsAtRestShowNoMinusZero) {
   }
 }
 
+// A server that stopped: the window says how long no state has come, in red (it said DRIVING).
+TEST(RigWindow, NoStateForTwoSecondsIsSaidInRed) {
+  WindowView v;
+  v.vehicle_id = 1;
+  v.source_id = "rig";
+  v.have_state = true;
+  v.driving = true;
+  auto line = [&v] {
+    for (const WindowItem& item : LayoutWindow(v, StatusWindow::kWidth)) {
+      if (item.text.rfind("VEHICLE 1", 0) == 0) return item;
+    }
+    return WindowItem{};
+  };
+  v.state_age_s = 0.01;
+  EXPECT_EQ(line().text, "VEHICLE 1  SOURCE rig  DRIVING");
+  v.state_age_s = 3.2;
+  const WindowItem gone = line();
+  EXPECT_EQ(gone.text, "VEHICLE 1  SOURCE rig  NO STATE FOR 3 S (SERVER GONE?)");
+  EXPECT_EQ(gone.color.r, 255);
+  EXPECT_EQ(gone.color.g, 90);
+}
+
 // --- the commands (commands.h), called as vdyn-input's main calls them -----------------------
 
 // calibrate with a device SDL does not have: exit code 2 (bad input) and the reason, before any

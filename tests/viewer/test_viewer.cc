@@ -281,6 +281,103 @@ TEST_F(ViewerTest, VehiclesOfOtherServersAreDrawnOnlyWhenTheyShareTheTerrain) {
   }
 }
 
+// A vehicle its server no longer runs (removed, or the server started again without it) is
+// forgotten once the server's diagnostics no longer list it: before, it stayed drawn, frozen,
+// counted on the HUD and reachable with Tab for good. One whose server is silent stays.
+TEST_F(ViewerTest, AVehicleItsServerNoLongerRunsIsForgotten) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("a", kPi / 2, {1, 2})));
+  ViewerOptions o = Options(domain);
+  o.follow = 1;
+  o.hud = false;
+  Viewer v(o);
+  std::uint64_t step = 0;
+  auto state = [&](std::uint32_t id) {
+    TestVehicle t;
+    t.id = id;
+    t.server = "a";
+    t.x = 6.0 * (id - 1);
+    pb::VehicleState s = MakeState(t);
+    s.set_step(step);
+    return s;
+  };
+  auto diagnostics = [&](std::initializer_list<std::uint32_t> ids) {
+    pb::Diagnostics d;
+    d.set_server_id("a");
+    d.set_steps(step);
+    d.set_sim_time_ns(static_cast<std::int64_t>(step) * 1'000'000);
+    for (std::uint32_t id : ids) d.add_vehicles()->set_vehicle_id(id);
+    pub.Diagnostics(d);
+  };
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        ++step;
+        pub.State(state(1));
+        pub.State(state(2));
+        diagnostics({1, 2});
+      },
+      [&] { return v.vehicle(1) != nullptr && v.vehicle(2) != nullptr; }));
+  // Both listed while both send: a frame later both are still there.
+  v.Frame();
+  ASSERT_NE(v.vehicle(2), nullptr);
+  // Tab pressed three times within one frame moves three places (1 -> 2 -> 1 -> 2): it moved one
+  // place before (each press counted from the vehicle followed at the frame's start).
+  for (int k = 0; k < 3; ++k) {
+    SDL_Event tab{};
+    tab.type = SDL_KEYDOWN;
+    tab.key.keysym.sym = SDLK_TAB;
+    SDL_PushEvent(&tab);
+  }
+  ++step;
+  pub.State(state(1));
+  pub.State(state(2));
+  v.Frame();
+  v.Frame();
+  EXPECT_EQ(v.followed(), std::optional<std::uint32_t>(2));
+  for (int k = 0; k < 2; ++k) {
+    SDL_Event tab{};
+    tab.type = SDL_KEYDOWN;
+    tab.key.keysym.sym = SDLK_TAB;
+    SDL_PushEvent(&tab);
+  }
+  v.Frame();
+  v.Frame();
+  EXPECT_EQ(v.followed(), std::optional<std::uint32_t>(2));  // two places: back to 2
+  // Follow 1 again for the rest.
+  {
+    SDL_Event tab{};
+    tab.type = SDL_KEYDOWN;
+    tab.key.keysym.sym = SDLK_TAB;
+    SDL_PushEvent(&tab);
+  }
+  v.Frame();
+  v.Frame();
+  ASSERT_EQ(v.followed(), std::optional<std::uint32_t>(1));
+  // Vehicle 2 removed: no more states of it, and the diagnostics list vehicle 1 alone.
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        ++step;
+        pub.State(state(1));
+        diagnostics({1});
+      },
+      [&] { return v.vehicle(2) == nullptr; }));
+  EXPECT_NE(v.vehicle(1), nullptr);
+  EXPECT_EQ(v.session().vehicle(2), nullptr);
+  // It comes back with a new state (spawned again).
+  ASSERT_TRUE(FramesUntil(
+      v,
+      [&] {
+        ++step;
+        pub.State(state(1));
+        pub.State(state(2));
+        diagnostics({1, 2});
+      },
+      [&] { return v.vehicle(2) != nullptr; }));
+}
+
 // --- arrows ----------------------------------------------------------------------------------
 
 // The tip of an arrow of `kind` on the map: the extreme pixel of its colour in the direction it

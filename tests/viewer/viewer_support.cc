@@ -172,6 +172,7 @@ TestPublisher::TestPublisher(std::uint32_t domain)
     : participant_(domain),
       worlds_(participant_, transport::TopicId::kWorld),
       params_(participant_, transport::TopicId::kParams),
+      diagnostics_(participant_, transport::TopicId::kDiagnostics),
       states_(participant_, transport::TopicId::kStates),
       inputs_(participant_, transport::TopicId::kInput, 10) {}
 
@@ -185,6 +186,9 @@ bool TestPublisher::State(const pb::VehicleState& s) {
 }
 bool TestPublisher::Params(std::uint32_t vehicle_id, const pb::VehicleParams& p) {
   return params_.Write(vehicle_id, p);
+}
+bool TestPublisher::Diagnostics(const pb::Diagnostics& d) {
+  return diagnostics_.Write(transport::ServerKey(d.server_id()), d);
 }
 bool TestPublisher::Input(std::uint32_t vehicle_id, std::uint32_t buttons) {
   pb::DriverInput in;

@@ -77,6 +77,8 @@ class TestPublisher {
   bool World(const pb::WorldDescription& w);
   bool State(const pb::VehicleState& s);
   bool Params(std::uint32_t vehicle_id, const pb::VehicleParams& p);
+  // A server's diagnostics, as its publisher writes them once a window.
+  bool Diagnostics(const pb::Diagnostics& d);
   // Driver input with the next sequence number.
   bool Input(std::uint32_t vehicle_id, std::uint32_t buttons);
   transport::Participant& participant() { return participant_; }
@@ -87,6 +89,7 @@ class TestPublisher {
   transport::Participant participant_;
   transport::Writer<pb::WorldDescription> worlds_;
   transport::Writer<pb::VehicleParams> params_;
+  transport::Writer<pb::Diagnostics> diagnostics_;
   transport::RawWriter
       states_;  // vdyn/states, a state a sample: a viewer reads every vehicle there
   transport::Writer<pb::DriverInput> inputs_;

@@ -78,6 +78,9 @@ int DrawableHeight(SDL_Window* w) {
 }
 
 // A vehicle as received: its states (each passed CheckState), and what the frame shows of it.
+// Without a state of the followed vehicle for this long its server is said to be silent, s.
+constexpr double kSilenceS = 2.0;
+
 struct Tracked {
   StateHistory history;
   std::uint64_t seen = 0;                // SessionView's count when last taken
@@ -88,6 +91,7 @@ struct Tracked {
   std::int64_t instant_ns = 0;       // the instant shown, publisher's clock
   std::int64_t last_instant_ns = 0;  // the previous frame's (latency counted when it moves)
   WheelSpin spin;                    // the wheels' turn, integrated frame by frame
+  base::MonoTime arrived;            // when its newest state was taken here
 };
 
 // A key press held back until the frame's HUD has taken its input: keys typed into a text field
@@ -138,6 +142,9 @@ struct Viewer::Impl {
   bool uploaded = false;
 
   std::map<std::uint32_t, Tracked> tracked;
+  // Each server's newest diagnostics seen (steps, sim time): a new one lists its vehicles.
+  std::map<std::string, std::pair<std::uint64_t, std::int64_t>> diagnostics_seen;
+  bool silence_said = false;  // "no states from server ..." logged for the followed vehicle
   std::map<std::string, ClockOffset> clocks;   // each publisher's clock, by server
   std::map<std::uint32_t, VehicleView> views;  // this frame's, for the followed server
   std::map<std::pair<std::uint32_t, std::string>, std::uint32_t> buttons;  // by vehicle, source
@@ -243,6 +250,8 @@ struct Viewer::Impl {
 
   // Parts of the stages.
   void NoteMissingFollow();
+  void ForgetVehiclesGone();
+  void NoteSilence();
   void HudStatus(const FrameScene& f, float right_px);  // its lines wrap before right_px
   void HudLabels(const FrameScene& f);
   void Line(const std::string& text, const ImVec4* colour = nullptr);
@@ -795,7 +804,9 @@ void Viewer::Impl::TakeSamples() {
     clocks[v.state.server_id()].Observe(v.source_timestamp_ns, arrived);
     t.history.Add(v.state, v.source_timestamp_ns, arrived);
     t.server = v.state.server_id();
+    t.arrived = v.received;
   }
+  ForgetVehiclesGone();
   // The followed vehicle: the chosen one when present, else the lowest id. One chosen but not
   // there is waited for (and said so), never swapped for another.
   const ViewerOptions& o = owner.options_;
@@ -807,6 +818,7 @@ void Viewer::Impl::TakeSamples() {
     owner.followed_ = tracked.begin()->first;
   }
   NoteMissingFollow();
+  NoteSilence();
   // The followed server's terrain on the GPU.
   const std::string server = CurrentServer();
   const AcceptedWorld* accepted = WorldOf(server);
@@ -821,6 +833,54 @@ void Viewer::Impl::TakeSamples() {
   } else if (uploaded) {
     renderer->ClearTerrain();
     uploaded = false;
+  }
+}
+
+// A vehicle its server no longer runs (removed, or the server started again without it) is
+// forgotten: each new diagnostics message of a server lists the vehicles it runs, and one of its
+// vehicles not among them, without a state for half a second, has left. (Before, it stayed on the
+// screen, frozen, counted and reachable with Tab.) A server that stopped sends no diagnostics: its
+// vehicles stay, and the HUD says how long no state has come.
+void Viewer::Impl::ForgetVehiclesGone() {
+  const base::MonoTime now = base::MonotonicNow();
+  for (const auto& [server, d] : session.diagnostics()) {
+    const std::pair<std::uint64_t, std::int64_t> key{d.steps(), d.sim_time_ns()};
+    auto& seen = diagnostics_seen[server];
+    if (seen == key) continue;
+    seen = key;
+    for (auto it = tracked.begin(); it != tracked.end();) {
+      const auto& listed = d.vehicles();
+      const bool runs =
+          std::any_of(listed.begin(), listed.end(), [&](const pb::VehicleDiagnostics& v) {
+            return v.vehicle_id() == it->first;
+          });
+      if (it->second.server != server || runs || now - it->second.arrived < base::Milliseconds(500)) {
+        ++it;
+        continue;
+      }
+      spdlog::info("vdyn-viewer: vehicle {} has left server '{}' (not among the vehicles it runs)",
+                   it->first, server);
+      session.Forget(it->first);
+      it = tracked.erase(it);
+    }
+  }
+}
+
+// No state of the followed vehicle for 2 s (its server stopped, paused, or between lockstep
+// steps): said in the log once, and again when states come back; the HUD says it too.
+void Viewer::Impl::NoteSilence() {
+  const auto it = owner.followed_ ? tracked.find(*owner.followed_) : tracked.end();
+  if (it == tracked.end()) return;
+  const double silent_s = (base::MonotonicNow() - it->second.arrived).seconds();
+  if (silent_s >= kSilenceS && !silence_said) {
+    spdlog::warn("vdyn-viewer: no state of vehicle {} from server '{}' for {:.0f} s (stopped, "
+                 "paused, or a lockstep server between steps)",
+                 it->first, it->second.server, silent_s);
+    silence_said = true;
+  } else if (silent_s < kSilenceS && silence_said) {
+    spdlog::info("vdyn-viewer: states of vehicle {} from server '{}' again", it->first,
+                 it->second.server);
+    silence_said = false;
   }
 }
 
@@ -1115,6 +1175,12 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
   } else if (it != tracked.end() && it->second.at != nullptr) {
     const pb::VehicleState& s = *it->second.at;
     Line(Format("vehicle %u  (%zu on the domain, Tab: next)", s.vehicle_id(), tracked.size()));
+    if (const double silent_s = (base::MonotonicNow() - it->second.arrived).seconds();
+        silent_s >= kSilenceS) {
+      Line(Format("NO STATE from server '%s' for %.0f s: stopped, paused, or between lockstep steps",
+                  it->second.server.c_str(), silent_s),
+           &red);
+    }
     // The vehicle's time and step always agree: its time is its steps (since its first spawn;
     // a restore continues a recording's); the server's clock is shown too where it differs
     // (a vehicle spawned later, or restored into another session).
@@ -1216,6 +1282,7 @@ void Viewer::Impl::ApplyKeys() {
   const bool taken = item_active_before || active_now || ImGui::GetIO().WantTextInput;
   item_active_before = active_now;
   if (taken) return;
+  bool tab_pressed = false;  // a Tab earlier in this frame's keys
   for (const KeyPress& kp : keys) {
     const SDL_Keycode k = kp.key;
     CameraState& c = o.camera;
@@ -1241,8 +1308,11 @@ void Viewer::Impl::ApplyKeys() {
       std::vector<std::uint32_t> ids;
       for (const auto& [id, t] : tracked) ids.push_back(id);
       const bool back = (kp.mod & KMOD_SHIFT) != 0;
-      const auto it =
-          owner.followed_ ? std::find(ids.begin(), ids.end(), *owner.followed_) : ids.end();
+      // From the one a Tab earlier in this frame chose (the followed one changes next frame:
+      // three quick presses in one frame moved one place before).
+      const std::optional<std::uint32_t> from = tab_pressed ? o.follow : owner.followed_;
+      tab_pressed = true;
+      const auto it = from ? std::find(ids.begin(), ids.end(), *from) : ids.end();
       std::size_t i = 0;
       if (it == ids.end()) {
         i = back ? ids.size() - 1 : 0;

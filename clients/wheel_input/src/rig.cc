@@ -13,6 +13,7 @@
 
 #include "command_support.h"
 #include "vdyn/base/text.h"
+#include "vdyn/base/time.h"
 #include "vdyn/wheel_input/mapping.h"
 #include "vdyn/wheel_input/sdl_haptic.h"
 
@@ -151,8 +152,11 @@ void RigLoop::PumpEvents(base::MonoTime now) {
         if (e.key.repeat != 0) break;
         keyboard_.OnKey(e.key.keysym.scancode, e.type == SDL_KEYDOWN);
         if (e.type == SDL_KEYDOWN && e.key.keysym.scancode == SDL_SCANCODE_F12 && window_) {
-          const auto path =
-              cfg_.screenshot_dir / ("vdyn-input-" + std::to_string(++screenshots_) + ".png");
+          // Named by the wall clock's milliseconds, as the viewer's: a counter started at 1 in
+          // every run and overwrote the last run's screenshots.
+          ++screenshots_;
+          const auto path = cfg_.screenshot_dir /
+                            ("vdyn-input-" + std::to_string(base::WallNow().ns / 1'000'000) + ".png");
           window_->RequestScreenshot(path);
           spdlog::info("vdyn-input: screenshot {}", path.string());
         }
@@ -253,6 +257,19 @@ bool RigLoop::Tick(base::MonoTime now) {
     feed_.Poll();
     if (const pb::VehicleParams* p = feed_.params()) ApplyParams(*p, info_);
     const pb::VehicleState* s = feed_.state();
+    // A server that stopped sends no state: said once (the input is still sent), and again when
+    // states come back; the window says it too.
+    if (s != nullptr) {
+      const bool silent = now - feed_.state_received() >= base::Seconds(kStateSilenceS);
+      if (silent && !silence_said_) {
+        spdlog::warn("vdyn-input: no state of vehicle {} for {:.0f} s: the server stopped or is "
+                     "unreachable (input is still sent)",
+                     cfg_.vehicle_id, kStateSilenceS);
+      } else if (!silent && silence_said_) {
+        spdlog::info("vdyn-input: states of vehicle {} again", cfg_.vehicle_id);
+      }
+      silence_said_ = silent;
+    }
     if (s != nullptr) {
       info_.speed_known = true;
       info_.speed_kmh = s->v_wt_b().x() * 3.6;
@@ -286,6 +303,7 @@ void RigLoop::DrawWindow() {
   v.source_id = cfg_.source_id;
   v.driving = driving_;
   v.have_state = feed_.state() != nullptr;
+  v.state_age_s = v.have_state ? (base::MonotonicNow() - feed_.state_received()).seconds() : 0.0;
   v.speed_kmh = info_.speed_kmh;
   v.input = msg_;
   // A refused shift stays on the window for 3 s: long enough to read why.

@@ -137,9 +137,12 @@ std::vector<WindowItem> LayoutWindow(const WindowView& v, int width) {
   const int inner = width - 2 * kMargin;
   l.Line("VDYN-INPUT  " + v.mode, white);
   l.Line("VEHICLE " + std::to_string(v.vehicle_id) + "  SOURCE " + v.source_id +
-             (v.have_state ? (v.driving ? "  DRIVING" : "  NOT DRIVING (ANOTHER SOURCE OWNS IT)")
-                           : "  NO STATE YET"),
-         grey, 2);
+             (!v.have_state ? "  NO STATE YET"
+              : v.state_age_s >= kStateSilenceS
+                  ? fmt::format("  NO STATE FOR {:.0f} S (SERVER GONE?)", v.state_age_s)
+              : v.driving ? "  DRIVING"
+                          : "  NOT DRIVING (ANOTHER SOURCE OWNS IT)"),
+         v.have_state && v.state_age_s >= kStateSilenceS ? Rgb(255, 90, 80) : grey, 2);
   l.Line(v.status, v.status_alarm ? Rgb(255, 90, 80) : Rgb(120, 220, 120), 2);
   l.y() += 8;
 

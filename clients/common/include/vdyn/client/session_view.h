@@ -64,6 +64,9 @@ class SessionView {
 
   const std::map<std::uint32_t, Vehicle>& vehicles() const { return vehicles_; }
   const Vehicle* vehicle(std::uint32_t id) const;
+  // Forgets a vehicle that has left (its server no longer runs it): it is seen again only when a
+  // new state of it arrives.
+  void Forget(std::uint32_t id) { vehicles_.erase(id); }
   // Worlds and diagnostics by server id.
   const std::map<std::string, pb::WorldDescription>& worlds() const { return worlds_; }
   const std::map<std::string, pb::Diagnostics>& diagnostics() const { return diagnostics_; }

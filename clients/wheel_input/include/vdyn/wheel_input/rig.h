@@ -159,6 +159,7 @@ class RigLoop {
   bool status_alarm_ = false;
   double steer_fraction_ = 0;
   bool driving_ = false;
+  bool silence_said_ = false;  // "no state ... for 2 s" logged
   int screenshots_ = 0;
 };
 

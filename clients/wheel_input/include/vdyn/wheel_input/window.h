@@ -16,6 +16,9 @@
 
 namespace vdyn::wheel_input {
 
+// Without a state for this long the server is said to be gone (window and log), s.
+inline constexpr double kStateSilenceS = 2.0;
+
 struct WindowView {
   std::string mode;           // "KEYBOARD", "WHEEL: Logitech G29"
   std::string status;         // one line: "driving", "wheel unplugged: neutral", ...
@@ -24,6 +27,7 @@ struct WindowView {
   std::string source_id;
   bool driving = false;  // the newest state applied this rig's input
   bool have_state = false;
+  double state_age_s = 0;  // since the newest state arrived (a stopped server: it grows)
   double speed_kmh = 0;
   pb::DriverInput input;      // as sent
   std::string shift_refusal;  // a gear shift refused in the last few seconds, and why
