@@ -1150,6 +1150,7 @@ TEST_F(SdlTest, KeyboardDrivesWithRampsAndSteeringReturnsToCentre) {
   auto run = [&](double seconds) {
     for (int i = 0; i < static_cast<int>(std::lround(seconds * 1000)); ++i) {
       t = t + Milliseconds(1);
+      feed.received = t;  // a state each tick (a silent server is said: another test)
       ASSERT_TRUE(rig.Tick(t));
     }
   };
@@ -1590,6 +1591,40 @@ TEST(RigWindow, NoStateForTwoSecondsIsSaidInRed) {
   EXPECT_EQ(gone.text, "VEHICLE 1  SOURCE rig  NO STATE FOR 3 S (SERVER GONE?)");
   EXPECT_EQ(gone.color.r, 255);
   EXPECT_EQ(gone.color.g, 90);
+}
+
+// The rig loop says once when no state has come for 2 s (the server stopped) and once when states
+// come again; it said nothing and its window went on saying DRIVING.
+TEST_F(SdlTest, TheRigSaysWhenNoStateHasComeForTwoSeconds) {
+  SdlContext sdl(true);
+  ASSERT_TRUE(sdl.video()) << sdl.video_error();
+  RecordingSink sink;
+  FakeFeed feed;
+  feed.SetSpeedKmh(30);
+  RigConfig cfg;
+  cfg.source = RigConfig::Source::kAuto;
+  RigLoop rig(cfg, sdl, sink, feed, nullptr);
+  rig.Start();
+  MonoTime t{1'000'000'000};
+  feed.received = t;
+  testing::ExpectLogs logs;
+  for (int i = 0; i < 1900; ++i) {  // 1.9 s without a new state: nothing said yet
+    t = t + Milliseconds(1);
+    ASSERT_TRUE(rig.Tick(t));
+  }
+  EXPECT_EQ(logs.count(), 0);
+  for (int i = 0; i < 200; ++i) {
+    t = t + Milliseconds(1);
+    ASSERT_TRUE(rig.Tick(t));
+  }
+  EXPECT_EQ(logs.count(), 1);  // the warning, once
+  feed.received = t;
+  for (int i = 0; i < 100; ++i) {
+    t = t + Milliseconds(1);
+    feed.received = t;
+    ASSERT_TRUE(rig.Tick(t));
+  }
+  EXPECT_EQ(logs.count(), 1);  // "again" is information, not a warning
 }
 
 // --- the commands (commands.h), called as vdyn-input's main calls them -----------------------
