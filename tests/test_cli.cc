@@ -258,6 +258,30 @@ TEST(Cli, ServerThatCannotStartItsVehiclesSaysWhy) {
                    "no terrain below wheel");
 }
 
+// An option of another mode than the one run is refused with the reason, never ignored (a
+// networked server took --csv and wrote nothing, --lockstep ran past --duration, --batch with
+// --lockstep ran the batch).
+TEST(Cli, ServerRefusesOptionsOfAnotherMode) {
+  testing::UseLoopbackDds();
+  const std::string domain = " --domain " + std::to_string(testing::FreshDomain());
+  ExpectServerSays("--world flat --duration 1 --csv rt.csv" + domain, 2,
+                   "vdyn-server: --csv is for --batch (or --demo)");
+  ExpectServerSays("--world flat --duration 1 --maneuver demo" + domain, 2,
+                   "--maneuver is for --batch");
+  ExpectServerSays("--lockstep --duration 0.5" + domain, 2,
+                   "--duration is for real time and --batch: a lockstep server steps as its "
+                   "client asks");
+  ExpectServerSays("--batch --lockstep --maneuver demo", 2,
+                   "--batch and --lockstep are two things to do: give one");
+  ExpectServerSays("--dump-maneuver demo --dump-vehicle", 2,
+                   "--dump-vehicle and --dump-maneuver are two things to do");
+  ExpectServerSays("--demo --csv out.csv" + domain, 2,
+                   "--domain is for a networked server; --demo runs without one");
+  ExpectServerSays("--dump-vehicle --fz 3000", 2, "--fz is for --tire-curves");
+  ExpectServerSays("--world flat --duration 1 --lockstep-timeout 5" + domain, 2,
+                   "--lockstep-timeout is for --lockstep");
+}
+
 // Without --step-threads the server steps up to 128 --max-vehicles on its loop thread alone (a
 // second thread costs more than it saves on a shared machine: bench/README.md), and one more
 // thread per 128 above, where the machine has the cores. Its log line says what it chose.

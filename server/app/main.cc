@@ -161,6 +161,45 @@ int DefaultStepThreads(int max_vehicles) {
   return std::clamp((max_vehicles + 127) / 128, 1, hardware);
 }
 
+// Which of the server's modes the command line asks for, and an option of another mode it gives:
+// the reason, or empty.
+std::string ModeConflict(const CLI::App& app, const Options& o) {
+  auto given = [&app](const char* name) { return app.count(name) > 0; };
+  std::vector<std::string> modes;  // the one-shot commands and the batch
+  for (const char* m : {"--dump-vehicle", "--dump-maneuver", "--tire-curves"})
+    if (given(m)) modes.push_back(m);
+  const bool batch = o.batch || o.demo;
+  if (batch) modes.push_back(o.demo ? "--demo" : "--batch");
+  if (o.lockstep) modes.push_back("--lockstep");
+  if (modes.size() > 1) return modes[0] + " and " + modes[1] + " are two things to do: give one";
+  if (given("--fz") && !given("--tire-curves")) return "--fz is for --tire-curves";
+  if (!batch) {
+    for (const char* opt : {"--maneuver", "--csv", "--csv-every", "--quiet"}) {
+      if (given(opt)) {
+        return std::string(opt) +
+               " is for --batch (or --demo): a networked server drives from its clients and "
+               "writes no CSV (vdyn-recorder records and exports it)";
+      }
+    }
+  }
+  if (batch || !modes.empty()) {
+    const std::string mode = modes.empty() ? "--batch" : modes[0];
+    for (const char* opt : {"--domain", "--server-id", "--vehicle-ids", "--max-vehicles",
+                            "--step-threads", "--watchdog-ms", "--lockstep-timeout", "--rt-priority",
+                            "--state-writer-nice", "--status", "--no-status", "--stats-out"}) {
+      if (given(opt) && !(mode == "--lockstep")) {
+        return std::string(opt) + " is for a networked server; " + mode + " runs without one";
+      }
+    }
+  }
+  if (o.lockstep && given("--duration")) {
+    return "--duration is for real time and --batch: a lockstep server steps as its client asks "
+           "and stops after --lockstep-timeout without a request";
+  }
+  if (!o.lockstep && given("--lockstep-timeout")) return "--lockstep-timeout is for --lockstep";
+  return {};
+}
+
 int RunNetworked(const Options& o) {
   vdyn::ServerOptions so;
   so.mode = o.lockstep ? vdyn::ServerOptions::Mode::kLockstep
@@ -341,6 +380,12 @@ int main(int argc, char** argv) {
       std::cerr << "vdyn-server: --vehicle-ids: vehicle " << *id << " is listed twice\n";
       return 2;
     }
+  }
+  // Options of another mode than the one run are refused, not ignored (a networked server took
+  // --csv and wrote nothing; --lockstep ran past --duration).
+  if (const std::string why = ModeConflict(app, o); !why.empty()) {
+    std::cerr << "vdyn-server: " << why << "\n";
+    return 2;
   }
   // More vehicles listed than the server may run: said with the option that raises the limit.
   if (o.vehicle_ids.size() > static_cast<std::size_t>(o.max_vehicles)) {
