@@ -13,6 +13,9 @@
 namespace vdyn::python {
 namespace {
 
+// The rate a Driver sends its input at, Hz.
+constexpr limits::Range kDriverRateHz{0.0, 10000.0, true, false, "rate_hz"};
+
 // A call's deadline from its timeout in seconds (finite and >= 0; a time beyond the clock's range,
 // 1e10 s and more, waits without end instead of wrapping round into the past).
 base::Deadline DeadlineIn(double seconds) {
@@ -460,8 +463,8 @@ void Driver::Set(const pb::DriverInput& input) {
 }
 
 void Driver::Start(double rate_hz) {
-  if (!std::isfinite(rate_hz) || rate_hz <= 0 || rate_hz > 10'000) {
-    throw std::invalid_argument("rate_hz must be in (0, 10000], got " + std::to_string(rate_hz));
+  if (const std::string why = limits::Check(kDriverRateHz, rate_hz); !why.empty()) {
+    throw std::invalid_argument(why);  // "rate_hz must be in (0, 10000], got 0"
   }
   if (running_.exchange(true)) throw std::runtime_error("the driver is already running");
   const base::Nanos period{static_cast<std::int64_t>(std::llround(1e9 / rate_hz))};

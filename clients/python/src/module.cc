@@ -14,6 +14,7 @@
 #include "state_columns.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/io/maneuver.h"
+#include "vdyn/io/vehicle_params.h"
 #include "vdyn/messages/input_checks.h"
 #include "vdyn/recorder/mcap.h"
 
@@ -118,6 +119,14 @@ void BindChecks(py::module_& m) {
         return limits::Check(*r, value);
       },
       "Empty when value is within the named limit, else the reason (base/limits.h).");
+  m.def(
+      "merge_vehicle_params",
+      [](const py::bytes& base, const py::bytes& update) {
+        return py::bytes(MergeVehicleParams(Parse<pb::VehicleParams>(base, "vehicle parameters"),
+                                            Parse<pb::VehicleParams>(update, "vehicle parameters"))
+                             .SerializeAsString());
+      },
+      "The serialised VehicleParams `update` merged over `base` as a server merges a change.");
   m.def(
       "why_input_refused",
       [](const py::bytes& input) {

@@ -1,6 +1,7 @@
 """The vdyn package against a real vdyn-server: connect, control, lockstep, real time, driving."""
 
 import math
+import os
 import subprocess
 import time
 
@@ -107,6 +108,8 @@ def test_bad_arguments_are_refused_before_sending(lockstep_server, domain):
         sim.step(1, timeout=float("nan"))
     with pytest.raises(ValueError, match="steer_mode"):
         vdyn.make_input(steer_mode="sideways")
+    with pytest.raises(ValueError, match=r"buttons must be in \[0, 4294967295\], got -1"):
+        vdyn.make_input(buttons=-1)  # protobuf said "Value out of range: -1", naming nothing
 
 
 def test_a_driver_drives_and_the_subscription_loses_no_state(realtime_server, domain):
@@ -246,6 +249,57 @@ def test_a_driver_the_server_would_refuse_raises(lockstep_server, domain):
         drv.set(vdyn.pb.DriverInput(clutch=float("inf")))
     drv.send(vdyn.pb.DriverInput(throttle=0.5))
     assert drv.sent == 1 and drv.failed == 0
+    # A refused start changes nothing: the input it carried is not set (it was, before the
+    # refusal: a second start raised and its input was sent from then on).
+    drv.start(1000.0, vdyn.make_input(throttle=0.2))
+    try:
+        with pytest.raises(RuntimeError, match="already running"):
+            drv.start(500.0, vdyn.make_input(throttle=0.9))
+    finally:
+        drv.stop()
+    with pytest.raises(ValueError, match=r"rate_hz must be in \(0, 10000\], got 0"):
+        drv.start(0, vdyn.make_input(throttle=0.9))
+    assert not drv.running
+    # What the driver holds now is what the first start set: a send() goes out with it.
+    sent = drv.sent
+    drv.start(1000.0)
+    try:
+        t0 = time.monotonic()
+        while drv.sent < sent + 10 and time.monotonic() - t0 < 10:
+            time.sleep(0.01)
+    finally:
+        drv.stop()
+    s = sim.step(1)[1]  # lockstep: the newest input latched at the step
+    assert s.throttle_in[0] == 0.2, s.throttle_in[0]
+
+
+def test_parameters_and_steps_that_would_answer_wrongly_are_refused_or_answered_right(start, domain):
+    tire = os.path.join(os.path.dirname(__file__), "..", "..", "..", "tires",
+                        "vdyn_synthetic_205_55R16_mf61.tir")
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain),
+           "--world", "flat", "--tire", tire], "server")
+    sim = vdyn.Client(domain=domain, timeout=30)
+    assert sim.params(1).lf.HasField("magic_formula")
+    # The documented way back to the brush law: an empty tyre message. It returns once the
+    # change shows (it waited its whole timeout, comparing a protobuf merge that cannot remove).
+    t0 = time.monotonic()
+    sim.set_params(1, {"lf": {"magic_formula": {}}}, timeout=20)
+    assert time.monotonic() - t0 < 10
+    assert not sim.params(1).lf.HasField("magic_formula")
+    assert sim.params(1).rf.HasField("magic_formula")
+    # A string where a number goes (protobuf's JSON mapping took "1800").
+    with pytest.raises(TypeError, match=r"params\['mass'\] must be a number, got '1800' \(str\)"):
+        sim.set_params(1, {"mass": "1800"})
+    with pytest.raises(TypeError, match=r"params\['lf'\]\['radius'\] must be a number"):
+        sim.set_params(1, {"lf": {"radius": "0.3"}})
+    with pytest.raises(TypeError, match=r"params\['abs'\] must be True or False, got 0"):
+        sim.set_params(1, {"abs": 0})
+    # vehicle_id without an input stepped every vehicle and ignored it (also one not there).
+    with pytest.raises(ValueError, match="vehicle_id names the vehicle an input is for"):
+        sim.step(1, None, vehicle_id=99)
+    for n in (-1, 0, 2 ** 40):
+        with pytest.raises(ValueError, match=rf"n must be in \[1, 4294967295\] steps, got {n}"):
+            sim.step(n)
 
 
 def test_timeouts_of_any_length_and_durations_beyond_the_limit(lockstep_server, domain):

@@ -58,6 +58,9 @@ def make_input(steer=0.0, throttle=0.0, brake=0.0, *, gear=0, buttons=0, clutch=
              "hands_off": input_pb2.STEER_HANDS_OFF}
     if steer_mode not in modes:
         raise ValueError(f"steer_mode must be one of {sorted(modes)}, got {steer_mode!r}")
+    for name, value, top in (("buttons", buttons, 0xFFFFFFFF), ("vehicle_id", vehicle_id, 0xFFFFFFFF)):
+        if not 0 <= _whole(name, value) <= top:
+            raise ValueError(f"{name} must be in [0, {top}], got {value}")
     msg = input_pb2.DriverInput(
         vehicle_id=_whole("vehicle_id", vehicle_id), source_id=_text("source_id", source_id),
         steer=_real("steer", steer), throttle=_real("throttle", throttle),
@@ -70,6 +73,32 @@ def make_input(steer=0.0, throttle=0.0, brake=0.0, *, gear=0, buttons=0, clutch=
     return _check_input(msg)
 
 
+def _check_param_types(d, descriptor, path):
+    """A number where a number goes, a bool where a bool goes: protobuf's JSON mapping also takes
+    "1800" for a number, which Python's users do not mean (TypeError names the field)."""
+    from google.protobuf.descriptor import FieldDescriptor as F
+    numeric = {F.TYPE_DOUBLE, F.TYPE_FLOAT, F.TYPE_INT32, F.TYPE_INT64, F.TYPE_UINT32,
+               F.TYPE_UINT64, F.TYPE_SINT32, F.TYPE_SINT64, F.TYPE_FIXED32, F.TYPE_FIXED64,
+               F.TYPE_SFIXED32, F.TYPE_SFIXED64}
+    for key, value in d.items():
+        field = descriptor.fields_by_name.get(key) or next(
+            (f for f in descriptor.fields if f.json_name == key), None)
+        if field is None:
+            continue  # json_format names it
+        where = f"{path}[{key!r}]"
+        items = (enumerate(value) if field.label == F.LABEL_REPEATED and
+                 isinstance(value, (list, tuple)) else [(None, value)])
+        for i, v in items:
+            at = where if i is None else f"{where}[{i}]"
+            if field.type == F.TYPE_MESSAGE and isinstance(v, dict):
+                _check_param_types(v, field.message_type, at)
+            elif field.type in numeric and (isinstance(v, (str, bool)) or
+                                            not isinstance(v, numbers.Real)):
+                raise TypeError(f"{at} must be a number, got {v!r} ({type(v).__name__})")
+            elif field.type == F.TYPE_BOOL and not isinstance(v, bool):
+                raise TypeError(f"{at} must be True or False, got {v!r} ({type(v).__name__})")
+
+
 def _params_message(params):
     """VehicleParams from a message or a dict of its fields (nested dicts for wheels)."""
     if params is None:
@@ -78,6 +107,7 @@ def _params_message(params):
         return params
     if isinstance(params, dict):
         from google.protobuf import json_format
+        _check_param_types(params, vehicle_params_pb2.VehicleParams.DESCRIPTOR, "params")
         try:
             return json_format.ParseDict(params, vehicle_params_pb2.VehicleParams())
         except json_format.ParseError as e:
@@ -230,16 +260,18 @@ class Client:
         return reply
 
     def _wait_params(self, vehicle_id, want, timeout):
-        """Waits until vdyn/params shows every field of `want` (the server publishes a change
-        a moment after its reply)."""
+        """Waits until vdyn/params shows the change `want` (the server publishes it a moment
+        after its reply): until `want` merged over them, as the server merges it (an empty
+        tyre message removes the tyre), changes nothing."""
         from ._errors import TimeoutError
         t = self._t(timeout)
         deadline = time.monotonic() + t
+        want_bytes = want.SerializeToString()
         while True:
             current = self.params(vehicle_id, max(0.0, deadline - time.monotonic()))
-            merged = vehicle_params_pb2.VehicleParams()
-            merged.CopyFrom(current)
-            merged.MergeFrom(want)
+            current_bytes = current.SerializeToString()
+            merged = vehicle_params_pb2.VehicleParams.FromString(
+                _vdyn.merge_vehicle_params(current_bytes, want_bytes))
             if merged == current:
                 return current
             if time.monotonic() >= deadline:
@@ -269,6 +301,12 @@ class Client:
         (out of range, not a number), raises ValueError with the reason before anything is
         stepped. Raises vdyn.TimeoutError naming what did not arrive."""
         n = _whole("n", n)
+        if not 1 <= n <= 0xFFFFFFFF:
+            raise ValueError(f"n must be in [1, 4294967295] steps, got {n}")
+        if input is None and vehicle_id is not None:
+            raise ValueError("vehicle_id names the vehicle an input is for; without an input, "
+                             "step() advances every vehicle and returns each one's states "
+                             "(give input=, or leave vehicle_id out)")
         msg = _input_message(input, vehicle_id, _text("source_id", source_id))
         if msg is not None and msg.vehicle_id == 0:
             raise ValueError("the input names no vehicle: give vehicle_id=")
@@ -354,9 +392,19 @@ class Driver:
         self._d.set(self._bytes(input))
 
     def start(self, rate_hz=1000.0, input=None):
-        if input is not None:
-            self.set(input)
-        self._d.start(_real("rate_hz", rate_hz))
+        """Sends the input at rate_hz in the background. A refused start (running already, a
+        rate out of range, an input the server would not apply) changes nothing: the input
+        sent stays as it was."""
+        rate_hz = _real("rate_hz", rate_hz)
+        if self._d.running:
+            raise RuntimeError("the driver is already running (stop() it first, or set() a new "
+                               "input)")
+        if not (0.0 < rate_hz <= 10000.0):
+            raise ValueError(f"rate_hz must be in (0, 10000], got {rate_hz:g}")
+        data = None if input is None else self._bytes(input)
+        if data is not None:
+            self._d.set(data)
+        self._d.start(rate_hz)
         return self
 
     def stop(self):
