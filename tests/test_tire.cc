@@ -280,6 +280,12 @@ TEST(TireFile, EveryBadFileIsRefusedWithFileLineKeyAndReason) {
        "bad.tir:3: TYRESIDE: 'UP' is not LEFT, RIGHT or SYMMETRIC"},
       {"[MODEL]\nFITTYP = 61\nPDY1 = 1\n[LATERAL]\npdy1 = 2\n",
        "bad.tir:5: PDY1: given twice (first at line 3)"},
+      // Settings given twice (the last won: every length in millimetres; PAC2002 read as MF 6.1).
+      {"[UNITS]\nLENGTH = 'meter'\nLENGTH = 'millimeter'\n[MODEL]\nFITTYP = 61\n",
+       "bad.tir:3: LENGTH: given twice (first at line 2)"},
+      {"[MODEL]\nFITTYP = 6\nFITTYP = 61\n", "bad.tir:3: FITTYP: given twice (first at line 2)"},
+      {"[MODEL]\nFITTYP = 61\nTYRESIDE = 'LEFT'\nTYRESIDE = 'RIGHT'\n",
+       "bad.tir:4: TYRESIDE: given twice (first at line 3)"},
       {"[MODEL\nFITTYP = 61\n", "bad.tir:1: a section line '[MODEL' has no closing ]"},
       {"[]\n", "bad.tir:1: an empty section name"},
       {"FITTYP = 61\n", "bad.tir:1: FITTYP: given before any [SECTION]"},
@@ -341,7 +347,14 @@ TEST(TireFile, AMissingOrUnusableCoefficientIsNamed) {
       {[](auto& m) { m.set_pcx1(0.9); }, "magic_formula.pcx1", "must exceed 1"},
       {[](auto& m) { m.set_pky1(18.0); }, "magic_formula.pky1", "must be negative"},
       {[](auto& m) { m.set_pkx1(-24.0); }, "magic_formula.pkx1", "must be positive"},
-      {[](auto& m) { m.set_fnomin(0.0); }, "magic_formula.fnomin", "must be positive"},
+      {[](auto& m) { m.set_fnomin(0.0); }, "magic_formula.fnomin", "must be in (0, 1e6] N"},
+      {[](auto& m) { m.set_fnomin(1e300); }, "magic_formula.fnomin", "must be in (0, 1e6] N"},
+      // Every load taken as FZMAX (the curves labelled 4500 N were 100 N's).
+      {[](auto& m) { m.set_fzmax(100.0); }, "magic_formula.fzmax",
+       "FZMAX (100 N) is below the nominal load FNOMIN * LFZO (4500 N)"},
+      // Metre values under LENGTH = 'millimeter': a 0.3 mm wheel crawled at 0.37 km/h.
+      {[](auto& m) { m.set_unloaded_radius(0.000316); }, "magic_formula.unloaded_radius",
+       "is not a tyre's radius (0.05 to 3 m): does [UNITS] LENGTH match"},
       {[](auto& m) { m.set_alpmax(2.0); }, "magic_formula.alpmin", "ALPMAX < pi/2"},
       {[](auto& m) { m.set_fittyp(52); }, "magic_formula.fittyp", "not a model vdyn evaluates"},
       {[](auto& m) { m.set_tyreside("UP"); }, "magic_formula.tyreside", "LEFT, RIGHT or SYMMETRIC"},
@@ -756,6 +769,16 @@ TEST(TireCli, TheCurvesOfATyreFileAsCsv) {
   const ServerRun bad = RunServer("--tire-curves " + (dir / "pac.tir").string());
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_THAT(bad.output, HasSubstr("pac.tir:2: FITTYP: 6 is MF 5.2 / PAC2002"));
+  // A load above FZMAX (10000 N) is not evaluated there: the rows were FZMAX's, labelled 20000.
+  const ServerRun above =
+      RunServer("--tire-curves " + SyntheticTirePath().string() + " --fz 3000,20000");
+  EXPECT_EQ(above.exit_code, 2);
+  EXPECT_THAT(above.output, HasSubstr("--fz 20000 N is above the tyre's FZMAX (10000 N)"));
+  // The paper model has no tyre law: a tyre file with it is refused (it read only the radius).
+  const ServerRun paper = RunServer("--batch --world flat --maneuver demo --duration 1 --model "
+                                    "paper --tire " + SyntheticTirePath().string());
+  EXPECT_EQ(paper.exit_code, 2);
+  EXPECT_THAT(paper.output, HasSubstr("lf.magic_formula: the paper model has no tyre law"));
 }
 
 TEST(TireCli, TireOptionsPutTheFileOnTheirWheelsAndTheDumpShowsIt) {

@@ -212,6 +212,17 @@ class TirParser {
       number = ParseFortranNumber(v);
       if (!number) FailKey(key, Quoted(v) + " is not a finite number");
     }
+    // A unit, the model's version or the tyre's side given twice in its section is refused as a
+    // coefficient given twice is (the last one won: LENGTH 'meter' then 'millimeter' made every
+    // length millimetres; FITTYP 6 then 61 read a PAC2002 file as MF 6.1).
+    if (section_ == "UNITS" || key == "FITTYP" || key == "PROPERTY_FILE_FORMAT" ||
+        key == "TYRESIDE") {
+      const std::string where = section_ + "/" + key;
+      if (const auto it = given_settings_.find(where); it != given_settings_.end()) {
+        FailKey(key, "given twice (first at line " + std::to_string(it->second) + ")");
+      }
+      given_settings_[where] = line_;
+    }
     if (section_ == "UNITS") return UnitLine(key, text, number);
     if (key == "FITTYP") {
       if (!number || *number != std::floor(*number)) FailKey(key, "must be a whole number");
@@ -317,6 +328,7 @@ class TirParser {
   std::optional<double> fittyp_;
   int fittyp_line_ = 0;
   std::map<std::string, int> given_;  // coefficient key -> its line
+  std::map<std::string, int> given_settings_;  // "SECTION/KEY" of a unit or setting -> its line
   double length_ = 1.0, force_ = 1.0, angle_ = 1.0, mass_ = 1.0, time_ = 1.0, pressure_ = 0.0;
   pb::MagicFormulaTire out_;
 };

@@ -1,8 +1,11 @@
 #include "vdyn/bridge/tire_curves.h"
 
+#include <algorithm>
 #include <cmath>
+#include <stdexcept>
 #include <numbers>
 
+#include "vdyn/base/text.h"
 #include "vdyn/io/shortest_double.h"
 
 namespace vdyn {
@@ -36,7 +39,15 @@ MfOutput At(const MagicFormula& mf, double Fz, double kappa, double alpha) {
 std::string TireCurvesCsv(const MagicFormula& mf, std::vector<double> loads_N) {
   if (loads_N.empty()) {
     const double fz0 = mf.fnomin * mf.lfzo;
-    loads_N = {0.5 * fz0, fz0, 1.5 * fz0};
+    loads_N = {0.5 * fz0, fz0, std::min(1.5 * fz0, mf.fzmax)};
+  }
+  // Above FZMAX the law takes FZMAX: a row labelled with another load would not be that load's.
+  for (double Fz : loads_N) {
+    if (Fz > mf.fzmax) {
+      throw std::invalid_argument("--fz " + base::FormatNumber(Fz) +
+                                  " N is above the tyre's FZMAX (" + base::FormatNumber(mf.fzmax) +
+                                  " N), where its Magic Formula stops: give loads up to it");
+    }
   }
   constexpr int kPoints = 120;
   std::string out = "curve,Fz_N,kappa,alpha_rad,gamma_rad,Fx_N,Fy_N,Mz_Nm,Mx_Nm,My_Nm\n";

@@ -241,10 +241,14 @@ void AddMagicFormulaIssues(const MagicFormula& m, const std::string& prefix,
     if (!ok) out.push_back({prefix + field, why});
   };
   constexpr double kHalfPi = 1.5707963267948966;
-  need(m.fnomin > 0.0, "fnomin", "the nominal load must be positive");
+  need(m.fnomin > 0.0 && m.fnomin <= 1e6, "fnomin", "the nominal load must be in (0, 1e6] N");
   need(m.lfzo > 0.0, "lfzo", "the nominal load's scale must be positive");
-  need(m.unloaded_radius > 0.0 && m.unloaded_radius <= 3.0, "unloaded_radius",
-       "must be in (0, 3] m");
+  // A tyre's radius, 5 cm to 3 m: a file whose [UNITS] LENGTH does not match its numbers (metre
+  // values under 'millimeter') is caught here instead of driving a car on 0.3 mm wheels.
+  need(m.unloaded_radius >= 0.05 && m.unloaded_radius <= 3.0, "unloaded_radius",
+       FormatApprox(m.unloaded_radius) +
+           " m is not a tyre's radius (0.05 to 3 m): does [UNITS] LENGTH match the file's "
+           "numbers?");
   need(m.longvl > 0.0, "longvl", "the nominal speed must be positive");
   need(m.vxlow > 0.0, "vxlow", "must be positive");
   need(m.nompres > 0.0, "nompres", "the nominal pressure must be positive");
@@ -265,7 +269,9 @@ void AddMagicFormulaIssues(const MagicFormula& m, const std::string& prefix,
        "-pi/2 < ALPMIN < 0 < ALPMAX < pi/2");
   need(m.cammin < m.cammax, "cammin", "CAMMIN must be below CAMMAX");
   need(m.presmin < m.presmax, "presmin", "PRESMIN must be below PRESMAX");
-  need(m.fzmax > 0.0, "fzmax", "must be positive");
+  need(m.fzmax >= m.fnomin * m.lfzo, "fzmax",
+       "FZMAX (" + FormatApprox(m.fzmax) + " N) is below the nominal load FNOMIN * LFZO (" +
+           FormatApprox(m.fnomin * m.lfzo) + " N): every load above it would be taken as FZMAX");
   if (out.size() != issues_before) return;
   // The slip stiffnesses at the nominal load: Fx along the slip, Fy against it (TNO's signs).
   const MfLoad L = MagicFormulaLoad(m, m.fnomin * m.lfzo, 0.0, m.inflpres);
@@ -353,6 +359,11 @@ std::vector<ParamIssue> CheckParams(const Params& p) {
                      "static camber must be in [-0.3, 0.3] rad, got " + FormatNumber(wp.camber)});
     }
     if (wp.mf.enabled) AddMagicFormulaIssues(wp.mf, prefix + "magic_formula.", out);
+    if (wp.mf.enabled && p.model == VehicleModel::kPaper) {
+      out.push_back({prefix + "magic_formula",
+                     "the paper model has no tyre law to give it (it would read only the file's "
+                     "radius): use the full model, or no tyre file"});
+    }
     if (p.model == VehicleModel::kFull && !(wp.damper_coefficient > 0.0)) {
       out.push_back({prefix + "damper_coefficient",
                      "must be positive for the full model (the wheel's travel is set by it)"});
