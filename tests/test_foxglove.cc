@@ -386,6 +386,22 @@ TEST(FoxgloveOutbox, ControlOverItsBoundIsRefusedAndFinishEndsWithClose) {
   EXPECT_TRUE(o.finished());
 }
 
+// A client that pings without reading holds one pong, the newest ping's (RFC 6455 5.5.3): it held
+// one per ping, up to the control bound (64 MiB), and got no answer past it.
+TEST(FoxgloveOutbox, OnlyTheNewestPingsPongWaits) {
+  foxglove::Outbox o(foxglove::Outbox::Limits{});
+  for (int k = 0; k < 10000; ++k) o.PushPong("ping " + std::to_string(k));
+  EXPECT_LT(o.counters().queued_bytes, 1000u);
+  std::string out;
+  std::vector<std::int64_t> stamps;
+  ASSERT_TRUE(o.Take(out, 1 << 20, base::MonoTime{0}, stamps));
+  // One pong frame (opcode 10), the last ping's payload.
+  ASSERT_GE(out.size(), 2u);
+  EXPECT_EQ(static_cast<std::uint8_t>(out[0]), 0x80 | 0x0a);
+  EXPECT_EQ(out.substr(2), "ping 9999");
+  EXPECT_FALSE(o.Take(out, 1 << 20, base::MonoTime{0}, stamps));
+}
+
 // --- the scene
 // ------------------------------------------------------------------------------------
 

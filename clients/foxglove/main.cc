@@ -196,6 +196,7 @@ int main(int argc, char** argv) {
       // The status line once a second; turns a signal or the end of --duration into stop.
       vdyn::base::MonoTime next = start + vdyn::base::Seconds(1);
       fx::Bridge::Counters last;
+      fx::Server::Stats last_st;
       std::uint64_t last_bytes = 0;
       vdyn::base::Nanos last_cpu = cpu0;
       while (!g_stop &&
@@ -213,6 +214,22 @@ int main(int argc, char** argv) {
         if (!no_status) {
           Print(StatusLine(c, last, st.bytes_written - last_bytes, second, cpu - last_cpu));
         }
+        // What was refused or failed in the last second, said in the log (the totals were only
+        // in the summary at the end).
+        if (st.refused > last_st.refused || st.protocol_errors > last_st.protocol_errors) {
+          Print("vdyn-foxglove: in the last second " + std::to_string(st.refused - last_st.refused) +
+                " connection(s) refused (a bad upgrade, or --max-clients " +
+                std::to_string(max_clients) + " reached: HTTP 400/503) and " +
+                std::to_string(st.protocol_errors - last_st.protocol_errors) +
+                " client(s) closed for a WebSocket protocol error");
+        }
+        if (st.accept_errors > last_st.accept_errors) {
+          Print("vdyn-foxglove: " + std::to_string(st.accept_errors - last_st.accept_errors) +
+                " connection(s) could not be accepted in the last second: " +
+                st.last_accept_error + " (out of file descriptors? ulimit -n; tried again every "
+                "100 ms)");
+        }
+        last_st = st;
         last = c;
         last_bytes = st.bytes_written;
         last_cpu = cpu;

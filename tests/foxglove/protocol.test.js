@@ -217,6 +217,13 @@ test("driving from a client is refused unless allowed, then takes the vehicle at
   d.client.sendMessage(input, new TextEncoder().encode(JSON.stringify({ throttle: 7 })));
   await h.until(() => d.status.find((x) => x.level === 1 && /throttle must be in \[-1, 1\], got 7: clamped/.test(x.message)),
                 5000, "a clamped input said");
+  // Channels that drive nothing are refused by name: vehicle 0, another schema (both were taken).
+  d.client.advertise({ topic: "/vehicle/0/input", encoding: "json", schemaName: "vdyn.pb.DriverInput" });
+  d.client.advertise({ topic: "/vehicle/1/input", encoding: "json", schemaName: "foo.Bar" });
+  await h.until(() => d.status.find((x) => /advertise: \/vehicle\/0\/input: vehicle id must be in \[1, 4294967295\], got 0/.test(x.message)),
+                5000, "vehicle 0 refused");
+  await h.until(() => d.status.find((x) => /advertise: \/vehicle\/1\/input: schema 'foo\.Bar', expected vdyn\.pb\.DriverInput/.test(x.message)),
+                5000, "another schema refused");
   d.close();
 });
 

@@ -67,3 +67,26 @@ test("a stalled client's queue drops and warns while the server and the other cl
   healthy.close();
   stalled.close();
 });
+
+// A client closed for a protocol error that reads nothing more cannot take the close frame: it is
+// dropped after the grace period (it kept its --max-clients slot for as long as it stayed
+// connected), the log says why (it said "closed", as for a polite client), and its slot is free.
+test("a closed client that stops reading is dropped after the grace period and frees its slot", async () => {
+  const b = await h.bridge("bridge-grace", ["--max-clients", "1", "--queue-kb", "64"]);
+  const c = new h.Client(b.url);
+  await h.until(() => c.byTopic.has("/vehicle/1/state"), 20000, "vehicle 1 advertised");
+  for (const topic of c.byTopic.keys()) c.subscribe(topic);
+  await h.until(() => c.of("/vehicle/1/state").length > 0, 10000, "a first state");
+  c.ws._socket.pause();  // reads nothing more: the bridge's sends fill the buffers
+  await new Promise((resolve) => setTimeout(resolve, 1000));
+  // A masked frame with the reserved opcode 3: a protocol error (RFC 6455 5.2).
+  c.ws._socket.write(Buffer.from([0x83, 0x80, 1, 2, 3, 4]));
+  const line = await h.waitForLine(b.process, (l) => (/gone: (WebSocket protocol error.*)/.exec(l) || [])[1],
+                                   20000, "the client dropped");
+  assert.match(line, /reserved opcode|opcode 3/i);
+  assert.match(line, /the close was not taken within 5 s: dropped/);
+  const d = new h.Client(b.url);
+  await h.until(() => d.info, 10000, "the slot free again: server info for a new client");
+  d.close();
+  c.ws._socket.destroy();
+});

@@ -14,6 +14,7 @@
 
 #include "foxglove/FrameTransforms.pb.h"
 #include "foxglove/SceneUpdate.pb.h"
+#include "vdyn/base/limits.h"
 #include "vdyn/client/driver_input.h"
 #include "vdyn/client/state_reader.h"
 #include "vdyn/diagnostics.pb.h"
@@ -30,6 +31,9 @@ namespace {
 namespace fg = ::foxglove;
 using protocol::StatusLevel;
 using protocol::WsOpcode;
+
+// The input channels one client may advertise at once (one DDS writer each).
+constexpr std::size_t kMaxClientChannels = 16;
 
 enum class Kind { kState, kTransforms, kScene, kWorld, kDiagnostics, kEvents };
 
@@ -483,14 +487,32 @@ void Bridge::Impl::HandleAdvertise(ClientId id, ClientState& c,
            digits.find_first_not_of("0123456789") == std::string::npos;
       if (ok) vehicle = static_cast<std::uint32_t>(std::stoul(digits));
     }
+    // Each refusal is said to the client and counted (bad client messages).
+    auto refuse = [&](const std::string& why) {
+      ++counters.bad_messages;
+      Status(id, c, StatusLevel::kError, "advertise: " + why);
+    };
     if (!ok) {
-      Status(id, c, StatusLevel::kError,
-             "advertise: topic '" + t + "': driver input goes to /vehicle/<id>/input");
+      refuse("topic '" + t + "': driver input goes to /vehicle/<id>/input");
+      continue;
+    }
+    if (const std::string why = limits::Check(limits::kVehicleId, vehicle); !why.empty()) {
+      refuse(t + ": " + why);  // vehicle 0 was taken, and drove nothing
       continue;
     }
     if (ch.encoding != "json" && ch.encoding != "protobuf") {
-      Status(id, c, StatusLevel::kError,
-             "advertise: " + t + ": encoding '" + ch.encoding + "', expected json or protobuf");
+      refuse(t + ": encoding '" + ch.encoding + "', expected json or protobuf");
+      continue;
+    }
+    if (!ch.schema_name.empty() && ch.schema_name != "vdyn.pb.DriverInput") {
+      refuse(t + ": schema '" + ch.schema_name + "', expected vdyn.pb.DriverInput");
+      continue;
+    }
+    // One writer on vdyn/input per channel: a bounded number a client (2000 in one message made
+    // 2000 DDS writers).
+    if (c.publishes.size() >= kMaxClientChannels && c.publishes.count(ch.id) == 0) {
+      refuse(t + ": this client advertises " + std::to_string(c.publishes.size()) +
+             " channels already, the most one may (" + std::to_string(kMaxClientChannels) + ")");
       continue;
     }
     ClientPublish p;

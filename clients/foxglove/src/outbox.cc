@@ -44,6 +44,16 @@ bool Outbox::PushControl(WsOpcode opcode, std::string_view payload) {
   return true;
 }
 
+void Outbox::PushPong(std::string_view ping_payload) {
+  std::string frame;
+  protocol::AppendFrameHeader(frame, WsOpcode::kPong, ping_payload.size());
+  frame.append(ping_payload);
+  std::lock_guard lock(mu_);
+  if (finishing_) return;
+  pong_ = std::move(frame);
+  Wake();
+}
+
 void Outbox::Finish(std::string_view close_payload) {
   std::string frame;
   protocol::AppendFrameHeader(frame, WsOpcode::kClose, close_payload.size());
@@ -56,6 +66,7 @@ void Outbox::Finish(std::string_view close_payload) {
   data_.clear();
   data_bytes_ = 0;
   latest_.clear();
+  pong_.reset();
   time_ns_.reset();
   Wake();
 }
@@ -186,7 +197,12 @@ bool Outbox::Take(std::string& out, std::size_t max_bytes, base::MonoTime now,
   std::lock_guard lock(mu_);
   DropAged(now);
   MaybeWarn(now);
-  if (!time_ns_ && control_.empty() && data_.empty()) return false;
+  if (!time_ns_ && !pong_ && control_.empty() && data_.empty()) return false;
+  if (pong_) {
+    out += *pong_;
+    pong_.reset();
+    ++counters_.sent_messages;
+  }
   if (time_ns_) {
     std::uint8_t t[protocol::kTimeBytes];
     protocol::WriteTime(t, *time_ns_);
@@ -224,7 +240,7 @@ bool Outbox::Take(std::string& out, std::size_t max_bytes, base::MonoTime now,
 Outbox::Counters Outbox::counters() const {
   std::lock_guard lock(mu_);
   Counters c = counters_;
-  c.queued_bytes = data_bytes_ + control_bytes_;
+  c.queued_bytes = data_bytes_ + control_bytes_ + (pong_ ? pong_->size() : 0);
   return c;
 }
 

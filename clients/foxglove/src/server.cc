@@ -83,7 +83,10 @@ struct Server::Impl {
   ClientId next_id = 1;
   std::map<ClientId, std::weak_ptr<ConnectionBase>> connections;  // the io thread's
   std::atomic<std::uint64_t> connections_total{0}, http_requests{0}, refused{0}, protocol_errors{0},
-      bytes_written{0};
+      bytes_written{0}, accept_errors{0};
+  mutable std::mutex accept_error_mu;
+  std::string last_accept_error;
+  asio::steady_timer accept_retry{io};
   std::atomic<int> clients{0};
   std::mutex latency_mu;
   LatencyHistogram latency;
@@ -140,6 +143,17 @@ class Connection final : public ConnectionBase,
     if (dropped_ || closing_) return;
     if (!outbox_) return Drop(reason);
     closing_ = true;
+    close_reason_ = reason;  // the log says it (it said "closed", as for a polite client)
+    // A client that does not read keeps its socket and its slot: dropped after a grace period
+    // for the close frame to go out (it held its --max-clients slot for as long as it stayed).
+    idle_.expires_after(std::chrono::seconds(kCloseGraceS));
+    idle_.async_wait([weak = this->weak_from_this()](beast::error_code ec) {
+      if (ec) return;
+      if (auto self = weak.lock(); self && !self->dropped_) {
+        self->Drop(self->close_reason_ + " (the close was not taken within " +
+                   std::to_string(kCloseGraceS) + " s: dropped)");
+      }
+    });
     // Say why in a status first (Foxglove shows it), then the close frame; nothing after it.
     (void)outbox_->PushControl(WsOpcode::kText,
                                protocol::StatusJson(protocol::StatusLevel::kError, reason));
@@ -311,13 +325,14 @@ class Connection final : public ConnectionBase,
                 id_, {reinterpret_cast<const std::uint8_t*>(ev.payload.data()), ev.payload.size()});
             break;
           case protocol::FrameReader::Event::Kind::kPing:
-            (void)outbox_->PushControl(WsOpcode::kPong, ev.payload);
+            outbox_->PushPong(ev.payload);  // the newest ping's pong (it queued one per ping)
             break;
           case protocol::FrameReader::Event::Kind::kPong:
             break;
           case protocol::FrameReader::Event::Kind::kClose:
             // Answer with the client's code (or none), then close.
             closing_ = true;
+            close_reason_ = "closed by the client";
             outbox_->Finish(ev.payload.size() >= 2 ? ev.payload.substr(0, 2) : std::string());
             MaybeWrite();
             return false;
@@ -357,7 +372,7 @@ class Connection final : public ConnectionBase,
   void Shutdown() {
     beast::error_code ec;
     Socket(stream_).shutdown(tcp::socket::shutdown_send, ec);
-    Drop(closing_ ? "closed" : "shut down");
+    Drop(closing_ ? (close_reason_.empty() ? "closed" : close_reason_) : "shut down");
   }
 
   void Drop(const std::string& why) {
@@ -386,6 +401,8 @@ class Connection final : public ConnectionBase,
   std::string wbuf_;
   std::vector<std::int64_t> stamps_;
   bool opened_ = false, writing_ = false, closing_ = false, dropped_ = false;
+  std::string close_reason_;  // why it is closing, for the log
+  static constexpr int kCloseGraceS = 5;
 };
 
 }  // namespace
@@ -393,6 +410,21 @@ class Connection final : public ConnectionBase,
 void Server::Impl::Accept() {
   acceptor.async_accept([this](beast::error_code ec, tcp::socket socket) {
     if (ec == asio::error::operation_aborted) return;
+    if (ec) {
+      // Out of file descriptors (or another failure): counted and said by the status loop, and
+      // tried again after a pause. Re-armed at once, the failing accept spun a core and served
+      // nobody.
+      ++accept_errors;
+      {
+        std::lock_guard lock(accept_error_mu);
+        last_accept_error = ec.message();
+      }
+      accept_retry.expires_after(std::chrono::milliseconds(100));
+      accept_retry.async_wait([this](beast::error_code wait_ec) {
+        if (!wait_ec) Accept();
+      });
+      return;
+    }
     if (!ec) {
       beast::error_code ignore;
       socket.set_option(tcp::no_delay(true), ignore);
@@ -505,6 +537,11 @@ Server::Stats Server::stats() const {
   s.refused = impl_->refused;
   s.protocol_errors = impl_->protocol_errors;
   s.bytes_written = impl_->bytes_written;
+  s.accept_errors = impl_->accept_errors;
+  {
+    std::lock_guard lock(impl_->accept_error_mu);
+    s.last_accept_error = impl_->last_accept_error;
+  }
   s.clients = impl_->clients;
   return s;
 }

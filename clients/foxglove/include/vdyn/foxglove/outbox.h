@@ -47,6 +47,9 @@ class Outbox {
                 std::shared_ptr<const std::string> payload, base::MonoTime now,
                 std::int64_t source_ns = 0, bool latest_only = false);
   void PushTime(std::uint64_t time_ns);
+  // The answer to a ping: only the newest ping's pong is kept until it is sent (RFC 6455 5.5.3
+  // allows it), so a client that pings without reading holds one pong here, not a queue of them.
+  void PushPong(std::string_view ping_payload);
   // Drops queued data of these subscriptions (unsubscribed, or their channel went).
   void Purge(const std::vector<std::uint32_t>& subscription_ids);
 
@@ -101,6 +104,7 @@ class Outbox {
   std::uint64_t front_seq_ = 0;                              // sequence number of data_.front()
   std::unordered_map<std::uint32_t, std::uint64_t> latest_;  // subscription -> its queued item
   std::optional<std::uint64_t> time_ns_;
+  std::optional<std::string> pong_;  // a whole pong frame
   Counters counters_;
   std::uint64_t unreported_messages_ = 0, unreported_bytes_ = 0;
   base::MonoTime first_unreported_{};

@@ -86,6 +86,8 @@ class Server {
     std::uint64_t refused = 0;  // upgrades refused (no Foxglove subprotocol, too many clients)
     std::uint64_t protocol_errors = 0;  // clients closed for a framing error
     std::uint64_t bytes_written = 0;
+    std::uint64_t accept_errors = 0;  // accepts that failed (e.g. out of file descriptors)
+    std::string last_accept_error;
     int clients = 0;  // open now
   };
   Stats stats() const;
