@@ -7,12 +7,14 @@
 #include <cstdio>
 #include <numbers>
 
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include "test_support.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/physics/full_model.h"
+#include "vdyn/runtime/batch.h"
 
 namespace vdyn {
 namespace {
@@ -775,6 +777,46 @@ TEST(FullModelProperties, ThePaperModelReadsAHandWheelAngleThroughTheSteeringRat
   sim.SetInput(in);
   ASSERT_EQ(sim.Step(), StepStatus::kOk);
   EXPECT_EQ(sim.last_step().control.gamma, 0.0);
+}
+
+}  // namespace
+}  // namespace vdyn
+
+namespace vdyn {
+namespace {
+
+// This model has no contact of the body with the ground: a car that rolls over (mu 3, a 30 degree
+// step of the road wheels at 60 km/h) fell through the ground for ever and a batch ended with exit
+// 0 kilometres underground. The step that takes its centre under the ground (no wheel touching,
+// nothing below, the surface above) is refused: the state stays at x_n and the step says why.
+TEST(FullModelProperties, ARolledOverCarIsStoppedAtTheGroundNotLetFallThroughIt) {
+  const ValidParams params = testing::ParamsWith([](pb::VehicleParams& m) { m.set_mu(3.0); });
+  const Maneuver m = Maneuver::Parse(
+      "t_s,steer_deg,throttle,brake,cruise_kmh\n0,0,0,0,60\n3,0,0,0,60\n3.5,30,0,0,60\n", "roll");
+  Simulator sim(testing::SharedWorld("flat"), params);
+  sim.Spawn({0.0, 0.0, 0.0});
+  StepStatus status = StepStatus::kOk;
+  double lowest_z = 1e9, largest_roll = 0;
+  for (int k = 0; k < 20'000 && status == StepStatus::kOk; ++k) {
+    sim.SetInput(FromManeuver(m.At(sim.time())));
+    status = sim.Step();
+    lowest_z = std::min(lowest_z, Position(sim.state().x).z());
+    largest_roll = std::max(largest_roll, std::abs(RollPitchYaw(Orientation(sim.state().x)).x()));
+  }
+  ASSERT_EQ(status, StepStatus::kUnderGround);
+  EXPECT_EQ(sim.under_ground_steps(), 1u);
+  EXPECT_GT(largest_roll, 1.5);  // it did roll over (past 86 degrees)
+  EXPECT_GT(lowest_z, -0.5);     // kept at the ground, not kilometres under it
+  EXPECT_TRUE(sim.state().x.allFinite());
+  // A batch says so and fails (exit 1 from vdyn-server --batch).
+  Simulator again(testing::SharedWorld("flat"), params);
+  again.Spawn({0.0, 0.0, 0.0});
+  BatchOptions o;
+  o.duration = 20.0;
+  const BatchSummary s = RunBatch(again, m, o, nullptr);
+  EXPECT_FALSE(s.ok);
+  EXPECT_THAT(s.error, ::testing::HasSubstr("the vehicle fell through the ground at t = "));
+  EXPECT_THAT(s.error, ::testing::HasSubstr("this model has no contact of the body with the ground"));
 }
 
 }  // namespace

@@ -90,4 +90,16 @@ test("an exported recording holds the recording unchanged and Foxglove's scene o
     assert.equal(forces.arrows.length, 18);
     assert.ok(Math.abs(forces.arrows[0].pose.position.z - s.wheels[0].p_b_w.z) < 1e-9, "the LF spring arrow at B");
   }
+
+  // The export of an export replaces the earlier scene (it added a second set of scene channels:
+  // two scenes of each vehicle in Foxglove).
+  const again = path.join(h.work, "drive-foxglove-again.mcap");
+  const exp2 = h.start("export-again", h.bin.recorder, ["export", out, "--foxglove", again]);
+  assert.equal(await exp2.exited, 0, exp2.lines.join("\n"));
+  assert.match(exp2.lines.join("\n"), /had a Foxglove scene of an earlier export \(\d+ messages on 3 channels\): replaced by this one/);
+  const c = await read(again, handlers);
+  for (const topic of ["/vehicle/1/scene", "/vehicle/1/tf", "/vdyn/world"]) {
+    assert.equal(c.get(topic).length, b.get(topic).length, `${topic}: one scene, not two`);
+  }
+  assert.equal(c.get("vdyn/state/1").length, a.get("vdyn/state/1").length);
 });

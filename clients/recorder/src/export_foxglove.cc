@@ -62,7 +62,8 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
   std::map<std::uint32_t, pb::VehicleParams> params;
   std::map<std::uint32_t, std::uint64_t> last_scene;  // vehicle -> log time of its last scene
   std::set<std::uint64_t> terrains;                   // terrain hashes written
-  std::uint64_t copied = 0, scenes = 0, malformed = 0, undrawable = 0, orphans = 0;
+  std::uint64_t copied = 0, scenes = 0, malformed = 0, undrawable = 0, orphans = 0, replaced = 0;
+  std::set<std::uint16_t> earlier_scene;  // channels of a scene an earlier export added
   pb::VehicleState state;
   fg::SceneUpdate scene;
   fg::FrameTransforms transforms;
@@ -85,6 +86,12 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
     schema_ids[s.id] = w.AddSchema(s.name, s.encoding, s.data);
   };
   v.on_channel = [&](const mcap::Channel& c) {
+    // A scene an earlier export added (a copy of a copy): replaced by this one, not doubled.
+    if (const auto tag = c.metadata.find("vdyn");
+        tag != c.metadata.end() && tag->second == "foxglove scene") {
+      earlier_scene.insert(c.id);
+      return;
+    }
     const auto s = schemas.find(c.schema_id);
     channel_ids[c.id] = w.AddChannel(c.schema_id == 0 ? 0 : schema_ids[c.schema_id], c.topic,
                                      c.message_encoding, c.metadata);
@@ -96,6 +103,10 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
     w.WriteMetadata(m.name, m.values);
   };
   v.on_message = [&](const mcap::Message& m, std::uint64_t) {
+    if (earlier_scene.count(m.channel_id) != 0) {
+      ++replaced;
+      return;
+    }
     const auto id = channel_ids.find(m.channel_id);
     if (id == channel_ids.end()) {
       ++orphans;
@@ -163,6 +174,10 @@ int RunExportFoxglove(const FoxgloveExportOptions& o, std::ostream& out) {
   }
   if (orphans > 0)
     out << "vdyn-recorder export: " << orphans << " messages on undefined channels were left out\n";
+  if (!earlier_scene.empty()) {
+    out << "vdyn-recorder export: the file had a Foxglove scene of an earlier export (" << replaced
+        << " messages on " << earlier_scene.size() << " channels): replaced by this one\n";
+  }
   if (undrawable > 0)
     out << "vdyn-recorder export: " << undrawable
         << " states could not be drawn (no scene for them)\n";

@@ -1031,6 +1031,9 @@ void Viewer::Impl::BuildLists(const FrameScene& f, const Mat4& view_proj, const 
 void Viewer::Impl::Occupied() {
   const ImVec2 p = ImGui::GetWindowPos(), sz = ImGui::GetWindowSize();
   hud_boxes.push_back({p.x, p.y, p.x + sz.x, p.y + sz.y});
+  // A window ImGui pushed past the top or left edge (the display shrank to a few pixels) comes
+  // back by the next frame: it stayed clipped after the window grew again.
+  if (p.x < 0 || p.y < 0) ImGui::SetWindowPos(ImVec2(std::max(p.x, 0.0f), std::max(p.y, 0.0f)));
 }
 
 // A line of the HUD: drawn, and kept for tests.

@@ -313,6 +313,20 @@ StepStatus Simulator::Step() {
     return StepStatus::kNonFinite;
   }
   x.segment<4>(sx::kQ) /= qn;
+  // Stage: the body under the ground (StepStatus::kUnderGround). Only while no wheel touches it
+  // (two traces then; none while driving): nothing below the centre T within 10 km, and the
+  // ground above it.
+  bool any_contact = false;
+  for (const WheelOutputs& w : record_.derived.wheel) any_contact = any_contact || w.contact;
+  if (!any_contact) {
+    const Eigen::Vector3d p = Position(x);
+    if (!terrain.Trace(p, -Eigen::Vector3d::UnitZ(), 1e4).hit &&
+        terrain.Trace(p, Eigen::Vector3d::UnitZ(), 1e4).hit) {
+      state_ = ws_.start;
+      ++under_ground_steps_;
+      return StepStatus::kUnderGround;
+    }
+  }
   if (params_->model == VehicleModel::kPaper && params_->yaw_mode == YawMode::kPaper &&
       ws_.stage_derived.any_contact) {
     // The yaw rate is eq. 6 of the new state (contact as seen by the last stage).

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <optional>
 
+#include "vdyn/base/text.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/runtime/csv_pipe.h"
 
@@ -34,11 +35,18 @@ BatchSummary RunBatch(Simulator& sim, const Maneuver& maneuver, const BatchOptio
 
   for (std::int64_t i = 0; i < n_steps; ++i) {
     sim.SetInput(FromManeuver(maneuver.At(sim.time())));
-    if (sim.Step() != StepStatus::kOk) {
+    if (const StepStatus status = sim.Step(); status != StepStatus::kOk) {
       s.ok = false;
-      s.error = "the state became non-finite at t = " + std::to_string(sim.time()) +
-                " s (step " + std::to_string(sim.state().step) +
-                "); the run stopped there and the last finite state was kept";
+      s.error = (status == StepStatus::kUnderGround
+                     ? "the vehicle fell through the ground at t = "
+                     : "the state became non-finite at t = ") +
+                base::FormatFixed(sim.time(), 3) + " s (step " +
+                std::to_string(sim.state().step) + ")" +
+                (status == StepStatus::kUnderGround
+                     ? ": its wheels off the ground and its centre under it (it rolled over? "
+                       "this model has no contact of the body with the ground: docs/model.md)"
+                     : "") +
+                "; the run stopped there and the last state before it was kept";
       break;
     }
     const StepRecord& r = sim.last_step();

@@ -353,6 +353,7 @@ void ServerNode::PushReport(base::MonoTime now) {
       std::memcpy(v.source, src.data(), n);
       v.source[n] = '\0';
       v.nonfinite_steps = sim.nonfinite_steps();
+      v.under_ground_steps = sim.under_ground_steps();
       v.sanitized_inputs = sim.sanitized_inputs();
       v.invariant_failures = sim.invariant_failures();
       std::snprintf(v.last_invariant_failure, sizeof v.last_invariant_failure, "%s",
@@ -1172,14 +1173,21 @@ void ServerNode::PublishReport(WindowReport& r) {
     const VehicleReport& v = r.vehicles[i];
     // A state that went non-finite is contained (the vehicle put back at rest where it was, a
     // spawned event): said in the log too, not only counted in the diagnostics.
-    std::uint64_t& said = nonfinite_said_[v.id];
-    if (v.nonfinite_steps < said) said = 0;  // a new vehicle of that id counts afresh
+    auto& [said, said_under] = contained_said_[v.id];
+    if (v.nonfinite_steps < said || v.under_ground_steps < said_under) said = said_under = 0;
     if (v.nonfinite_steps > said) {
       spdlog::warn("server '{}': vehicle {}: its state became non-finite in {} more step(s) ({} in "
                    "all): put back at rest where it was (its parameters or input drive it past "
                    "what the step resolves?)",
                    server_id, v.id, v.nonfinite_steps - said, v.nonfinite_steps);
       said = v.nonfinite_steps;
+    }
+    if (v.under_ground_steps > said_under) {
+      spdlog::warn("server '{}': vehicle {}: fell through the ground {} more time(s) ({} in all): "
+                   "put back on its wheels where it was (it rolled over? this model has no "
+                   "contact of the body with the ground)",
+                   server_id, v.id, v.under_ground_steps - said_under, v.under_ground_steps);
+      said_under = v.under_ground_steps;
     }
     pb::VehicleDiagnostics* vd = d.add_vehicles();
     vd->set_vehicle_id(v.id);

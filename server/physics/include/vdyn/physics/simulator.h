@@ -42,7 +42,12 @@ struct StepRecord {
   std::uint64_t hash_after = 0;  // StateHash of x_{n+1}
 };
 
-enum class StepStatus { kOk, kNonFinite };
+// kNonFinite: the step made the state non-finite. kUnderGround: no wheel touches the ground and
+// the body's centre is under all of it (nothing below it, the surface above it): this model has
+// no contact of the body with the ground, so a car that rolled over falls through it for ever.
+// Either way the state stays at x_n (the step is discarded) and the caller decides what follows
+// (the session puts the vehicle back on its wheels there, a batch stops with the reason).
+enum class StepStatus { kOk, kNonFinite, kUnderGround };
 
 class Simulator {
  public:
@@ -85,6 +90,7 @@ class Simulator {
   double time() const { return static_cast<double>(state_.step) * h_; }
   std::int64_t step_ns() const { return config_.step_ns; }
   std::uint64_t nonfinite_steps() const { return nonfinite_steps_; }
+  std::uint64_t under_ground_steps() const { return under_ground_steps_; }
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
@@ -111,6 +117,7 @@ class Simulator {
   StepRecord record_;
   Workspace ws_;
   std::uint64_t nonfinite_steps_ = 0;
+  std::uint64_t under_ground_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
   std::uint64_t invariant_failures_ = 0;

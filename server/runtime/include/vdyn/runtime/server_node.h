@@ -96,6 +96,7 @@ class ServerNode {
     double input_age_ms = -1;
     char source[72] = {};
     std::uint64_t nonfinite_steps = 0;
+    std::uint64_t under_ground_steps = 0;
     std::uint64_t sanitized_inputs = 0;
     std::uint64_t invariant_failures = 0;
     char last_invariant_failure[160] = {};
@@ -270,8 +271,8 @@ class ServerNode {
   std::int64_t window_start_steps_ = 0;
   // Publisher's view for the status line.
   std::int64_t last_status_ns_ = 0;
-  // Publisher thread: each vehicle's non-finite steps already said in the log.
-  std::map<std::uint32_t, std::uint64_t> nonfinite_said_;
+  // Publisher thread: each vehicle's non-finite and under-ground steps already said in the log.
+  std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>> contained_said_;
 };
 
 }  // namespace vdyn
