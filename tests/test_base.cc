@@ -237,7 +237,9 @@ TEST(Limits, EveryVehicleParameterIsNamedInWordsAndTheDocumentationSaysTheSame) 
     ASSERT_FALSE(words.empty()) << "the table of limits does not name " << path;
     ASSERT_EQ(doc.count(row), 1u) << "docs/formats.md does not list " << row;
     EXPECT_EQ(doc.at(row).first, words);
-    if (const limits::Range* r = limits::ParamRange(path)) {
+    if (f->type() == gp::FieldDescriptor::TYPE_BOOL) {
+      EXPECT_EQ(doc.at(row).second, "`true`, `false`");  // a switch, not a number
+    } else if (const limits::Range* r = limits::ParamRange(path)) {
       EXPECT_EQ(doc.at(row).second, limits::Describe(*r));
     } else if (f->enum_type() != nullptr) {
       std::string choices;

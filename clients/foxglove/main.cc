@@ -63,6 +63,34 @@ std::string StatusLine(const fx::Bridge::Counters& c, const fx::Bridge::Counters
          " ms | CPU " + Fixed(100.0 * cpu.seconds(), 1) + " %";
 }
 
+// Where Foxglove and a browser connect.
+void PrintListening(const fx::Server& server, const std::string& host, std::uint32_t domain,
+                    bool allow_input) {
+  const std::string shown = host == "0.0.0.0" ? "127.0.0.1" : host;
+  const std::string s = server.tls() ? "s" : "";
+  const std::string port = std::to_string(server.port());
+  Print("vdyn-foxglove: listening on ws" + s + "://" + shown + ":" + port +
+        " (Foxglove/Lichtblick), the page at http" + s + "://" + shown + ":" + port + "/ (domain " +
+        std::to_string(domain) + ", " + (allow_input ? "input allowed" : "input off") + ")");
+}
+
+// What was refused or failed in the last second, said in the log (the totals were only in the
+// summary at the end).
+void PrintRefusals(const fx::Server::Stats& st, const fx::Server::Stats& last,
+                   std::uint32_t max_clients) {
+  if (st.refused > last.refused || st.protocol_errors > last.protocol_errors) {
+    Print("vdyn-foxglove: in the last second " + std::to_string(st.refused - last.refused) +
+          " connection(s) refused (a bad upgrade, or --max-clients " + std::to_string(max_clients) +
+          " reached: HTTP 400/503) and " + std::to_string(st.protocol_errors - last.protocol_errors) +
+          " client(s) closed for a WebSocket protocol error");
+  }
+  if (st.accept_errors > last.accept_errors) {
+    Print("vdyn-foxglove: " + std::to_string(st.accept_errors - last.accept_errors) +
+          " connection(s) could not be accepted in the last second: " + st.last_accept_error +
+          " (out of file descriptors? ulimit -n; tried again every 100 ms)");
+  }
+}
+
 // The summary at the end: the whole run.
 std::string Summary(const fx::Bridge::Counters& c, const fx::Server::Stats& st,
                     const fx::LatencyHistogram& latency, double wall_s, double cpu_s) {
@@ -181,12 +209,7 @@ int main(int argc, char** argv) {
     }
     bridge.SetCloser(
         [&server](fx::ClientId id, const std::string& why) { server->Close(id, why); });
-    const std::string shown = host == "0.0.0.0" ? "127.0.0.1" : host;
-    const std::string s = server->tls() ? "s" : "";
-    Print("vdyn-foxglove: listening on ws" + s + "://" + shown + ":" +
-          std::to_string(server->port()) + " (Foxglove/Lichtblick), the page at http" + s + "://" +
-          shown + ":" + std::to_string(server->port()) + "/ (domain " + std::to_string(domain) +
-          ", " + (allow_input ? "input allowed" : "input off") + ")");
+    PrintListening(*server, host, domain, allow_input);
     std::thread net([&] { server->Run(); });
     const vdyn::base::MonoTime start = vdyn::base::MonotonicNow();
     const vdyn::base::Nanos cpu0 = vdyn::base::ProcessCpuTime();
@@ -214,21 +237,7 @@ int main(int argc, char** argv) {
         if (!no_status) {
           Print(StatusLine(c, last, st.bytes_written - last_bytes, second, cpu - last_cpu));
         }
-        // What was refused or failed in the last second, said in the log (the totals were only
-        // in the summary at the end).
-        if (st.refused > last_st.refused || st.protocol_errors > last_st.protocol_errors) {
-          Print("vdyn-foxglove: in the last second " + std::to_string(st.refused - last_st.refused) +
-                " connection(s) refused (a bad upgrade, or --max-clients " +
-                std::to_string(max_clients) + " reached: HTTP 400/503) and " +
-                std::to_string(st.protocol_errors - last_st.protocol_errors) +
-                " client(s) closed for a WebSocket protocol error");
-        }
-        if (st.accept_errors > last_st.accept_errors) {
-          Print("vdyn-foxglove: " + std::to_string(st.accept_errors - last_st.accept_errors) +
-                " connection(s) could not be accepted in the last second: " +
-                st.last_accept_error + " (out of file descriptors? ulimit -n; tried again every "
-                "100 ms)");
-        }
+        PrintRefusals(st, last_st, max_clients);
         last_st = st;
         last = c;
         last_bytes = st.bytes_written;

@@ -200,6 +200,29 @@ std::string ModeConflict(const CLI::App& app, const Options& o) {
   return {};
 }
 
+// What the parsed command line asks that cannot be done, said as one (exit 2); fills the
+// vehicle ids from their entries.
+std::string CheckCommandLine(const CLI::App& app, Options& o) {
+  o.vehicle_ids = vdyn::cli::ExpandVehicleIds(o.vehicle_id_entries);
+  // A vehicle listed twice is a slip in the list, said as one (not "vehicle 1 exists already").
+  for (auto id = o.vehicle_ids.begin(); id != o.vehicle_ids.end(); ++id) {
+    if (std::find(o.vehicle_ids.begin(), id, *id) != id) {
+      return "--vehicle-ids: vehicle " + std::to_string(*id) + " is listed twice";
+    }
+  }
+  // Options of another mode than the one run are refused, not ignored (a networked server took
+  // --csv and wrote nothing; --lockstep ran past --duration).
+  if (std::string why = ModeConflict(app, o); !why.empty()) return why;
+  // More vehicles listed than the server may run: said with the option that raises the limit.
+  if (o.vehicle_ids.size() > static_cast<std::size_t>(o.max_vehicles)) {
+    return "--vehicle-ids lists " + std::to_string(o.vehicle_ids.size()) +
+           " vehicles and --max-vehicles is " + std::to_string(o.max_vehicles) +
+           ": raise --max-vehicles to " + std::to_string(o.vehicle_ids.size()) + " (at most " +
+           std::to_string(static_cast<int>(vdyn::limits::kMaxVehicles.hi)) + ") or list fewer";
+  }
+  return {};
+}
+
 int RunNetworked(const Options& o) {
   vdyn::ServerOptions so;
   so.mode = o.lockstep ? vdyn::ServerOptions::Mode::kLockstep
@@ -373,26 +396,8 @@ int main(int argc, char** argv) {
 
   // --help is a success; every parse error is a usage error (exit code 2).
   if (const int code = vdyn::cli::Parse(app, argc, argv); code >= 0) return code;
-  o.vehicle_ids = vdyn::cli::ExpandVehicleIds(o.vehicle_id_entries);
-  // A vehicle listed twice is a slip in the list, said as one (not "vehicle 1 exists already").
-  for (auto id = o.vehicle_ids.begin(); id != o.vehicle_ids.end(); ++id) {
-    if (std::find(o.vehicle_ids.begin(), id, *id) != id) {
-      std::cerr << "vdyn-server: --vehicle-ids: vehicle " << *id << " is listed twice\n";
-      return 2;
-    }
-  }
-  // Options of another mode than the one run are refused, not ignored (a networked server took
-  // --csv and wrote nothing; --lockstep ran past --duration).
-  if (const std::string why = ModeConflict(app, o); !why.empty()) {
+  if (const std::string why = CheckCommandLine(app, o); !why.empty()) {
     std::cerr << "vdyn-server: " << why << "\n";
-    return 2;
-  }
-  // More vehicles listed than the server may run: said with the option that raises the limit.
-  if (o.vehicle_ids.size() > static_cast<std::size_t>(o.max_vehicles)) {
-    std::cerr << "vdyn-server: --vehicle-ids lists " << o.vehicle_ids.size()
-              << " vehicles and --max-vehicles is " << o.max_vehicles << ": raise --max-vehicles to "
-              << o.vehicle_ids.size() << " (at most " << static_cast<int>(vdyn::limits::kMaxVehicles.hi)
-              << ") or list fewer\n";
     return 2;
   }
 
