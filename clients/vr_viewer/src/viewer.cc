@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <cmath>
 #include <cstdarg>
 #include <cstdio>
@@ -1071,6 +1072,8 @@ void Viewer::Impl::BuildHud(const FrameScene& f) {
                           ImVec2(0, 1));
   ImGui::SetNextWindowBgAlpha(0.7f);
   ImGui::SetNextWindowCollapsed(!legend_open, ImGuiCond_Always);
+  // Never narrower than its title: a display shrunk to a few pixels left it cut to "for" after.
+  ImGui::SetNextWindowSizeConstraints(ImVec2(160.0f * scale, 0.0f), ImVec2(FLT_MAX, FLT_MAX));
   const bool expanded =
       ImGui::Begin("forces (L)", nullptr,
                    ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
