@@ -554,6 +554,7 @@ TEST_F(ViewerTest, PaddlePressesAndKeysTurnTheNorthCameraAndItsCompass) {
   ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
   ViewerOptions o = Options(domain);
   o.camera.mode = CameraMode::kNorth;
+  o.playback = true;  // the paper's use: the paddles turn the camera in playback (test below)
   Viewer v(o);
   TestVehicle t;
   Image img = Show(v, pub, {MakeState(t)});
@@ -975,6 +976,45 @@ TEST_F(ViewerTest, TheStatusPanelStaysClearOfTheCompassInANarrowWindow) {
   EXPECT_GT(compass.x0, kW / 2) << "not the compass at the top right";
   EXPECT_FALSE(viewer::Overlap(status, compass))
       << "the status panel reaches x = " << status.x1 << ", the compass starts at " << compass.x0;
+}
+
+// Live, a full-model car's paddles are its gearbox: a shift no longer turns the geographic camera
+// (every gear change turned the map). A paper-model car has no gearbox: its paddles still do.
+TEST_F(ViewerTest, LiveTheGearboxsPaddlesLeaveTheCameraAlone) {
+  const std::uint32_t domain = FreshDomain();
+  TestPublisher pub(domain);
+  ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2, {1, 2})));
+  ViewerOptions o = Options(domain);
+  o.camera.mode = CameraMode::kNorth;
+  o.follow = 1;
+  Viewer v(o);
+  TestVehicle full;
+  pb::VehicleState s1 = MakeState(full);
+  s1.set_model(pb::VEHICLE_MODEL_FULL);
+  Show(v, pub, {s1});
+  auto input_seen = [&](std::uint32_t vehicle, std::uint64_t n) {
+    return FramesUntil(v, {}, [&] {
+      const auto* sv = v.session().vehicle(vehicle);
+      return sv != nullptr && sv->input && sv->input->sequence() >= n;
+    });
+  };
+  ASSERT_TRUE(pub.Input(1, 0));
+  ASSERT_TRUE(input_seen(1, 1));
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_RIGHT));  // a gear up
+  ASSERT_TRUE(input_seen(1, 2));
+  for (int i = 0; i < 3; ++i) v.Frame();
+  EXPECT_EQ(v.stats().paddle_presses, 0u);
+  EXPECT_NEAR(NeedleAngle(Keep(v.Screenshot())), 0.0, 0.09) << "the camera turned on a shift";
+  // The paper model's car (no gearbox): its paddle turns the camera, live too.
+  pb::VehicleState s2 = s1;
+  s2.set_model(pb::VEHICLE_MODEL_PAPER);
+  s2.set_step(s1.step() + 1);
+  Show(v, pub, {s2});
+  ASSERT_TRUE(pub.Input(1, 0));
+  ASSERT_TRUE(input_seen(1, 3));
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_RIGHT));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().paddle_presses == 1; }));
+  EXPECT_NEAR(NeedleAngle(Keep(v.Screenshot())), viewer::Rad(45), 0.09);
 }
 
 // --- drawn straight into the window ---------------------------------------------------------------

@@ -251,6 +251,7 @@ struct Viewer::Impl {
 
   // Parts of the stages.
   void NoteMissingFollow();
+  const pb::Diagnostics* PlayerOf(const std::string& server) const;
   void ForgetVehiclesGone();
   void NoteSilence();
   void HudStatus(const FrameScene& f, float right_px);  // its lines wrap before right_px
@@ -319,6 +320,20 @@ void Viewer::AcceptWorld(const pb::WorldDescription& w) {
                w.name(), w.server_id(), w.meshes_size(), triangles, w.landmarks_size());
 }
 
+// LIVE or PLAYBACK: a player says what it is on vdyn/diagnostics (mode "playback", the recording,
+// the servers it replays): the player of `server`'s vehicles, or none.
+const pb::Diagnostics* Viewer::Impl::PlayerOf(const std::string& server) const {
+  const pb::Diagnostics* player = nullptr;
+  for (const auto& [id, d] : session.diagnostics()) {
+    if (d.mode() != "playback") continue;
+    const auto& rs = d.replayed_servers();
+    if (id == server || rs.empty() || std::find(rs.begin(), rs.end(), server) != rs.end()) {
+      player = &d;
+    }
+  }
+  return player;
+}
+
 void Viewer::HandlePaddles(const pb::DriverInput& in) {
   Impl& im = *impl_;
   std::uint32_t& prev = im.buttons[{in.vehicle_id(), in.source_id()}];
@@ -326,14 +341,23 @@ void Viewer::HandlePaddles(const pb::DriverInput& in) {
   prev = in.buttons();
   // The paddles of the followed vehicle's driver (any vehicle's while none is followed).
   if (followed_ && *followed_ != in.vehicle_id()) return;
+  // Live, a full-model car's paddles are its gearbox: a shift turned the map and north cameras.
+  // They turn the camera in playback (the paper's use) and for a car without a gearbox (paper).
+  const auto t = im.tracked.find(in.vehicle_id());
+  const bool playback = options_.playback || (t != im.tracked.end() && im.PlayerOf(t->second.server));
+  const bool gearbox = t != im.tracked.end() && !t->second.history.empty() &&
+                       t->second.history.newest().model() != pb::VEHICLE_MODEL_PAPER;
+  if (!playback && gearbox) return;
   int turn = 0;
   if (pressed & pb::BUTTON_PADDLE_LEFT) ++turn;
   if (pressed & pb::BUTTON_PADDLE_RIGHT) --turn;
   if (turn != 0) {
     TurnGeographic(options_.camera, turn);
     ++stats_.paddle_presses;
-    spdlog::info("vdyn-viewer: paddle {} from '{}': geographic camera at {:.0f} deg from north",
-                 turn > 0 ? "left" : "right", in.source_id(), Deg(options_.camera.geo_turn));
+    spdlog::info("vdyn-viewer: paddle {} from '{}': the geographic camera turned {} (Q/E do the "
+                 "same; N back to north)",
+                 turn > 0 ? "left" : "right", in.source_id(),
+                 turn > 0 ? "counter-clockwise" : "clockwise");
   }
 }
 
@@ -1143,16 +1167,7 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
                ImGuiWindowFlags_AlwaysAutoResize | ImGuiWindowFlags_NoFocusOnAppearing);
   ImGui::PushTextWrapPos(
       std::max(right_px - ImGui::GetWindowPos().x - ImGui::GetStyle().WindowPadding.x, 200.0f));
-  // LIVE or PLAYBACK: a player says what it is on vdyn/diagnostics (mode "playback", the
-  // recording, the servers it replays); --playback says so whatever it says.
-  const pb::Diagnostics* player = nullptr;
-  for (const auto& [id, d] : session.diagnostics()) {
-    if (d.mode() != "playback") continue;
-    const auto& rs = d.replayed_servers();
-    if (id == f.server || rs.empty() || std::find(rs.begin(), rs.end(), f.server) != rs.end()) {
-      player = &d;
-    }
-  }
+  const pb::Diagnostics* player = PlayerOf(f.server);
   std::string mode = o.playback || player != nullptr ? "PLAYBACK" : "LIVE";
   std::string source = "server '" + f.server + "'";
   if (player != nullptr) {
