@@ -1015,6 +1015,11 @@ TEST_F(ViewerTest, LiveTheGearboxsPaddlesLeaveTheCameraAlone) {
   ASSERT_TRUE(pub.Input(1, pb::BUTTON_PADDLE_RIGHT));
   ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().paddle_presses == 1; }));
   EXPECT_NEAR(NeedleAngle(Keep(v.Screenshot())), viewer::Rad(45), 0.09);
+  // The wheel's camera button: the next camera (north -> beside), as C (nothing read it).
+  ASSERT_EQ(v.options().camera.mode, CameraMode::kNorth);
+  ASSERT_TRUE(pub.Input(1, pb::BUTTON_CAMERA));
+  ASSERT_TRUE(FramesUntil(v, {}, [&] { return v.stats().camera_buttons == 1; }));
+  EXPECT_EQ(v.options().camera.mode, CameraMode::kBeside);
 }
 
 // --- drawn straight into the window ---------------------------------------------------------------

@@ -341,6 +341,14 @@ void Viewer::HandlePaddles(const pb::DriverInput& in) {
   prev = in.buttons();
   // The paddles of the followed vehicle's driver (any vehicle's while none is followed).
   if (followed_ && *followed_ != in.vehicle_id()) return;
+  // The wheel's camera button: the next camera, as C (it was sent and nothing read it).
+  if (pressed & pb::BUTTON_CAMERA) {
+    CameraState& c = options_.camera;
+    c.mode = static_cast<CameraMode>((static_cast<int>(c.mode) + 1) % kCameraModes);
+    ++stats_.camera_buttons;
+    spdlog::info("vdyn-viewer: camera button from '{}': the {} camera", in.source_id(),
+                 CameraName(c.mode));
+  }
   // Live, a full-model car's paddles are its gearbox: a shift turned the map and north cameras.
   // They turn the camera in playback (the paper's use) and for a car without a gearbox (paper).
   const auto t = im.tracked.find(in.vehicle_id());

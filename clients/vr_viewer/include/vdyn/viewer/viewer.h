@@ -78,6 +78,7 @@ struct ViewerStats {
   std::uint64_t worlds_refused = 0;
   std::uint64_t states_refused = 0;  // failed CheckState (non-finite ones: transport drops)
   std::uint64_t paddle_presses = 0;
+  std::uint64_t camera_buttons = 0;  // the driver's camera button pressed (the next camera)
   std::string last_refusal;
   std::vector<double> frame_ms;  // work per frame (events to presented), ms
   // The instant a frame shows (publisher's clock) to the frame on the screen, ms: the delay, the
@@ -109,6 +110,7 @@ class Viewer {
   // asked for it: the last such image (empty before the first).
   Image Screenshot() const;
   const ViewerStats& stats() const { return stats_; }
+  const ViewerOptions& options() const { return options_; }
   void WriteStats(const std::string& path) const;
 
   CameraState& camera() { return options_.camera; }
