@@ -612,9 +612,11 @@ class Verifier {
       Diff(recorded_, *resimulated, "", out);
   }
 
-  // A state whose hash matched: verified, unless other fields differ. The hash covers the state,
-  // not every field of the message: each is compared with the re-simulation (it just ran this
-  // very step), in chunks with a CRC too (a CRC written anew over edited bytes holds).
+  // A state whose hash matched: verified, unless other fields differ where no CRC vouched for
+  // the bytes (damaged). The hash covers the state, not every field of the message: each is
+  // compared with the re-simulation (it just ran this very step). Where a CRC held, a field that
+  // differs is said (another version's writer, or an edit with its CRCs written anew) but the
+  // state stays verified: its hash, the simulation's, matched.
   void Matched(const StateAt& at, VehicleRun& run, const Segment& seg, bool fresh_step) {
     ++run.matched;
     if (at.m.unchecked) ++res_.unchecked;
@@ -622,9 +624,15 @@ class Verifier {
     bool damaged = false;
     std::vector<FieldDiff> fields;
     if (fresh_step && DiffJustRun(at, *seg.replayer, fields) && !fields.empty()) {
-      damaged = true;
-      ++res_.damaged;
-      if (!res_.first_damaged) res_.first_damaged = Damaged{at.m.key, at.start, at.step, fields};
+      if (at.m.unchecked) {
+        damaged = true;
+        ++res_.damaged;
+        if (!res_.first_damaged) res_.first_damaged = Damaged{at.m.key, at.start, at.step, fields};
+      } else {
+        ++res_.field_differences;
+        if (!res_.first_field_difference)
+          res_.first_field_difference = Damaged{at.m.key, at.start, at.step, fields};
+      }
     }
     if (damaged) {
       res_.Unverified(at.m.key, at.start, at.step, kDamagedWhy, false);
@@ -787,6 +795,7 @@ class VerifyReport {
     }
     PrintVerified();
     PrintDamage();
+    PrintFieldDifferences();
     if (!r_.holes.empty()) {
       out_ << "  events lost from the recording:";
       for (const std::string& h : r_.holes) out_ << " " << h << ";";
@@ -905,13 +914,24 @@ class VerifyReport {
     out_ << line;
   }
 
+  void PrintFieldDifferences() {
+    if (r_.field_differences == 0) return;
+    const Damaged& d = *r_.first_field_difference;
+    out_ << "  note: " << r_.field_differences
+         << " recorded state message(s) match their re-simulation's hash but differ from what "
+            "this build writes in other fields: written by another version of vdyn, or changed "
+            "with their chunks' CRCs written anew; the first, "
+         << VehicleName(d.vehicle, d.start) << " at step " << d.step << " (recorded, re-simulated):\n";
+    Fields(d.fields);
+  }
+
   void PrintDamage() {
     if (r_.damaged == 0) return;
     const Damaged& d = *r_.first_damaged;
     out_ << "  DAMAGED: " << r_.damaged
-         << " recorded state(s) differ from their re-simulation in one part only (the other "
-         << "fields, or the hash alone, the state after them matching): their bytes were changed "
-         << "after the server wrote them (where no CRC covered them, or with CRCs written anew); "
+         << " recorded state(s) differ from their re-simulation in one part only (fields where "
+         << "no CRC covered them, or the hash alone, the state after them matching): their bytes "
+         << "were changed after the server wrote them; "
          << "the first, " << VehicleName(d.vehicle, d.start) << " at step " << d.step
          << " (recorded, re-simulated):\n";
     Fields(d.fields);

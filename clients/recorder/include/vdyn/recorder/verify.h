@@ -82,6 +82,11 @@ struct VerifyResult {
   std::uint64_t unchecked = 0;
   std::uint64_t damaged = 0;
   std::optional<Damaged> first_damaged;
+  // States from chunks with a CRC whose hash matched but whose other message fields differ from
+  // what this build writes: another version's writer (the message changed, the physics not), or
+  // bytes changed with their CRCs written anew. Said, not counted as damage.
+  std::uint64_t field_differences = 0;
+  std::optional<Damaged> first_field_difference;
   bool data_crc_checked = false;  // the file's data-section CRC held (it covered them)
   double sim_seconds = 0;  // simulated time re-simulated
   double wall_seconds = 0;
