@@ -280,6 +280,9 @@ TEST(Cli, ServerRefusesOptionsOfAnotherMode) {
   ExpectServerSays("--dump-vehicle --fz 3000", 2, "--fz is for --tire-curves");
   ExpectServerSays("--world flat --duration 1 --lockstep-timeout 5" + domain, 2,
                    "--lockstep-timeout is for --lockstep");
+  // Its end said in the figure given ("0.30000000000000004 s" before).
+  ExpectServerSays("--lockstep --lockstep-timeout 0.3" + domain, 3,
+                   "lockstep: no control request for 0.3 s;");
 }
 
 // Without --step-threads the server steps up to 128 --max-vehicles on its loop thread alone (a

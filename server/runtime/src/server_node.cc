@@ -530,7 +530,7 @@ int ServerNode::RunLockstep(const std::atomic<bool>& stop) {
     if ((now - window_start_).ns >= 1'000'000'000) PushReport(now);
     if (now - last_request > timeout) {
       spdlog::error("lockstep: no control request for {} s; the client is gone? stopping",
-                    base::FormatNumber(options_.lockstep_timeout.seconds()));
+                    base::FormatApprox(options_.lockstep_timeout.seconds()));
       return 3;
     }
     if (prepared_.empty() && inputs_.empty()) loop_bell_.Wait(token, base::Milliseconds(20));
