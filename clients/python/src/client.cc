@@ -212,6 +212,12 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
       ++received_[s.vehicle_id()];
       if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last) return;
       out[s.vehicle_id()].Append(s);
+      // The newest of each vehicle, for latest(): a lockstep server sends nothing between steps,
+      // so a reader made after the step has nothing to give (latest() after step() timed out).
+      if (auto [it, fresh] = from_steps_.try_emplace(s.vehicle_id(), s);
+          !fresh && s.sim_time_ns() >= it->second.sim_time_ns()) {
+        it->second = s;
+      }
       ++got[s.vehicle_id()];
       vehicles_.insert(s.vehicle_id());
     });
@@ -378,6 +384,24 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
   std::lock_guard lock(mutex_);
   client::SessionView& view = LatestView(vehicle_id);
   const client::SessionView::Vehicle* v = nullptr;
+  // The newest a step() brought, when no newer one comes here within 50 ms (a real-time server
+  // sends one a step; a lockstep server none until the next step).
+  const auto stepped = from_steps_.find(vehicle_id);
+  if (stepped != from_steps_.end()) {
+    (void)base::PollUntil(
+        DeadlineIn(std::min(timeout_s, 0.05)), kSlice,
+        [&] {
+          view.Poll();
+          v = view.vehicle(vehicle_id);
+          return v != nullptr && v->state.sim_time_ns() > stepped->second.sim_time_ns();
+        },
+        [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
+    if (v == nullptr || v->state.sim_time_ns() < stepped->second.sim_time_ns()) {
+      StateTable t;
+      t.Append(stepped->second);
+      return t;
+    }
+  }
   const bool found = base::PollUntil(
       DeadlineIn(timeout_s), kSlice,
       [&] {

@@ -119,6 +119,7 @@ class Client {
   std::set<std::uint32_t> vehicles_;  // see Vehicles(); a step expects states of each
   std::set<std::uint32_t> removed_;   // removed by this client (and not added since)
   std::map<std::uint32_t, std::uint64_t> received_;  // StatesReceived()
+  std::map<std::uint32_t, pb::VehicleState> from_steps_;  // each vehicle's newest from Step()
   std::int64_t step_ns_ = 1'000'000;
 };
 

@@ -300,6 +300,12 @@ def test_parameters_and_steps_that_would_answer_wrongly_are_refused_or_answered_
     for n in (-1, 0, 2 ** 40):
         with pytest.raises(ValueError, match=rf"n must be in \[1, 4294967295\] steps, got {n}"):
             sim.step(n)
+    # latest() right after a lockstep step: the newest state the step brought (a reader made
+    # after it had nothing, and the server sends nothing until the next step: it timed out).
+    fresh = vdyn.Client(domain=domain, timeout=30)
+    last = fresh.step(5)[1]
+    newest = fresh.latest(1, timeout=2)
+    assert newest.step[0] == last.step[-1]
 
 
 def test_timeouts_of_any_length_and_durations_beyond_the_limit(lockstep_server, domain):
