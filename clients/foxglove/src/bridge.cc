@@ -547,7 +547,11 @@ void Bridge::Impl::HandleSetParameters(ClientId id, ClientState& c,
     } else {
       SetRequest& r = by_vehicle[name->vehicle_id];
       why = SetParameter(r.change, name->path, *p.value);
-      if (why.empty()) r.asked.push_back(p);
+      if (why.empty()) {
+        // One value a name: the last (as the change holds it); both were echoed back.
+        std::erase_if(r.asked, [&](const protocol::Parameter& q) { return q.name == p.name; });
+        r.asked.push_back(p);
+      }
     }
     if (!why.empty()) {
       Status(id, c, StatusLevel::kError, "setParameters: " + why);
