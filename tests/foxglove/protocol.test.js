@@ -170,6 +170,11 @@ test("a refused parameter comes back with the server's reason; an accepted one i
   // The server publishes the new parameters; the subscribed update carries them.
   await h.until(() => watcher.params.find((x) => !x.id && x.parameters.some((q) => q.name === "vehicle/1/mass" && q.value === 1600)),
                 10000, "the parameter update");
+  // One name twice: the answer is the value in force, the last (both were echoed).
+  watcher.client.setParameters([{ name: "vehicle/1/mass", value: 1650, type: "float64" },
+                                { name: "vehicle/1/mass", value: 1700, type: "float64" }], "twice");
+  const twice = await h.until(() => watcher.params.find((x) => x.id === "twice"), 10000, "the answer");
+  assert.deepEqual(twice.parameters.map((q) => [q.name, q.value]), [["vehicle/1/mass", 1700]]);
   // Names that are not vehicle parameters, and values of the wrong type, are refused here.
   watcher.status.length = 0;
   watcher.client.setParameters([{ name: "vehicle/1/no_such_thing", value: 1 }, { name: "vehicle/1/model", value: 3 }], "names");
