@@ -1183,3 +1183,34 @@ TEST(MagicFormulaVehicle, ASessionOnTheTyreResimulatesBitForBit) {
 
 }  // namespace
 }  // namespace vdyn
+
+namespace vdyn {
+namespace {
+
+// A wheel on a tyre file rolls on its UNLOADED_RADIUS: a live change of its radius is refused
+// with the reason (it was accepted, shown by params() and never used); the same radius again
+// (a whole message sent back) is not a change and passes. The dump says which radius is used.
+TEST(TireParams, ARadiusChangeOnATyreFilesWheelIsRefusedWithTheReason) {
+  const auto world = testing::SharedWorld("flat");
+  SessionConfig c;
+  c.default_params = CarOn(SyntheticTire());
+  Session s(world, c, nullptr);
+  s.Spawn(1, world->spawn, 0.0, pb::VehicleParams());
+  pb::ControlRequest change;
+  change.set_vehicle_id(1);
+  change.mutable_set_params()->mutable_params()->mutable_lf()->set_radius(0.4);
+  const pb::ControlReply refused = s.Apply(change);
+  EXPECT_FALSE(refused.accepted());
+  EXPECT_THAT(refused.reason(), HasSubstr("lf.radius: this wheel's tyre file sets its radius "
+                                          "(UNLOADED_RADIUS 0.316 m)"));
+  pb::ControlRequest same;
+  same.set_vehicle_id(1);
+  *same.mutable_set_params()->mutable_params() = s.params(1);
+  EXPECT_TRUE(s.Apply(same).accepted());
+  EXPECT_THAT(DumpVehicleParamsText(c.default_params),
+              HasSubstr("# lf rolls on its tyre file's UNLOADED_RADIUS (0.316 m), not on its "
+                        "radius\n"));
+}
+
+}  // namespace
+}  // namespace vdyn

@@ -1,3 +1,4 @@
+#include "vdyn/base/text.h"
 #include "vdyn/io/vehicle_params.h"
 
 #include "vdyn/io/tire_file.h"
@@ -196,10 +197,20 @@ std::string DumpVehicleParamsText(const pb::VehicleParams& msg) {
   gp::TextFormat::Printer printer;
   printer.SetUseShortRepeatedPrimitives(true);
   printer.PrintToString(msg, &body);
+  // A wheel on a tyre file rolls on its UNLOADED_RADIUS: said, since its radius field (kept so
+  // that the dump reads back as it is) is not what it rolls on.
+  std::string tyres;
+  const std::pair<const char*, const pb::WheelParams*> wheels[] = {
+      {"lf", &msg.lf()}, {"rf", &msg.rf()}, {"lr", &msg.lr()}, {"rr", &msg.rr()}};
+  for (const auto& [name, w] : wheels) {
+    if (!w->has_magic_formula()) continue;
+    tyres += std::string("# ") + name + " rolls on its tyre file's UNLOADED_RADIUS (" +
+             base::FormatNumber(w->magic_formula().unloaded_radius()) + " m), not on its radius\n";
+  }
   return "# vdyn vehicle parameters (protobuf text format, vdyn.pb.VehicleParams).\n"
          "# SI units; field meanings in proto/vdyn/vehicle_params.proto and docs/model.md.\n"
          "# Pass back with --vehicle FILE; a file may list only the fields it changes.\n" +
-         body;
+         tyres + body;
 }
 
 }  // namespace vdyn

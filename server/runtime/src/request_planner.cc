@@ -1,3 +1,4 @@
+#include "vdyn/base/text.h"
 #include "vdyn/runtime/request_planner.h"
 
 #include <stdexcept>
@@ -189,6 +190,22 @@ std::string RequestPlanner::PlanSetParams(const pb::ControlRequest& r, Known& k,
       MergeVehicleParams(*k.params, r.set_params().params()));
   if (const auto issues = ValidateVehicleParams(*merged); !issues.empty()) {
     return FormatIssues(issues);
+  }
+  // A wheel on a tyre file rolls on its UNLOADED_RADIUS: a radius asked for it would be shown
+  // and never used (it was accepted so).
+  const pb::VehicleParams& asked = r.set_params().params();
+  const std::pair<const char*, const pb::WheelParams*> wheels[] = {
+      {"lf", &asked.lf()}, {"rf", &asked.rf()}, {"lr", &asked.lr()}, {"rr", &asked.rr()}};
+  const pb::WheelParams* after[] = {&merged->lf(), &merged->rf(), &merged->lr(), &merged->rr()};
+  const pb::WheelParams* before[] = {&k.params->lf(), &k.params->rf(), &k.params->lr(),
+                                     &k.params->rr()};
+  for (int w = 0; w < 4; ++w) {
+    if (wheels[w].second->has_radius() && after[w]->has_magic_formula() &&
+        wheels[w].second->radius() != before[w]->radius()) {
+      return std::string(wheels[w].first) + ".radius: this wheel's tyre file sets its radius (" +
+             "UNLOADED_RADIUS " + base::FormatNumber(after[w]->magic_formula().unloaded_radius()) +
+             " m): change the tyre's unloaded_radius, or remove the tyre";
+    }
   }
   auto valid = std::make_shared<const ValidParams>(ParamsFromProto(*merged));
   if (std::string why = CheckStep(*valid, h_); !why.empty()) return why;
