@@ -383,6 +383,57 @@ TEST(McapBadFiles, ATruncatedFileIsRefusedAtTheOffsetWhereItEndsAndRecoverKeepsE
   }
 }
 
+// A damaged length in a closed file is not a truncation: said as corruption, with the record
+// whose length it is (it was "truncated ... the recorder was stopped before it closed the file?"
+// at an offset far from the damage).
+TEST(McapBadFiles, ADamagedLengthInAClosedFileIsCorruptionNotATruncation) {
+  testing::TempDir dir;
+  const auto path = dir / "a.mcap";
+  WriteStates(path, 3000, mc::Compression::kNone, 16 * 1024);
+  const std::vector<mc::ChunkIndex> chunks = mc::Reader(path).Chunks();
+  ASSERT_GT(chunks.size(), 4u);
+  const std::vector<std::uint8_t> whole = ReadBytes(path);
+  const std::uint64_t index = chunks[1].message_index_offsets.begin()->second;
+  ASSERT_EQ(whole[index], 0x07);  // a message index record
+  // Its own length far past the end: the record itself is named.
+  std::vector<std::uint8_t> b = whole;
+  b[index + 1 + 6] ^= 0x01;  // + 2^48 bytes
+  WriteBytes(dir / "own.mcap", b);
+  try {
+    ReadAll(dir / "own.mcap");
+    FAIL() << "accepted";
+  } catch (const mc::McapError& e) {
+    EXPECT_EQ(e.offset(), index);
+    EXPECT_THAT(e.reason(), HasSubstr("corrupted: a message index record at offset " +
+                                      std::to_string(index) +
+                                      " claims more bytes than the data section holds"));
+    EXPECT_THAT(e.reason(), ::testing::Not(HasSubstr("stopped before it closed")));
+  }
+  // A length that lands inside the file on bytes that are no record: the record before is named.
+  b = whole;
+  std::uint64_t len = 0;
+  for (int i = 0; i < 8; ++i) len |= std::uint64_t{whole[index + 1 + i]} << (8 * i);
+  const std::uint64_t to = chunks[3].chunk_start_offset + 9 + 40;  // inside a chunk's records
+  const std::uint64_t bad = to - index - 9;
+  for (int i = 0; i < 8; ++i) b[index + 1 + i] = static_cast<std::uint8_t>(bad >> (8 * i));
+  ASSERT_NE(bad, len);
+  WriteBytes(dir / "before.mcap", b);
+  try {
+    ReadAll(dir / "before.mcap");
+    FAIL() << "accepted";
+  } catch (const mc::McapError& e) {
+    const std::string why = e.reason();
+    if (why.find("do not read as a record") != std::string::npos) {
+      EXPECT_THAT(why, HasSubstr("the record before, a message index at offset " +
+                                 std::to_string(index)));
+    } else {
+      // The bytes there read as some record's header whose content does not: said so, never as
+      // a truncation of a closed file.
+      EXPECT_THAT(why, ::testing::Not(HasSubstr("stopped before it closed"))) << why;
+    }
+  }
+}
+
 TEST(McapBadFiles, AFlippedBitIsACrcMismatchAndRecoverDropsOnlyThatChunk) {
   testing::TempDir dir;
   const auto path = dir / "a.mcap";

@@ -1171,7 +1171,25 @@ class Scanner {
         return false;
       }
       Frame f;
-      if (const std::string why = FrameAt(data_, size_, pos_, f); !why.empty()) {
+      if (std::string why = FrameAt(data_, size_, pos_, f); !why.empty()) {
+        // A closed file (its footer and summary whole) is not truncated: a length or opcode was
+        // damaged, most likely the record before's, whose length led here (a flipped bit in a
+        // message index's length was reported as a truncation 4 MB further on).
+        if (!lenient_ && !summary_at_ && why.rfind("truncated", 0) == 0) FindVerifiedSummary();
+        if (summary_at_ && why.rfind("truncated", 0) == 0 && KnownOp(data_[pos_])) {
+          why = std::string("corrupted: a ") + OpName(data_[pos_]) + " record at offset " +
+                std::to_string(pos_) +
+                " claims more bytes than the data section holds (the file is closed: its footer "
+                "and summary are whole, so it is not cut short): its length is damaged; " +
+                kRecoverAdvice;
+        } else if (summary_at_ && why.rfind("truncated", 0) == 0 && prev_op_ != 0) {
+          why = "corrupted: the bytes at offset " + std::to_string(pos_) +
+                " do not read as a record (the file is closed: its footer and summary are whole, "
+                "so it is not cut short); the record before, a " + OpName(prev_op_) +
+                " at offset " + std::to_string(prev_offset_) + " of " +
+                std::to_string(prev_length_) + " bytes, may have a damaged length; " +
+                kRecoverAdvice;
+        }
         if (!lenient_) r_.Fail(pos_, why);
         if (!SkipToNextRecord(why)) return false;
         continue;
@@ -1186,6 +1204,9 @@ class Scanner {
         continue;
       }
       if (f.op != kMessageIndex) lost_chunk_ = kNone;
+      prev_op_ = f.op;
+      prev_offset_ = f.offset;
+      prev_length_ = f.content.size();
       if (!Record(f)) continue;  // it moved pos_ itself
       pos_ = f.end();
       res_.good_until = pos_;
@@ -1544,6 +1565,8 @@ class Scanner {
   std::map<std::tuple<std::uint32_t, std::uint64_t, std::uint64_t, std::uint64_t>, std::uint64_t>
       seen_;
   std::size_t lost_chunk_ = kNone;  // a dropped chunk's entry in res_.damage (its indexes count)
+  std::uint8_t prev_op_ = 0;  // the last record read whole in the data section
+  std::uint64_t prev_offset_ = 0, prev_length_ = 0;
 };
 
 ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
