@@ -310,50 +310,35 @@ TEST_F(ViewerTest, AVehicleItsServerNoLongerRunsIsForgotten) {
     for (std::uint32_t id : ids) d.add_vehicles()->set_vehicle_id(id);
     pub.Diagnostics(d);
   };
-  ASSERT_TRUE(FramesUntil(
-      v,
-      [&] {
-        ++step;
-        pub.State(state(1));
-        pub.State(state(2));
-        diagnostics({1, 2});
-      },
-      [&] { return v.vehicle(1) != nullptr && v.vehicle(2) != nullptr; }));
+  auto both = [&] {  // a step of both vehicles, and diagnostics that list them
+    ++step;
+    pub.State(state(1));
+    pub.State(state(2));
+    diagnostics({1, 2});
+  };
+  // Tab pressed n times before one frame, then the frames that take them.
+  auto tabs = [&](int n) {
+    for (int k = 0; k < n; ++k) {
+      SDL_Event tab{};
+      tab.type = SDL_KEYDOWN;
+      tab.key.keysym.sym = SDLK_TAB;
+      SDL_PushEvent(&tab);
+    }
+    v.Frame();
+    v.Frame();
+  };
+  ASSERT_TRUE(FramesUntil(v, both, [&] { return v.vehicle(1) != nullptr && v.vehicle(2) != nullptr; }));
   // Both listed while both send: a frame later both are still there.
   v.Frame();
   ASSERT_NE(v.vehicle(2), nullptr);
   // Tab pressed three times within one frame moves three places (1 -> 2 -> 1 -> 2): it moved one
   // place before (each press counted from the vehicle followed at the frame's start).
-  for (int k = 0; k < 3; ++k) {
-    SDL_Event tab{};
-    tab.type = SDL_KEYDOWN;
-    tab.key.keysym.sym = SDLK_TAB;
-    SDL_PushEvent(&tab);
-  }
-  ++step;
-  pub.State(state(1));
-  pub.State(state(2));
-  v.Frame();
-  v.Frame();
+  both();
+  tabs(3);
   EXPECT_EQ(v.followed(), std::optional<std::uint32_t>(2));
-  for (int k = 0; k < 2; ++k) {
-    SDL_Event tab{};
-    tab.type = SDL_KEYDOWN;
-    tab.key.keysym.sym = SDLK_TAB;
-    SDL_PushEvent(&tab);
-  }
-  v.Frame();
-  v.Frame();
+  tabs(2);
   EXPECT_EQ(v.followed(), std::optional<std::uint32_t>(2));  // two places: back to 2
-  // Follow 1 again for the rest.
-  {
-    SDL_Event tab{};
-    tab.type = SDL_KEYDOWN;
-    tab.key.keysym.sym = SDLK_TAB;
-    SDL_PushEvent(&tab);
-  }
-  v.Frame();
-  v.Frame();
+  tabs(1);  // follow 1 again for the rest
   ASSERT_EQ(v.followed(), std::optional<std::uint32_t>(1));
   // Vehicle 2 removed: no more states of it, and the diagnostics list vehicle 1 alone.
   ASSERT_TRUE(FramesUntil(
@@ -367,15 +352,7 @@ TEST_F(ViewerTest, AVehicleItsServerNoLongerRunsIsForgotten) {
   EXPECT_NE(v.vehicle(1), nullptr);
   EXPECT_EQ(v.session().vehicle(2), nullptr);
   // It comes back with a new state (spawned again).
-  ASSERT_TRUE(FramesUntil(
-      v,
-      [&] {
-        ++step;
-        pub.State(state(1));
-        pub.State(state(2));
-        diagnostics({1, 2});
-      },
-      [&] { return v.vehicle(2) != nullptr; }));
+  ASSERT_TRUE(FramesUntil(v, both, [&] { return v.vehicle(2) != nullptr; }));
 }
 
 // --- arrows ----------------------------------------------------------------------------------

@@ -1175,19 +1175,18 @@ void ServerNode::PublishReport(WindowReport& r) {
     // spawned event): said in the log too, not only counted in the diagnostics.
     auto& [said, said_under] = contained_said_[v.id];
     if (v.nonfinite_steps < said || v.under_ground_steps < said_under) said = said_under = 0;
-    if (v.nonfinite_steps > said) {
-      spdlog::warn("server '{}': vehicle {}: its state became non-finite in {} more step(s) ({} in "
-                   "all): put back at rest where it was (its parameters or input drive it past "
-                   "what the step resolves?)",
-                   server_id, v.id, v.nonfinite_steps - said, v.nonfinite_steps);
-      said = v.nonfinite_steps;
-    }
-    if (v.under_ground_steps > said_under) {
-      spdlog::warn("server '{}': vehicle {}: fell through the ground {} more time(s) ({} in all): "
-                   "put back on its wheels where it was (it rolled over? this model has no "
-                   "contact of the body with the ground)",
-                   server_id, v.id, v.under_ground_steps - said_under, v.under_ground_steps);
-      said_under = v.under_ground_steps;
+    const std::tuple<std::uint64_t, std::uint64_t*, const char*> contained[] = {
+        {v.nonfinite_steps, &said,
+         "its state became non-finite: put back at rest where it was (its parameters or input "
+         "drive it past what the step resolves?)"},
+        {v.under_ground_steps, &said_under,
+         "it fell through the ground: put back on its wheels where it was (it rolled over? this "
+         "model has no contact of the body with the ground)"}};
+    for (const auto& [count, told, what] : contained) {
+      if (count <= *told) continue;
+      spdlog::warn("server '{}': vehicle {}: {} ({} more time(s), {} in all)", server_id, v.id,
+                   what, count - *told, count);
+      *told = count;
     }
     pb::VehicleDiagnostics* vd = d.add_vehicles();
     vd->set_vehicle_id(v.id);
