@@ -1320,6 +1320,19 @@ int DropEventsAfter(const std::filesystem::path& in, const std::filesystem::path
   return dropped;
 }
 
+// A copy of `in` whose vehicle 1 state at `step` is changed by `edit` (CRCs as `chunk_crc` says).
+void EditStateAt(const std::filesystem::path& in, const std::filesystem::path& out, bool chunk_crc,
+                 std::uint64_t step, const std::function<void(pb::VehicleState&)>& edit) {
+  CopyRecording(in, out, chunk_crc, [&](const std::string& topic, std::string& data) {
+    if (topic != "vdyn/state/1") return;
+    pb::VehicleState s;
+    ASSERT_TRUE(s.ParseFromString(data));
+    if (s.step() != step) return;
+    edit(s);
+    data = s.SerializeAsString();
+  });
+}
+
 // A recording whose last events never arrived (the server left, or the recorder stopped, before
 // they did) lacks the inputs of its last steps: verify says so and verifies the steps before,
 // instead of calling the session diverged.
@@ -1506,15 +1519,9 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   EXPECT_EQ(code, 0) << verified;
   EXPECT_THAT(verified, HasSubstr("come from chunks without a CRC")) << verified;
   EXPECT_THAT(verified, HasSubstr("(all equal)")) << verified;
-  CopyRecording(file, dir_ / "nocrc-damaged.mcap", false,
-                [](const std::string& topic, std::string& data) {
-                  if (topic != "vdyn/state/1") return;
-                  pb::VehicleState s;
-                  ASSERT_TRUE(s.ParseFromString(data));
-                  if (s.step() != 1500) return;
-                  s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);  // the hash stays as it was
-                  data = s.SerializeAsString();
-                });
+  EditStateAt(file, dir_ / "nocrc-damaged.mcap", /*chunk_crc=*/false, 1500, [](pb::VehicleState& s) {
+    s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);  // the hash stays as it was
+  });
   std::tie(code, verified) = Run({"verify", (dir_ / "nocrc-damaged.mcap").string()});
   EXPECT_EQ(code, 1) << verified;
   // The first line says so (it said "bit-exact over ..." before the DAMAGED line).
@@ -1530,15 +1537,9 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   // The same edit with the chunks' CRCs written anew over it (CRCs that hold): said as well,
   // every field of every state being compared (before, only states without a CRC were), but not
   // as damage: another version's writer makes such messages too (its physics the same).
-  CopyRecording(file, dir_ / "edited.mcap", /*chunk_crc=*/true,
-                [](const std::string& topic, std::string& data) {
-                  if (topic != "vdyn/state/1") return;
-                  pb::VehicleState s;
-                  ASSERT_TRUE(s.ParseFromString(data));
-                  if (s.step() != 1500) return;
-                  s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);
-                  data = s.SerializeAsString();
-                });
+  EditStateAt(file, dir_ / "edited.mcap", /*chunk_crc=*/true, 1500, [](pb::VehicleState& s) {
+    s.mutable_wheels(2)->set_fp(s.wheels(2).fp() + 0.25);
+  });
   std::tie(code, verified) = Run({"verify", (dir_ / "edited.mcap").string()});
   EXPECT_EQ(code, 0) << verified;  // every state hash matched
   EXPECT_THAT(verified, HasSubstr("edited.mcap: bit-exact over")) << verified;
@@ -1550,15 +1551,9 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
 
   // A damaged hash (one bit) over fields that all match, the next state matching too: the
   // recorded hash is wrong, not the simulation (it was reported as a divergence).
-  CopyRecording(file, dir_ / "hash.mcap", /*chunk_crc=*/true,
-                [](const std::string& topic, std::string& data) {
-                  if (topic != "vdyn/state/1") return;
-                  pb::VehicleState s;
-                  ASSERT_TRUE(s.ParseFromString(data));
-                  if (s.step() != 1500) return;
-                  s.set_state_hash(s.state_hash() ^ 0x100);
-                  data = s.SerializeAsString();
-                });
+  EditStateAt(file, dir_ / "hash.mcap", /*chunk_crc=*/true, 1500, [](pb::VehicleState& s) {
+    s.set_state_hash(s.state_hash() ^ 0x100);
+  });
   std::tie(code, verified) = Run({"verify", (dir_ / "hash.mcap").string()});
   EXPECT_EQ(code, 1) << verified;
   EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
@@ -1574,16 +1569,10 @@ TEST_F(RecorderTest, AfterALostChunkVerifyGoesOnFromTheNextCheckpointAndTheWorld
   // One state's position and hash both changed, the next state matching again: a damaged
   // message too (a simulation that diverged never finds its way back; the test above edits every
   // state after one to show a divergence).
-  CopyRecording(file, dir_ / "one.mcap", /*chunk_crc=*/true,
-                [](const std::string& topic, std::string& data) {
-                  if (topic != "vdyn/state/1") return;
-                  pb::VehicleState s;
-                  ASSERT_TRUE(s.ParseFromString(data));
-                  if (s.step() != 1500) return;
-                  s.mutable_p_wt_w()->set_x(s.p_wt_w().x() + 1e-3);
-                  s.set_state_hash(s.state_hash() ^ 1u);
-                  data = s.SerializeAsString();
-                });
+  EditStateAt(file, dir_ / "one.mcap", /*chunk_crc=*/true, 1500, [](pb::VehicleState& s) {
+    s.mutable_p_wt_w()->set_x(s.p_wt_w().x() + 1e-3);
+    s.set_state_hash(s.state_hash() ^ 1u);
+  });
   std::tie(code, verified) = Run({"verify", (dir_ / "one.mcap").string()});
   EXPECT_EQ(code, 1) << verified;
   EXPECT_THAT(verified, ::testing::Not(HasSubstr("DIVERGES"))) << verified;
