@@ -362,8 +362,8 @@ TEST(McapBadFiles, ATruncatedFileIsRefusedAtTheOffsetWhereItEndsAndRecoverKeepsE
       try {
         recorder::RunRecover(ro, log);
         ADD_FAILURE() << "a file cut at " << cut << " before its first chunk's end was recovered";
-      } catch (const std::runtime_error& e) {
-        EXPECT_THAT(e.what(), HasSubstr("nothing to recover")) << cut;
+      } catch (const mc::McapError& e) {
+        EXPECT_THAT(e.reason(), HasSubstr("nothing to recover")) << cut;
       }
       EXPECT_FALSE(std::filesystem::exists(ro.out)) << cut;
       continue;

@@ -1,6 +1,6 @@
 // Fuzz target: `vdyn-recorder recover` and `verify` on damaged recordings (clients/recorder/src/
 // recover.cc, verify.cc), not only the reader. Any bytes, as a file: recover either refuses it
-// (McapError: not MCAP at all) or writes a copy that is a valid, closed MCAP file - a strict scan
+// (McapError: not MCAP at all, or no message in it reads; then no copy is written) or writes a copy that is a valid, closed MCAP file - a strict scan
 // of it passes, `info` describes it - and `verify` of the copy re-simulates what it can and
 // accounts for every state it saw, listing as verified only states that matched and are intact;
 // never a crash, never a read outside the file.
@@ -55,7 +55,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     if (rec::RunRecover(ro, log) != 0) std::abort();
   } catch (const mcap::McapError&) {
-    return 0;  // refused (empty, not MCAP): nothing written
+    if (fs::exists(out)) std::abort();  // refused (empty, not MCAP, nothing to recover): no copy
+    return 0;
   }
   // The copy is whole: every CRC and the summary check out, and info reads it.
   std::uint64_t states = 0;

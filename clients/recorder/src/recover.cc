@@ -79,11 +79,10 @@ class Recovery {
     Probe();
     OpenCopy();
     CopyRecords();
-    // Nothing read (a file of its magic alone, or all damage): no copy is written (the unwinding
-    // abandons it), rather than an empty recording under the name.
+    // Nothing read (a file of its magic alone, or all damage): refused as a file with nothing in
+    // it (exit 2; the unwinding abandons the copy), rather than an empty recording under the name.
     if (kept_ == 0) {
-      throw std::runtime_error(o_.file.string() +
-                               ": nothing to recover: no message in it reads; nothing written");
+      throw mcap::McapError(o_.file, 8, "nothing to recover: no message in it reads; nothing written");
     }
     const Losses losses = Tally();
     WriteMetadata(losses);
