@@ -1177,7 +1177,10 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
       std::max(right_px - ImGui::GetWindowPos().x - ImGui::GetStyle().WindowPadding.x, 200.0f));
   const pb::Diagnostics* player = PlayerOf(f.server);
   std::string mode = o.playback || player != nullptr ? "PLAYBACK" : "LIVE";
-  std::string source = "server '" + f.server + "'";
+  // Before any server is heard: said so (it read "LIVE server ''  world '(waiting)'").
+  std::string source = f.server.empty()
+                           ? "no server yet on domain " + std::to_string(o.domain) + ": waiting"
+                           : "server '" + f.server + "'";
   if (player != nullptr) {
     source = "recording '" + player->recording() + "' (player '" + player->server_id() +
              "', server '" + f.server + "')";

@@ -22,8 +22,18 @@ int Drive(const CommonOptions& c, const RigOptions& o, const std::atomic<bool>& 
       o.keyboard ? RigConfig::Source::kKeyboard : RigConfig::Source::kAuto;
   transport::Participant participant(c.domain);
   DdsLink link(participant, c.vehicle_id, c.source_id, c.strength);
-  if (!link.WaitForParams(std::chrono::duration_cast<std::chrono::nanoseconds>(
-          std::chrono::duration<double>(c.wait_s)))) {
+  // A server that is there answers at once; the wait is said when it takes longer (no window
+  // and no line for the whole --wait before).
+  const auto wait = std::chrono::duration_cast<std::chrono::nanoseconds>(
+      std::chrono::duration<double>(c.wait_s));
+  const auto first = std::min(wait, std::chrono::nanoseconds(std::chrono::milliseconds(500)));
+  bool found = link.WaitForParams(first);
+  if (!found && wait > first) {
+    spdlog::info("vdyn-input: waiting up to {} s for vehicle {} on domain {} (--wait)", c.wait_s,
+                 c.vehicle_id, c.domain);
+    found = link.WaitForParams(wait - first);
+  }
+  if (!found) {
     std::vector<std::uint32_t> others;
     for (const auto& [id, vehicle] : link.view().vehicles()) others.push_back(id);
     std::cerr << "vdyn-input: no parameters of vehicle " << c.vehicle_id << " on domain "
