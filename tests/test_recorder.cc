@@ -693,17 +693,18 @@ TEST_F(RecorderTest, PlayPausesSeeksAndStepsOnRequest) {
   pb::ControlReply bad = request([](auto& r) { r.mutable_playback()->set_rate(0.0); });
   EXPECT_FALSE(bad.accepted());
   EXPECT_THAT(bad.reason(), HasSubstr("playback rate"));
-  // Resume at 4x: the rest, in order, and the player ends.
-  EXPECT_TRUE(request([](auto& r) { r.mutable_playback()->set_rate(4.0); }).accepted());
+  // Resume at 2x: the rest, in order, and the player ends.
+  EXPECT_TRUE(request([](auto& r) { r.mutable_playback()->set_rate(2.0); }).accepted());
   EXPECT_TRUE(request([](auto& r) { r.mutable_resume(); }).accepted());
-  // Best effort at 4 kHz, each state two DATAFRAGs: on a machine that also compiles the sanitizer
-  // build a clean-clone run lost 12 of 991 (a lost fragment loses its state). What is checked is
-  // that the rest comes, in order, from where the steps stopped to the end.
+  // Best effort at 2 kHz, each state two DATAFRAGs: on a machine that also compiles the sanitizer
+  // build clean-clone runs lost 12 of 991 at 4x, and once the last 13 together (this reader
+  // descheduled while its socket buffer overflowed). What is checked is that the rest comes, in
+  // order, from where the steps stopped; that the player went to the end is its exit (with
+  // --no-keys it ends only there) and the count (one that stopped early sends too few).
   steps = take(3000 - 2009);
   ASSERT_GE(steps.size(), (3000u - 2009u) * 95 / 100);
   EXPECT_GE(steps.front(), 2009u);  // nothing before the pause point again
   EXPECT_LE(steps.front(), 2019u);  // and no jump past it (a lost first state or two aside)
-  EXPECT_GE(steps.back(), 2990u);
   for (std::size_t i = 1; i < steps.size(); ++i) ASSERT_GT(steps[i], steps[i - 1]);
   EXPECT_EQ(play->Wait(30s), 0) << play->Log();
 }
