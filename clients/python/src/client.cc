@@ -156,7 +156,24 @@ ReplyInfo Client::Request(pb::ControlRequest request, const std::string& what, d
     vehicles_.erase(vehicle);
     removed_.insert(vehicle);
   }
-  return {reply->server_id(), reply->applied_step(), reply->sim_time_ns()};
+  ReplyInfo info;
+  info.server_id = reply->server_id();
+  info.applied_step = reply->applied_step();
+  info.sim_time_ns = reply->sim_time_ns();
+  for (const pb::DiscardedSteps& d : reply->discarded()) {
+    info.discarded[d.vehicle_id()] += d.count();
+    info.discarded_notes.push_back("vehicle " + std::to_string(d.vehicle_id()) + ": " +
+                                   std::to_string(d.count()) + " step(s) discarded by server '" +
+                                   reply->server_id() + "', the first its step " +
+                                   std::to_string(d.first_step()) + " (no state for them): " +
+                                   d.reason());
+  }
+  info.discarded_not_listed = reply->discarded_not_listed();
+  if (info.discarded_not_listed > 0) {
+    info.discarded_notes.push_back(std::to_string(info.discarded_not_listed) +
+                                   " more step(s) of other vehicles discarded (not listed)");
+  }
+  return info;
 }
 
 std::set<std::uint32_t> Client::KnownVehicles() {
@@ -222,18 +239,27 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
       vehicles_.insert(s.vehicle_id());
     });
   };
+  // A discarded step has no state (the reply says whose; beyond its list, only how many).
+  for (const auto& [id, n] : reply.discarded) vehicles_.insert(id);
+  auto expected = [&](std::uint32_t id) {
+    const auto it = reply.discarded.find(id);
+    const std::uint32_t none = it != reply.discarded.end() ? it->second : reply.discarded_not_listed;
+    return chunk - std::min(chunk, none);
+  };
   // A step's states of every vehicle travel together (vdyn/states): when every other vehicle's
   // have come and none of the input's, the server has no such vehicle (removed meanwhile).
   const std::uint32_t driven = input != nullptr ? input->vehicle_id() : 0;
   bool driven_absent = false;
   auto complete = [&] {
     take();
-    if (got.empty()) return false;
+    bool any = !got.empty();
     for (std::uint32_t id : vehicles_) {
-      if (id != driven && got[id] < chunk) return false;
+      if (expected(id) == 0) any = true;
+      if (id != driven && got[id] < expected(id)) return false;
     }
-    driven_absent = driven != 0 && got[driven] == 0;
-    return driven_absent || driven == 0 || got[driven] >= chunk;
+    if (!any) return false;
+    driven_absent = driven != 0 && got[driven] == 0 && reply.discarded.count(driven) == 0;
+    return driven_absent || driven == 0 || got[driven] >= expected(driven);
   };
   const bool done =
       base::PollUntil(DeadlineIn(timeout_s), base::Milliseconds(50), complete,
@@ -247,9 +273,9 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
   if (done) return;
   std::string missing;
   for (std::uint32_t id : vehicles_) {
-    if (got[id] >= chunk) continue;
+    if (got[id] >= expected(id)) continue;
     missing += (missing.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": " +
-               std::to_string(chunk - got[id]) + " of " + std::to_string(chunk);
+               std::to_string(expected(id) - got[id]) + " of " + std::to_string(expected(id));
   }
   if (got.empty() && vehicles_.empty()) missing = "no vehicle's states at all";
   throw TimeoutError(
@@ -261,7 +287,8 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
 }
 
 std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::DriverInput* input,
-                                                 double timeout_s) {
+                                                 double timeout_s,
+                                                 std::vector<std::string>* discarded) {
   if (steps == 0) throw std::invalid_argument("steps must be at least 1");
   if (steps > limits::kMaxStepsPerRequest) {
     throw std::invalid_argument("steps must be at most " +
@@ -283,6 +310,10 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     const ReplyInfo reply =
         Request(request, "step " + std::to_string(chunk) + " (lockstep)", timeout_s);
     TakeStepStates(states, chunk, reply, input, timeout_s, out);
+    if (discarded != nullptr) {
+      discarded->insert(discarded->end(), reply.discarded_notes.begin(),
+                        reply.discarded_notes.end());
+    }
     done += chunk;
   }
   for (auto& [id, table] : out) table.SortByStep();
@@ -293,7 +324,8 @@ std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneu
                                                         std::uint32_t vehicle_id,
                                                         std::optional<double> duration_s,
                                                         const std::string& source_id,
-                                                        double timeout_s) {
+                                                        double timeout_s,
+                                                        std::vector<std::string>* discarded) {
   if (duration_s) {
     if (const std::string why = limits::Check(limits::kDurationS, *duration_s); !why.empty()) {
       throw std::invalid_argument("run_maneuver: " + why);
@@ -320,7 +352,7 @@ std::map<std::uint32_t, StateTable> Client::RunManeuver(const std::string& maneu
            input_at(k + run).SerializeAsString() == bytes) {
       ++run;
     }
-    for (auto& [id, table] : Step(run, &in, timeout_s)) out[id].Extend(table);
+    for (auto& [id, table] : Step(run, &in, timeout_s, discarded)) out[id].Extend(table);
     k += run;
   }
   return out;

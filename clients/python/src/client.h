@@ -32,6 +32,11 @@ struct ReplyInfo {
   std::string server_id;
   std::uint64_t applied_step = 0;
   std::int64_t sim_time_ns = 0;
+  // A step request's: the steps the server discarded (contained), by vehicle, which published no
+  // state; and each as a person reads it.
+  std::map<std::uint32_t, std::uint32_t> discarded;
+  std::uint32_t discarded_not_listed = 0;
+  std::vector<std::string> discarded_notes;
 };
 
 class Client {
@@ -63,8 +68,11 @@ class Client {
   // with the reason (std::invalid_argument) before anything is stepped. Requests go in chunks the
   // server's state outbox holds whole; with an input, in chunks of at most 50 steps, each carrying
   // it (the server's input watchdog, 100 ms by default, replaces an input that is not renewed).
+  // A step the server discarded (its state went non-finite, the car fell through the ground: the
+  // vehicle put back at rest) has no state: it is left out, and said in `discarded` when given.
   std::map<std::uint32_t, StateTable> Step(std::uint32_t steps, const pb::DriverInput* input,
-                                           double timeout_s);
+                                           double timeout_s,
+                                           std::vector<std::string>* discarded = nullptr);
   // A maneuver (a CSV file as vdyn-server --batch reads it, or "demo") driven in lockstep for
   // `duration_s` (limits::kDurationS; none: to its last row) from the vehicle's step on: at each
   // step the input the maneuver gives at that step's time from the start, as the batch runner
@@ -73,7 +81,8 @@ class Client {
   std::map<std::uint32_t, StateTable> RunManeuver(const std::string& maneuver,
                                                   std::uint32_t vehicle_id,
                                                   std::optional<double> duration_s,
-                                                  const std::string& source_id, double timeout_s);
+                                                  const std::string& source_id, double timeout_s,
+                                                  std::vector<std::string>* discarded = nullptr);
   // The newest state of a vehicle (waits up to timeout_s for a first one).
   StateTable Latest(std::uint32_t vehicle_id, double timeout_s);
   // The states this client receives, one line per reader it holds ("vehicle 2 (its partition)",

@@ -172,25 +172,27 @@ void BindClient(py::module_& m) {
              std::optional<pb::DriverInput> in;
              if (!input.is_none()) in = Parse<pb::DriverInput>(input, "driver input");
              std::map<std::uint32_t, StateTable> out;
+             std::vector<std::string> discarded;
              {
                py::gil_scoped_release release;
-               out = c.Step(steps, in ? &*in : nullptr, timeout);
+               out = c.Step(steps, in ? &*in : nullptr, timeout, &discarded);
              }
              py::dict d;
              for (auto& [id, t] : out) d[py::int_(id)] = Table(std::move(t));
-             return d;
+             return py::make_tuple(d, discarded);
            })
       .def("run_maneuver",
            [](Client& c, const std::string& maneuver, std::uint32_t id,
               std::optional<double> duration, const std::string& source_id, double timeout) {
              std::map<std::uint32_t, StateTable> out;
+             std::vector<std::string> discarded;
              {
                py::gil_scoped_release release;
-               out = c.RunManeuver(maneuver, id, duration, source_id, timeout);
+               out = c.RunManeuver(maneuver, id, duration, source_id, timeout, &discarded);
              }
              py::dict d;
              for (auto& [vid, t] : out) d[py::int_(vid)] = Table(std::move(t));
-             return d;
+             return py::make_tuple(d, discarded);
            })
       .def("latest", [](Client& c, std::uint32_t id, double timeout) {
         StateTable t;

@@ -4,6 +4,7 @@ import math
 import os
 import subprocess
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -55,6 +56,39 @@ def test_lockstep_returns_every_state_of_the_steps_with_the_input_applied(lockst
         assert list(one.step) == [1000 + k]
     assert s.wheel("Fp_N").shape == (1000, 4)
     assert np.all(s.state_hash != 0)
+
+
+def test_a_step_the_server_discards_is_said_not_waited_for(lockstep_server, domain):
+    # A car that rolls over (mu 3, the road wheels at 30 degrees at 60 km/h) falls through the
+    # ground, which this model has no body contact for: the server discards that step, puts the
+    # car back on its wheels and publishes no state for it. step() waited its whole timeout for
+    # that state and raised TimeoutError; the server's reply now says which step went, and why.
+    sim = vdyn.Client(domain=domain, timeout=30)
+    sim.set_params(1, {"mu": 3.0})
+    sim.teleport(1, 0.0, 0.0, 0.0, speed=60 / 3.6)
+    inp = vdyn.make_input(steer=0.52, cruise_kmh=60, vehicle_id=1)
+    said = []
+    got = []
+    for _ in range(10):  # it rolls over within some 1.3 s
+        with warnings.catch_warnings(record=True) as w:
+            warnings.simplefilter("always")
+            got.append(sim.step(500, inp, timeout=30)[1])
+        said += [x for x in w if issubclass(x.category, vdyn.DiscardedStepsWarning)]
+        if said:
+            break
+    assert len(said) == 1, [str(x.message) for x in said]
+    text = str(said[0].message)
+    assert text.startswith("vehicle 1: 1 step(s) discarded by server 'vdyn', the first its step ")
+    assert "it fell through the ground: put back on its wheels where it was" in text
+    gone = int(text.split("the first its step ")[1].split(" ")[0])
+    # That call's states: every step but the discarded one; the car on its wheels after it.
+    last = got[-1]
+    assert len(last) == 499
+    steps = [int(k) for k in last.step]
+    assert gone not in steps and gone - 1 in steps and gone + 1 in steps
+    assert abs(float(last["roll_rad"][steps.index(gone + 1)])) < 0.2
+    # And the session goes on: the next call has every state.
+    assert len(sim.step(100, inp, timeout=30)[1]) == 100
 
 
 def test_control_requests_and_refusals_carry_the_servers_reason(lockstep_server, domain):

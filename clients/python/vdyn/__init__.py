@@ -43,7 +43,8 @@ try:
     from . import _vdyn  # noqa: F401  (the extension module)
 except ImportError as _e:
     raise _import_error(_e) from _e
-from ._errors import Error, RecordingError, RefusedError, TimeoutError, TransportError
+from ._errors import (DiscardedStepsWarning, Error, RecordingError, RefusedError, TimeoutError,
+                      TransportError)
 from ._states import COLUMNS, States
 from ._client import DEFAULT_TIMEOUT, Client, Driver, Subscription, make_input
 from ._recording import Recording
@@ -66,5 +67,5 @@ class _Pb:
 pb = _Pb()
 
 __all__ = ["Client", "Driver", "Subscription", "Recording", "States", "COLUMNS", "make_input",
-           "Error", "TimeoutError", "RefusedError", "RecordingError", "TransportError", "pb",
-           "DEFAULT_TIMEOUT"]
+           "Error", "TimeoutError", "RefusedError", "RecordingError", "TransportError",
+           "DiscardedStepsWarning", "pb", "DEFAULT_TIMEOUT"]

@@ -46,6 +46,16 @@ def _check_input(msg):
     return msg
 
 
+def _warn_discarded(notes):
+    """One vdyn.DiscardedStepsWarning per vehicle whose steps the server discarded."""
+    if not notes:
+        return
+    import warnings
+    from ._errors import DiscardedStepsWarning
+    for note in notes:
+        warnings.warn(note, DiscardedStepsWarning, stacklevel=3)
+
+
 def make_input(steer=0.0, throttle=0.0, brake=0.0, *, gear=0, buttons=0, clutch=0.0,
                handbrake=0.0, cruise_kmh=None, steer_mode="road_wheel", vehicle_id=0,
                source_id=""):
@@ -299,7 +309,10 @@ class Client:
         applied first, and returns {vehicle_id: States} with every vehicle's state at each of
         those steps. An input for a vehicle the server does not have, or one it would not apply
         (out of range, not a number), raises ValueError with the reason before anything is
-        stepped. Raises vdyn.TimeoutError naming what did not arrive."""
+        stepped. Raises vdyn.TimeoutError naming what did not arrive. A step the server
+        discarded (a state gone non-finite, a car that rolled over and fell through the ground:
+        put back at rest) has no state: its row is missing, and a vdyn.DiscardedStepsWarning says
+        whose, how many and why."""
         n = _whole("n", n)
         if not 1 <= n <= 0xFFFFFFFF:
             raise ValueError(f"n must be in [1, 4294967295] steps, got {n}")
@@ -310,8 +323,9 @@ class Client:
         msg = _input_message(input, vehicle_id, _text("source_id", source_id))
         if msg is not None and msg.vehicle_id == 0:
             raise ValueError("the input names no vehicle: give vehicle_id=")
-        tables = self._c.step(n, None if msg is None else msg.SerializeToString(),
-                              self._t(timeout))
+        tables, discarded = self._c.step(n, None if msg is None else msg.SerializeToString(),
+                                         self._t(timeout))
+        _warn_discarded(discarded)
         return {vid: States(vid, t) for vid, t in tables.items()}
 
     def run_maneuver(self, maneuver, vehicle_id=1, duration=None, source_id="python",
@@ -324,10 +338,11 @@ class Client:
         line and column; a duration outside (0, 1e7] s raises ValueError."""
         if not isinstance(maneuver, (str, os.PathLike)):
             raise TypeError(f"maneuver must be a file name or \"demo\", got {maneuver!r}")
-        tables = self._c.run_maneuver(os.fspath(maneuver),
-                                      _whole("vehicle_id", vehicle_id, "vehicle_id"),
-                                      None if duration is None else _real("duration", duration),
-                                      _text("source_id", source_id), self._t(timeout))
+        tables, discarded = self._c.run_maneuver(
+            os.fspath(maneuver), _whole("vehicle_id", vehicle_id, "vehicle_id"),
+            None if duration is None else _real("duration", duration),
+            _text("source_id", source_id), self._t(timeout))
+        _warn_discarded(discarded)
         return {vid: States(vid, t) for vid, t in tables.items()}
 
     # --- real time ----------------------------------------------------------------------------

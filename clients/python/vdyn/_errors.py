@@ -26,3 +26,10 @@ class RecordingError(Error):
 
 class TransportError(Error):
     """DDS refused to create an entity (a bad domain id, a configuration error)."""
+
+
+class DiscardedStepsWarning(UserWarning):
+    """A lockstep step() or run_maneuver() ran steps the server discarded: a vehicle's state
+    became non-finite, or the car fell through the ground (it rolled over), and the server put it
+    back at rest. Those steps have no state (their rows are not in the States); the message names
+    the vehicle, how many, the first step and why."""

@@ -229,7 +229,15 @@ void ServerNode::StepOnce() {
   if (session_->paused() && session_->pending_steps() > 0) {
     session_->ConsumePendingStep();
     if (!deferred_step_replies_.empty() && deferred_step_replies_.front().remaining > 0) {
-      --deferred_step_replies_.front().remaining;
+      DeferredReply& running = deferred_step_replies_.front();
+      --running.remaining;
+      // A discarded step published no state: the reply says whose, so that a client waiting
+      // for every state of these steps knows which will not come.
+      for (const auto& [id, v] : session_->vehicles()) {
+        if (v.step_status != StepStatus::kOk) {
+          running.outcome.AddDiscarded(id, v.sim->state().step - 1, v.step_status);
+        }
+      }
     }
   }
   if (!deferred_step_replies_.empty()) SendDueStepReplies();
@@ -1176,12 +1184,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     auto& [said, said_under] = contained_said_[v.id];
     if (v.nonfinite_steps < said || v.under_ground_steps < said_under) said = said_under = 0;
     const std::tuple<std::uint64_t, std::uint64_t*, const char*> contained[] = {
-        {v.nonfinite_steps, &said,
-         "its state became non-finite: put back at rest where it was (its parameters or input "
-         "drive it past what the step resolves?)"},
-        {v.under_ground_steps, &said_under,
-         "it fell through the ground: put back on its wheels where it was (it rolled over? this "
-         "model has no contact of the body with the ground)"}};
+        {v.nonfinite_steps, &said, ContainedWhy(StepStatus::kNonFinite)},
+        {v.under_ground_steps, &said_under, ContainedWhy(StepStatus::kUnderGround)}};
     for (const auto& [count, told, what] : contained) {
       if (count <= *told) continue;
       spdlog::warn("server '{}': vehicle {}: {} ({} more time(s), {} in all)", server_id, v.id,

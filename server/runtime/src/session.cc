@@ -107,11 +107,48 @@ std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id)
   return {};
 }
 
+const char* ContainedWhy(StepStatus status) {
+  switch (status) {
+    case StepStatus::kOk:
+      return "";
+    case StepStatus::kNonFinite:
+      return "its state became non-finite: put back at rest where it was (its parameters or input "
+             "drive it past what the step resolves?)";
+    case StepStatus::kUnderGround:
+      return "it fell through the ground: put back on its wheels where it was (it rolled over? "
+             "this model has no contact of the body with the ground)";
+  }
+  return "";
+}
+
+void RequestOutcome::AddDiscarded(std::uint32_t vehicle_id, std::int64_t step, StepStatus status) {
+  for (std::size_t i = 0; i < n_discarded; ++i) {
+    if (discarded[i].vehicle_id == vehicle_id) {
+      ++discarded[i].count;
+      return;
+    }
+  }
+  if (n_discarded == kDiscardedListed) {
+    ++discarded_not_listed;  // a vehicle counted once per discarded step beyond the list
+    return;
+  }
+  discarded[n_discarded++] = {vehicle_id, 1, step, status};
+}
+
 pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) {
   pb::ControlReply reply = messages::ReplyTo(o.request.get(), server_id);
   if (!o.accepted) messages::Refuse(reply, OutcomeReason(o, server_id));
   if (o.applied_step >= 0) reply.set_applied_step(static_cast<std::uint64_t>(o.applied_step));
   reply.set_sim_time_ns(o.sim_time_ns);
+  for (std::size_t i = 0; i < o.n_discarded; ++i) {
+    const RequestOutcome::Discarded& d = o.discarded[i];
+    pb::DiscardedSteps* m = reply.add_discarded();
+    m->set_vehicle_id(d.vehicle_id);
+    m->set_count(d.count);
+    m->set_first_step(static_cast<std::uint64_t>(d.first_step));
+    m->set_reason(ContainedWhy(d.first_status));
+  }
+  reply.set_discarded_not_listed(o.discarded_not_listed);
   return reply;
 }
 

@@ -211,7 +211,24 @@ struct RequestOutcome {
   std::int64_t applied_step = -1;  // the vehicle's step then (-1: no such vehicle)
   std::int64_t sim_time_ns = 0;
   std::string text;
+  // A step request's: the vehicles whose steps were discarded while its steps ran (contained:
+  // no state published for them), the first kDiscardedListed of them; the rest only counted.
+  struct Discarded {
+    std::uint32_t vehicle_id = 0;
+    std::uint32_t count = 0;
+    std::int64_t first_step = 0;
+    StepStatus first_status = StepStatus::kOk;
+  };
+  static constexpr std::size_t kDiscardedListed = 16;
+  std::array<Discarded, kDiscardedListed> discarded{};
+  std::uint8_t n_discarded = 0;
+  std::uint32_t discarded_not_listed = 0;  // vehicles beyond the list
+  void AddDiscarded(std::uint32_t vehicle_id, std::int64_t step, StepStatus status);
 };
+
+// What became of a vehicle whose step was contained (non-finite, under the ground), as the log
+// and a step request's reply say it.
+const char* ContainedWhy(StepStatus status);
 
 // The reason of a refusal as a person reads it.
 std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id);
