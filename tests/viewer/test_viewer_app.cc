@@ -358,21 +358,22 @@ class ViewerApp : public ::testing::Test {
 };
 Xvfb* ViewerApp::xvfb_ = nullptr;
 
-// Before any server is heard the HUD says so (it read "LIVE server ''  world '(waiting)'"); once
-// one is, it names it.
+// Before any server is heard the HUD says so, WAITING in amber (it read "LIVE server ''  world
+// '(waiting)'"); once one is, it names it.
 TEST_F(ViewerApp, TheHudSaysWhenNoServerHasBeenHeardYet) {
   const std::uint32_t domain = FreshDomain();
   ViewerOptions o = Options(domain);
   ASSERT_TRUE(o.hud);
   Viewer v(o);
   for (int i = 0; i < 3; ++i) ASSERT_TRUE(v.Frame());
-  EXPECT_TRUE(HudHas(v, "no server yet on domain " + std::to_string(domain) + ": waiting"))
-      << Hud(v);
+  EXPECT_TRUE(HudHas(v, "WAITING  no server yet on domain " + std::to_string(domain))) << Hud(v);
   EXPECT_FALSE(HudHas(v, "server ''")) << Hud(v);
+  EXPECT_FALSE(HudHas(v, "LIVE")) << Hud(v);
+  EXPECT_FALSE(HudHas(v, "(waiting)")) << Hud(v);
   TestPublisher pub(domain);
   ASSERT_TRUE(pub.World(MakeWorld("test", kPi / 2)));
   Show(v, pub, {MakeState(TestVehicle{})});
-  EXPECT_TRUE(HudHas(v, "server 'test'")) << Hud(v);
+  EXPECT_TRUE(HudHas(v, "LIVE  server 'test'")) << Hud(v);
 }
 
 TEST_F(ViewerApp, TheDriverCameraShowsTheRoadAheadNotItsOwnArrowsAndTyres) {

@@ -1176,11 +1176,13 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
   ImGui::PushTextWrapPos(
       std::max(right_px - ImGui::GetWindowPos().x - ImGui::GetStyle().WindowPadding.x, 200.0f));
   const pb::Diagnostics* player = PlayerOf(f.server);
-  std::string mode = o.playback || player != nullptr ? "PLAYBACK" : "LIVE";
-  // Before any server is heard: said so (it read "LIVE server ''  world '(waiting)'").
-  std::string source = f.server.empty()
-                           ? "no server yet on domain " + std::to_string(o.domain) + ": waiting"
-                           : "server '" + f.server + "'";
+  // Before any server is heard: said so, in amber (it read "LIVE server ''  world '(waiting)'").
+  const bool none = f.server.empty() && player == nullptr;
+  std::string mode = none                             ? "WAITING"
+                     : o.playback || player != nullptr ? "PLAYBACK"
+                                                       : "LIVE";
+  std::string source = none ? "no server yet on domain " + std::to_string(o.domain)
+                            : "server '" + f.server + "'";
   if (player != nullptr) {
     source = "recording '" + player->recording() + "' (player '" + player->server_id() +
              "', server '" + f.server + "')";
@@ -1192,7 +1194,8 @@ void Viewer::Impl::HudStatus(const FrameScene& f, float right_px) {
   ImGui::TextColored(mode == "LIVE" ? green : amber, "%s", mode.c_str());
   ImGui::SameLine();
   const std::string where =
-      source + "  world '" + (f.world != nullptr ? f.world->name() : "(waiting)") + "'";
+      none ? source
+           : source + "  world '" + (f.world != nullptr ? f.world->name() : "(waiting)") + "'";
   ImGui::TextUnformatted(where.c_str());
   hud_text.push_back(mode + "  " + where);
 
