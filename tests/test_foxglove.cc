@@ -15,6 +15,7 @@
 #include "foxglove/FrameTransforms.pb.h"
 #include "foxglove/SceneUpdate.pb.h"
 #include "vdyn/client/palette.h"
+#include "vdyn/foxglove/clock.h"
 #include "vdyn/foxglove/outbox.h"
 #include "vdyn/foxglove/params.h"
 #include "vdyn/foxglove/protocol.h"
@@ -181,6 +182,45 @@ TEST(FoxgloveWebSocket, Utf8CheckFollowsTheStandard) {
 
 // --- the protocol's messages
 // ----------------------------------------------------------------------
+
+// The protocol: "timestamps of published messages must originate from the same time source". The
+// bridge's time was the largest simulation time of any state ever heard: after a server restart it
+// stood still at the old session's end while the new states were stamped 0 s on, and a second
+// server's states were stamped with a clock of their own.
+TEST(FoxgloveClock, OneServersTimeFollowedThroughRestartsOthersStampedWithIt) {
+  const base::Nanos silence = base::Seconds(3);
+  foxglove::BridgeClock clock(silence);
+  base::MonoTime t{1'000'000'000};
+  const auto ms = [](std::int64_t n) { return base::Milliseconds(n); };
+  EXPECT_FALSE(clock.set());
+  bool changed = false;
+  // The first state's server is the clock; its states keep their own time.
+  EXPECT_EQ(clock.OnState("a", 1, 20'000'000'000, t, &changed), 20'000'000'000u);
+  EXPECT_TRUE(changed);
+  EXPECT_EQ(clock.OnState("a", 1, 20'001'000'000, t + ms(1), &changed), 20'001'000'000u);
+  EXPECT_FALSE(changed);
+  // Another server on the domain: stamped with the clock's time, the clock unmoved.
+  EXPECT_EQ(clock.OnState("b", 7, 340'000'000'000, t + ms(2), &changed), 20'001'000'000u);
+  EXPECT_FALSE(changed);
+  EXPECT_EQ(clock.now_ns(), 20'001'000'000u);
+  EXPECT_EQ(clock.StampOf("b", 340'000'000'000), 20'001'000'000u);  // its diagnostics too
+  EXPECT_EQ(clock.StampOf("a", 20'000'500'000), 20'000'500'000u);
+  // Server a restarts (another incarnation): the clock follows its new session back to 0 s.
+  EXPECT_EQ(clock.OnState("a", 2, 5'000'000, t + ms(3000), &changed), 5'000'000u);
+  EXPECT_TRUE(changed);
+  EXPECT_EQ(clock.now_ns(), 5'000'000u);
+  // A player seeking back takes the clock back with it (same incarnation, an earlier time).
+  EXPECT_EQ(clock.OnState("a", 2, 1'000'000, t + ms(3001), &changed), 1'000'000u);
+  EXPECT_FALSE(changed);
+  // Server a falls silent for longer than `silence`: the next server heard is the clock.
+  EXPECT_EQ(clock.OnState("b", 7, 345'000'000'000, t + ms(3002), &changed), 1'000'000u);
+  EXPECT_EQ(clock.OnState("b", 7, 349'000'000'000, t + ms(3001 + 3001), &changed),
+            349'000'000'000u);
+  EXPECT_TRUE(changed);
+  EXPECT_EQ(clock.server_id(), "b");
+  // A negative simulation time is no log time: 0.
+  EXPECT_EQ(clock.StampOf("b", -5), 0u);
+}
 
 TEST(FoxgloveProtocol, ParsesTheClientMessagesFoxgloveSends) {
   const auto s = std::get<pr::Subscribe>(pr::ParseClientText(

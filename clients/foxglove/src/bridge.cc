@@ -1,4 +1,5 @@
 #include "vdyn/foxglove/bridge.h"
+#include "vdyn/foxglove/clock.h"
 
 #include <google/protobuf/util/json_util.h>
 
@@ -111,7 +112,7 @@ struct Bridge::Impl {
   std::map<std::string, std::shared_ptr<const std::string>> world_scenes;  // by server id
   std::map<std::uint32_t, pb::VehicleParams> params;  // written by the source thread only
   std::map<std::uint32_t, std::string> vehicle_servers;
-  std::uint64_t newest_sim_ns = 0;
+  BridgeClock clock{cfg.vehicle_timeout};  // the time source of `time` and every log time
   Bridge::Counters counters;
   std::uint64_t closed_dropped_messages = 0, closed_dropped_bytes = 0;  // of clients gone
   std::atomic<std::uint64_t> dds_lost{0};
@@ -263,8 +264,13 @@ struct Bridge::Impl {
       v.last_seen = now;
       std::lock_guard lock(mu);
       ++counters.states_in;
-      newest_sim_ns = std::max<std::uint64_t>(
-          newest_sim_ns, static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)));
+      bool clock_changed = false;
+      const std::uint64_t stamp =
+          clock.OnState(s.server_id(), s.incarnation(), s.sim_time_ns(), now, &clock_changed);
+      if (clock_changed) {
+        log("clock: the simulation time of server '" + s.server_id() +
+            "' (its first state, or a new start of it); other servers' messages get its time");
+      }
       // A reset vehicle's clock does not go back: forward again from its new time.
       if (s.sim_time_ns() < v.last_forwarded_ns)
         v.last_forwarded_ns = std::numeric_limits<std::int64_t>::min();
@@ -277,9 +283,7 @@ struct Bridge::Impl {
       auto payload = std::make_shared<std::string>();
       (void)s.SerializeToString(payload.get());
       if (want_state) {
-        Deliver(v.state_channel,
-                static_cast<std::uint64_t>(std::max<std::int64_t>(s.sim_time_ns(), 0)), payload,
-                now, info.source_timestamp_ns, false);
+        Deliver(v.state_channel, stamp, payload, now, info.source_timestamp_ns, false);
         v.last_forwarded_ns = s.sim_time_ns();
       }
       if (want_scene) {
@@ -318,9 +322,11 @@ void Bridge::Impl::SceneTick(base::MonoTime now) {
     const auto p = params.find(id);
     const Geometry g = GeometryFor(id, world == worlds.end() ? nullptr : &world->second,
                                    p == params.end() ? nullptr : &p->second);
-    const std::int64_t stamp = scratch.sim_time_ns();
-    const auto log_time = static_cast<std::uint64_t>(std::max<std::int64_t>(stamp, 0));
     std::lock_guard lock(mu);
+    // The message's own timestamps are its log time: the clock's (another server's vehicle gets
+    // the clock's time, so that a panel looking up transforms at the clock's time finds them).
+    const std::uint64_t log_time = clock.StampOf(scratch.server_id(), scratch.sim_time_ns());
+    const auto stamp = static_cast<std::int64_t>(log_time);
     if (Subscribed(v.tf_channel)) {
       BuildTransforms(scratch, g, stamp, transforms);
       Deliver(v.tf_channel, log_time, std::make_shared<std::string>(transforms.SerializeAsString()),
@@ -333,7 +339,8 @@ void Bridge::Impl::SceneTick(base::MonoTime now) {
     }
   }
   std::lock_guard lock(mu);
-  for (auto& [cid, c] : clients) c.outbox->PushTime(newest_sim_ns);
+  if (!clock.set()) return;
+  for (auto& [cid, c] : clients) c.outbox->PushTime(clock.now_ns());
 }
 
 void Bridge::Impl::TakeOthers(base::MonoTime now) {
@@ -344,7 +351,7 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
     std::lock_guard lock(mu);
     world_scenes[w.server_id()] = payload;
     for (const Subscriber& s : channels[world_channel].subscribers) {
-      if (!s.outbox->PushControlData(s.subscription, newest_sim_ns, payload) && close) {
+      if (!s.outbox->PushControlData(s.subscription, clock.now_ns(), payload) && close) {
         close(s.client,
               "vdyn-foxglove: this client has fallen too far behind (control queue full)");
       }
@@ -363,8 +370,7 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
   (void)diagnostics_reader.Take([&](const pb::Diagnostics& d, const transport::SampleInfo&) {
     std::lock_guard lock(mu);
     if (!Subscribed(diagnostics_channel)) return;
-    Deliver(diagnostics_channel,
-            static_cast<std::uint64_t>(std::max<std::int64_t>(d.sim_time_ns(), 0)),
+    Deliver(diagnostics_channel, clock.StampOf(d.server_id(), d.sim_time_ns()),
             std::make_shared<const std::string>(d.SerializeAsString()), now, 0, false);
   });
   std::vector<std::uint32_t> removed;
@@ -372,7 +378,7 @@ void Bridge::Impl::TakeOthers(base::MonoTime now) {
     if (e.has_removed()) removed.push_back(e.vehicle_id());
     std::lock_guard lock(mu);
     if (!Subscribed(events_channel)) return;
-    Deliver(events_channel, newest_sim_ns,
+    Deliver(events_channel, clock.now_ns(),
             std::make_shared<const std::string>(e.SerializeAsString()), now, 0, false);
   });
   for (std::uint32_t v : removed) RemoveVehicle(v, "was removed by its server");
@@ -437,7 +443,7 @@ void Bridge::Impl::HandleSubscribe(ClientId id, ClientState& c, const protocol::
     if (ch->second.kind == Kind::kWorld) {
       // The protocol has no latching: every new subscriber gets the terrain once.
       for (const auto& [server, payload] : world_scenes) {
-        if (!c.outbox->PushControlData(sub, newest_sim_ns, payload) && close) {
+        if (!c.outbox->PushControlData(sub, clock.now_ns(), payload) && close) {
           close(id, "vdyn-foxglove: this client has fallen too far behind (control queue full)");
         }
       }
