@@ -219,12 +219,17 @@ std::uint32_t Client::ChunkSteps(std::uint32_t left, bool with_input) {
 void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const ReplyInfo& reply,
                             const pb::DriverInput* input, double timeout_s,
                             std::map<std::uint32_t, StateTable>& out) {
-  std::lock_guard lock(mutex_);
   // The states of these steps start at these simulation times (the reply: the time after).
   const std::int64_t last = reply.sim_time_ns - step_ns_;
   const std::int64_t first = reply.sim_time_ns - static_cast<std::int64_t>(chunk) * step_ns_;
+  // One sample of vdyn/states is one step of every vehicle the server had then: the steps are
+  // complete when a sample of each has come, and a vehicle in none of them was not there (removed
+  // by another client, or a server that restarted without it); one spawned or removed meanwhile
+  // has the states of the steps it was there for.
   std::map<std::uint32_t, std::uint32_t> got;
+  std::set<std::int64_t> times;
   auto take = [&] {
+    std::lock_guard lock(mutex_);
     (void)states.Take([&](const pb::VehicleState& s) {
       ++received_[s.vehicle_id()];
       if (s.server_id() != server_id_ || s.sim_time_ns() < first || s.sim_time_ns() > last) return;
@@ -236,53 +241,50 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
         it->second = s;
       }
       ++got[s.vehicle_id()];
+      times.insert(s.sim_time_ns());
       vehicles_.insert(s.vehicle_id());
     });
   };
-  // A discarded step has no state (the reply says whose; beyond its list, only how many).
-  for (const auto& [id, n] : reply.discarded) vehicles_.insert(id);
-  auto expected = [&](std::uint32_t id) {
-    const auto it = reply.discarded.find(id);
-    const std::uint32_t none = it != reply.discarded.end() ? it->second : reply.discarded_not_listed;
-    return chunk - std::min(chunk, none);
+  // A discarded step published no state (the reply says whose): a step of which every vehicle's
+  // was discarded has no sample at all. At most as many as the fewest any vehicle lost.
+  auto without_sample = [&]() -> std::uint32_t {
+    if (reply.discarded.empty() || reply.discarded_not_listed > 0) return 0;
+    std::uint32_t fewest = chunk;
+    for (const auto& [id, n] : reply.discarded) fewest = std::min(fewest, n);
+    for (const auto& [id, n] : got) {
+      if (reply.discarded.count(id) == 0) return 0;  // a vehicle with a state at every step
+    }
+    return fewest;
   };
-  // A step's states of every vehicle travel together (vdyn/states): when every other vehicle's
-  // have come and none of the input's, the server has no such vehicle (removed meanwhile).
-  const std::uint32_t driven = input != nullptr ? input->vehicle_id() : 0;
-  bool driven_absent = false;
   auto complete = [&] {
     take();
-    bool any = !got.empty();
-    for (std::uint32_t id : vehicles_) {
-      if (expected(id) == 0) any = true;
-      if (id != driven && got[id] < expected(id)) return false;
-    }
-    if (!any) return false;
-    driven_absent = driven != 0 && got[driven] == 0 && reply.discarded.count(driven) == 0;
-    return driven_absent || driven == 0 || got[driven] >= expected(driven);
+    return times.size() + without_sample() >= chunk;
   };
   const bool done =
       base::PollUntil(DeadlineIn(timeout_s), base::Milliseconds(50), complete,
                       [&](base::Nanos slice) { (void)states.Wait(base::Chrono(slice)); });
-  if (driven_absent) {
-    vehicles_.erase(driven);
-    throw std::invalid_argument("no vehicle " + std::to_string(driven) + " on server '" +
-                                server_id_ + "': " + std::to_string(chunk) +
-                                " steps ran without it (" + VehicleList(vehicles_) + ")");
+  std::lock_guard lock(mutex_);
+  if (done) {
+    std::vector<std::uint32_t> absent;
+    for (std::uint32_t id : vehicles_) {
+      if (got.count(id) == 0 && reply.discarded.count(id) == 0) absent.push_back(id);
+    }
+    for (std::uint32_t id : absent) vehicles_.erase(id);
+    const std::uint32_t driven = input != nullptr ? input->vehicle_id() : 0;
+    if (driven != 0 && got.count(driven) == 0 && reply.discarded.count(driven) == 0) {
+      throw std::invalid_argument("no vehicle " + std::to_string(driven) + " on server '" +
+                                  server_id_ + "': " + std::to_string(chunk) +
+                                  " steps ran without it (" + VehicleList(vehicles_) + ")");
+    }
+    return;
   }
-  if (done) return;
-  std::string missing;
-  for (std::uint32_t id : vehicles_) {
-    if (got[id] >= expected(id)) continue;
-    missing += (missing.empty() ? "" : "; ") + std::string("vehicle ") + std::to_string(id) + ": " +
-               std::to_string(expected(id) - got[id]) + " of " + std::to_string(expected(id));
-  }
-  if (got.empty() && vehicles_.empty()) missing = "no vehicle's states at all";
+  const std::size_t missing = chunk - std::min<std::size_t>(chunk, times.size() + without_sample());
   throw TimeoutError(
-      "the states of the last " + std::to_string(chunk) + " lockstep steps (simulation time " +
-      std::to_string(static_cast<double>(first) * 1e-9) + " s to " +
-      std::to_string(static_cast<double>(last) * 1e-9) + " s) did not arrive within " +
-      Seconds(timeout_s) + " of the server's reply: missing " + missing +
+      "the states of " + std::to_string(missing) + " of the last " + std::to_string(chunk) +
+      " lockstep steps (simulation time " + std::to_string(static_cast<double>(first) * 1e-9) +
+      " s to " + std::to_string(static_cast<double>(last) * 1e-9) + " s) did not arrive within " +
+      Seconds(timeout_s) + " of the server's reply" +
+      (times.empty() ? ": no vehicle's states at all" : "") +
       " (states lost by this reader so far: " + std::to_string(states.Lost()) + ")");
 }
 
@@ -297,6 +299,9 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
   }
   (void)DeadlineIn(timeout_s);  // a bad timeout is refused before anything is sent
   if (input != nullptr) CheckStepInput(*input);
+  // One step() at a time per client (two threads' steps run one after the other): each takes the
+  // states of its own steps from the one reader.
+  std::lock_guard one_step(step_mu_);
   std::map<std::uint32_t, StateTable> out;
   StateSource& states = StepStates(timeout_s);
   for (std::uint32_t done = 0; done < steps;) {
@@ -368,6 +373,7 @@ StateSource& Client::StepStates(double timeout_s) {
                        "' did not match this client's reader of the states within " +
                        Seconds(timeout_s) + " (its world did not arrive again)");
   }
+  std::lock_guard lock(mutex_);  // StateReaders() reads it
   states_ = std::move(states);
   return *states_;
 }
@@ -413,42 +419,53 @@ std::vector<std::string> Client::StateReaders() {
 }
 
 StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
-  std::lock_guard lock(mutex_);
-  client::SessionView& view = LatestView(vehicle_id);
-  const client::SessionView::Vehicle* v = nullptr;
+  // Waits without mutex_ (a step() in another thread goes on meanwhile); polls with it (the
+  // view's callback counts into received_).
+  std::lock_guard one(latest_mu_);
+  client::SessionView* view_of = nullptr;
+  std::optional<pb::VehicleState> stepped;
+  {
+    std::lock_guard lock(mutex_);
+    view_of = &LatestView(vehicle_id);
+    if (const auto it = from_steps_.find(vehicle_id); it != from_steps_.end()) stepped = it->second;
+  }
+  client::SessionView& view = *view_of;
+  std::optional<pb::VehicleState> live;
+  auto poll = [&] {
+    std::lock_guard lock(mutex_);
+    view.Poll();
+    if (const client::SessionView::Vehicle* v = view.vehicle(vehicle_id)) live = v->state;
+  };
+  auto wait = [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); };
+  // A state of another start of the server than the step's (it restarted) is the newer one.
+  auto newer_than_stepped = [&] {
+    return live && (live->incarnation() != stepped->incarnation() ||
+                    live->sim_time_ns() > stepped->sim_time_ns());
+  };
   // The newest a step() brought, when no newer one comes here within 50 ms (a real-time server
   // sends one a step; a lockstep server none until the next step).
-  const auto stepped = from_steps_.find(vehicle_id);
-  if (stepped != from_steps_.end()) {
-    (void)base::PollUntil(
-        DeadlineIn(std::min(timeout_s, 0.05)), kSlice,
-        [&] {
-          view.Poll();
-          v = view.vehicle(vehicle_id);
-          return v != nullptr && v->state.sim_time_ns() > stepped->second.sim_time_ns();
-        },
-        [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
-    if (v == nullptr || v->state.sim_time_ns() < stepped->second.sim_time_ns()) {
+  if (stepped) {
+    (void)base::PollUntil(DeadlineIn(std::min(timeout_s, 0.05)), kSlice, [&] {
+      poll();
+      return newer_than_stepped();
+    }, wait);
+    if (!newer_than_stepped()) {
       StateTable t;
-      t.Append(stepped->second);
+      t.Append(*stepped);
       return t;
     }
   }
-  const bool found = base::PollUntil(
-      DeadlineIn(timeout_s), kSlice,
-      [&] {
-        view.Poll();
-        v = view.vehicle(vehicle_id);
-        return v != nullptr;
-      },
-      [&](base::Nanos slice) { (void)view.Wait(base::Chrono(slice)); });
+  const bool found = base::PollUntil(DeadlineIn(timeout_s), kSlice, [&] {
+    poll();
+    return live.has_value();
+  }, wait);
   if (!found) {
     throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id) +
                        " arrived on vdyn/state within " + Seconds(timeout_s) +
                        " (a lockstep server publishes states only while it steps)");
   }
   StateTable t;
-  t.Append(v->state);
+  t.Append(*live);
   return t;
 }
 

@@ -111,6 +111,8 @@ class Client {
   std::string server_id_;
   double timeout_s_;
   std::mutex mutex_;
+  std::mutex step_mu_;  // held by Step() throughout, never while mutex_ is
+  std::mutex latest_mu_;  // held by Latest() throughout, never while mutex_ is
   transport::Participant participant_;
   transport::ControlClient control_;
   client::SessionView view_;  // world, params, diagnostics (no states)

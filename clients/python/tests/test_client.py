@@ -3,6 +3,7 @@
 import math
 import os
 import subprocess
+import threading
 import time
 import warnings
 
@@ -89,6 +90,70 @@ def test_a_step_the_server_discards_is_said_not_waited_for(lockstep_server, doma
     assert abs(float(last["roll_rad"][steps.index(gone + 1)])) < 0.2
     # And the session goes on: the next call has every state.
     assert len(sim.step(100, inp, timeout=30)[1]) == 100
+
+
+def test_one_client_stepped_from_two_threads_gives_each_its_own_steps(lockstep_server, domain):
+    # Two threads stepping one Client crashed it (both made the step reader at once: SIGSEGV) or,
+    # once made, one thread took the other's states and timed out. Its steps now run one at a time.
+    sim = vdyn.Client(domain=domain, timeout=30)
+    got, errors = [], []
+
+    def run():
+        try:
+            for _ in range(3):
+                got.append([int(k) for k in sim.step(700)[1].step])
+        except Exception as e:  # noqa: BLE001  (any error fails the test below)
+            errors.append(e)
+
+    threads = [threading.Thread(target=run) for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(120)
+    assert not errors, errors
+    assert len(got) == 6 and all(len(g) == 700 for g in got)
+    # Each call has 700 consecutive steps; together every step of the 4200 once.
+    assert all(g == list(range(g[0], g[0] + 700)) for g in got)
+    assert sorted(k for g in got for k in g) == list(range(4200))
+
+
+def test_vehicles_removed_or_spawned_by_another_client_do_not_stall_steps(lockstep_server,
+                                                                          domain):
+    # A vehicle another client removed stayed in this client's list: every later step() waited its
+    # whole timeout for that vehicle's states and raised TimeoutError.
+    a = vdyn.Client(domain=domain, timeout=30)
+    b = vdyn.Client(domain=domain, timeout=30)
+    b.spawn(14, 60.0, 40.0)
+    assert sorted(a.step(10, timeout=30)) == [1, 14]
+    b.despawn(14)
+    t0 = time.monotonic()
+    for _ in range(3):
+        assert sorted(a.step(10, timeout=30)) == [1]
+    assert time.monotonic() - t0 < 25  # no step waited out its 30 s (generous for a loaded machine)
+    assert 14 not in a.vehicles
+    # Driving the removed vehicle is refused with the reason, before anything is stepped.
+    with pytest.raises(ValueError, match="vehicle 14"):
+        a.step(1, vdyn.make_input(), vehicle_id=14)
+
+
+def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
+    # latest() held the client's lock for its whole wait: a step() in another thread, which would
+    # bring the state it waited for, could not run until latest() timed out.
+    sim = vdyn.Client(domain=domain, timeout=60)
+    result = {}
+
+    def wait_latest():
+        try:
+            result["state"] = sim.latest(1, timeout=60)
+        except Exception as e:  # noqa: BLE001
+            result["error"] = e
+
+    t = threading.Thread(target=wait_latest)
+    t.start()
+    sim.step(50, timeout=60)
+    t.join(90)
+    assert "error" not in result, result.get("error")
+    assert len(result["state"]) == 1 and int(result["state"].step[0]) < 50
 
 
 def test_control_requests_and_refusals_carry_the_servers_reason(lockstep_server, domain):
