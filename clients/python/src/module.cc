@@ -111,6 +111,8 @@ const limits::Range* NamedLimit(const std::string& name) {
 
 void BindChecks(py::module_& m) {
   m.def("state_columns", &StateColumns, "The state columns (the vehicle CSV's, in order).");
+  m.attr("MAX_ID_BYTES") = limits::kMaxIdBytes;  // a server's, client's or source's id
+  m.attr("MAX_STEPS") = limits::kMaxStepsPerRequest;  // of one step() call
   m.def(
       "check_limit",
       [](const std::string& name, double value) {

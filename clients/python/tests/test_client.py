@@ -396,9 +396,20 @@ def test_parameters_and_steps_that_would_answer_wrongly_are_refused_or_answered_
     # vehicle_id without an input stepped every vehicle and ignored it (also one not there).
     with pytest.raises(ValueError, match="vehicle_id names the vehicle an input is for"):
         sim.step(1, None, vehicle_id=99)
-    for n in (-1, 0, 2 ** 40):
-        with pytest.raises(ValueError, match=rf"n must be in \[1, 4294967295\] steps, got {n}"):
+    # The README said up to 2^32 - 1; a call takes at most 600,000 (the client said "steps must
+    # be at most 600000" without naming n).
+    for n in (-1, 0, 600_001, 2 ** 40):
+        with pytest.raises(ValueError, match=rf"n must be in \[1, 600000\] steps .*, got {n}"):
             sim.step(n)
+    # An id a server would ignore (over 64 bytes) is refused here; it timed out after the whole
+    # wait saying no server answered.
+    with pytest.raises(ValueError, match="client_id must be at most 64 bytes in UTF-8, got 65"):
+        vdyn.Client(domain=domain, client_id="x" * 65, timeout=30)
+    # An input naming one vehicle sent to another was sent to the other without a word.
+    with pytest.raises(ValueError, match="the input names vehicle 2, but it goes to vehicle 1"):
+        sim.step(1, vdyn.make_input(vehicle_id=2), vehicle_id=1)
+    with pytest.raises(ValueError, match="the input names vehicle 2, but it goes to vehicle 1"):
+        sim.driver(1).send(vdyn.make_input(vehicle_id=2))
     # latest() right after a lockstep step: the newest state the step brought (a reader made
     # after it had nothing, and the server sends nothing until the next step: it timed out).
     fresh = vdyn.Client(domain=domain, timeout=30)

@@ -38,6 +38,15 @@ def _text(name, value):
     return value
 
 
+def _id(name, value):
+    """An id a server reads (client, server, source): text of at most MAX_ID_BYTES in UTF-8."""
+    value = _text(name, value)
+    if len(value.encode()) > _vdyn.MAX_ID_BYTES:
+        raise ValueError(f"{name} must be at most {_vdyn.MAX_ID_BYTES} bytes in UTF-8, got "
+                         f"{len(value.encode())} (a server ignores a longer one)")
+    return value
+
+
 def _check_input(msg):
     """Raises ValueError with a server's reason when it would not apply this input."""
     why = _vdyn.why_input_refused(msg.SerializeToString())
@@ -135,7 +144,11 @@ def _input_message(inp, vehicle_id, source_id):
     msg = input_pb2.DriverInput()
     msg.CopyFrom(inp)
     if vehicle_id is not None:
-        msg.vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
+        vehicle_id = _whole("vehicle_id", vehicle_id, "vehicle_id")
+        if msg.vehicle_id not in (0, vehicle_id):
+            raise ValueError(f"the input names vehicle {msg.vehicle_id}, but it goes to vehicle "
+                             f"{vehicle_id} (vehicle_id=, or the driver's): give one of them")
+        msg.vehicle_id = vehicle_id
     if not msg.source_id:
         msg.source_id = source_id
     return msg
@@ -153,9 +166,9 @@ class Client:
     def __init__(self, domain=0, server_id=None, timeout=DEFAULT_TIMEOUT, client_id=None):
         self.timeout = DEFAULT_TIMEOUT
         self.timeout = self._t(timeout)
-        self.client_id = (_text("client_id", client_id) if client_id is not None
+        self.client_id = (_id("client_id", client_id) if client_id is not None
                           else f"python-{os.getpid()}-{id(self):x}")
-        server_id = "" if server_id is None else _text("server_id", server_id)
+        server_id = "" if server_id is None else _id("server_id", server_id)
         self._c = _vdyn.Client(_whole("domain", domain, "domain"), server_id, self.timeout,
                                self.client_id)
         self._world = None
@@ -304,7 +317,8 @@ class Client:
 
     # --- lockstep -----------------------------------------------------------------------------
     def step(self, n=1, input=None, vehicle_id=None, source_id="python", timeout=None):
-        """Advances the server n steps (lockstep; a real-time server pauses its clock for them)
+        """Advances the server n steps (lockstep; a real-time server pauses its clock for them
+        and stays paused after them until resume())
         with ``input`` (vdyn.make_input(...) or a dict; for ``vehicle_id``, else the input's own)
         applied first, and returns {vehicle_id: States} with every vehicle's state at each of
         those steps. An input for a vehicle the server does not have, or one it would not apply
@@ -314,8 +328,9 @@ class Client:
         put back at rest) has no state: its row is missing, and a vdyn.DiscardedStepsWarning says
         whose, how many and why."""
         n = _whole("n", n)
-        if not 1 <= n <= 0xFFFFFFFF:
-            raise ValueError(f"n must be in [1, 4294967295] steps, got {n}")
+        if not 1 <= n <= _vdyn.MAX_STEPS:
+            raise ValueError(f"n must be in [1, {_vdyn.MAX_STEPS}] steps (ten simulated minutes "
+                             f"at 1 kHz: call step() again for more), got {n}")
         if input is None and vehicle_id is not None:
             raise ValueError("vehicle_id names the vehicle an input is for; without an input, "
                              "step() advances every vehicle and returns each one's states "
