@@ -1605,6 +1605,23 @@ TEST_F(RecorderTest, EmptyRangesAndMissingVehiclesAreSaidAlikeAndLeaveNothingBeh
     EXPECT_THAT(out, HasSubstr("vdyn-recorder " + cmd + ": --from 2 s is after --to 1 s: the "
                                "range is empty"));
   }
+  // export --foxglove copies the whole recording: a range or a vehicle was ignored (exit 0,
+  // everything copied); the scene's options were ignored by --csv.
+  const auto fg = dir_ / "fg.mcap";
+  for (const std::vector<std::string>& extra :
+       std::vector<std::vector<std::string>>{{"--from", "1"}, {"--to", "2"}, {"--vehicle", "1"},
+                                             {"--each"}, {"--every", "10"}}) {
+    std::vector<std::string> args = {"export", file.string(), "--foxglove", fg.string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    std::tie(code, out) = Run(args);
+    EXPECT_EQ(code, 2) << extra[0] << ": " << out;
+    EXPECT_THAT(out, HasSubstr("--foxglove excludes " + extra[0])) << out;
+    EXPECT_FALSE(std::filesystem::exists(fg));
+  }
+  std::tie(code, out) =
+      Run({"export", file.string(), "--csv", csv.string(), "--scene-hz", "5"});
+  EXPECT_EQ(code, 2) << out;
+  EXPECT_THAT(out, HasSubstr("--csv excludes --scene-hz"));
   std::tie(code, out) = Run({"verify", file.string(), "--vehicle", "9"});
   EXPECT_EQ(code, 2) << out;
   EXPECT_THAT(out, HasSubstr("no states of vehicle 9 in " + file.string() + " (it has vehicle 1)"));

@@ -218,20 +218,28 @@ struct Export {
     foxglove = cmd->add_option("--foxglove", fo.out,
                                "A copy of the recording with Foxglove's scene added (MCAP)");
     csv->excludes(foxglove);
-    cmd->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
-        ->check(cli::InRange(limits::kFoxgloveSceneHz))
-        ->capture_default_str();
-    cmd->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
-        ->check(cli::InRange(limits::kArrowScale))
-        ->capture_default_str();
-    vehicle.Add(cmd, "--vehicle", "Only this vehicle");
-    cmd->add_flag("--each", eo.each, "Every vehicle to its own file: OUT-v<ID>.csv");
-    cmd->add_option("--from", eo.from_s, "Start, s from the recording's start")
-        ->check(cli::InRange(limits::kRecordingTimeS));
-    cmd->add_option("--to", eo.to_s, "End, s from the recording's start")
-        ->check(cli::InRange(limits::kRecordingTimeS));
-    cmd->add_option("--every", eo.every, "Rows whose step is a multiple of N (as --csv-every)")
-        ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
+    CLI::Option* scene_hz =
+        cmd->add_option("--scene-hz", fo.scene_hz, "--foxglove: scenes per second of log time")
+            ->check(cli::InRange(limits::kFoxgloveSceneHz))
+            ->capture_default_str();
+    CLI::Option* arrows =
+        cmd->add_option("--arrow-scale", fo.arrow_m_per_kn, "--foxglove: force arrows, m per kN")
+            ->check(cli::InRange(limits::kArrowScale))
+            ->capture_default_str();
+    vehicle.Add(cmd, "--vehicle", "--csv: only this vehicle");
+    CLI::Option* each =
+        cmd->add_flag("--each", eo.each, "--csv: every vehicle to its own file: OUT-v<ID>.csv");
+    CLI::Option* from = cmd->add_option("--from", eo.from_s, "--csv: start, s from the recording's start")
+                            ->check(cli::InRange(limits::kRecordingTimeS));
+    CLI::Option* to = cmd->add_option("--to", eo.to_s, "--csv: end, s from the recording's start")
+                          ->check(cli::InRange(limits::kRecordingTimeS));
+    CLI::Option* every =
+        cmd->add_option("--every", eo.every, "--csv: rows whose step is a multiple of N (as --csv-every)")
+            ->check(cli::WholeInRange({1, 1e6, false, false, "--every"}));
+    // The Foxglove copy is the whole recording with its scene: a range or a vehicle of it was
+    // ignored (exit 0, everything copied), as the scene's options were by --csv.
+    for (CLI::Option* o : {vehicle.option, each, from, to, every}) foxglove->excludes(o);
+    for (CLI::Option* o : {scene_hz, arrows}) csv->excludes(o);
   }
 
   int Run() {
