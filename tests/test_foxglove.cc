@@ -158,6 +158,54 @@ TEST(FoxgloveWebSocket, RefusesWhatAClientMustNotSendWithTheCloseCode) {
   }
 }
 
+// A close frame's body: empty, or a code an endpoint may send and a UTF-8 reason (RFC 6455 5.5.1,
+// 7.4, 8.1). The bridge echoed any code back (999, 1005, 1006, 1015, 5000: codes it must not send),
+// answered a 1-byte body with an empty close and a reason that is not UTF-8 with 1000.
+TEST(FoxgloveWebSocket, AnInvalidCloseBodyIsAProtocolErrorNotEchoed) {
+  const auto close_of = [](unsigned code, const std::string& reason) {
+    std::string body;
+    body.push_back(static_cast<char>(code >> 8));
+    body.push_back(static_cast<char>(code & 0xff));
+    return ClientFrame(WsOpcode::kClose, body + reason);
+  };
+  const auto read = [](const std::string& frame, std::uint16_t* code) {
+    pr::FrameReader r(1 << 20);
+    std::string_view in = frame;
+    pr::FrameReader::Event ev;
+    try {
+      EXPECT_TRUE(r.Next(in, ev));
+      *code = 0;
+      return ev.kind == pr::FrameReader::Event::Kind::kClose;
+    } catch (const pr::ProtocolError&) {
+      *code = r.close_code();
+      return false;
+    }
+  };
+  std::uint16_t code = 0;
+  for (unsigned ok : {1000u, 1001u, 1003u, 1007u, 1011u, 1014u, 3000u, 4999u}) {
+    EXPECT_TRUE(read(close_of(ok, "bye"), &code)) << ok;
+  }
+  EXPECT_TRUE(read(ClientFrame(WsOpcode::kClose, ""), &code));  // no body at all
+  for (unsigned bad : {0u, 999u, 1004u, 1005u, 1006u, 1015u, 1016u, 2999u, 5000u, 65535u}) {
+    EXPECT_FALSE(read(close_of(bad, ""), &code)) << bad;
+    EXPECT_EQ(code, 1002) << bad;
+  }
+  EXPECT_FALSE(read(ClientFrame(WsOpcode::kClose, "\x03"), &code));
+  EXPECT_EQ(code, 1002);
+  EXPECT_FALSE(read(close_of(1000, "\xff"), &code));
+  EXPECT_EQ(code, 1007);
+}
+
+// RFC 6455 4.2.1: the key is 16 bytes in base64 (a key "abc" was accepted).
+TEST(FoxgloveWebSocket, AClientKeyIsSixteenBytesInBase64) {
+  EXPECT_TRUE(pr::ValidClientKey("dGhlIHNhbXBsZSBub25jZQ=="));  // the RFC's example
+  for (const char* bad : {"", "abc", "dGhlIHNhbXBsZSBub25jZQ", "dGhlIHNhbXBsZSBub25jZQ=x",
+                          "dGhlIHNhbXBsZSBub25jZ*==", "dGhlIHNhbXBsZSBub25jZQ===",
+                          "dGhlIHNhbXBsZSBub25jZSBvZiAzMiBieXRlcw=="}) {
+    EXPECT_FALSE(pr::ValidClientKey(bad)) << bad;
+  }
+}
+
 TEST(FoxgloveWebSocket, FrameHeadersUseTheShortestLength) {
   for (auto [n, header] : std::vector<std::pair<std::uint64_t, std::vector<std::uint8_t>>>{
            {0, {0x82, 0}},

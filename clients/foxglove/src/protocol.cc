@@ -111,6 +111,23 @@ std::string ChooseSubprotocol(std::string_view header) {
   return {};
 }
 
+bool ValidClientKey(std::string_view key) {
+  if (key.size() != 24 || key.substr(22) != "==") return false;
+  const auto base64 = [](char c) {
+    return (c >= 'A' && c <= 'Z') || (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '+' ||
+           c == '/';
+  };
+  for (std::size_t i = 0; i < 22; ++i) {
+    if (!base64(key[i])) return false;
+  }
+  return true;
+}
+
+bool SendableCloseCode(unsigned code) {
+  return (code >= 1000 && code <= 1003) || (code >= 1007 && code <= 1014) ||
+         (code >= 3000 && code <= 4999);
+}
+
 std::string Base64(std::span<const std::uint8_t> b) {
   static constexpr char kAlphabet[] =
       "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -336,6 +353,17 @@ void FrameReader::Fail(std::uint16_t code, const std::string& why) {
   throw ProtocolError(why);
 }
 
+void FrameReader::CheckCloseBody(std::string_view body) {
+  if (body.empty()) return;
+  if (body.size() == 1) Fail(1002, "a close frame with a 1-byte body (a code takes 2)");
+  const unsigned code =
+      (static_cast<unsigned>(static_cast<std::uint8_t>(body[0])) << 8) |
+      static_cast<std::uint8_t>(body[1]);
+  if (!SendableCloseCode(code))
+    Fail(1002, "close code " + std::to_string(code) + ", which an endpoint may not send");
+  if (!ValidUtf8(body.substr(2))) Fail(1007, "a close reason that is not UTF-8");
+}
+
 bool FrameReader::Next(std::string_view& in, Event& out) {
   for (;;) {
     if (!have_header_) {
@@ -404,6 +432,7 @@ bool FrameReader::Next(std::string_view& in, Event& out) {
     if (left_ > 0) return false;
     have_header_ = false;
     if (control) {
+      if (opcode_ == WsOpcode::kClose) CheckCloseBody(control_);
       out.kind = opcode_ == WsOpcode::kClose  ? Event::Kind::kClose
                  : opcode_ == WsOpcode::kPing ? Event::Kind::kPing
                                               : Event::Kind::kPong;

@@ -180,6 +180,20 @@ class Connection final : public ConnectionBase,
     parser_->body_limit(64 * 1024);
     http::async_read(stream_, buffer_, *parser_,
                      [self = this->shared_from_this()](beast::error_code ec, std::size_t) {
+                       // Too long a request line or headers (431), too large a body (413), a
+                       // request that is not HTTP (400): answered, then closed.
+                       if (ec == http::error::header_limit) {
+                         return self->Refuse(http::status::request_header_fields_too_large,
+                                             "request line and headers over 16 KiB");
+                       }
+                       if (ec == http::error::body_limit) {
+                         return self->Refuse(http::status::payload_too_large,
+                                             "request body over 64 KiB");
+                       }
+                       if (ec && ec != http::error::end_of_stream &&
+                           ec.category() == http::make_error_code(http::error::bad_target).category()) {
+                         return self->Refuse(http::status::bad_request, "HTTP: " + ec.message());
+                       }
                        if (ec)
                          return self->Drop(
                              ec == http::error::end_of_stream ? "closed" : "HTTP: " + ec.message());
@@ -190,13 +204,26 @@ class Connection final : public ConnectionBase,
   void OnRequest() {
     ++server_.http_requests;
     http::request<http::string_body> req = parser_->release();
+    // RFC 9112 3.2: an HTTP/1.1 request with no Host, or more than one, is answered 400.
+    const auto hosts = std::distance(req.equal_range(http::field::host).first,
+                                     req.equal_range(http::field::host).second);
+    if (hosts > 1 || (hosts == 0 && req.version() >= 11)) {
+      return Refuse(http::status::bad_request,
+                    hosts == 0 ? "an HTTP/1.1 request needs a Host header"
+                               : "a request with more than one Host header");
+    }
     if (beast::websocket::is_upgrade(req)) return Upgrade(req);
     auto res = std::make_shared<http::response<http::string_body>>();
     res->version(req.version());
     res->set(http::field::server, "vdyn-foxglove");
     res->set(http::field::cache_control, "no-cache");
     res->keep_alive(req.keep_alive());
-    const std::string full(req.target());
+    std::string full(req.target());
+    // The absolute form (RFC 9112 3.2.2: a server must accept it): its path.
+    if (const std::size_t scheme = full.find("://"); scheme != std::string::npos && full[0] != '/') {
+      const std::size_t path = full.find('/', scheme + 3);
+      full = path == std::string::npos ? "/" : full.substr(path);
+    }
     const std::string target = full.substr(0, full.find('?'));
     auto body = [&](http::status s, std::string_view type, std::string_view text) {
       res->result(s);
@@ -205,6 +232,7 @@ class Connection final : public ConnectionBase,
     };
     if (req.method() != http::verb::get && req.method() != http::verb::head) {
       body(http::status::method_not_allowed, "text/plain", "GET only\n");
+      res->set(http::field::allow, "GET, HEAD");  // RFC 9110 15.5.6
     } else if (target == "/" || target == "/index.html") {
       body(http::status::ok, "text/html; charset=utf-8", web::IndexHtml());
     } else if (target == "/app.js") {
@@ -219,6 +247,10 @@ class Connection final : public ConnectionBase,
       body(http::status::not_found, "text/plain", "not found: " + target + "\n");
     }
     res->prepare_payload();
+    if (res->result() == http::status::no_content) {  // RFC 9110 8.6: no Content-Length
+      res->erase(http::field::content_length);
+      res->erase(http::field::content_type);
+    }
     if (req.method() == http::verb::head) res->body().clear();
     http::async_write(stream_, *res,
                       [self = this->shared_from_this(), res](beast::error_code ec, std::size_t n) {
@@ -232,6 +264,9 @@ class Connection final : public ConnectionBase,
   void Refuse(http::status status, const std::string& why) {
     ++server_.refused;
     auto res = std::make_shared<http::response<http::string_body>>(status, 11);
+    res->set(http::field::server, "vdyn-foxglove");
+    // RFC 6455 4.4: a version this server does not speak is answered with the one it does.
+    if (status == http::status::upgrade_required) res->set(http::field::sec_websocket_version, "13");
     res->set(http::field::content_type, "text/plain");
     res->body() = why + "\n";
     res->keep_alive(false);
@@ -244,11 +279,18 @@ class Connection final : public ConnectionBase,
 
   void Upgrade(const http::request<http::string_body>& req) {
     const std::string key(req[http::field::sec_websocket_key]);
-    const std::string subprotocol =
-        protocol::ChooseSubprotocol(std::string(req[http::field::sec_websocket_protocol]));
-    if (key.empty() || req[http::field::sec_websocket_version] != "13") {
+    // The subprotocols offered, on one header line or several (RFC 6455 11.3.4: the same).
+    std::string offered;
+    for (auto [it, end] = req.equal_range(http::field::sec_websocket_protocol); it != end; ++it)
+      offered += (offered.empty() ? "" : ",") + std::string(it->value());
+    const std::string subprotocol = protocol::ChooseSubprotocol(offered);
+    if (req[http::field::sec_websocket_version] != "13") {
+      return Refuse(http::status::upgrade_required,
+                    "vdyn-foxglove speaks WebSocket version 13 (Sec-WebSocket-Version)");
+    }
+    if (!protocol::ValidClientKey(key)) {
       return Refuse(http::status::bad_request,
-                    "a WebSocket upgrade needs Sec-WebSocket-Key and Sec-WebSocket-Version 13");
+                    "a WebSocket upgrade needs a Sec-WebSocket-Key of 16 bytes in base64");
     }
     if (subprotocol.empty()) {
       return Refuse(http::status::bad_request,

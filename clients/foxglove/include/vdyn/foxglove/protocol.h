@@ -32,6 +32,10 @@ class ProtocolError : public std::runtime_error {
 std::string ChooseSubprotocol(std::string_view header);
 // The Sec-WebSocket-Accept value for a client's Sec-WebSocket-Key (SHA-1 and base64).
 std::string AcceptKey(std::string_view client_key);
+// RFC 6455 4.2.1: a Sec-WebSocket-Key is the base64 of 16 bytes (24 characters, "==" at the end).
+bool ValidClientKey(std::string_view key);
+// RFC 6455 7.4: a close code an endpoint may send (1000-1003, 1007-1014, 3000-4999).
+bool SendableCloseCode(unsigned code);
 std::string Base64(std::span<const std::uint8_t> bytes);
 
 // --- server messages ----------------------------------------------------------------------------
@@ -169,6 +173,8 @@ class FrameReader {
 
  private:
   [[noreturn]] void Fail(std::uint16_t code, const std::string& why);
+  // RFC 6455 5.5.1, 7.4, 8.1: a close body is empty or a sendable code and a UTF-8 reason.
+  void CheckCloseBody(std::string_view body);
   std::size_t max_message_;
   std::string header_;   // the current frame's header bytes, until whole
   std::string message_;  // a fragmented message so far
