@@ -12,6 +12,7 @@
 #include "client.h"
 #include "recording_reader.h"
 #include "state_columns.h"
+#include "vdyn/base/deadline.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/io/vehicle_params.h"
@@ -23,6 +24,25 @@ using namespace vdyn;
 using namespace vdyn::python;
 
 namespace {
+
+// The GIL released while a call waits, and Ctrl-C checked between its waits (base::PollUntil's
+// slices, 20-50 ms): a KeyboardInterrupt ends the wait (it waited out its whole timeout, without
+// end for a timeout of 1e10 s). Only the main thread receives signals; elsewhere nothing is seen.
+class WaitReleased {
+ public:
+  WaitReleased() : saved_(base::ThreadWaitHook()) { base::ThreadWaitHook() = &CheckSignals; }
+  ~WaitReleased() { base::ThreadWaitHook() = saved_; }
+  WaitReleased(const WaitReleased&) = delete;
+  WaitReleased& operator=(const WaitReleased&) = delete;
+
+ private:
+  static void CheckSignals() {
+    py::gil_scoped_acquire gil;
+    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+  }
+  py::gil_scoped_release release_;  // first: released before the hook is set
+  base::WaitHook saved_;
+};
 
 template <class M>
 M Parse(const py::bytes& bytes, const char* what) {
@@ -137,7 +157,7 @@ void BindChecks(py::module_& m) {
       "Empty when a server applies this serialised DriverInput, else its reason.");
 }
 
-using Release = py::call_guard<py::gil_scoped_release>;
+using Release = py::call_guard<WaitReleased>;
 
 void BindClient(py::module_& m) {
   py::class_<Client>(m, "Client")
@@ -154,7 +174,7 @@ void BindClient(py::module_& m) {
            [](Client& c, std::uint32_t id, double timeout) {
              std::string s;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                s = c.ParamsBytes(id, timeout);
              }
              return py::bytes(s);
@@ -164,7 +184,7 @@ void BindClient(py::module_& m) {
              auto r = Parse<pb::ControlRequest>(request, "control request");
              ReplyInfo info;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                info = c.Request(std::move(r), what, timeout);
              }
              return Reply(info);
@@ -176,7 +196,7 @@ void BindClient(py::module_& m) {
              std::map<std::uint32_t, StateTable> out;
              std::vector<std::string> discarded;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                out = c.Step(steps, in ? &*in : nullptr, timeout, &discarded);
              }
              py::dict d;
@@ -189,7 +209,7 @@ void BindClient(py::module_& m) {
              std::map<std::uint32_t, StateTable> out;
              std::vector<std::string> discarded;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                out = c.RunManeuver(maneuver, id, duration, source_id, timeout, &discarded);
              }
              py::dict d;
@@ -199,7 +219,7 @@ void BindClient(py::module_& m) {
       .def("latest", [](Client& c, std::uint32_t id, double timeout) {
         StateTable t;
         {
-          py::gil_scoped_release release;
+          WaitReleased release;
           t = c.Latest(id, timeout);
         }
         return Table(std::move(t));
@@ -233,13 +253,13 @@ void BindDriver(py::module_& m) {
       .def("send",
            [](Driver& d, const py::bytes& input) {
              auto in = Parse<pb::DriverInput>(input, "driver input");
-             py::gil_scoped_release release;
+             WaitReleased release;
              d.Send(in);
            })
       .def("set",
            [](Driver& d, const py::bytes& input) {
              auto in = Parse<pb::DriverInput>(input, "driver input");
-             py::gil_scoped_release release;
+             WaitReleased release;
              d.Set(in);
            })
       .def("start", &Driver::Start, py::arg("rate_hz"), Release())
@@ -259,7 +279,7 @@ void BindSubscription(py::module_& m) {
            [](Subscription& s, double timeout) {
              StateTable t;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                t = s.Next(timeout);
              }
              return Table(std::move(t));
@@ -268,7 +288,7 @@ void BindSubscription(py::module_& m) {
            [](Subscription& s) {
              StateTable t;
              {
-               py::gil_scoped_release release;
+               WaitReleased release;
                t = s.TakeAll();
              }
              return Table(std::move(t));
@@ -284,7 +304,7 @@ void BindSubscription(py::module_& m) {
 void BindRecording(py::module_& m) {
   py::class_<RecordingReader>(m, "RecordingReader")
       .def(py::init([](const std::string& path) {
-             py::gil_scoped_release release;
+             WaitReleased release;
              return std::make_unique<RecordingReader>(path);
            }),
            py::arg("path"))
@@ -342,7 +362,7 @@ void BindRecording(py::module_& m) {
       .def("states", [](const RecordingReader& r, std::uint32_t id) {
         StateTable t;
         {
-          py::gil_scoped_release release;
+          WaitReleased release;
           t = r.States(id);
         }
         return Table(std::move(t));

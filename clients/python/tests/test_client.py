@@ -3,6 +3,7 @@
 import math
 import os
 import subprocess
+import sys
 import threading
 import time
 import warnings
@@ -31,6 +32,22 @@ def test_a_wait_with_no_server_raises_within_its_timeout(domain):
     with pytest.raises(vdyn.TimeoutError, match=f"^no vdyn server on DDS domain {domain} answered"):
         vdyn.Client(domain=domain, timeout=1.0)
     assert time.monotonic() - t0 < 6.0  # 1 s, and generous room for a loaded machine
+
+
+def test_ctrl_c_ends_a_wait(domain):
+    # Every wait runs with the GIL released; Ctrl-C (SIGINT) came only when the call returned: a
+    # wait without end (timeout 1e10 s) could not be stopped. Now a KeyboardInterrupt ends it.
+    script = (
+        "import os, signal, sys, threading, time\n"
+        "import vdyn\n"
+        "threading.Timer(1.0, lambda: os.kill(os.getpid(), signal.SIGINT)).start()\n"
+        "try:\n"
+        f"    vdyn.Client(domain={domain}, timeout=1e10)\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted')\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.stdout.strip() == "interrupted", done.stdout + done.stderr
 
 
 def test_a_named_server_that_is_absent_raises(lockstep_server, domain):

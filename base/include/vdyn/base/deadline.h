@@ -47,6 +47,14 @@ inline Nanos FromChrono(std::chrono::nanoseconds d) {
   return Nanos{d.count()};
 }
 
+// What a thread runs between the waits of PollUntil, when set: the Python module checks for
+// Ctrl-C there (and throws to end the wait). None by default, for each thread.
+using WaitHook = void (*)();
+inline WaitHook& ThreadWaitHook() {
+  thread_local WaitHook hook = nullptr;
+  return hook;
+}
+
 // Calls done() until it returns true or the deadline passes; between calls, wait(slice) blocks for
 // at most `slice` or what is left of the deadline, whichever is shorter (a reader's or waitset's
 // Wait, which returns early when data arrives). done() is called at least once, and once more
@@ -57,6 +65,7 @@ bool PollUntil(const Deadline& deadline, Nanos slice, Done&& done, Wait&& wait) 
     if (done()) return true;
     const MonoTime now = MonotonicNow();
     if (deadline.Passed(now)) return false;
+    if (const WaitHook hook = ThreadWaitHook()) hook();
     wait(std::min(slice, deadline.Left(now)));
   }
 }
