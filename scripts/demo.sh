@@ -21,18 +21,9 @@ export CYCLONEDDS_URI="${CYCLONEDDS_URI:-<General><Interfaces><NetworkInterface 
 domain="${VDYN_DOMAIN:-42}"
 rec="$bin/clients/recorder/vdyn-recorder"
 mkdir -p out
-# The recorder's socket needs room for the world description the server sends in one burst (2 MB):
-# Debian caps a socket's receive buffer at 208 KiB (net.core.rmem_max), and the kernel then drops
-# a few states at the start of the recording. As root (a fresh machine), raise the cap. Whether it
-# took is read back: sysctl exits 0 in some containers where the write changed nothing.
-rmem_max() { cat /proc/sys/net/core/rmem_max 2>/dev/null || echo 0; }
-if [ "$(rmem_max)" -lt 16777216 ]; then
-  if [ "$(id -u)" = 0 ]; then sysctl -qw net.core.rmem_max=16777216 2>/dev/null || true; fi
-  if [ "$(rmem_max)" -lt 16777216 ]; then
-    echo "demo.sh: net.core.rmem_max is $(rmem_max) bytes: the recording may miss a few states at" \
-         "the start; as root: sysctl -w net.core.rmem_max=16777216 (on a container, on its host)" >&2
-  fi
-fi
+# The recorder's socket needs room for the world description the server sends in one burst (2 MB)
+# and its first states: as root (a fresh machine), raise the kernel's cap (scripts/raise-rmem.sh).
+./scripts/raise-rmem.sh demo.sh
 # The recorder first, so it has the whole session: every topic, raw, into MCAP.
 "$rec" record out/live.mcap --domain "$domain" --no-status &
 recorder=$!

@@ -84,6 +84,9 @@ fuzz_seconds="${VDYN_FUZZ_SECONDS:-$([ "$full" -eq 1 ] && echo 120 || echo 10)}"
 mkdir -p build
 
 stage "install dependencies" ./scripts/install-deps.sh
+# The tests' readers of best-effort states (recorders, players, Python, the tests' own) need the
+# socket buffers they ask for: a fresh Debian caps them at 208 KiB (scripts/raise-rmem.sh).
+./scripts/raise-rmem.sh test.sh
 stage "build release" ./scripts/build.sh release
 background "build asan + fuzz" build/asan-build.log ./scripts/build.sh asan
 stage "test release" ctest --test-dir build/release "${ctest_args[@]}"

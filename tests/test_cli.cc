@@ -381,7 +381,8 @@ TEST(CliInput, WithoutDevicesListSaysSoAndCalibrateRefuses) {
 
 TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
   testing::UseLoopbackDds();
-  const Result r = RunInput("--domain 229 --wait 1 drive");
+  const Result r =
+      RunInput("--domain " + std::to_string(testing::FreshDomain()) + " --wait 1 drive");
   EXPECT_EQ(r.exit_code, 1);
   // The wait said as it starts (nothing was said for the whole --wait), then its end.
   EXPECT_THAT(r.output, HasSubstr("vdyn-input: waiting up to 1 s for vehicle 1 on domain 229"));

@@ -290,6 +290,24 @@ bool RawWriter::Write(std::uint32_t key, const google::protobuf::Message& msg) {
   return WriteBytes(key, {reinterpret_cast<const std::uint8_t*>(buffer_.data()), buffer_.size()});
 }
 
+bool RawWriter::Dispose(std::uint32_t key) {
+  const TopicSpec& s = Spec(id_);
+  vdyn_dds_Envelope env{};
+  env.key = key;
+  std::strncpy(env.type_name, s.payload, sizeof env.type_name - 1);
+  env.type_name[sizeof env.type_name - 1] = '\0';
+  dds_return_t rc = dds_dispose(writer_, &env);
+  if (rc == DDS_RETCODE_OK) rc = dds_unregister_instance(writer_, &env);
+  if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) {
+    dds_write_flush(writer_);
+  }
+  if (rc != DDS_RETCODE_OK) {
+    last_error_ = DdsError(std::string("dds_dispose on ") + s.name, rc);
+    return false;
+  }
+  return true;
+}
+
 bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload) {
   const TopicSpec& s = Spec(id_);
   if (payload.size() > s.max_payload_bytes) {

@@ -1324,6 +1324,15 @@ void ServerNode::PublisherLoop() {
         PublishOne(TopicId::kParams, e.vehicle_id(), *params,
                    base::MonotonicNow() + base::Seconds(1));
       }
+      // A removed vehicle's parameters end with it: a reader joining later took them from the
+      // topic's history and counted the vehicle as there (Python's params(), the recorder's info).
+      if (e.has_removed()) {
+        transport::RawWriter& w = *writers_[static_cast<int>(TopicId::kParams)];
+        if (!w.Dispose(e.vehicle_id())) {
+          drops_.Count(std::string("dispose failed on ") + transport::Spec(TopicId::kParams).name,
+                       w.last_error());
+        }
+      }
     }
     drops_.Report();
     if (queues_empty() && !publisher_stop_.load()) {

@@ -153,6 +153,10 @@ class RawWriter {
   [[nodiscard]] bool Write(std::uint32_t key, const google::protobuf::Message& msg);
   // Writes an already serialised payload of the topic's type as it is (a recording played back).
   [[nodiscard]] bool WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload);
+  // Ends the instance `key` (disposed and unregistered): a reader joining later no longer gets its
+  // last sample from a transient-local history (readers take no sample for it: Take skips
+  // samples without data).
+  [[nodiscard]] bool Dispose(std::uint32_t key);
   // Sends what a kBatched writer has gathered (nothing to do for kEach). False when the writer
   // could not be flushed (last_error()). Cyclone DDS 0.10.2's dds_write_flush returns nothing: it
   // does nothing, silently, when it cannot lock the writer, so the writer is checked first.
