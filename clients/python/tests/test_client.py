@@ -50,6 +50,20 @@ def test_ctrl_c_ends_a_wait(domain):
     assert done.stdout.strip() == "interrupted", done.stdout + done.stderr
 
 
+def test_a_small_socket_buffer_cap_is_said_once(monkeypatch):
+    # On a fresh Debian (rmem_max 208 KiB) a step() whose reader fell 0.1 s behind lost states and
+    # timed out with nothing said of why.
+    import io
+    from vdyn import _client
+    monkeypatch.setattr(_client, "_said_receive_buffer", False)
+    monkeypatch.setattr(_client, "open", lambda *a, **k: io.StringIO("212992\n"), raising=False)
+    with pytest.warns(UserWarning, match="net.core.rmem_max is 212992 bytes"):
+        _client._say_receive_buffer()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _client._say_receive_buffer()  # once a process
+
+
 def test_a_named_server_that_is_absent_raises(lockstep_server, domain):
     # Said as what happened: no server of that id answered (the one there is named).
     with pytest.raises(vdyn.TimeoutError,

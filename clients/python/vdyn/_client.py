@@ -154,6 +154,28 @@ def _input_message(inp, vehicle_id, source_id):
     return msg
 
 
+_said_receive_buffer = False
+
+
+def _say_receive_buffer():
+    """Once a process: a warning when the kernel caps socket buffers below what step() needs."""
+    global _said_receive_buffer
+    if _said_receive_buffer:
+        return
+    _said_receive_buffer = True
+    try:
+        with open("/proc/sys/net/core/rmem_max") as f:
+            cap = int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return
+    if cap < 16 << 20:
+        import warnings
+        warnings.warn(f"net.core.rmem_max is {cap} bytes: step() asks for 16 MiB of socket buffer "
+                      "for the states of its steps (best effort), and one that falls ~0.1 s "
+                      "behind loses some and times out naming them; as root: sysctl -w "
+                      "net.core.rmem_max=16777216", stacklevel=3)
+
+
 class Client:
     """A connection to one vdyn server on a DDS domain.
 
@@ -169,6 +191,7 @@ class Client:
         self.client_id = (_id("client_id", client_id) if client_id is not None
                           else f"python-{os.getpid()}-{id(self):x}")
         server_id = "" if server_id is None else _id("server_id", server_id)
+        _say_receive_buffer()
         self._c = _vdyn.Client(_whole("domain", domain, "domain"), server_id, self.timeout,
                                self.client_id)
         self._world = None
