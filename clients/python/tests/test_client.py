@@ -167,6 +167,24 @@ def test_vehicles_removed_or_spawned_by_another_client_do_not_stall_steps(lockst
         a.step(1, vdyn.make_input(), vehicle_id=14)
 
 
+def test_a_removed_vehicle_is_gone_for_clients_that_join_later(lockstep_server, domain):
+    # The server kept a removed vehicle's parameters on vdyn/params (a transient-local history):
+    # a client joining later counted it as there (params() answered, step() ran without it).
+    b = vdyn.Client(domain=domain, timeout=30)
+    b.spawn(7, 60.0, 40.0)
+    assert b.params(7).mass > 0
+    b.despawn(7)
+    late = vdyn.Client(domain=domain, timeout=30)
+    assert late.vehicles == [1]
+    with pytest.raises(vdyn.TimeoutError):
+        late.params(7, timeout=2)
+    with pytest.raises(ValueError, match="vehicle 7"):
+        late.step(1, vdyn.make_input(), vehicle_id=7)
+    # A vehicle spawned again under that id has its parameters again.
+    b.spawn(7, 60.0, 40.0, params={"mass": 1234.0})
+    assert vdyn.Client(domain=domain, timeout=30).params(7).mass == 1234.0
+
+
 def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
     # latest() held the client's lock for its whole wait: a step() in another thread, which would
     # bring the state it waited for, could not run until latest() timed out.
