@@ -71,7 +71,7 @@ int AllReader(std::uint32_t domain, double seconds) {
                                                .world = false,
                                                .diagnostics = false,
                                                .inputs = false,
-                                               .only_vehicle = std::nullopt});
+                                               .only_vehicle = std::nullopt, .only_server = {}});
   vdyn::client::FixedRateLoop loop(vdyn::base::Milliseconds(1));
   const auto end = MonotonicNow() + Secs(seconds);
   while (MonotonicNow() < end) {

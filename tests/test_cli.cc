@@ -381,12 +381,13 @@ TEST(CliInput, WithoutDevicesListSaysSoAndCalibrateRefuses) {
 
 TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
   testing::UseLoopbackDds();
-  const Result r =
-      RunInput("--domain " + std::to_string(testing::FreshDomain()) + " --wait 1 drive");
+  const std::string domain = std::to_string(testing::FreshDomain());
+  const Result r = RunInput("--domain " + domain + " --wait 1 drive");
   EXPECT_EQ(r.exit_code, 1);
   // The wait said as it starts (nothing was said for the whole --wait), then its end.
-  EXPECT_THAT(r.output, HasSubstr("vdyn-input: waiting up to 1 s for vehicle 1 on domain 229"));
-  EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain 229 within 1 s"));
+  EXPECT_THAT(r.output,
+              HasSubstr("vdyn-input: waiting up to 1 s for vehicle 1 on domain " + domain));
+  EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain " + domain + " within 1 s"));
 }
 
 // A server runs, but not with the vehicle asked for: play and drive name the vehicles there are

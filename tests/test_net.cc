@@ -218,7 +218,7 @@ TEST_F(Net, AOneVehicleReaderReceivesThatVehicleOnly) {
                                .world = false,
                                .diagnostics = false,
                                .inputs = false,
-                               .only_vehicle = 3});
+                               .only_vehicle = 3, .only_server = {}});
   ASSERT_EQ(view.one_vehicle_fallback(), "");
   std::map<std::uint32_t, std::uint64_t> at_all, at_own, at_view;
   view.on_state = [&](const pb::VehicleState&, const transport::SampleInfo& info) {
@@ -661,7 +661,7 @@ TEST_F(Net, AViewOfEveryVehicleReadsBatchesAndCostsTheWriterNoSingleStates) {
   transport::StateWriters writers(p, drops, transport::StateWriters::Options{.states_key = 5});
   client::SessionView view(p, client::SessionView::Topics{.params = false, .world = false,
                                                           .diagnostics = false,
-                                                          .only_vehicle = std::nullopt});
+                                                          .only_vehicle = std::nullopt, .only_server = {}});
   std::uint64_t step = 1;
   auto round = [&] {
     for (std::uint32_t v = 1; v <= 4; ++v) {

@@ -4,7 +4,8 @@ namespace vdyn::client {
 
 using transport::TopicId;
 
-SessionView::SessionView(transport::Participant& participant, Topics topics) {
+SessionView::SessionView(transport::Participant& participant, Topics topics)
+    : only_server_(std::move(topics.only_server)) {
   waitset_ = std::make_unique<transport::Waitset>(participant);
   if (topics.states) {
     states_ = std::make_unique<StateReader>(participant, drops_, topics.only_vehicle,
@@ -79,6 +80,7 @@ int SessionView::Poll() {
 }
 
 void SessionView::OnState(const pb::VehicleState& s, const transport::SampleInfo& info) {
+  if (!only_server_.empty() && s.server_id() != only_server_) return;
   Vehicle& v = vehicles_[s.vehicle_id()];
   v.state = s;
   v.received = base::MonotonicNow();

@@ -67,7 +67,7 @@ Client::Client(std::uint32_t domain, const std::string& server_id, double timeou
                                                       .world = true,
                                                       .diagnostics = true,
                                                       .inputs = false,
-                                                      .only_vehicle = std::nullopt}) {
+                                                      .only_vehicle = std::nullopt, .only_server = {}}) {
   const base::Deadline deadline = DeadlineIn(timeout_s);
   const std::string who =
       server_id.empty() ? "no vdyn server" : "no vdyn server with the id '" + server_id + "'";
@@ -389,7 +389,8 @@ client::SessionView& Client::LatestView(std::uint32_t vehicle_id) {
                                   .world = false,
                                   .diagnostics = false,
                                   .inputs = false,
-                                  .only_vehicle = own ? std::optional(vehicle_id) : std::nullopt});
+                                  .only_vehicle = own ? std::optional(vehicle_id) : std::nullopt,
+                                  .only_server = server_id_});
   view->on_state = [this](const pb::VehicleState& s, const transport::SampleInfo&) {
     ++received_[s.vehicle_id()];  // Poll() runs with mutex_ held
   };
@@ -577,7 +578,10 @@ bool Driver::WaitForServer(double timeout_s) {
 // --- Subscription -----------------------------------------------------------------------------
 
 Subscription::Subscription(Client& client, std::uint32_t vehicle_id, std::size_t capacity)
-    : vehicle_id_(vehicle_id), capacity_(capacity), source_(client.participant(), vehicle_id) {
+    : vehicle_id_(vehicle_id),
+      capacity_(capacity),
+      server_id_(client.server_id()),
+      source_(client.participant(), vehicle_id) {
   if (capacity == 0) throw std::invalid_argument("capacity must be at least 1");
   queue_.Reserve(capacity);
   thread_ = std::thread([this] { Run(); });
@@ -598,6 +602,7 @@ void Subscription::Run() {
     if (!source_.Wait(std::chrono::milliseconds(50))) continue;
     std::lock_guard lock(mutex_);
     (void)source_.Take([&](const pb::VehicleState& s) {
+      if (s.server_id() != server_id_) return;  // another server's vehicle of that id
       received_.fetch_add(1);
       if (last_step_ && s.step() > *last_step_ + 1) missing_.fetch_add(s.step() - *last_step_ - 1);
       last_step_ = s.step();

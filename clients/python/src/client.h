@@ -189,6 +189,7 @@ class Subscription {
   void Run();
   std::uint32_t vehicle_id_;
   std::size_t capacity_;
+  std::string server_id_;  // the client's: another server's states of the vehicle are not its
   StateSource source_;
   std::mutex mutex_;
   std::condition_variable ready_;

@@ -185,6 +185,25 @@ def test_a_removed_vehicle_is_gone_for_clients_that_join_later(lockstep_server, 
     assert vdyn.Client(domain=domain, timeout=30).params(7).mass == 1234.0
 
 
+def test_a_client_of_one_server_does_not_answer_with_anothers_vehicle(start, domain):
+    # Two servers on one domain: a client of 'ls' (vehicle 2) asked for vehicle 1 got 'rt''s
+    # vehicle 1 from latest() and subscribe(), with no word of the other server.
+    start([SERVER, "--server-id", "rt", "--domain", str(domain), "--duration", "60"], "rt")
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--server-id", "ls",
+           "--vehicle-ids", "2", "--domain", str(domain)], "ls")
+    rt = vdyn.Client(domain=domain, server_id="rt", timeout=30)
+    assert rt.latest(1).step.size == 1  # rt's vehicle 1 is there and live
+    ls = vdyn.Client(domain=domain, server_id="ls", timeout=30)
+    sub = ls.subscribe(1)
+    with pytest.raises(vdyn.TimeoutError):
+        ls.latest(1, timeout=2)
+    with pytest.raises(vdyn.TimeoutError):
+        sub.next(timeout=1)
+    sub.close()
+    assert list(ls.step(3)) == [2]
+    assert int(ls.latest(2).step[0]) == 2
+
+
 def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
     # latest() held the client's lock for its whole wait: a step() in another thread, which would
     # bring the state it waited for, could not run until latest() timed out.

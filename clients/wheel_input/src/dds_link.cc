@@ -16,7 +16,7 @@ DdsLink::DdsLink(transport::Participant& participant, std::uint32_t vehicle_id,
                                                      .world = false,
                                                      .diagnostics = false,
                                                      .inputs = false,
-                                                     .only_vehicle = vehicle_id}),
+                                                     .only_vehicle = vehicle_id, .only_server = {}}),
       control_(participant, source_id) {
   if (!view_.one_vehicle_fallback().empty()) {
     spdlog::warn("vdyn-input: reading every vehicle's states ({})", view_.one_vehicle_fallback());

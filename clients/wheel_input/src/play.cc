@@ -31,7 +31,7 @@ std::vector<std::uint32_t> VehiclesOnDomain(transport::Participant& participant)
                                          .world = false,
                                          .diagnostics = false,
                                          .inputs = false,
-                                         .only_vehicle = std::nullopt});
+                                         .only_vehicle = std::nullopt, .only_server = {}});
   (void)base::PollUntil(
       base::Deadline::After(base::Seconds(1)), base::Milliseconds(100),
       [&] {
@@ -60,7 +60,7 @@ int Play(const CommonOptions& c, const PlayOptions& o, const std::atomic<bool>& 
                                            .world = false,
                                            .diagnostics = false,
                                            .inputs = false,
-                                           .only_vehicle = c.vehicle_id});
+                                           .only_vehicle = c.vehicle_id, .only_server = {}});
   if (!states.one_vehicle_fallback().empty()) {
     spdlog::warn("vdyn-input: reading every vehicle's states ({})", states.one_vehicle_fallback());
   }

@@ -35,6 +35,8 @@ class SessionView {
     // other vehicles' states are not sent here at all, so a client that follows one vehicle pays
     // for one whatever the number of vehicles. Without it, every vehicle's states.
     std::optional<std::uint32_t> only_vehicle;
+    // States of this server only (empty: every server's on the domain).
+    std::string only_server;
   };
   struct Vehicle {
     pb::VehicleState state;                 // the newest
@@ -83,6 +85,7 @@ class SessionView {
 
   transport::DropCounters drops_;
   std::unique_ptr<StateReader> states_;
+  std::string only_server_;
   std::unique_ptr<transport::Reader<pb::VehicleParams>> params_;
   std::unique_ptr<transport::Reader<pb::WorldDescription>> world_;
   std::unique_ptr<transport::Reader<pb::Diagnostics>> diagnostics_reader_;
