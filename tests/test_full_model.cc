@@ -819,5 +819,34 @@ TEST(FullModelProperties, ARolledOverCarIsStoppedAtTheGroundNotLetFallThroughIt)
   EXPECT_THAT(s.error, ::testing::HasSubstr("this model has no contact of the body with the ground"));
 }
 
+// A live change the model cannot carry: springs made 3000 times stiffer while compressed under the
+// old rate (1e8 N/m, within its range) push the car away at once; in a live session the states on
+// the way reached 7.6e7 km/h and 8.9 km in a step, all published and kept, before one went
+// non-finite. A step whose state is faster than any vehicle, or spins faster than any, is
+// discarded (kRunaway), as a non-finite one is.
+TEST(FullModelProperties, AStateThatRunsAwayIsDiscardedNotPublished) {
+  Simulator sim(testing::SharedWorld("flat"), ParamsWith([](pb::VehicleParams&) {}));
+  sim.Spawn({0.0, 0.0, 0.0}, 15.0);
+  for (int k = 0; k < 200; ++k) ASSERT_EQ(sim.Step(), StepStatus::kOk);
+  sim.SetParams(ParamsWith([](pb::VehicleParams& m) {
+    for (auto* w : {m.mutable_lf(), m.mutable_rf(), m.mutable_lr(), m.mutable_rr()})
+      w->set_spring_stiffness(1e8);
+  }));
+  double fastest = 0.0;
+  int contained = 0, runaway = 0;
+  for (int k = 0; k < 3000; ++k) {
+    const StepStatus status = sim.Step();
+    contained += status != StepStatus::kOk ? 1 : 0;
+    runaway += status == StepStatus::kRunaway ? 1 : 0;
+    ASSERT_TRUE(sim.state().x.allFinite());
+    fastest = std::max(fastest, Velocity(sim.state().x).norm());
+    if (status != StepStatus::kOk) sim.Spawn({0.0, 0.0, 0.0});  // as a session does
+  }
+  EXPECT_GT(runaway, 0);
+  EXPECT_EQ(sim.runaway_steps(), static_cast<std::uint64_t>(runaway));
+  EXPECT_GT(contained, 0);
+  EXPECT_LE(fastest, 1000.0);  // never kept faster
+}
+
 }  // namespace
 }  // namespace vdyn

@@ -313,6 +313,13 @@ StepStatus Simulator::Step() {
     return StepStatus::kNonFinite;
   }
   x.segment<4>(sx::kQ) /= qn;
+  // Stage: a state that ran away (StepStatus::kRunaway): discarded like a non-finite one.
+  if (Velocity(x).squaredNorm() > kRunawaySpeedMps * kRunawaySpeedMps ||
+      AngularVelocityB(x).squaredNorm() > kRunawayRateRadps * kRunawayRateRadps) {
+    state_ = ws_.start;
+    ++runaway_steps_;
+    return StepStatus::kRunaway;
+  }
   // Stage: the body under the ground (StepStatus::kUnderGround). Only while no wheel touches it
   // (two traces then; none while driving): nothing below the centre T within 10 km, and the
   // ground above it.

@@ -362,6 +362,7 @@ void ServerNode::PushReport(base::MonoTime now) {
       v.source[n] = '\0';
       v.nonfinite_steps = sim.nonfinite_steps();
       v.under_ground_steps = sim.under_ground_steps();
+      v.runaway_steps = sim.runaway_steps();
       v.sanitized_inputs = sim.sanitized_inputs();
       v.invariant_failures = sim.invariant_failures();
       std::snprintf(v.last_invariant_failure, sizeof v.last_invariant_failure, "%s",
@@ -1181,11 +1182,15 @@ void ServerNode::PublishReport(WindowReport& r) {
     const VehicleReport& v = r.vehicles[i];
     // A state that went non-finite is contained (the vehicle put back at rest where it was, a
     // spawned event): said in the log too, not only counted in the diagnostics.
-    auto& [said, said_under] = contained_said_[v.id];
-    if (v.nonfinite_steps < said || v.under_ground_steps < said_under) said = said_under = 0;
+    auto& said = contained_said_[v.id];
+    if (v.nonfinite_steps < said[0] || v.under_ground_steps < said[1] ||
+        v.runaway_steps < said[2]) {
+      said = {};  // another vehicle of that id
+    }
     const std::tuple<std::uint64_t, std::uint64_t*, const char*> contained[] = {
-        {v.nonfinite_steps, &said, ContainedWhy(StepStatus::kNonFinite)},
-        {v.under_ground_steps, &said_under, ContainedWhy(StepStatus::kUnderGround)}};
+        {v.nonfinite_steps, &said[0], ContainedWhy(StepStatus::kNonFinite)},
+        {v.under_ground_steps, &said[1], ContainedWhy(StepStatus::kUnderGround)},
+        {v.runaway_steps, &said[2], ContainedWhy(StepStatus::kRunaway)}};
     for (const auto& [count, told, what] : contained) {
       if (count <= *told) continue;
       spdlog::warn("server '{}': vehicle {}: {} ({} more time(s), {} in all)", server_id, v.id,

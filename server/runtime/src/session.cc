@@ -117,6 +117,9 @@ const char* ContainedWhy(StepStatus status) {
     case StepStatus::kUnderGround:
       return "it fell through the ground: put back on its wheels where it was (it rolled over? "
              "this model has no contact of the body with the ground)";
+    case StepStatus::kRunaway:
+      return "its state ran away (faster than 1000 m/s or spinning faster than 1000 rad/s): put "
+             "back at rest where it was (a parameter changed past what the model resolves?)";
   }
   return "";
 }

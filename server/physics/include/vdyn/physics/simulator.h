@@ -47,7 +47,13 @@ struct StepRecord {
 // no contact of the body with the ground, so a car that rolled over falls through it for ever.
 // Either way the state stays at x_n (the step is discarded) and the caller decides what follows
 // (the session puts the vehicle back on its wheels there, a batch stops with the reason).
-enum class StepStatus { kOk, kNonFinite, kUnderGround };
+// kRunaway: the new state is finite but faster than any vehicle (kRunawaySpeedMps) or spinning
+// faster than any (kRunawayRateRadps): parameters changed past what the model resolves (a spring
+// made 1000 times stiffer while compressed, a tyre's nominal load of a nanonewton) blow up over a
+// few steps, and each state on the way was published and kept (one car ended 1e47 m away).
+enum class StepStatus { kOk, kNonFinite, kUnderGround, kRunaway };
+inline constexpr double kRunawaySpeedMps = 1000.0;
+inline constexpr double kRunawayRateRadps = 1000.0;
 
 class Simulator {
  public:
@@ -91,6 +97,7 @@ class Simulator {
   std::int64_t step_ns() const { return config_.step_ns; }
   std::uint64_t nonfinite_steps() const { return nonfinite_steps_; }
   std::uint64_t under_ground_steps() const { return under_ground_steps_; }
+  std::uint64_t runaway_steps() const { return runaway_steps_; }
   std::uint64_t sanitized_inputs() const { return sanitized_inputs_; }
   // Steps whose horizontal (wall) traces were cast: near a steep surface.
   std::uint64_t wall_traced_steps() const { return wall_traced_steps_; }
@@ -118,6 +125,7 @@ class Simulator {
   Workspace ws_;
   std::uint64_t nonfinite_steps_ = 0;
   std::uint64_t under_ground_steps_ = 0;
+  std::uint64_t runaway_steps_ = 0;
   std::uint64_t sanitized_inputs_ = 0;
   std::uint64_t wall_traced_steps_ = 0;
   std::uint64_t invariant_failures_ = 0;

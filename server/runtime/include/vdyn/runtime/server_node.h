@@ -22,6 +22,7 @@
 // loop. Shutdown drains what is queued for at most a deadline, whatever a reader does.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <map>
@@ -97,6 +98,7 @@ class ServerNode {
     char source[72] = {};
     std::uint64_t nonfinite_steps = 0;
     std::uint64_t under_ground_steps = 0;
+    std::uint64_t runaway_steps = 0;
     std::uint64_t sanitized_inputs = 0;
     std::uint64_t invariant_failures = 0;
     char last_invariant_failure[160] = {};
@@ -272,7 +274,7 @@ class ServerNode {
   // Publisher's view for the status line.
   std::int64_t last_status_ns_ = 0;
   // Publisher thread: each vehicle's non-finite and under-ground steps already said in the log.
-  std::map<std::uint32_t, std::pair<std::uint64_t, std::uint64_t>> contained_said_;
+  std::map<std::uint32_t, std::array<std::uint64_t, 3>> contained_said_;
 };
 
 }  // namespace vdyn
