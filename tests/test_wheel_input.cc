@@ -1132,6 +1132,43 @@ void Key(SDL_Scancode sc, bool down) {
   ASSERT_EQ(SDL_PushEvent(&e), 1) << SDL_GetError();
 }
 
+// A wheel plugged in whose mapping is broken, or a --mapping for another device: said, and
+// refused (vdyn-input drive exits 2), not set aside for the keyboard or the built-in table
+// (drive went on with the keyboard, exit 0, with no word of the file).
+TEST_F(SdlTest, ABrokenOrForeignMappingIsRefusedNotSetAsideForTheKeyboard) {
+  SdlContext sdl(true);
+  ASSERT_TRUE(sdl.video()) << sdl.video_error();
+  VirtualWheel g29(0x046d, 0xc24f, 6, 25, "G29 virtual");
+  RecordingSink sink;
+  FakeFeed feed;
+  auto start = [&](const std::filesystem::path& file) {
+    RigConfig cfg;
+    cfg.source = RigConfig::Source::kAuto;
+    cfg.window = false;
+    cfg.ffb = false;
+    cfg.mapping_file = file;
+    RigLoop rig(cfg, sdl, sink, feed, nullptr);
+    try {
+      rig.Start();
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string(rig.using_wheel() ? "wheel" : "keyboard");
+  };
+  testing::WriteFile(dir_ / "broken.txt", "steer { axis: 0 left: \n");
+  const std::string broken = start(dir_ / "broken.txt");
+  EXPECT_THAT(broken, HasSubstr("cannot use G29 virtual [046d:c24f]: broken mapping: "));
+  EXPECT_THAT(broken, HasSubstr("broken.txt"));
+  pb::WheelMapping foreign = *FindBuiltinWheel(0x046d, 0xc24f);
+  foreign.set_vendor_id(0x1234);
+  foreign.clear_product_ids();
+  foreign.add_product_ids(0x5678);
+  WriteMappingFile(dir_ / "other.txt", foreign);
+  const std::string other = start(dir_ / "other.txt");
+  EXPECT_THAT(other, HasSubstr("other.txt is for another device"));
+  EXPECT_THAT(other, HasSubstr("G29 virtual [046d:c24f]"));
+}
+
 // Keyboard driving from synthetic SDL key events under the dummy video driver, with the loop's
 // clock given: every ramp is its rate times the time held.
 TEST_F(SdlTest, KeyboardDrivesWithRampsAndSteeringReturnsToCentre) {

@@ -100,6 +100,24 @@ void RigLoop::Start() {
       throw std::runtime_error("no device " + std::to_string(cfg_.device_index) +
                                " (vdyn-input list shows the devices)");
     }
+    // A wheel whose mapping is broken is not left for the keyboard without a word (it drove with
+    // the keyboard, exit 0), and a --mapping that names another device is not set aside for the
+    // table's or the generic mapping.
+    if (chosen == nullptr) {
+      for (const auto& d : devices) {
+        if (d.kind == DeviceInfo::Kind::kBrokenFile) {
+          throw std::runtime_error("cannot use " + d.name + " [" +
+                                   VidPid(d.vendor_id, d.product_id) + "]: " + d.recognised_as);
+        }
+      }
+    }
+    if (chosen != nullptr && cfg_.mapping_file && chosen->mapping_path != *cfg_.mapping_file) {
+      throw std::runtime_error("--mapping " + cfg_.mapping_file->string() +
+                               " is for another device (its vendor_id and product_id) than " +
+                               chosen->name + " [" +
+                               VidPid(chosen->vendor_id, chosen->product_id) +
+                               "] (vdyn-input list shows the devices and their ids)");
+    }
     if (chosen != nullptr) {
       std::string why;
       if (!OpenWheel(devices, *chosen, &why)) {
