@@ -11,6 +11,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include "vdyn/base/deadline.h"
 #include "vdyn/cli/errors.h"
 #include "vdyn/cli/options.h"
 #include "vdyn/io/csv.h"
@@ -388,6 +389,24 @@ TEST(CliInput, DriveWithoutAServerEndsWithAMessage) {
   EXPECT_THAT(r.output,
               HasSubstr("vdyn-input: waiting up to 1 s for vehicle 1 on domain " + domain));
   EXPECT_THAT(r.output, HasSubstr("no parameters of vehicle 1 on domain " + domain + " within 1 s"));
+}
+
+// Ctrl-C during drive's --wait ends it (it waited out the whole --wait: an hour for --wait 3600).
+TEST(CliInput, CtrlCEndsTheWaitForAServer) {
+  testing::UseLoopbackDds();
+  TempDir dir;
+  const std::string domain = std::to_string(testing::FreshDomain());
+  testing::Process input({testing::InputBinary(), "--domain", domain, "--wait", "3600", "drive",
+                          "--no-window"},
+                         dir / "input.log");
+  const bool waiting = base::PollUntil(
+      base::Deadline::After(base::Seconds(60)), base::Milliseconds(50),
+      [&] { return input.Log().find("waiting up to 3600 s") != std::string::npos; },
+      [](base::Nanos slice) { std::this_thread::sleep_for(base::Chrono(slice)); });
+  ASSERT_TRUE(waiting) << input.Log();
+  input.Signal(SIGINT);
+  EXPECT_EQ(input.Wait(std::chrono::seconds(30)), 0) << input.Log();
+  EXPECT_THAT(input.Log(), HasSubstr("vdyn-input: stopped while waiting for vehicle 1"));
 }
 
 // A server runs, but not with the vehicle asked for: play and drive name the vehicles there are

@@ -57,12 +57,12 @@ const pb::VehicleParams* DdsLink::params() const {
   return v != nullptr && v->params ? &*v->params : nullptr;
 }
 
-bool DdsLink::WaitForParams(std::chrono::nanoseconds timeout) {
+bool DdsLink::WaitForParams(std::chrono::nanoseconds timeout, const std::atomic<bool>* stop) {
   return base::PollUntil(
       base::Deadline::After(base::Nanos{timeout.count()}), base::Milliseconds(50),
       [&] {
         view_.Poll();
-        return params() != nullptr;
+        return params() != nullptr || (stop != nullptr && stop->load());
       },
       [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
 }

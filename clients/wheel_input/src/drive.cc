@@ -27,11 +27,15 @@ int Drive(const CommonOptions& c, const RigOptions& o, const std::atomic<bool>& 
   const auto wait = std::chrono::duration_cast<std::chrono::nanoseconds>(
       std::chrono::duration<double>(c.wait_s));
   const auto first = std::min(wait, std::chrono::nanoseconds(std::chrono::milliseconds(500)));
-  bool found = link.WaitForParams(first);
-  if (!found && wait > first) {
+  bool found = link.WaitForParams(first, &stop) && !stop;
+  if (!found && !stop && wait > first) {
     spdlog::info("vdyn-input: waiting up to {} s for vehicle {} on domain {} (--wait)", c.wait_s,
                  c.vehicle_id, c.domain);
-    found = link.WaitForParams(wait - first);
+    found = link.WaitForParams(wait - first, &stop) && !stop;
+  }
+  if (stop) {  // Ctrl-C while waiting (it waited out the whole --wait)
+    std::cerr << "vdyn-input: stopped while waiting for vehicle " << c.vehicle_id << "\n";
+    return 0;
   }
   if (!found) {
     std::vector<std::uint32_t> others;

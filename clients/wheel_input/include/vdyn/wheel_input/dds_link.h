@@ -37,7 +37,8 @@ class DdsLink : public InputSink, public VehicleFeed, public Resetter {
   std::uint64_t resets_accepted() const { return resets_accepted_; }
 
   // Waits up to `timeout` for the vehicle's parameters (a late joiner gets them at once).
-  bool WaitForParams(std::chrono::nanoseconds timeout);
+  // (or until *stop: Ctrl-C during --wait; false then)
+  bool WaitForParams(std::chrono::nanoseconds timeout, const std::atomic<bool>* stop = nullptr);
   client::SessionView& view() { return view_; }
 
  private:
