@@ -415,6 +415,30 @@ TEST(InputBuilder, PaddlesCountGearsCruiseFollowsButtonsAndBrake) {
   EXPECT_FALSE(b.TakeResetRequest());
 }
 
+// The paddles count to the car's gears, not to --gears (a 3-speed car: E six times read "gear 5"
+// on the rig, and a down-shift did nothing until the count came back under 3).
+TEST(InputBuilder, ThePaddlesCountToTheCarsGears) {
+  InputBuilder b;  // --gears 6
+  VehicleInfo v;
+  pb::VehicleParams p = DefaultVehicleParams();
+  p.set_model(pb::VEHICLE_MODEL_FULL);
+  p.set_gear_count(3);
+  ApplyParams(p, v);
+  ASSERT_EQ(v.gear_count, 3);
+  pb::DriverInput out;
+  WheelControls c;
+  for (int i = 0; i < 6; ++i) {
+    c.buttons = pb::BUTTON_PADDLE_RIGHT;
+    b.Build(MonoTime{}, c, v, out);
+    c.buttons = 0;
+    b.Build(MonoTime{}, c, v, out);
+  }
+  EXPECT_EQ(out.gear(), 3);
+  c.buttons = pb::BUTTON_PADDLE_LEFT;
+  b.Build(MonoTime{}, c, v, out);
+  EXPECT_EQ(out.gear(), 2);
+}
+
 // A paddle shift that would turn the engine past its limit, or go into or out of reverse while
 // moving, is refused with the reason; a reset returns to automatic (issue 31: E from automatic took
 // 1st at 87 km/h, 8,482 rpm against 6,800; Q passed into reverse at 40-70 km/h with cruise on;

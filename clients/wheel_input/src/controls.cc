@@ -100,7 +100,9 @@ void InputBuilder::Build(base::MonoTime now, const WheelControls& c, const Vehic
   // (issue 31: E from automatic took 1st at 87 km/h, 8,482 rpm; Q passed into reverse at speed).
   for (const auto& [bit, step] : {std::pair{pb::BUTTON_PADDLE_RIGHT, 1}, {pb::BUTTON_PADDLE_LEFT, -1}}) {
     if ((pressed & static_cast<std::uint32_t>(bit)) == 0) continue;
-    const int to = std::clamp(gear_ + step, -1, params_.forward_gears);
+    // The car's own gear count where its parameters are known (a 3-speed car counted to 5).
+    const int top = v.gear_count > 0 ? v.gear_count : params_.forward_gears;
+    const int to = std::clamp(gear_ + step, -1, top);
     if (to == gear_) continue;
     if (std::string why = ShiftRefusal(to, v); !why.empty()) {
       shift_refusal_ = std::move(why);
