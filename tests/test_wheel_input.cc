@@ -1045,6 +1045,40 @@ TEST_F(SdlTest, ABaseWithoutPedalsDrivesWithAUsbPedalSet) {
   EXPECT_EQ(sink.last.throttle(), 0.0);
 }
 
+// A device that refuses every force-feedback update is said (the status line read "ffb ... on"
+// throughout; only the summary at the end counted the errors).
+TEST_F(SdlTest, ForceFeedbackTheDeviceRefusesIsSaid) {
+  struct Refusing : RecordingHaptic {
+    bool SetConstant(double, base::Nanos) override { return false; }
+  };
+  SdlContext sdl(false);
+  VirtualWheel w(0x046d, 0xc24f, 4, 25);
+  for (int a = 1; a < 4; ++a) w.Axis(a, 32767);
+  RecordingSink sink;
+  FakeFeed feed;
+  RigConfig cfg;
+  cfg.source = RigConfig::Source::kWheel;
+  cfg.window = false;
+  HapticFactory factory = [](const WheelDevice&, std::string*) -> std::unique_ptr<HapticDevice> {
+    return std::make_unique<Refusing>();
+  };
+  RigLoop rig(cfg, sdl, sink, feed, nullptr, factory);
+  rig.Start();
+  ASSERT_TRUE(rig.using_wheel());
+  MonoTime t{1'000'000'000};
+  feed.has_state = true;
+  feed.st.set_steering_torque(1.25);
+  testing::ExpectLogs logs;
+  for (int i = 0; i < 100; ++i) {
+    t = t + Milliseconds(1);
+    feed.received = t;
+    feed.st.set_step(static_cast<std::uint64_t>(i));
+    ASSERT_TRUE(rig.Tick(t));
+  }
+  EXPECT_EQ(logs.count(), 1);  // once a second
+  EXPECT_THAT(rig.StatusLine(), HasSubstr("DEVICE ERRORS"));
+}
+
 // --- the rig loop with a wheel: steering per model, hot-unplug ---------------------------------
 
 TEST_F(SdlTest, RigDrivesFromAWheelAndFallsBackToNeutralWhenItIsUnplugged) {

@@ -78,6 +78,7 @@ bool RigLoop::OpenWheel(const std::vector<DeviceInfo>& devices, const DeviceInfo
     }
   }
   ffb_ = std::make_unique<ForceFeedback>(p, haptic_.get());
+  ffb_errors_said_ = 0;
   return true;
 }
 
@@ -302,7 +303,18 @@ bool RigLoop::Tick(base::MonoTime now) {
       in.source_wall_ns = feed_.state_source_wall_ns();
       in.step = s->step();
     }
-    if (ffb_) ffb_->Update(now, in, builder_.estop());
+    if (ffb_) {
+      ffb_->Update(now, in, builder_.estop());
+      // A device that refuses the updates is said (once a second), not only counted for the
+      // summary at the end (the status line read "on" with every update failing).
+      if (ffb_->device_errors() > ffb_errors_said_ && now >= ffb_errors_next_say_) {
+        spdlog::warn("vdyn-input: {}: force feedback: the device refused {} update(s) ({} in all)",
+                     device_name_, ffb_->device_errors() - ffb_errors_said_,
+                     ffb_->device_errors());
+        ffb_errors_said_ = ffb_->device_errors();
+        ffb_errors_next_say_ = now + base::Seconds(1);
+      }
+    }
   }
 
   if (window_ && now >= next_draw_) {
@@ -363,6 +375,8 @@ std::string RigLoop::StatusLine() const {
     line += " | ffb " + base::FormatFixed(ffb_->last().torque_nm, 2, true) + " N*m " +
             ModeName(ffb_->last().mode) +
             fmt::format(" clip {:.1f} %", 100.0 * ffb_->clip_fraction());
+    if (ffb_->device_errors() > 0)
+      line += fmt::format(" DEVICE ERRORS {}", ffb_->device_errors());
   }
   if (builder_.estop()) line += " | E-STOP";
   line += fmt::format(" | sample->write p99 {:.0f} us", sample_to_write_.PercentileUs(99));

@@ -156,6 +156,8 @@ class RigLoop {
   std::uint64_t published_ = 0, publish_errors_ = 0, unplugs_ = 0, replugs_ = 0, resets_ = 0;
   LatencyHistogram sample_to_write_;
   std::string status_;
+  std::uint64_t ffb_errors_said_ = 0;  // the force feedback's device errors logged so far
+  base::MonoTime ffb_errors_next_say_{};
   bool status_alarm_ = false;
   double steer_fraction_ = 0;
   bool driving_ = false;
