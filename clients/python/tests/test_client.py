@@ -204,6 +204,26 @@ def test_a_client_of_one_server_does_not_answer_with_anothers_vehicle(start, dom
     assert int(ls.latest(2).step[0]) == 2
 
 
+def test_small_api_edges_answer_rightly(lockstep_server, domain):
+    sim = vdyn.Client(domain=domain, timeout=30)
+    s = sim.step(5)[1]
+    # Per-wheel columns whose wheel tag is not second (kappa_t_LF, alpha_t_LF_rad) were a KeyError.
+    assert s.wheel("kappa_t").shape == (5, 4)
+    assert np.array_equal(s.wheel("alpha_t_rad")[:, 0], s["alpha_t_LF_rad"])
+    with pytest.raises(KeyError, match="no per-wheel column 'nope'"):
+        s.wheel("nope")
+    # A closed subscription's next() waited its whole timeout, then said no state arrived.
+    sub = sim.subscribe(1)
+    sub.close()
+    t0 = time.monotonic()
+    with pytest.raises(vdyn.TimeoutError, match="is closed"):
+        sub.next(timeout=30)
+    assert time.monotonic() - t0 < 10
+    # A capacity the queue cannot hold (reserved up front) was a bad_alloc.
+    with pytest.raises(ValueError, match=r"capacity must be in \[1, 10000000\] states"):
+        sim.subscribe(1, capacity=2 ** 40)
+
+
 def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
     # latest() held the client's lock for its whole wait: a step() in another thread, which would
     # bring the state it waited for, could not run until latest() timed out.
@@ -532,7 +552,7 @@ def test_arguments_of_the_wrong_type_are_refused(lockstep_server, domain):
             (lambda: sim.latest(0), r"vehicle id must be in \[1, 4294967295\], got 0"),
             (lambda: sim.spawn(-1, 0.0, 0.0), r"vehicle id must be in \[1, 4294967295\]"),
             (lambda: vdyn.Client(domain=999), r"DDS domain id must be in \[0, 232\], got 999"),
-            (lambda: sim.subscribe(1, capacity=0), "capacity must be at least 1")]:
+            (lambda: sim.subscribe(1, capacity=0), r"capacity must be in \[1, 10000000\] states")]:
         with pytest.raises(ValueError, match=match):
             call()
     # numpy's numbers are numbers.

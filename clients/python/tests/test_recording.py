@@ -23,6 +23,10 @@ def test_a_recording_equals_the_recorders_export_and_the_lockstep_states(recorde
     assert rec.gaps == {1: 0}
     topics = {c["topic"] for c in rec.channels}
     assert "vdyn/state/1" in topics and "vdyn/events/1" in topics
+    # A vehicle id as the client's methods take it (1.7, '1' and True were read as vehicle 1).
+    for bad, error in ((1.7, TypeError), ("1", TypeError), (True, TypeError), (0, ValueError)):
+        with pytest.raises(error, match="vehicle_id"):
+            rec.states(bad)
     events = rec.events()
     assert any(e.HasField("spawned") for _, e in events)
     assert any(e.HasField("input_batch") for _, e in events)

@@ -3,6 +3,7 @@
 from . import _vdyn
 from . import session_pb2
 from ._states import States
+from ._client import _whole
 
 
 class Recording:
@@ -62,7 +63,9 @@ class Recording:
 
     def _one(self, vehicle_id):
         if vehicle_id is not None:
-            return int(vehicle_id)
+            # As the client's methods take ids: a whole number in range (1.7, '1' and True were
+            # read as vehicle 1).
+            return _whole("vehicle_id", vehicle_id, "vehicle_id")
         ids = self.vehicle_ids
         if len(ids) != 1:
             raise ValueError(f"{self.path} holds vehicles {ids}: name one")

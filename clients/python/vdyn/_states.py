@@ -5,6 +5,7 @@ import numpy as np
 from . import _vdyn
 
 COLUMNS = tuple(_vdyn.state_columns())
+_COLUMN_SET = frozenset(COLUMNS)
 _INDEX = {name: i for i, name in enumerate(COLUMNS)}
 
 
@@ -57,9 +58,14 @@ class States:
     def wheel(self, prefix):
         """The four wheels' column of a per-wheel quantity as an (n, 4) array, LF RF LR RR:
         ``s.wheel("Fy_N")`` is Fy_LF_N, Fy_RF_N, Fy_LR_N, Fy_RR_N."""
-        head, _, unit = prefix.partition("_")
-        names = [f"{head}_{w}_{unit}" if unit else f"{head}_{w}" for w in ("LF", "RF", "LR", "RR")]
-        return np.stack([self[n] for n in names], axis=1)
+        parts = prefix.split("_")
+        # The wheel's tag goes where the column has it: Fy_LF_N, kappa_t_LF, alpha_t_LF_rad.
+        for at in range(1, len(parts) + 1):
+            names = ["_".join(parts[:at] + [w] + parts[at:]) for w in ("LF", "RF", "LR", "RR")]
+            if all(n in _COLUMN_SET for n in names):
+                return np.stack([self[n] for n in names], axis=1)
+        raise KeyError(f"no per-wheel column {prefix!r}: the four wheels' columns are named with "
+                       f"LF, RF, LR, RR inside, e.g. Fy_N for Fy_LF_N or kappa_t for kappa_t_LF")
 
     def to_dataframe(self):
         """A pandas DataFrame of every column (plus step, state_hash, sim_time_ns and, for a
