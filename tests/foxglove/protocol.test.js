@@ -175,11 +175,16 @@ test("a refused parameter comes back with the server's reason; an accepted one i
                                 { name: "vehicle/1/mass", value: 1700, type: "float64" }], "twice");
   const twice = await h.until(() => watcher.params.find((x) => x.id === "twice"), 10000, "the answer");
   assert.deepEqual(twice.parameters.map((q) => [q.name, q.value]), [["vehicle/1/mass", 1700]]);
+  // A whole number for a float64 parameter: the answer is the value as the vehicle holds it,
+  // typed (it came back as the client wrote it, without a type).
+  watcher.client.setParameters([{ name: "vehicle/1/mass", value: 1710 }], "whole");
+  const whole = await h.until(() => watcher.params.find((x) => x.id === "whole"), 10000, "the answer");
+  assert.deepEqual(whole.parameters.map((q) => [q.name, q.value, q.type]), [["vehicle/1/mass", 1710, "float64"]]);
   // Names that are not vehicle parameters, and values of the wrong type, are refused here.
   watcher.status.length = 0;
   watcher.client.setParameters([{ name: "vehicle/1/no_such_thing", value: 1 }, { name: "vehicle/1/model", value: 3 }], "names");
   await h.until(() => watcher.status.filter((s) => s.level === 2).length >= 2, 5000, "two refusals");
-  assert.match(watcher.status[0].message, /no parameter 'no_such_thing'/);
+  assert.match(watcher.status[0].message, /vehicle\/1\/no_such_thing: no parameter 'no_such_thing'/);
   assert.match(watcher.status[1].message, /'model' takes one of VEHICLE_MODEL_UNSPECIFIED/);
 });
 

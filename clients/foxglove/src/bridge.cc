@@ -553,6 +553,7 @@ void Bridge::Impl::HandleSetParameters(ClientId id, ClientState& c,
     } else {
       SetRequest& r = by_vehicle[name->vehicle_id];
       why = SetParameter(r.change, name->path, *p.value);
+      if (!why.empty()) why = p.name + ": " + why;  // the full name, not only its field's
       if (why.empty()) {
         // One value a name: the last (as the change holds it); both were echoed back.
         std::erase_if(r.asked, [&](const protocol::Parameter& q) { return q.name == p.name; });
@@ -605,7 +606,10 @@ void Bridge::Impl::RequestLoop() {
     if (c == clients.end()) continue;
     if (reply && reply->accepted()) {
       ++counters.params_accepted;
-      PushControl(c->first, c->second, protocol::ParameterValuesJson(r.asked, r.id));
+      // The values as the vehicle holds them, typed (an integer given for a float64 parameter
+      // was echoed as the client wrote it, without its type).
+      PushControl(c->first, c->second,
+                  protocol::ParameterValuesJson(ParametersOf(r.vehicle, r.change), r.id));
       Status(c->first, c->second, StatusLevel::kInfo,
              names + ": accepted by server '" + reply->server_id() + "' at step " +
                  std::to_string(reply->applied_step()));
