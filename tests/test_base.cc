@@ -417,6 +417,19 @@ TEST(Messages, AControlReplyEchoesItsRequestAndPassesTheReceiversChecks) {
   messages::Refuse(reply, std::string(5000, 'x'));
   EXPECT_FALSE(reply.accepted());
   EXPECT_EQ(reply.reason().size(), limits::kMaxReasonBytes);
+  EXPECT_TRUE(reply.reason().ends_with("x ..."));  // said to be cut
+  // A cut inside a character (here each is 2 bytes, odd offset) would leave invalid UTF-8, which
+  // a receiver's parse refuses: cut where one starts.
+  std::string degrees;
+  for (int i = 0; i < 1000; ++i) degrees += "\xc2\xb0";
+  messages::Refuse(reply, "x" + degrees);
+  EXPECT_LE(reply.reason().size(), limits::kMaxReasonBytes);
+  std::string bytes;
+  ASSERT_TRUE(reply.SerializeToString(&bytes));
+  pb::ControlReply back;
+  EXPECT_TRUE(back.ParseFromString(bytes));
+  EXPECT_TRUE(back.reason().ends_with("\xc2\xb0 ..."));
+  EXPECT_EQ(base::CutText("short", 10), "short");
   EXPECT_EQ(messages::CheckMessage(reply).problem, messages::Problem::kNone)
       << messages::CheckMessage(reply).field;
   EXPECT_EQ(messages::ReplyTo(nullptr, "vdyn").client_id(), "");  // to no request

@@ -1,6 +1,7 @@
 #include "vdyn/messages/control_reply.h"
 
 #include "vdyn/base/limits.h"
+#include "vdyn/base/text.h"
 
 namespace vdyn::messages {
 
@@ -18,7 +19,9 @@ pb::ControlReply ReplyTo(const pb::ControlRequest* request, std::string_view ser
 
 void Refuse(pb::ControlReply& reply, std::string_view reason) {
   reply.set_accepted(false);
-  reply.set_reason(std::string(reason.substr(0, limits::kMaxReasonBytes)));
+  // Cut where a character starts, and said (a cut inside one made the message's string invalid
+  // UTF-8, which a receiver's parse refuses; a cut mid-word read as the whole reason).
+  reply.set_reason(base::CutText(reason, limits::kMaxReasonBytes));
 }
 
 }  // namespace vdyn::messages

@@ -36,6 +36,10 @@ std::string FormatHex(std::uint64_t v, int digits);
 // ASCII kept, everything else escaped (\n, \x1b, ...), and "... (N bytes)" when cut.
 std::string Quote(std::string_view text, std::size_t max_bytes = 80);
 
+// `text` in at most `max_bytes` bytes: whole when it fits, else cut at a UTF-8 character's start
+// (a string field of a message must stay valid UTF-8) with " ..." after it to say so.
+std::string CutText(std::string_view text, std::size_t max_bytes);
+
 // Strips a leading UTF-8 byte-order mark.
 std::string_view StripBom(std::string_view text);
 
