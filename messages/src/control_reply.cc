@@ -9,7 +9,8 @@ pb::ControlReply ReplyTo(const pb::ControlRequest* request, std::string_view ser
   pb::ControlReply reply;
   if (request != nullptr) {
     reply.set_request_id(request->request_id());
-    reply.set_client_id(request->client_id().substr(0, limits::kMaxIdBytes));
+    // A longer id (refused) cut where a character starts: the refusal stays a valid message.
+    reply.set_client_id(base::CutText(request->client_id(), limits::kMaxIdBytes));
     reply.set_vehicle_id(request->vehicle_id());
   }
   reply.set_server_id(std::string(server_id));
