@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "process.h"
+#include "vdyn/recorder/capture.h"
 #include "test_support.h"
 
 namespace vdyn {
@@ -29,20 +30,10 @@ int SoakSeconds() {
   return seconds >= 10 ? seconds : 600;
 }
 
-// The kernel's cap on a socket's receive buffer (net.core.rmem_max), bytes; 0 when unknown.
-std::uint64_t ReceiveBufferCap() {
-  std::FILE* f = std::fopen("/proc/sys/net/core/rmem_max", "r");
-  if (f == nullptr) return 0;
-  unsigned long long v = 0;
-  if (std::fscanf(f, "%llu", &v) != 1) v = 0;
-  std::fclose(f);
-  return v;
-}
-
 TEST(RecorderLong, ASessionAt1kHzWithNothingLostOnLoopback) {
   // Nothing lost needs room for a burst: behind Debian's 208 KiB cap a recorder descheduled for
   // 0.2 s loses best-effort states, whatever it does (scripts/test.sh raises the cap as root).
-  if (const std::uint64_t cap = ReceiveBufferCap(); cap < 16u << 20) {
+  if (const std::uint64_t cap = recorder::KernelReceiveBufferMax(); cap < 16u << 20) {
     GTEST_SKIP() << "net.core.rmem_max is " << cap
                  << " bytes: nothing lost needs the recorder's socket buffer of 16 MiB or more "
                     "(as root: sysctl -w net.core.rmem_max=16777216)";

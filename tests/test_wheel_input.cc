@@ -75,6 +75,25 @@ class FakeFeed : public VehicleFeed {
   MonoTime received{};
 };
 
+// A rig config for a wheel, no window.
+RigConfig WheelRigConfig() {
+  RigConfig cfg;
+  cfg.source = RigConfig::Source::kWheel;
+  cfg.window = false;
+  return cfg;
+}
+
+// n ticks of 1 ms, a state of the server (step `first` on) arriving with each.
+void TickWithStates(RigLoop& rig, FakeFeed& feed, MonoTime& t, int n, int first = 0) {
+  feed.has_state = true;
+  for (int i = 0; i < n; ++i) {
+    t = t + Milliseconds(1);
+    feed.received = t;
+    feed.st.set_step(static_cast<std::uint64_t>(first + i));
+    ASSERT_TRUE(rig.Tick(t));
+  }
+}
+
 // Each test gets its own SDL (and no user mapping files but its own).
 class SdlTest : public ::testing::Test {
  protected:
@@ -147,6 +166,13 @@ class VirtualWheel {
   SDL_Joystick* js_ = nullptr;
   SDL_JoystickID id_ = -1;
 };
+
+// A G29 as SDL would present it, its pedals released.
+std::unique_ptr<VirtualWheel> ReleasedG29() {
+  auto w = std::make_unique<VirtualWheel>(0x046d, 0xc24f, 4, 25);
+  for (int a = 1; a < 4; ++a) w->Axis(a, 32767);  // the G29's pedals rest at the top
+  return w;
+}
 
 DeviceInfo Find(const std::vector<DeviceInfo>& devices, std::uint16_t vid, std::uint16_t pid) {
   for (const auto& d : devices) {
@@ -1052,13 +1078,10 @@ TEST_F(SdlTest, ForceFeedbackTheDeviceRefusesIsSaid) {
     bool SetConstant(double, base::Nanos) override { return false; }
   };
   SdlContext sdl(false);
-  VirtualWheel w(0x046d, 0xc24f, 4, 25);
-  for (int a = 1; a < 4; ++a) w.Axis(a, 32767);
+  const auto g29 = ReleasedG29();
   RecordingSink sink;
   FakeFeed feed;
-  RigConfig cfg;
-  cfg.source = RigConfig::Source::kWheel;
-  cfg.window = false;
+  RigConfig cfg = WheelRigConfig();
   HapticFactory factory = [](const WheelDevice&, std::string*) -> std::unique_ptr<HapticDevice> {
     return std::make_unique<Refusing>();
   };
@@ -1066,15 +1089,9 @@ TEST_F(SdlTest, ForceFeedbackTheDeviceRefusesIsSaid) {
   rig.Start();
   ASSERT_TRUE(rig.using_wheel());
   MonoTime t{1'000'000'000};
-  feed.has_state = true;
   feed.st.set_steering_torque(1.25);
   testing::ExpectLogs logs;
-  for (int i = 0; i < 100; ++i) {
-    t = t + Milliseconds(1);
-    feed.received = t;
-    feed.st.set_step(static_cast<std::uint64_t>(i));
-    ASSERT_TRUE(rig.Tick(t));
-  }
+  TickWithStates(rig, feed, t, 100);
   EXPECT_EQ(logs.count(), 1);  // once a second
   EXPECT_THAT(rig.StatusLine(), HasSubstr("DEVICE ERRORS"));
 }
@@ -1514,13 +1531,11 @@ TEST_F(Ffb, TheDamperActsAtLowSpeedOnly) {
 // button on the wheel stops it.
 TEST_F(SdlTest, RigPlaysTheServersTorqueAndTheEstopButtonStopsIt) {
   SdlContext sdl(false);
-  VirtualWheel w(0x046d, 0xc24f, 4, 25);
-  for (int a = 1; a < 4; ++a) w.Axis(a, 32767);
+  const auto g29 = ReleasedG29();
+  VirtualWheel& w = *g29;
   RecordingSink sink;
   FakeFeed feed;
-  RigConfig cfg;
-  cfg.source = RigConfig::Source::kWheel;
-  cfg.window = false;
+  RigConfig cfg = WheelRigConfig();
   cfg.ffb_params.cap_nm = 4;
   RecordingHaptic* haptic = nullptr;
   RigLoop rig(cfg, sdl, sink, feed, nullptr,
@@ -1532,14 +1547,8 @@ TEST_F(SdlTest, RigPlaysTheServersTorqueAndTheEstopButtonStopsIt) {
   rig.Start();
   ASSERT_NE(haptic, nullptr);
   MonoTime t{1'000'000'000};
-  feed.has_state = true;
   feed.st.set_steering_torque(1.25);
-  for (int i = 0; i < 1000; ++i) {
-    t = t + Milliseconds(1);
-    feed.received = t;
-    feed.st.set_step(static_cast<std::uint64_t>(i));
-    ASSERT_TRUE(rig.Tick(t));
-  }
+  TickWithStates(rig, feed, t, 1000);
   // 500 updates a second at 1 kHz ticks; the G29 table's peak is 2.5 N*m.
   EXPECT_NEAR(static_cast<double>(haptic->calls.size()), 500.0, 2.0);
   EXPECT_NEAR(haptic->calls.back().value, 1.25 / 2.5, 1e-6);

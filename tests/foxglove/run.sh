@@ -29,14 +29,7 @@ fi
   fi
 ) 9>"$work/.install.lock"
 # A domain of 100..229 that no other test holds (released when this script exits).
-domain=""
-for i in $(seq 0 129); do
-  d=$((100 + ($$ + i) % 130))
-  exec {fd}>"/tmp/vdyn-test-domain-$d.lock" || continue
-  if flock -n "$fd"; then domain=$d; break; fi
-  exec {fd}>&-
-done
-[ -n "$domain" ] || { echo "run.sh: no free DDS domain among 100..229" >&2; exit 1; }
+. "$(dirname "$0")/../domain-lock.sh"
 export VDYN_DOMAIN="$domain"
 export VDYN_BUILD="$build"
 export VDYN_WORK="$work/$(basename "$test" .test.js)"

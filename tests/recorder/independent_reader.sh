@@ -21,14 +21,7 @@ fi
 export CYCLONEDDS_URI='<General><Interfaces><NetworkInterface name="lo"/></Interfaces></General><Discovery><MaxAutoParticipantIndex>120</MaxAutoParticipantIndex></Discovery>'
 # A domain of 100..229 that no other test holds (the lock files tests/foxglove/run.sh and the
 # C++ tests take; released when this script exits).
-domain=""
-for i in $(seq 0 129); do
-  d=$((100 + ($$ + i) % 130))
-  exec {fd}>"/tmp/vdyn-test-domain-$d.lock" || continue
-  if flock -n "$fd"; then domain=$d; break; fi
-  exec {fd}>&-
-done
-[ -n "$domain" ] || { echo "independent_reader.sh: no free DDS domain among 100..229" >&2; exit 1; }
+. "$(dirname "$0")/../domain-lock.sh"
 out="$work/rec"
 rm -rf "$out"
 mkdir -p "$out"

@@ -290,22 +290,23 @@ bool RawWriter::Write(std::uint32_t key, const google::protobuf::Message& msg) {
   return WriteBytes(key, {reinterpret_cast<const std::uint8_t*>(buffer_.data()), buffer_.size()});
 }
 
-bool RawWriter::Dispose(std::uint32_t key) {
-  const TopicSpec& s = Spec(id_);
+namespace {
+// One sample's envelope for `key`, without its payload.
+vdyn_dds_Envelope EnvelopeOf(std::uint32_t key, const TopicSpec& s) {
   vdyn_dds_Envelope env{};
   env.key = key;
   std::strncpy(env.type_name, s.payload, sizeof env.type_name - 1);
   env.type_name[sizeof env.type_name - 1] = '\0';
+  return env;
+}
+}  // namespace
+
+bool RawWriter::Dispose(std::uint32_t key) {
+  const TopicSpec& s = Spec(id_);
+  vdyn_dds_Envelope env = EnvelopeOf(key, s);
   dds_return_t rc = dds_dispose(writer_, &env);
   if (rc == DDS_RETCODE_OK) rc = dds_unregister_instance(writer_, &env);
-  if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) {
-    dds_write_flush(writer_);
-  }
-  if (rc != DDS_RETCODE_OK) {
-    last_error_ = DdsError(std::string("dds_dispose on ") + s.name, rc);
-    return false;
-  }
-  return true;
+  return Sent(rc, "dds_dispose on ", s);
 }
 
 bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payload) {
@@ -316,21 +317,21 @@ bool RawWriter::WriteBytes(std::uint32_t key, std::span<const std::uint8_t> payl
                   " bytes)";
     return false;
   }
-  vdyn_dds_Envelope env;
-  env.key = key;
-  std::strncpy(env.type_name, s.payload, sizeof env.type_name - 1);
-  env.type_name[sizeof env.type_name - 1] = '\0';
+  vdyn_dds_Envelope env = EnvelopeOf(key, s);
   env.payload._maximum = static_cast<std::uint32_t>(payload.size());
   env.payload._length = static_cast<std::uint32_t>(payload.size());
   // dds_write copies (serialises) the sample; the buffer stays ours.
   env.payload._buffer = const_cast<std::uint8_t*>(payload.data());
   env.payload._release = false;
-  const dds_return_t rc = dds_write(writer_, &env);
+  return Sent(dds_write(writer_, &env), "dds_write on ", s);
+}
+
+bool RawWriter::Sent(dds_return_t rc, const char* what, const TopicSpec& s) {
   if (sending_ == Sending::kEach && g_batching.load(std::memory_order_relaxed)) {
     dds_write_flush(writer_);
   }
   if (rc != DDS_RETCODE_OK) {
-    last_error_ = DdsError(std::string("dds_write on ") + s.name, rc);
+    last_error_ = DdsError(std::string(what) + s.name, rc);
     return false;
   }
   return true;

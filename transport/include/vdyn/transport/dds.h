@@ -176,6 +176,8 @@ class RawWriter {
   std::uint64_t InstanceHandle() const;
 
  private:
+  // The end of a write or dispose: flushed where each write goes out at once, the error kept.
+  bool Sent(dds_return_t rc, const char* what, const TopicSpec& s);
   TopicId id_;
   Sending sending_ = Sending::kEach;
   dds_entity_t publisher_ = 0;  // with a partition
