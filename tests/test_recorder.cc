@@ -14,6 +14,7 @@
 #include <cmath>
 #include <fstream>
 #include <functional>
+#include <regex>
 #include <iterator>
 #include <map>
 #include <optional>
@@ -1233,27 +1234,46 @@ TEST_F(RecorderTest, ARecorderReadsStatesOnVdynStatesOnly) {
   auto matched = [&] { return world.MatchedReaders() >= 1; };
   ASSERT_TRUE(WaitWhileRunning(*recorder, matched)) << recorder->Log();
   EXPECT_EQ(writers.state_readers(), 0u);
-  for (std::uint64_t step = 1; step <= 6; ++step) {
-    pb::VehicleState st;
-    st.set_server_id("fake");
-    st.set_vehicle_id(7);
-    st.set_step(step);
-    const std::string bytes = st.SerializeAsString();
-    ASSERT_TRUE(
-        writers.WriteBytes(7, {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()}))
-        << writers.last_error();
-    ASSERT_TRUE(writers.EndStep());
-    ASSERT_TRUE(writers.Flush()) << writers.last_error();
-    std::this_thread::sleep_for(20ms);  // paced: a best-effort topic
+  // Best effort: steps go on until the recorder has taken six states (a loaded machine may lose
+  // one; a run lost the sixth and waited for it in vain), at most 300.
+  std::uint64_t step = 0;
+  auto taken = [&] {
+    const std::string log = recorder->Log();
+    for (int n = 6; n <= 300; ++n) {
+      if (log.find("| state " + std::to_string(n) + " ") != std::string::npos) return true;
+    }
+    return false;
+  };
+  while (step < 300 && !taken()) {
+    for (int k = 0; k < 6 && step < 300; ++k) {
+      pb::VehicleState st;
+      st.set_server_id("fake");
+      st.set_vehicle_id(7);
+      st.set_step(++step);
+      const std::string bytes = st.SerializeAsString();
+      ASSERT_TRUE(writers.WriteBytes(
+          7, {reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()}))
+          << writers.last_error();
+      ASSERT_TRUE(writers.EndStep());
+      ASSERT_TRUE(writers.Flush()) << writers.last_error();
+      std::this_thread::sleep_for(20ms);  // paced: a best-effort topic
+    }
+    (void)WaitWhileRunning(*recorder, taken, 2s);
   }
-  auto taken = [&] { return recorder->Log().find("| state 6 ") != std::string::npos; };
-  ASSERT_TRUE(WaitWhileRunning(*recorder, taken)) << recorder->Log();
+  ASSERT_TRUE(taken()) << recorder->Log();
   Stop(*recorder);
   EXPECT_EQ(writers.all_states_written(), 0u);
   const auto [code, info] = Run({"info", file.string()});
   ASSERT_EQ(code, 0) << info;
-  EXPECT_THAT(info, HasSubstr(" steps 1..6 ")) << info;
-  EXPECT_THAT(info, HasSubstr(", 6 states, 0 missing")) << info;
+  // Each state once: the states recorded and the steps missing make the steps' range, no more.
+  const std::regex range(R"( steps 1\.\.(\d+) .*, (\d+) states, (\d+) missing)");
+  std::smatch m;
+  ASSERT_TRUE(std::regex_search(info, m, range)) << info;
+  const std::uint64_t last = std::stoull(m[1]), states = std::stoull(m[2]),
+                      missing = std::stoull(m[3]);
+  EXPECT_EQ(states + missing, last) << info;
+  EXPECT_GE(states, 6u) << info;
+  EXPECT_LE(last, step) << info;
 }
 
 // --- damaged recordings: verify, play, outputs

@@ -138,14 +138,19 @@ std::string Quote(std::string_view text, std::size_t max_bytes) {
   return out;
 }
 
+std::string_view CutUtf8(std::string_view text, std::size_t max_bytes) {
+  if (text.size() <= max_bytes) return text;
+  std::size_t end = max_bytes;
+  // Back to the start of a character: continuation bytes are 10xxxxxx.
+  while (end > 0 && (static_cast<unsigned char>(text[end]) & 0xC0) == 0x80) --end;
+  return text.substr(0, end);
+}
+
 std::string CutText(std::string_view text, std::size_t max_bytes) {
   if (text.size() <= max_bytes) return std::string(text);
   constexpr std::string_view kMore = " ...";
   if (max_bytes < kMore.size()) return std::string(kMore.substr(0, max_bytes));
-  std::size_t end = max_bytes - kMore.size();
-  // Back to the start of a character: continuation bytes are 10xxxxxx.
-  while (end > 0 && (static_cast<unsigned char>(text[end]) & 0xC0) == 0x80) --end;
-  return std::string(text.substr(0, end)) + std::string(kMore);
+  return std::string(CutUtf8(text, max_bytes - kMore.size())) + std::string(kMore);
 }
 
 std::string_view StripBom(std::string_view text) {

@@ -10,7 +10,7 @@ pb::ControlReply ReplyTo(const pb::ControlRequest* request, std::string_view ser
   if (request != nullptr) {
     reply.set_request_id(request->request_id());
     // A longer id (refused) cut where a character starts: the refusal stays a valid message.
-    reply.set_client_id(base::CutText(request->client_id(), limits::kMaxIdBytes));
+    reply.set_client_id(std::string(base::CutUtf8(request->client_id(), limits::kMaxIdBytes)));
     reply.set_vehicle_id(request->vehicle_id());
   }
   reply.set_server_id(std::string(server_id));

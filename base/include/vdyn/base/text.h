@@ -39,6 +39,8 @@ std::string Quote(std::string_view text, std::size_t max_bytes = 80);
 // `text` in at most `max_bytes` bytes: whole when it fits, else cut at a UTF-8 character's start
 // (a string field of a message must stay valid UTF-8) with " ..." after it to say so.
 std::string CutText(std::string_view text, std::size_t max_bytes);
+// The same without the " ...": at most `max_bytes` bytes, cut where a character starts.
+std::string_view CutUtf8(std::string_view text, std::size_t max_bytes);
 
 // Strips a leading UTF-8 byte-order mark.
 std::string_view StripBom(std::string_view text);
