@@ -253,7 +253,11 @@ TEST(FoxgloveClock, OneServersTimeFollowedThroughRestartsOthersStampedWithIt) {
   EXPECT_EQ(clock.now_ns(), 20'001'000'000u);
   EXPECT_EQ(clock.StampOf("b", 340'000'000'000), 20'001'000'000u);  // its diagnostics too
   EXPECT_EQ(clock.StampOf("a", 20'000'500'000), 20'000'500'000u);
-  // Server a restarts (another incarnation): the clock follows its new session back to 0 s.
+  // Another start of server a while this one still sends (a player of its recording beside it):
+  // the clock stays (it took each state's source in turn).
+  EXPECT_EQ(clock.OnState("a", 2, 7'000'000, t + ms(500), &changed), 20'001'000'000u);
+  EXPECT_FALSE(changed);
+  // Server a restarts (another incarnation, the old quiet): the clock follows it back to 0 s.
   EXPECT_EQ(clock.OnState("a", 2, 5'000'000, t + ms(3000), &changed), 5'000'000u);
   EXPECT_TRUE(changed);
   EXPECT_EQ(clock.now_ns(), 5'000'000u);

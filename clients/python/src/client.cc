@@ -169,6 +169,7 @@ ReplyInfo Client::Request(pb::ControlRequest request, const std::string& what, d
                                    d.reason());
   }
   info.discarded_not_listed = reply->discarded_not_listed();
+  info.steps_without_state = reply->steps_without_state();
   if (info.discarded_not_listed > 0) {
     info.discarded_notes.push_back(std::to_string(info.discarded_not_listed) +
                                    " more step(s) of other vehicles discarded (not listed)");
@@ -245,17 +246,9 @@ void Client::TakeStepStates(StateSource& states, std::uint32_t chunk, const Repl
       vehicles_.insert(s.vehicle_id());
     });
   };
-  // A discarded step published no state (the reply says whose): a step of which every vehicle's
-  // was discarded has no sample at all. At most as many as the fewest any vehicle lost.
-  auto without_sample = [&]() -> std::uint32_t {
-    if (reply.discarded.empty() || reply.discarded_not_listed > 0) return 0;
-    std::uint32_t fewest = chunk;
-    for (const auto& [id, n] : reply.discarded) fewest = std::min(fewest, n);
-    for (const auto& [id, n] : got) {
-      if (reply.discarded.count(id) == 0) return 0;  // a vehicle with a state at every step
-    }
-    return fewest;
-  };
+  // A step of which every vehicle's state was discarded has no sample at all: the reply says how
+  // many.
+  auto without_sample = [&]() -> std::uint32_t { return reply.steps_without_state; };
   auto complete = [&] {
     take();
     return times.size() + without_sample() >= chunk;

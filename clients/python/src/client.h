@@ -36,6 +36,7 @@ struct ReplyInfo {
   // state; and each as a person reads it.
   std::map<std::uint32_t, std::uint32_t> discarded;
   std::uint32_t discarded_not_listed = 0;
+  std::uint32_t steps_without_state = 0;  // of the request's steps: no vehicle's state at all
   std::vector<std::string> discarded_notes;
 };
 

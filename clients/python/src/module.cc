@@ -5,6 +5,9 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include <signal.h>
+#include <atomic>
+#include <thread>
 #include <map>
 #include <memory>
 #include <optional>
@@ -25,23 +28,51 @@ using namespace vdyn::python;
 
 namespace {
 
-// The GIL released while a call waits, and Ctrl-C checked between its waits (base::PollUntil's
-// slices, 20-50 ms): a KeyboardInterrupt ends the wait (it waited out its whole timeout, without
-// end for a timeout of 1e10 s). Only the main thread receives signals; elsewhere nothing is seen.
+// Ctrl-C while a call of the main thread waits with the GIL released: the call sets a C handler
+// of SIGINT of its own for its length (restoring Python's after), whose flag the waits check
+// between their slices (base::PollUntil's hook, 20-50 ms) and end with Interrupted, raised in
+// Python as KeyboardInterrupt (through Python's own handler). The hook takes no GIL and runs no
+// Python: a hook that took the GIL while a client lock was held deadlocked with a thread that held
+// the GIL and wanted that lock, and a Python signal handler could re-enter the client.
+std::atomic<bool> g_sigint{false};
+std::thread::id g_main_thread;  // the interpreter's main thread: the one Python signals
+
+extern "C" void OnSigint(int) { g_sigint.store(true); }
+
+struct Interrupted : std::exception {
+  const char* what() const noexcept override { return "interrupted (Ctrl-C)"; }
+};
+
 class WaitReleased {
  public:
-  WaitReleased() : saved_(base::ThreadWaitHook()) { base::ThreadWaitHook() = &CheckSignals; }
-  ~WaitReleased() { base::ThreadWaitHook() = saved_; }
+  WaitReleased() {
+    if (std::this_thread::get_id() != g_main_thread || base::ThreadWaitHook() != nullptr) return;
+    g_sigint.store(false);
+    struct sigaction sa {};
+    sa.sa_handler = OnSigint;
+    sigemptyset(&sa.sa_mask);
+    if (sigaction(SIGINT, &sa, &python_) != 0) return;
+    installed_ = true;
+    base::ThreadWaitHook() = &Check;
+  }
+  ~WaitReleased() {
+    if (!installed_) return;
+    base::ThreadWaitHook() = nullptr;
+    sigaction(SIGINT, &python_, nullptr);
+    // A Ctrl-C that came as the call ended goes to Python as if it came now (callable without
+    // the GIL).
+    if (g_sigint.exchange(false)) PyErr_SetInterrupt();
+  }
   WaitReleased(const WaitReleased&) = delete;
   WaitReleased& operator=(const WaitReleased&) = delete;
 
  private:
-  static void CheckSignals() {
-    py::gil_scoped_acquire gil;
-    if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+  static void Check() {
+    if (g_sigint.exchange(false)) throw Interrupted();
   }
-  py::gil_scoped_release release_;  // first: released before the hook is set
-  base::WaitHook saved_;
+  py::gil_scoped_release release_;  // first: released before the handler is set
+  bool installed_ = false;
+  struct sigaction python_ {};
 };
 
 template <class M>
@@ -113,6 +144,10 @@ void BindErrors() {
     } catch (const transport::TransportError& e) {
       py::object cls = py::module_::import("vdyn._errors").attr("TransportError");
       PyErr_SetObject(cls.ptr(), py::str(e.what()).ptr());
+    } catch (const Interrupted&) {
+      // Through Python's handler of SIGINT (KeyboardInterrupt, or the program's own).
+      PyErr_SetInterrupt();
+      if (PyErr_CheckSignals() == 0 && !PyErr_Occurred()) PyErr_SetNone(PyExc_KeyboardInterrupt);
     }
   });
 }
@@ -373,6 +408,7 @@ void BindRecording(py::module_& m) {
 
 PYBIND11_MODULE(_vdyn, m) {
   m.doc() = "vdyn's client layer for Python (use the package vdyn, not this module)";
+  g_main_thread = std::this_thread::get_id();  // imported on the main thread (WaitReleased)
   BindErrors();
   BindChecks(m);
   BindClient(m);

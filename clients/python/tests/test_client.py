@@ -64,6 +64,28 @@ def test_a_small_socket_buffer_cap_is_said_once(monkeypatch):
         _client._say_receive_buffer()  # once a process
 
 
+def test_a_thread_reading_counts_while_another_steps_does_not_deadlock(lockstep_server, domain):
+    # The Ctrl-C check between waits once took the GIL while the stepping thread held the client's
+    # lock; a thread holding the GIL and asking for states_received (that lock) then waited for
+    # ever, and so did the stepping thread. Run in a process of its own, bounded.
+    script = (
+        "import threading, vdyn\n"
+        f"c = vdyn.Client(domain={domain}, timeout=30)\n"
+        "def steps():\n"
+        "    for _ in range(100):\n"
+        "        c.step(5)\n"
+        "t = threading.Thread(target=steps)\n"
+        "t.start()\n"
+        "n = 0\n"
+        "while t.is_alive():\n"
+        "    n += len(c.states_received) + len(c.state_readers)\n"
+        "t.join()\n"
+        "print('done', c.states_received[1] >= 500)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=120)
+    assert done.stdout.strip() == "done True", done.stdout + done.stderr
+
+
 def test_a_named_server_that_is_absent_raises(lockstep_server, domain):
     # Said as what happened: no server of that id answered (the one there is named).
     with pytest.raises(vdyn.TimeoutError,

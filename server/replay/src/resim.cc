@@ -226,7 +226,7 @@ bool VehicleReplayer::Impl::Run(std::uint64_t end_step,
       continue;
     }
     if (static_cast<std::uint64_t>(sim_->state().step) >= end_step) break;
-    if (sim_->Step() != StepStatus::kOk) {
+    if (const StepStatus status = sim_->Step(); status != StepStatus::kOk) {
       // The recorded session re-spawned the vehicle after this step (its next Spawned event).
       if (next < actions_.size() && actions_[next].kind == Action::Kind::kSpawned) {
         State s = sim_->state();
@@ -234,7 +234,12 @@ bool VehicleReplayer::Impl::Run(std::uint64_t end_step,
         sim_->SetState(s);
         continue;
       }
-      *error = who + ": non-finite state at step " + std::to_string(step);
+      *error = who + ": the re-simulation discarded step " + std::to_string(step) + " (" +
+               (status == StepStatus::kNonFinite     ? "its state became non-finite"
+                : status == StepStatus::kUnderGround ? "the car fell through the ground"
+                                                     : "its state ran away, past 1000 m/s or "
+                                                       "1000 rad/s") +
+               ") where the recorded session went on: a recording made before that check?";
       return false;
     }
     if (on_step) on_step(step, sim_->last_step().hash_after);

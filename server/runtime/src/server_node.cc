@@ -233,11 +233,15 @@ void ServerNode::StepOnce() {
       --running.remaining;
       // A discarded step published no state: the reply says whose, so that a client waiting
       // for every state of these steps knows which will not come.
+      bool any_state = false;
       for (const auto& [id, v] : session_->vehicles()) {
         if (v.step_status != StepStatus::kOk) {
           running.outcome.AddDiscarded(id, v.sim->state().step - 1, v.step_status);
+        } else {
+          any_state = true;
         }
       }
+      if (!any_state && !session_->vehicles().empty()) ++running.outcome.steps_without_state;
     }
   }
   if (!deferred_step_replies_.empty()) SendDueStepReplies();

@@ -152,6 +152,7 @@ pb::ControlReply ToReply(const RequestOutcome& o, const std::string& server_id) 
     m->set_reason(ContainedWhy(d.first_status));
   }
   reply.set_discarded_not_listed(o.discarded_not_listed);
+  reply.set_steps_without_state(o.steps_without_state);
   return reply;
 }
 

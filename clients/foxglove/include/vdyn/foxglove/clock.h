@@ -3,9 +3,9 @@
 // time source").
 //
 // The clock is one server's simulation time: the server of the first state heard, until that
-// server restarts (a state of its id with another incarnation: the new session's time, which
-// starts again near 0) or falls silent (no state for `silence`: the next state's server takes
-// over). Its own states and diagnostics keep their simulation time as their log time, and the
+// server restarts (a state of its id with another incarnation, once the old one has been quiet
+// for a second: the new session's time, which starts again near 0) or falls silent (no state for
+// `silence`: the next state's server takes over). Its own states and diagnostics keep their simulation time as their log time, and the
 // clock follows the newest of its states (a player seeking back takes it back). Everything else
 // — another server's states and diagnostics on the same domain, session events, worlds — is
 // stamped with the clock's time when it arrives (the message's own times are in its payload).

@@ -222,7 +222,8 @@ struct RequestOutcome {
   static constexpr std::size_t kDiscardedListed = 16;
   std::array<Discarded, kDiscardedListed> discarded{};
   std::uint8_t n_discarded = 0;
-  std::uint32_t discarded_not_listed = 0;  // vehicles beyond the list
+  std::uint32_t discarded_not_listed = 0;  // discarded steps of vehicles beyond the list
+  std::uint32_t steps_without_state = 0;   // steps every vehicle's state was discarded
   void AddDiscarded(std::uint32_t vehicle_id, std::int64_t step, StepStatus status);
 };
 
