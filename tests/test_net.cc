@@ -991,6 +991,57 @@ TEST_F(Net, LockstepAnswersWhenTheStepsAreDoneAndTimesOutWithoutAClient) {
   EXPECT_THAT(control.last_error(), HasSubstr("no reply"));
 }
 
+// A live change past what the model resolves (springs 3000 times stiffer while compressed): the
+// steps whose state runs away are discarded; the step request's reply lists them with the reason,
+// and the server's diagnostics count them per vehicle by kind (they counted only non-finite ones).
+TEST_F(Net, DiscardedStepsAreRepliedAndCountedInTheDiagnosticsByKind) {
+  auto server = StartServer({"--lockstep"});
+  transport::Participant p(domain_);
+  transport::DropCounters drops;
+  transport::ControlClient control(p, "stiff-client");
+  ASSERT_TRUE(control.WaitForServer(20s)) << control.last_error() << server->Log();
+  pb::ControlRequest step;
+  step.set_vehicle_id(1);
+  step.mutable_step()->set_steps(200);
+  *step.mutable_step()->mutable_input() = Input(1, 0.0, "stiff-client");
+  const auto settled = control.Call(step, 20s);
+  ASSERT_TRUE(settled.has_value()) << control.last_error();
+  ASSERT_TRUE(settled->accepted()) << settled->reason();
+  ASSERT_EQ(settled->discarded_size(), 0);
+  pb::ControlRequest stiff;
+  stiff.set_vehicle_id(1);
+  auto* params = stiff.mutable_set_params()->mutable_params();
+  for (auto* w : {params->mutable_lf(), params->mutable_rf(), params->mutable_lr(),
+                  params->mutable_rr()}) {
+    w->set_spring_stiffness(1e8);
+  }
+  const auto changed = control.Call(stiff, 20s);
+  ASSERT_TRUE(changed.has_value()) << control.last_error();
+  ASSERT_TRUE(changed->accepted()) << changed->reason();
+  const auto reply = control.Call(step, 20s);
+  ASSERT_TRUE(reply.has_value()) << control.last_error();
+  ASSERT_TRUE(reply->accepted()) << reply->reason();
+  ASSERT_EQ(reply->discarded_size(), 1) << server->Log();
+  const pb::DiscardedSteps& d = reply->discarded(0);
+  EXPECT_EQ(d.vehicle_id(), 1u);
+  EXPECT_GE(d.count(), 1u);
+  EXPECT_THAT(d.reason(), HasSubstr("its state ran away (faster than 1000 m/s"));
+  EXPECT_THAT(d.reason(), HasSubstr(": put back at rest where it was"));
+  // The diagnostics (reliable, once a second) count every discarded step by its kind.
+  transport::Reader<pb::Diagnostics> diag(p, TopicId::kDiagnostics, &drops);
+  std::optional<pb::VehicleDiagnostics> seen;
+  ASSERT_TRUE(ReadUntil<pb::Diagnostics>(diag, 10s, [&](const auto& m) {
+    for (const auto& v : m.vehicles()) {
+      if (v.vehicle_id() == 1) seen = v;
+    }
+  }, [&] { return seen.has_value(); }));
+  EXPECT_GE(seen->runaway_steps(), 1u);
+  EXPECT_EQ(seen->runaway_steps() + seen->nonfinite_steps() + seen->under_ground_steps(),
+            d.count())
+      << seen->DebugString();
+  EXPECT_THAT(server->Log(), HasSubstr("its state ran away"));
+}
+
 TEST_F(Net, LockstepKeepsAClientWhoseStepsTakeLongerThanTheTimeout) {
   // 600,000 steps (100,000 under the sanitizers, 20-30 times slower) take well over the 1 s
   // timeout (checked below); the client's next request is still answered.

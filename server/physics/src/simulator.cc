@@ -285,6 +285,23 @@ std::string CheckStepInvariants(const StepRecord& r, const State& after) {
   return why.empty() ? why : "invariant: " + why;
 }
 
+const char* StepStatusText(StepStatus status) {
+  static_assert(kRunawaySpeedMps == 1000.0 && kRunawayRateRadps == 1000.0,
+                "StepStatusText names the runaway limits");
+  switch (status) {
+    case StepStatus::kOk:
+      return "";
+    case StepStatus::kNonFinite:
+      return "its state became non-finite";
+    case StepStatus::kUnderGround:
+      return "it fell through the ground (its wheels off the ground and its centre under it: it "
+             "rolled over? this model has no contact of the body with the ground)";
+    case StepStatus::kRunaway:
+      return "its state ran away (faster than 1000 m/s or spinning faster than 1000 rad/s)";
+  }
+  return "";
+}
+
 StepStatus Simulator::Step() {
   const Terrain& terrain = world_->terrain;
   ws_.start = state_;

@@ -235,10 +235,7 @@ bool VehicleReplayer::Impl::Run(std::uint64_t end_step,
         continue;
       }
       *error = who + ": the re-simulation discarded step " + std::to_string(step) + " (" +
-               (status == StepStatus::kNonFinite     ? "its state became non-finite"
-                : status == StepStatus::kUnderGround ? "the car fell through the ground"
-                                                     : "its state ran away, past 1000 m/s or "
-                                                       "1000 rad/s") +
+               StepStatusText(status) +
                ") where the recorded session went on: a recording made before that check?";
       return false;
     }

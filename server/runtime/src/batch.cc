@@ -37,19 +37,12 @@ BatchSummary RunBatch(Simulator& sim, const Maneuver& maneuver, const BatchOptio
     sim.SetInput(FromManeuver(maneuver.At(sim.time())));
     if (const StepStatus status = sim.Step(); status != StepStatus::kOk) {
       s.ok = false;
-      const bool under = status == StepStatus::kUnderGround;
-      const bool runaway = status == StepStatus::kRunaway;
-      s.error = std::string(under     ? "the vehicle fell through the ground at t = "
-                            : runaway ? "the state ran away at t = "
-                                      : "the state became non-finite at t = ") +
-                base::FormatFixed(sim.time(), 3) + " s (step " +
-                std::to_string(sim.state().step) + ")" +
-                (under ? ": its wheels off the ground and its centre under it (it rolled over? "
-                         "this model has no contact of the body with the ground: docs/model.md)"
-                 : runaway ? ": faster than 1000 m/s or spinning faster than 1000 rad/s (the "
-                             "parameters drive the model past what it resolves)"
-                           : "") +
-                "; the run stopped there and the last state before it was kept";
+      s.error = std::string("the vehicle stopped at t = ") + base::FormatFixed(sim.time(), 3) +
+                " s (step " + std::to_string(sim.state().step) + "): " + StepStatusText(status) +
+                (status == StepStatus::kRunaway ? ": the parameters drive the model past what it "
+                                                  "resolves"
+                                                : "") +
+                "; the run stopped there and the last state before it was kept (docs/model.md)";
       break;
     }
     const StepRecord& r = sim.last_step();

@@ -1191,14 +1191,14 @@ void ServerNode::PublishReport(WindowReport& r) {
         v.runaway_steps < said[2]) {
       said = {};  // another vehicle of that id
     }
-    const std::tuple<std::uint64_t, std::uint64_t*, const char*> contained[] = {
-        {v.nonfinite_steps, &said[0], ContainedWhy(StepStatus::kNonFinite)},
-        {v.under_ground_steps, &said[1], ContainedWhy(StepStatus::kUnderGround)},
-        {v.runaway_steps, &said[2], ContainedWhy(StepStatus::kRunaway)}};
-    for (const auto& [count, told, what] : contained) {
+    const std::tuple<std::uint64_t, std::uint64_t*, StepStatus> contained[] = {
+        {v.nonfinite_steps, &said[0], StepStatus::kNonFinite},
+        {v.under_ground_steps, &said[1], StepStatus::kUnderGround},
+        {v.runaway_steps, &said[2], StepStatus::kRunaway}};
+    for (const auto& [count, told, status] : contained) {
       if (count <= *told) continue;
       spdlog::warn("server '{}': vehicle {}: {} ({} more time(s), {} in all)", server_id, v.id,
-                   what, count - *told, count);
+                   ContainedWhy(status), count - *told, count);
       *told = count;
     }
     pb::VehicleDiagnostics* vd = d.add_vehicles();
@@ -1207,6 +1207,8 @@ void ServerNode::PublishReport(WindowReport& r) {
     vd->set_input_age_ms(v.input_age_ms);
     vd->set_input_source(v.source);
     vd->set_nonfinite_steps(v.nonfinite_steps);
+    vd->set_under_ground_steps(v.under_ground_steps);
+    vd->set_runaway_steps(v.runaway_steps);
     vd->set_sanitized_inputs(v.sanitized_inputs);
     vd->set_invariant_failures(v.invariant_failures);
     vd->set_last_invariant_failure(v.last_invariant_failure);

@@ -107,21 +107,16 @@ std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id)
   return {};
 }
 
-const char* ContainedWhy(StepStatus status) {
-  switch (status) {
-    case StepStatus::kOk:
-      return "";
-    case StepStatus::kNonFinite:
-      return "its state became non-finite: put back at rest where it was (its parameters or input "
-             "drive it past what the step resolves?)";
-    case StepStatus::kUnderGround:
-      return "it fell through the ground: put back on its wheels where it was (it rolled over? "
-             "this model has no contact of the body with the ground)";
-    case StepStatus::kRunaway:
-      return "its state ran away (faster than 1000 m/s or spinning faster than 1000 rad/s): put "
-             "back at rest where it was (a parameter changed past what the model resolves?)";
-  }
-  return "";
+std::string ContainedWhy(StepStatus status) {
+  if (status == StepStatus::kOk) return {};
+  return std::string(StepStatusText(status)) +
+         (status == StepStatus::kUnderGround
+              ? ": put back on its wheels where it was"
+              : status == StepStatus::kRunaway
+                    ? ": put back at rest where it was (a parameter changed past what the model "
+                      "resolves?)"
+                    : ": put back at rest where it was (its parameters or input drive it past "
+                      "what the step resolves?)");
 }
 
 void RequestOutcome::AddDiscarded(std::uint32_t vehicle_id, std::int64_t step, StepStatus status) {

@@ -54,6 +54,11 @@ struct StepRecord {
 enum class StepStatus { kOk, kNonFinite, kUnderGround, kRunaway };
 inline constexpr double kRunawaySpeedMps = 1000.0;
 inline constexpr double kRunawayRateRadps = 1000.0;
+// What happened in a discarded step, for a person: "its state became non-finite", "it fell
+// through the ground (...)", "its state ran away (faster than 1000 m/s or ...)"; empty for kOk.
+// The one text of each status: the session's log and replies, a batch's error and a
+// re-simulation's add only what they did about it.
+const char* StepStatusText(StepStatus status);
 
 class Simulator {
  public:

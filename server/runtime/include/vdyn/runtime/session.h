@@ -229,7 +229,7 @@ struct RequestOutcome {
 
 // What became of a vehicle whose step was contained (non-finite, under the ground), as the log
 // and a step request's reply say it.
-const char* ContainedWhy(StepStatus status);
+std::string ContainedWhy(StepStatus status);
 
 // The reason of a refusal as a person reads it.
 std::string OutcomeReason(const RequestOutcome& o, const std::string& server_id);
