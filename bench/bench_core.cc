@@ -23,9 +23,18 @@
 //   state/parse     the peer: protobuf's ParseFromArray alone into a reused message on the heap,
 //                   what a plain protobuf reader pays
 //   state/copy      the floor: copying the bytes
+//   tyre/mf/load    MagicFormulaLoad: the law's load-dependent terms (Kxk, Kya, relaxation lengths),
+//                   as each wheel's every RK4 stage computes them
+//   tyre/mf/front   MagicFormulaLoad + EvaluateMagicFormula with the aligning moment (a front
+//                   wheel's stage: its Mz is the steering torque), over 64 operating points of the
+//                   synthetic tyre (loads, slips, camber, speeds, as a drive visits them)
+//   tyre/mf/rear    the same without the aligning moment (a rear wheel's stage that is not published)
+//   libm/atan, libm/sin, libm/cos  one call of glibc's function over the same spread of arguments,
+//                   independent calls (throughput: what a law of many such calls pays each)
 //
 // After the run, the medians are printed as vdyn / Bullet ratios (below 1: vdyn is faster).
 // Respawning a car (cars.h) is excluded from the timed region with PauseTiming.
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <map>
@@ -41,6 +50,7 @@
 #include "rays.h"
 #include "vdyn/bridge/convert.h"
 #include "vdyn/messages/checks.h"
+#include "vdyn/physics/magic_formula.h"
 #include "vdyn/state.pb.h"
 #include "vdyn/transport/dds.h"
 
@@ -241,6 +251,56 @@ void BM_StateCopy(benchmark::State& st) {
   st.SetBytesProcessed(static_cast<std::int64_t>(st.iterations() * bytes.size()));
 }
 
+// 64 operating points of a wheel on the synthetic tyre: loads 1-8 kN, slip ratios to +-0.3, slip
+// angles to +-12 degrees, camber to +-3 degrees, 5-40 m/s.
+struct MfPoint {
+  double Fz, gamma, kappa, tan_alpha, Vx;
+};
+std::vector<MfPoint> MfPoints() {
+  std::vector<MfPoint> pts;
+  for (int i = 0; i < 64; ++i) {
+    const double u = (i % 8) / 7.0, v = (i / 8) / 7.0;
+    pts.push_back({1000.0 + 7000.0 * u, (v - 0.5) * 0.1, (u - 0.5) * 0.6 * (i % 3 == 0 ? 1 : 0.1),
+                   std::tan((v - 0.5) * 0.42 * (i % 2 == 0 ? 1 : 0.2)), 5.0 + 35.0 * v});
+  }
+  return pts;
+}
+
+const MagicFormula& BenchTyre() {
+  static const ValidParams params = MagicFormulaBenchParams();
+  return params->wheel[0].mf;
+}
+
+void BM_MfLoad(benchmark::State& st) {
+  const MagicFormula& mf = BenchTyre();
+  const std::vector<MfPoint> pts = MfPoints();
+  std::size_t i = 0;
+  for (auto _ : st) {
+    const MfPoint& q = pts[i++ & 63];
+    benchmark::DoNotOptimize(MagicFormulaLoad(mf, q.Fz, q.gamma, mf.inflpres));
+  }
+}
+
+void BM_MfWheel(benchmark::State& st, bool aligning) {
+  const MagicFormula& mf = BenchTyre();
+  const std::vector<MfPoint> pts = MfPoints();
+  std::size_t i = 0;
+  for (auto _ : st) {
+    const MfPoint& q = pts[i++ & 63];
+    const MfLoad L = MagicFormulaLoad(mf, q.Fz, q.gamma, mf.inflpres);
+    const double Vc = q.Vx * std::sqrt(1.0 + q.tan_alpha * q.tan_alpha);
+    benchmark::DoNotOptimize(
+        EvaluateMagicFormula(mf, L, {q.kappa, q.tan_alpha, q.Vx, Vc}, aligning, false));
+  }
+}
+
+void BM_Libm(benchmark::State& st, double (*f)(double)) {
+  std::vector<double> xs;
+  for (const MfPoint& q : MfPoints()) xs.push_back(8.0 * q.kappa + q.tan_alpha);
+  std::size_t i = 0;
+  for (auto _ : st) benchmark::DoNotOptimize(f(xs[i++ & 63]));
+}
+
 // Console output as usual; also keeps each benchmark's median (or single run) for the ratios.
 // (A reporter given to RunSpecifiedBenchmarks does not follow --benchmark_color: colour only when
 // stdout is a terminal, so result files stay plain text.)
@@ -275,6 +335,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
         Ratio("ray/" + wp + " (Trace4 / 4)", "trace4/vdyn/" + wp, "ray/bullet/" + wp, 0.25);
       }
     }
+    Ratio("tyre: front wheel / libm atan", "tyre/mf/front", "libm/atan");
     Ratio("state: decode (checked) / plain protobuf parse", "state/decode", "state/parse");
     Ratio("state: decode / copying the bytes", "state/decode", "state/copy");
     std::fflush(stdout);
@@ -314,6 +375,12 @@ void Register() {
   benchmark::RegisterBenchmark("state/wire_check", BM_StateWireCheck);
   benchmark::RegisterBenchmark("state/parse", BM_StateParse);
   benchmark::RegisterBenchmark("state/copy", BM_StateCopy);
+  benchmark::RegisterBenchmark("tyre/mf/load", BM_MfLoad);
+  benchmark::RegisterBenchmark("tyre/mf/front", BM_MfWheel, true);
+  benchmark::RegisterBenchmark("tyre/mf/rear", BM_MfWheel, false);
+  benchmark::RegisterBenchmark("libm/atan", BM_Libm, static_cast<double (*)(double)>(std::atan));
+  benchmark::RegisterBenchmark("libm/sin", BM_Libm, static_cast<double (*)(double)>(std::sin));
+  benchmark::RegisterBenchmark("libm/cos", BM_Libm, static_cast<double (*)(double)>(std::cos));
 }
 
 }  // namespace
