@@ -4,8 +4,16 @@
 // the transforms against the state, and the parameters' names. The end-to-end tests (real
 // processes, Foxglove's protocol client, the page in Chromium) are in tests/foxglove/.
 #include <gtest/gtest.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <array>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <thread>
 #include <cmath>
 #include <map>
 #include <set>
@@ -20,6 +28,7 @@
 #include "vdyn/foxglove/params.h"
 #include "vdyn/foxglove/protocol.h"
 #include "vdyn/foxglove/scene.h"
+#include "vdyn/foxglove/server.h"
 #include "vdyn/viewer/draw_list.h"
 #include "vdyn/viewer/scene.h"
 
@@ -118,6 +127,137 @@ TEST(FoxgloveWebSocket, PutsFragmentsTogetherAroundAPing) {
   EXPECT_EQ(ev.kind, pr::FrameReader::Event::Kind::kBinary);
   EXPECT_EQ(ev.payload, std::string(70000, 'x'));
   EXPECT_FALSE(r.Next(rest, ev));
+}
+
+// --- HTTP and the WebSocket handshake, over a real socket to a server on loopback ----------------
+class NoClients : public foxglove::ClientHandler {
+ public:
+  void OnOpen(foxglove::ClientId, const std::shared_ptr<foxglove::Outbox>&, const std::string&,
+              const std::string&) override {}
+  void OnText(foxglove::ClientId, std::string_view) override {}
+  void OnBinary(foxglove::ClientId, std::span<const std::uint8_t>) override {}
+  void OnClose(foxglove::ClientId, const std::string&) override {}
+};
+
+class FoxgloveHttp : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    foxglove::ServerOptions o;
+    o.host = "127.0.0.1";
+    o.port = 0;
+    o.three_js = "/nonexistent/three.min.js";
+    server_ = std::make_unique<foxglove::Server>(o, handler_);
+    thread_ = std::thread([this] { server_->Run(); });
+  }
+  void TearDown() override {
+    server_->Stop();
+    thread_.join();
+  }
+
+  struct Answer {
+    std::string bytes;  // everything received
+    int end = 0;        // how the connection ended: 0 an orderly close (FIN), else the errno
+  };
+  // Connects, sends `request` (its whole length, reading meanwhile), and reads until the server
+  // ends the connection (or, with `headers_only`, until the answer's headers are in); at most 10 s.
+  Answer Exchange(const std::string& request, bool headers_only = false) const {
+    Answer a;
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in addr{};
+    addr.sin_family = AF_INET;
+    addr.sin_port = htons(server_->port());
+    addr.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::connect(fd, reinterpret_cast<const sockaddr*>(&addr), sizeof addr) != 0) {
+      a.end = errno;
+      ::close(fd);
+      return a;
+    }
+    std::size_t sent = 0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (std::chrono::steady_clock::now() < deadline) {
+      pollfd p{fd, static_cast<short>(POLLIN | (sent < request.size() ? POLLOUT : 0)), 0};
+      if (::poll(&p, 1, 100) <= 0) continue;
+      if (p.revents & POLLIN) {
+        char buf[4096];
+        const ssize_t n = ::recv(fd, buf, sizeof buf, 0);
+        if (n <= 0) {
+          a.end = n == 0 ? 0 : errno;
+          break;
+        }
+        a.bytes.append(buf, static_cast<std::size_t>(n));
+        if (headers_only && a.bytes.find("\r\n\r\n") != std::string::npos) break;
+      } else if (p.revents & POLLOUT) {
+        const ssize_t n = ::send(fd, request.data() + sent,
+                                 std::min<std::size_t>(request.size() - sent, 65536), MSG_NOSIGNAL);
+        if (n < 0) {
+          sent = request.size();  // the server stopped reading: read what it answered
+        } else {
+          sent += static_cast<std::size_t>(n);
+        }
+      } else if (p.revents & (POLLERR | POLLHUP)) {
+        a.end = ECONNRESET;
+        break;
+      }
+    }
+    ::close(fd);
+    return a;
+  }
+
+  NoClients handler_;
+  std::unique_ptr<foxglove::Server> server_;
+  std::thread thread_;
+};
+
+// RFC 9112 9.6: an answer to a request the server stops reading (431 for an over-long header, 413
+// for an over-large body) is followed by an orderly close. The server closed the socket with the
+// client's bytes unread, which resets the connection: the client got ECONNRESET after the answer
+// (and a reset can discard the answer itself before it is read).
+TEST_F(FoxgloveHttp, ARefusalOfARequestStillBeingSentEndsWithAnOrderlyClose) {
+  const Answer headers =
+      Exchange("GET / HTTP/1.1\r\nHost: x\r\nX-Big: " + std::string(70000, 'a') + "\r\n\r\n");
+  EXPECT_EQ(headers.bytes.rfind("HTTP/1.1 431 ", 0), 0u) << headers.bytes;
+  EXPECT_NE(headers.bytes.find("request line and headers over 16 KiB"), std::string::npos);
+  EXPECT_EQ(headers.end, 0) << std::strerror(headers.end);
+  const Answer body = Exchange("POST / HTTP/1.1\r\nHost: x\r\nContent-Length: 500000\r\n\r\n" +
+                               std::string(500000, 'b'));
+  EXPECT_EQ(body.bytes.rfind("HTTP/1.1 413 ", 0), 0u) << body.bytes;
+  EXPECT_NE(body.bytes.find("request body over 64 KiB"), std::string::npos);
+  EXPECT_EQ(body.end, 0) << std::strerror(body.end);
+}
+
+// RFC 6455 4.2.1 and 4.2.2; RFC 9110 and 9112 on Host, Allow, 204 and the absolute form.
+TEST_F(FoxgloveHttp, TheHandshakeAndHttpAnswersFollowTheRfcs) {
+  const std::string upgrade =
+      "GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+      "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Protocol: "
+      "foxglove.websocket.v1\r\n";
+  // No version: not a WebSocket handshake (400), saying which header; another version: 426 with
+  // the one the server speaks.
+  const Answer none = Exchange(upgrade + "\r\n");
+  EXPECT_EQ(none.bytes.rfind("HTTP/1.1 400 ", 0), 0u) << none.bytes;
+  EXPECT_NE(none.bytes.find("needs Sec-WebSocket-Version: 13"), std::string::npos) << none.bytes;
+  const Answer v12 = Exchange(upgrade + "Sec-WebSocket-Version: 12\r\n\r\n");
+  EXPECT_EQ(v12.bytes.rfind("HTTP/1.1 426 ", 0), 0u) << v12.bytes;
+  EXPECT_NE(v12.bytes.find("Sec-WebSocket-Version: 13\r\n"), std::string::npos) << v12.bytes;
+  const Answer v13 = Exchange(upgrade + "Sec-WebSocket-Version: 13\r\n\r\n", true);
+  EXPECT_EQ(v13.bytes.rfind("HTTP/1.1 101 ", 0), 0u) << v13.bytes;
+  EXPECT_NE(v13.bytes.find("Sec-WebSocket-Accept: s3pPLMBiTxaQ9kYGzzhZRbK+xOo=\r\n"),
+            std::string::npos)
+      << v13.bytes;  // RFC 6455 1.3's worked example
+  const Answer no_host = Exchange("GET / HTTP/1.1\r\n\r\n");
+  EXPECT_EQ(no_host.bytes.rfind("HTTP/1.1 400 ", 0), 0u) << no_host.bytes;
+  const Answer two_hosts = Exchange("GET / HTTP/1.1\r\nHost: a\r\nHost: b\r\n\r\n");
+  EXPECT_EQ(two_hosts.bytes.rfind("HTTP/1.1 400 ", 0), 0u) << two_hosts.bytes;
+  const Answer post = Exchange("POST / HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+  EXPECT_EQ(post.bytes.rfind("HTTP/1.1 405 ", 0), 0u) << post.bytes;
+  EXPECT_NE(post.bytes.find("Allow: GET, HEAD\r\n"), std::string::npos) << post.bytes;
+  const Answer icon = Exchange("GET /favicon.ico HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+  EXPECT_EQ(icon.bytes.rfind("HTTP/1.1 204 ", 0), 0u) << icon.bytes;
+  EXPECT_EQ(icon.bytes.find("Content-Length"), std::string::npos) << icon.bytes;
+  const Answer absolute =
+      Exchange("GET http://x/app.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n");
+  EXPECT_EQ(absolute.bytes.rfind("HTTP/1.1 200 ", 0), 0u) << absolute.bytes.substr(0, 200);
+  EXPECT_NE(absolute.bytes.find("Content-Type: text/javascript"), std::string::npos);
 }
 
 TEST(FoxgloveWebSocket, RefusesWhatAClientMustNotSendWithTheCloseCode) {

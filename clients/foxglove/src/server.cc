@@ -272,9 +272,35 @@ class Connection final : public ConnectionBase,
     res->keep_alive(false);
     res->prepare_payload();
     http::async_write(stream_, *res,
-                      [self = this->shared_from_this(), res](beast::error_code, std::size_t) {
-                        self->Drop("refused");
+                      [self = this->shared_from_this(), res](beast::error_code ec, std::size_t) {
+                        if (ec) return self->Drop("refused");
+                        self->LingerThenDrop();
                       });
+  }
+
+  // RFC 9112 9.6: after a refusal the client may still be sending (the rest of an over-long
+  // header or body). Closing a socket with unread data resets the connection, and a reset can
+  // discard the answer before the client reads it (its own or the server's queue). So the answer
+  // is followed by a FIN, and what the client still sends is read and discarded, for at most 2 s
+  // and 1 MiB, before the socket is closed.
+  void LingerThenDrop() {
+    beast::error_code ec;
+    Socket(stream_).shutdown(tcp::socket::shutdown_send, ec);
+    if (ec) return Drop("refused");
+    idle_.expires_after(std::chrono::seconds(2));
+    idle_.async_wait([weak = this->weak_from_this()](beast::error_code e) {
+      if (e) return;
+      if (auto self = weak.lock()) self->Drop("refused");
+    });
+    DiscardInput();
+  }
+  void DiscardInput() {
+    Socket(stream_).async_read_some(
+        asio::buffer(rbuf_), [self = this->shared_from_this()](beast::error_code ec, std::size_t n) {
+          self->lingered_ += n;
+          if (ec || self->lingered_ > (1u << 20)) return self->Drop("refused");
+          self->DiscardInput();
+        });
   }
 
   void Upgrade(const http::request<http::string_body>& req) {
@@ -284,6 +310,12 @@ class Connection final : public ConnectionBase,
     for (auto [it, end] = req.equal_range(http::field::sec_websocket_protocol); it != end; ++it)
       offered += (offered.empty() ? "" : ",") + std::string(it->value());
     const std::string subprotocol = protocol::ChooseSubprotocol(offered);
+    // RFC 6455 4.2.1: an upgrade without a version is not a WebSocket handshake (400); 4.2.2: one
+    // with a version this server does not speak gets 426 and the version it does.
+    if (req.count(http::field::sec_websocket_version) == 0) {
+      return Refuse(http::status::bad_request,
+                    "a WebSocket upgrade needs Sec-WebSocket-Version: 13");
+    }
     if (req[http::field::sec_websocket_version] != "13") {
       return Refuse(http::status::upgrade_required,
                     "vdyn-foxglove speaks WebSocket version 13 (Sec-WebSocket-Version)");
@@ -439,6 +471,7 @@ class Connection final : public ConnectionBase,
   std::optional<http::request_parser<http::string_body>> parser_;
   protocol::FrameReader reader_;
   std::array<char, 16384> rbuf_{};
+  std::size_t lingered_ = 0;  // bytes read and discarded after a refusal
   std::shared_ptr<Outbox> outbox_;
   std::string wbuf_;
   std::vector<std::int64_t> stamps_;
