@@ -132,7 +132,10 @@ std::string Client::ParamsBytes(std::uint32_t vehicle_id, double timeout_s) {
       [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
   if (!found) {
     throw TimeoutError("no parameters of vehicle " + std::to_string(vehicle_id) +
-                       " arrived on vdyn/params within " + Seconds(timeout_s));
+                       " arrived on vdyn/params within " + Seconds(timeout_s) + " (" +
+                       UnknownVehicleNote(vehicle_id, "the server publishes them at its start "
+                                                      "and at each change") +
+                       ")");
   }
   return params->SerializeAsString();
 }
@@ -184,6 +187,13 @@ std::set<std::uint32_t> Client::KnownVehicles() {
     if (v.params && removed_.count(id) == 0) known.insert(id);
   }
   return known;
+}
+
+std::string Client::UnknownVehicleNote(std::uint32_t vehicle_id, const std::string& otherwise) {
+  const std::set<std::uint32_t> known = KnownVehicles();
+  if (known.count(vehicle_id) != 0) return otherwise;
+  return "server '" + server_id_ + "' has no vehicle " + std::to_string(vehicle_id) + ": " +
+         VehicleList(known);
 }
 
 std::string Client::VehicleList(const std::set<std::uint32_t>& ids) {
@@ -364,7 +374,10 @@ StateSource& Client::StepStates(double timeout_s) {
                                               server_id_)) {
     throw TimeoutError("server '" + server_id_ +
                        "' did not match this client's reader of the states within " +
-                       Seconds(timeout_s) + " (its world did not arrive again)");
+                       Seconds(timeout_s) +
+                       (timeout_s < 1.0 ? " (a new reader takes some milliseconds to be matched: "
+                                          "give the first step() a timeout of a second or more)"
+                                        : " (its world did not arrive again)"));
   }
   std::lock_guard lock(mutex_);  // StateReaders() reads it
   states_ = std::move(states);
@@ -454,9 +467,13 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
     return live.has_value();
   }, wait);
   if (!found) {
+    std::lock_guard lock(mutex_);
     throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id) +
-                       " arrived on vdyn/state within " + Seconds(timeout_s) +
-                       " (a lockstep server publishes states only while it steps)");
+                       " arrived on vdyn/state within " + Seconds(timeout_s) + " (" +
+                       UnknownVehicleNote(vehicle_id,
+                                          "a lockstep server publishes states only while it "
+                                          "steps") +
+                       ")");
   }
   StateTable t;
   t.Append(*live);

@@ -109,6 +109,9 @@ class Client {
   // (with mutex_ held); "its vehicles are 1, 2" for a message.
   std::set<std::uint32_t> KnownVehicles();
   static std::string VehicleList(const std::set<std::uint32_t>& ids);
+  // For a wait that found nothing (with mutex_ held): "server 's' has no vehicle 9: its vehicle
+  // is 1" when the vehicle is not known, else `otherwise` (the likely reason it is).
+  std::string UnknownVehicleNote(std::uint32_t vehicle_id, const std::string& otherwise);
   std::string server_id_;
   double timeout_s_;
   std::mutex mutex_;

@@ -247,6 +247,27 @@ def test_small_api_edges_answer_rightly(lockstep_server, domain):
         sim.subscribe(1, capacity=2 ** 40)
 
 
+def test_a_wait_for_a_vehicle_the_server_does_not_have_says_so(lockstep_server, domain):
+    # latest() and params() of vehicle 999 timed out saying a lockstep server publishes states
+    # only while it steps (or nothing), though the server has no vehicle 999: now they name the
+    # vehicles it has. A first step() with timeout 0 blamed the world for not arriving.
+    sim = vdyn.Client(domain=domain, timeout=30)
+    with pytest.raises(vdyn.TimeoutError,
+                       match=r"within 0 s \(a new reader takes some milliseconds to be matched"):
+        sim.step(1, timeout=0)
+    with pytest.raises(vdyn.TimeoutError,
+                       match=r"no state of vehicle 999 arrived on vdyn/state within 0.5 s "
+                             r"\(server 'vdyn' has no vehicle 999: its vehicle is 1\)"):
+        sim.latest(999, timeout=0.5)
+    with pytest.raises(vdyn.TimeoutError,
+                       match=r"no parameters of vehicle 999 arrived on vdyn/params within 0.5 s "
+                             r"\(server 'vdyn' has no vehicle 999: its vehicle is 1\)"):
+        sim.params(999, timeout=0.5)
+    # A vehicle that is there but sends nothing (lockstep, not stepping) keeps the old reason.
+    with pytest.raises(vdyn.TimeoutError, match="publishes states only while it steps"):
+        sim.latest(1, timeout=0.5)
+
+
 def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
     # latest() held the client's lock for its whole wait: a step() in another thread, which would
     # bring the state it waited for, could not run until latest() timed out.
