@@ -2,9 +2,11 @@
 // (docs/hash.md's Python reference, and FNV's published test vectors), the table of limits, and
 // numbers as a person reads and writes them.
 #include <sys/resource.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <map>
@@ -16,6 +18,7 @@
 #include <gtest/gtest.h>
 
 #include "vdyn/base/deadline.h"
+#include "vdyn/base/file.h"
 #include "vdyn/base/gearbox.h"
 #include "vdyn/base/hash.h"
 #include "vdyn/base/limits.h"
@@ -261,6 +264,27 @@ TEST(Limits, EveryVehicleParameterIsNamedInWordsAndTheDocumentationSaysTheSame) 
   EXPECT_EQ(limits::ParamWords("b"), "distance T to front axle, m");
   EXPECT_EQ(limits::ParamWords("lf.radius"), "wheel radius, m");
   EXPECT_EQ(limits::ParamWords("wings"), "");
+}
+
+// A file is read whole up to its bound and refused past it, also one that cannot be sized
+// beforehand (a device, a pipe: /dev/zero never ends).
+TEST(File, ReadsAWholeFileWithinItsBoundAndRefusesOneBeyondIt) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("vdyn-file-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string text(100000, 'x');  // more than one block of the reader
+  std::ofstream(dir / "f.txt", std::ios::binary) << text;
+  const base::FileText whole = base::ReadFileBounded(dir / "f.txt", text.size(), "test file");
+  EXPECT_EQ(whole.error, "");
+  EXPECT_EQ(whole.text, text);
+  const base::FileText over = base::ReadFileBounded(dir / "f.txt", text.size() - 1, "test file");
+  EXPECT_EQ(over.error, "more than 99999 bytes, more than a test file may have");
+  EXPECT_EQ(over.text, "");
+  const base::FileText zero = base::ReadFileBounded("/dev/zero", 1 << 20, "test file");
+  EXPECT_EQ(zero.error, "more than 1048576 bytes, more than a test file may have");
+  const base::FileText none = base::ReadFileBounded(dir / "none.txt", 10, "test file");
+  EXPECT_EQ(none.error, "cannot open the test file (No such file or directory)");
+  std::filesystem::remove_all(dir);
 }
 
 TEST(Text, NumbersReadAsAPersonWritesThem) {

@@ -178,6 +178,14 @@ TEST(Params, MissingFileIsAClearError) {
   } catch (const ParamsError& e) {
     EXPECT_THAT(e.what(), HasSubstr("/nonexistent/car.txt: no such vehicle parameter file"));
   }
+  // A file that never ends is refused at the bound while it is read (it filled the memory).
+  try {
+    LoadVehicleParamsFile("/dev/zero");
+    FAIL() << "expected ParamsError";
+  } catch (const ParamsError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("/dev/zero: more than 4194304 bytes, more than a vehicle "
+                                    "parameter file may have"));
+  }
 }
 
 TEST(Params, DumpReadsBackToTheSameMessage) {

@@ -324,6 +324,15 @@ TEST(TireFile, EveryBadFileIsRefusedWithFileLineKeyAndReason) {
   } catch (const TireFileError& e) {
     EXPECT_THAT(e.what(), HasSubstr("is a directory, not a tyre file"));
   }
+  // A file that never ends (a device: its size is 0 to stat) is refused at the bound while it is
+  // read; it was read whole and filled the memory (24 GB, killed by the kernel).
+  try {
+    ReadTireFile("/dev/zero");
+    ADD_FAILURE();
+  } catch (const TireFileError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("/dev/zero: more than 4194304 bytes, more than a tyre file may "
+                                    "have"));
+  }
 }
 
 // A file that parses but lacks a coefficient the equations need is refused with the coefficient

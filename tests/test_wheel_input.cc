@@ -657,6 +657,12 @@ TEST_F(SdlTest, MappingFilesRoundTripAndBadOnesAreRefusedWithTheReason) {
   }
   EXPECT_THROW(ReadMappingFile(dir_ / "missing.txt"), MappingError);
   EXPECT_THROW(ReadMappingFile(dir_.path()), MappingError);
+  try {  // a file that never ends: refused at the bound (it filled the memory)
+    ReadMappingFile("/dev/zero");
+    ADD_FAILURE() << "accepted";
+  } catch (const MappingError& e) {
+    EXPECT_THAT(e.what(), HasSubstr("/dev/zero: more than 4194304 bytes, more than a mapping file"));
+  }
   // A broken user file is reported, not silently replaced by the table.
   std::filesystem::create_directories(DefaultMappingPath(0x046d, 0xc29b).parent_path());
   testing::WriteFile(DefaultMappingPath(0x046d, 0xc29b), "steer {");

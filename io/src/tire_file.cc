@@ -11,6 +11,7 @@
 
 #include <google/protobuf/descriptor.h>
 
+#include "vdyn/base/file.h"
 #include "vdyn/base/text.h"
 
 namespace vdyn {
@@ -354,18 +355,11 @@ pb::MagicFormulaTire ReadTireFile(const std::filesystem::path& path) {
   }
   if (!std::filesystem::exists(path, ec))
     throw TireFileError(path.string() + ": no such tyre file");
-  const auto size = std::filesystem::file_size(path, ec);
-  if (!ec && size > kMaxTireFileBytes) {
-    throw TireFileError(path.string() + ": " + std::to_string(size) +
-                        " bytes, more than a tyre file may have (" +
-                        std::to_string(kMaxTireFileBytes) + ")");
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw TireFileError(path.string() + ": cannot open the tyre file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throw TireFileError(path.string() + ": read error");
-  return ParseTireFile(ss.str(), path.string());
+  // Bounded while it reads: a device or a pipe has no size to check beforehand (/dev/zero filled
+  // the memory).
+  const base::FileText file = base::ReadFileBounded(path, kMaxTireFileBytes, "tyre file");
+  if (!file.error.empty()) throw TireFileError(path.string() + ": " + file.error);
+  return ParseTireFile(file.text, path.string());
 }
 
 void ResolveTireFiles(pb::VehicleParams& update, const std::filesystem::path& folder) {

@@ -1,3 +1,5 @@
+#include "vdyn/base/file.h"
+#include "vdyn/base/limits.h"
 #include "vdyn/base/text.h"
 #include "vdyn/io/vehicle_params.h"
 
@@ -182,14 +184,12 @@ pb::VehicleParams ReadVehicleParamsFile(const std::filesystem::path& path,
   if (!std::filesystem::exists(path, ec)) {
     throw ParamsError(path.string() + ": no such vehicle parameter file");
   }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw ParamsError(path.string() + ": cannot open the vehicle parameter file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) throw ParamsError(path.string() + ": read error");
+  const base::FileText file =
+      base::ReadFileBounded(path, limits::kMaxTextFileBytes, "vehicle parameter file");
+  if (!file.error.empty()) throw ParamsError(path.string() + ": " + file.error);
   const bool json = path.extension() == ".json";
   const std::filesystem::path folder = path.parent_path();
-  return ParseVehicleParamsText(ss.str(), json, path.string(), base, &folder);
+  return ParseVehicleParamsText(file.text, json, path.string(), base, &folder);
 }
 
 std::string DumpVehicleParamsText(const pb::VehicleParams& msg) {

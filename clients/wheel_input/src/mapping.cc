@@ -8,6 +8,7 @@
 
 #include <google/protobuf/text_format.h>
 
+#include "vdyn/base/file.h"
 #include "vdyn/base/limits.h"
 #include "vdyn/messages/text_format.h"
 
@@ -210,11 +211,10 @@ pb::WheelMapping ReadMappingFile(const std::filesystem::path& path) {
   if (std::filesystem::is_directory(path, ec)) {
     throw MappingError(path.string() + ": is a directory, not a mapping file");
   }
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream ss;
-  ss << in.rdbuf();
-  if (!in && !in.eof()) throw MappingError(path.string() + ": cannot be read");
-  return ParseMappingText(ss.str(), path.string());
+  const base::FileText file =
+      base::ReadFileBounded(path, limits::kMaxTextFileBytes, "mapping file");
+  if (!file.error.empty()) throw MappingError(path.string() + ": " + file.error);
+  return ParseMappingText(file.text, path.string());
 }
 
 std::string DumpMappingText(const pb::WheelMapping& m) {

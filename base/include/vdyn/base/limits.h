@@ -90,6 +90,8 @@ inline constexpr Range kWorldCoordinateM{-1e9, 1e9, true, true, "terrain vertex 
 // before it is read; a row beyond the limit where it starts. Rows are 48 bytes in memory.
 inline constexpr std::size_t kMaxManeuverBytes = 64u << 20;
 inline constexpr std::size_t kMaxManeuverRows = 1'000'000;
+// A vehicle parameter file or a wheel mapping (text or JSON): far more than any holds.
+inline constexpr std::size_t kMaxTextFileBytes = 4u << 20;
 
 // --- Vehicle parameters (vdyn.pb.VehicleParams), by field path -------------------------------
 struct ParamLimit {
