@@ -1796,6 +1796,13 @@ TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
     const std::string csv = testing::ReadFile(dir_ / "piped.csv");
     EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 3001) << csv.substr(0, 400);  // a header
   }
+  {  // --each names a file per vehicle after --csv: beside a stream it made /dev/stdout-v1.
+    const auto [code, out] = in_dir("exec " + rec + " export run.mcap --each --csv /dev/stdout");
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_THAT(out, HasSubstr("--each writes a file per vehicle named after --csv (stdout-v1, "
+                               "...); /dev/stdout is a stream"));
+    EXPECT_FALSE(std::filesystem::exists("/dev/stdout-v1"));
+  }
   for (const std::string& args :
        {std::string("export run.mcap --csv new/"),
         "record new/ --domain " + std::to_string(domain_) + " --duration 1"}) {
@@ -1847,6 +1854,59 @@ TEST_F(RecorderTest, ASignalStopsAReadingCommandWithinARecord) {
   EXPECT_EQ(*code, 1) << p->Log();
   EXPECT_THAT(p->Log(), HasSubstr("interrupted (Ctrl-C or SIGTERM)"));
   EXPECT_LT(lines, 15000u) << "it went on to the end";
+}
+
+// Waits (at most 20 s) until process `pid` is blocked in system call `nr` (/proc/PID/syscall).
+bool BlockedIn(pid_t pid, long nr) {
+  for (int i = 0; i < 2000; ++i) {
+    std::ifstream f("/proc/" + std::to_string(pid) + "/syscall");
+    long at = -1;
+    if (f >> at && at == nr) return true;
+    std::this_thread::sleep_for(10ms);
+  }
+  return false;
+}
+
+// A command writing into a FIFO could be stopped by nothing but SIGKILL: opening a FIFO that no one
+// reads blocks (the signal handler's flag was never looked at: the call restarted), and so does
+// writing into one whose reader does not read. The first signal now ends the wait to open it
+// (exit 2, saying why); a second ends any command at once.
+TEST_F(RecorderTest, ACommandBlockedOnAFifoStopsOnASignalOrTwo) {
+#if !defined(__x86_64__)
+  GTEST_SKIP() << "reads x86-64 system call numbers from /proc";
+#endif
+  const auto file = dir_ / "run.mcap";
+  WriteRecording(file);
+  const auto fifo = dir_ / "rows.csv";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  {  // No reader: export waits in open(2) (openat, 257).
+    auto p = Recorder({"export", file.string(), "--csv", fifo.string()}, "open.log");
+    ASSERT_TRUE(BlockedIn(p->pid(), 257)) << p->Log();
+    p->Signal(SIGINT);
+    const auto code = p->Wait(30s);
+    ASSERT_TRUE(code.has_value()) << "export ignored SIGINT while opening a FIFO\n" << p->Log();
+    EXPECT_EQ(*code, 2) << p->Log();
+    EXPECT_THAT(p->Log(), HasSubstr("interrupted while waiting for a reader of it"));
+  }
+  {  // A reader that reads nothing: export fills the pipe and waits in write(2) (1).
+    const int fd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+    ASSERT_GE(fd, 0);
+    auto p = Recorder({"export", file.string(), "--csv", fifo.string()}, "write.log");
+    ASSERT_TRUE(BlockedIn(p->pid(), 1)) << p->Log();
+    p->Signal(SIGINT);
+    std::optional<int> code = p->Wait(2s);
+    if (!code) {
+      p->Signal(SIGINT);
+      code = p->Wait(30s);
+    }
+    ::close(fd);
+    ASSERT_TRUE(code.has_value()) << "export ignored two SIGINTs while writing into a FIFO\n"
+                                  << p->Log();
+    EXPECT_TRUE(*code == 1 || *code == 128 + SIGINT) << *code << "\n" << p->Log();
+    if (*code == 128 + SIGINT) {
+      EXPECT_THAT(p->Log(), HasSubstr("a second signal: ending at once"));
+    }
+  }
 }
 
 // Issue 33, item 9: `export --each` of a file with many vehicles opened a CSV (and its 1 MiB

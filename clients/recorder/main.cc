@@ -26,8 +26,26 @@
 namespace {
 
 std::atomic<bool> g_stop{false};
-extern "C" void OnSignal(int) {
-  g_stop.store(true);
+// The first Ctrl-C or SIGTERM asks the command to stop (a recording is closed whole); a second one
+// ends the process at once, as the signal's default would: a command blocked where no flag is
+// looked at (writing into a FIFO whose reader does not read) could not be stopped but by SIGKILL.
+// Installed without SA_RESTART, so that a blocking call (opening a FIFO nobody reads) returns at
+// the first one.
+extern "C" void OnSignal(int sig) {
+  if (g_stop.exchange(true)) {
+    static constexpr char kSay[] = "\nvdyn-recorder: a second signal: ending at once\n";
+    (void)!::write(STDERR_FILENO, kSay, sizeof kSay - 1);
+    std::signal(sig, SIG_DFL);
+    std::raise(sig);
+  }
+}
+void OnSignals() {
+  struct sigaction sa {};
+  sa.sa_handler = OnSignal;
+  sigemptyset(&sa.sa_mask);
+  sa.sa_flags = 0;  // no SA_RESTART
+  ::sigaction(SIGINT, &sa, nullptr);
+  ::sigaction(SIGTERM, &sa, nullptr);
 }
 
 std::string CommandLine(int argc, char** argv) {
@@ -449,8 +467,7 @@ int main(int argc, char** argv) {
   Takeover takeover(app);
   Recover recover(app);
   if (const int code = cli::Parse(app, argc, argv); code >= 0) return code;
-  std::signal(SIGINT, OnSignal);
-  std::signal(SIGTERM, OnSignal);
+  OnSignals();
   if (!record.cmd->parsed() && !play.cmd->parsed() && !takeover.cmd->parsed()) {
     // The commands that only read a file stop at the next record on a signal (record, play
     // and takeover stop on g_stop themselves).

@@ -154,6 +154,15 @@ int RunExport(const ExportOptions& o, std::ostream& out) {
         << ": choose one with --vehicle ID, or --each for a file per vehicle\n";
     return 2;
   }
+  // --each names its files after --csv (NAME-v1.csv, ...): beside a stream that made regular
+  // files such as /dev/stdout-v1 and wrote nothing to the stream.
+  if (o.each && CheckOutputKind(o.csv) == OutputKind::kStream) {
+    out << "vdyn-recorder export: --each writes a file per vehicle named after --csv ("
+        << VehiclePath(o.csv, *chosen.begin()).filename().string() << ", ...); "
+        << o.csv.string()
+        << " is a stream: give a file name, or choose one vehicle with --vehicle ID\n";
+    return 2;
+  }
   // With the CSV on the standard output, what export says goes to the standard error.
   std::ostream& report = NamesStandardOutput(o.csv) ? std::cerr : out;
   const std::uint64_t start = FirstLogTime(reader);

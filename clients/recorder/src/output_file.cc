@@ -133,6 +133,10 @@ OutputFile::OutputFile(fs::path dest, std::vector<fs::path> inputs)
     const std::optional<int> named = DescriptorNamed(dest_);
     fd_ = named ? ::fcntl(*named, F_DUPFD_CLOEXEC, 3)
                 : ::open(dest_.c_str(), O_WRONLY | O_NOCTTY | O_CLOEXEC);
+    if (fd_ < 0 && errno == EINTR) {
+      throw OutputError(dest_.string() + ": interrupted while waiting for a reader of it (a FIFO "
+                        "opens for writing when something opens it for reading)");
+    }
     if (fd_ < 0) throw OutputError(dest_.string() + ": cannot write into it: " + Errno());
     return;
   }
