@@ -1426,5 +1426,273 @@ TEST(McapInfo, RatesArePrintedOnlyForStreams) {
   EXPECT_THAT(info, ::testing::Not(HasSubstr("76.9 Hz"))) << info;
 }
 
+// --- files laid out record by record, as other writers lay them out -----------------------------
+
+// Little-endian fields of the spec's records, for files our writer would not write.
+struct Rec {
+  std::string b;
+  Rec& Le(std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i)
+      b.push_back(static_cast<char>(static_cast<std::uint8_t>(v >> (8 * i))));
+    return *this;
+  }
+  Rec& U16(std::uint64_t v) { return Le(v, 2); }
+  Rec& U32(std::uint64_t v) { return Le(v, 4); }
+  Rec& U64(std::uint64_t v) { return Le(v, 8); }
+  Rec& Str(const std::string& s) {
+    U32(s.size());
+    b += s;
+    return *this;
+  }
+  // The record of opcode `op` that holds these fields.
+  std::string As(std::uint8_t op) const {
+    Rec r;
+    r.b.push_back(static_cast<char>(op));
+    return r.U64(b.size()).b + b;
+  }
+};
+
+// Where the data section of FileOf's files starts: the magic (8), then the header record (9)
+// with an empty profile (4) and the library "test" (4 + 4).
+constexpr std::size_t kDataAt = 29;
+
+std::string SchemaRecord(std::uint16_t id, const std::string& name) {
+  return Rec().U16(id).Str(name).Str("protobuf").Str("fds").As(mc::kSchema);
+}
+// The state channel of `vehicle`, as our recorder names it.
+std::string ChannelRecord(std::uint16_t id, std::uint16_t schema, std::uint32_t vehicle) {
+  std::string m;
+  for (const auto& [k, v] : recorder::ChannelMetadata(transport::TopicId::kState, vehicle))
+    m += Rec().Str(k).Str(v).b;
+  return Rec()
+      .U16(id)
+      .U16(schema)
+      .Str(recorder::ChannelTopic(transport::TopicId::kState, vehicle))
+      .Str("protobuf")
+      .Str(m)
+      .As(mc::kChannel);
+}
+std::uint64_t StateTime(std::uint64_t step) {
+  return 1'700'000'000'000'000'000ull + step * 1'000'000;
+}
+// The states [from, to) of vehicle 1 on `channel`, as message records.
+std::string StateRecords(std::uint16_t channel, std::uint64_t from, std::uint64_t to) {
+  std::string out;
+  for (std::uint64_t s = from; s < to; ++s) {
+    Rec r;
+    r.U16(channel).U32(s).U64(StateTime(s)).U64(StateTime(s));
+    r.b += StateAt(s).SerializeAsString();
+    out += r.As(mc::kMessage);
+  }
+  return out;
+}
+// An uncompressed chunk of `records` (with its CRC) over the log times of steps [from, to).
+std::string ChunkRecord(const std::string& records, std::uint64_t from, std::uint64_t to) {
+  const auto* p = reinterpret_cast<const std::uint8_t*>(records.data());
+  Rec r;
+  r.U64(StateTime(from)).U64(StateTime(to - 1)).U64(records.size());
+  r.U32(mc::Crc32(0, {p, records.size()})).Str("").U64(records.size());
+  r.b += records;
+  return r.As(mc::kChunk);
+}
+// The magic, a header, `data`, a data end, `summary` (none when empty), a footer, the magic; no
+// CRC of the data section or of the summary (0: not computed, as the spec allows).
+std::vector<std::uint8_t> FileOf(const std::string& data, const std::string& summary = "") {
+  std::string f(reinterpret_cast<const char*>(mc::kMagic), 8);
+  f += Rec().Str("").Str("test").As(mc::kHeader) + data + Rec().U32(0).As(mc::kDataEnd);
+  const std::uint64_t summary_start = summary.empty() ? 0 : f.size();
+  f += summary + Rec().U64(summary_start).U64(0).U32(0).As(mc::kFooter);
+  f.append(reinterpret_cast<const char*>(mc::kMagic), 8);
+  return {f.begin(), f.end()};
+}
+// Where FileOf(data, ...) places its summary.
+std::uint64_t SummaryAt(const std::string& data) {
+  return kDataAt + data.size() + 13;
+}
+
+// The McapError a strict scan of `path` throws ("" reason when it reads).
+mc::McapError StrictError(const fs::path& path) {
+  try {
+    ReadAll(path);
+  } catch (const mc::McapError& e) {
+    return e;
+  }
+  return mc::McapError(path, 0, "");
+}
+
+// The official writers put a schema and a channel into the chunk where they are first used
+// (mcap's Python writer, register_channel), and may not copy them into the summary: every
+// command read such a file as "a message on channel 1, which no channel record defines". Now
+// each takes them there, and a reader that seeks by the summary (play, export, verify) finds
+// them all the same.
+TEST(McapForeign, SchemasAndChannelsInsideChunksAreTakenAndTheSummaryFindsThem) {
+  testing::TempDir dir;
+  const fs::path path = dir / "python.mcap";
+  const std::string type = pb::VehicleState::descriptor()->full_name();
+  const std::string first =
+      ChunkRecord(SchemaRecord(1, type) + ChannelRecord(1, 1, 1) + StateRecords(1, 0, 30), 0, 30);
+  const std::string second = ChunkRecord(StateRecords(1, 30, 60), 30, 60);
+  // The summary: statistics counting channel 1's messages and the chunk indexes, no channel.
+  const std::string stats = Rec()
+                                .U64(60)
+                                .U16(1)
+                                .U32(1)
+                                .U32(0)
+                                .U32(0)
+                                .U32(2)
+                                .U64(StateTime(0))
+                                .U64(StateTime(59))
+                                .Str(Rec().U16(1).U64(60).b)
+                                .As(mc::kStatistics);
+  auto index = [](std::uint64_t at, const std::string& chunk, std::uint64_t from) {
+    const std::uint64_t records = chunk.size() - 9 - 40;
+    return Rec()
+        .U64(StateTime(from))
+        .U64(StateTime(from + 29))
+        .U64(at)
+        .U64(chunk.size())
+        .Str("")
+        .U64(0)
+        .Str("")
+        .U64(records)
+        .U64(records)
+        .As(mc::kChunkIndex);
+  };
+  WriteBytes(path, FileOf(first + second, stats + index(kDataAt, first, 0) +
+                                              index(kDataAt + first.size(), second, 30)));
+  mc::ScanResult res;
+  EXPECT_EQ(ReadAll(path, &res).size(), 60u);
+  EXPECT_TRUE(res.complete);
+  const std::string info = Info(path);
+  EXPECT_THAT(info, HasSubstr("vdyn/state/1                          60 msgs")) << info;
+
+  const mc::Reader reader(path);
+  const auto summary = reader.ReadSummary();
+  ASSERT_TRUE(summary.has_value());
+  ASSERT_EQ(summary->channels.size(), 1u);
+  EXPECT_EQ(summary->channels[0].topic, "vdyn/state/1");
+  ASSERT_EQ(summary->schemas.size(), 1u);
+  EXPECT_EQ(summary->schemas[0].name, type);
+  const auto channels = recorder::VdynChannels(*summary);
+  ASSERT_EQ(channels.count(1), 1u);
+  EXPECT_EQ(channels.at(1).topic, transport::TopicId::kState);
+  EXPECT_EQ(channels.at(1).key, 1u);
+  std::size_t seeked = 0;
+  std::vector<std::uint8_t> scratch;
+  for (const mc::ChunkIndex& c : reader.Chunks())
+    reader.ReadChunk(
+        c, [&](const mc::Message&) { ++seeked; }, scratch);
+  EXPECT_EQ(seeked, 60u);
+}
+
+// The spec wants every record of one schema or channel id identical. One that is not made the
+// commands disagree (info named channel 1 vdyn/state/2, export took it for vehicle 1's): it is
+// refused at the second record, wherever it stands, saying what differs; recover says it is
+// damage. Identical copies (the data section's, a chunk's, the summary's) are welcome.
+TEST(McapBadFiles, AnIdDefinedTwiceWithOtherContentIsRefusedAtTheSecondRecord) {
+  testing::TempDir dir;
+  const std::string type = pb::VehicleState::descriptor()->full_name();
+  const std::string defs = SchemaRecord(1, type) + ChannelRecord(1, 1, 1);
+  const std::string states = ChunkRecord(StateRecords(1, 0, 20), 0, 20);
+  const std::string more = ChunkRecord(StateRecords(1, 20, 40), 20, 40);
+  const std::string other_schema =
+      ChunkRecord(SchemaRecord(1, "vdyn.pb.SessionEvent") + StateRecords(1, 20, 40), 20, 40);
+  const std::string channel_at =
+      "than at offset " + std::to_string(kDataAt + SchemaRecord(1, type).size());
+  struct Case {
+    const char* what;
+    std::string data, summary;
+    std::uint64_t at;
+    std::string says;
+  };
+  const std::vector<Case> cases = {
+      {"in the data section", defs + ChannelRecord(1, 1, 2) + states, "", kDataAt + defs.size(),
+       "channel 1 is defined again with other content (topic 'vdyn/state/2', was "
+       "'vdyn/state/1') " +
+           channel_at},
+      {"in a chunk", defs + states + other_schema, "", kDataAt + defs.size() + states.size(),
+       "inside the chunk, byte 0: schema 1 is defined again with other content (name "
+       "'vdyn.pb.SessionEvent', was 'vdyn.pb.VehicleState') than at offset 29"},
+      {"in the summary", defs + states + more, ChannelRecord(1, 1, 2),
+       SummaryAt(defs + states + more),
+       "channel 1 is defined again with other content (topic 'vdyn/state/2', was "
+       "'vdyn/state/1') " +
+           channel_at},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const fs::path path = dir / "twice.mcap";
+    WriteBytes(path, FileOf(c.data, c.summary));
+    const mc::McapError e = StrictError(path);
+    EXPECT_EQ(e.offset(), c.at) << e.what();
+    EXPECT_THAT(e.reason(), HasSubstr(c.says));
+    EXPECT_THROW(Info(path), mc::McapError);
+    const auto [code, log] = Recover(path, dir / "twice-recovered.mcap");
+    EXPECT_EQ(code, 0);
+    EXPECT_THAT(log, ::testing::Not(HasSubstr("was whole"))) << log;
+    fs::remove(dir / "twice-recovered.mcap");
+  }
+  // Identical copies in the data section, in a chunk and in the summary.
+  const fs::path path = dir / "copies.mcap";
+  WriteBytes(path, FileOf(defs + defs + ChunkRecord(defs + StateRecords(1, 0, 20), 0, 20), defs));
+  EXPECT_EQ(ReadAll(path).size(), 20u);
+  EXPECT_EQ(mc::Reader(path).ReadSummary()->channels.size(), 1u);
+  const auto [code, log] = Recover(path, dir / "copies-recovered.mcap");
+  EXPECT_EQ(code, 0);
+  EXPECT_THAT(log, HasSubstr("was whole")) << log;
+}
+
+// A chunk holds schema, channel and message records (and private ones, which a reader skips):
+// a chunk nested in one was skipped as if private, and its messages silently lost (info said
+// nothing, recover said "was whole"). Such a chunk is malformed: refused at its offset, naming
+// the record; recover drops it as damage.
+TEST(McapBadFiles, AChunkHoldsOnlySchemaChannelAndMessageRecords) {
+  testing::TempDir dir;
+  const std::string defs =
+      SchemaRecord(1, pb::VehicleState::descriptor()->full_name()) + ChannelRecord(1, 1, 1);
+  const std::string more = ChunkRecord(StateRecords(1, 20, 40), 20, 40);
+  struct Case {
+    const char* what;
+    std::string inner;
+    std::string says;
+  };
+  const std::vector<Case> cases = {
+      {"a chunk", ChunkRecord(StateRecords(1, 0, 20), 0, 20),
+       "inside the chunk, byte 0: a chunk record (opcode 0x06), which the spec does not allow "
+       "inside a chunk"},
+      {"metadata", StateRecords(1, 0, 20) + Rec().Str("m").Str("").As(mc::kMetadata),
+       "a metadata record (opcode 0x0c), which the spec does not allow inside a chunk"},
+      {"an attachment", Rec().U64(0).U64(0).Str("a").Str("").U64(0).U32(0).As(mc::kAttachment),
+       "inside the chunk, byte 0: an attachment record (opcode 0x09)"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.what);
+    const fs::path path = dir / "nested.mcap";
+    WriteBytes(path, FileOf(defs + ChunkRecord(c.inner, 0, 20) + more));
+    const mc::McapError e = StrictError(path);
+    EXPECT_EQ(e.offset(), kDataAt + defs.size()) << e.what();
+    EXPECT_THAT(e.reason(), HasSubstr(c.says));
+    EXPECT_THROW(Info(path), mc::McapError);
+    const mc::Reader reader(path);
+    std::vector<std::uint8_t> scratch;
+    EXPECT_THROW(reader.ReadChunk(
+                     reader.Chunks().at(0), [](const mc::Message&) {}, scratch),
+                 mc::McapError);
+    const auto [code, log] = Recover(path, dir / "nested-recovered.mcap");
+    EXPECT_EQ(code, 0);
+    EXPECT_THAT(log, HasSubstr("recovered 20 messages")) << log;
+    EXPECT_THAT(log, HasSubstr(c.says)) << log;
+    fs::remove(dir / "nested-recovered.mcap");
+  }
+  // Private records (0x80 and up) and those of a later version of the spec are skipped.
+  const fs::path path = dir / "private.mcap";
+  const std::string skipped = Rec().Str("mine").As(0x80) + Rec().Str("later").As(0x20);
+  WriteBytes(path, FileOf(defs + ChunkRecord(skipped + StateRecords(1, 0, 20), 0, 20) + more));
+  EXPECT_EQ(ReadAll(path).size(), 40u);
+  const auto [code, log] = Recover(path, dir / "private-recovered.mcap");
+  EXPECT_EQ(code, 0);
+  EXPECT_THAT(log, HasSubstr("was whole (40 messages)")) << log;
+}
+
 }  // namespace
 }  // namespace vdyn

@@ -11,7 +11,9 @@
 #include <exception>
 #include <limits>
 #include <map>
+#include <set>
 #include <tuple>
+#include <type_traits>
 
 #include <lz4frame.h>
 #include <zlib.h>
@@ -270,6 +272,87 @@ Metadata ParseMetadata(std::span<const std::uint8_t> c) {
   m.name = r.Str("name");
   m.values = r.Map("metadata");
   return m;
+}
+
+// "a" or "an" before a record's name ("an attachment").
+std::string WithArticle(std::string_view name) {
+  return (name.empty() || std::string_view("aeiou").find(name[0]) == std::string_view::npos
+              ? "a "
+              : "an ") +
+         std::string(name);
+}
+
+// Why a record of opcode `op` may not lie inside a chunk (empty when it may). The spec puts
+// schema, channel and message records in chunks, and allows private records (0x80 and up) and
+// records a later version defines (past the data end's opcode) there, which a reader skips. Any
+// other record it defines is for elsewhere: a chunk in a chunk, say, would hide its messages
+// from every reader that takes the chunk for read.
+std::string NotInAChunk(std::uint8_t op) {
+  if (op == kSchema || op == kChannel || op == kMessage || op > kDataEnd) return {};
+  return WithArticle(OpName(op)) + " record (opcode " + base::FormatHex(op, 2) +
+         "), which the spec does not allow inside a chunk (only schema, channel and message "
+         "records): the chunk is malformed";
+}
+
+// What differs between two records of one schema or channel id ("" when nothing does).
+std::string Quoted(const std::string& s) {
+  return "'" + base::Quote(s, 60) + "'";
+}
+std::string Difference(const Schema& was, const Schema& is) {
+  if (was.name != is.name) return "name " + Quoted(is.name) + ", was " + Quoted(was.name);
+  if (was.encoding != is.encoding)
+    return "encoding " + Quoted(is.encoding) + ", was " + Quoted(was.encoding);
+  if (was.data != is.data) {
+    return "data of " + std::to_string(is.data.size()) + " bytes, other than the " +
+           std::to_string(was.data.size()) + " bytes it had";
+  }
+  return {};
+}
+std::string Difference(const Channel& was, const Channel& is) {
+  if (was.topic != is.topic) return "topic " + Quoted(is.topic) + ", was " + Quoted(was.topic);
+  if (was.schema_id != is.schema_id) {
+    return "schema " + std::to_string(is.schema_id) + ", was " + std::to_string(was.schema_id);
+  }
+  if (was.message_encoding != is.message_encoding) {
+    return "message encoding " + Quoted(is.message_encoding) + ", was " +
+           Quoted(was.message_encoding);
+  }
+  for (const auto& [k, v] : is.metadata) {
+    const auto it = was.metadata.find(k);
+    if (it == was.metadata.end()) return "metadata " + Quoted(k) + " added";
+    if (it->second != v) {
+      return "metadata " + Quoted(k) + " = " + Quoted(v) + ", was " + Quoted(it->second);
+    }
+  }
+  for (const auto& [k, v] : was.metadata) {
+    if (is.metadata.count(k) == 0) return "metadata " + Quoted(k) + " dropped";
+  }
+  return {};
+}
+
+// The first record of a schema or channel id, and where it is (its offset, or its chunk's).
+template <class T>
+struct Defined {
+  T record;
+  std::uint64_t offset = 0;
+};
+template <class T>
+using Definitions = std::map<std::uint16_t, Defined<T>>;
+
+// Why `again` may not stand beside the record of its id in `known` (empty: it is the first, or
+// identical). The spec wants every record of one id identical: were they not, one reader would
+// take the first and another the last, and file the same messages under different topics.
+template <class T>
+std::string Redefinition(const T& again, const Definitions<T>& known) {
+  const auto it = known.find(again.id);
+  if (it == known.end()) return {};
+  const std::string diff = Difference(it->second.record, again);
+  if (diff.empty()) return {};
+  return std::string(std::is_same_v<T, Schema> ? "schema " : "channel ") +
+         std::to_string(again.id) + " is defined again with other content (" + diff +
+         ") than at offset " + std::to_string(it->second.offset) +
+         ": the spec wants every record of one id identical, and readers would disagree on what "
+         "its messages are";
 }
 
 // Makes room in `out` past `used` for more decompressed bytes: doubles (from 64 KiB), never past
@@ -1241,13 +1324,16 @@ class Scanner {
         case kSchema: {
           const Schema s = ParseSchema(f.content);
           if (s.id == 0) throw Malformed{"a schema with id 0"};
+          if (!Define(s, f, schemas_)) return true;
           schema_known_[s.id] = true;
           if (v_.on_schema) v_.on_schema(s);
           return true;
         }
-        case kChannel:
-          OnChannel(ParseChannel(f.content));
+        case kChannel: {
+          const Channel c = ParseChannel(f.content);
+          if (Define(c, f, channels_)) OnChannel(c);
           return true;
+        }
         case kMessage:
           OnLooseMessage(ParseMessage(f.content));
           return true;
@@ -1285,6 +1371,21 @@ class Scanner {
       pos_ = f.end();
       return false;
     }
+  }
+
+  // A schema or channel record of the data section: the first of its id, or one identical to
+  // it. Another is refused (strict) or left out (lenient: the first stands, and the scan says
+  // so). False when it is left out.
+  template <class T>
+  bool Define(const T& rec, const Frame& f, Definitions<T>& known) {
+    if (const std::string why = Redefinition(rec, known); !why.empty()) {
+      if (!lenient_) r_.Fail(pos_, why);
+      Damaged(pos_, f.end() - pos_, why + "; left out, the first stands");
+      ++res_.records_skipped;
+      return false;
+    }
+    known.try_emplace(rec.id, Defined<T>{rec, pos_});
+    return true;
   }
 
   void OnChannel(const Channel& c) {
@@ -1437,32 +1538,65 @@ class Scanner {
     return true;
   }
 
-  // A chunk's records: checked first (framing, ids), delivered only when all are good.
+  // A chunk's records: checked first (framing, opcodes, ids), delivered only when all are good.
+  // Schema and channel records count from where they stand: a message may use a channel the
+  // chunk defines before it (the official writers put them there, where first used).
   std::string InnerRecords(std::span<const std::uint8_t> recs) {
     inner_.clear();
+    chunk_schemas_.clear();
+    chunk_channels_.clear();
     for (std::uint64_t p = 0; p < recs.size();) {
       Frame f;
-      const std::string why = FrameAt(recs.data(), recs.size(), p, f);
-      if (!why.empty()) return "inside the chunk, byte " + std::to_string(p) + ": " + why;
-      try {
-        if (f.op == kSchema) {
-          if (ParseSchema(f.content).id == 0) return "a schema with id 0 inside a chunk";
-        } else if (f.op == kChannel) {
-          ParseChannel(f.content);
-        } else if (f.op == kMessage) {
-          const Message m = ParseMessage(f.content);
-          if (!channel_known_[m.channel_id] && !lenient_) {
-            return "a message on channel " + std::to_string(m.channel_id) +
-                   ", which no channel record defines";
-          }
+      std::string why = FrameAt(recs.data(), recs.size(), p, f);
+      if (why.empty()) why = NotInAChunk(f.op);
+      if (why.empty()) {
+        try {
+          why = InnerRecord(f);
+        } catch (const Malformed& e) {
+          why = std::string("a malformed ") + OpName(f.op) + " record: " + e.what;
         }
-      } catch (const Malformed& e) {
-        return std::string("inside the chunk: a malformed ") + OpName(f.op) + " record: " + e.what;
       }
+      if (!why.empty()) return "inside the chunk, byte " + std::to_string(p) + ": " + why;
       inner_.push_back(p);
       p = f.end();
     }
     return {};
+  }
+
+  // One record of a chunk, checked against what the file defined before it, the chunk's own
+  // definitions included: why it is wrong (empty when it is not).
+  std::string InnerRecord(const Frame& f) {
+    if (f.op == kSchema) {
+      const Schema s = ParseSchema(f.content);
+      if (s.id == 0) return "a schema with id 0";
+      return Pending(s, schemas_, chunk_schemas_);
+    }
+    if (f.op == kChannel) {
+      const Channel c = ParseChannel(f.content);
+      if (std::string why = Pending(c, channels_, chunk_channels_); !why.empty()) return why;
+      if (c.schema_id != 0 && !schema_known_[c.schema_id] &&
+          chunk_schemas_.count(c.schema_id) == 0 && !lenient_) {
+        return "channel " + std::to_string(c.id) + " names schema " + std::to_string(c.schema_id) +
+               ", which no schema record defines";
+      }
+    } else if (f.op == kMessage) {
+      const Message m = ParseMessage(f.content);
+      if (!channel_known_[m.channel_id] && chunk_channels_.count(m.channel_id) == 0 && !lenient_) {
+        return "a message on channel " + std::to_string(m.channel_id) +
+               ", which no channel record defines";
+      }
+    }
+    return {};
+  }
+
+  // A schema or channel record of the chunk being checked: held for the chunk (the file's
+  // definitions take it once the chunk is delivered whole), or why it conflicts.
+  template <class T>
+  std::string Pending(const T& rec, const Definitions<T>& file, Definitions<T>& chunk) {
+    std::string why = Redefinition(rec, file);
+    if (why.empty()) why = Redefinition(rec, chunk);
+    if (why.empty()) chunk.try_emplace(rec.id, Defined<T>{rec, pos_});
+    return why;
   }
 
   void DeliverInner(std::span<const std::uint8_t> recs, bool unchecked) {
@@ -1471,10 +1605,12 @@ class Scanner {
       FrameAt(recs.data(), recs.size(), p, f);
       if (f.op == kSchema) {
         const Schema s = ParseSchema(f.content);
+        schemas_.try_emplace(s.id, Defined<Schema>{s, pos_});
         schema_known_[s.id] = true;
         if (v_.on_schema) v_.on_schema(s);
       } else if (f.op == kChannel) {
         const Channel c = ParseChannel(f.content);
+        channels_.try_emplace(c.id, Defined<Channel>{c, pos_});
         channel_known_[c.id] = true;
         if (v_.on_channel) v_.on_channel(c);
       } else if (f.op == kMessage) {
@@ -1531,18 +1667,33 @@ class Scanner {
         Problem(pos, why + " (in the summary)");
         return;
       }
-      if (f.op == kStatistics) {
-        try {
-          res_.statistics = ParseStatistics(f.content);
-        } catch (const Malformed& e) {
-          Problem(pos, std::string("a malformed statistics record: ") + e.what);
+      try {
+        if (f.op == kStatistics) res_.statistics = ParseStatistics(f.content);
+        // The summary's copies of schema and channel records: the same as the data section's
+        // (a reader that seeks by the summary takes these).
+        std::string why;
+        if (f.op == kSchema) why = SummaryCopy(ParseSchema(f.content), pos, schemas_);
+        if (f.op == kChannel) why = SummaryCopy(ParseChannel(f.content), pos, channels_);
+        if (!why.empty()) {
+          Problem(pos, why + " (in the summary)");
           return;
         }
+      } catch (const Malformed& e) {
+        Problem(pos,
+                std::string("a malformed ") + OpName(f.op) + " record in the summary: " + e.what);
+        return;
       }
       pos = f.end();
     }
     res_.complete = res_.problem.empty();
     if (v_.on_progress) v_.on_progress(size_);
+  }
+
+  template <class T>
+  static std::string SummaryCopy(const T& rec, std::uint64_t at, Definitions<T>& known) {
+    std::string why = Redefinition(rec, known);
+    if (why.empty()) known.try_emplace(rec.id, Defined<T>{rec, at});
+    return why;
   }
 
   static constexpr std::size_t kNone = ~std::size_t{0};
@@ -1559,6 +1710,10 @@ class Scanner {
   std::optional<std::uint64_t> summary_at_;  // lenient: where a verified summary starts
   std::vector<bool> schema_known_ = std::vector<bool>(65536, false);
   std::vector<bool> channel_known_ = std::vector<bool>(65536, false);
+  // The first record of each schema and channel id (a second must be identical), and those of
+  // the chunk being checked, which count once it is delivered.
+  Definitions<Schema> schemas_, chunk_schemas_;
+  Definitions<Channel> channels_, chunk_channels_;
   std::vector<std::uint8_t> scratch_;
   std::vector<std::uint64_t> inner_;  // a chunk's records: their offsets
   // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
@@ -1576,7 +1731,58 @@ ScanResult Reader::Scan(const Visitor& v, bool lenient) const {
 std::optional<Reader::Summary> Reader::ReadSummary() const {
   std::optional<Summary> s = SummaryOf();
   CheckIntact();  // what it read was there
+  if (s) CompleteSummary(*s);
   return s;
+}
+
+// The spec wants the summary to copy every schema and channel that its chunk indexes and
+// statistics count messages of, but a writer may leave them in the data section alone, or in
+// chunks (the official writers put them in the chunk where they are first used): a reader that
+// seeks by the summary (play, export, verify) would not know their messages. They are taken from
+// the data section then, reading chunks only until none is missing (a channel comes before its
+// first message). A lenient scan: what cannot be read stays missing, and the scan of the command
+// says why.
+void Reader::CompleteSummary(Summary& s) const {
+  std::set<std::uint16_t> channels, schemas;  // ids missing from the summary
+  for (const ChunkIndex& c : s.chunk_indexes) {
+    for (const auto& [id, offset] : c.message_index_offsets) channels.insert(id);
+  }
+  if (s.statistics) {
+    for (const auto& [id, n] : s.statistics->channel_message_counts) channels.insert(id);
+  }
+  for (const Channel& c : s.channels) channels.erase(c.id);
+  // No channel at all, yet messages: which ones, only the data section says.
+  const bool all = s.channels.empty() && (!s.statistics || s.statistics->message_count > 0);
+  const auto has_schema = [&s](std::uint16_t id) {
+    return id == 0 || std::any_of(s.schemas.begin(), s.schemas.end(),
+                                  [id](const Schema& x) { return x.id == id; });
+  };
+  for (const Channel& c : s.channels) {
+    if (!has_schema(c.schema_id)) schemas.insert(c.schema_id);
+  }
+  if (channels.empty() && schemas.empty() && !all) return;
+  std::map<std::uint16_t, Schema> found_schemas;
+  Visitor v;
+  v.on_schema = [&](const Schema& x) {
+    found_schemas.try_emplace(x.id, x);
+    schemas.erase(x.id);
+  };
+  std::set<std::uint16_t> added;
+  v.on_channel = [&](const Channel& c) {
+    if ((!all && channels.count(c.id) == 0) || !added.insert(c.id).second) return;
+    channels.erase(c.id);
+    s.channels.push_back(c);
+    if (!has_schema(c.schema_id) && found_schemas.count(c.schema_id) == 0)
+      schemas.insert(c.schema_id);
+  };
+  v.on_chunk = [&](const ChunkIndex&) { return all || !channels.empty() || !schemas.empty(); };
+  Scan(v, /*lenient=*/true);
+  for (const auto& [id, x] : found_schemas) {
+    if (has_schema(id)) continue;
+    const bool used = std::any_of(s.channels.begin(), s.channels.end(),
+                                  [id](const Channel& c) { return c.schema_id == id; });
+    if (used) s.schemas.push_back(x);
+  }
 }
 
 std::optional<Reader::Summary> Reader::SummaryOf() const {
@@ -1601,6 +1807,16 @@ std::optional<Reader::Summary> Reader::SummaryOf() const {
     }
   }
   Summary s;
+  Definitions<Schema> schemas;  // a second record of an id must be identical (the spec)
+  Definitions<Channel> channels;
+  const auto take = [this](const auto& rec, std::uint64_t at, auto& known, auto& into) {
+    if (const std::string why = Redefinition(rec, known); !why.empty())
+      Fail(at, why + " (in the summary)");
+    if (known.try_emplace(rec.id, typename std::decay_t<decltype(known)>::mapped_type{rec, at})
+            .second) {
+      into.push_back(rec);
+    }
+  };
   std::uint64_t pos = summary_start;
   while (pos < footer) {
     Frame f;
@@ -1609,10 +1825,10 @@ std::optional<Reader::Summary> Reader::SummaryOf() const {
     try {
       switch (f.op) {
         case kSchema:
-          s.schemas.push_back(ParseSchema(f.content));
+          take(ParseSchema(f.content), pos, schemas, s.schemas);
           break;
         case kChannel:
-          s.channels.push_back(ParseChannel(f.content));
+          take(ParseChannel(f.content), pos, channels, s.channels);
           break;
         case kStatistics:
           s.statistics = ParseStatistics(f.content);
@@ -1667,9 +1883,9 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
   std::uint64_t p = 0;
   while (p < scratch.size()) {
     Frame r;
-    if (const std::string bad = FrameAt(scratch.data(), scratch.size(), p, r); !bad.empty()) {
-      Fail(pos, "inside the chunk, byte " + std::to_string(p) + ": " + bad);
-    }
+    std::string bad = FrameAt(scratch.data(), scratch.size(), p, r);
+    if (bad.empty()) bad = NotInAChunk(r.op);
+    if (!bad.empty()) Fail(pos, "inside the chunk, byte " + std::to_string(p) + ": " + bad);
     if (r.op == kMessage) {
       try {
         Message m = ParseMessage(r.content);
@@ -1685,8 +1901,10 @@ void Reader::ReadChunk(const ChunkIndex& chunk,
 }
 
 std::vector<ChunkIndex> Reader::Chunks() const {
-  if (auto s = ReadSummary();
-      s && s->statistics && s->chunk_indexes.size() == s->statistics->chunk_count) {
+  // The summary's own chunk indexes (not completed: no channel is wanted here).
+  std::optional<Summary> s = SummaryOf();
+  CheckIntact();
+  if (s && s->statistics && s->chunk_indexes.size() == s->statistics->chunk_count) {
     return s->chunk_indexes;
   }
   // No summary: walk the record frames (chunk contents are not read), up to the first problem.

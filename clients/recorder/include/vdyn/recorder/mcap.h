@@ -307,10 +307,19 @@ class Reader {
   // the next valid record, two valid frames in a row), an exact copy of an earlier chunk.
   // Messages on a channel no readable record defines, and channels naming an unknown schema, are
   // delivered all the same: the caller decides (their records may be the damaged ones).
+  // Schema and channel records count wherever the spec allows them: the data section, chunks
+  // (before the messages that use them), the summary. A second record of an id must be
+  // identical to the first (strict: refused at its offset, saying what differs; lenient: left
+  // out as damage - with its chunk, when it is in one - and the first stands); identical ones
+  // are delivered again. A chunk holds schema,
+  // channel and message records, private ones (skipped, as are opcodes past this version's);
+  // any other record in it makes the chunk malformed (lenient: dropped as damage).
   ScanResult Scan(const Visitor& visitor, bool lenient = false) const;
 
   // The summary when the file has a valid footer and summary (nullopt otherwise): channels,
-  // schemas, statistics and chunk indexes without reading the data.
+  // schemas, statistics and chunk indexes without reading the data - unless the summary lacks
+  // channels it counts messages of (or has none at all): those, and their schemas, are then
+  // taken from the data section and the chunks (as far as they read).
   struct Summary {
     std::vector<Schema> schemas;
     std::vector<Channel> channels;
@@ -338,6 +347,7 @@ class Reader {
   friend class Scanner;
   void CheckMagic();
   std::optional<Summary> SummaryOf() const;
+  void CompleteSummary(Summary& s) const;
   [[noreturn]] void Fail(std::uint64_t offset, const std::string& reason) const;
   std::filesystem::path path_;
   Open open_ = Open::kWhole;
