@@ -1788,6 +1788,7 @@ TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
                                     std::to_string(domain_) + " --duration 1");
     EXPECT_EQ(code, 0) << out;
     EXPECT_THAT(out, HasSubstr("nothing was recorded: run.mcap is left as it was"));
+    EXPECT_THAT(out, HasSubstr("no server was heard on domain " + std::to_string(domain_)));
     EXPECT_EQ(Bytes(file), before) << "an empty recording took the place of a good one";
   }
   {
@@ -1813,6 +1814,42 @@ TEST_F(RecorderTest, NothingRecordedLeavesTheOldRecordingAndStdoutIsAStream) {
     EXPECT_FALSE(std::filesystem::exists(dir_ / "new")) << "a folder was left behind";
   }
   EXPECT_EQ(Bytes(file), before);
+}
+
+// A disk that fills while `record` replaces an older recording: the error named the older file
+// (untouched) and not the temporary one that holds what was recorded, nor how to get it back.
+// The file size limit (ulimit -f, SIGXFSZ ignored) fails the write as a full disk does.
+TEST_F(RecorderTest, AFailedWriteNamesTheFileThatHoldsTheRecordingAndHowToRecoverIt) {
+  const auto file = dir_ / "old.mcap";
+  WriteRecording(file);
+  const std::vector<std::uint8_t> before = Bytes(file);
+  Process server({testing::ServerBinary(), "--domain", std::to_string(domain_), "--no-status",
+                  "--world", "flat"},
+                 dir_ / "server.log");
+  // 2048 blocks of 512 bytes: the world and some hundreds of states (no compression).
+  Process p({"/bin/sh", "-c",
+             "cd '" + dir_.path().string() + "' && trap '' XFSZ && ulimit -f 2048 && exec " +
+                 testing::RecorderBinary() + " record old.mcap --compression none --domain " +
+                 std::to_string(domain_) + " --duration 120"},
+            dir_ / "full.log");
+  const auto code = p.Wait(120s);
+  ASSERT_TRUE(code.has_value()) << p.Log();
+  EXPECT_EQ(*code, 2) << p.Log();
+  const std::string log = p.Log();
+  EXPECT_THAT(log, HasSubstr("old.partial-")) << log;
+  EXPECT_THAT(log, HasSubstr("write failed: File too large; what was written stays in this file: "
+                             "vdyn-recorder recover "))
+      << log;
+  EXPECT_EQ(Bytes(file), before) << "the older recording was touched";
+  // And what it names is there, and recovers.
+  std::string partial;
+  for (const auto& e : std::filesystem::directory_iterator(dir_.path())) {
+    if (e.path().filename().string().rfind("old.partial-", 0) == 0) partial = e.path().string();
+  }
+  ASSERT_FALSE(partial.empty()) << log;
+  EXPECT_THAT(log, HasSubstr(std::filesystem::path(partial).filename().string()));
+  const auto [rcode, rout] = Run({"recover", partial, "-o", (dir_ / "back.mcap").string()});
+  EXPECT_EQ(rcode, 0) << rout;
 }
 
 // Issue 33, item 9: `export` (and every command that reads a whole file) ignored SIGTERM.
@@ -2241,6 +2278,16 @@ TEST(CaptureBuffer, UnderOverloadStatesAreDroppedFirstAndEventsAlwaysFindRoom) {
   EXPECT_EQ(events_dropped, 0u);
   EXPECT_EQ(inputs_dropped, 0u);
   EXPECT_LE(peak, queue);
+}
+
+// A world larger than the whole buffer (facility's 2 MB behind --queue-mb 1) was dropped, and the
+// recording could not be re-simulated: it is kept, full buffer or not. A state is not.
+TEST(CaptureBuffer, AWorldLargerThanTheBufferIsKept) {
+  const std::size_t queue = 1u << 20, world = 2u << 20;
+  EXPECT_TRUE(recorder::Admits(TopicId::kWorld, 0, world, queue));
+  EXPECT_TRUE(recorder::Admits(TopicId::kWorld, queue, world, queue));
+  EXPECT_FALSE(recorder::Admits(TopicId::kState, 0, world, queue));
+  EXPECT_FALSE(recorder::Admits(TopicId::kWorld, queue, 1000, queue));  // one that fits: the bound
 }
 
 TEST(SequenceGaps, CountsOnlyWhatNeverArrivesWhateverTheOrder) {

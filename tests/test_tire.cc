@@ -358,6 +358,15 @@ TEST(TireFile, AMissingOrUnusableCoefficientIsNamed) {
       {[](auto& m) { m.set_pkx1(-24.0); }, "magic_formula.pkx1", "must be positive"},
       {[](auto& m) { m.set_fnomin(0.0); }, "magic_formula.fnomin", "must be in (0, 1e6] N"},
       {[](auto& m) { m.set_fnomin(1e300); }, "magic_formula.fnomin", "must be in (0, 1e6] N"},
+      // Taken, and side forces of 4e301 N written to a batch's CSV with exit 0.
+      {[](auto& m) { m.set_pdy1(1e300); }, "magic_formula.pdy1",
+       "the friction PDY1 * LMUY is 1e300: more than 10 times the load"},
+      {[](auto& m) { m.set_lmux(20.0); }, "magic_formula.pdx1",
+       "the friction PDX1 * LMUX is 24: more than 10 times the load"},
+      {[](auto& m) { m.set_pky1(-1e6); }, "magic_formula.pky1",
+       "times the load: more than 1000 times is no tyre's"},
+      {[](auto& m) { m.set_pkx1(1e5); }, "magic_formula.pkx1",
+       "times the load: more than 1000 times is no tyre's"},
       // Every load taken as FZMAX (the curves labelled 4500 N were 100 N's).
       {[](auto& m) { m.set_fzmax(100.0); }, "magic_formula.fzmax",
        "FZMAX (100 N) is below the nominal load FNOMIN * LFZO (4500 N)"},

@@ -195,6 +195,16 @@ struct Record {
     std::printf("; CPU %.2f s (%.1f%% of one core); buffer peak %s\n", s.cpu_seconds,
                 s.seconds > 0 ? 100.0 * s.cpu_seconds / s.seconds : 0.0,
                 recorder::FormatBytes(static_cast<double>(s.queue_peak_bytes)).c_str());
+    const auto heard = [&s](vdyn::transport::TopicId t) {
+      const auto it = s.topics.find(t);
+      return it != s.topics.end() && it->second.messages > 0;
+    };
+    if (!heard(vdyn::transport::TopicId::kWorld) && !heard(vdyn::transport::TopicId::kState)) {
+      spdlog::warn(
+          "vdyn-recorder: no server was heard on domain {}: no world and no state arrived (is "
+          "vdyn-server running with --domain {}?)",
+          domain, domain);
+    }
     return 0;
   }
 };

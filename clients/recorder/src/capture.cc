@@ -51,6 +51,10 @@ std::string CaptureSummary::dropped_by_topic() const {
 }
 
 bool Admits(TopicId topic, std::size_t in_use, std::size_t size, std::size_t queue_bytes) {
+  // A world larger than the whole buffer (facility's is 2 MB; --queue-mb 1) could never find room
+  // and was dropped: a recording without its world cannot be re-simulated. It is kept, past the
+  // bound by itself (a world arrives once a server start).
+  if (topic == TopicId::kWorld && size > queue_bytes) return true;
   const std::size_t bound = topic == TopicId::kState ? queue_bytes - queue_bytes / 4 : queue_bytes;
   return in_use + size <= bound;
 }

@@ -638,7 +638,14 @@ void Writer::Append(const std::string& bytes) {
     const ssize_t n = ::write(fd_, bytes.data() + done, bytes.size() - done);
     if (n < 0) {
       if (errno == EINTR) continue;
-      throw McapError(path_, offset_ + done, std::string("write failed: ") + std::strerror(errno));
+      // Named by the file it writes: a recording (live) stays under its temporary name, which the
+      // user must be told to recover (the destination, an older recording perhaps, is untouched).
+      throw McapError(writing_to(), offset_ + done,
+                      std::string("write failed: ") + std::strerror(errno) +
+                          (options_.live ? std::string("; what was written stays in this file: "
+                                                       "vdyn-recorder recover ") +
+                                               writing_to().string() + " -o OUT.mcap"
+                                         : std::string()));
     }
     done += static_cast<std::size_t>(n);
   }

@@ -263,6 +263,14 @@ void AddMagicFormulaIssues(const MagicFormula& m, const std::string& prefix,
        "the shape factor PCY1 * LCY must exceed 1 (a curve with a peak)");
   need(m.pdx1 * m.lmux > 0.0, "pdx1", "the friction PDX1 * LMUX must be positive");
   need(m.pdy1 * m.lmuy > 0.0, "pdy1", "the friction PDY1 * LMUY must be positive");
+  // No tyre grips with ten times its load (road tyres 0.8-1.3, racing slicks about 2): a file
+  // with PDY1 = 1e300 was taken and gave side forces of 4e301 N.
+  need(m.pdx1 * m.lmux <= 10.0, "pdx1",
+       "the friction PDX1 * LMUX is " + FormatApprox(m.pdx1 * m.lmux) +
+           ": more than 10 times the load, which no tyre carries (road tyres 0.8-1.3)");
+  need(m.pdy1 * m.lmuy <= 10.0, "pdy1",
+       "the friction PDY1 * LMUY is " + FormatApprox(m.pdy1 * m.lmuy) +
+           ": more than 10 times the load, which no tyre carries (road tyres 0.8-1.3)");
   need(m.kpumin < 0.0 && m.kpumax > 0.0, "kpumin",
        "KPUMIN < 0 < KPUMAX: the range holds zero slip");
   need(m.alpmin > -kHalfPi && m.alpmin < 0.0 && m.alpmax > 0.0 && m.alpmax < kHalfPi, "alpmin",
@@ -280,6 +288,14 @@ void AddMagicFormulaIssues(const MagicFormula& m, const std::string& prefix,
   need(L.Kya < 0.0, "pky1",
        "the cornering stiffness Kya at FNOMIN is " + FormatApprox(L.Kya) +
            " N/rad: it must be negative (the side force opposes the slip, ISO signs as TNO's)");
+  // Slip stiffnesses of a tyre are some 10 to 40 times its load (per unit slip, per radian).
+  const double fz0 = m.fnomin * m.lfzo;
+  need(L.Kxk <= 1000.0 * fz0, "pkx1",
+       "the slip stiffness Kxk at FNOMIN is " + FormatApprox(L.Kxk) + " N, " +
+           FormatApprox(L.Kxk / fz0) + " times the load: more than 1000 times is no tyre's");
+  need(-L.Kya <= 1000.0 * fz0, "pky1",
+       "the cornering stiffness Kya at FNOMIN is " + FormatApprox(L.Kya) + " N/rad, " +
+           FormatApprox(-L.Kya / fz0) + " times the load: more than 1000 times is no tyre's");
 }
 
 // Rules between the full model's parameters (each named by the field a user would change).

@@ -74,7 +74,8 @@ struct CaptureSummary {
 // The buffer's admission rule, states apart: states may fill at most three quarters of it, so
 // that under overload they are dropped first and session events (checkpoints among them), inputs,
 // requests, worlds and parameters still find room (the rest of the bound); the whole never
-// exceeds `queue_bytes`.
+// exceeds `queue_bytes`, but by a world larger than the whole buffer, which is kept (without it a
+// recording cannot be re-simulated).
 bool Admits(transport::TopicId topic, std::size_t in_use, std::size_t size,
             std::size_t queue_bytes);
 
