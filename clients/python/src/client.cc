@@ -6,7 +6,6 @@
 
 #include "vdyn/base/deadline.h"
 #include "vdyn/base/limits.h"
-#include "vdyn/client/loop.h"
 #include "vdyn/io/maneuver.h"
 #include "vdyn/messages/input_checks.h"
 
@@ -14,7 +13,8 @@ namespace vdyn::python {
 namespace {
 
 // The rate a Driver sends its input at, Hz.
-constexpr limits::Range kDriverRateHz{0.0, 10000.0, true, false, "rate_hz"};
+// At least one input a minute (a period that fits: 1e-10 Hz overflowed it and aborted Python).
+constexpr limits::Range kDriverRateHz{1.0 / 60.0, 10000.0, false, false, "rate_hz"};
 
 // A call's deadline from its timeout in seconds (finite and >= 0; a time beyond the clock's range,
 // 1e10 s and more, waits without end instead of wrapping round into the past).
@@ -111,6 +111,12 @@ std::string Client::WorldBytes() {
   std::lock_guard lock(mutex_);
   PollView();
   return view_.worlds().at(server_id_).SerializeAsString();
+}
+
+std::uint64_t Client::WorldVersion() {
+  std::lock_guard lock(mutex_);
+  PollView();
+  return view_.world_version();
 }
 
 std::vector<std::uint32_t> Client::Vehicles() {
@@ -472,7 +478,8 @@ StateTable Client::Latest(std::uint32_t vehicle_id, double timeout_s) {
                        " arrived on vdyn/state within " + Seconds(timeout_s) + " (" +
                        UnknownVehicleNote(vehicle_id,
                                           "a lockstep server publishes states only while it "
-                                          "steps") +
+                                          "steps, and so does a real-time one that step() or "
+                                          "pause() left paused: resume() it") +
                        ")");
   }
   StateTable t;
@@ -548,15 +555,23 @@ void Driver::Set(const pb::DriverInput& input) {
 
 void Driver::Start(double rate_hz) {
   if (const std::string why = limits::Check(kDriverRateHz, rate_hz); !why.empty()) {
-    throw std::invalid_argument(why);  // "rate_hz must be in (0, 10000], got 0"
+    throw std::invalid_argument(why);  // "rate_hz must be in [0.0166667, 10000], got 0"
   }
   if (running_.exchange(true)) throw std::runtime_error("the driver is already running");
-  const base::Nanos period{static_cast<std::int64_t>(std::llround(1e9 / rate_hz))};
+  const auto period = std::chrono::nanoseconds(std::llround(1e9 / rate_hz));
   thread_ = std::thread([this, period] {
-    client::FixedRateLoop loop(period);
+    auto next = std::chrono::steady_clock::now();
+    std::unique_lock wait(stop_mu_);
     while (running_.load()) {
-      const auto tick = loop.Wait();
-      skipped_.fetch_add(tick.skipped);
+      next += period;
+      if (stop_cv_.wait_until(wait, next, [this] { return !running_.load(); })) break;
+      // Ticks this machine was too busy for are skipped, not sent late in a burst.
+      const auto late = std::chrono::steady_clock::now() - next;
+      if (late >= period) {
+        const auto skipped = late / period;
+        skipped_.fetch_add(static_cast<std::uint64_t>(skipped));
+        next += skipped * period;
+      }
       std::lock_guard lock(mutex_);
       sending_.CopyFrom(current_);  // reuses the message's storage: no allocation once warm
       if (!publisher_.Publish(sending_)) failed_.fetch_add(1);
@@ -565,7 +580,11 @@ void Driver::Start(double rate_hz) {
 }
 
 void Driver::Stop() {
-  running_.store(false);
+  {
+    std::lock_guard lock(stop_mu_);
+    running_.store(false);
+  }
+  stop_cv_.notify_all();
   if (thread_.joinable()) thread_.join();
 }
 
@@ -602,7 +621,11 @@ Subscription::~Subscription() {
 }
 
 void Subscription::Close() {
-  stop_.store(true);
+  {
+    std::lock_guard lock(mutex_);
+    stop_.store(true);
+  }
+  ready_.notify_all();  // a next() waiting in another thread ends now, not at its timeout
   if (thread_.joinable()) thread_.join();
 }
 
@@ -656,8 +679,12 @@ StateTable Subscription::Next(double timeout_s) {
   std::unique_lock lock(mutex_);
   // In slices: a condition variable's wait_for adds its time to the clock, which 1e10 s overflows.
   const bool ready = base::PollUntil(
-      deadline, base::Milliseconds(100), [&] { return queue_.rows() > head_; },
+      deadline, base::Milliseconds(100), [&] { return queue_.rows() > head_ || stop_.load(); },
       [&](base::Nanos slice) { ready_.wait_for(lock, base::Chrono(slice)); });
+  if (queue_.rows() <= head_ && stop_.load()) {
+    throw TimeoutError("the subscription to vehicle " + std::to_string(vehicle_id_) +
+                       " is closed: no state will arrive (take() returns what was queued)");
+  }
   if (!ready) {
     throw TimeoutError("no state of vehicle " + std::to_string(vehicle_id_) +
                        " arrived on vdyn/state within " + Seconds(timeout_s));

@@ -53,6 +53,9 @@ class Client {
   double timeout_s() const { return timeout_s_; }
   // The server's world description, serialised (vdyn.pb.WorldDescription).
   std::string WorldBytes();
+  // Counts the worlds received (a restarted server publishes its world again): what a cache of
+  // the world compares.
+  std::uint64_t WorldVersion();
   // The vehicles of the server as this client knows them: the world's at the start, those this
   // client spawned, restored or removed since, and any whose states a step delivered.
   std::vector<std::uint32_t> Vehicles();
@@ -167,6 +170,10 @@ class Driver {
   pb::DriverInput current_, sending_;
   std::atomic<bool> running_{false};
   std::atomic<std::uint64_t> failed_{0}, skipped_{0};
+  // The sending thread waits for its next tick on this, so that Stop() ends the wait at once
+  // (a sleep of the whole period held stop() for it: for ever at a rate of 1e-6 Hz).
+  std::mutex stop_mu_;
+  std::condition_variable stop_cv_;
   std::thread thread_;
 };
 

@@ -202,6 +202,7 @@ void BindClient(py::module_& m) {
       .def_property_readonly("server_id", &Client::server_id)
       .def_property_readonly("domain", &Client::domain)
       .def("world_bytes", [](Client& c) { return py::bytes(c.WorldBytes()); })
+      .def("world_version", &Client::WorldVersion)
       .def("vehicles", &Client::Vehicles, Release())
       .def_property_readonly("state_readers", &Client::StateReaders)
       .def_property_readonly("states_received", &Client::StatesReceived)

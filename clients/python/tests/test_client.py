@@ -227,6 +227,24 @@ def test_a_client_of_one_server_does_not_answer_with_anothers_vehicle(start, dom
     assert int(ls.latest(2).step[0]) == 2
 
 
+def test_the_world_of_a_restarted_server_is_read_again(start, domain):
+    # A client kept the first world it read for ever: after its server restarted on facility it
+    # still said 'flat' while latest() gave positions on facility.
+    first = start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--world", "flat",
+                   "--domain", str(domain)], "flat")
+    sim = vdyn.Client(domain=domain, timeout=30)
+    assert sim.world_name == "flat"
+    flat_hash = sim.world_hash
+    first.stop()
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--world", "facility",
+           "--domain", str(domain)], "facility")
+    deadline = time.monotonic() + 60
+    while sim.world_name != "facility" and time.monotonic() < deadline:
+        time.sleep(0.05)  # the world arrives on DDS: no event this test can wait on
+    assert sim.world_name == "facility"
+    assert sim.world_hash != flat_hash
+
+
 def test_small_api_edges_answer_rightly(lockstep_server, domain):
     sim = vdyn.Client(domain=domain, timeout=30)
     s = sim.step(5)[1]
@@ -242,6 +260,15 @@ def test_small_api_edges_answer_rightly(lockstep_server, domain):
     with pytest.raises(vdyn.TimeoutError, match="is closed"):
         sub.next(timeout=30)
     assert time.monotonic() - t0 < 10
+    # Closed from another thread while next() waits: next() raises then, not at its timeout.
+    sub = sim.subscribe(1)
+    t0 = time.monotonic()
+    closer = threading.Timer(0.5, sub.close)
+    closer.start()
+    with pytest.raises(vdyn.TimeoutError, match="is closed"):
+        sub.next(timeout=60)
+    closer.join()
+    assert time.monotonic() - t0 < 30
     # A capacity the queue cannot hold (reserved up front) was a bad_alloc.
     with pytest.raises(ValueError, match=r"capacity must be in \[1, 10000000\] states"):
         sim.subscribe(1, capacity=2 ** 40)
@@ -488,9 +515,21 @@ def test_a_driver_the_server_would_refuse_raises(lockstep_server, domain):
             drv.start(500.0, vdyn.make_input(throttle=0.9))
     finally:
         drv.stop()
-    with pytest.raises(ValueError, match=r"rate_hz must be in \(0, 10000\], got 0"):
+    with pytest.raises(ValueError, match=r"rate_hz must be in \[1/60, 10000\] \(at least one "
+                                         r"input a minute\), got 0"):
         drv.start(0, vdyn.make_input(throttle=0.9))
+    # 1e-10 Hz overflowed the period and aborted Python (SIGABRT).
+    with pytest.raises(ValueError, match=r"rate_hz must be in \[1/60, 10000\]"):
+        drv.start(1e-10, vdyn.make_input(throttle=0.9))
     assert not drv.running
+    # stop() waited out the period (for ever at 1e-6 Hz, Ctrl-C or not): a minute's period ends
+    # at once.
+    slow = sim.driver(1, source_id="slow")
+    slow.start(1.0 / 60.0, vdyn.make_input(throttle=0.1))
+    t0 = time.monotonic()
+    slow.stop()
+    assert time.monotonic() - t0 < 30, "stop() waited out its period"
+    assert not slow.running
     # What the driver holds now is what the first start set: a send() goes out with it.
     sent = drv.sent
     drv.start(1000.0)

@@ -195,6 +195,7 @@ class Client:
         self._c = _vdyn.Client(_whole("domain", domain, "domain"), server_id, self.timeout,
                                self.client_id)
         self._world = None
+        self._world_version = None
 
     # --- the world and the vehicles -----------------------------------------------------------
     @property
@@ -209,8 +210,12 @@ class Client:
     def world(self):
         """The server's world description (vdyn.pb.WorldDescription): name, terrain_hash,
         step_ns, meshes, landmarks, spawn, the vehicles' geometry."""
-        if self._world is None:
+        # Read again when a world arrived since (the server restarted, on another world perhaps:
+        # the first one was kept for ever).
+        version = self._c.world_version()
+        if self._world is None or version != self._world_version:
             self._world = world_pb2.WorldDescription.FromString(self._c.world_bytes())
+            self._world_version = version
         return self._world
 
     @property
@@ -452,8 +457,9 @@ class Driver:
         if self._d.running:
             raise RuntimeError("the driver is already running (stop() it first, or set() a new "
                                "input)")
-        if not (0.0 < rate_hz <= 10000.0):
-            raise ValueError(f"rate_hz must be in (0, 10000], got {rate_hz:g}")
+        if not (1.0 / 60.0 <= rate_hz <= 10000.0):
+            raise ValueError(f"rate_hz must be in [1/60, 10000] (at least one input a minute), "
+                             f"got {rate_hz:g}")
         data = None if input is None else self._bytes(input)
         if data is not None:
             self._d.set(data)
