@@ -107,6 +107,7 @@ py::dict Table(StateTable&& t) {
   d["sim_time_ns"] = Array(std::move(t.sim_time_ns));
   d["log_time_ns"] = Array(std::move(t.log_time_ns));
   d["malformed"] = t.malformed;
+  d["runs"] = t.runs;
   return d;
 }
 
@@ -395,11 +396,11 @@ void BindRecording(py::module_& m) {
              for (const auto& md : r.metadata()) out.append(py::make_tuple(md.name, md.values));
              return out;
            })
-      .def("states", [](const RecordingReader& r, std::uint32_t id) {
+      .def("states", [](const RecordingReader& r, std::uint32_t id, int run) {
         StateTable t;
         {
           WaitReleased release;
-          t = r.States(id);
+          t = r.States(id, run);
         }
         return Table(std::move(t));
       });

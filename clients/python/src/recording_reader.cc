@@ -1,9 +1,14 @@
 #include "recording_reader.h"
 
+#include <utility>
+
+#include <map>
+
 #include <algorithm>
 #include <stdexcept>
 #include <string>
 
+#include "vdyn/base/text.h"
 #include "vdyn/recorder/capture.h"
 #include "vdyn/recorder/recording.h"
 #include "vdyn/session.pb.h"
@@ -96,7 +101,7 @@ RecordingReader::RecordingReader(const std::filesystem::path& path)
   }
 }
 
-StateTable RecordingReader::States(std::uint32_t vehicle_id) const {
+StateTable RecordingReader::States(std::uint32_t vehicle_id, int run) const {
   const auto it = std::find_if(vehicles_.begin(), vehicles_.end(),
                                [&](const VehicleSummary& s) { return s.vehicle_id == vehicle_id; });
   if (it == vehicles_.end()) {
@@ -108,9 +113,10 @@ StateTable RecordingReader::States(std::uint32_t vehicle_id) const {
                             (have.empty() ? std::string(" (no vehicle states at all)")
                                           : " (it has vehicle " + have + ")"));
   }
-  StateTable t;
-  t.Reserve(it->states);
-  t.log_time_ns.reserve(it->states);
+  // Each (server, start) is a run of its own, kept in the order its first state came.
+  std::map<std::pair<std::string, std::uint64_t>, std::size_t> run_of;
+  std::vector<StateTable> runs;
+  std::vector<std::string> names;
   pb::VehicleState state;
   std::uint64_t malformed = 0;
   recorder::RecordingVisitor v;
@@ -121,11 +127,33 @@ StateTable RecordingReader::States(std::uint32_t vehicle_id) const {
       ++malformed;
       return;
     }
+    const auto [at, added] =
+        run_of.try_emplace({state.server_id(), state.incarnation()}, runs.size());
+    if (added) {
+      runs.emplace_back();
+      names.push_back("server '" + state.server_id() + "' start " +
+                      base::FormatHex(state.incarnation(), 16));
+    }
+    StateTable& t = runs[at->second];
     t.Append(state);
     t.log_time_ns.push_back(m.log_time);
   };
   recorder::ScanRecording(*reader_, v);
-  t.SortByStep();
+  if (run >= 0 && static_cast<std::size_t>(run) >= runs.size()) {
+    throw std::out_of_range(path_.string() + ": vehicle " + std::to_string(vehicle_id) + " has " +
+                            std::to_string(runs.size()) + " run(s) (server starts): run " +
+                            std::to_string(run) + " is not one (they count from 0)");
+  }
+  StateTable t;
+  t.Reserve(it->states);
+  t.log_time_ns.reserve(it->states);
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    runs[k].SortByStep();
+    const StateTable& r = runs[k];
+    t.runs.push_back(names[k] + ": steps " + std::to_string(r.step.front()) + ".." +
+                     std::to_string(r.step.back()) + ", " + std::to_string(r.rows()) + " states");
+    if (run < 0 || static_cast<std::size_t>(run) == k) t.Extend(r);
+  }
   t.malformed = malformed;
   return t;
 }

@@ -57,7 +57,10 @@ class RecordingReader {
   // Every state of a vehicle in the file, by step (log_time_ns filled; one that does not parse is
   // skipped and counted in `malformed`). Throws
   // std::out_of_range naming the vehicles the file has when it has none of this one.
-  StateTable States(std::uint32_t vehicle_id) const;
+  // A vehicle's states, each run (a start of the server that stepped it: a restart begins its
+  // steps again) sorted by step, the runs one after another in the order they came; `run` >= 0
+  // takes that run alone. Sorting all by step interleaved two runs' rows.
+  StateTable States(std::uint32_t vehicle_id, int run = -1) const;
 
  private:
   std::filesystem::path path_;

@@ -23,6 +23,9 @@ struct StateTable {
   std::vector<std::int64_t> sim_time_ns;
   std::vector<std::uint64_t> log_time_ns;  // recordings: when the recorder took it (else empty)
   std::uint64_t malformed = 0;             // recordings: states skipped because they did not parse
+  // Recordings: the server starts that stepped the vehicle, one line each in the order they came
+  // ("server 'vdyn' start 0x...: steps 0..3999, 4000 states"); their rows follow one another.
+  std::vector<std::string> runs;
 
   void Append(const pb::VehicleState& s);
   std::size_t rows() const { return step.size(); }

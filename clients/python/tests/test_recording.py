@@ -2,12 +2,13 @@
 recorder's own CSV export and the states the lockstep calls returned."""
 
 import subprocess
+import time
 
 import numpy as np
 import pytest
 
 import vdyn
-from conftest import RECORDER
+from conftest import RECORDER, SERVER
 
 
 def read_csv(path):
@@ -58,3 +59,40 @@ def test_a_broken_recording_raises_naming_the_file(tmp_path):
         vdyn.Recording(bad)
     with pytest.raises(vdyn.RecordingError):
         vdyn.Recording(tmp_path / "missing.mcap")
+
+
+def test_a_vehicle_of_two_server_starts_comes_run_after_run(start, domain, tmp_path):
+    # A server restarted while recording counts its steps from 0 again: states() sorted every row
+    # by step and interleaved the two runs (step 992 at y 0 m, step 992 at y 20 m, step 993 ...),
+    # with no word. The runs now follow one another, each by step, with a warning naming them.
+    out = tmp_path / "two.mcap"
+    rec = start([RECORDER, "record", str(out), "--domain", str(domain), "--status"], "recorder")
+    steps = {}
+    for k, (n, y) in enumerate(((500, 0.0), (300, 20.0))):
+        server = start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain),
+                        "--spawn", f"0,{y:g},0"], f"server{k}")
+        deadline = time.monotonic() + 60
+        while rec.log().count("recording world") <= k and time.monotonic() < deadline:
+            time.sleep(0.05)  # polls the recorder's log: no event to wait on
+        assert rec.log().count("recording world") > k, rec.log()
+        sim = vdyn.Client(domain=domain, timeout=30)
+        steps[k] = sim.step(n)[1]
+        assert server.stop(15) == 0, server.log()
+        del sim
+    assert rec.stop(2) == 0, rec.log()
+    r = vdyn.Recording(out)
+    with pytest.warns(vdyn.SeveralRunsWarning, match=r"vehicle 1 was stepped by 2 starts of its "
+                                                     r"server: run 0: server 'vdyn' start 0x"):
+        both = r.states(1)
+    first, second = r.states(1, run=0), r.states(1, run=1)
+    assert len(both) == len(first) + len(second)
+    assert np.all(np.diff(first.step.astype(np.int64)) > 0)
+    assert np.all(np.diff(second.step.astype(np.int64)) > 0)
+    np.testing.assert_array_equal(both.step, np.concatenate([first.step, second.step]))
+    # Each run is its own server's: the first at y 0 m, the second at y 20 m, every row.
+    assert np.all(np.abs(first["y_m"]) < 5) and np.all(np.abs(second["y_m"] - 20) < 5)
+    assert len(first) <= 500 and len(second) <= 300 and len(first) > 400 and len(second) > 200
+    with pytest.raises(IndexError, match=r"vehicle 1 has 2 run\(s\) \(server starts\): run 2"):
+        r.states(1, run=2)
+    with pytest.raises(ValueError, match="run counts the server's starts from 0"):
+        r.states(1, run=-1)

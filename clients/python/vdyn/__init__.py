@@ -43,8 +43,8 @@ try:
     from . import _vdyn  # noqa: F401  (the extension module)
 except ImportError as _e:
     raise _import_error(_e) from _e
-from ._errors import (DiscardedStepsWarning, Error, RecordingError, RefusedError, TimeoutError,
-                      TransportError)
+from ._errors import (DiscardedStepsWarning, Error, RecordingError, RefusedError,
+                      SeveralRunsWarning, TimeoutError, TransportError)
 from ._states import COLUMNS, States
 from ._client import DEFAULT_TIMEOUT, Client, Driver, Subscription, make_input
 from ._recording import Recording
@@ -68,4 +68,4 @@ pb = _Pb()
 
 __all__ = ["Client", "Driver", "Subscription", "Recording", "States", "COLUMNS", "make_input",
            "Error", "TimeoutError", "RefusedError", "RecordingError", "TransportError",
-           "DiscardedStepsWarning", "pb", "DEFAULT_TIMEOUT"]
+           "DiscardedStepsWarning", "SeveralRunsWarning", "pb", "DEFAULT_TIMEOUT"]

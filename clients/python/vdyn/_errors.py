@@ -33,3 +33,10 @@ class DiscardedStepsWarning(UserWarning):
     became non-finite, or the car fell through the ground (it rolled over), and the server put it
     back at rest. Those steps have no state (their rows are not in the States); the message names
     the vehicle, how many, the first step and why."""
+
+
+class SeveralRunsWarning(UserWarning):
+    """A recording's vehicle was stepped by more than one start of its server (it restarted
+    while recording: each start counts its steps from 0). Recording.states() gives the runs one
+    after another, each sorted by step, never merged by step; ``run=K`` takes one. The message
+    lists the runs."""

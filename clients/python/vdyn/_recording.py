@@ -1,9 +1,12 @@
 """Recordings (MCAP files of vdyn-recorder), read through the recorder's own reader."""
 
+import warnings
+
 from . import _vdyn
 from . import session_pb2
 from ._states import States
 from ._client import _whole
+from ._errors import SeveralRunsWarning
 
 
 class Recording:
@@ -52,11 +55,27 @@ class Recording:
     def metadata(self):
         return self._r.metadata()
 
-    def states(self, vehicle_id=None):
-        return States(self._one(vehicle_id), self._r.states(self._one(vehicle_id)))
+    def states(self, vehicle_id=None, run=None):
+        """Every state of the vehicle, sorted by step. A vehicle stepped by several starts of its
+        server (a restart while recording) has a run per start: they come one after another,
+        each sorted by step, with a vdyn.SeveralRunsWarning that lists them; ``run=K`` (from 0)
+        takes one alone."""
+        vid = self._one(vehicle_id)
+        k = -1 if run is None else _whole("run", run)
+        if not -1 <= k < 2 ** 31 or (run is not None and k < 0):
+            raise ValueError(f"run counts the server's starts from 0, got {run!r}")
+        table = self._r.states(vid, k)
+        runs = list(table.get("runs", []))
+        if run is None and len(runs) > 1:
+            warnings.warn(SeveralRunsWarning(
+                f"{self.path}: vehicle {vid} was stepped by {len(runs)} starts of its server: "
+                + "; ".join(f"run {i}: {r}" for i, r in enumerate(runs))
+                + f". Their states follow one run after another (each by step), not merged: "
+                f"states({vid}, run=K) takes one"), stacklevel=2)
+        return States(vid, table)
 
-    def dataframe(self, vehicle_id=None):
-        return self.states(vehicle_id).to_dataframe()
+    def dataframe(self, vehicle_id=None, run=None):
+        return self.states(vehicle_id, run).to_dataframe()
 
     def events(self):
         return [(t, session_pb2.SessionEvent.FromString(b)) for t, b in self._r.events()]
