@@ -592,6 +592,11 @@ void RawReader::Refused(const SampleInfo& info, int slot, const char* kind, std:
   if (on_refused) on_refused(info, std::string(kind) + " on " + Spec(id_).name, detail, parsed);
 }
 
+void RawReader::Disposed(const void* sample, const dds_sample_info_t& si) {
+  if (!on_disposed || si.instance_state != DDS_NOT_ALIVE_DISPOSED_INSTANCE_STATE) return;
+  on_disposed(static_cast<const vdyn_dds_Envelope*>(sample)->key);  // its key fields are set
+}
+
 bool RawReader::Envelope(const void* sample, const dds_sample_info_t& si, RawSample& out) {
   const auto* env = static_cast<const vdyn_dds_Envelope*>(sample);
   const TopicSpec& s = Spec(id_);
@@ -646,7 +651,10 @@ int RawReader::TakeRaw(const std::function<void(const RawSample&)>& fn, int max_
     if (n <= 0) break;
     taken += n;
     for (int i = 0; i < n; ++i) {
-      if (!b.infos[i].valid_data) continue;
+      if (!b.infos[i].valid_data) {
+        Disposed(b.samples[i], b.infos[i]);
+        continue;
+      }
       RawSample raw;
       if (!Envelope(b.samples[i], b.infos[i], raw)) continue;
       fn(raw);

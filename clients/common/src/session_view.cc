@@ -16,6 +16,11 @@ SessionView::SessionView(transport::Participant& participant, Topics topics)
     params_ = std::make_unique<transport::Reader<pb::VehicleParams>>(participant, TopicId::kParams,
                                                                      &drops_);
     if (!topics.states) waitset_->Attach(*params_);
+    // A removed vehicle's parameters are disposed by its server: forgotten here, or params() of
+    // a removed vehicle answered with them.
+    params_->on_disposed = [this](std::uint32_t key) {
+      if (const auto it = vehicles_.find(key); it != vehicles_.end()) it->second.params.reset();
+    };
   }
   if (topics.world) {
     world_ = std::make_unique<transport::Reader<pb::WorldDescription>>(participant,

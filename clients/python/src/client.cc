@@ -164,6 +164,16 @@ ReplyInfo Client::Request(pb::ControlRequest request, const std::string& what, d
   if (removes) {
     vehicles_.erase(vehicle);
     removed_.insert(vehicle);
+    // The server disposes the vehicle's parameters as it removes it: once that arrives here,
+    // params() of it no longer answers with them (bounded: a late dispose only delays that).
+    (void)base::PollUntil(
+        DeadlineIn(std::min(timeout_s, 5.0)), kSlice,
+        [&] {
+          PollView();
+          const client::SessionView::Vehicle* v = view_.vehicle(vehicle);
+          return v == nullptr || !v->params;
+        },
+        [&](base::Nanos slice) { (void)view_.Wait(base::Chrono(slice)); });
   }
   ReplyInfo info;
   info.server_id = reply->server_id();

@@ -295,6 +295,23 @@ def test_a_wait_for_a_vehicle_the_server_does_not_have_says_so(lockstep_server, 
         sim.latest(1, timeout=0.5)
 
 
+def test_a_removed_vehicle_has_no_parameters(lockstep_server, domain):
+    # params() of a vehicle this client removed answered with its old parameters (the reader kept
+    # the instance its server disposed); another client's view forgets them as well.
+    sim = vdyn.Client(domain=domain, timeout=30)
+    other = vdyn.Client(domain=domain, timeout=30)
+    sim.spawn(7, 0.0, 20.0, params={"mass": 1234.0})
+    assert sim.params(7).mass == 1234.0 and other.params(7).mass == 1234.0
+    sim.despawn(7)
+    with pytest.raises(vdyn.TimeoutError, match=r"server 'vdyn' has no vehicle 7"):
+        sim.params(7, timeout=0.5)
+    deadline = time.monotonic() + 30
+    while 7 in other.vehicles and time.monotonic() < deadline:
+        time.sleep(0.05)
+    with pytest.raises(vdyn.TimeoutError, match=r"no parameters of vehicle 7"):
+        other.params(7, timeout=0.5)
+
+
 def test_latest_waiting_in_one_thread_does_not_hold_up_step_in_another(lockstep_server, domain):
     # latest() held the client's lock for its whole wait: a step() in another thread, which would
     # bring the state it waited for, could not run until latest() timed out.

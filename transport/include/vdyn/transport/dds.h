@@ -252,6 +252,10 @@ class RawReader {
   std::function<void(const SampleInfo&, std::string_view kind, std::string_view detail,
                      const google::protobuf::Message* parsed)>
       on_refused;
+  // Called, while a Take runs, for each instance its writer disposed (a removed vehicle's
+  // transient-local parameters): the instance's key. A reader that keeps the last sample of
+  // each instance forgets it here.
+  std::function<void(std::uint32_t key)> on_disposed;
 
   // Takes every available sample (at most max_samples) and hands each valid one to fn as raw
   // bytes, unparsed: the envelope's type name must be the topic's and the size within its limit.
@@ -280,6 +284,8 @@ class RawReader {
   int TakeBatch(Batch& b, int max_samples);
   void ReturnBatch(Batch& b, int n);
   bool Envelope(const void* sample, const dds_sample_info_t& si, RawSample& out);
+  // An invalid sample (no data): on_disposed when it says its instance was disposed.
+  void Disposed(const void* sample, const dds_sample_info_t& si);
   void Refused(const SampleInfo& info, int slot, const char* kind, std::string_view detail,
                const google::protobuf::Message* parsed);
   bool Decode(const RawSample& raw, google::protobuf::Message& scratch);
@@ -410,7 +416,10 @@ int RawReader::TakeInto(Next&& next, F&& fn, int max_samples) {
     if (n <= 0) break;
     taken += n;
     for (int i = 0; i < n; ++i) {
-      if (!b.infos[i].valid_data) continue;
+      if (!b.infos[i].valid_data) {
+        Disposed(b.samples[i], b.infos[i]);
+        continue;
+      }
       RawSample raw;
       if (!Envelope(b.samples[i], b.infos[i], raw)) continue;
       google::protobuf::Message& scratch = next();
