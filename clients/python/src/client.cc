@@ -333,7 +333,16 @@ std::map<std::uint32_t, StateTable> Client::Step(std::uint32_t steps, const pb::
     }
     const ReplyInfo reply =
         Request(request, "step " + std::to_string(chunk) + " (lockstep)", timeout_s);
-    TakeStepStates(states, chunk, reply, input, timeout_s, out);
+    try {
+      TakeStepStates(states, chunk, reply, input, timeout_s, out);
+    } catch (const std::invalid_argument& e) {
+      if (done == 0) throw;
+      // The vehicle went while this call ran (another client removed it): the message said only
+      // the last request's steps, a fraction of what ran.
+      throw std::invalid_argument(std::string(e.what()) + "; it went during this step() call, " +
+                                  std::to_string(done) + " of its " + std::to_string(steps) +
+                                  " steps after the start (their states are not returned)");
+    }
     if (discarded != nullptr) {
       discarded->insert(discarded->end(), reply.discarded_notes.begin(),
                         reply.discarded_notes.end());

@@ -190,6 +190,31 @@ def test_vehicles_removed_or_spawned_by_another_client_do_not_stall_steps(lockst
         a.step(1, vdyn.make_input(), vehicle_id=14)
 
 
+def test_a_vehicle_removed_during_a_step_call_says_how_far_the_call_got(lockstep_server, domain):
+    # Removed by another client while a long step() drove it: the error said "50 steps ran
+    # without it" (the last request's) where thousands had run, their states thrown away unsaid.
+    a = vdyn.Client(domain=domain, timeout=60)
+    b = vdyn.Client(domain=domain, timeout=60)
+    a.spawn(21, 60.0, 40.0)
+    errors = []
+
+    def remove_once_stepping():
+        try:
+            b.latest(21, timeout=60)  # a lockstep server publishes states only while it steps
+            b.despawn(21)
+        except Exception as e:  # noqa: BLE001  (any error fails the test below)
+            errors.append(e)
+
+    t = threading.Thread(target=remove_once_stepping)
+    t.start()
+    with pytest.raises(ValueError, match=r"no vehicle 21 on server 'vdyn': \d+ steps ran without "
+                                         r"it .*; it went during this step\(\) call, \d+ of its "
+                                         r"200000 steps after the start"):
+        a.step(200000, vdyn.make_input(throttle=0.1), vehicle_id=21, timeout=120)
+    t.join(60)
+    assert not errors, errors
+
+
 def test_a_removed_vehicle_is_gone_for_clients_that_join_later(lockstep_server, domain):
     # The server kept a removed vehicle's parameters on vdyn/params (a transient-local history):
     # a client joining later counted it as there (params() answered, step() ran without it).
