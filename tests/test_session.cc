@@ -12,6 +12,8 @@
 #include <stdexcept>
 #include <thread>
 
+#include <functional>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -280,6 +282,44 @@ TEST(Session, RequestsAreValidatedAndAnswered) {
   EXPECT_TRUE(s.Apply(step).accepted());
   EXPECT_TRUE(s.paused());
   EXPECT_EQ(s.pending_steps(), 5u);
+}
+
+// restore took any finite state, where spawn and teleport check the pose: a car 1e9 m out (no
+// terrain: it fell for ever), 1000 km up, with a zero quaternion or at 1e5 m/s was accepted.
+TEST(Session, ARestoredStateMustBeOneAServerCouldHaveSaved) {
+  Session s(testing::SharedWorld("flat"), Config(), {});
+  s.Spawn(1, {0, 0, 0}, 0.0, pb::VehicleParams());
+  for (int i = 0; i < 10; ++i) s.Step();
+  const State saved = s.simulator(1).state();
+  struct Bad {
+    std::function<void(State&)> edit;
+    const char* says;
+  };
+  const Bad bad[] = {
+      {[](State& t) { t.x[sx::kP] = 1e9; }, "pose position, m must be in [-1e7, 1e7], got 1e9"},
+      {[](State& t) { t.x[sx::kP] = 5e6; }, "no terrain under its position (5000000, "},
+      {[](State& t) { t.x[sx::kP + 2] += 1e6; }, "m above the ground under it (at most 100 m"},
+      {[](State& t) { t.x[sx::kP + 2] -= 150.0; }, "m below the ground under it"},
+      {[](State& t) { t.x.segment<4>(sx::kQ).setZero(); }, "orientation quaternion has norm 0"},
+      {[](State& t) { t.x[sx::kV] = 1e5; }, "moves faster than 1000 m/s"},
+  };
+  for (const Bad& b : bad) {
+    State t = saved;
+    b.edit(t);
+    pb::ControlRequest restore = Request(5);
+    restore.set_server_id("test");
+    *restore.mutable_restore()->mutable_state() = ToExactState(t);
+    const pb::ControlReply r = s.Apply(restore);
+    EXPECT_FALSE(r.accepted()) << b.says;
+    EXPECT_THAT(r.reason(), HasSubstr("restore: ")) << r.reason();
+    EXPECT_THAT(r.reason(), HasSubstr(b.says)) << r.reason();
+    EXPECT_FALSE(s.HasVehicle(5));
+  }
+  pb::ControlRequest restore = Request(5);
+  restore.set_server_id("test");
+  *restore.mutable_restore()->mutable_state() = ToExactState(saved);
+  const pb::ControlReply r = s.Apply(restore);
+  EXPECT_TRUE(r.accepted()) << r.reason();
 }
 
 // A request is planned off the stepping thread and applied later: when the session changed in

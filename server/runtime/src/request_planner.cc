@@ -11,6 +11,7 @@ namespace vdyn {
 namespace {
 
 using Op = PreparedRequest::Op;
+constexpr double kMaxRestoreHeightM = 100.0;
 
 Pose2 FromProto(const pb::Pose2& p) {
   return {p.x(), p.y(), p.yaw()};
@@ -21,6 +22,40 @@ std::string CheckPose(const pb::Pose2& p, double speed) {
        {limits::Check(limits::kPoseXY, p.x()), limits::Check(limits::kPoseXY, p.y()),
         limits::Check(limits::kPoseYaw, p.yaw()), limits::Check(limits::kSpawnSpeed, speed)}) {
     if (!why.empty()) return why;
+  }
+  return {};
+}
+
+// A restored state must be one a server could have saved: spawn and teleport check the pose,
+// restore took any finite state (a car 1e9 m out with no terrain, falling for ever; one 1000 km
+// up; a zero quaternion; a car at 1e5 m/s).
+std::string CheckRestoredState(const State& s, const Terrain& terrain) {
+  const Eigen::Vector3d p = Position(s.x);
+  const double q = s.x.segment<4>(sx::kQ).norm();
+  if (std::abs(q - 1.0) > 1e-6) {
+    return "its orientation quaternion has norm " + base::FormatApprox(q) +
+           ", not 1: not a state a server saved (checkpoints carry them exactly)";
+  }
+  for (const std::string& why :
+       {limits::Check(limits::kPoseXY, p.x()), limits::Check(limits::kPoseXY, p.y())}) {
+    if (!why.empty()) return why;
+  }
+  if (Velocity(s.x).norm() > kRunawaySpeedMps ||
+      AngularVelocityB(s.x).norm() > kRunawayRateRadps) {
+    return "it moves faster than 1000 m/s or spins faster than 1000 rad/s: no vehicle does";
+  }
+  const double top = terrain.bounds_max().z() + 10.0;
+  const TraceHit ground = terrain.Trace({p.x(), p.y(), top}, -Eigen::Vector3d::UnitZ(),
+                                        top - terrain.bounds_min().z() + 10.0);
+  if (!ground.hit) {
+    return "no terrain under its position (" + base::FormatApprox(p.x(), 6) + ", " +
+           base::FormatApprox(p.y(), 6) + ") m: it would fall for ever";
+  }
+  const double height = p.z() - (top - ground.distance);
+  if (height > kMaxRestoreHeightM || height < -kMaxRestoreHeightM) {
+    return "it is " + base::FormatApprox(height) + " m " + (height > 0 ? "above" : "below") +
+           " the ground under it (at most " + base::FormatNumber(kMaxRestoreHeightM) +
+           " m either way: a car in a jump, not one dropped from the sky)";
   }
   return {};
 }
@@ -229,6 +264,9 @@ std::string RequestPlanner::PlanRestore(const pb::ControlRequest& r, PreparedReq
     return std::string("restore: ") + e.what();
   }
   if (state.step < 0) return "restore: the state's step is beyond range";
+  if (std::string bad = CheckRestoredState(state, world_->terrain); !bad.empty()) {
+    return "restore: " + bad;
+  }
   auto params = std::make_shared<const pb::VehicleParams>(
       MergeVehicleParams(config_.default_params, rs.params()));
   if (const auto issues = ValidateVehicleParams(*params); !issues.empty()) {
