@@ -606,6 +606,15 @@ def test_parameters_and_steps_that_would_answer_wrongly_are_refused_or_answered_
         sim.set_params(1, {"lf": {"radius": "0.3"}})
     with pytest.raises(TypeError, match=r"params\['abs'\] must be True or False, got 0"):
         sim.set_params(1, {"abs": 0})
+    # A NaN got protobuf's 'use quoted "NaN"' and an unknown name a list of camelCase names.
+    with pytest.raises(ValueError, match=r"params\['mass'\] must be a finite number, got nan"):
+        sim.set_params(1, {"mass": float("nan")})
+    with pytest.raises(ValueError, match=r"params\['lf'\]\['radus'\]: no such parameter \(did "
+                                         r"you mean radius\?\)"):
+        sim.set_params(1, {"lf": {"radus": 0.3}})
+    with pytest.raises(ValueError, match=r"params\['masss'\]: no such parameter \(did you mean "
+                                         r"mass"):
+        sim.set_params(1, {"masss": 1800.0})
     # vehicle_id without an input stepped every vehicle and ignored it (also one not there).
     with pytest.raises(ValueError, match="vehicle_id names the vehicle an input is for"):
         sim.step(1, None, vehicle_id=99)

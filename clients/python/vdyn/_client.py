@@ -102,9 +102,15 @@ def _check_param_types(d, descriptor, path):
     for key, value in d.items():
         field = descriptor.fields_by_name.get(key) or next(
             (f for f in descriptor.fields if f.json_name == key), None)
-        if field is None:
-            continue  # json_format names it
         where = f"{path}[{key!r}]"
+        if field is None:
+            # protobuf's JSON parser lists the camelCase names; users write the fields' own.
+            import difflib
+            names = sorted(f.name for f in descriptor.fields)
+            close = difflib.get_close_matches(str(key), names, n=3)
+            raise ValueError(f"{where}: no such parameter"
+                             + (f" (did you mean {', '.join(close)}?)" if close else "")
+                             + f"; the parameters here: {', '.join(names)}")
         items = (enumerate(value) if field.label == F.LABEL_REPEATED and
                  isinstance(value, (list, tuple)) else [(None, value)])
         for i, v in items:
@@ -114,6 +120,9 @@ def _check_param_types(d, descriptor, path):
             elif field.type in numeric and (isinstance(v, (str, bool)) or
                                             not isinstance(v, numbers.Real)):
                 raise TypeError(f"{at} must be a number, got {v!r} ({type(v).__name__})")
+            elif field.type in numeric and not math.isfinite(v):
+                # Said as the server says it (protobuf's parser asked for a quoted "NaN").
+                raise ValueError(f"{at} must be a finite number, got {v!r}")
             elif field.type == F.TYPE_BOOL and not isinstance(v, bool):
                 raise TypeError(f"{at} must be True or False, got {v!r} ({type(v).__name__})")
 
