@@ -227,6 +227,45 @@ TEST(McapLayout, FollowsTheSpecFromMagicToFooter) {
   EXPECT_EQ(ops.count(0x05), 0u);  // every message is inside a chunk
 }
 
+// The summary's statistics must describe the data section: `info` and `verify` passed a file whose
+// statistics said 999999 messages (its summary CRC written anew, or zero), while a reader that
+// trusts the summary (Foxglove seeks by it) shows another file.
+TEST(McapBadFiles, StatisticsThatDoNotCountTheDataSectionAreRefused) {
+  testing::TempDir dir;
+  const auto path = dir / "a.mcap";
+  WriteStates(path, 300, mc::Compression::kNone);
+  const std::vector<std::uint8_t> b = ReadBytes(path);
+  const std::size_t footer = b.size() - 8 - 29;
+  const std::uint64_t summary_start = Le64(b, footer + 9);
+  std::size_t stats = 0;
+  for (std::size_t pos = summary_start; pos < footer; pos += 9 + Le64(b, pos + 1)) {
+    if (b[pos] == 0x0b) stats = pos;
+  }
+  ASSERT_NE(stats, 0u);
+  struct Edit {
+    std::size_t at;  // in the statistics record's content
+    const char* says;
+  };
+  // message_count at 0; channel 1's count after the fixed fields (8 + 2 + 4 * 4 + 8 + 8), the
+  // map's byte length (4) and the channel id (2).
+  for (const Edit e : {Edit{0, "the statistics count 999999 messages; the data section holds 300"},
+                       Edit{48, "the statistics count 999999 messages on channel 1; the data "
+                                "section holds 300"}}) {
+    std::vector<std::uint8_t> bad = b;
+    PutLe64(bad, stats + 9 + e.at, 999999);
+    std::fill_n(bad.begin() + static_cast<std::ptrdiff_t>(footer + 25), 4, 0);  // summary_crc 0
+    WriteBytes(dir / "bad.mcap", bad);
+    try {
+      ReadAll(dir / "bad.mcap");
+      ADD_FAILURE() << e.says;
+    } catch (const mc::McapError& err) {
+      EXPECT_THAT(err.what(), HasSubstr(e.says));
+      EXPECT_THAT(err.what(), HasSubstr("(in the summary)"));
+    }
+  }
+  EXPECT_EQ(ReadAll(path).size(), 300u);  // the file as written reads
+}
+
 TEST(McapSchema, TheFileDescriptorSetAloneDecodesAPayload) {
   const std::string fds = FileDescriptorSetOf(pb::VehicleState::descriptor());
   google::protobuf::FileDescriptorSet set;

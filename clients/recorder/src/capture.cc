@@ -241,6 +241,8 @@ struct Capture::Impl {
   std::condition_variable cv;
   Batch pending;
   std::size_t writer_bytes = 0;
+  // Bytes in the buffer that were admitted past its bound (a world larger than all of it).
+  std::size_t beyond_bound = 0;
   std::size_t peak = 0;
   bool done = false;
   std::exception_ptr writer_error;
@@ -387,11 +389,13 @@ struct Capture::Impl {
     }
     {
       std::lock_guard<std::mutex> lock(mu);
-      const std::size_t in_use = pending.bytes.size() + writer_bytes;
+      // A world kept past the bound (Admits) takes no one else's room: its bytes are not counted.
+      const std::size_t in_use = pending.bytes.size() + writer_bytes - beyond_bound;
       if (!Admits(topic, in_use, s.payload.size(), o.queue_bytes)) {
         ++c.dropped;
         return;
       }
+      if (s.payload.size() > o.queue_bytes) beyond_bound += s.payload.size();
       pending.entries.push_back(
           {topic, key, now,
            static_cast<std::uint64_t>(std::max<std::int64_t>(0, s.info.source_timestamp_ns)),
@@ -653,6 +657,7 @@ struct Capture::Impl {
         {
           std::lock_guard<std::mutex> lock(mu);
           writer_bytes = 0;
+          beyond_bound = 0;  // what was admitted past the bound was in `work`, now written
         }
         work.clear();
       }

@@ -1420,6 +1420,7 @@ class Scanner {
     }
     m.unchecked = true;  // only the data section's CRC covers it
     ++res_.messages;
+    ++counted_[m.channel_id];
     ++res_.messages_unchecked;
     r_.CheckIntact();
     if (v_.on_message) v_.on_message(m, pos_);
@@ -1500,7 +1501,10 @@ class Scanner {
     h.index.chunk_length = f.end() - pos_;
     h.index.uncompressed_crc = h.crc;
     if (lenient_ && IsCopy(h, f)) return;
-    if (v_.on_chunk && !v_.on_chunk(h.index)) return;
+    if (v_.on_chunk && !v_.on_chunk(h.index)) {
+      read_every_chunk_ = false;
+      return;
+    }
     std::string why =
         Decompress(h.index.compression, h.records, h.index.uncompressed_size, scratch_);
     r_.CheckIntact();
@@ -1624,6 +1628,7 @@ class Scanner {
         Message m = ParseMessage(f.content);
         m.unchecked = unchecked;
         ++res_.messages;
+        ++counted_[m.channel_id];
         if (unchecked) ++res_.messages_unchecked;
         if (v_.on_message) v_.on_message(m, pos_);
       }
@@ -1675,7 +1680,10 @@ class Scanner {
         return;
       }
       try {
-        if (f.op == kStatistics) res_.statistics = ParseStatistics(f.content);
+        if (f.op == kStatistics) {
+          res_.statistics = ParseStatistics(f.content);
+          statistics_at_ = pos;
+        }
         // The summary's copies of schema and channel records: the same as the data section's
         // (a reader that seeks by the summary takes these).
         std::string why;
@@ -1692,8 +1700,32 @@ class Scanner {
       }
       pos = f.end();
     }
+    if (const std::string why = StatisticsDisagree(); !why.empty()) {
+      Problem(statistics_at_, why + " (in the summary)");
+      return;
+    }
     res_.complete = res_.problem.empty();
     if (v_.on_progress) v_.on_progress(size_);
+  }
+
+  // Why the summary's statistics do not describe the messages this scan read (empty when they
+  // do, or when the scan left chunks unread): a reader that trusts the summary (Foxglove seeks by
+  // it) would show another file than the one here.
+  std::string StatisticsDisagree() const {
+    if (!res_.statistics || !read_every_chunk_ || !res_.problem.empty()) return {};
+    const Statistics& st = *res_.statistics;
+    if (st.message_count != res_.messages) {
+      return "the statistics count " + std::to_string(st.message_count) +
+             " messages; the data section holds " + std::to_string(res_.messages);
+    }
+    for (const auto& [channel, n] : st.channel_message_counts) {
+      const std::uint64_t here = counted_[channel];
+      if (n != here) {
+        return "the statistics count " + std::to_string(n) + " messages on channel " +
+               std::to_string(channel) + "; the data section holds " + std::to_string(here);
+      }
+    }
+    return {};
   }
 
   template <class T>
@@ -1721,6 +1753,11 @@ class Scanner {
   // the chunk being checked, which count once it is delivered.
   Definitions<Schema> schemas_, chunk_schemas_;
   Definitions<Channel> channels_, chunk_channels_;
+  // Messages read per channel, and whether every chunk was (a visitor may skip some), for the
+  // check of the summary's statistics.
+  std::vector<std::uint64_t> counted_ = std::vector<std::uint64_t>(65536, 0);
+  bool read_every_chunk_ = true;
+  std::uint64_t statistics_at_ = 0;
   std::vector<std::uint8_t> scratch_;
   std::vector<std::uint64_t> inner_;  // a chunk's records: their offsets
   // Chunks seen, by what their headers say, for telling an exact copy (lenient scans).
