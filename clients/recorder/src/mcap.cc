@@ -1821,7 +1821,8 @@ void Reader::CompleteSummary(Summary& s) const {
   };
   v.on_chunk = [&](const ChunkIndex&) { return all || !channels.empty() || !schemas.empty(); };
   Scan(v, /*lenient=*/true);
-  for (const auto& [id, x] : found_schemas) {
+  for (const auto& [found_id, x] : found_schemas) {
+    const std::uint16_t id = found_id;  // clang before 16 captures no structured binding
     if (has_schema(id)) continue;
     const bool used = std::any_of(s.channels.begin(), s.channels.end(),
                                   [id](const Channel& c) { return c.schema_id == id; });
