@@ -1900,12 +1900,17 @@ TEST_F(RecorderTest, ASignalStopsAReadingCommandWithinARecord) {
   EXPECT_LT(lines, 15000u) << "it went on to the end";
 }
 
-// Waits (at most 20 s) until process `pid` is blocked in system call `nr` (/proc/PID/syscall).
-bool BlockedIn(pid_t pid, long nr) {
+// Waits (at most 20 s) until process `pid` sleeps in system call `nr` (/proc/PID/syscall) at a
+// kernel function whose name holds `where` (/proc/PID/wchan: "wait_for_partner" opening a FIFO,
+// "pipe_write" writing into a full one). The call number alone also matches the loader's and the
+// sanitizers' own calls of a process preempted while it starts.
+bool BlockedIn(pid_t pid, long nr, const std::string& where) {
+  const std::string proc = "/proc/" + std::to_string(pid);
   for (int i = 0; i < 2000; ++i) {
-    std::ifstream f("/proc/" + std::to_string(pid) + "/syscall");
+    std::ifstream call(proc + "/syscall"), chan(proc + "/wchan");
     long at = -1;
-    if (f >> at && at == nr) return true;
+    std::string in;
+    if (call >> at && at == nr && chan >> in && in.find(where) != std::string::npos) return true;
     std::this_thread::sleep_for(10ms);
   }
   return false;
@@ -1925,7 +1930,7 @@ TEST_F(RecorderTest, ACommandBlockedOnAFifoStopsOnASignalOrTwo) {
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
   {  // No reader: export waits in open(2) (openat, 257).
     auto p = Recorder({"export", file.string(), "--csv", fifo.string()}, "open.log");
-    ASSERT_TRUE(BlockedIn(p->pid(), 257)) << p->Log();
+    ASSERT_TRUE(BlockedIn(p->pid(), 257, "partner")) << p->Log();
     p->Signal(SIGINT);
     const auto code = p->Wait(30s);
     ASSERT_TRUE(code.has_value()) << "export ignored SIGINT while opening a FIFO\n" << p->Log();
@@ -1936,7 +1941,7 @@ TEST_F(RecorderTest, ACommandBlockedOnAFifoStopsOnASignalOrTwo) {
     const int fd = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
     ASSERT_GE(fd, 0);
     auto p = Recorder({"export", file.string(), "--csv", fifo.string()}, "write.log");
-    ASSERT_TRUE(BlockedIn(p->pid(), 1)) << p->Log();
+    ASSERT_TRUE(BlockedIn(p->pid(), 1, "pipe_write")) << p->Log();
     p->Signal(SIGINT);
     std::optional<int> code = p->Wait(2s);
     if (!code) {

@@ -16,6 +16,7 @@ FileText ReadFileBounded(const std::filesystem::path& path, std::size_t max_byte
     return r;
   }
   char block[64 * 1024];
+  errno = 0;
   while (true) {
     const std::size_t n = std::fread(block, 1, sizeof block, f.get());
     if (r.text.size() + n > max_bytes) {
@@ -29,7 +30,7 @@ FileText ReadFileBounded(const std::filesystem::path& path, std::size_t max_byte
   }
   if (std::ferror(f.get())) {
     r.text.clear();
-    r.error = std::string("read error (") + std::strerror(errno) + ")";
+    r.error = "cannot read the " + what + " (" + std::strerror(errno) + ")";
   }
   return r;
 }

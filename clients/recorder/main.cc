@@ -33,7 +33,10 @@ std::atomic<bool> g_stop{false};
 // the first one.
 extern "C" void OnSignal(int sig) {
   if (g_stop.exchange(true)) {
-    static constexpr char kSay[] = "\nvdyn-recorder: a second signal: ending at once\n";
+    static constexpr char kSay[] =
+        "\nvdyn-recorder: a second signal: ending at once (an unfinished output stays beside its "
+        "name as NAME.partial-XXXXXX.EXT; a recording's holds what was recorded: "
+        "`vdyn-recorder recover` it)\n";
     (void)!::write(STDERR_FILENO, kSay, sizeof kSay - 1);
     std::signal(sig, SIG_DFL);
     std::raise(sig);

@@ -645,6 +645,7 @@ void Subscription::Close() {
     stop_.store(true);
   }
   ready_.notify_all();  // a next() waiting in another thread ends now, not at its timeout
+  std::lock_guard once(close_mu_);  // two threads closing at once: one joins
   if (thread_.joinable()) thread_.join();
 }
 

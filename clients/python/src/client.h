@@ -209,6 +209,7 @@ class Subscription {
   std::atomic<bool> stop_{false};
   std::atomic<std::uint64_t> received_{0}, overflowed_{0}, missing_{0};
   std::optional<std::uint64_t> last_step_;
+  std::mutex close_mu_;
   std::thread thread_;
 };
 

@@ -241,8 +241,9 @@ struct Capture::Impl {
   std::condition_variable cv;
   Batch pending;
   std::size_t writer_bytes = 0;
-  // Bytes in the buffer that were admitted past its bound (a world larger than all of it).
-  std::size_t beyond_bound = 0;
+  // Bytes admitted past the buffer's bound (a world larger than all of it), not counted against
+  // it: in `pending`, and in the batch the writer writes.
+  std::size_t beyond_pending = 0, beyond_writing = 0;
   std::size_t peak = 0;
   bool done = false;
   std::exception_ptr writer_error;
@@ -390,12 +391,13 @@ struct Capture::Impl {
     {
       std::lock_guard<std::mutex> lock(mu);
       // A world kept past the bound (Admits) takes no one else's room: its bytes are not counted.
-      const std::size_t in_use = pending.bytes.size() + writer_bytes - beyond_bound;
+      const std::size_t in_use =
+          pending.bytes.size() + writer_bytes - beyond_pending - beyond_writing;
       if (!Admits(topic, in_use, s.payload.size(), o.queue_bytes)) {
         ++c.dropped;
         return;
       }
-      if (s.payload.size() > o.queue_bytes) beyond_bound += s.payload.size();
+      if (s.payload.size() > o.queue_bytes) beyond_pending += s.payload.size();
       pending.entries.push_back(
           {topic, key, now,
            static_cast<std::uint64_t>(std::max<std::int64_t>(0, s.info.source_timestamp_ns)),
@@ -634,6 +636,8 @@ struct Capture::Impl {
           if (pending.entries.empty() && done) break;
           std::swap(work, pending);
           writer_bytes = work.bytes.size();
+          beyond_writing = beyond_pending;  // what was past the bound goes with its batch
+          beyond_pending = 0;
         }
         const auto split_ns = static_cast<std::uint64_t>(base::FromSeconds(o.split_s).ns);
         for (const Entry& e : work.entries) {
@@ -657,7 +661,7 @@ struct Capture::Impl {
         {
           std::lock_guard<std::mutex> lock(mu);
           writer_bytes = 0;
-          beyond_bound = 0;  // what was admitted past the bound was in `work`, now written
+          beyond_writing = 0;
         }
         work.clear();
       }

@@ -595,6 +595,19 @@ Writer::~Writer() {
     fd_ = -1;
     return;
   }
+  if (!closed_ && out_ && write_failed_) {
+    // A write failed part-way (a full disk): the file ends in a torn record. Closing it now (the
+    // disk freed meanwhile) would put a summary after that and take the destination's name, while
+    // the error told to recover the temporary file. A recording keeps it as it is; an export
+    // leaves the destination as it was.
+    if (options_.live) {
+      out_->Keep();
+    } else {
+      out_->Abandon();
+    }
+    fd_ = -1;
+    return;
+  }
   try {
     Close();
   } catch (const std::exception&) {
@@ -638,6 +651,7 @@ void Writer::Append(const std::string& bytes) {
     const ssize_t n = ::write(fd_, bytes.data() + done, bytes.size() - done);
     if (n < 0) {
       if (errno == EINTR) continue;
+      write_failed_ = true;
       // Named by the file it writes: a recording (live) stays under its temporary name, which the
       // user must be told to recover (the destination, an older recording perhaps, is untouched).
       throw McapError(writing_to(), offset_ + done,

@@ -53,7 +53,8 @@ std::string CheckRestoredState(const State& s, const Terrain& terrain) {
   }
   const double height = p.z() - (top - ground.distance);
   if (height > kMaxRestoreHeightM || height < -kMaxRestoreHeightM) {
-    return "it is " + base::FormatApprox(height) + " m " + (height > 0 ? "above" : "below") +
+    return "it is " + base::FormatApprox(std::abs(height)) + " m " +
+           (height > 0 ? "above" : "below") +
            " the ground under it (at most " + base::FormatNumber(kMaxRestoreHeightM) +
            " m either way: a car in a jump, not one dropped from the sky)";
   }

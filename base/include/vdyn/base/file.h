@@ -17,7 +17,7 @@ struct FileText {
 // `max_bytes` + 1, so a file that never ends (/dev/zero, whose size is 0 to stat) is refused like
 // a large one instead of filling the memory. `what` names the file's kind in the errors:
 // "cannot open the tyre file (No such file or directory)", "more than 4194304 bytes, more than a
-// tyre file may have", "read error (Input/output error)".
+// tyre file may have", "cannot read the tyre file (Input/output error)".
 FileText ReadFileBounded(const std::filesystem::path& path, std::size_t max_bytes,
                          const std::string& what);
 

@@ -213,6 +213,7 @@ class Writer {
   bool chunk_crc_ = true;
   bool any_unchecked_ = false;
   bool closed_ = false;
+  bool write_failed_ = false;  // a write failed part-way: the file ends in a torn record
   std::uint64_t offset_ = 0;
   std::uint32_t data_crc_ = 0;
   std::vector<Schema> schemas_;
