@@ -657,6 +657,12 @@ void Subscription::Run() {
     (void)source_.Take([&](const pb::VehicleState& s) {
       if (s.server_id() != server_id_) return;  // another server's vehicle of that id
       received_.fetch_add(1);
+      if (incarnation_ && *incarnation_ != s.incarnation()) {
+        // Another start of the server: its steps count from 0, nothing between is missing.
+        restarts_.fetch_add(1);
+        last_step_.reset();
+      }
+      incarnation_ = s.incarnation();
       if (last_step_ && s.step() > *last_step_ + 1) missing_.fetch_add(s.step() - *last_step_ - 1);
       last_step_ = s.step();
       if (queue_.rows() - head_ >= capacity_) {

@@ -192,6 +192,9 @@ class Subscription {
   // overwrote them before they were taken, or steps missing in the sequence.
   std::uint64_t overflowed() const { return overflowed_.load(); }
   std::uint64_t missing_steps() const { return missing_.load(); }
+  // Times the server restarted under this subscription (another start's states began: its steps
+  // count from 0 again, and no steps count as missing across it).
+  std::uint64_t restarts() const { return restarts_.load(); }
   // States DDS reports it dropped for this reader (its history overwritten before a take).
   std::uint64_t dds_lost();
   std::size_t queued();
@@ -207,8 +210,9 @@ class Subscription {
   StateTable queue_;  // rows [head_, end)
   std::size_t head_ = 0;
   std::atomic<bool> stop_{false};
-  std::atomic<std::uint64_t> received_{0}, overflowed_{0}, missing_{0};
+  std::atomic<std::uint64_t> received_{0}, overflowed_{0}, missing_{0}, restarts_{0};
   std::optional<std::uint64_t> last_step_;
+  std::optional<std::uint64_t> incarnation_;  // the server start whose states come now
   std::mutex close_mu_;
   std::thread thread_;
 };

@@ -334,6 +334,7 @@ void BindSubscription(py::module_& m) {
       .def_property_readonly("received", &Subscription::received)
       .def_property_readonly("overflowed", &Subscription::overflowed)
       .def_property_readonly("missing_steps", &Subscription::missing_steps)
+      .def_property_readonly("restarts", &Subscription::restarts)
       .def_property_readonly("dds_lost", &Subscription::dds_lost)
       .def_property_readonly("queued", &Subscription::queued);
 }

@@ -270,6 +270,28 @@ def test_the_world_of_a_restarted_server_is_read_again(start, domain):
     assert sim.world_hash != flat_hash
 
 
+def test_a_subscription_counts_the_restarts_of_its_server(start, domain):
+    # A subscription ran straight across a server restart (step 3999 then 0, x jumping 250 m)
+    # with nothing to tell it: it counts them.
+    first = start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain)],
+                  "first")
+    a = vdyn.Client(domain=domain, timeout=30)
+    sub = a.subscribe(1)
+    a.step(300)
+    first.stop()
+    start([SERVER, "--lockstep", "--lockstep-timeout", "60", "--domain", str(domain)], "second")
+    b = vdyn.Client(domain=domain, timeout=30)
+    b.step(200)
+    deadline = time.monotonic() + 60
+    while sub.restarts < 1 and time.monotonic() < deadline:
+        time.sleep(0.05)  # the states arrive on DDS: no event this test can wait on
+    assert sub.restarts == 1
+    # The states of the two starts follow one another: the steps go back once, where it restarted.
+    steps = [int(k) for k in sub.take().step]
+    assert sum(1 for p, q in zip(steps, steps[1:]) if q < p) == 1, steps
+    sub.close()
+
+
 def test_small_api_edges_answer_rightly(lockstep_server, domain):
     sim = vdyn.Client(domain=domain, timeout=30)
     s = sim.step(5)[1]

@@ -327,16 +327,22 @@ class Client:
         t = self._t(timeout)
         deadline = time.monotonic() + t
         want_bytes = want.SerializeToString()
+        seen = set()
         while True:
             current = self.params(vehicle_id, max(0.0, deadline - time.monotonic()))
             current_bytes = current.SerializeToString()
+            seen.add(current_bytes)
             merged = vehicle_params_pb2.VehicleParams.FromString(
                 _vdyn.merge_vehicle_params(current_bytes, want_bytes))
             if merged == current:
                 return current
             if time.monotonic() >= deadline:
-                raise TimeoutError(f"the parameters of vehicle {vehicle_id} the server accepted "
-                                   f"did not appear on vdyn/params within {t:g} s")
+                raise TimeoutError(
+                    f"the parameters of vehicle {vehicle_id} the server accepted did not appear "
+                    f"on vdyn/params within {t:g} s"
+                    + ("; they changed meanwhile to others (another client's change after this "
+                       "one replaced it?): params() gives what the vehicle holds now"
+                       if len(seen) > 1 else ""))
             time.sleep(0.005)  # vdyn/params has no per-change event to wait on
 
     def restore(self, vehicle_id, state, params=None, input=None, branched_from="", timeout=None):
@@ -544,6 +550,13 @@ class Subscription:
     @property
     def missing_steps(self):
         return self._s.missing_steps
+
+    @property
+    def restarts(self):
+        """Times the server restarted while this subscription read: the states of each start
+        follow the last one's, their steps counting from 0 again (``next()`` and ``take()`` give
+        them in the order they came; a drop of the step column marks where)."""
+        return self._s.restarts
 
     @property
     def dds_lost(self):
