@@ -44,8 +44,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
                    double* max_misfit) {
   const Eigen::Matrix3d R_yaw =
       Eigen::AngleAxisd(pose.yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix();
-  const double top = terrain.bounds_max().z() + 10.0;
-  const double depth = top - terrain.bounds_min().z() + 10.0;
+  const double top = terrain.above_all_z();
   // Linearised mount height: z_T - x theta + y phi + (R p_TA)_z = required height, solved for
   // (z_T, theta, phi) in the least-squares sense (pitch theta nose down, roll phi right down).
   Eigen::Matrix<double, 4, 3> A;
@@ -54,7 +53,7 @@ State RestingState(const Params& p, const Terrain& terrain, const Pose2& pose, d
     const WheelParams& wp = p.wheel[w];
     const Eigen::Vector3d a_W = R_yaw * p.p_TA_B[w];
     const Eigen::Vector3d origin(pose.x + a_W.x(), pose.y + a_W.y(), top);
-    const TraceHit hit = terrain.Trace(origin, -Eigen::Vector3d::UnitZ(), depth);
+    const TraceHit hit = terrain.GroundBelow(origin.x(), origin.y());
     if (!hit.hit) {
       throw WorldError("no terrain below wheel " + std::string(kWheelNames[w]) + " at (" +
                        base::FormatApprox(origin.x(), 6) + ", " + base::FormatApprox(origin.y(), 6) +

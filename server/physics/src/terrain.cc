@@ -237,6 +237,11 @@ bool FiniteRay(const Eigen::Vector3d& o, const Eigen::Vector3d& d, double t_max)
 float FloatFar(double t_max) { return static_cast<float>(t_max) * 1.0001f + 1e-3f; }
 }  // namespace
 
+TraceHit Terrain::GroundBelow(double x, double y) const {
+  const double top = above_all_z();
+  return Trace({x, y, top}, -Eigen::Vector3d::UnitZ(), top - bounds_min_.z() + 10.0);
+}
+
 TraceHit Terrain::Trace(const Eigen::Vector3d& origin_W, const Eigen::Vector3d& dir_W,
                        double t_max) const {
   // A non-finite ray (from a diverging state) finds nothing; Embree must never see one.

@@ -44,14 +44,12 @@ std::string CheckRestoredState(const State& s, const Terrain& terrain) {
       AngularVelocityB(s.x).norm() > kRunawayRateRadps) {
     return "it moves faster than 1000 m/s or spins faster than 1000 rad/s: no vehicle does";
   }
-  const double top = terrain.bounds_max().z() + 10.0;
-  const TraceHit ground = terrain.Trace({p.x(), p.y(), top}, -Eigen::Vector3d::UnitZ(),
-                                        top - terrain.bounds_min().z() + 10.0);
+  const TraceHit ground = terrain.GroundBelow(p.x(), p.y());
   if (!ground.hit) {
     return "no terrain under its position (" + base::FormatApprox(p.x(), 6) + ", " +
            base::FormatApprox(p.y(), 6) + ") m: it would fall for ever";
   }
-  const double height = p.z() - (top - ground.distance);
+  const double height = p.z() - (terrain.above_all_z() - ground.distance);
   if (height > kMaxRestoreHeightM || height < -kMaxRestoreHeightM) {
     return "it is " + base::FormatApprox(std::abs(height)) + " m " +
            (height > 0 ? "above" : "below") +

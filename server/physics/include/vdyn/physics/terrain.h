@@ -48,6 +48,12 @@ class Terrain {
               const std::array<Eigen::Vector3d, 4>& dir_W, const std::array<double, 4>& t_max,
               std::array<TraceHit, 4>& hits) const;
 
+  // The highest surface at (x, y): a vertical trace from above the whole terrain down through
+  // it. Its hit's distance is from z = bounds_max().z() + 10 m (ground z = that - distance); no
+  // hit where no terrain lies under (x, y).
+  TraceHit GroundBelow(double x, double y) const;
+  double above_all_z() const { return bounds_max_.z() + 10.0; }
+
   // Whether any steep surface (|n_z| < kSteepNormalZ: walls, barrier, ramp faces) lies within
   // `radius` of (x, y) in the horizontal plane, from a grid built at Commit. Conservative: it may
   // say yes when the surface is a little farther, never no when it is near.
